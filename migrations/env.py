@@ -1,0 +1,58 @@
+"""Alembic environment for the siteline catalog.
+
+siteline drives Alembic from Python (``siteline db ...``) and hands over its engine in
+``config.attributes["engine"]``; the plain ``alembic`` command works too, reading the URL from
+``SITELINE_DATABASE_URL`` (or the SQLite catalog under ``SITELINE_HOME``).
+"""
+
+from __future__ import annotations
+
+from alembic import context
+
+from siteline.catalog import models  # noqa: F401  (registers the tables)
+from siteline.catalog.base import Base
+
+config = context.config
+target_metadata = Base.metadata
+
+
+def _engine():
+    engine = config.attributes.get("engine")
+    if engine is not None:
+        return engine
+    from siteline.catalog.engine import make_engine
+    from siteline.config import load_settings
+
+    return make_engine(load_settings().database_url)
+
+
+def run_migrations_offline() -> None:
+    context.configure(
+        url=config.get_main_option("sqlalchemy.url"),
+        target_metadata=target_metadata,
+        literal_binds=True,
+        render_as_batch=True,
+    )
+    with context.begin_transaction():
+        context.run_migrations()
+
+
+def run_migrations_online() -> None:
+    engine = _engine()
+    with engine.connect() as connection:
+        context.configure(
+            connection=connection,
+            target_metadata=target_metadata,
+            # SQLite cannot ALTER most things: batch mode rebuilds tables for it.
+            render_as_batch=connection.dialect.name == "sqlite",
+            compare_type=True,
+        )
+        with context.begin_transaction():
+            context.run_migrations()
+        connection.commit()
+
+
+if context.is_offline_mode():
+    run_migrations_offline()
+else:
+    run_migrations_online()

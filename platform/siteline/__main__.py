@@ -1,0 +1,5 @@
+import sys
+
+from siteline.cli import main
+
+sys.exit(main())

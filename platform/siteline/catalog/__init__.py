@@ -1,0 +1,44 @@
+"""The SQL catalog: ORM models, migrations, sessions and query functions (DESIGN.md §8)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session, sessionmaker
+
+from siteline.catalog import migrate
+from siteline.catalog.base import Base
+from siteline.catalog.engine import make_engine, ping, transaction
+from siteline.config import Settings
+
+__all__ = ["Base", "Catalog", "open_catalog"]
+
+
+@dataclass
+class Catalog:
+    """A catalog database: its engine and session factory."""
+
+    engine: sa.Engine
+    sessions: sessionmaker[Session]
+
+    @contextmanager
+    def transaction(self) -> Iterator[Session]:
+        """A session committed at the end of the block, rolled back on error."""
+        with transaction(self.sessions) as session:
+            yield session
+
+    def dispose(self) -> None:
+        self.engine.dispose()
+
+
+def open_catalog(url_or_settings: str | Settings, *, check: bool = True) -> Catalog:
+    """Connect to the catalog; with ``check``, refuse a database not at this siteline's revision."""
+    url = url_or_settings.database_url if isinstance(url_or_settings, Settings) else url_or_settings
+    engine = make_engine(url)
+    ping(engine)
+    if check:
+        migrate.check_revision(engine)
+    return Catalog(engine=engine, sessions=sessionmaker(engine, expire_on_commit=False))

@@ -1,0 +1,84 @@
+"""Alembic migrations of the catalog, driven from Python (``siteline db ...``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import sqlalchemy as sa
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+
+from siteline.errors import CatalogError, RevisionMismatchError
+
+MIGRATIONS_DIR = Path(__file__).resolve().parents[3] / "migrations"
+
+
+def alembic_config(engine: sa.Engine) -> Config:
+    """An Alembic config whose migrations run on ``engine``."""
+    if not (MIGRATIONS_DIR / "env.py").is_file():
+        raise CatalogError(
+            f"migrations folder {MIGRATIONS_DIR} is missing: run siteline from its source tree."
+        )
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    cfg.set_main_option("sqlalchemy.url", engine.url.render_as_string(hide_password=False).replace("%", "%%"))
+    cfg.attributes["engine"] = engine
+    return cfg
+
+
+def head_revision() -> str:
+    """The newest revision this siteline knows."""
+    script = ScriptDirectory.from_config(_script_config())
+    heads = script.get_heads()
+    if len(heads) != 1:
+        raise CatalogError(f"migrations have {len(heads)} heads {heads}; merge them.")
+    return heads[0]
+
+
+def _script_config() -> Config:
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    return cfg
+
+
+def known_revisions() -> set[str]:
+    script = ScriptDirectory.from_config(_script_config())
+    return {rev.revision for rev in script.walk_revisions()}
+
+
+def current_revision(engine: sa.Engine) -> str | None:
+    """The revision the database is at, or None for a database never migrated."""
+    with engine.connect() as conn:
+        return MigrationContext.configure(conn).get_current_revision()
+
+
+def upgrade(engine: sa.Engine, revision: str = "head") -> None:
+    command.upgrade(alembic_config(engine), revision)
+
+
+def downgrade(engine: sa.Engine, revision: str = "base") -> None:
+    command.downgrade(alembic_config(engine), revision)
+
+
+def check_revision(engine: sa.Engine) -> None:
+    """Refuse a database at another revision than this siteline's head, saying which command fixes it."""
+    where = engine.url.render_as_string(hide_password=True)
+    current = current_revision(engine)
+    head = head_revision()
+    if current == head:
+        return
+    if current is None:
+        raise RevisionMismatchError(
+            f"the catalog at {where} is not initialised: run `siteline init` (or `siteline db upgrade`)."
+        )
+    if current not in known_revisions():
+        raise RevisionMismatchError(
+            f"the catalog at {where} is at revision {current}, which this siteline does not know "
+            f"(its newest is {head}): it was migrated by another siteline version; upgrade siteline, "
+            "or run that version's `siteline db downgrade` to a shared revision."
+        )
+    raise RevisionMismatchError(
+        f"the catalog at {where} is at revision {current}, but this siteline needs {head}: run `siteline db upgrade`."
+    )

@@ -1,0 +1,63 @@
+"""Catalog queries on sites. Functions take a session and never commit: the caller owns the transaction."""
+
+from __future__ import annotations
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from siteline.catalog.models import Scene, Site
+from siteline.errors import SiteError, SiteNotFoundError
+from siteline.site import SiteSpec
+from siteline.taxonomy import Taxonomy
+
+
+def add_site(session: Session, spec: SiteSpec) -> Site:
+    """Insert a validated site; :class:`SiteError` if the name is taken."""
+    if session.execute(sa.select(Site.id).where(Site.name == spec.name)).first() is not None:
+        raise SiteError(f"site {spec.name!r} already exists: choose another name (see `siteline site list`).")
+    fence = None if spec.fence is None else [list(v) for v in spec.fence]
+    row = Site(
+        name=spec.name,
+        crs=spec.crs,
+        origin_x=spec.origin[0],
+        origin_y=spec.origin[1],
+        origin_z=spec.origin[2],
+        fence=fence,
+        taxonomy=spec.taxonomy.to_dict(),
+        tile_size_m=spec.tile_size_m,
+    )
+    session.add(row)
+    session.flush()
+    return row
+
+
+def get_site(session: Session, name: str) -> Site:
+    site = session.execute(sa.select(Site).where(Site.name == name)).scalar_one_or_none()
+    if site is None:
+        names = session.execute(sa.select(Site.name).order_by(Site.name)).scalars().all()
+        hint = (
+            f" Known sites: {', '.join(names)}." if names else " No site exists yet: `siteline site create`."
+        )
+        raise SiteNotFoundError(f"unknown site {name!r}.{hint}")
+    return site
+
+
+def list_sites(session: Session) -> list[Site]:
+    return list(session.execute(sa.select(Site).order_by(Site.name)).scalars())
+
+
+def site_spec(site: Site) -> SiteSpec:
+    """The spec of a stored site."""
+    fence = None if site.fence is None else tuple((float(x), float(y)) for x, y in site.fence)
+    return SiteSpec(
+        name=site.name,
+        crs=site.crs,
+        origin=site.origin,
+        fence=fence,
+        taxonomy=Taxonomy.from_dict(site.taxonomy, source=f"site {site.name} taxonomy"),
+        tile_size_m=site.tile_size_m,
+    )
+
+
+def scene_count(session: Session, site: Site) -> int:
+    return session.execute(sa.select(sa.func.count(Scene.id)).where(Scene.site_id == site.id)).scalar_one()

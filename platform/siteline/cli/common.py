@@ -1,0 +1,81 @@
+"""What every CLI command shares: settings, the catalog, JSON or table output, errors."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from siteline.catalog import Catalog, open_catalog
+from siteline.config import Settings, load_settings
+
+console = Console()
+err_console = Console(stderr=True)
+
+JsonOption = typer.Option(False, "--json", help="Print machine-readable JSON instead of a table.")
+
+
+def settings() -> Settings:
+    return load_settings()
+
+
+@contextmanager
+def catalog(check: bool = True) -> Iterator[Catalog]:
+    """The configured catalog, disposed of at the end of the block."""
+    cat = open_catalog(settings(), check=check)
+    try:
+        yield cat
+    finally:
+        cat.dispose()
+
+
+def _default(obj: Any) -> Any:
+    if isinstance(obj, datetime):
+        return obj.isoformat()
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    raise TypeError(f"cannot serialise {type(obj).__name__}")
+
+
+def print_json(data: Any) -> None:
+    """JSON on stdout, nothing else (so ``--json`` output can be piped)."""
+    sys.stdout.write(json.dumps(data, indent=2, default=_default, sort_keys=False) + "\n")
+
+
+def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> None:
+    table = Table(title=title)
+    for col in columns:
+        table.add_column(col)
+    for row in rows:
+        table.add_row(*("" if v is None else str(v) for v in row))
+    console.print(table)
+
+
+def print_record(title: str, record: dict[str, Any]) -> None:
+    table = Table(title=title, show_header=False)
+    table.add_column("field", style="bold")
+    table.add_column("value")
+    for key, value in record.items():
+        if isinstance(value, dict | list):
+            value = json.dumps(value, default=_default)
+            if len(value) > 200:
+                value = value[:197] + "..."
+        table.add_row(key, "" if value is None else str(value))
+    console.print(table)
+
+
+def emit(as_json: bool, data: Any, human: Callable[[], None]) -> None:
+    if as_json:
+        print_json(data)
+    else:
+        human()

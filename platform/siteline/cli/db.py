@@ -1,0 +1,73 @@
+"""``siteline init`` and ``siteline db ...``: create and migrate the catalog."""
+
+from __future__ import annotations
+
+import typer
+
+from siteline.catalog import migrate
+from siteline.catalog.engine import make_engine, ping
+from siteline.cli.common import JsonOption, console, emit, print_record, settings
+
+app = typer.Typer(help="Migrate the catalog database (Alembic).", no_args_is_help=True)
+
+
+def _engine():
+    engine = make_engine(settings().database_url)
+    ping(engine)
+    return engine
+
+
+def init() -> None:
+    """Create SITELINE_HOME and its stores, and migrate the catalog to the newest revision."""
+    cfg = settings()
+    cfg.home.mkdir(parents=True, exist_ok=True)
+    cfg.store_dir.mkdir(parents=True, exist_ok=True)
+    engine = _engine()
+    try:
+        migrate.upgrade(engine, "head")
+        rev = migrate.current_revision(engine)
+    finally:
+        engine.dispose()
+    console.print(
+        f"siteline home [bold]{cfg.home}[/], catalog {engine.url.render_as_string(hide_password=True)} at revision {rev}"
+    )
+
+
+@app.command("upgrade")
+def upgrade(revision: str = typer.Argument("head", help="Target revision.")) -> None:
+    """Migrate the catalog up to REVISION (default: the newest)."""
+    engine = _engine()
+    try:
+        migrate.upgrade(engine, revision)
+        console.print(f"catalog at revision {migrate.current_revision(engine)}")
+    finally:
+        engine.dispose()
+
+
+@app.command("downgrade")
+def downgrade(
+    revision: str = typer.Argument(..., help="Target revision, or 'base' to drop every table."),
+) -> None:
+    """Migrate the catalog down to REVISION."""
+    engine = _engine()
+    try:
+        migrate.downgrade(engine, revision)
+        console.print(f"catalog at revision {migrate.current_revision(engine)}")
+    finally:
+        engine.dispose()
+
+
+@app.command("current")
+def current(as_json: bool = JsonOption) -> None:
+    """Show the catalog's revision and this siteline's newest."""
+    engine = _engine()
+    try:
+        record = {
+            "url": engine.url.render_as_string(hide_password=True),
+            "current": migrate.current_revision(engine),
+            "head": migrate.head_revision(),
+        }
+    finally:
+        engine.dispose()
+    record["up_to_date"] = record["current"] == record["head"]
+    emit(as_json, record, lambda: print_record("catalog", record))

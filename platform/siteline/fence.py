@@ -1,0 +1,132 @@
+"""The site fence: a simple polygon in site-local metres (DESIGN.md §1, §4).
+
+Points outside the fence become class ``ignore``; mirror views reflect across its segments.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import shapely
+from shapely.validation import explain_validity
+
+from siteline.errors import GeometryError
+
+# A fence vertex further than this from the site origin means the file is in another frame or unit.
+MAX_FENCE_EXTENT_M = 50_000.0
+
+
+def validate_fence(vertices_m: Sequence[Sequence[float]], source: str = "fence") -> list[tuple[float, float]]:
+    """Check a closed ring of (x, y) site-local metres; return it without the repeated last vertex.
+
+    Raises :class:`GeometryError` naming ``source`` when the ring is not closed, has fewer than three
+    distinct vertices, is not finite, has no area, or intersects itself.
+    """
+    pts = np.asarray(vertices_m, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise GeometryError(f"{source}: fence vertices must be (x, y) pairs, got shape {pts.shape}.")
+    if not np.isfinite(pts).all():
+        raise GeometryError(f"{source}: fence has a non-finite vertex.")
+    if len(pts) < 4 or not np.array_equal(pts[0], pts[-1]):
+        raise GeometryError(
+            f"{source}: fence polygon is not closed: its last vertex must repeat the first "
+            f"(got {len(pts)} vertices, first {pts[0].tolist() if len(pts) else None}, last "
+            f"{pts[-1].tolist() if len(pts) else None})."
+        )
+    ring = pts[:-1]
+    if len(np.unique(ring, axis=0)) < 3:
+        raise GeometryError(f"{source}: fence needs at least 3 distinct vertices.")
+    if np.abs(ring).max() > MAX_FENCE_EXTENT_M:
+        raise GeometryError(
+            f"{source}: fence reaches {np.abs(ring).max():.0f} m from the site origin; fence coordinates "
+            "must be in the site CRS near the origin (is the origin right?)."
+        )
+    poly = shapely.Polygon(ring)
+    if not poly.is_valid:
+        raise GeometryError(
+            f"{source}: fence polygon is invalid ({explain_validity(poly)}): it must not intersect itself."
+        )
+    if poly.area <= 0.0:
+        raise GeometryError(f"{source}: fence polygon has no area.")
+    return [(float(x), float(y)) for x, y in ring]
+
+
+def load_fence_geojson(path: Path, origin: Sequence[float]) -> list[tuple[float, float]]:
+    """Read a fence from a GeoJSON file in the site CRS and return it in site-local metres.
+
+    The file holds one Polygon (a Feature, FeatureCollection of one feature, or bare geometry) whose
+    coordinates are easting/northing in the site CRS, as a survey export gives them; the site origin
+    (float64) is subtracted.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise GeometryError(f"fence file {path} does not exist.") from exc
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise GeometryError(f"fence file {path} is not valid GeoJSON: {exc}") from exc
+    geom = doc
+    if isinstance(doc, dict) and doc.get("type") == "FeatureCollection":
+        feats = doc.get("features") or []
+        if len(feats) != 1:
+            raise GeometryError(f"fence file {path}: expected exactly one feature, found {len(feats)}.")
+        geom = feats[0].get("geometry")
+    elif isinstance(doc, dict) and doc.get("type") == "Feature":
+        geom = doc.get("geometry")
+    if not isinstance(geom, dict) or geom.get("type") != "Polygon":
+        raise GeometryError(
+            f"fence file {path}: expected a GeoJSON Polygon, found {getattr(geom, 'get', lambda _: None)('type')!r}."
+        )
+    rings = geom.get("coordinates") or []
+    if len(rings) != 1:
+        raise GeometryError(
+            f"fence file {path}: the fence must be one ring without holes, found {len(rings)} rings."
+        )
+    try:
+        ring = np.asarray([[float(c[0]), float(c[1])] for c in rings[0]], dtype=np.float64)
+    except (TypeError, ValueError, IndexError) as exc:
+        raise GeometryError(f"fence file {path}: a coordinate is not a number pair.") from exc
+    local = ring - np.asarray(origin[:2], dtype=np.float64)
+    return validate_fence(local, source=f"fence file {path}")
+
+
+def fence_geojson(vertices_m: Sequence[Sequence[float]], origin: Sequence[float]) -> dict:
+    """GeoJSON Polygon (site CRS coordinates) of a site-local fence ring."""
+    ring = [[float(x) + origin[0], float(y) + origin[1]] for x, y in vertices_m]
+    ring.append(ring[0])
+    return {"type": "Polygon", "coordinates": [ring]}
+
+
+def inside_fence(xy_m: np.ndarray, vertices_m: Sequence[Sequence[float]]) -> np.ndarray:
+    """Which points lie inside (or on) the fence. xy_m: (N, 2+) site-local metres. Returns (N,) bool."""
+    poly = shapely.Polygon(vertices_m)
+    xy = np.asarray(xy_m, dtype=np.float64)
+    return shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
+
+
+def fence_area_m2(vertices_m: Sequence[Sequence[float]]) -> float:
+    """Area enclosed by the fence in m2."""
+    return float(shapely.Polygon(vertices_m).area)
+
+
+def nearest_segment(
+    point_xy: Sequence[float], vertices_m: Sequence[Sequence[float]]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fence segment (a, b), each (2,) float64 metres, nearest to ``point_xy``."""
+    ring = np.asarray(vertices_m, dtype=np.float64)
+    a = ring
+    b = np.roll(ring, -1, axis=0)
+    p = np.asarray(point_xy, dtype=np.float64)[:2]
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(1) / np.maximum((ab * ab).sum(1), 1e-300), 0.0, 1.0)
+    d = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
+    i = int(np.argmin(d))
+    return a[i], b[i]
+
+
+def is_finite_ring(vertices_m: Sequence[Sequence[float]]) -> bool:
+    return all(math.isfinite(c) for v in vertices_m for c in v)

@@ -1,0 +1,141 @@
+"""The site class taxonomy (DESIGN.md §4): site classes stored as uint8 and the mapping from
+source codes (ASPRS LAS classes, DJI Modify exports, hand corrections) to them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from siteline.errors import SchemaError
+from siteline.schemas import SCHEMA_DIR, load_json, validate
+
+DEFAULT_TAXONOMY_PATH = SCHEMA_DIR / "taxonomy.default.json"
+
+
+@dataclass(frozen=True)
+class SiteClass:
+    """One site class: uint8 id, name, whether change detection ignores it, display colour (RGB)."""
+
+    id: int
+    name: str
+    ignore: bool
+    color: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class Taxonomy:
+    """Site classes and the source-code mappings into them.
+
+    ``source_codes[source][code] = class name``; ``default_class`` receives unmapped codes.
+    """
+
+    name: str
+    classes: tuple[SiteClass, ...]
+    source_codes: dict[str, dict[int, str]] = field(default_factory=dict)
+    default_class: str = "ignore"
+
+    def __post_init__(self) -> None:
+        ids = [c.id for c in self.classes]
+        names = [c.name for c in self.classes]
+        if len(set(ids)) != len(ids):
+            raise SchemaError(f"taxonomy {self.name!r}: class ids repeat: {sorted(ids)}.")
+        if len(set(names)) != len(names):
+            raise SchemaError(f"taxonomy {self.name!r}: class names repeat: {sorted(names)}.")
+        known = set(names)
+        if self.default_class not in known:
+            raise SchemaError(f"taxonomy {self.name!r}: default_class {self.default_class!r} is not a class.")
+        if "ignore" not in known:
+            raise SchemaError(
+                f"taxonomy {self.name!r}: needs a class named 'ignore' (outside the fence goes there)."
+            )
+        for source, table in self.source_codes.items():
+            for code, target in table.items():
+                if target not in known:
+                    raise SchemaError(
+                        f"taxonomy {self.name!r}: source {source!r} code {code} maps to unknown class {target!r}."
+                    )
+
+    def by_name(self, name: str) -> SiteClass:
+        for c in self.classes:
+            if c.name == name:
+                return c
+        raise SchemaError(
+            f"taxonomy {self.name!r} has no class {name!r}; classes: {[c.name for c in self.classes]}."
+        )
+
+    def id_of(self, name: str) -> int:
+        return self.by_name(name).id
+
+    @property
+    def ignore_id(self) -> int:
+        return self.id_of("ignore")
+
+    def ignored_ids(self) -> np.ndarray:
+        """uint8 ids of the classes that change detection ignores."""
+        return np.array([c.id for c in self.classes if c.ignore], dtype=np.uint8)
+
+    def ignored_lut(self) -> np.ndarray:
+        """(256,) bool: True at the ids of ignored classes and at ids not in the taxonomy."""
+        lut = np.ones(256, dtype=bool)
+        for c in self.classes:
+            lut[c.id] = c.ignore
+        return lut
+
+    def code_lut(self, source: str) -> tuple[np.ndarray, np.ndarray]:
+        """(256,) uint8 lookup from source codes to class ids, and (256,) bool of codes that are mapped."""
+        if source not in self.source_codes:
+            raise SchemaError(
+                f"taxonomy {self.name!r} has no mapping for source {source!r}; it maps {sorted(self.source_codes)}."
+            )
+        lut = np.full(256, self.id_of(self.default_class), dtype=np.uint8)
+        known = np.zeros(256, dtype=bool)
+        for code, target in self.source_codes[source].items():
+            lut[code] = self.id_of(target)
+            known[code] = True
+        return lut, known
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "classes": [
+                {"id": c.id, "name": c.name, "ignore": c.ignore, "color": list(c.color)} for c in self.classes
+            ],
+            "source_codes": {
+                source: {str(code): target for code, target in sorted(table.items())}
+                for source, table in sorted(self.source_codes.items())
+            },
+            "default_class": self.default_class,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], source: str = "taxonomy") -> Taxonomy:
+        """Validate ``doc`` against ``schema/taxonomy.schema.json`` and build the taxonomy."""
+        validate(doc, "taxonomy.schema.json", source)
+        try:
+            return cls(
+                name=doc["name"],
+                classes=tuple(
+                    SiteClass(int(c["id"]), c["name"], bool(c["ignore"]), tuple(int(v) for v in c["color"]))
+                    for c in doc["classes"]
+                ),
+                source_codes={
+                    src: {int(code): target for code, target in table.items()}
+                    for src, table in doc.get("source_codes", {}).items()
+                },
+                default_class=doc.get("default_class", "ignore"),
+            )
+        except SchemaError as exc:
+            raise SchemaError(f"{source}: {exc}") from exc
+
+
+def load_taxonomy(path: Path) -> Taxonomy:
+    """Read and validate a taxonomy JSON file."""
+    return Taxonomy.from_dict(load_json(path, "taxonomy"), source=f"taxonomy file {path}")
+
+
+def default_taxonomy() -> Taxonomy:
+    """The taxonomy that ships in ``schema/taxonomy.default.json``."""
+    return load_taxonomy(DEFAULT_TAXONOMY_PATH)

@@ -1,0 +1,86 @@
+"""Shared fixtures: catalogs on SQLite and PostgreSQL, a SITELINE_HOME per test."""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import sqlalchemy as sa
+
+PG_ADMIN_URL = os.environ.get(
+    "SITELINE_TEST_POSTGRES_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
+)
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="session")
+def pg_admin() -> Iterator[sa.Engine]:
+    engine = sa.create_engine(PG_ADMIN_URL, isolation_level="AUTOCOMMIT")
+    try:
+        with engine.connect() as conn:
+            conn.execute(sa.text("SELECT 1"))
+    except sa.exc.OperationalError as exc:
+        pytest.fail(
+            f"PostgreSQL is not reachable at {PG_ADMIN_URL} ({exc.orig}); start it "
+            "(`pg_ctlcluster --skip-systemctl-redirect $(ls /etc/postgresql) main start`) or set "
+            "SITELINE_TEST_POSTGRES_URL."
+        )
+    yield engine
+    engine.dispose()
+
+
+def _pg_database(pg_admin: sa.Engine) -> Iterator[str]:
+    name = f"siteline_test_{uuid.uuid4().hex[:12]}"
+    with pg_admin.connect() as conn:
+        conn.execute(sa.text(f'CREATE DATABASE "{name}"'))
+    url = pg_admin.url.set(database=name).render_as_string(hide_password=False)
+    try:
+        yield url
+    finally:
+        with pg_admin.connect() as conn:
+            conn.execute(sa.text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+
+
+@pytest.fixture
+def postgres_url(pg_admin: sa.Engine) -> Iterator[str]:
+    """URL of a fresh PostgreSQL database with a random name, dropped after the test."""
+    yield from _pg_database(pg_admin)
+
+
+@pytest.fixture
+def sqlite_url(tmp_path: Path) -> str:
+    return f"sqlite:///{tmp_path / 'catalog.sqlite'}"
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
+    """An empty catalog database URL, once on SQLite and once on PostgreSQL."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'catalog.sqlite'}"
+    else:
+        yield from _pg_database(request.getfixturevalue("pg_admin"))
+
+
+@pytest.fixture
+def migrated_url(db_url: str) -> str:
+    from siteline.catalog import migrate
+    from siteline.catalog.engine import make_engine
+
+    engine = make_engine(db_url)
+    migrate.upgrade(engine)
+    engine.dispose()
+    return db_url
+
+
+@pytest.fixture
+def home(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A fresh SITELINE_HOME (SQLite catalog inside) for CLI tests."""
+    h = tmp_path / "home"
+    monkeypatch.setenv("SITELINE_HOME", str(h))
+    monkeypatch.delenv("SITELINE_DATABASE_URL", raising=False)
+    return h
