@@ -1,0 +1,167 @@
+"""Point splatting with a z-buffer in torch, one code path for CPU and CUDA (DESIGN.md §6).
+
+Points arrive in the site-local frame (float32, metres) with per-point attributes. Each batch is
+projected, invalid points (behind the near plane, NaN/inf, off-image) are sent to a dump slot before
+any integer cast, and every pixel keeps the minimum of the key (float32 depth bits << 32 | point
+index) via ``scatter_reduce_(..., "amin")``: the nearest point wins and equal depths break by the
+smaller index, so the output does not depend on the device or the batch size.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from siteline.cameras import Camera
+from siteline.errors import RenderError
+from siteline.render.settings import RenderSettings
+
+EMPTY_KEY = torch.iinfo(torch.int64).max
+MAX_POINTS = 2**32 - 1
+INDEX_MASK = 0xFFFFFFFF
+
+
+@dataclass
+class RenderResult:
+    """Outputs of one render, all (H, W[, C]) numpy arrays on the CPU.
+
+    hit: bool, a point landed. depth: float32 z_cam in metres, NaN where no hit. index: int64 winning
+    point index into the input, -1 where no hit. attributes: each input attribute gathered at the
+    winner, zero where no hit (check ``hit``). camera: the camera at the render scale.
+    """
+
+    camera: Camera
+    hit: np.ndarray
+    depth: np.ndarray
+    index: np.ndarray
+    attributes: dict[str, np.ndarray]
+    stats: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def coverage(self) -> float:
+        """Fraction of pixels hit."""
+        return float(self.hit.mean()) if self.hit.size else 0.0
+
+    @property
+    def rgb(self) -> np.ndarray:
+        if "rgb" not in self.attributes:
+            raise RenderError("this render was given no 'rgb' attribute.")
+        return self.attributes["rgb"]
+
+
+def disk_offsets(point_size_px: int) -> list[tuple[int, int]]:
+    """Pixel offsets (du, dv) covered by a disk of diameter ``point_size_px`` centred on a pixel."""
+    r = point_size_px / 2.0
+    k = point_size_px // 2
+    return [(du, dv) for dv in range(-k, k + 1) for du in range(-k, k + 1) if du * du + dv * dv <= r * r]
+
+
+def _as_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
+    return x if isinstance(x, torch.Tensor) else torch.from_numpy(np.ascontiguousarray(x))
+
+
+def _check_inputs(xyz: np.ndarray | torch.Tensor, attributes: Mapping[str, np.ndarray | torch.Tensor]) -> int:
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise RenderError(f"points must have shape (N, 3), got {tuple(xyz.shape)}.")
+    if xyz.dtype not in (np.float32, torch.float32):
+        raise RenderError(
+            f"points must be site-local float32, got {xyz.dtype}; georeferenced float64 coordinates go "
+            "through siteline.render.render_georeferenced."
+        )
+    n = int(xyz.shape[0])
+    if n > MAX_POINTS:
+        raise RenderError(f"{n} points exceed the {MAX_POINTS} a single render indexes; split the cloud.")
+    for name, values in attributes.items():
+        if values.shape[0] != n:
+            raise RenderError(f"attribute {name!r} has {values.shape[0]} rows for {n} points.")
+    return n
+
+
+def render_points(
+    xyz: np.ndarray | torch.Tensor,
+    camera: Camera,
+    settings: RenderSettings | None = None,
+    attributes: Mapping[str, np.ndarray | torch.Tensor] | None = None,
+    device: str | torch.device = "cpu",
+) -> RenderResult:
+    """Render site-local points through ``camera`` at ``settings.scale``.
+
+    xyz: (N, 3) float32, site-local metres. attributes: name -> (N,) or (N, C) arrays of any dtype
+    (uint8 RGB, uint8 class, bool flags). Returns a :class:`RenderResult` at the scaled camera.
+    """
+    settings = settings or RenderSettings()
+    attributes = dict(attributes or {})
+    n = _check_inputs(xyz, attributes)
+    dev = torch.device(device)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise RenderError("device 'cuda' was asked for but torch sees no CUDA device.")
+    cam = camera.scaled(settings.scale)
+    W, H = cam.width, cam.height
+    npix = W * H
+    t0 = time.perf_counter()
+    dtype = torch.float64 if settings.precision == "float64" else torch.float32
+    Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
+    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
+    fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
+    offsets = disk_offsets(settings.point_size_px)
+    margin = float(settings.point_size_px // 2)
+    # one extra slot (index npix) swallows every invalid point
+    zbuf = torch.full((npix + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
+    pts = _as_tensor(xyz)
+    in_frustum = 0
+    for start in range(0, n, settings.chunk_points):
+        stop = min(n, start + settings.chunk_points)
+        p = pts[start:stop].to(dev, non_blocking=True).to(dtype)
+        c = torch.addmm(tt, p, Rt)  # (M, 3) camera coordinates
+        z = c[:, 2]
+        inv_z = 1.0 / z
+        u = c[:, 0] * inv_z * fx + cx
+        v = c[:, 1] * inv_z * fy + cy
+        # NaN and inf fail every comparison, so they are invalid here; nothing is cast yet.
+        valid = (z > settings.near_m) & (u >= -margin) & (u < W + margin) & (v >= -margin) & (v < H + margin)
+        in_frustum += int(valid.sum())
+        zero = torch.zeros((), dtype=dtype, device=dev)
+        ui = torch.where(valid, u, zero).floor_().to(torch.int64)
+        vi = torch.where(valid, v, zero).floor_().to(torch.int64)
+        depth_bits = torch.where(valid, z, zero).to(torch.float32).view(torch.int32).to(torch.int64)
+        key = (depth_bits << 32) | torch.arange(start, stop, device=dev, dtype=torch.int64)
+        if len(offsets) == 1:
+            pix = torch.where(valid, vi * W + ui, npix)
+            zbuf.scatter_reduce_(0, pix, key, reduce="amin")
+        else:
+            for du, dv in offsets:
+                uo, vo = ui + du, vi + dv
+                ok = valid & (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
+                pix = torch.where(ok, vo * W + uo, npix)
+                zbuf.scatter_reduce_(0, pix, key, reduce="amin")
+    zbuf = zbuf[:npix]
+    hit_t = zbuf != EMPTY_KEY
+    index_t = torch.where(hit_t, zbuf & INDEX_MASK, -1)
+    depth_t = torch.where(hit_t, (zbuf >> 32).to(torch.int32).view(torch.float32), float("nan"))
+    if dev.type == "cuda":
+        torch.cuda.synchronize(dev)
+    t_splat = time.perf_counter() - t0
+    hit = hit_t.cpu().numpy().reshape(H, W)
+    index = index_t.cpu().numpy().reshape(H, W)
+    depth = depth_t.cpu().numpy().reshape(H, W)
+    winners = index[hit]
+    out_attrs: dict[str, np.ndarray] = {}
+    for name, values in attributes.items():
+        arr = values.cpu().numpy() if isinstance(values, torch.Tensor) else np.asarray(values)
+        img = np.zeros((H, W) + arr.shape[1:], dtype=arr.dtype)
+        img[hit] = arr[winners]
+        out_attrs[name] = img
+    stats = {
+        "points_read": n,
+        "points_in_frustum": in_frustum,
+        "coverage": float(hit.mean()) if hit.size else 0.0,
+        "seconds": time.perf_counter() - t0,
+        "seconds_splat": t_splat,
+        "width": W,
+        "height": H,
+    }
+    return RenderResult(camera=cam, hit=hit, depth=depth, index=index, attributes=out_attrs, stats=stats)
