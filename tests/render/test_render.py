@@ -155,6 +155,10 @@ def test_naive_float32_world_render_differs() -> None:
     uv0, _ = cam.project(xyz)
     moved = (u != np.floor(uv0[:, 0])) | (v != np.floor(uv0[:, 1]))
     assert moved.mean() > 0.2
+    inside = (u >= 0) & (u < 706) & (v >= 0) & (v < 510) & (c[:, 2].numpy() > 0)
+    naive_hit = np.zeros_like(at_origin.hit)
+    naive_hit[v[inside].astype(int), u[inside].astype(int)] = True
+    assert (naive_hit != at_origin.hit).sum() > 1000
 
 
 def test_georeferenced_input_must_be_float64() -> None:
