@@ -129,3 +129,80 @@ def read_site_local(
     cls = np.concatenate(classes) if classes else np.zeros(0, np.uint8)
     rgb = np.concatenate(rgbs) if rgbs else None
     return SiteLocalCloud(xyz=xyz, rgb=rgb, classification=cls)
+
+
+def las_offset(xyz_min: np.ndarray, scale: float) -> np.ndarray:
+    """A LAS offset near the data: the minimum rounded down to a multiple of 1000 scale units, so
+    |coordinate - offset| stays far below 2^31 x scale (DESIGN.md §2)."""
+    step = 1000.0 * scale
+    return np.floor(np.asarray(xyz_min, dtype=np.float64) / step) * step
+
+
+def las_header(
+    crs_text: str | None,
+    xyz_min: np.ndarray,
+    scale: float = 0.001,
+    point_format: int = 3,
+    version: str = "1.2",
+) -> laspy.LasHeader:
+    """A LAS header with ``scale`` on every axis, an offset near ``xyz_min`` and the CRS record."""
+    import pyproj
+
+    header = laspy.LasHeader(point_format=point_format, version=version)
+    header.scales = np.array([scale, scale, scale])
+    header.offsets = las_offset(xyz_min, scale)
+    if crs_text:
+        header.add_crs(pyproj.CRS.from_user_input(crs_text))
+    return header
+
+
+def fill_record(
+    record: laspy.ScaleAwarePointRecord,
+    xyz_crs: np.ndarray,
+    rgb: np.ndarray | None = None,
+    classification: np.ndarray | None = None,
+    intensity: np.ndarray | None = None,
+    gps_time: np.ndarray | None = None,
+    return_number: np.ndarray | None = None,
+) -> None:
+    """Set a point record's fields from float64 georeferenced coordinates and attributes.
+
+    Colour is written as 16-bit (value * 257), as LAS expects.
+    """
+    record.x = xyz_crs[:, 0]
+    record.y = xyz_crs[:, 1]
+    record.z = xyz_crs[:, 2]
+    if rgb is not None:
+        rgb16 = rgb.astype(np.uint16) * 257
+        record.red, record.green, record.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
+    if classification is not None:
+        record.classification = classification
+    if intensity is not None:
+        record.intensity = intensity
+    if gps_time is not None:
+        record.gps_time = gps_time
+    if return_number is not None:
+        record.return_number = return_number
+        record.number_of_returns = np.maximum(return_number, 1)
+
+
+def write_las(
+    path: Path,
+    xyz_crs: np.ndarray,
+    *,
+    crs: str | None,
+    rgb: np.ndarray | None = None,
+    classification: np.ndarray | None = None,
+    intensity: np.ndarray | None = None,
+    gps_time: np.ndarray | None = None,
+    return_number: np.ndarray | None = None,
+    scale: float = 0.001,
+) -> None:
+    """Write a small LAS/LAZ file (by extension) in one go; point format 3, version 1.2."""
+    xyz = np.asarray(xyz_crs, dtype=np.float64)
+    header = las_header(crs, xyz.min(axis=0) if len(xyz) else np.zeros(3), scale)
+    record = laspy.ScaleAwarePointRecord.zeros(len(xyz), header=header)
+    fill_record(record, xyz, rgb, classification, intensity, gps_time, return_number)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with laspy.open(path, mode="w", header=header) as writer:
+        writer.write_points(record)

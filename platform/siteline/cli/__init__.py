@@ -7,7 +7,7 @@ import sys
 import typer
 
 from siteline import __version__
-from siteline.cli import db, demo, site
+from siteline.cli import db, demo, render, site
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
@@ -22,6 +22,8 @@ app.command("init")(db.init)
 app.command("demo")(demo.demo)
 app.add_typer(db.app, name="db")
 app.add_typer(site.app, name="site")
+app.command("render")(render.render)
+app.add_typer(render.views_app, name="views")
 
 
 @app.callback()

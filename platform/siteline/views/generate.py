@@ -1,0 +1,249 @@
+"""Cascade the strategies into candidate views, reject the unusable ones, draw a stratified sample."""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from siteline.cameras import Camera
+from siteline.errors import ViewsError
+from siteline.fence import inside_fence
+from siteline.render import RenderSettings, render_points
+from siteline.views import strategies
+from siteline.views.ground import GroundPlane
+from siteline.views.params import ViewParams
+from siteline.views.sources import PointSource
+
+
+@dataclass(frozen=True)
+class NamedCamera:
+    """A real camera and the name of its image."""
+
+    name: str
+    camera: Camera
+
+
+@dataclass
+class SyntheticView:
+    """One synthetic view: its parent real camera, the strategy key, the parameters that made it, the
+    camera (site-local), and after rejection its coverage at the render scale."""
+
+    parent: str
+    strategy: str
+    params: dict[str, Any]
+    camera: Camera
+    coverage: float | None = None
+    rejected: str | None = None
+    index: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "index": self.index,
+            "parent": self.parent,
+            "strategy": self.strategy,
+            "params": self.params,
+            "coverage": self.coverage,
+            "camera": self.camera.to_dict(),
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> SyntheticView:
+        return cls(
+            doc["parent"],
+            doc["strategy"],
+            doc["params"],
+            Camera.from_dict(doc["camera"]),
+            doc.get("coverage"),
+            None,
+            doc.get("index"),
+        )
+
+
+@dataclass
+class ViewSet:
+    """The outcome of view generation: the sample, and counts of what was generated and rejected."""
+
+    views: list[SyntheticView]
+    params: ViewParams
+    ground: GroundPlane
+    candidates: int
+    rejected: dict[str, int] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "params": self.params.to_dict(),
+            "ground_plane": self.ground.to_dict(),
+            "candidates": self.candidates,
+            "rejected": self.rejected,
+            "views": [v.to_dict() for v in self.views],
+        }
+
+
+def strategy_key(vertical_fraction: float, mirrored: bool, forward_fraction: float) -> str:
+    return f"v{vertical_fraction:g}-{'mirror' if mirrored else 'orig'}-f{forward_fraction:g}"
+
+
+def central_median_depth(camera: Camera, source: PointSource, params: ViewParams) -> float | None:
+    """Median depth (metres) of the central image region, from a probe render; None if it is empty."""
+    r = render_points(
+        source.points_for_view(camera, params.depth_probe_scale),
+        camera,
+        RenderSettings(scale=params.depth_probe_scale),
+    )
+    H, W = r.hit.shape
+    fh, fw = max(1, int(round(H * params.central_fraction))), max(1, int(round(W * params.central_fraction)))
+    top, left = (H - fh) // 2, (W - fw) // 2
+    d = r.depth[top : top + fh, left : left + fw]
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else None
+
+
+def candidate_views(
+    parent: NamedCamera,
+    ground: GroundPlane,
+    fence_m: Sequence[Sequence[float]] | None,
+    depth_of: Callable[[Camera], float | None],
+    params: ViewParams,
+) -> list[SyntheticView]:
+    """All ``params.per_camera`` candidates of one real camera, cascaded vertical -> mirror -> forward.
+
+    A candidate that cannot exist (no fence to mirror across, nothing ahead to step towards) is
+    returned with ``rejected`` set, so the count is always ``per_camera``.
+    """
+    out: list[SyntheticView] = []
+    for vf in params.vertical_fractions:
+        cam_v = strategies.vertical(parent.camera, ground, vf)
+        for mirrored in (False, True) if params.mirror else (False,):
+            segment = None
+            cam_m: Camera | None = cam_v
+            reason = None
+            if mirrored:
+                if fence_m is None:
+                    cam_m, reason = None, "no_fence"
+                else:
+                    cam_m, segment = strategies.mirror(cam_v, fence_m)
+            depth = depth_of(cam_m) if cam_m is not None else None
+            for ff in params.forward_fractions:
+                base = {
+                    "vertical_fraction": vf,
+                    "mirrored": mirrored,
+                    "forward_fraction": ff,
+                    "mirror_segment_m": segment,
+                    "central_depth_m": depth,
+                }
+                key = strategy_key(vf, mirrored, ff)
+                if cam_m is None:
+                    out.append(
+                        SyntheticView(parent.name, key, base | {"forward_m": None}, cam_v, rejected=reason)
+                    )
+                    continue
+                if depth is None and ff > 0:
+                    out.append(
+                        SyntheticView(
+                            parent.name, key, base | {"forward_m": None}, cam_m, rejected="nothing_ahead"
+                        )
+                    )
+                    continue
+                step = ff * (depth or 0.0)
+                out.append(
+                    SyntheticView(
+                        parent.name, key, base | {"forward_m": step}, strategies.forward(cam_m, step)
+                    )
+                )
+    return out
+
+
+def reject(
+    views: list[SyntheticView],
+    ground: GroundPlane,
+    fence_m: Sequence[Sequence[float]] | None,
+    source: PointSource,
+    params: ViewParams,
+) -> None:
+    """Set ``rejected`` on views underground, outside the fence after mirroring, within
+    ``clearance_m`` of a surface, under geometry, or below ``min_coverage``; set ``coverage`` on the rest."""
+    live = [v for v in views if v.rejected is None]
+    if not live:
+        return
+    centers = np.array([v.camera.center for v in live])
+    heights = ground.height(centers)
+    near = source.nearest_distance(centers)
+    above = source.count_above(centers, params.overhead_radius_m)
+    inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
+    settings = RenderSettings(scale=params.render_scale)
+    for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
+        if h < params.min_height_m:
+            v.rejected = "underground"
+        elif v.params["mirrored"] and not ins:
+            v.rejected = "outside_fence"
+        elif dist < params.clearance_m:
+            v.rejected = "near_surface"
+        elif up > 0:
+            v.rejected = "under_geometry"
+        else:
+            r = render_points(source.points_for_view(v.camera, params.render_scale), v.camera, settings)
+            v.coverage = r.coverage
+            if r.coverage < params.min_coverage:
+                v.rejected = "low_coverage"
+
+
+def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list[SyntheticView]:
+    """Draw ``n`` views (all if fewer), round-robin over strategy strata in a seeded order, so stratum
+    counts differ by at most one wherever strata have views to give."""
+    rng = np.random.default_rng(seed)
+    strata: dict[str, list[SyntheticView]] = defaultdict(list)
+    for v in views:
+        strata[v.strategy].append(v)
+    keys = sorted(strata)
+    pools = {}
+    for k in keys:
+        order = rng.permutation(len(strata[k]))
+        pools[k] = [strata[k][i] for i in order]
+    key_order = [keys[i] for i in rng.permutation(len(keys))]
+    chosen: list[SyntheticView] = []
+    depth = 0
+    while len(chosen) < n and any(len(pools[k]) > depth for k in key_order):
+        for k in key_order:
+            if len(chosen) >= n:
+                break
+            if len(pools[k]) > depth:
+                chosen.append(pools[k][depth])
+        depth += 1
+    return chosen
+
+
+def generate_views(
+    cameras: Iterable[NamedCamera],
+    ground: GroundPlane,
+    fence_m: Sequence[Sequence[float]] | None,
+    source: PointSource,
+    params: ViewParams | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> ViewSet:
+    """Synthetic views of one scene (the later scene of a pair): candidates for every real camera,
+    rejection, then a seeded stratified sample of ``params.n_views``, indexed 0..n-1."""
+    params = params or ViewParams()
+    cams = list(cameras)
+    if not cams:
+        raise ViewsError("no real cameras to generate views from.")
+
+    def depth_of(cam: Camera) -> float | None:
+        return central_median_depth(cam, source, params)
+
+    candidates: list[SyntheticView] = []
+    for parent in cams:
+        cands = candidate_views(parent, ground, fence_m, depth_of, params)
+        reject(cands, ground, fence_m, source, params)
+        candidates.extend(cands)
+        if progress is not None:
+            progress(1)
+    kept = [v for v in candidates if v.rejected is None]
+    sample = stratified_sample(kept, params.n_views, params.seed)
+    for i, v in enumerate(sample):
+        v.index = i
+    rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))
+    return ViewSet(sample, params, ground, len(candidates), rejected)

@@ -1,0 +1,77 @@
+"""Synthetic view parameters (DESIGN.md §5 defaults), persisted with every view set."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from siteline.errors import ViewsError
+
+
+@dataclass(frozen=True)
+class ViewParams:
+    """vertical_fractions: camera heights kept, as fractions of the real camera's height above the
+    ground plane (moved along the plane normal, orientation kept).
+    mirror: add a mirror of each view across the nearest fence segment.
+    forward_fractions: steps along the optical axis, as fractions of the median depth of the central
+    image region (``central_fraction`` of the width and height).
+    depth_probe_scale: render scale of the depth probe that measures that median (of the real image).
+    clearance_m: reject views whose centre is within this distance of a point.
+    min_height_m: reject views lower than this above the ground plane (underground).
+    overhead_radius_m: reject views with points above them within this horizontal radius (under a
+    slab, inside a building).
+    render_scale, min_coverage: reject views whose coverage at this scale is below min_coverage.
+    n_views: views kept per pair (seeded sample, stratified by strategy).
+    """
+
+    vertical_fractions: tuple[float, ...] = (1.0, 0.75, 0.5, 0.25)
+    mirror: bool = True
+    forward_fractions: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75)
+    central_fraction: float = 0.5
+    depth_probe_scale: float = 0.0625
+    clearance_m: float = 1.0
+    min_height_m: float = 1.0
+    overhead_radius_m: float = 1.0
+    render_scale: float = 0.125
+    min_coverage: float = 0.5
+    n_views: int = 300
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("vertical_fractions", "forward_fractions"):
+            vals = getattr(self, name)
+            if not vals or not all(isinstance(v, int | float) and math.isfinite(v) for v in vals):
+                raise ViewsError(f"{name} must be a non-empty list of numbers, got {vals!r}.")
+        if not all(0 < v <= 1 for v in self.vertical_fractions):
+            raise ViewsError(f"vertical_fractions must lie in (0, 1], got {self.vertical_fractions}.")
+        if not all(0 <= v < 1 for v in self.forward_fractions):
+            raise ViewsError(f"forward_fractions must lie in [0, 1), got {self.forward_fractions}.")
+        if not 0 < self.central_fraction <= 1:
+            raise ViewsError(f"central_fraction {self.central_fraction} must lie in (0, 1].")
+        if not 0 <= self.min_coverage <= 1:
+            raise ViewsError(f"min_coverage {self.min_coverage} must lie in [0, 1].")
+        if self.n_views < 1:
+            raise ViewsError(f"n_views must be at least 1, got {self.n_views}.")
+        for name in ("clearance_m", "overhead_radius_m", "render_scale", "depth_probe_scale"):
+            if not getattr(self, name) > 0:
+                raise ViewsError(f"{name} must be positive.")
+
+    @property
+    def per_camera(self) -> int:
+        """Candidate views per real camera before rejection."""
+        return len(self.vertical_fractions) * (2 if self.mirror else 1) * len(self.forward_fractions)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["vertical_fractions"] = list(self.vertical_fractions)
+        d["forward_fractions"] = list(self.forward_fractions)
+        return d
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> ViewParams:
+        doc = dict(doc)
+        for key in ("vertical_fractions", "forward_fractions"):
+            if key in doc:
+                doc[key] = tuple(doc[key])
+        return cls(**doc)

@@ -1,0 +1,56 @@
+"""Where view generation gets its geometry: an interface with an in-memory implementation (the tile
+store provides another)."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from siteline.cameras import Camera
+
+
+class PointSource(Protocol):
+    """Site-local geometry of one scene."""
+
+    def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
+        """(N, 3) float32 site-local points a render of ``camera`` at ``scale`` needs."""
+        ...
+
+    def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
+        """(M,) distance in metres from each query (M, 3) to the nearest point."""
+        ...
+
+    def count_above(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
+        """(M,) number of points higher than each query within ``radius_m`` horizontally."""
+        ...
+
+
+class ArrayPointSource:
+    """A whole (small) cloud held in memory: xyz (N, 3) float32 site-local metres."""
+
+    def __init__(self, xyz: np.ndarray) -> None:
+        self.xyz = np.ascontiguousarray(xyz, dtype=np.float32)
+        self._tree3 = cKDTree(self.xyz) if len(self.xyz) else None
+        self._tree2 = cKDTree(self.xyz[:, :2]) if len(self.xyz) else None
+
+    def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
+        return self.xyz
+
+    def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
+        q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+        if self._tree3 is None:
+            return np.full(len(q), np.inf)
+        d, _ = self._tree3.query(q, k=1)
+        return d
+
+    def count_above(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
+        q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+        if self._tree2 is None:
+            return np.zeros(len(q), dtype=np.int64)
+        out = np.zeros(len(q), dtype=np.int64)
+        for i, idx in enumerate(self._tree2.query_ball_point(q[:, :2], r=radius_m)):
+            if idx:
+                out[i] = int((self.xyz[idx, 2] > q[i, 2]).sum())
+        return out

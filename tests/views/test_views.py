@@ -1,0 +1,185 @@
+"""Synthetic views: ground fit, the three strategies, rejection and stratified sampling."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from siteline.cameras import Camera
+from siteline.errors import ViewsError
+from siteline.fence import inside_fence
+from siteline.views import (
+    ArrayPointSource,
+    NamedCamera,
+    SyntheticView,
+    ViewParams,
+    candidate_views,
+    fit_ground_plane,
+    generate_views,
+    mirror,
+    stratified_sample,
+)
+
+FENCE = [(-40.0, -40.0), (40.0, -40.0), (40.0, 40.0), (-40.0, 40.0)]
+PARAMS = ViewParams(render_scale=0.25, depth_probe_scale=0.25, min_coverage=0.3, n_views=40)
+
+
+def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    ground = np.c_[rng.uniform(-70, 70, (60000, 2)), rng.normal(0.0, 0.02, 60000)]
+    building = np.c_[rng.uniform(-8, 8, (8000, 2)), rng.uniform(0, 12, 8000)]
+    xyz = np.concatenate([ground, building]).astype(np.float32)
+    cls = np.r_[np.ones(len(ground)), np.full(len(building), 2)].astype(np.uint8)
+    return xyz, cls
+
+
+def _real_cameras() -> list[NamedCamera]:
+    cams = []
+    for i, (x, y) in enumerate([(-55, 0), (55, 10), (0, -55), (20, 55)]):
+        cams.append(
+            NamedCamera(
+                f"DJI_{i:04d}.JPG", Camera.look_at((x, y, 40.0), (0.3 * x, 0.3 * y, 0.0), 320, 240, fx=260.0)
+            )
+        )
+    return cams
+
+
+def test_ground_plane_is_robust_to_outliers() -> None:
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-50, 50, (5000, 2))
+    z = 0.02 * xy[:, 0] - 0.01 * xy[:, 1] + 3.0 + rng.normal(0, 0.02, len(xy))
+    pts = np.c_[xy, z]
+    outliers = np.c_[rng.uniform(-50, 50, (2000, 2)), rng.uniform(5, 30, 2000)]
+    plane = fit_ground_plane(np.concatenate([pts, outliers]))
+    true_n = np.array([-0.02, 0.01, 1.0]) / np.linalg.norm([-0.02, 0.01, 1.0])
+    assert np.degrees(np.arccos(np.clip(np.dot(plane.normal, true_n), -1, 1))) < 0.2
+    assert abs(plane.height(np.array([0.0, 0.0, 3.0]))) < 0.02
+
+
+def test_ground_plane_needs_points() -> None:
+    with pytest.raises(ViewsError, match="at least 3"):
+        fit_ground_plane(np.zeros((2, 3)))
+
+
+def test_thirty_two_candidates_per_real_camera() -> None:
+    xyz, cls = _scene()
+    plane = fit_ground_plane(xyz[cls == 1])
+    source = ArrayPointSource(xyz)
+    for cam in _real_cameras():
+        cands = candidate_views(cam, plane, FENCE, lambda c: 30.0, ViewParams())
+        assert len(cands) == 32
+        assert len({v.strategy for v in cands}) == 32
+        assert all(v.parent == cam.name for v in cands)
+    assert (
+        len(candidate_views(_real_cameras()[0], plane, None, lambda c: 30.0, ViewParams(mirror=False))) == 16
+    )
+    assert source.nearest_distance(np.zeros((1, 3)))[0] < 1.0
+
+
+def test_mirroring_twice_gives_the_original() -> None:
+    cam = _real_cameras()[0].camera
+    once, seg = mirror(cam, FENCE)
+    twice, seg2 = mirror(once, FENCE)
+    assert seg == seg2
+    assert np.allclose(twice.R, cam.R, atol=1e-12) and np.allclose(twice.center, cam.center, atol=1e-9)
+    assert inside_fence(once.center[None, :2], FENCE)[0]
+    assert np.linalg.det(once.R) == pytest.approx(1.0)
+    # the mirrored camera looks back across the fence: its forward x flips sign
+    assert np.sign(once.forward[0]) == -np.sign(cam.forward[0])
+
+
+def test_vertical_heights_are_fractions_of_the_real_height() -> None:
+    xyz, cls = _scene()
+    plane = fit_ground_plane(xyz[cls == 1])
+    cam = _real_cameras()[0]
+    cands = candidate_views(cam, plane, FENCE, lambda c: 30.0, ViewParams())
+    h0 = plane.height(cam.camera.center)
+    for v in cands:
+        if not v.params["mirrored"] and v.params["forward_fraction"] == 0:
+            assert plane.height(v.camera.center) == pytest.approx(
+                v.params["vertical_fraction"] * h0, abs=1e-9
+            )
+            assert np.allclose(v.camera.R, cam.camera.R)
+
+
+def test_generated_views_are_valid_seeded_and_recorded() -> None:
+    xyz, cls = _scene()
+    plane = fit_ground_plane(xyz[cls == 1])
+    source = ArrayPointSource(xyz)
+    a = generate_views(_real_cameras(), plane, FENCE, source, PARAMS)
+    b = generate_views(_real_cameras(), plane, FENCE, source, PARAMS)
+    assert a.candidates == 4 * 32
+    assert 0 < len(a.views) <= 40
+    assert [v.to_dict() for v in a.views] == [v.to_dict() for v in b.views]
+    assert [v.index for v in a.views] == list(range(len(a.views)))
+    for v in a.views:
+        assert plane.height(v.camera.center) >= PARAMS.min_height_m
+        assert source.nearest_distance(v.camera.center[None])[0] >= PARAMS.clearance_m
+        assert v.coverage is not None and v.coverage >= PARAMS.min_coverage
+        if v.params["mirrored"]:
+            assert inside_fence(v.camera.center[None, :2], FENCE)[0]
+        again = SyntheticView.from_dict(v.to_dict())
+        assert again.camera == v.camera and again.parent == v.parent
+    assert {v.params["mirrored"] for v in a.views} == {False, True}
+    c = generate_views(
+        _real_cameras(),
+        plane,
+        FENCE,
+        source,
+        ViewParams(
+            **{
+                **PARAMS.to_dict(),
+                "seed": 1,
+                "vertical_fractions": (1.0, 0.75, 0.5, 0.25),
+                "forward_fractions": (0.0, 0.25, 0.5, 0.75),
+            }
+        ),
+    )
+    assert [v.to_dict() for v in c.views] != [v.to_dict() for v in a.views]
+
+
+def test_views_under_geometry_and_underground_are_rejected() -> None:
+    xyz, cls = _scene()
+    slab = np.c_[np.random.default_rng(1).uniform(-60, -50, (2000, 2)), np.full(2000, 60.0)].astype(
+        np.float32
+    )
+    xyz = np.concatenate([xyz, slab])
+    plane = fit_ground_plane(xyz[:60000])
+    source = ArrayPointSource(xyz)
+    under = NamedCamera("under", Camera.look_at((-55, -55, 40.0), (0, 0, 0), 320, 240, fx=260.0))
+    cands = candidate_views(
+        under, plane, None, lambda c: 30.0, ViewParams(mirror=False, forward_fractions=(0.0,))
+    )
+    from siteline.views.generate import reject
+
+    reject(cands, plane, None, source, ViewParams(mirror=False, forward_fractions=(0.0,)))
+    assert {v.rejected for v in cands} == {"under_geometry"}
+    below = NamedCamera("below", Camera.look_at((0, 0, -5.0), (10, 0, -5.0), 320, 240, fx=260.0))
+    cands = candidate_views(
+        below, plane, None, lambda c: 30.0, ViewParams(mirror=False, forward_fractions=(0.0,))
+    )
+    reject(cands, plane, None, source, ViewParams(mirror=False, forward_fractions=(0.0,)))
+    assert {v.rejected for v in cands} == {"underground"}
+
+
+def _fake(strategy: str, i: int) -> SyntheticView:
+    return SyntheticView(f"p{i}", strategy, {}, Camera.look_at((0, 0, 10), (0, 0, 0), 4, 4, 2.0))
+
+
+def test_sample_is_stratified() -> None:
+    sizes = {"a": 50, "b": 3, "c": 20, "d": 9}
+    views = [_fake(k, i) for k, n in sizes.items() for i in range(n)]
+    for n in (10, 30, 60, 200):
+        chosen = stratified_sample(views, n, seed=7)
+        assert len(chosen) == min(n, len(views))
+        counts = Counter(v.strategy for v in chosen)
+        exhausted = {k for k in sizes if counts[k] == sizes[k]}
+        open_counts = [counts[k] for k in sizes if k not in exhausted]
+        if open_counts:
+            assert max(open_counts) - min(open_counts) <= 1
+            assert all(counts[k] <= max(open_counts) for k in exhausted)
+    assert [id(v) for v in stratified_sample(views, 30, 3)] == [
+        id(v) for v in stratified_sample(views, 30, 3)
+    ]
