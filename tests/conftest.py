@@ -8,7 +8,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import sqlalchemy as sa
 
 PG_ADMIN_URL = os.environ.get(
     "SITELINE_TEST_POSTGRES_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
@@ -19,7 +18,9 @@ DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="session")
-def pg_admin() -> Iterator[sa.Engine]:
+def pg_admin() -> Iterator:
+    import sqlalchemy as sa
+
     engine = sa.create_engine(PG_ADMIN_URL, isolation_level="AUTOCOMMIT")
     try:
         with engine.connect() as conn:
@@ -34,7 +35,9 @@ def pg_admin() -> Iterator[sa.Engine]:
     engine.dispose()
 
 
-def _pg_database(pg_admin: sa.Engine) -> Iterator[str]:
+def _pg_database(pg_admin) -> Iterator[str]:
+    import sqlalchemy as sa
+
     name = f"siteline_test_{uuid.uuid4().hex[:12]}"
     with pg_admin.connect() as conn:
         conn.execute(sa.text(f'CREATE DATABASE "{name}"'))
@@ -47,7 +50,7 @@ def _pg_database(pg_admin: sa.Engine) -> Iterator[str]:
 
 
 @pytest.fixture
-def postgres_url(pg_admin: sa.Engine) -> Iterator[str]:
+def postgres_url(pg_admin) -> Iterator[str]:
     """URL of a fresh PostgreSQL database with a random name, dropped after the test."""
     yield from _pg_database(pg_admin)
 

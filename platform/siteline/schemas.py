@@ -8,8 +8,6 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import jsonschema
-
 from siteline.errors import SchemaError
 
 SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schema"
@@ -32,7 +30,8 @@ def load_schema(name: str) -> dict[str, Any]:
 
 
 @cache
-def _validator(name: str) -> jsonschema.protocols.Validator:
+def _validator(name: str):  # -> jsonschema.protocols.Validator
+    import jsonschema
     from referencing import Registry, Resource
     from referencing.jsonschema import DRAFT202012
 
