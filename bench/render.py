@@ -146,7 +146,7 @@ def main() -> None:
             f"pixel agreement with siteline {agree:.4%}"
         )
     print()
-    print(f"| scale | size (px) | point size | seconds | M points/s | coverage | speed-up vs numpy |")
+    print("| scale | size (px) | point size | seconds | M points/s | coverage | speed-up vs numpy |")
     print("|---|---|---|---|---|---|---|")
     for scale, ps, sec, pps, cov, w, h in rows:
         ratio = f"{base[scale] / sec:.1f}x" if scale in base and ps == 1 else ""
