@@ -1,0 +1,228 @@
+"""LiDAR-like sampling of a synthetic epoch: surfaces at a density, kept only where the flight can see
+them, with range noise, intensity, GPS time and return numbers; streamed in chunks with ground truth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import minimum_filter
+
+from siteline.synth import model as m
+from siteline.synth.primitives import SAMPLE, Primitive
+
+GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06T00:00:00Z
+SECONDS_PER_WEEK = 604800.0
+
+
+@dataclass(frozen=True)
+class LidarSpec:
+    """density_pts_m2: surface sampling density. noise_m: range noise (1 sigma, metres).
+    altitude_m: flight height above the site origin. line_spacing_m, speed_m_s: the lawnmower pattern
+    that sets GPS times. chunk_points: points generated per chunk (bounds memory)."""
+
+    density_pts_m2: float = 10.0
+    noise_m: float = 0.02
+    altitude_m: float = 80.0
+    line_spacing_m: float = 40.0
+    speed_m_s: float = 8.0
+    chunk_points: int = 500_000
+    occluder_density_pts_m2: float = 6.0
+    occluder_cell_m: float = 0.5
+    visibility_tolerance_m: float = 0.3
+    oblique_tilts_deg: tuple[float, ...] = (35.0, 65.0)
+
+
+@dataclass
+class EpochChunk:
+    """Points of one epoch chunk, site-local float64, with LAS attributes and ground truth."""
+
+    xyz: np.ndarray
+    rgb: np.ndarray
+    las_class: np.ndarray
+    intensity: np.ndarray
+    gps_time: np.ndarray
+    return_number: np.ndarray
+    number_of_returns: np.ndarray
+    object_id: np.ndarray
+    changed_since_previous: np.ndarray
+    changed_until_next: np.ndarray
+
+
+INTENSITY = {
+    m.GROUND: 60,
+    m.BUILDING: 150,
+    m.CRANE: 200,
+    m.VEHICLE: 180,
+    m.VEG_MED: 80,
+    m.VEG_HIGH: 95,
+    m.TEMPORARY: 120,
+    m.WORKER: 170,
+    m.MATERIAL: 110,
+    m.SNOW: 230,
+    m.NOISE: 20,
+}
+
+
+def directions(tilts_deg: tuple[float, ...]) -> list[np.ndarray]:
+    """Viewing directions (unit, sensor -> scene): nadir, then four azimuths per oblique tilt."""
+    out = [np.array([0.0, 0.0, -1.0])]
+    for tilt in tilts_deg:
+        t = math.radians(tilt)
+        for az in (45.0, 135.0, 225.0, 315.0):
+            a = math.radians(az)
+            out.append(np.array([math.sin(t) * math.cos(a), math.sin(t) * math.sin(a), -math.cos(t)]))
+    return out
+
+
+class OcclusionBuffers:
+    """Orthographic depth buffers along a few directions, built from a coarse sampling of every
+    surface; a point is visible if it is within tolerance of the nearest surface in its cell along
+    at least one direction. On the nadir buffer a 3x3 minimum filter closes holes of the coarse
+    sampling (slabs stay opaque); oblique buffers are left unfiltered so walls and masts stay visible."""
+
+    def __init__(self, prims: list[Primitive], spec: LidarSpec, seed: int) -> None:
+        self.spec = spec
+        rng = np.random.default_rng(seed)
+        pts = np.concatenate(
+            [
+                SAMPLE[p.kind](int(rng.poisson(spec.occluder_density_pts_m2 * p.area_m2())), rng, *p.params)
+                for p in prims
+            ]
+        )
+        self.buffers = []
+        for k, d in enumerate(directions(spec.oblique_tilts_deg)):
+            e1 = np.cross(d, [0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.cross(d, [1.0, 0.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(d, e1)
+            a, b, depth = pts @ e1, pts @ e2, pts @ d
+            lo = np.array([a.min(), b.min()]) - 2 * spec.occluder_cell_m
+            shape = (
+                int((a.max() - lo[0]) / spec.occluder_cell_m) + 4,
+                int((b.max() - lo[1]) / spec.occluder_cell_m) + 4,
+            )
+            buf = np.full(shape, np.inf)
+            ia = ((a - lo[0]) / spec.occluder_cell_m).astype(np.int64)
+            ib = ((b - lo[1]) / spec.occluder_cell_m).astype(np.int64)
+            np.minimum.at(buf, (ia, ib), depth)
+            if k == 0:
+                buf = minimum_filter(buf, size=3, mode="nearest")
+            self.buffers.append((d, e1, e2, lo, buf))
+
+    def visible(self, xyz: np.ndarray) -> np.ndarray:
+        """(N,) bool: seen along at least one direction."""
+        out = np.zeros(len(xyz), bool)
+        for d, e1, e2, lo, buf in self.buffers:
+            ia = np.clip(
+                ((xyz @ e1 - lo[0]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[0] - 1
+            )
+            ib = np.clip(
+                ((xyz @ e2 - lo[1]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[1] - 1
+            )
+            out |= xyz @ d <= buf[ia, ib] + self.spec.visibility_tolerance_m
+        return out
+
+    def visible_from_above(self, xyz: np.ndarray) -> np.ndarray:
+        d, e1, e2, lo, buf = self.buffers[0]
+        ia = np.clip(((xyz @ e1 - lo[0]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[0] - 1)
+        ib = np.clip(((xyz @ e2 - lo[1]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[1] - 1)
+        return xyz @ d <= buf[ia, ib] + self.spec.visibility_tolerance_m
+
+
+def flight_lines_y(spec: LidarSpec) -> np.ndarray:
+    x0, x1, y0, y1 = m.TERRAIN_M
+    return np.arange(y0 + spec.line_spacing_m / 2, y1, spec.line_spacing_m)
+
+
+def gps_week_seconds(t_unix: float) -> float:
+    return (t_unix - GPS_EPOCH_UNIX_S) % SECONDS_PER_WEEK
+
+
+def _times_and_sensors(xyz: np.ndarray, spec: LidarSpec, t0: float) -> tuple[np.ndarray, np.ndarray]:
+    """GPS time (week seconds) of the pass that saw each point, and the sensor position then."""
+    x0, x1, _, _ = m.TERRAIN_M
+    lines = flight_lines_y(spec)
+    k = np.abs(xyz[:, 1:2] - lines[None, :]).argmin(axis=1)
+    line_s = (x1 - x0) / spec.speed_m_s + 20.0
+    along = np.where(k % 2 == 0, xyz[:, 0] - x0, x1 - xyz[:, 0]) / spec.speed_m_s
+    t = t0 + k * line_s + along
+    sensors = np.c_[xyz[:, 0], lines[k], np.full(len(xyz), spec.altitude_m)]
+    return t, sensors
+
+
+def _keys(prims: list[Primitive]) -> set[tuple[str, str]]:
+    return {(p.key, p.signature) for p in prims}
+
+
+def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochChunk]:
+    """Stream the LiDAR points of epoch ``e`` in chunks of at most ``spec.chunk_points``."""
+    ep = site.epochs[e]
+    prims = site.primitives(e)
+    prev = _keys(site.primitives(e - 1)) if e > 0 else None
+    nxt = _keys(site.primitives(e + 1)) if e + 1 < len(site.epochs) else None
+    occ = OcclusionBuffers(prims, spec, seed=site.seed * 1000 + e * 7 + 1)
+    t0 = gps_week_seconds(ep.time.timestamp())
+    base_seed = site.seed * 100_003 + e * 1009
+    jib_c, jib_d, jib_len = site.jib_ground_footprint(e)
+    for pi, prim in enumerate(prims):
+        rng = np.random.default_rng([base_seed, pi])
+        n_total = int(rng.poisson(spec.density_pts_m2 * prim.area_m2()))
+        changed_prev = prev is not None and (prim.key, prim.signature) not in prev
+        changed_next = nxt is not None and (prim.key, prim.signature) not in nxt
+        for start in range(0, n_total, spec.chunk_points):
+            n = min(spec.chunk_points, n_total - start)
+            xyz = SAMPLE[prim.kind](n, rng, *prim.params)
+            xyz = xyz[occ.visible(xyz)]
+            if not len(xyz):
+                continue
+            yield _finish(
+                xyz, prim, rng, spec, t0, ep, occ, (jib_c, jib_d, jib_len), changed_prev, changed_next
+            )
+    if ep.snow:
+        rng = np.random.default_rng([base_seed, 99_991])
+        x0, x1, y0, y1 = m.TERRAIN_M
+        n = int(rng.poisson(0.02 * (x1 - x0) * (y1 - y0)))
+        xyz = np.c_[rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(3, 35, n)]
+        flake = Primitive("snow:airborne", f"e{e}", 900, m.SNOW, "sphere", (0, 0, 0, 1), (245, 245, 250))
+        yield _finish(xyz, flake, rng, spec, t0, ep, None, None, False, False)
+
+
+def _finish(xyz, prim, rng, spec, t0, ep, occ, jib, changed_prev, changed_next) -> EpochChunk:  # noqa: ANN001
+    n = len(xyz)
+    t, sensors = _times_and_sensors(xyz, spec, t0)
+    ray = xyz - sensors
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True) + 1e-12
+    xyz = xyz + ray * rng.normal(0.0, spec.noise_m, (n, 1))
+    rgb = np.clip(np.asarray(prim.colour, float) + rng.normal(0, 8, (n, 3)), 0, 255)
+    if occ is not None and ep.snow and prim.upward:
+        top = occ.visible_from_above(xyz)
+        rgb[top] = np.clip(rng.normal(242, 4, (int(top.sum()), 3)), 0, 255)
+        xyz[top, 2] += 0.05
+    if occ is not None and ep.projection_error and prim.las_class == m.GROUND and jib is not None:
+        c, d, length = jib
+        rel = xyz[:, :2] - c
+        along = rel @ d
+        across = np.abs(rel @ np.array([-d[1], d[0]]))
+        smear = (np.abs(along) < length / 2) & (across < 1.5)
+        rgb[smear] = (230, 50, 35)
+    ret = np.ones(n, np.uint8)
+    nret = np.ones(n, np.uint8)
+    if prim.las_class in (m.VEG_LOW, m.VEG_MED, m.VEG_HIGH):
+        nret[:] = 3
+        ret = rng.integers(1, 4, n).astype(np.uint8)
+    intensity = np.clip(INTENSITY.get(prim.las_class, 100) + rng.normal(0, 12, n), 0, 255).astype(np.uint16)
+    return EpochChunk(
+        xyz=xyz,
+        rgb=rgb.astype(np.uint8),
+        las_class=np.full(n, prim.las_class, np.uint8),
+        intensity=intensity,
+        gps_time=t,
+        return_number=ret,
+        number_of_returns=nret,
+        object_id=np.full(n, prim.object_id, np.int32),
+        changed_since_previous=np.full(n, changed_prev),
+        changed_until_next=np.full(n, changed_next),
+    )

@@ -1,0 +1,372 @@
+"""The procedural construction site and how it evolves epoch by epoch (site-local metres).
+
+Layout: terrain 160 m x 130 m around the origin, a 120 m x 90 m fence, an excavation that deepens then
+is backfilled, a building rising a floor per epoch with formwork on its top edge, a tower crane whose
+jib turns, vehicles and workers that move, material piles that come and go, trees outside the fence.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+
+from siteline.synth.primitives import Primitive
+
+# LAS source codes understood by the default taxonomy (schema/taxonomy.default.json)
+GROUND, VEG_LOW, VEG_MED, VEG_HIGH, BUILDING, NOISE = 2, 3, 4, 5, 6, 7
+CRANE, MATERIAL, VEHICLE, TEMPORARY, WORKER, SNOW = 64, 65, 66, 67, 68, 69
+
+TERRAIN_M = (-80.0, 80.0, -65.0, 65.0)
+FENCE_M = ((-60.0, -45.0), (60.0, -45.0), (60.0, 45.0), (-60.0, 45.0))
+PIT_M = (15.0, 40.0, -35.0, -10.0)
+PIT_DEPTHS_M = (2.0, 4.0, 4.0, 0.0)
+BUILDING_M = (-40.0, -5.0, -15.0, 20.0)
+FLOOR_M = 3.5
+CRANE_BASE_M = (5.0, 28.0)
+CRANE_HEIGHT_M = 42.0
+SLOPE = (0.01, 0.005)
+FIRST_EPOCH = datetime(2024, 11, 27, 15, 0, tzinfo=UTC)
+EPOCH_DAYS = (0, 26, 53, 79, 105)
+
+
+@dataclass(frozen=True)
+class EpochSpec:
+    """What one epoch looks like and its capture time (UTC)."""
+
+    index: int
+    time: datetime
+    pit_depth_m: float
+    floors: int
+    jib_deg: float
+    vehicles: tuple[tuple[float, float, float], ...]
+    workers: tuple[tuple[float, float], ...]
+    piles: tuple[bool, ...]
+    snow: bool = False
+    projection_error: bool = False
+
+    @property
+    def name(self) -> str:
+        return f"e{self.index:02d}_{self.time:%Y%m%d}"
+
+
+@dataclass
+class SiteModel:
+    """A seeded site; ``epochs`` evolve it. ``snow_epochs``: accumulated and airborne snow;
+    ``projection_error_epochs``: crane colour smeared onto the ground below its jib."""
+
+    seed: int = 0
+    n_epochs: int = 4
+    snow_epochs: tuple[int, ...] = (2,)
+    projection_error_epochs: tuple[int, ...] = (1,)
+    epochs: list[EpochSpec] = field(init=False)
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.n_epochs <= 12:
+            raise ValueError(f"epochs must be between 1 and 12, got {self.n_epochs}.")
+        rng = np.random.default_rng(self.seed)
+        pile_sites = 4
+        self.epochs = []
+        for e in range(self.n_epochs):
+            day = EPOCH_DAYS[e] if e < len(EPOCH_DAYS) else EPOCH_DAYS[-1] + 26 * (e - len(EPOCH_DAYS) + 1)
+            vehicles = tuple(
+                (float(rng.uniform(-50, 50)), float(rng.uniform(-40, -22)), float(rng.uniform(0, math.pi)))
+                for _ in range(3)
+            )
+            workers = tuple((float(rng.uniform(-55, 55)), float(rng.uniform(-40, 40))) for _ in range(6))
+            piles = tuple(bool(rng.random() < 0.6) for _ in range(pile_sites))
+            self.epochs.append(
+                EpochSpec(
+                    index=e,
+                    time=FIRST_EPOCH + timedelta(days=day, minutes=int(rng.integers(0, 120))),
+                    pit_depth_m=PIT_DEPTHS_M[e] if e < len(PIT_DEPTHS_M) else 0.0,
+                    floors=min(e, 6),
+                    jib_deg=float((37.0 + 71.0 * e + rng.uniform(-10, 10)) % 360.0),
+                    vehicles=vehicles,
+                    workers=workers,
+                    piles=piles,
+                    snow=e in self.snow_epochs,
+                    projection_error=e in self.projection_error_epochs,
+                )
+            )
+
+    def primitives(self, e: int) -> list[Primitive]:
+        """Every surface of epoch ``e``."""
+        ep = self.epochs[e]
+        out: list[Primitive] = []
+        x0, x1, y0, y1 = TERRAIN_M
+        pit = (*PIT_M, ep.pit_depth_m)
+        out.append(
+            Primitive(
+                "terrain:open",
+                "v1",
+                1,
+                GROUND,
+                "terrain",
+                (x0, x1, y0, y1, *SLOPE, None, PIT_M),
+                (120, 100, 80),
+                upward=True,
+            )
+        )
+        out.append(
+            Primitive(
+                "terrain:pit",
+                f"depth={ep.pit_depth_m:g}",
+                2,
+                GROUND,
+                "terrain",
+                (*PIT_M, *SLOPE, pit, None),
+                (110, 85, 60),
+                upward=True,
+            )
+        )
+        out.extend(self._building(ep))
+        out.extend(self._crane(ep))
+        out.extend(self._fence())
+        out.extend(self._trees())
+        for i, (vx, vy, yaw) in enumerate(ep.vehicles):
+            z = float(SLOPE[0] * vx + SLOPE[1] * vy)
+            sig = f"{vx:.3f},{vy:.3f},{yaw:.3f}"
+            out.append(
+                Primitive(
+                    f"vehicle:{i}:body",
+                    sig,
+                    300 + i,
+                    VEHICLE,
+                    "box",
+                    ((vx, vy, z), (8.0, 3.0, 2.5), yaw),
+                    (240, 200, 20),
+                    upward=True,
+                )
+            )
+            cab = (vx + 3.0 * math.cos(yaw), vy + 3.0 * math.sin(yaw), z + 2.5)
+            out.append(
+                Primitive(
+                    f"vehicle:{i}:cab",
+                    sig,
+                    300 + i,
+                    VEHICLE,
+                    "box",
+                    (cab, (2.0, 2.6, 1.5), yaw),
+                    (60, 60, 70),
+                    upward=True,
+                )
+            )
+        for i, (wx, wy) in enumerate(ep.workers):
+            z = float(SLOPE[0] * wx + SLOPE[1] * wy)
+            out.append(
+                Primitive(
+                    f"worker:{i}",
+                    f"{wx:.3f},{wy:.3f}",
+                    400 + i,
+                    WORKER,
+                    "cylinder",
+                    (wx, wy, z, 0.3, 1.8),
+                    (255, 120, 0),
+                )
+            )
+        for i, present in enumerate(ep.piles):
+            if present:
+                px, py = -50.0 + 22.0 * i, 35.0
+                r, h = 3.0 + 0.5 * i, 2.0 + 0.3 * i
+                z = float(SLOPE[0] * px + SLOPE[1] * py)
+                out.append(
+                    Primitive(
+                        f"pile:{i}",
+                        "v1",
+                        500 + i,
+                        MATERIAL,
+                        "cone",
+                        (px, py, z, r, h),
+                        (150 + 20 * i, 140, 120),
+                        upward=True,
+                    )
+                )
+        return out
+
+    def _building(self, ep: EpochSpec) -> list[Primitive]:
+        bx0, bx1, by0, by1 = BUILDING_M
+        base = float(SLOPE[0] * (bx0 + bx1) / 2 + SLOPE[1] * (by0 + by1) / 2)
+        out = [
+            Primitive(
+                "building:foundation",
+                "v1",
+                100,
+                BUILDING,
+                "box",
+                (((bx0 + bx1) / 2, (by0 + by1) / 2, base), (bx1 - bx0, by1 - by0, 0.5), 0.0),
+                (170, 170, 165),
+                upward=True,
+            )
+        ]
+        top = base + 0.5
+        for f in range(ep.floors):
+            zf = base + 0.5 + f * FLOOR_M
+            for i, cx in enumerate(np.linspace(bx0 + 1, bx1 - 1, 5)):
+                for j, cy in enumerate(np.linspace(by0 + 1, by1 - 1, 5)):
+                    out.append(
+                        Primitive(
+                            f"building:column:{f}:{i}:{j}",
+                            "v1",
+                            100,
+                            BUILDING,
+                            "cylinder",
+                            (float(cx), float(cy), zf, 0.3, FLOOR_M - 0.3),
+                            (185, 185, 180),
+                        )
+                    )
+            out.append(
+                Primitive(
+                    f"building:slab:{f}",
+                    "v1",
+                    100,
+                    BUILDING,
+                    "box",
+                    (
+                        ((bx0 + bx1) / 2, (by0 + by1) / 2, zf + FLOOR_M - 0.3),
+                        (bx1 - bx0, by1 - by0, 0.3),
+                        0.0,
+                    ),
+                    (175, 175, 170),
+                    upward=True,
+                )
+            )
+            if f < ep.floors - 1:  # walls close the floors below the top one
+                for side, (o, u) in enumerate(
+                    (((bx0, by0), (bx1 - bx0, 0.0)), ((bx0, by1), (bx1 - bx0, 0.0)))
+                ):
+                    out.append(
+                        Primitive(
+                            f"building:wall:{f}:{side}",
+                            "v1",
+                            100,
+                            BUILDING,
+                            "quad",
+                            ((o[0], o[1], zf), (u[0], u[1], 0.0), (0.0, 0.0, FLOOR_M - 0.3)),
+                            (200, 195, 185),
+                        )
+                    )
+            top = zf + FLOOR_M
+        # formwork stands on the current top edge and moves up as floors are added
+        for side, (o, u) in enumerate((((bx0, by0), (bx1 - bx0, 0.0)), ((bx1, by0), (0.0, by1 - by0)))):
+            out.append(
+                Primitive(
+                    f"temporary:formwork:{side}",
+                    f"top={top:.2f}",
+                    600 + side,
+                    TEMPORARY,
+                    "quad",
+                    ((o[0], o[1], top), (u[0], u[1], 0.0), (0.0, 0.0, 1.2)),
+                    (60, 110, 200),
+                )
+            )
+        return out
+
+    def _crane(self, ep: EpochSpec) -> list[Primitive]:
+        cx, cy = CRANE_BASE_M
+        base = float(SLOPE[0] * cx + SLOPE[1] * cy)
+        a = math.radians(ep.jib_deg)
+        d = np.array([math.cos(a), math.sin(a)])
+        jib_c = np.array([cx, cy]) + d * 25.0
+        cj_c = np.array([cx, cy]) - d * 8.0
+        z = base + CRANE_HEIGHT_M
+        sig = f"jib={ep.jib_deg:.3f}"
+        return [
+            Primitive(
+                "crane:mast",
+                "v1",
+                200,
+                CRANE,
+                "box",
+                ((cx, cy, base), (2.0, 2.0, CRANE_HEIGHT_M), 0.0),
+                (220, 40, 30),
+            ),
+            Primitive(
+                "crane:jib",
+                sig,
+                200,
+                CRANE,
+                "box",
+                ((float(jib_c[0]), float(jib_c[1]), z), (50.0, 1.6, 1.6), a),
+                (230, 50, 35),
+                upward=True,
+            ),
+            Primitive(
+                "crane:counterjib",
+                sig,
+                200,
+                CRANE,
+                "box",
+                ((float(cj_c[0]), float(cj_c[1]), z), (16.0, 2.5, 2.0), a),
+                (120, 120, 120),
+                upward=True,
+            ),
+        ]
+
+    def _fence(self) -> list[Primitive]:
+        out = []
+        ring = list(FENCE_M) + [FENCE_M[0]]
+        for i in range(len(FENCE_M)):
+            (ax, ay), (bx, by) = ring[i], ring[i + 1]
+            z = float(SLOPE[0] * ax + SLOPE[1] * ay)
+            out.append(
+                Primitive(
+                    f"temporary:fence:{i}",
+                    "v1",
+                    700,
+                    TEMPORARY,
+                    "quad",
+                    ((ax, ay, z), (bx - ax, by - ay, 0.0), (0.0, 0.0, 2.0)),
+                    (90, 90, 100),
+                )
+            )
+        return out
+
+    def _trees(self) -> list[Primitive]:
+        rng = np.random.default_rng(self.seed + 1000)
+        out = []
+        for i in range(14):
+            side = i % 4
+            if side == 0:
+                x, y = rng.uniform(-75, 75), rng.uniform(50, 62)
+            elif side == 1:
+                x, y = rng.uniform(-75, 75), rng.uniform(-62, -50)
+            elif side == 2:
+                x, y = rng.uniform(-78, -66), rng.uniform(-40, 40)
+            else:
+                x, y = rng.uniform(66, 78), rng.uniform(-40, 40)
+            z = float(SLOPE[0] * x + SLOPE[1] * y)
+            h = float(rng.uniform(5, 9))
+            r = float(rng.uniform(2, 3.5))
+            out.append(
+                Primitive(
+                    f"tree:{i}:trunk",
+                    "v1",
+                    800 + i,
+                    VEG_MED,
+                    "cylinder",
+                    (float(x), float(y), z, 0.25, h - r),
+                    (90, 60, 40),
+                )
+            )
+            out.append(
+                Primitive(
+                    f"tree:{i}:crown",
+                    "v1",
+                    800 + i,
+                    VEG_HIGH,
+                    "sphere",
+                    (float(x), float(y), z + h - r * 0.5, r),
+                    (40, 120, 45),
+                    upward=True,
+                )
+            )
+        return out
+
+    def jib_ground_footprint(self, e: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Centre (2,), direction (2,) and length (m) of the jib projected onto the ground."""
+        a = math.radians(self.epochs[e].jib_deg)
+        d = np.array([math.cos(a), math.sin(a)])
+        return np.array(CRANE_BASE_M) + d * 25.0, d, 50.0

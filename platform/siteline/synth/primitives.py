@@ -1,0 +1,152 @@
+"""Surfaces of the synthetic site and their uniform sampling at a density (points per m2).
+
+Every primitive samples ``Poisson(density x area)`` points uniformly over its surface with its own
+generator, so the same seed gives the same points whatever else the site holds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """One sampled surface of one object.
+
+    key: stable name of the surface (its identity across epochs). signature: its geometry; the same
+    key and signature in two epochs means the same surface. object_id: the object it belongs to.
+    las_class: ASPRS/siteline source code written to LAS. kind + params: the geometry (site-local
+    metres). colour: RGB uint8. upward: whether snow settles on it.
+    """
+
+    key: str
+    signature: str
+    object_id: int
+    las_class: int
+    kind: str
+    params: tuple
+    colour: tuple[int, int, int]
+    upward: bool = False
+
+    def area_m2(self) -> float:
+        return AREA[self.kind](*self.params)
+
+    def sample(self, density: float, rng: np.random.Generator) -> np.ndarray:
+        """(N, 3) float64 site-local points on the surface."""
+        n = int(rng.poisson(density * self.area_m2()))
+        return SAMPLE[self.kind](n, rng, *self.params)
+
+
+def _quad_area(origin, u, v) -> float:  # noqa: ANN001
+    return float(np.linalg.norm(np.cross(u, v)))
+
+
+def _quad(n, rng, origin, u, v) -> np.ndarray:  # noqa: ANN001
+    a = rng.random((n, 2))
+    return np.asarray(origin) + a[:, :1] * np.asarray(u) + a[:, 1:] * np.asarray(v)
+
+
+def _box_faces(center, size, yaw, top=True):  # noqa: ANN001, ANN202
+    cx, cy, z0 = center
+    sx, sy, sz = size
+    c, s = math.cos(yaw), math.sin(yaw)
+    ex, ey = np.array([c, s, 0.0]) * sx, np.array([-s, c, 0.0]) * sy
+    ez = np.array([0.0, 0.0, sz])
+    o = np.array([cx, cy, z0]) - ex / 2 - ey / 2
+    faces = [(o, ex, ez), (o + ey, ex, ez), (o, ey, ez), (o + ex, ey, ez)]
+    if top:
+        faces.append((o + ez, ex, ey))
+    return faces
+
+
+def _box_area(center, size, yaw) -> float:  # noqa: ANN001
+    return sum(_quad_area(*f) for f in _box_faces(center, size, yaw))
+
+
+def _box(n, rng, center, size, yaw) -> np.ndarray:  # noqa: ANN001
+    faces = _box_faces(center, size, yaw)
+    areas = np.array([_quad_area(*f) for f in faces])
+    which = rng.choice(len(faces), n, p=areas / areas.sum())
+    out = np.empty((n, 3))
+    for i, f in enumerate(faces):
+        m = which == i
+        out[m] = _quad(int(m.sum()), rng, *f)
+    return out
+
+
+def _cyl_area(cx, cy, z0, r, h) -> float:  # noqa: ANN001
+    return 2 * math.pi * r * h + math.pi * r * r
+
+
+def _cyl(n, rng, cx, cy, z0, r, h) -> np.ndarray:  # noqa: ANN001
+    side = 2 * math.pi * r * h
+    top = math.pi * r * r
+    on_top = rng.random(n) < top / (side + top)
+    th = rng.uniform(0, 2 * math.pi, n)
+    rr = np.where(on_top, r * np.sqrt(rng.random(n)), r)
+    z = np.where(on_top, z0 + h, z0 + rng.random(n) * h)
+    return np.c_[cx + rr * np.cos(th), cy + rr * np.sin(th), z]
+
+
+def _cone_area(cx, cy, z0, r, h) -> float:  # noqa: ANN001
+    return math.pi * r * math.hypot(r, h)
+
+
+def _cone(n, rng, cx, cy, z0, r, h) -> np.ndarray:  # noqa: ANN001
+    rr = r * np.sqrt(rng.random(n))
+    th = rng.uniform(0, 2 * math.pi, n)
+    return np.c_[cx + rr * np.cos(th), cy + rr * np.sin(th), z0 + h * (1 - rr / r)]
+
+
+def _sphere_area(cx, cy, cz, r) -> float:  # noqa: ANN001
+    return 4 * math.pi * r * r
+
+
+def _sphere(n, rng, cx, cy, cz, r) -> np.ndarray:  # noqa: ANN001
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True) + 1e-300
+    return np.array([cx, cy, cz]) + r * v
+
+
+def _terrain_area(x0, x1, y0, y1, *rest) -> float:  # noqa: ANN001
+    return (x1 - x0) * (y1 - y0)
+
+
+def terrain_height(x: np.ndarray, y: np.ndarray, slope: tuple[float, float], pit: tuple | None) -> np.ndarray:
+    """Ground height (metres) of the terrain: a gentle plane minus the excavation pit, whose sides
+    ramp over 2 m. pit: (x0, x1, y0, y1, depth) or None."""
+    z = slope[0] * x + slope[1] * y
+    if pit is not None:
+        px0, px1, py0, py1, depth = pit
+        if depth > 0:
+            dx = np.minimum(x - px0, px1 - x)
+            dy = np.minimum(y - py0, py1 - y)
+            inside = np.clip(np.minimum(dx, dy) / 2.0, 0.0, 1.0)
+            z = z - depth * inside
+    return z
+
+
+def _terrain(n, rng, x0, x1, y0, y1, sx, sy, pit, exclude) -> np.ndarray:  # noqa: ANN001
+    """Terrain over a rectangle, optionally only inside (pit region) or outside (``exclude``) a box."""
+    x = rng.uniform(x0, x1, n)
+    y = rng.uniform(y0, y1, n)
+    keep = np.ones(n, bool)
+    if exclude is not None:
+        ex0, ex1, ey0, ey1 = exclude
+        keep = ~((x >= ex0) & (x < ex1) & (y >= ey0) & (y < ey1))
+    x, y = x[keep], y[keep]
+    return np.c_[x, y, terrain_height(x, y, (sx, sy), pit)]
+
+
+AREA = {
+    "quad": _quad_area,
+    "box": _box_area,
+    "cylinder": _cyl_area,
+    "cone": _cone_area,
+    "sphere": _sphere_area,
+    "terrain": _terrain_area,
+}
+SAMPLE = {"quad": _quad, "box": _box, "cylinder": _cyl, "cone": _cone, "sphere": _sphere, "terrain": _terrain}
