@@ -7,7 +7,7 @@ import sys
 import typer
 
 from siteline import __version__
-from siteline.cli import db, demo, render, site
+from siteline.cli import db, demo, render, site, synth
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
@@ -24,6 +24,7 @@ app.add_typer(db.app, name="db")
 app.add_typer(site.app, name="site")
 app.command("render")(render.render)
 app.add_typer(render.views_app, name="views")
+app.add_typer(synth.app, name="synth")
 
 
 @app.callback()

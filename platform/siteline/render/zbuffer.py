@@ -133,9 +133,12 @@ def render_points(
             pix = torch.where(valid, vi * W + ui, npix)
             zbuf.scatter_reduce_(0, pix, key, reduce="amin")
         else:
+            # a disk scatters every point several times: drop the invalid ones once, first
+            sel = torch.nonzero(valid).squeeze(1)
+            ui, vi, key = ui[sel], vi[sel], key[sel]
             for du, dv in offsets:
                 uo, vo = ui + du, vi + dv
-                ok = valid & (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
+                ok = (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
                 pix = torch.where(ok, vo * W + uo, npix)
                 zbuf.scatter_reduce_(0, pix, key, reduce="amin")
     # Only hit pixels are decoded and moved: at full scale most of the buffer may be empty.

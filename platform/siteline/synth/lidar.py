@@ -30,10 +30,12 @@ class LidarSpec:
     line_spacing_m: float = 40.0
     speed_m_s: float = 8.0
     chunk_points: int = 500_000
-    occluder_density_pts_m2: float = 6.0
+    occluder_density_pts_m2: float = 20.0
     occluder_cell_m: float = 0.5
+    oblique_cell_m: float = 0.25
     visibility_tolerance_m: float = 0.3
-    oblique_tilts_deg: tuple[float, ...] = (35.0, 65.0)
+    min_tolerance_m: float = 0.12
+    oblique_tilts_deg: tuple[float, ...] = (35.0, 60.0)
 
 
 @dataclass
@@ -81,8 +83,9 @@ def directions(tilts_deg: tuple[float, ...]) -> list[np.ndarray]:
 class OcclusionBuffers:
     """Orthographic depth buffers along a few directions, built from a coarse sampling of every
     surface; a point is visible if it is within tolerance of the nearest surface in its cell along
-    at least one direction. On the nadir buffer a 3x3 minimum filter closes holes of the coarse
-    sampling (slabs stay opaque); oblique buffers are left unfiltered so walls and masts stay visible."""
+    at least one direction. The tolerance shrinks with the tilt (a surface 0.5 m under a slab must
+    stay hidden at grazing angles); oblique buffers use finer cells so walls keep their points. Each cell
+    takes the nearest depth of its 3x3 neighbourhood, so a sampling gap never lets a hidden point through."""
 
     def __init__(self, prims: list[Primitive], spec: LidarSpec, seed: int) -> None:
         self.spec = spec
@@ -95,41 +98,38 @@ class OcclusionBuffers:
         )
         self.buffers = []
         for k, d in enumerate(directions(spec.oblique_tilts_deg)):
+            cell = spec.occluder_cell_m if k == 0 else spec.oblique_cell_m
+            tol = max(spec.min_tolerance_m, spec.visibility_tolerance_m * float(-d[2]))
             e1 = np.cross(d, [0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.cross(d, [1.0, 0.0, 0.0])
             e1 /= np.linalg.norm(e1)
             e2 = np.cross(d, e1)
             a, b, depth = pts @ e1, pts @ e2, pts @ d
-            lo = np.array([a.min(), b.min()]) - 2 * spec.occluder_cell_m
-            shape = (
-                int((a.max() - lo[0]) / spec.occluder_cell_m) + 4,
-                int((b.max() - lo[1]) / spec.occluder_cell_m) + 4,
-            )
+            lo = np.array([a.min(), b.min()]) - 2 * cell
+            shape = (int((a.max() - lo[0]) / cell) + 4, int((b.max() - lo[1]) / cell) + 4)
             buf = np.full(shape, np.inf)
-            ia = ((a - lo[0]) / spec.occluder_cell_m).astype(np.int64)
-            ib = ((b - lo[1]) / spec.occluder_cell_m).astype(np.int64)
+            ia = ((a - lo[0]) / cell).astype(np.int64)
+            ib = ((b - lo[1]) / cell).astype(np.int64)
             np.minimum.at(buf, (ia, ib), depth)
-            if k == 0:
-                buf = minimum_filter(buf, size=3, mode="nearest")
-            self.buffers.append((d, e1, e2, lo, buf))
+            # a cell may hold a far sample and miss the near surface by chance: compare with the
+            # nearest depth around it (fine cells keep the spread small on walls)
+            buf = minimum_filter(buf, size=3, mode="nearest")
+            self.buffers.append((d, e1, e2, lo, buf, cell, tol))
 
     def visible(self, xyz: np.ndarray) -> np.ndarray:
         """(N,) bool: seen along at least one direction."""
         out = np.zeros(len(xyz), bool)
-        for d, e1, e2, lo, buf in self.buffers:
-            ia = np.clip(
-                ((xyz @ e1 - lo[0]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[0] - 1
-            )
-            ib = np.clip(
-                ((xyz @ e2 - lo[1]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[1] - 1
-            )
-            out |= xyz @ d <= buf[ia, ib] + self.spec.visibility_tolerance_m
+        for k in range(len(self.buffers)):
+            out |= self._seen(xyz, k)
         return out
 
     def visible_from_above(self, xyz: np.ndarray) -> np.ndarray:
-        d, e1, e2, lo, buf = self.buffers[0]
-        ia = np.clip(((xyz @ e1 - lo[0]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[0] - 1)
-        ib = np.clip(((xyz @ e2 - lo[1]) / self.spec.occluder_cell_m).astype(np.int64), 0, buf.shape[1] - 1)
-        return xyz @ d <= buf[ia, ib] + self.spec.visibility_tolerance_m
+        return self._seen(xyz, 0)
+
+    def _seen(self, xyz: np.ndarray, k: int) -> np.ndarray:
+        d, e1, e2, lo, buf, cell, tol = self.buffers[k]
+        ia = np.clip(((xyz @ e1 - lo[0]) / cell).astype(np.int64), 0, buf.shape[0] - 1)
+        ib = np.clip(((xyz @ e2 - lo[1]) / cell).astype(np.int64), 0, buf.shape[1] - 1)
+        return xyz @ d <= buf[ia, ib] + tol
 
 
 def flight_lines_y(spec: LidarSpec) -> np.ndarray:

@@ -17,7 +17,9 @@ from siteline.synth.primitives import Primitive
 
 # LAS source codes understood by the default taxonomy (schema/taxonomy.default.json)
 GROUND, VEG_LOW, VEG_MED, VEG_HIGH, BUILDING, NOISE = 2, 3, 4, 5, 6, 7
-CRANE, MATERIAL, VEHICLE, TEMPORARY, WORKER, SNOW = 64, 65, 66, 67, 68, 69
+# LAS 1.2 point format 3 holds classes 0-31: 19 (overhead structure) and 21 (snow) as in LAS 1.4,
+# site-specific codes in the reserved 24-27.
+CRANE, SNOW, MATERIAL, VEHICLE, TEMPORARY, WORKER = 19, 21, 24, 25, 26, 27
 
 TERRAIN_M = (-80.0, 80.0, -65.0, 65.0)
 FENCE_M = ((-60.0, -45.0), (60.0, -45.0), (60.0, 45.0), (-60.0, 45.0))

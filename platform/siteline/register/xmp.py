@@ -1,0 +1,55 @@
+"""Camera poses straight from DJI photo metadata (no reconstruction): RTK position and gimbal angles."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pyproj
+
+from siteline.cameras import Camera
+from siteline.dji import cam_from_world_rotation, grid_convergence_deg
+from siteline.errors import PhotoError
+from siteline.ingest.photos import PhotoMeta
+
+
+def photo_center_crs(meta: PhotoMeta, crs: pyproj.CRS) -> np.ndarray:
+    """Photo position (3,) float64 in ``crs``: WGS84 latitude/longitude and absolute (ellipsoidal)
+    altitude, transformed in float64."""
+    if not meta.has_position:
+        raise PhotoError(f"photo {meta.file} has no position.")
+    t = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+    x, y = t.transform(meta.longitude_deg, meta.latitude_deg)
+    out = np.array([x, y, meta.absolute_altitude_m], dtype=np.float64)
+    if not np.isfinite(out).all():
+        raise PhotoError(f"photo {meta.file}: its position cannot be expressed in {crs.name}.")
+    return out
+
+
+def camera_from_photo(meta: PhotoMeta, crs: pyproj.CRS, origin: Sequence[float]) -> Camera:
+    """The photo's pinhole camera in the site-local frame of ``origin`` (float64, ``crs`` units).
+
+    Intrinsics come from CalibratedFocalLength / CalibratedOpticalCenterX/Y and the image size;
+    orientation from the gimbal angles, yaw corrected by the grid convergence at the photo.
+    """
+    if not meta.has_orientation:
+        raise PhotoError(f"photo {meta.file} has no gimbal angles (GimbalYawDegree, GimbalPitchDegree).")
+    if meta.width is None or meta.height is None:
+        raise PhotoError(f"photo {meta.file}: image size unknown.")
+    fx = meta.calibrated_focal_length_px
+    if fx is None:
+        raise PhotoError(f"photo {meta.file} has no CalibratedFocalLength: intrinsics unknown.")
+    cx = (
+        meta.calibrated_optical_center_x_px
+        if meta.calibrated_optical_center_x_px is not None
+        else meta.width / 2.0
+    )
+    cy = (
+        meta.calibrated_optical_center_y_px
+        if meta.calibrated_optical_center_y_px is not None
+        else meta.height / 2.0
+    )
+    center = photo_center_crs(meta, crs) - np.asarray(origin, dtype=np.float64)
+    conv = grid_convergence_deg(crs, meta.longitude_deg, meta.latitude_deg)
+    R = cam_from_world_rotation(meta.gimbal_yaw_deg, meta.gimbal_pitch_deg, meta.gimbal_roll_deg or 0.0, conv)
+    return Camera.from_pose(meta.width, meta.height, fx, fx, cx, cy, R, -R @ center)
