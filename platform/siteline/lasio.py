@@ -32,6 +32,7 @@ class PointChunk:
     intensity: np.ndarray
     gps_time: np.ndarray | None
     return_number: np.ndarray
+    colour_8bit: bool | None = None
 
 
 def colour_to_u8(rgb16: np.ndarray, eight_bit: bool) -> np.ndarray:
@@ -86,6 +87,7 @@ def iter_chunks(
                     intensity=np.asarray(pts.intensity, dtype=np.uint16),
                     gps_time=np.asarray(pts.gps_time, dtype=np.float64) if has_time else None,
                     return_number=np.asarray(pts.return_number, dtype=np.uint8),
+                    colour_8bit=eight_bit if has_rgb else None,
                 )
         except (laspy.LaspyException, OSError, ValueError, RuntimeError) as exc:
             raise PointCloudError(f"point cloud {path} is truncated or corrupt: {exc}") from exc

@@ -7,7 +7,7 @@ import sys
 import typer
 
 from siteline import __version__
-from siteline.cli import db, demo, render, site, synth
+from siteline.cli import db, demo, ingest, render, site, synth
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
@@ -25,6 +25,10 @@ app.add_typer(site.app, name="site")
 app.command("render")(render.render)
 app.add_typer(render.views_app, name="views")
 app.add_typer(synth.app, name="synth")
+app.command("ingest")(ingest.ingest)
+app.add_typer(ingest.mission_app, name="mission")
+app.add_typer(ingest.scene_app, name="scene")
+app.add_typer(ingest.photo_app, name="photo")
 
 
 @app.callback()

@@ -1,0 +1,122 @@
+"""Catalog queries on missions, scenes, cameras and pairs. Functions take a session; callers commit."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from siteline.cameras import Camera
+from siteline.catalog.models import Camera as CameraRow
+from siteline.catalog.models import Mission, MissionFile, Pair, Scene, Site
+from siteline.errors import NotFoundError
+
+
+def mission_by_manifest(session: Session, sha256: str) -> Mission | None:
+    return session.execute(sa.select(Mission).where(Mission.manifest_sha256 == sha256)).scalar_one_or_none()
+
+
+def mission_files(session: Session, mission_id: int) -> list[MissionFile]:
+    return list(
+        session.execute(
+            sa.select(MissionFile).where(MissionFile.mission_id == mission_id).order_by(MissionFile.path)
+        ).scalars()
+    )
+
+
+def list_missions(session: Session, site: Site | None = None) -> list[Mission]:
+    q = sa.select(Mission).order_by(Mission.received_at, Mission.id)
+    if site is not None:
+        q = q.where(Mission.site_id == site.id)
+    return list(session.execute(q).scalars())
+
+
+def get_scene(session: Session, scene_id: int) -> Scene:
+    scene = session.get(Scene, scene_id)
+    if scene is None:
+        raise NotFoundError(f"no scene with id {scene_id}; see `siteline scene list --site NAME`.")
+    return scene
+
+
+def list_scenes(session: Session, site: Site) -> list[Scene]:
+    return list(
+        session.execute(
+            sa.select(Scene).where(Scene.site_id == site.id).order_by(Scene.capture_time)
+        ).scalars()
+    )
+
+
+def scene_at(session: Session, site: Site, capture_time: datetime) -> Scene | None:
+    return session.execute(
+        sa.select(Scene).where(Scene.site_id == site.id, Scene.capture_time == capture_time)
+    ).scalar_one_or_none()
+
+
+def neighbours(session: Session, site: Site, capture_time: datetime) -> tuple[Scene | None, Scene | None]:
+    """The site's scenes just before and just after ``capture_time``."""
+    before = session.execute(
+        sa.select(Scene)
+        .where(Scene.site_id == site.id, Scene.capture_time < capture_time)
+        .order_by(Scene.capture_time.desc())
+        .limit(1)
+    ).scalar_one_or_none()
+    after = session.execute(
+        sa.select(Scene)
+        .where(Scene.site_id == site.id, Scene.capture_time > capture_time)
+        .order_by(Scene.capture_time)
+        .limit(1)
+    ).scalar_one_or_none()
+    return before, after
+
+
+def scene_cameras(session: Session, scene_id: int) -> list[tuple[str, Camera]]:
+    rows = session.execute(
+        sa.select(CameraRow).where(CameraRow.scene_id == scene_id).order_by(CameraRow.image_name)
+    ).scalars()
+    return [
+        (r.image_name, Camera.from_pose(r.width, r.height, r.fx, r.fy, r.cx, r.cy, r.rotation, r.translation))
+        for r in rows
+    ]
+
+
+def add_cameras(session: Session, scene_id: int, cameras: dict[str, Camera], source: str) -> None:
+    for name, cam in sorted(cameras.items()):
+        session.add(
+            CameraRow(
+                scene_id=scene_id,
+                image_name=name,
+                width=cam.width,
+                height=cam.height,
+                fx=cam.fx,
+                fy=cam.fy,
+                cx=cam.cx,
+                cy=cam.cy,
+                rotation=list(cam.rotation),
+                translation=list(cam.translation),
+                source=source,
+            )
+        )
+
+
+def ensure_pair(session: Session, site: Site, t1: Scene, t2: Scene) -> Pair:
+    pair = session.execute(
+        sa.select(Pair).where(Pair.t1_scene_id == t1.id, Pair.t2_scene_id == t2.id)
+    ).scalar_one_or_none()
+    if pair is None:
+        pair = Pair(site_id=site.id, t1_scene_id=t1.id, t2_scene_id=t2.id)
+        session.add(pair)
+        session.flush()
+    return pair
+
+
+def list_pairs(session: Session, site: Site) -> list[Pair]:
+    t1 = sa.orm.aliased(Scene)
+    return list(
+        session.execute(
+            sa.select(Pair)
+            .join(t1, Pair.t1_scene_id == t1.id)
+            .where(Pair.site_id == site.id)
+            .order_by(t1.capture_time)
+        ).scalars()
+    )

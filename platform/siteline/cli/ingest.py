@@ -1,0 +1,219 @@
+"""``siteline ingest``, ``siteline mission ...``, ``siteline scene ...``, ``siteline photo inspect``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
+
+from siteline.catalog.models import Node
+from siteline.catalog.scenes import get_scene, list_missions, list_pairs, list_scenes, scene_cameras
+from siteline.catalog.sites import get_site
+from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
+from siteline.ingest.mission import IngestOptions, Reporter, ingest_mission
+from siteline.ingest.photos import read_photo_meta
+
+mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
+scene_app = typer.Typer(help="Scenes (epochs) of a site.", no_args_is_help=True)
+photo_app = typer.Typer(help="DJI photo metadata.", no_args_is_help=True)
+
+
+class BarReporter(Reporter):
+    """Rich progress bars for ingest stages (bytes for hashing and storing, points for reading)."""
+
+    def __init__(self, bar: Progress) -> None:
+        self.bar = bar
+        self.tasks: dict[str, int] = {}
+
+    def start(self, task: str, total: float | None) -> None:
+        if task in self.tasks:
+            self.bar.update(self.tasks[task], total=total)
+        else:
+            self.tasks[task] = self.bar.add_task(task, total=total)
+
+    def advance(self, task: str, amount: float) -> None:
+        if task in self.tasks:
+            self.bar.advance(self.tasks[task], amount)
+
+
+def ingest(
+    mission_dir: Path = typer.Argument(
+        ..., help="DJI mission folder (raw SD-card folder, lidars/terra_las/, photos, COLMAP model)."
+    ),
+    site: str = typer.Option(..., "--site", help="Site the mission belongs to."),
+    crs: str | None = typer.Option(
+        None, "--crs", help="CRS of a LAS file that records none, e.g. EPSG:32618."
+    ),
+    copy: bool = typer.Option(
+        True,
+        "--copy/--reference",
+        help="Copy files into the content-addressed store, or reference them in place.",
+    ),
+    accept_misalignment: bool = typer.Option(
+        False,
+        "--accept-misalignment",
+        help="Register the scene even when ICP finds it misaligned with the previous one.",
+    ),
+    max_rms_m: float = typer.Option(
+        0.1, "--max-georegistration-rms-m", help="Largest accepted georegistration RMS, metres."
+    ),
+    as_json: bool = JsonOption,
+) -> None:
+    """Ingest a mission folder as a new scene of a site (a re-run of the same content does nothing)."""
+    opts = IngestOptions(
+        crs=crs,
+        storage="copy" if copy else "reference",
+        accept_misalignment=accept_misalignment,
+        max_georegistration_rms_m=max_rms_m,
+    )
+    cfg = settings()
+    columns = [
+        TextColumn("{task.description}"),
+        BarColumn(),
+        DownloadColumn(binary_units=True),
+        TimeRemainingColumn(),
+    ]
+    with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
+        result = ingest_mission(cat, cfg, mission_dir, site, opts, BarReporter(bar))
+    record = result.to_dict()
+    emit(
+        as_json,
+        record,
+        lambda: console.print(
+            result.message
+            if not result.created
+            else f"{result.message}: {result.scan.get('point_count', 0):,} points, "
+            f"{result.registration.get('source')} cameras, pairs {result.pairs}"
+        ),
+    )
+
+
+@mission_app.command("list")
+def mission_list(
+    site: str | None = typer.Option(None, "--site", help="Only this site."), as_json: bool = JsonOption
+) -> None:
+    """List ingested missions."""
+    with catalog() as cat, cat.transaction() as s:
+        rows = list_missions(s, get_site(s, site) if site else None)
+        records = [
+            {
+                "id": m.id,
+                "site_id": m.site_id,
+                "name": m.name,
+                "manifest_sha256": m.manifest_sha256,
+                "received_at": m.received_at,
+                "status": m.status,
+                "storage": m.storage,
+                "root": m.root_uri,
+            }
+            for m in rows
+        ]
+    emit(
+        as_json,
+        records,
+        lambda: print_table(
+            "missions",
+            ["id", "name", "status", "storage", "received", "manifest"],
+            [
+                [r["id"], r["name"], r["status"], r["storage"], r["received_at"], r["manifest_sha256"][:12]]
+                for r in records
+            ],
+        ),
+    )
+
+
+def scene_record(s, scene) -> dict:  # noqa: ANN001
+    import sqlalchemy as sa
+
+    nodes = s.execute(
+        sa.select(
+            sa.func.count(Node.id), sa.func.count(sa.distinct(Node.tile)), sa.func.max(Node.level)
+        ).where(Node.scene_id == scene.id)
+    ).one()
+    stats = scene.statistics or {}
+    tiles = stats.get("tiles", {})
+    return {
+        "id": scene.id,
+        "site_id": scene.site_id,
+        "mission_id": scene.mission_id,
+        "capture_time": scene.capture_time,
+        "status": scene.status,
+        "point_count": scene.point_count,
+        "bounds_m": scene.bounds,
+        "class_histogram": stats.get("class_histogram"),
+        "unknown_codes": stats.get("unknown_codes"),
+        "density_pts_m2": stats.get("density_pts_m2"),
+        "source_crs": stats.get("source_crs"),
+        "transformed": stats.get("transformed"),
+        "colour": stats.get("colour"),
+        "registration": scene.registration,
+        "cameras": len(scene_cameras(s, scene.id)),
+        "tile_store": scene.tile_store_uri,
+        "tiles": nodes[1],
+        "nodes": nodes[0],
+        "levels": (nodes[2] + 1) if nodes[2] is not None else 0,
+        "bytes_per_point": tiles.get("bytes_per_point"),
+    }
+
+
+@scene_app.command("list")
+def scene_list(
+    site: str = typer.Option(..., "--site", help="Site name."), as_json: bool = JsonOption
+) -> None:
+    """List the scenes of a site in capture order, and its pairs."""
+    with catalog() as cat, cat.transaction() as s:
+        st = get_site(s, site)
+        records = [
+            {
+                "id": sc.id,
+                "capture_time": sc.capture_time,
+                "points": sc.point_count,
+                "status": sc.status,
+                "mission_id": sc.mission_id,
+                "registration": (sc.registration or {}).get("source"),
+                "alignment_m": ((sc.registration or {}).get("alignment") or {}).get("translation_m"),
+            }
+            for sc in list_scenes(s, st)
+        ]
+        pairs = [{"id": p.id, "t1": p.t1_scene_id, "t2": p.t2_scene_id} for p in list_pairs(s, st)]
+    emit(
+        as_json,
+        {"site": site, "scenes": records, "pairs": pairs},
+        lambda: (
+            print_table(
+                f"scenes of {site}",
+                ["id", "captured", "points", "status", "cameras from", "ICP shift m"],
+                [
+                    [
+                        r["id"],
+                        r["capture_time"],
+                        f"{r['points']:,}",
+                        r["status"],
+                        r["registration"],
+                        "" if r["alignment_m"] is None else f"{r['alignment_m']:.3f}",
+                    ]
+                    for r in records
+                ],
+            ),
+            print_table("pairs", ["id", "t1", "t2"], [[p["id"], p["t1"], p["t2"]] for p in pairs]),
+        ),
+    )
+
+
+@scene_app.command("show")
+def scene_show(scene_id: int = typer.Argument(..., help="Scene id."), as_json: bool = JsonOption) -> None:
+    """Show one scene: statistics, registration, tiles."""
+    with catalog() as cat, cat.transaction() as s:
+        record = scene_record(s, get_scene(s, scene_id))
+    emit(as_json, record, lambda: print_record(f"scene {scene_id}", record))
+
+
+@photo_app.command("inspect")
+def photo_inspect(
+    file: Path = typer.Argument(..., help="A DJI photo (JPEG)."), as_json: bool = JsonOption
+) -> None:
+    """Print the DJI XMP (or EXIF) metadata siteline reads from a photo."""
+    meta = read_photo_meta(file)
+    record = meta.to_dict()
+    emit(as_json, record, lambda: print_record(f"photo {file.name}", record))

@@ -1,0 +1,154 @@
+"""Inventory of a mission folder: every file's relative path, size, sha256 and kind, and the mission
+manifest hash that identifies the mission (DESIGN.md §1, §9.1)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path, PurePosixPath
+
+from siteline.errors import MissionError
+
+HASH_BLOCK_BYTES = 4 * 2**20
+RAW_SUFFIXES = {
+    ".ldr",
+    ".clc",
+    ".cli",
+    ".imu",
+    ".rtk",
+    ".rts",
+    ".rtl",
+    ".rtb",
+    ".sig",
+    ".ldrt",
+    ".rpt",
+    ".rpos",
+    ".cmi",
+}
+COLMAP_FILES = {
+    "cameras.bin",
+    "images.bin",
+    "points3d.bin",
+    "rigs.bin",
+    "frames.bin",
+    "cameras.txt",
+    "images.txt",
+    "points3d.txt",
+    "rigs.txt",
+    "frames.txt",
+}
+
+
+@dataclass(frozen=True)
+class FileEntry:
+    """One file of a mission: POSIX path relative to the mission folder, size in bytes, sha256, kind
+    (las, photo, colmap, trajectory, raw, other)."""
+
+    path: str
+    size_bytes: int
+    sha256: str
+    kind: str
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def file_kind(rel: PurePosixPath) -> str:
+    name = rel.name.lower()
+    suffix = rel.suffix.lower()
+    if suffix in (".las", ".laz"):
+        return "las"
+    if suffix in (".jpg", ".jpeg"):
+        return "photo"
+    if name in COLMAP_FILES:
+        return "colmap"
+    if name.endswith("_sbet.out") or suffix == ".out":
+        return "trajectory"
+    if suffix in RAW_SUFFIXES:
+        return "raw"
+    return "other"
+
+
+def check_relative(rel: str, root: Path) -> PurePosixPath:
+    """A safe relative POSIX path inside the mission folder, or :class:`MissionError`."""
+    p = PurePosixPath(rel)
+    if p.is_absolute() or rel.startswith(("/", "\\")):
+        raise MissionError(f"mission {root}: file name {rel!r} is an absolute path.")
+    if any(part == ".." for part in p.parts) or "\\" in rel or "\0" in rel:
+        raise MissionError(f"mission {root}: file name {rel!r} leaves the mission folder ('..').")
+    return p
+
+
+def _walk(root: Path) -> list[tuple[PurePosixPath, Path]]:
+    out = []
+    root_real = root.resolve()
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+        dirnames.sort()
+        here = Path(dirpath)
+        for d in list(dirnames):
+            full = here / d
+            if full.is_symlink():
+                target = full.resolve()
+                if not target.is_relative_to(root_real):
+                    raise MissionError(
+                        f"mission {root}: {full.relative_to(root)} is a symlink to {os.readlink(full)}, "
+                        "outside the mission folder."
+                    )
+        for name in sorted(filenames):
+            full = here / name
+            rel = check_relative(full.relative_to(root).as_posix(), root)
+            if full.is_symlink():
+                link = os.readlink(full)
+                target = full.resolve()
+                if os.path.isabs(link) and not target.is_relative_to(root_real):
+                    raise MissionError(
+                        f"mission {root}: {rel} is a symlink to the absolute path {link}, outside the "
+                        "mission folder."
+                    )
+                if not target.is_relative_to(root_real):
+                    raise MissionError(
+                        f"mission {root}: {rel} is a symlink to {link}, outside the mission folder."
+                    )
+                if not target.is_file():
+                    raise MissionError(f"mission {root}: {rel} is a broken symlink.")
+            out.append((rel, full))
+    return out
+
+
+def sha256_file(path: Path, progress: Callable[[int], None] | None = None) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(HASH_BLOCK_BYTES):
+            h.update(block)
+            if progress:
+                progress(len(block))
+    return h.hexdigest()
+
+
+def inventory(
+    root: Path, progress: Callable[[int], None] | None = None, total: Callable[[int], None] | None = None
+) -> list[FileEntry]:
+    """Every regular file under ``root`` with its hash, sorted by path. ``total`` receives the byte
+    count before hashing starts, ``progress`` the bytes hashed as they go."""
+    root = Path(root)
+    if not root.is_dir():
+        raise MissionError(f"mission folder {root} does not exist or is not a folder.")
+    files = _walk(root)
+    if not files:
+        raise MissionError(f"mission folder {root} is empty.")
+    sizes = [full.stat().st_size for _, full in files]
+    if total:
+        total(sum(sizes))
+    return [
+        FileEntry(rel.as_posix(), size, sha256_file(full, progress), file_kind(rel))
+        for (rel, full), size in zip(files, sizes, strict=True)
+    ]
+
+
+def manifest_sha256(entries: list[FileEntry]) -> str:
+    """sha256 of the canonical manifest: sorted (path, size, sha256) triples as compact JSON."""
+    doc = [[e.path, e.size_bytes, e.sha256] for e in sorted(entries, key=lambda e: e.path)]
+    return hashlib.sha256(json.dumps(doc, separators=(",", ":")).encode()).hexdigest()

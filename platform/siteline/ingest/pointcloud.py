@@ -1,0 +1,188 @@
+"""One streaming pass over a mission's LAS/LAZ: CRS, transformation to the site CRS, validation and
+statistics, and a sample of stable-class points for the alignment check."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pyproj
+
+from siteline.crs import crs_text, parse_crs, transformer
+from siteline.errors import CRSError, PointCloudError
+from siteline.fence import inside_fence
+from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, iter_chunks, open_las
+from siteline.site import SiteSpec
+
+STABLE_CLASSES = ("ground", "building")
+
+
+@dataclass
+class LasScan:
+    """What one pass over a LAS/LAZ file found. Bounds are site-local metres (float64)."""
+
+    path: str
+    source_crs: str
+    transformed: bool
+    point_count: int
+    bounds_min: list[float]
+    bounds_max: list[float]
+    class_histogram: dict[str, int]
+    unknown_codes: dict[int, int]
+    outside_fence: int
+    colour: str
+    density_pts_m2: float
+    version: str
+    point_format: int
+    scale: list[float]
+    offset: list[float]
+    gps_time_range: list[float] | None
+    stable_sample: np.ndarray = field(repr=False)
+
+    def to_dict(self) -> dict:
+        d = {k: v for k, v in self.__dict__.items() if k != "stable_sample"}
+        d["unknown_codes"] = {str(k): v for k, v in self.unknown_codes.items()}
+        return d
+
+
+def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
+    """The CRS of a LAS header (WKT or GeoTIFF keys), None when it has none."""
+    try:
+        crs = reader.header.parse_crs()
+    except Exception as exc:  # laspy/pyproj raise many types on malformed records
+        raise CRSError(f"point cloud {path}: its CRS record cannot be parsed ({exc}); pass --crs.") from exc
+    return crs
+
+
+def scan_las(
+    path: Path,
+    site: SiteSpec,
+    crs_override: str | None = None,
+    *,
+    sample_max: int = 200_000,
+    chunk_points: int = DEFAULT_CHUNK_POINTS,
+    progress: Callable[[int], None] | None = None,
+    seed: int = 0,
+) -> LasScan:
+    """Read ``path`` once in chunks: bring coordinates into the site CRS in float64, refuse non-finite
+    or absurd ones, map classes through the site taxonomy, and gather statistics."""
+    path = Path(path)
+    with open_las(path) as reader:
+        header = reader.header
+        n_total = int(header.point_count)
+        in_file = file_crs(reader, path)
+        version = f"{header.version.major}.{header.version.minor}"
+        pf = int(header.point_format.id)
+        scale = [float(v) for v in header.scales]
+        offset = [float(v) for v in header.offsets]
+    if not (np.isfinite(scale).all() and np.isfinite(offset).all()) or min(abs(s) for s in scale) == 0:
+        raise PointCloudError(
+            f"point cloud {path}: header scale {scale} / offset {offset} is not finite and non-zero."
+        )
+    if in_file is None and crs_override is None:
+        raise CRSError(f"point cloud {path} has no CRS record; pass --crs (e.g. --crs EPSG:32618).")
+    if (
+        in_file is not None
+        and crs_override is not None
+        and not in_file.equals(parse_crs(crs_override), ignore_axis_order=True)
+    ):
+        raise CRSError(
+            f"point cloud {path} declares {in_file.name} but --crs says {crs_override}: remove --crs or fix the file."
+        )
+    src = in_file if in_file is not None else parse_crs(crs_override)
+    if not (src.is_projected or src.is_compound or src.is_geographic):
+        raise CRSError(f"point cloud {path}: CRS {src.name} is neither projected nor geographic.")
+    dst = site.pyproj_crs
+    same = src.equals(dst, ignore_axis_order=True)
+    tr = None if same else transformer(src, dst)
+    if tr is not None:
+        try:
+            probe = tr.transform(site.origin[0], site.origin[1], errcheck=True, direction="INVERSE")
+        except Exception as exc:
+            raise CRSError(
+                f"point cloud {path}: no usable transformation from {src.name} to the site CRS {dst.name} ({exc})."
+            ) from exc
+        if not np.isfinite(probe).all():
+            raise CRSError(
+                f"point cloud {path}: {src.name} cannot be transformed to the site CRS {dst.name}."
+            )
+    tax = site.taxonomy
+    lut, known = tax.code_lut("las")
+    origin = np.asarray(site.origin, dtype=np.float64)
+    stable_ids = np.array([tax.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
+    rng = np.random.default_rng(seed)
+    keep_p = min(1.0, sample_max / max(n_total, 1))
+    hist = np.zeros(256, np.int64)
+    unknown = np.zeros(256, np.int64)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    count = outside = 0
+    tmin, tmax = np.inf, -np.inf
+    samples = []
+    colour = "none"
+    for chunk in iter_chunks(path, chunk_points):
+        xyz = chunk.xyz_crs
+        if tr is not None:
+            x, y, z = tr.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2], errcheck=False)
+            xyz = np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=1)
+        local = xyz - origin
+        if not np.isfinite(local).all():
+            bad = int((~np.isfinite(local).all(axis=1)).sum())
+            raise PointCloudError(
+                f"point cloud {path}: {bad} points have non-finite coordinates (NaN or inf)."
+            )
+        far = float(np.abs(local).max(initial=0.0))
+        if far > MAX_SITE_LOCAL_M:
+            raise PointCloudError(
+                f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(origin)} (limit "
+                f"{MAX_SITE_LOCAL_M:,.0f} m): wrong site, wrong CRS or corrupt coordinates."
+            )
+        codes = chunk.classification
+        cls = lut[codes]
+        unknown += np.bincount(codes[~known[codes]], minlength=256)
+        if site.fence is not None:
+            out = ~inside_fence(local[:, :2], site.fence)
+            outside += int(out.sum())
+            cls = np.where(out, tax.ignore_id, cls)
+        hist += np.bincount(cls, minlength=256)
+        lo = np.minimum(lo, local.min(axis=0))
+        hi = np.maximum(hi, local.max(axis=0))
+        count += len(local)
+        if chunk.gps_time is not None and len(chunk.gps_time):
+            tmin, tmax = min(tmin, float(chunk.gps_time.min())), max(tmax, float(chunk.gps_time.max()))
+        if chunk.rgb is not None:
+            colour = "rgb 8-bit stored in 16-bit fields" if chunk.colour_8bit else "rgb 16-bit"
+        stable = np.isin(cls, stable_ids) & (rng.random(len(cls)) < keep_p)
+        samples.append(local[stable])
+        if progress:
+            progress(len(local))
+    if count == 0:
+        raise PointCloudError(f"point cloud {path} holds no points.")
+    if count != n_total:
+        raise PointCloudError(
+            f"point cloud {path}: header says {n_total} points but {count} were read (truncated?)."
+        )
+    area = max(float((hi[0] - lo[0]) * (hi[1] - lo[1])), 1e-6)
+    names = {c.id: c.name for c in tax.classes}
+    return LasScan(
+        path=str(path),
+        source_crs=crs_text(src) if (src.is_projected or src.is_compound) else src.to_wkt(),
+        transformed=not same,
+        point_count=count,
+        bounds_min=lo.tolist(),
+        bounds_max=hi.tolist(),
+        class_histogram={names.get(i, str(i)): int(v) for i, v in enumerate(hist) if v},
+        unknown_codes={i: int(v) for i, v in enumerate(unknown) if v},
+        outside_fence=outside,
+        colour=colour,
+        density_pts_m2=count / area,
+        version=version,
+        point_format=pf,
+        scale=scale,
+        offset=offset,
+        gps_time_range=[tmin, tmax] if np.isfinite(tmin) else None,
+        stable_sample=np.concatenate(samples) if samples else np.zeros((0, 3)),
+    )
