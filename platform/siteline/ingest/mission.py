@@ -256,8 +256,11 @@ def ingest_mission(
     if previous is not None and previous[1] is not None:
         check = point_to_plane_icp(scan.stable_sample, previous[1])
         registration["alignment"] = check.to_dict() | {"against_scene": previous[0]}
+        overlap = check.matched / max(len(scan.stable_sample), 1)
+        registration["alignment"]["overlap"] = overlap
         bad = (
             check.translation_m > opts.max_alignment_translation_m
+            or overlap < 0.2
             or not np.isfinite(check.residual_m)
             or check.residual_m > opts.max_alignment_residual_m
         )
@@ -266,7 +269,8 @@ def ingest_mission(
             raise RegistrationError(
                 f"mission {root.name} is misaligned with scene {previous[0]}: ICP on ground and building moves it by "
                 f"{check.translation_m:.3f} m (limit {opts.max_alignment_translation_m} m) with residual "
-                f"{check.residual_m:.3f} m (limit {opts.max_alignment_residual_m} m). Check the CRS and the georeferencing, "
+                f"{check.residual_m:.3f} m (limit {opts.max_alignment_residual_m} m), {overlap:.0%} of its stable points "
+                "overlap the previous scene. Check the CRS and the georeferencing, "
                 "or pass --accept-misalignment to register it anyway. Nothing was ingested."
             )
     new_blobs: list[str] = []

@@ -66,7 +66,7 @@ def point_to_plane_icp(
     degenerate = False
     it = 0
     resid = np.zeros(0)
-    for it in range(1, iterations + 1):
+    for it in range(1, iterations + 1):  # noqa: B007  (the count is reported)
         moved = src @ T[:3, :3].T + T[:3, 3]
         d, j = tree.query(moved, distance_upper_bound=max_distance_m)
         ok = np.isfinite(d)
