@@ -305,7 +305,12 @@ def ingest_mission(
             opts,
         )
     except BaseException:
-        remove_blobs(settings.store_dir, new_blobs)
+        with catalog.transaction() as s:
+            shared = set(
+                s.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(new_blobs))).scalars()
+            )
+        # content another mission committed meanwhile stays; only this ingest's own blobs go
+        remove_blobs(settings.store_dir, [b for b in new_blobs if b not in shared])
         raise
     return result
 

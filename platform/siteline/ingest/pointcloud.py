@@ -1,9 +1,10 @@
-"""One streaming pass over a mission's LAS/LAZ: CRS, transformation to the site CRS, validation and
-statistics, and a sample of stable-class points for the alignment check."""
+"""Streaming a mission's LAS/LAZ into the site frame, and the one validating pass of ingest: CRS,
+transformation to the site CRS, statistics, and a sample of stable-class points for the alignment
+check."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,10 +15,23 @@ import pyproj
 from siteline.crs import crs_text, parse_crs, transformer
 from siteline.errors import CRSError, PointCloudError
 from siteline.fence import inside_fence
-from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, iter_chunks, open_las
+from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
 from siteline.site import SiteSpec
 
 STABLE_CLASSES = ("ground", "building")
+
+
+@dataclass
+class SiteChunk:
+    """A chunk in the site frame: local (N, 3) float64 site-local metres, the raw chunk, site classes
+    (N,) uint8 after the taxonomy and the fence, which raw codes the taxonomy knows, which points lie
+    outside the fence."""
+
+    local: np.ndarray
+    chunk: PointChunk
+    classes: np.ndarray
+    known_code: np.ndarray
+    outside: np.ndarray
 
 
 @dataclass
@@ -51,37 +65,15 @@ class LasScan:
 def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
     """The CRS of a LAS header (WKT or GeoTIFF keys), None when it has none."""
     try:
-        crs = reader.header.parse_crs()
+        return reader.header.parse_crs()
     except Exception as exc:  # laspy/pyproj raise many types on malformed records
         raise CRSError(f"point cloud {path}: its CRS record cannot be parsed ({exc}); pass --crs.") from exc
-    return crs
 
 
-def scan_las(
-    path: Path,
-    site: SiteSpec,
-    crs_override: str | None = None,
-    *,
-    sample_max: int = 200_000,
-    chunk_points: int = DEFAULT_CHUNK_POINTS,
-    progress: Callable[[int], None] | None = None,
-    seed: int = 0,
-) -> LasScan:
-    """Read ``path`` once in chunks: bring coordinates into the site CRS in float64, refuse non-finite
-    or absurd ones, map classes through the site taxonomy, and gather statistics."""
-    path = Path(path)
+def source_crs(path: Path, crs_override: str | None) -> pyproj.CRS:
+    """The CRS of a point cloud: its own record, or ``crs_override`` when it has none."""
     with open_las(path) as reader:
-        header = reader.header
-        n_total = int(header.point_count)
         in_file = file_crs(reader, path)
-        version = f"{header.version.major}.{header.version.minor}"
-        pf = int(header.point_format.id)
-        scale = [float(v) for v in header.scales]
-        offset = [float(v) for v in header.offsets]
-    if not (np.isfinite(scale).all() and np.isfinite(offset).all()) or min(abs(s) for s in scale) == 0:
-        raise PointCloudError(
-            f"point cloud {path}: header scale {scale} / offset {offset} is not finite and non-zero."
-        )
     if in_file is None and crs_override is None:
         raise CRSError(f"point cloud {path} has no CRS record; pass --crs (e.g. --crs EPSG:32618).")
     if (
@@ -94,35 +86,39 @@ def scan_las(
         )
     src = in_file if in_file is not None else parse_crs(crs_override)
     if not (src.is_projected or src.is_compound or src.is_geographic):
-        raise CRSError(f"point cloud {path}: CRS {src.name} is neither projected nor geographic.")
+        raise CRSError(
+            f"point cloud {path}: CRS {src.name} is neither projected nor geographic; it cannot be "
+            "transformed to the site CRS."
+        )
+    return src
+
+
+def source_transformer(path: Path, site: SiteSpec, src: pyproj.CRS) -> pyproj.Transformer | None:
+    """A float64 transformer from the file's CRS to the site's, None when they are the same."""
     dst = site.pyproj_crs
-    same = src.equals(dst, ignore_axis_order=True)
-    tr = None if same else transformer(src, dst)
-    if tr is not None:
-        try:
-            probe = tr.transform(site.origin[0], site.origin[1], errcheck=True, direction="INVERSE")
-        except Exception as exc:
-            raise CRSError(
-                f"point cloud {path}: no usable transformation from {src.name} to the site CRS {dst.name} ({exc})."
-            ) from exc
-        if not np.isfinite(probe).all():
-            raise CRSError(
-                f"point cloud {path}: {src.name} cannot be transformed to the site CRS {dst.name}."
-            )
+    if src.equals(dst, ignore_axis_order=True):
+        return None
+    tr = transformer(src, dst)
+    try:
+        probe = tr.transform(site.origin[0], site.origin[1], errcheck=True, direction="INVERSE")
+    except Exception as exc:
+        raise CRSError(
+            f"point cloud {path}: no usable transformation from {src.name} to the site CRS "
+            f"{dst.name} ({exc})."
+        ) from exc
+    if not np.isfinite(probe).all():
+        raise CRSError(f"point cloud {path}: {src.name} cannot be transformed to the site CRS {dst.name}.")
+    return tr
+
+
+def site_chunks(
+    path: Path, site: SiteSpec, tr: pyproj.Transformer | None, chunk_points: int = DEFAULT_CHUNK_POINTS
+) -> Iterator[SiteChunk]:
+    """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
+    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore."""
     tax = site.taxonomy
     lut, known = tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
-    stable_ids = np.array([tax.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
-    rng = np.random.default_rng(seed)
-    keep_p = min(1.0, sample_max / max(n_total, 1))
-    hist = np.zeros(256, np.int64)
-    unknown = np.zeros(256, np.int64)
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    count = outside = 0
-    tmin, tmax = np.inf, -np.inf
-    samples = []
-    colour = "none"
     for chunk in iter_chunks(path, chunk_points):
         xyz = chunk.xyz_crs
         if tr is not None:
@@ -142,11 +138,54 @@ def scan_las(
             )
         codes = chunk.classification
         cls = lut[codes]
-        unknown += np.bincount(codes[~known[codes]], minlength=256)
+        outside = np.zeros(len(cls), dtype=bool)
         if site.fence is not None:
-            out = ~inside_fence(local[:, :2], site.fence)
-            outside += int(out.sum())
-            cls = np.where(out, tax.ignore_id, cls)
+            outside = ~inside_fence(local[:, :2], site.fence)
+            cls = np.where(outside, tax.ignore_id, cls)
+        yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside)
+
+
+def scan_las(
+    path: Path,
+    site: SiteSpec,
+    crs_override: str | None = None,
+    *,
+    sample_max: int = 200_000,
+    chunk_points: int = DEFAULT_CHUNK_POINTS,
+    progress: Callable[[int], None] | None = None,
+    seed: int = 0,
+) -> LasScan:
+    """Read ``path`` once in chunks: bring coordinates into the site CRS in float64, refuse non-finite
+    or absurd ones, map classes through the site taxonomy, and gather statistics."""
+    path = Path(path)
+    with open_las(path) as reader:
+        header = reader.header
+        n_total = int(header.point_count)
+        version = f"{header.version.major}.{header.version.minor}"
+        pf = int(header.point_format.id)
+        scale = [float(v) for v in header.scales]
+        offset = [float(v) for v in header.offsets]
+    if not (np.isfinite(scale).all() and np.isfinite(offset).all()) or min(abs(s) for s in scale) == 0:
+        raise PointCloudError(
+            f"point cloud {path}: header scale {scale} / offset {offset} is not finite and non-zero."
+        )
+    src = source_crs(path, crs_override)
+    tr = source_transformer(path, site, src)
+    stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
+    rng = np.random.default_rng(seed)
+    keep_p = min(1.0, sample_max / max(n_total, 1))
+    hist = np.zeros(256, np.int64)
+    unknown = np.zeros(256, np.int64)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    count = outside = 0
+    tmin, tmax = np.inf, -np.inf
+    samples = []
+    colour = "none"
+    for sc in site_chunks(path, site, tr, chunk_points):
+        local, chunk, cls = sc.local, sc.chunk, sc.classes
+        unknown += np.bincount(chunk.classification[~sc.known_code], minlength=256)
+        outside += int(sc.outside.sum())
         hist += np.bincount(cls, minlength=256)
         lo = np.minimum(lo, local.min(axis=0))
         hi = np.maximum(hi, local.max(axis=0))
@@ -166,11 +205,11 @@ def scan_las(
             f"point cloud {path}: header says {n_total} points but {count} were read (truncated?)."
         )
     area = max(float((hi[0] - lo[0]) * (hi[1] - lo[1])), 1e-6)
-    names = {c.id: c.name for c in tax.classes}
+    names = {c.id: c.name for c in site.taxonomy.classes}
     return LasScan(
         path=str(path),
         source_crs=crs_text(src) if (src.is_projected or src.is_compound) else src.to_wkt(),
-        transformed=not same,
+        transformed=tr is not None,
         point_count=count,
         bounds_min=lo.tolist(),
         bounds_max=hi.tolist(),

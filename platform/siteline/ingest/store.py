@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import uuid
 from pathlib import Path
 
 from siteline.errors import MissionError
@@ -20,7 +21,8 @@ def put_blob(store_dir: Path, source: Path, sha256: str) -> bool:
     if dest.exists():
         return False
     dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
+    # unique temporary name: concurrent ingests may copy the same content at the same time
+    tmp = dest.with_name(f".{dest.name}.tmp-{uuid.uuid4().hex}")
     try:
         with open(source, "rb") as src, open(tmp, "wb") as out:
             shutil.copyfileobj(src, out, 8 * 2**20)

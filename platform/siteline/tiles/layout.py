@@ -1,0 +1,117 @@
+"""The tile store's conventions: the site grid, node keys, quantisation and the persisted spec.
+
+Tile (i, j) covers site-local x in [i T, (i + 1) T) and y in [j T, (j + 1) T), T = the site's tile
+size, so the same tile covers the same ground in every scene. Inside a tile, level L keeps one point
+per occupied cube of edge ``root_spacing_m / 2**L`` among the points no earlier level kept (an
+additive level of detail); the tile's arrays are sorted by level, so levels 0..L are a prefix.
+Coordinates are int32 counts of ``quantum_m`` relative to the tile's float64 origin (the site origin
+plus (i T, j T, 0)).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from siteline.errors import TileError
+
+ATTRIBUTES = ("xyz", "rgb", "intensity", "class", "gps_time", "return_number")
+SPILL_DTYPE = np.dtype(
+    [
+        ("xyz", "<i4", (3,)),
+        ("rgb", "u1", (3,)),
+        ("intensity", "<u2"),
+        ("class", "u1"),
+        ("gps_time", "<f8"),
+        ("return_number", "u1"),
+    ]
+)
+
+
+@dataclass(frozen=True)
+class TileSpec:
+    """How a scene is tiled; stored in the Zarr group's attributes and the scene's statistics.
+
+    quantum_m: coordinate quantum (1 mm). tile_size_m: the site grid. root_spacing_m: spacing of
+    level 0 (default tile / 8). min_spacing_m: the last level takes every remaining point once the
+    spacing would fall below this. chunk_points / shard_points: Zarr inner chunk and shard length.
+    clevel: blosc-zstd level.
+    """
+
+    tile_size_m: float = 50.0
+    quantum_m: float = 0.001
+    root_spacing_m: float | None = None
+    min_spacing_m: float = 0.02
+    max_levels: int = 12
+    chunk_points: int = 65_536
+    shard_points: int = 1_048_576
+    clevel: int = 3
+
+    def __post_init__(self) -> None:
+        if not (self.tile_size_m > 0 and self.quantum_m > 0 and self.min_spacing_m > 0):
+            raise TileError("tile size, quantum and minimum spacing must be positive.")
+        if self.tile_size_m / self.quantum_m > 2**30:
+            raise TileError(
+                f"tile size {self.tile_size_m} m at quantum {self.quantum_m} m overflows int32 counts."
+            )
+        if self.shard_points % self.chunk_points:
+            raise TileError("shard_points must be a multiple of chunk_points.")
+
+    @property
+    def level0_spacing_m(self) -> float:
+        return self.root_spacing_m if self.root_spacing_m is not None else self.tile_size_m / 8.0
+
+    def spacing(self, level: int) -> float:
+        return self.level0_spacing_m / 2.0**level
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> TileSpec:
+        return cls(**doc)
+
+
+def tile_index(xy_local: np.ndarray, tile_size_m: float) -> np.ndarray:
+    """(N, 2) int64 tile indices of site-local (N, 2+) float64 positions."""
+    return np.floor(np.asarray(xy_local[:, :2], dtype=np.float64) / tile_size_m).astype(np.int64)
+
+
+def tile_key(i: int, j: int) -> str:
+    return f"t{i}_{j}"
+
+
+def parse_tile_key(key: str) -> tuple[int, int]:
+    i, j = key[1:].split("_")
+    return int(i), int(j)
+
+
+def node_key(tile: str, level: int) -> str:
+    return f"{tile}/{level}"
+
+
+def tile_origin_local(i: int, j: int, tile_size_m: float) -> np.ndarray:
+    """Site-local float64 origin of tile (i, j)."""
+    return np.array([i * tile_size_m, j * tile_size_m, 0.0])
+
+
+def quantise(local: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
+    """int32 counts of ``quantum_m`` of site-local float64 points relative to ``origin_local``."""
+    q = np.rint((np.asarray(local, dtype=np.float64) - origin_local) / quantum_m)
+    if np.abs(q).max(initial=0) >= 2**31 - 1:
+        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
+    return q.astype(np.int32)
+
+
+def dequantise(counts: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
+    """Site-local float64 points of int32 counts (the one place raw counts become metres)."""
+    return np.asarray(origin_local, dtype=np.float64) + counts.astype(np.float64) * quantum_m
+
+
+def level_count(spec: TileSpec) -> int:
+    """Levels before the spacing falls below ``min_spacing_m`` (the last one takes the rest)."""
+    n = int(math.floor(math.log2(spec.level0_spacing_m / spec.min_spacing_m))) + 1
+    return max(1, min(spec.max_levels, n))
