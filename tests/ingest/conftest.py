@@ -2,21 +2,14 @@
 
 from __future__ import annotations
 
-import json
-import shutil
 from pathlib import Path
 
 import pytest
+from sitehelpers import SYNTH, make_home
 
-from siteline.catalog import migrate, open_catalog
-from siteline.catalog.engine import make_engine
-from siteline.catalog.sites import add_site
-from siteline.config import Settings, sqlite_url
-from siteline.fence import load_fence_geojson
-from siteline.site import make_site_spec
-from siteline.synth import SynthConfig, write_site
-
-SYNTH = SynthConfig(epochs=3, density_pts_m2=3.0, seed=21)
+from siteline.catalog import open_catalog
+from siteline.config import Settings
+from siteline.synth import write_site
 
 
 @pytest.fixture(scope="session")
@@ -24,36 +17,6 @@ def synth_site(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("synth-ingest")
     write_site(out, SYNTH)
     return out
-
-
-def epoch_dirs(site: Path) -> list[Path]:
-    return [site / e["mission_dir"] for e in json.loads((site / "truth" / "site.json").read_text())["epochs"]]
-
-
-def copy_mission(site: Path, index: int, dest: Path) -> Path:
-    src = epoch_dirs(site)[index]
-    out = dest / src.name
-    shutil.copytree(src, out, symlinks=True)
-    return out
-
-
-def make_home(
-    root: Path, url: str | None = None, site_dir: Path | None = None, name: str = "demo"
-) -> Settings:
-    home = root / "home"
-    settings = Settings(home=home, database_url=url or sqlite_url(home / "catalog.sqlite"))
-    engine = make_engine(settings.database_url)
-    migrate.upgrade(engine)
-    engine.dispose()
-    cat = open_catalog(settings)
-    fence = None
-    if site_dir is not None:
-        ring = load_fence_geojson(site_dir / "fence.geojson", SYNTH.origin)
-        fence = [*ring, ring[0]]
-    with cat.transaction() as s:
-        add_site(s, make_site_spec(name, SYNTH.crs, SYNTH.origin, fence))
-    cat.dispose()
-    return settings
 
 
 @pytest.fixture

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 from PIL import Image
+from sitehelpers import copy_mission
 
 from siteline.catalog.models import Camera, Mission, MissionFile, Scene, StageRun
 from siteline.errors import (
@@ -24,8 +25,6 @@ from siteline.errors import (
 from siteline.ingest.mission import IngestOptions, ingest_mission
 from siteline.lasio import write_las
 from siteline.synth import LAS_RELPATH
-
-from .conftest import copy_mission
 
 
 def _assert_nothing_written(cat, home) -> None:
@@ -188,7 +187,7 @@ def test_dotdot_names_are_refused() -> None:
 
 
 def test_unknown_site(cat, home, synth_site) -> None:
-    from .conftest import epoch_dirs
+    from sitehelpers import epoch_dirs
 
     with pytest.raises(SiteNotFoundError, match="nowhere.*demo"):
         ingest_mission(cat, home, epoch_dirs(synth_site)[0], "nowhere")
@@ -210,7 +209,7 @@ def test_failure_after_copy_removes_new_blobs(cat, home, synth_site, tmp_path, m
         raise RuntimeError("disk full")
 
     monkeypatch.setattr(mission_mod, "_commit", boom)
-    from .conftest import epoch_dirs
+    from sitehelpers import epoch_dirs
 
     with pytest.raises(RuntimeError, match="disk full"):
         ingest_mission(cat, home, epoch_dirs(synth_site)[0], "demo")

@@ -10,6 +10,7 @@ import laspy
 import numpy as np
 import pytest
 import sqlalchemy as sa
+from sitehelpers import copy_mission, epoch_dirs, make_home
 
 from siteline.cameras import Camera
 from siteline.catalog import open_catalog
@@ -20,8 +21,6 @@ from siteline.errors import RegistrationError
 from siteline.ingest.mission import IngestOptions, ingest_mission
 from siteline.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
-
-from .conftest import copy_mission, epoch_dirs, make_home
 
 
 def _truth_cameras(site, index):

@@ -13,6 +13,7 @@ from siteline.catalog.sites import get_site
 from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
 from siteline.ingest.mission import IngestOptions, Reporter, ingest_mission
 from siteline.ingest.photos import read_photo_meta
+from siteline.tiles import export_las, open_scene_tiles, tile_scene
 
 mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
 scene_app = typer.Typer(help="Scenes (epochs) of a site.", no_args_is_help=True)
@@ -58,9 +59,10 @@ def ingest(
     max_rms_m: float = typer.Option(
         0.1, "--max-georegistration-rms-m", help="Largest accepted georegistration RMS, metres."
     ),
+    workers: int = typer.Option(2, "--workers", help="Processes writing tiles (each owns whole tiles)."),
     as_json: bool = JsonOption,
 ) -> None:
-    """Ingest a mission folder as a new scene of a site (a re-run of the same content does nothing)."""
+    """Ingest a mission folder as a new scene of a site and tile it (a re-run of the same content does nothing)."""
     opts = IngestOptions(
         crs=crs,
         storage="copy" if copy else "reference",
@@ -76,7 +78,23 @@ def ingest(
     ]
     with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
         result = ingest_mission(cat, cfg, mission_dir, site, opts, BarReporter(bar))
+        tiled = None
+        if result.scene_id is not None:
+            rep = BarReporter(bar)
+            tiled, tile_msg = tile_scene(
+                cat,
+                cfg,
+                result.scene_id,
+                workers=workers,
+                progress=lambda task, n, total: (
+                    rep.start(task, total) if task not in rep.tasks else None,
+                    rep.advance(task, n),
+                ),
+            )
+            if tiled is not None:
+                result.message += f"; {tile_msg}"
     record = result.to_dict()
+    record["tiles"] = tiled.summary() if tiled is not None else None
     emit(
         as_json,
         record,
@@ -217,3 +235,52 @@ def photo_inspect(
     meta = read_photo_meta(file)
     record = meta.to_dict()
     emit(as_json, record, lambda: print_record(f"photo {file.name}", record))
+
+
+@scene_app.command("tile")
+def scene_tile(
+    scene_id: int = typer.Argument(..., help="Scene id."),
+    workers: int = typer.Option(2, "--workers", help="Processes writing tiles."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Tile a registered scene into its Zarr store (a scene already tiled is left alone)."""
+    cfg = settings()
+    with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
+        rep = BarReporter(bar)
+        result, message = tile_scene(
+            cat,
+            cfg,
+            scene_id,
+            workers=workers,
+            progress=lambda task, n, total: (
+                rep.start(task, total) if task not in rep.tasks else None,
+                rep.advance(task, n),
+            ),
+        )
+    emit(
+        as_json,
+        {"message": message, "tiles": result.summary() if result else None},
+        lambda: console.print(message),
+    )
+
+
+@scene_app.command("export")
+def scene_export(
+    scene_id: int = typer.Argument(..., help="Scene id."),
+    out: Path = typer.Option(..., "--out", help="Output .las or .laz file."),
+    bounds: list[float] | None = typer.Option(
+        None, "--bounds", help="xmin ymin xmax ymax (site-local metres); repeat 4 times."
+    ),
+    level: int | None = typer.Option(None, "--level", help="Deepest level of detail (default: all)."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Export a tiled scene (or a region, or coarse levels) to LAS/LAZ in the site CRS."""
+    from siteline.catalog.models import Site
+    from siteline.catalog.sites import site_spec
+
+    with catalog() as cat, cat.transaction() as s:
+        scene = get_scene(s, scene_id)
+        tiles = open_scene_tiles(s, scene)
+        spec = site_spec(s.get(Site, scene.site_id))
+    n = export_las(tiles, spec, out, bounds=bounds or None, level=level)
+    emit(as_json, {"out": str(out), "points": n}, lambda: console.print(f"wrote {n:,} points to {out}"))

@@ -1,0 +1,210 @@
+"""Reading a scene's tile store: regions, levels of detail, and exactly what a view needs."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from siteline.cameras import Camera
+from siteline.errors import TileError
+from siteline.tiles.layout import ATTRIBUTES, TileSpec, dequantise, parse_tile_key, tile_origin_local
+from siteline.tiles.writer import NodeInfo
+
+DEFAULT_ATTRIBUTES = ("rgb", "class")
+
+
+@dataclass
+class ReadStats:
+    tiles_read: int = 0
+    points_read: int = 0
+    points_returned: int = 0
+    levels: dict[str, int] = field(default_factory=dict)
+
+
+def bounds_box(bounds: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of 4 (x y) or 6 (x y z) bound values, site-local metres; z open when omitted."""
+    b = [float(v) for v in bounds]
+    if len(b) == 4:
+        return np.array([b[0], b[1], -np.inf]), np.array([b[2], b[3], np.inf])
+    if len(b) == 6:
+        return np.array(b[:3]), np.array(b[3:])
+    raise TileError(f"bounds need 4 (xmin ymin xmax ymax) or 6 (with z) numbers, got {len(b)}.")
+
+
+def in_bounds(xyz: np.ndarray, bounds: Sequence[float]) -> np.ndarray:
+    lo, hi = bounds_box(bounds)
+    return np.all((xyz >= lo) & (xyz <= hi), axis=1)
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def box_in_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Conservative test: False only when the box lies wholly outside one plane."""
+    corners = _box_corners(lo, hi)
+    vals = corners @ planes[:, :3].T + planes[:, 3]
+    return bool((vals >= 0).any(axis=0).all())
+
+
+def box_distance(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    """Distance (m) from a point to an axis-aligned box (0 inside)."""
+    d = np.maximum(np.maximum(lo - point, 0.0), point - hi)
+    return float(np.linalg.norm(d))
+
+
+class SceneTiles:
+    """A scene's tile store opened for reading. Coordinates come back site-local float32 metres
+    (computed in float64 from the int32 counts and the tile origins, then cast)."""
+
+    def __init__(self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec) -> None:
+        import zarr
+
+        self.uri = str(uri)
+        if not Path(self.uri).is_dir():
+            raise TileError(f"tile store {self.uri} is missing; re-run `siteline scene tile`.")
+        self.root = zarr.open_group(self.uri, mode="r")
+        self.spec = spec
+        self.nodes = list(nodes)
+        self.by_tile: dict[str, list[NodeInfo]] = defaultdict(list)
+        for n in self.nodes:
+            self.by_tile[n.tile].append(n)
+        for v in self.by_tile.values():
+            v.sort(key=lambda n: n.level)
+        self.tile_bounds = {
+            t: (np.min([n.bounds_min for n in ns], axis=0), np.max([n.bounds_max for n in ns], axis=0))
+            for t, ns in self.by_tile.items()
+        }
+        self.last_stats = ReadStats()
+
+    @classmethod
+    def open(cls, uri: str | Path) -> SceneTiles:
+        """Open from the store alone (its attributes hold the spec and the node table)."""
+        import zarr
+
+        attrs = dict(zarr.open_group(str(uri), mode="r").attrs)
+        if "nodes" not in attrs:
+            raise TileError(f"{uri} is not a siteline tile store.")
+        nodes = [
+            NodeInfo(**{**n, "bounds_min": tuple(n["bounds_min"]), "bounds_max": tuple(n["bounds_max"])})
+            for n in attrs["nodes"]
+        ]
+        return cls(uri, nodes, TileSpec.from_dict(attrs["spec"]))
+
+    @property
+    def point_count(self) -> int:
+        return sum(n.count for n in self.nodes)
+
+    def level_for_resolution(self, resolution_m: float) -> int:
+        """Smallest level whose spacing is at most ``resolution_m`` (the deepest if none is)."""
+        levels = sorted({n.level for n in self.nodes})
+        for level in levels:
+            if self.spec.spacing(level) <= resolution_m:
+                return level
+        return levels[-1]
+
+    def _prefix(self, tile: str, level: int | None) -> int:
+        return sum(n.count for n in self.by_tile[tile] if level is None or n.level <= level)
+
+    def read(self, prefixes: dict[str, int], attributes: Sequence[str]) -> dict[str, np.ndarray]:
+        """Read the first ``prefixes[tile]`` points of each tile: one call per tile and attribute."""
+        bad = [a for a in attributes if a not in ATTRIBUTES or a == "xyz"]
+        if bad:
+            raise TileError(f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != 'xyz']}.")
+        parts: dict[str, list[np.ndarray]] = {a: [] for a in ("xyz", *attributes)}
+        stats = ReadStats()
+        for tile in sorted(prefixes):
+            k = prefixes[tile]
+            if k <= 0:
+                continue
+            g = self.root["tiles"][tile]
+            i, j = parse_tile_key(tile)
+            counts = g["xyz"][:k]
+            parts["xyz"].append(
+                dequantise(counts, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m)
+            )
+            for a in attributes:
+                parts[a].append(g[a][:k])
+            stats.tiles_read += 1
+            stats.points_read += k
+        out = {}
+        for a, chunks in parts.items():
+            if chunks:
+                out[a] = np.concatenate(chunks)
+            else:
+                shape = (0, 3) if a in ("xyz", "rgb") else (0,)
+                dtype = np.float64 if a == "xyz" else self.root["tiles"][next(iter(self.by_tile))][a].dtype
+                out[a] = np.zeros(shape, dtype=dtype)
+        self.last_stats = stats
+        return out
+
+    def points(
+        self,
+        bounds: Sequence[float] | None = None,
+        level: int | None = None,
+        resolution: float | None = None,
+        attributes: Sequence[str] = DEFAULT_ATTRIBUTES,
+    ) -> dict[str, np.ndarray]:
+        """Points in ``bounds`` ((xmin, ymin, xmax, ymax) or 6 values with z, site-local metres) up to
+        ``level`` (or the level that reaches ``resolution`` metres; all levels when both are None).
+        Returns ``xyz`` (N, 3) float32 site-local and the requested attributes."""
+        if level is not None and resolution is not None:
+            raise TileError("give level or resolution, not both.")
+        if resolution is not None:
+            level = self.level_for_resolution(resolution)
+        lo = hi = None
+        if bounds is not None:
+            lo, hi = bounds_box(bounds)
+        prefixes = {}
+        for tile, (tlo, thi) in self.tile_bounds.items():
+            if lo is not None and (np.any(thi < lo) or np.any(tlo > hi)):
+                continue
+            prefixes[tile] = self._prefix(tile, level)
+        out = self.read(prefixes, attributes)
+        if bounds is not None:
+            keep = in_bounds(out["xyz"], bounds)
+            out = {k: v[keep] for k, v in out.items()}
+        out["xyz"] = out["xyz"].astype(np.float32)
+        self.last_stats.points_returned = len(out["xyz"])
+        return out
+
+    def points_for_view(
+        self,
+        camera: Camera,
+        scale: float,
+        attributes: Sequence[str] = DEFAULT_ATTRIBUTES,
+        level: int | str = "auto",
+        near_m: float = 1e-3,
+    ) -> dict[str, np.ndarray]:
+        """Points a render of ``camera`` at ``scale`` needs: tiles culled by the frustum, and per tile
+        the coarsest level whose spacing at the tile's nearest distance is within one pixel
+        footprint (``level="auto"``; an int caps every tile at that level; None reads all levels).
+        Points outside the frustum are dropped (float64 test), so at full level the result is exactly
+        the brute-force frustum selection."""
+        cam = camera.scaled(scale)
+        planes = cam.frustum_planes(near_m)
+        centre = cam.center
+        f = min(cam.fx, cam.fy)
+        prefixes, chosen = {}, {}
+        for tile, (lo, hi) in self.tile_bounds.items():
+            if not box_in_frustum(planes, lo, hi):
+                continue
+            if level == "auto":
+                footprint = max(box_distance(centre, lo, hi), near_m) / f
+                lv = self.level_for_resolution(footprint)
+            else:
+                lv = level
+            prefixes[tile] = self._prefix(tile, lv)
+            chosen[tile] = -1 if lv is None else int(lv)
+        out = self.read(prefixes, attributes)
+        xyz = out["xyz"]
+        keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
+        out = {k: v[keep] for k, v in out.items()}
+        out["xyz"] = out["xyz"].astype(np.float32)
+        self.last_stats.points_returned = len(out["xyz"])
+        self.last_stats.levels = chosen
+        return out

@@ -1,0 +1,164 @@
+"""Tiling registered scenes and opening their stores, with the catalog as the index."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+
+import sqlalchemy as sa
+from sqlalchemy.orm import Session
+
+from siteline.catalog import Catalog
+from siteline.catalog.models import Mission, MissionFile, Node, Scene, StageRun
+from siteline.catalog.sites import site_spec
+from siteline.config import Settings
+from siteline.crs import parse_crs
+from siteline.errors import TileError
+from siteline.ingest.store import resolve_file
+from siteline.site import SiteSpec
+from siteline.tiles.layout import TileSpec
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import NodeInfo, TileResult, write_tiles
+
+
+def scene_las(session: Session, settings: Settings, scene: Scene) -> Path:
+    """Where the scene's LAS/LAZ bytes are (the store's blob, or the referenced original)."""
+    stats = scene.statistics or {}
+    mission = session.get(Mission, scene.mission_id)
+    row = session.execute(
+        sa.select(MissionFile).where(
+            MissionFile.mission_id == mission.id, MissionFile.path == stats.get("las_file")
+        )
+    ).scalar_one_or_none()
+    if row is None:
+        raise TileError(f"scene {scene.id}: its mission records no point cloud file.")
+    path = resolve_file(settings.store_dir, mission.storage, mission.root_uri, row.path, row.sha256)
+    if not path.is_file():
+        raise TileError(f"scene {scene.id}: point cloud {path} is missing from the store.")
+    return path
+
+
+def store_path(settings: Settings, scene_id: int) -> Path:
+    return settings.store_dir / "tiles" / f"scene-{scene_id}.zarr"
+
+
+def tile_scene(
+    catalog: Catalog,
+    settings: Settings,
+    scene_id: int,
+    spec: TileSpec | None = None,
+    workers: int = 2,
+    progress: Callable[[str, int, int | None], None] | None = None,
+) -> tuple[TileResult | None, str]:
+    """Tile a registered scene and index its nodes; a scene already tiled is left alone.
+
+    The store is written under a temporary name and renamed; only then are the node rows, the store
+    URI and the scene status committed in one transaction. A store without rows (a crash between the
+    rename and the commit) is replaced.
+    """
+    with catalog.transaction() as s:
+        scene = s.get(Scene, scene_id)
+        if scene is None:
+            raise TileError(f"no scene with id {scene_id}.")
+        if scene.status == "tiled" and scene.tile_store_uri and Path(scene.tile_store_uri).is_dir():
+            return None, f"scene {scene_id} is already tiled at {scene.tile_store_uri}: nothing to do."
+        from siteline.catalog.models import Site
+
+        site = site_spec(s.get(Site, scene.site_id))
+        las = scene_las(s, settings, scene)
+        src = parse_crs_or_site((scene.statistics or {}).get("source_crs"), site)
+    spec = spec or TileSpec(tile_size_m=site.tile_size_m)
+    out = store_path(settings, scene_id)
+    if out.exists():
+        shutil.rmtree(out)
+    started = datetime.now(UTC)
+    result = write_tiles(las, site, src, out, spec, workers=workers, seed=scene_id, progress=progress)
+    try:
+        with catalog.transaction() as s:
+            scene = s.get(Scene, scene_id)
+            s.execute(sa.delete(Node).where(Node.scene_id == scene_id))
+            for n in result.nodes:
+                s.add(
+                    Node(
+                        scene_id=scene_id,
+                        key=n.key,
+                        tile=n.tile,
+                        level=n.level,
+                        min_x=n.bounds_min[0],
+                        min_y=n.bounds_min[1],
+                        min_z=n.bounds_min[2],
+                        max_x=n.bounds_max[0],
+                        max_y=n.bounds_max[1],
+                        max_z=n.bounds_max[2],
+                        point_count=n.count,
+                        start=n.start,
+                        spacing_m=n.spacing_m,
+                    )
+                )
+            scene.tile_store_uri = result.uri
+            scene.status = "tiled"
+            scene.statistics = {
+                **(scene.statistics or {}),
+                "tiles": result.summary() | {"spec": spec.to_dict()},
+            }
+            s.add(
+                StageRun(
+                    stage="tile",
+                    subject=f"scene:{scene_id}",
+                    status="completed",
+                    started_at=started,
+                    finished_at=datetime.now(UTC),
+                    parameters={"spec": spec.to_dict(), "workers": workers},
+                )
+            )
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+    return (
+        result,
+        f"scene {scene_id} tiled: {result.points:,} points in {result.tiles} tiles, {result.levels} levels, "
+        f"{result.bytes_per_point:.1f} bytes/point",
+    )
+
+
+def parse_crs_or_site(text: str | None, site: SiteSpec):  # noqa: ANN201
+    return (
+        parse_crs(text)
+        if text and text.startswith("EPSG:")
+        else (site.pyproj_crs if not text else _wkt(text))
+    )
+
+
+def _wkt(text: str):  # noqa: ANN202
+    import pyproj
+
+    return pyproj.CRS.from_user_input(text)
+
+
+def scene_nodes(session: Session, scene_id: int) -> list[NodeInfo]:
+    rows = session.execute(
+        sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.level)
+    ).scalars()
+    return [
+        NodeInfo(
+            r.key,
+            r.tile,
+            r.level,
+            (r.min_x, r.min_y, r.min_z),
+            (r.max_x, r.max_y, r.max_z),
+            r.point_count,
+            r.start,
+            r.spacing_m,
+        )
+        for r in rows
+    ]
+
+
+def open_scene_tiles(session: Session, scene: Scene) -> SceneTiles:
+    """The scene's tile store, indexed by its catalog node rows."""
+    if scene.status != "tiled" or not scene.tile_store_uri:
+        raise TileError(f"scene {scene.id} is not tiled yet: run `siteline scene tile {scene.id}`.")
+    spec = TileSpec.from_dict(scene.statistics["tiles"]["spec"])
+    return SceneTiles(scene.tile_store_uri, scene_nodes(session, scene.id), spec)

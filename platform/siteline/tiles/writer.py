@@ -1,0 +1,297 @@
+"""LAS/LAZ -> one Zarr v3 group per scene, tiled on the site grid with an additive level of detail.
+
+Memory stays bounded: one streaming pass spills every chunk's points into per-tile files (an external
+partition), then each tile is loaded alone, levelled, sorted by level and written. Workers each own
+whole tiles, i.e. whole arrays and their shards (concurrent partial-shard writes lose data, zarr-python
+issue 3682). Everything is written under a hidden temporary name and renamed into place at the end,
+so a crash leaves no visible store.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import time
+import uuid
+import zlib
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+import pyproj
+
+from siteline.errors import TileError
+from siteline.ingest.pointcloud import site_chunks, source_transformer
+from siteline.site import SiteSpec
+from siteline.tiles.layout import (
+    SPILL_DTYPE,
+    TileSpec,
+    dequantise,
+    level_count,
+    node_key,
+    parse_tile_key,
+    quantise,
+    tile_index,
+    tile_key,
+    tile_origin_local,
+)
+from siteline.tiles.lod import assign_levels
+
+FORMAT_VERSION = 1
+PARALLEL_MIN_POINTS = 2_000_000
+
+
+@dataclass(frozen=True)
+class NodeInfo:
+    """One node: a level of a tile. Bounds in site-local metres; ``start``/``count`` index the tile's
+    arrays; ``spacing_m`` is the level's cube edge."""
+
+    key: str
+    tile: str
+    level: int
+    bounds_min: tuple[float, float, float]
+    bounds_max: tuple[float, float, float]
+    count: int
+    start: int
+    spacing_m: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class TileResult:
+    uri: str
+    points: int
+    tiles: int
+    levels: int
+    bytes: int
+    checksum: str
+    nodes: list[NodeInfo]
+    seconds: float
+
+    @property
+    def bytes_per_point(self) -> float:
+        return self.bytes / max(self.points, 1)
+
+    def summary(self) -> dict:
+        return {
+            "uri": self.uri,
+            "points": self.points,
+            "tiles": self.tiles,
+            "levels": self.levels,
+            "bytes": self.bytes,
+            "bytes_per_point": self.bytes_per_point,
+            "checksum": self.checksum,
+            "seconds": self.seconds,
+        }
+
+
+def _codec(spec: TileSpec):  # noqa: ANN202
+    from zarr.codecs import BloscCodec, BloscShuffle
+
+    return BloscCodec(cname="zstd", clevel=spec.clevel, shuffle=BloscShuffle.shuffle)
+
+
+def _spill(
+    las_path: Path,
+    site: SiteSpec,
+    tr: pyproj.Transformer | None,
+    spec: TileSpec,
+    spill_dir: Path,
+    progress: Callable[[int], None] | None,
+) -> dict[str, int]:
+    """Partition the cloud into per-tile spill files; return the point count per tile."""
+    counts: dict[str, int] = {}
+    for sc in site_chunks(las_path, site, tr):
+        ij = tile_index(sc.local, spec.tile_size_m)
+        order = np.lexsort((ij[:, 1], ij[:, 0]))
+        ij_sorted = ij[order]
+        cuts = np.flatnonzero(np.any(np.diff(ij_sorted, axis=0) != 0, axis=1)) + 1
+        ch = sc.chunk
+        n = len(sc.local)
+        rgb = ch.rgb if ch.rgb is not None else np.zeros((n, 3), np.uint8)
+        gps = ch.gps_time if ch.gps_time is not None else np.zeros(n)
+        for part in np.split(order, cuts):
+            i, j = (int(v) for v in ij[part[0]])
+            key = tile_key(i, j)
+            rec = np.empty(len(part), SPILL_DTYPE)
+            rec["xyz"] = quantise(sc.local[part], tile_origin_local(i, j, spec.tile_size_m), spec.quantum_m)
+            rec["rgb"] = rgb[part]
+            rec["intensity"] = ch.intensity[part]
+            rec["class"] = sc.classes[part]
+            rec["gps_time"] = gps[part]
+            rec["return_number"] = ch.return_number[part]
+            with open(spill_dir / f"{key}.bin", "ab") as fh:
+                rec.tofile(fh)
+            counts[key] = counts.get(key, 0) + len(part)
+        if progress:
+            progress(n)
+    return counts
+
+
+def _tile_seed(key: str, seed: int) -> int:
+    return zlib.crc32(key.encode()) ^ (seed * 2654435761 & 0xFFFFFFFF)
+
+
+def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed: int) -> dict:
+    """Level, sort and write one tile's arrays (runs in a worker process); returns its nodes and checksum."""
+    import zarr
+
+    spec = TileSpec.from_dict(spec_doc)
+    rec = np.fromfile(spill_path, dtype=SPILL_DTYPE)
+    levels = assign_levels(rec["xyz"], spec, _tile_seed(key, seed))
+    order = np.argsort(levels, kind="stable")
+    rec, levels = rec[order], levels[order]
+    n = len(rec)
+    group = zarr.open_group(group_path, mode="a").require_group("tiles").create_group(key)
+    digest = hashlib.sha256()
+    codec = _codec(spec)
+    for name in ("xyz", "rgb", "intensity", "class", "gps_time", "return_number"):
+        values = np.ascontiguousarray(rec[name])
+        shape = values.shape
+        chunks = (spec.chunk_points, *shape[1:])
+        shards = (spec.shard_points, *shape[1:])
+        arr = group.create_array(
+            name,
+            shape=shape,
+            dtype=values.dtype,
+            chunks=chunks,
+            shards=shards,
+            compressors=codec,
+            fill_value=0,
+        )
+        arr[...] = values
+        digest.update(name.encode())
+        digest.update(values.tobytes())
+    i, j = parse_tile_key(key)
+    origin = tile_origin_local(i, j, spec.tile_size_m)
+    nodes = []
+    bounds = np.searchsorted(levels, np.arange(level_count(spec) + 1))
+    for level in range(level_count(spec)):
+        s, e = int(bounds[level]), int(bounds[level + 1])
+        if e <= s:
+            continue
+        local = dequantise(rec["xyz"][s:e], origin, spec.quantum_m)
+        nodes.append(
+            NodeInfo(
+                node_key(key, level),
+                key,
+                level,
+                tuple(local.min(axis=0).tolist()),
+                tuple(local.max(axis=0).tolist()),
+                e - s,
+                s,
+                spec.spacing(level),
+            ).to_dict()
+        )
+    os.unlink(spill_path)
+    return {"key": key, "points": n, "checksum": digest.hexdigest(), "nodes": nodes}
+
+
+def _dir_bytes(path: Path) -> int:
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def clear_partials(out: Path) -> None:
+    """Remove what crashed writers left under hidden temporary names next to ``out``."""
+    for p in out.parent.glob(f".{out.name}.partial-*"):
+        shutil.rmtree(p, ignore_errors=True)
+
+
+def write_tiles(
+    las_path: Path,
+    site: SiteSpec,
+    src_crs: pyproj.CRS,
+    out: Path,
+    spec: TileSpec | None = None,
+    workers: int = 2,
+    seed: int = 0,
+    progress: Callable[[str, int, int | None], None] | None = None,
+) -> TileResult:
+    """Tile ``las_path`` into the Zarr group ``out`` (which must not exist); return its nodes."""
+    import zarr
+
+    t0 = time.perf_counter()
+    spec = spec or TileSpec(tile_size_m=site.tile_size_m)
+    out = Path(out)
+    if out.exists():
+        raise TileError(f"tile store {out} already exists; remove it or tile into another path.")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    clear_partials(out)
+    token = uuid.uuid4().hex[:12]
+    partial = out.with_name(f".{out.name}.partial-{token}")
+    spill_dir = out.with_name(f".{out.name}.partial-{token}-spill")
+    spill_dir.mkdir(parents=True)
+    try:
+        tr = source_transformer(las_path, site, src_crs)
+        counts = _spill(
+            las_path,
+            site,
+            tr,
+            spec,
+            spill_dir,
+            (lambda n: progress("partitioning", n, None)) if progress else None,
+        )
+        if not counts:
+            raise TileError(f"point cloud {las_path} holds no points to tile.")
+        root = zarr.open_group(str(partial), mode="w")
+        root.create_group("tiles")
+        keys = sorted(counts)
+        results = []
+        args = [(k, str(spill_dir / f"{k}.bin"), str(partial), spec.to_dict(), seed) for k in keys]
+        total_points = sum(counts.values())
+        # worker start-up (~1 s: imports) only pays off on big scenes
+        if workers > 1 and len(keys) > 1 and total_points >= PARALLEL_MIN_POINTS:
+            # spawn: zarr runs an event loop thread that a forked child must not inherit
+            with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+                for res in pool.map(write_tile, *zip(*args, strict=True)):
+                    results.append(res)
+                    if progress:
+                        progress("writing tiles", 1, len(keys))
+        else:
+            for a in args:
+                results.append(write_tile(*a))
+                if progress:
+                    progress("writing tiles", 1, len(keys))
+        nodes = [
+            NodeInfo(**{**n, "bounds_min": tuple(n["bounds_min"]), "bounds_max": tuple(n["bounds_max"])})
+            for r in results
+            for n in r["nodes"]
+        ]
+        checksum = hashlib.sha256(
+            "\n".join(f"{r['key']}:{r['checksum']}" for r in sorted(results, key=lambda r: r["key"])).encode()
+        ).hexdigest()
+        points = sum(r["points"] for r in results)
+        root.attrs.update(
+            {
+                "siteline_tiles": FORMAT_VERSION,
+                "spec": spec.to_dict(),
+                "site_origin": list(site.origin),
+                "crs": site.crs,
+                "points": points,
+                "checksum": checksum,
+                "nodes": [n.to_dict() for n in nodes],
+            }
+        )
+        size = _dir_bytes(partial)
+        os.replace(partial, out)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    finally:
+        shutil.rmtree(spill_dir, ignore_errors=True)
+    return TileResult(
+        str(out),
+        points,
+        len(keys),
+        max(n.level for n in nodes) + 1,
+        size,
+        checksum,
+        nodes,
+        time.perf_counter() - t0,
+    )
