@@ -23,8 +23,9 @@ import numpy as np
 ORIGIN = np.array([445_000.0, 5_030_000.0, 80.0])
 
 
-def make_las(path: Path, n: int, seed: int = 0) -> None:
-    """A flat-ish site of n points written in chunks (memory stays bounded)."""
+def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.5) -> None:
+    """A flat-ish site of n points over 300 m x 300 m written in chunks (memory stays bounded);
+    z_noise_m spreads them vertically (0.5: a slab of clutter; 0.02: a surface)."""
     from siteline.lasio import fill_record, las_header
 
     rng = np.random.default_rng(seed)
@@ -32,7 +33,7 @@ def make_las(path: Path, n: int, seed: int = 0) -> None:
     with laspy.open(path, mode="w", header=header) as w:
         for start in range(0, n, 2_000_000):
             k = min(2_000_000, n - start)
-            xyz = np.c_[rng.uniform(-150, 150, (k, 2)), rng.normal(0, 0.5, k)] + ORIGIN
+            xyz = np.c_[rng.uniform(-150, 150, (k, 2)), rng.normal(0, z_noise_m, k)] + ORIGIN
             rec = laspy.ScaleAwarePointRecord.zeros(k, header=header)
             fill_record(
                 rec,

@@ -189,10 +189,12 @@ class Pair(Base):
 
 class View(Base):
     __tablename__ = "view"
-    __table_args__ = (sa.UniqueConstraint("pair_id", "index"),)
+    __table_args__ = (sa.UniqueConstraint("pair_id", "param_digest", "index"),)
 
     id: Mapped[int] = mapped_column(primary_key=True)
     pair_id: Mapped[int] = mapped_column(sa.ForeignKey("pair.id", ondelete="CASCADE"))
+    # the pair processing parameters that made this view set (PairParams.digest())
+    param_digest: Mapped[str] = mapped_column(sa.String(16))
     index: Mapped[int] = mapped_column(sa.Integer)
     strategy: Mapped[str] = mapped_column(sa.String(64))
     parent_camera_id: Mapped[int | None] = mapped_column(

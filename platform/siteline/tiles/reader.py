@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import OrderedDict, defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,7 +61,7 @@ class SceneTiles:
     """A scene's tile store opened for reading. Coordinates come back site-local float32 metres
     (computed in float64 from the int32 counts and the tile origins, then cast)."""
 
-    def __init__(self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec) -> None:
+    def __init__(self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec, cache_bytes: int = 256 * 2**20) -> None:
         import zarr
 
         self.uri = str(uri)
@@ -80,6 +80,39 @@ class SceneTiles:
             for t, ns in self.by_tile.items()
         }
         self.last_stats = ReadStats()
+        self.extra: dict[str, object] = {}
+        # many views of one pair read the same tiles: keep recent tile prefixes (LRU, byte budget)
+        self.cache_bytes = cache_bytes
+        self._cache: OrderedDict[tuple[str, str], np.ndarray] = OrderedDict()
+        self._cached = 0
+
+    def _array(self, tile: str, name: str, k: int) -> np.ndarray:
+        """The first ``k`` values of ``tiles/<tile>/<name>`` (one zarr call on a cache miss)."""
+        key = (tile, name)
+        hit = self._cache.get(key)
+        if hit is not None and len(hit) >= k:
+            self._cache.move_to_end(key)
+            return hit[:k]
+        src = self.extra[name]["tiles"][tile] if name in self.extra else self.root["tiles"][tile]
+        values = src[name][:k]
+        if values.nbytes <= self.cache_bytes:
+            if hit is not None:
+                self._cached -= hit.nbytes
+            self._cache[key] = values
+            self._cached += values.nbytes
+            while self._cached > self.cache_bytes:
+                _, old = self._cache.popitem(last=False)
+                self._cached -= old.nbytes
+        return values
+
+    def attach(self, name: str, uri: str | Path) -> None:
+        """Read attribute ``name`` from another Zarr group laid out like this store's ``tiles/<tile>/<name>``
+        (per-point labels of a pair), aligned point for point with this scene's tiles."""
+        import zarr
+
+        if not Path(uri).is_dir():
+            raise TileError(f"attribute store {uri} is missing.")
+        self.extra[name] = zarr.open_group(str(uri), mode="r")
 
     @classmethod
     def open(cls, uri: str | Path) -> SceneTiles:
@@ -112,7 +145,7 @@ class SceneTiles:
 
     def read(self, prefixes: dict[str, int], attributes: Sequence[str]) -> dict[str, np.ndarray]:
         """Read the first ``prefixes[tile]`` points of each tile: one call per tile and attribute."""
-        bad = [a for a in attributes if a not in ATTRIBUTES or a == "xyz"]
+        bad = [a for a in attributes if (a not in ATTRIBUTES or a == "xyz") and a not in self.extra]
         if bad:
             raise TileError(f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != 'xyz']}.")
         parts: dict[str, list[np.ndarray]] = {a: [] for a in ("xyz", *attributes)}
@@ -121,14 +154,13 @@ class SceneTiles:
             k = prefixes[tile]
             if k <= 0:
                 continue
-            g = self.root["tiles"][tile]
             i, j = parse_tile_key(tile)
-            counts = g["xyz"][:k]
+            counts = self._array(tile, "xyz", k)
             parts["xyz"].append(
                 dequantise(counts, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m)
             )
             for a in attributes:
-                parts[a].append(g[a][:k])
+                parts[a].append(self._array(tile, a, k))
             stats.tiles_read += 1
             stats.points_read += k
         out = {}
@@ -137,7 +169,8 @@ class SceneTiles:
                 out[a] = np.concatenate(chunks)
             else:
                 shape = (0, 3) if a in ("xyz", "rgb") else (0,)
-                dtype = np.float64 if a == "xyz" else self.root["tiles"][next(iter(self.by_tile))][a].dtype
+                src = self.extra.get(a, self.root)
+                dtype = np.float64 if a == "xyz" else src["tiles"][next(iter(self.by_tile))][a].dtype
                 out[a] = np.zeros(shape, dtype=dtype)
         self.last_stats = stats
         return out
@@ -179,10 +212,13 @@ class SceneTiles:
         attributes: Sequence[str] = DEFAULT_ATTRIBUTES,
         level: int | str = "auto",
         near_m: float = 1e-3,
+        lod_factor: float = 1.0,
     ) -> dict[str, np.ndarray]:
         """Points a render of ``camera`` at ``scale`` needs: tiles culled by the frustum, and per tile
-        the coarsest level whose spacing at the tile's nearest distance is within one pixel
-        footprint (``level="auto"``; an int caps every tile at that level; None reads all levels).
+        the coarsest level whose spacing is within ``lod_factor`` pixel footprints at the tile's
+        nearest distance (``level="auto"``; an int caps every tile at that level; None reads all
+        levels). lod_factor 1 reads ~1-4 points per pixel of a surface; larger reads fewer, at some
+        coverage cost (bench/tiles.py measures it).
         Points outside the frustum are dropped (float64 test), so at full level the result is exactly
         the brute-force frustum selection."""
         cam = camera.scaled(scale)
@@ -195,7 +231,7 @@ class SceneTiles:
                 continue
             if level == "auto":
                 footprint = max(box_distance(centre, lo, hi), near_m) / f
-                lv = self.level_for_resolution(footprint)
+                lv = self.level_for_resolution(lod_factor * footprint)
             else:
                 lv = level
             prefixes[tile] = self._prefix(tile, lv)

@@ -1,0 +1,46 @@
+"""3D change between two scenes (DESIGN.md §4): pure functions over site-local arrays."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+UNCHANGED, CHANGED, IGNORED = 0, 1, 255
+
+
+def change_flags(a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray, radius_m: float,
+                 ignored: np.ndarray) -> np.ndarray:
+    """Change of each point of A against B, (N,) uint8: 0 unchanged, 1 changed, 255 ignored.
+
+    a_xyz (N, 3), b_xyz (M, 3): site-local metres (float32 or float64). a_cls, b_cls: uint8 site
+    classes. ignored: (256,) bool lookup of ignored classes. A point of A is ignored when its class
+    is; otherwise changed when B has no point of a non-ignored class within ``radius_m``, or when the
+    nearest such point has another class.
+    """
+    out = np.full(len(a_xyz), IGNORED, dtype=np.uint8)
+    live = ~ignored[a_cls]
+    if not live.any():
+        return out
+    b_keep = ~ignored[b_cls]
+    if not b_keep.any():
+        out[live] = CHANGED
+        return out
+    tree = cKDTree(np.asarray(b_xyz[b_keep], dtype=np.float64))
+    dist, idx = tree.query(np.asarray(a_xyz[live], dtype=np.float64), k=1, distance_upper_bound=radius_m)
+    found = np.isfinite(dist)
+    same = np.zeros(len(dist), dtype=bool)
+    same[found] = b_cls[b_keep][idx[found]] == a_cls[live][found]
+    out[live] = np.where(same, UNCHANGED, CHANGED)
+    return out
+
+
+def median_spacing(xyz: np.ndarray, max_points: int = 200_000, seed: int = 0) -> float:
+    """Median nearest-neighbour distance (metres) of a cloud (a seeded subsample of the queries)."""
+    pts = np.asarray(xyz, dtype=np.float64)
+    if len(pts) < 2:
+        return float("nan")
+    tree = cKDTree(pts)
+    rng = np.random.default_rng(seed)
+    q = pts if len(pts) <= max_points else pts[rng.choice(len(pts), max_points, replace=False)]
+    d, _ = tree.query(q, k=2)
+    return float(np.median(d[:, 1]))
