@@ -42,8 +42,16 @@ def child(mode: str, path: str, out: str) -> None:
         r = write_tiles(Path(path), site, pyproj.CRS("EPSG:32618"), Path(out), workers=2)
         n, extra = r.points, {"bytes_per_point": r.bytes_per_point, "tiles": r.tiles, "levels": r.levels}
     sec = time.perf_counter() - t
-    print(json.dumps({"points": n, "seconds": sec, "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                      **extra}))
+    print(
+        json.dumps(
+            {
+                "points": n,
+                "seconds": sec,
+                "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                **extra,
+            }
+        )
+    )
 
 
 def run(*args: str) -> dict:
@@ -71,8 +79,15 @@ def codecs(n: int = 2_000_000) -> None:
     print("|---|---|---|---|")
     for name, codec in options.items():
         with tempfile.TemporaryDirectory() as d:
-            a = zarr.create_array(f"{d}/a", shape=xyz.shape, dtype="int32", chunks=(65536, 3), shards=(1048576, 3),
-                                  compressors=codec, fill_value=0)
+            a = zarr.create_array(
+                f"{d}/a",
+                shape=xyz.shape,
+                dtype="int32",
+                chunks=(65536, 3),
+                shards=(1048576, 3),
+                compressors=codec,
+                fill_value=0,
+            )
             t = time.perf_counter()
             a[...] = xyz
             w = time.perf_counter() - t
@@ -95,12 +110,22 @@ def view_read(points: int) -> None:
     with tempfile.TemporaryDirectory() as d:
         las = Path(d) / "c.las"
         make_las(las, points, z_noise_m=0.02)  # a surface, as LiDAR samples it
-        r = write_tiles(las, make_site_spec("b", "EPSG:32618", ORIGIN), pyproj.CRS("EPSG:32618"), Path(d) / "s.zarr", workers=2)
+        r = write_tiles(
+            las,
+            make_site_spec("b", "EPSG:32618", ORIGIN),
+            pyproj.CRS("EPSG:32618"),
+            Path(d) / "s.zarr",
+            workers=2,
+        )
         tiles = SceneTiles.open(r.uri)
         cam = Camera.look_at((0, 0, 80), (0, 0, 0), 5645, 4082, 4000.0)
         density = points / 300.0**2
-        print(f"\n1/8-scale nadir view from 80 m of a {points / 1e6:.0f}M-point scene ({density:.0f} points/m2):")
-        print("| lod factor | points read | points returned | covered pixels | read per covered pixel | coverage | read M pts/s |")
+        print(
+            f"\n1/8-scale nadir view from 80 m of a {points / 1e6:.0f}M-point scene ({density:.0f} points/m2):"
+        )
+        print(
+            "| lod factor | points read | points returned | covered pixels | read per covered pixel | coverage | read M pts/s |"
+        )
         print("|---|---|---|---|---|---|---|")
         for factor in (1.0, 1.41, None):
             t = time.perf_counter()
@@ -112,8 +137,10 @@ def view_read(points: int) -> None:
             st = tiles.last_stats
             img = render_points(pts["xyz"], cam, RenderSettings(scale=0.125))
             covered = int(img.hit.sum())
-            print(f"| {factor if factor else 'all levels'} | {st.points_read:,} | {st.points_returned:,} | {covered:,} | "
-                  f"{st.points_read / max(covered, 1):.2f} | {img.coverage:.2%} | {st.points_read / sec / 1e6:.1f} |")
+            print(
+                f"| {factor if factor else 'all levels'} | {st.points_read:,} | {st.points_returned:,} | {covered:,} | "
+                f"{st.points_read / max(covered, 1):.2f} | {img.coverage:.2%} | {st.points_read / sec / 1e6:.1f} |"
+            )
 
 
 def main() -> None:
@@ -135,13 +162,19 @@ def main() -> None:
             ours = run("tile", str(path), str(Path(tmp) / f"{n}.zarr"))
             rows.append((n, plain, ours))
             path.unlink()
-    print("\n| points | laspy read M pts/s | tiling M pts/s (2 workers) | per core | tiling / read | bytes/point | peak MiB |")
+    print(
+        "\n| points | laspy read M pts/s | tiling M pts/s (2 workers) | per core | tiling / read | bytes/point | peak MiB |"
+    )
     print("|---|---|---|---|---|---|---|")
     for n, plain, ours in rows:
         pr, tr = plain["points"] / plain["seconds"], ours["points"] / ours["seconds"]
-        print(f"| {n / 1e6:.0f}M | {pr / 1e6:.2f} | {tr / 1e6:.2f} | {tr / 2e6:.2f} | {tr / pr:.2f} | "
-              f"{ours['bytes_per_point']:.1f} | {ours['peak_mib']:.0f} |")
-    print(f"peak memory {args.points / 1e6:.0f}M / {args.small / 1e6:.0f}M = {rows[1][2]['peak_mib'] / rows[0][2]['peak_mib']:.2f}x")
+        print(
+            f"| {n / 1e6:.0f}M | {pr / 1e6:.2f} | {tr / 1e6:.2f} | {tr / 2e6:.2f} | {tr / pr:.2f} | "
+            f"{ours['bytes_per_point']:.1f} | {ours['peak_mib']:.0f} |"
+        )
+    print(
+        f"peak memory {args.points / 1e6:.0f}M / {args.small / 1e6:.0f}M = {rows[1][2]['peak_mib'] / rows[0][2]['peak_mib']:.2f}x"
+    )
     view_read(args.points)
 
 

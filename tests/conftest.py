@@ -87,3 +87,15 @@ def home(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setenv("SITELINE_HOME", str(h))
     monkeypatch.delenv("SITELINE_DATABASE_URL", raising=False)
     return h
+
+
+@pytest.fixture(scope="session")
+def synth_site(tmp_path_factory) -> Path:
+    """A small synthetic site (3 epochs, ~70k points each, photos, COLMAP), generated once per run."""
+    from sitehelpers import SYNTH
+
+    from siteline.synth import write_site
+
+    out = tmp_path_factory.mktemp("synth-site")
+    write_site(out, SYNTH)
+    return out

@@ -2,21 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
-from sitehelpers import SYNTH, make_home
+from sitehelpers import make_home
 
 from siteline.catalog import open_catalog
 from siteline.config import Settings
-from siteline.synth import write_site
-
-
-@pytest.fixture(scope="session")
-def synth_site(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("synth-ingest")
-    write_site(out, SYNTH)
-    return out
 
 
 @pytest.fixture

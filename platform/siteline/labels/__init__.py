@@ -3,5 +3,14 @@
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
 from siteline.labels.store import LabelResult, attach_labels, auto_radius, write_labels
 
-__all__ = ["CHANGED", "IGNORED", "UNCHANGED", "LabelResult", "attach_labels", "auto_radius", "change_flags",
-           "median_spacing", "write_labels"]
+__all__ = [
+    "CHANGED",
+    "IGNORED",
+    "UNCHANGED",
+    "LabelResult",
+    "attach_labels",
+    "auto_radius",
+    "change_flags",
+    "median_spacing",
+    "write_labels",
+]

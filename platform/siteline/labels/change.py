@@ -8,8 +8,14 @@ from scipy.spatial import cKDTree
 UNCHANGED, CHANGED, IGNORED = 0, 1, 255
 
 
-def change_flags(a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray, radius_m: float,
-                 ignored: np.ndarray) -> np.ndarray:
+def change_flags(
+    a_xyz: np.ndarray,
+    a_cls: np.ndarray,
+    b_xyz: np.ndarray,
+    b_cls: np.ndarray,
+    radius_m: float,
+    ignored: np.ndarray,
+) -> np.ndarray:
     """Change of each point of A against B, (N,) uint8: 0 unchanged, 1 changed, 255 ignored.
 
     a_xyz (N, 3), b_xyz (M, 3): site-local metres (float32 or float64). a_cls, b_cls: uint8 site

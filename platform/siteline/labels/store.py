@@ -34,7 +34,9 @@ class LabelResult:
         return self.__dict__.copy()
 
 
-def auto_radius(a: SceneTiles, b: SceneTiles, multiplier: float = 2.5, max_points: int = 200_000) -> tuple[float, dict]:
+def auto_radius(
+    a: SceneTiles, b: SceneTiles, multiplier: float = 2.5, max_points: int = 200_000
+) -> tuple[float, dict]:
     """``multiplier`` x the median nearest-neighbour spacing of the sparser scene (DESIGN.md §4),
     measured on the full-density points of each scene's most populated tile."""
     spacing = {}
@@ -46,8 +48,9 @@ def auto_radius(a: SceneTiles, b: SceneTiles, multiplier: float = 2.5, max_point
     return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}
 
 
-def _label_side(src: SceneTiles, other: SceneTiles, radius_m: float, ignored: np.ndarray, out_root: str,
-                side: str) -> tuple[dict[str, int], str, int]:
+def _label_side(
+    src: SceneTiles, other: SceneTiles, radius_m: float, ignored: np.ndarray, out_root: str, side: str
+) -> tuple[dict[str, int], str, int]:
     import zarr
     from zarr.codecs import BloscCodec, BloscShuffle
 
@@ -62,8 +65,14 @@ def _label_side(src: SceneTiles, other: SceneTiles, radius_m: float, ignored: np
         theirs = other.points(bounds=(*lo, *hi), attributes=("class",))  # the tile plus a halo of r
         flags = change_flags(mine["xyz"], mine["class"], theirs["xyz"], theirs["class"], radius_m, ignored)
         arr = group.create_group(tile).create_array(
-            "change", shape=flags.shape, dtype="uint8", chunks=(src.spec.chunk_points,), shards=(src.spec.shard_points,),
-            compressors=BloscCodec(cname="zstd", clevel=3, shuffle=BloscShuffle.bitshuffle), fill_value=IGNORED)
+            "change",
+            shape=flags.shape,
+            dtype="uint8",
+            chunks=(src.spec.chunk_points,),
+            shards=(src.spec.shard_points,),
+            compressors=BloscCodec(cname="zstd", clevel=3, shuffle=BloscShuffle.bitshuffle),
+            fill_value=IGNORED,
+        )
         arr[...] = flags
         digest.update(tile.encode())
         digest.update(flags.tobytes())
@@ -74,7 +83,9 @@ def _label_side(src: SceneTiles, other: SceneTiles, radius_m: float, ignored: np
     return counts, digest.hexdigest(), n_total
 
 
-def write_labels(t1: SceneTiles, t2: SceneTiles, radius_m: float, ignored: np.ndarray, out: Path) -> LabelResult:
+def write_labels(
+    t1: SceneTiles, t2: SceneTiles, radius_m: float, ignored: np.ndarray, out: Path
+) -> LabelResult:
     """Compute both directions tile by tile (each tile against the other scene's points within the
     tile's bounds plus a halo of ``radius_m``) into ``out`` (written under a temporary name, renamed)."""
     t0 = time.perf_counter()

@@ -4,4 +4,12 @@ from siteline.pairs.params import PairParams
 from siteline.pairs.process import PairOutput, pair_view_ids, process_pair
 from siteline.pairs.render import PairRender, pair_mask, render_pair_view
 
-__all__ = ["PairOutput", "PairParams", "PairRender", "pair_mask", "pair_view_ids", "process_pair", "render_pair_view"]
+__all__ = [
+    "PairOutput",
+    "PairParams",
+    "PairRender",
+    "pair_mask",
+    "pair_view_ids",
+    "process_pair",
+    "render_pair_view",
+]

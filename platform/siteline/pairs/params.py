@@ -39,7 +39,12 @@ class PairParams:
             raise ReleaseError(f"views must be at least 1, got {self.views}.")
 
     def view_params_obj(self) -> ViewParams:
-        base = {"n_views": self.views, "seed": self.seed, "render_scale": self.scale, "min_coverage": self.min_coverage}
+        base = {
+            "n_views": self.views,
+            "seed": self.seed,
+            "render_scale": self.scale,
+            "min_coverage": self.min_coverage,
+        }
         return ViewParams.from_dict({**base, **self.view_params})
 
     def to_dict(self) -> dict[str, Any]:

@@ -52,8 +52,14 @@ def _output_root(settings: Settings, pair_id: int, params: PairParams) -> Path:
     return settings.store_dir / "pairs" / f"pair-{pair_id}" / params.digest()
 
 
-def process_pair(catalog: Catalog, settings: Settings, pair_id: int, params: PairParams | None = None,
-                 progress: Progress | None = None, device: str = "cpu") -> PairOutput:
+def process_pair(
+    catalog: Catalog,
+    settings: Settings,
+    pair_id: int,
+    params: PairParams | None = None,
+    progress: Progress | None = None,
+    device: str = "cpu",
+) -> PairOutput:
     """Labels, views and renders of ``pair_id`` with ``params`` (reused when already made)."""
     params = params or PairParams()
     with catalog.transaction() as s:
@@ -62,7 +68,9 @@ def process_pair(catalog: Catalog, settings: Settings, pair_id: int, params: Pai
             raise ReleaseError(f"no pair with id {pair_id}.")
         t1, t2 = s.get(Scene, pair.t1_scene_id), s.get(Scene, pair.t2_scene_id)
         if t1.site_id != t2.site_id or pair.site_id != t1.site_id:
-            raise ReleaseError(f"pair {pair_id} joins scenes of different sites ({t1.site_id}, {t2.site_id}).")
+            raise ReleaseError(
+                f"pair {pair_id} joins scenes of different sites ({t1.site_id}, {t2.site_id})."
+            )
         site = site_spec(s.get(Site, t1.site_id))
         ids = (t1.id, t2.id)
         untiled = [sc.id for sc in (t1, t2) if sc.status != "tiled"]
@@ -73,7 +81,17 @@ def process_pair(catalog: Catalog, settings: Settings, pair_id: int, params: Pai
     if summary_path.exists():
         doc = json.loads(summary_path.read_text())
         if not pair_view_ids(catalog, pair_id, params):  # outputs landed but the catalog rows did not
-            _record(catalog, pair_id, ids, params, doc["radius_m"], doc["labels"], doc["views"], root, datetime.now(UTC))
+            _record(
+                catalog,
+                pair_id,
+                ids,
+                params,
+                doc["radius_m"],
+                doc["labels"],
+                doc["views"],
+                root,
+                datetime.now(UTC),
+            )
         return PairOutput(pair_id, ids[0], ids[1], doc["radius_m"], root, doc["views"], doc["labels"])
     started = datetime.now(UTC)
     with catalog.transaction() as s:
@@ -98,38 +116,70 @@ def process_pair(catalog: Catalog, settings: Settings, pair_id: int, params: Pai
     attach_labels(tiles1, str(label_uri), "t1")
     attach_labels(tiles2, str(label_uri), "t2")
     if not cams:
-        raise ReleaseError(f"pair {pair_id}: the later scene {ids[1]} has no cameras to derive views from "
-                           "(a LiDAR-only mission); ingest photos with it.")
+        raise ReleaseError(
+            f"pair {pair_id}: the later scene {ids[1]} has no cameras to derive views from "
+            "(a LiDAR-only mission); ingest photos with it."
+        )
     ground_id = site.taxonomy.id_of("ground")
     ground = tiles2.points(resolution=0.5, attributes=("class",))
     plane = fit_ground_plane(ground["xyz"][ground["class"] == ground_id], seed=params.seed)
-    skip = np.array([site.taxonomy.id_of(c) for c in ("snow", "noise") if c in {k.name for k in site.taxonomy.classes}],
-                    dtype=np.uint8)
+    skip = np.array(
+        [site.taxonomy.id_of(c) for c in ("snow", "noise") if c in {k.name for k in site.taxonomy.classes}],
+        dtype=np.uint8,
+    )
     source = TilePointSource(tiles2, skip)
     vp = params.view_params_obj()
-    view_set = generate_views([NamedCamera(n, c) for n, c in cams], plane, site.fence, source, vp,
-                              progress=(lambda k: progress("views", k, len(cams))) if progress else None)
+    view_set = generate_views(
+        [NamedCamera(n, c) for n, c in cams],
+        plane,
+        site.fence,
+        source,
+        vp,
+        progress=(lambda k: progress("views", k, len(cams))) if progress else None,
+    )
     if not view_set.views:
-        raise ReleaseError(f"pair {pair_id}: every synthetic view was rejected ({view_set.rejected}); lower "
-                           "--min-coverage or check the cameras.")
+        raise ReleaseError(
+            f"pair {pair_id}: every synthetic view was rejected ({view_set.rejected}); lower "
+            "--min-coverage or check the cameras."
+        )
     partial = root.with_name(f".{root.name}.partial-{uuid.uuid4().hex[:8]}")
     for sub in ("A", "B", "label"):
         (partial / sub).mkdir(parents=True)
     records = []
     try:
         for v in view_set.views:
-            r = render_pair_view(tiles1, tiles2, v.camera, params.scale, params.point_size_px, params.lod_factor, device)
+            r = render_pair_view(
+                tiles1, tiles2, v.camera, params.scale, params.point_size_px, params.lod_factor, device
+            )
             name = f"{v.index:04d}.png"
             (partial / "A" / name).write_bytes(png_bytes(r.a))
             (partial / "B" / name).write_bytes(png_bytes(r.b))
             (partial / "label" / name).write_bytes(png_bytes(r.mask))
-            records.append(v.to_dict() | {"file": name, "coverage_a": r.coverage_a, "coverage_b": r.coverage_b,
-                                          "valid": r.valid, "change_ratio": r.change_ratio, "points_read": r.points_read})
+            records.append(
+                v.to_dict()
+                | {
+                    "file": name,
+                    "coverage_a": r.coverage_a,
+                    "coverage_b": r.coverage_b,
+                    "valid": r.valid,
+                    "change_ratio": r.change_ratio,
+                    "points_read": r.points_read,
+                }
+            )
             if progress:
                 progress("renders", 1, len(view_set.views))
-        summary = {"pair": pair_id, "t1": ids[0], "t2": ids[1], "radius_m": radius, "params": params.to_dict(),
-                   "labels": labels, "ground_plane": plane.to_dict(), "candidates": view_set.candidates,
-                   "rejected": view_set.rejected, "views": records}
+        summary = {
+            "pair": pair_id,
+            "t1": ids[0],
+            "t2": ids[1],
+            "radius_m": radius,
+            "params": params.to_dict(),
+            "labels": labels,
+            "ground_plane": plane.to_dict(),
+            "candidates": view_set.candidates,
+            "rejected": view_set.rejected,
+            "views": records,
+        }
         (partial / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
         root.parent.mkdir(parents=True, exist_ok=True)
         os.replace(partial, root)
@@ -140,8 +190,17 @@ def process_pair(catalog: Catalog, settings: Settings, pair_id: int, params: Pai
     return PairOutput(pair_id, ids[0], ids[1], radius, root, records, labels)
 
 
-def _record(catalog: Catalog, pair_id: int, ids: tuple[int, int], params: PairParams, radius: float, labels: dict,
-            records: list[dict], root: Path, started: datetime) -> None:
+def _record(
+    catalog: Catalog,
+    pair_id: int,
+    ids: tuple[int, int],
+    params: PairParams,
+    radius: float,
+    labels: dict,
+    records: list[dict],
+    root: Path,
+    started: datetime,
+) -> None:
     digest = params.digest()
     with catalog.transaction() as s:
         pair = s.get(Pair, pair_id)
@@ -149,25 +208,58 @@ def _record(catalog: Catalog, pair_id: int, ids: tuple[int, int], params: PairPa
         pair.status = "processed"
         pair.parameters = {**(pair.parameters or {}), digest: {"params": params.to_dict(), "labels": labels}}
         s.execute(sa.delete(View).where(View.pair_id == pair_id, View.param_digest == digest))
-        cams = {name: cid for cid, name in s.execute(
-            sa.text("SELECT id, image_name FROM camera WHERE scene_id = :sid"), {"sid": ids[1]}).all()}
+        cams = {
+            name: cid
+            for cid, name in s.execute(
+                sa.text("SELECT id, image_name FROM camera WHERE scene_id = :sid"), {"sid": ids[1]}
+            ).all()
+        }
         for rec in records:
             v = SyntheticView.from_dict(rec)
-            view = View(pair_id=pair_id, param_digest=digest, index=rec["index"], strategy=rec["strategy"],
-                        parent_camera_id=cams.get(v.parent), parameters=rec["params"], camera=rec["camera"])
+            view = View(
+                pair_id=pair_id,
+                param_digest=digest,
+                index=rec["index"],
+                strategy=rec["strategy"],
+                parent_camera_id=cams.get(v.parent),
+                parameters=rec["params"],
+                camera=rec["camera"],
+            )
             s.add(view)
             s.flush()
             for side, sid in (("A", ids[0]), ("B", ids[1])):
-                s.add(Render(view_id=view.id, scene_id=sid, scale=params.scale, point_size_px=params.point_size_px,
-                             coverage=rec["coverage_a" if side == "A" else "coverage_b"], change_ratio=rec["change_ratio"],
-                             paths={"image": str(root / side / rec["file"]), "label": str(root / "label" / rec["file"])}))
-        s.add(StageRun(stage="process_pair", subject=f"pair:{pair_id}", status="completed", started_at=started,
-                       finished_at=datetime.now(UTC), parameters=params.to_dict() | {"radius_m": radius}))
+                s.add(
+                    Render(
+                        view_id=view.id,
+                        scene_id=sid,
+                        scale=params.scale,
+                        point_size_px=params.point_size_px,
+                        coverage=rec["coverage_a" if side == "A" else "coverage_b"],
+                        change_ratio=rec["change_ratio"],
+                        paths={
+                            "image": str(root / side / rec["file"]),
+                            "label": str(root / "label" / rec["file"]),
+                        },
+                    )
+                )
+        s.add(
+            StageRun(
+                stage="process_pair",
+                subject=f"pair:{pair_id}",
+                status="completed",
+                started_at=started,
+                finished_at=datetime.now(UTC),
+                parameters=params.to_dict() | {"radius_m": radius},
+            )
+        )
 
 
 def pair_view_ids(catalog: Catalog, pair_id: int, params: PairParams) -> dict[int, int]:
     """View index -> view row id for a processed pair."""
     with catalog.transaction() as s:
-        rows = s.execute(sa.select(View.index, View.id).where(View.pair_id == pair_id,
-                                                              View.param_digest == params.digest())).all()
+        rows = s.execute(
+            sa.select(View.index, View.id).where(
+                View.pair_id == pair_id, View.param_digest == params.digest()
+            )
+        ).all()
     return dict(rows)

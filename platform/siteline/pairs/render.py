@@ -39,8 +39,15 @@ def pair_mask(hit_a: np.ndarray, change_a: np.ndarray, hit_b: np.ndarray, change
     return np.where(valid, np.where(changed, MASK_CHANGED, MASK_UNCHANGED), MASK_IGNORE).astype(np.uint8)
 
 
-def render_pair_view(t1: SceneTiles, t2: SceneTiles, camera: Camera, scale: float, point_size_px: int,
-                     lod_factor: float = 1.0, device: str = "cpu") -> PairRender:
+def render_pair_view(
+    t1: SceneTiles,
+    t2: SceneTiles,
+    camera: Camera,
+    scale: float,
+    point_size_px: int,
+    lod_factor: float = 1.0,
+    device: str = "cpu",
+) -> PairRender:
     """Render ``camera`` at ``scale`` on both scenes (their tile stores must carry the pair's
     ``change`` labels) and build the mask."""
     settings = RenderSettings(scale=scale, point_size_px=point_size_px)
@@ -49,10 +56,22 @@ def render_pair_view(t1: SceneTiles, t2: SceneTiles, camera: Camera, scale: floa
     for tiles in (t1, t2):
         pts = tiles.points_for_view(camera, scale, attributes=("rgb", "change"), lod_factor=lod_factor)
         read += tiles.last_stats.points_read
-        out.append(render_points(pts["xyz"], camera, settings, {"rgb": pts["rgb"], "change": pts["change"]}, device=device))
+        out.append(
+            render_points(
+                pts["xyz"], camera, settings, {"rgb": pts["rgb"], "change": pts["change"]}, device=device
+            )
+        )
     ra, rb = out
     mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"])
     valid = mask != MASK_IGNORE
     n_valid = int(valid.sum())
-    return PairRender(ra.rgb, rb.rgb, mask, ra.coverage, rb.coverage, n_valid / mask.size,
-                      float((mask == MASK_CHANGED).sum() / n_valid) if n_valid else 0.0, read)
+    return PairRender(
+        ra.rgb,
+        rb.rgb,
+        mask,
+        ra.coverage,
+        rb.coverage,
+        n_valid / mask.size,
+        float((mask == MASK_CHANGED).sum() / n_valid) if n_valid else 0.0,
+        read,
+    )

@@ -15,7 +15,9 @@ class TilePointSource:
     ``probe_m`` spacing (depth and coverage probes need no finer), and clearance and overhead checks
     on a coarse copy (``coarse_m``) of its solid geometry (airborne snow and noise left out)."""
 
-    def __init__(self, tiles: SceneTiles, skip_classes: np.ndarray, coarse_m: float = 0.25, probe_m: float = 0.05) -> None:
+    def __init__(
+        self, tiles: SceneTiles, skip_classes: np.ndarray, coarse_m: float = 0.25, probe_m: float = 0.05
+    ) -> None:
         self.tiles = tiles
         probe = tiles.points(resolution=probe_m, attributes=("class",))
         self._probe = probe["xyz"][~np.isin(probe["class"], skip_classes)]

@@ -5,6 +5,7 @@ them, with range noise, intensity, GPS time and return numbers; streamed in chun
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -52,6 +53,8 @@ class EpochChunk:
     object_id: np.ndarray
     changed_since_previous: np.ndarray
     changed_until_next: np.ndarray
+    margin_previous_m: np.ndarray
+    margin_next_m: np.ndarray
 
 
 INTENSITY = {
@@ -157,12 +160,42 @@ def _keys(prims: list[Primitive]) -> set[tuple[str, str]]:
     return {(p.key, p.signature) for p in prims}
 
 
+MARGIN_DENSITY_PTS_M2 = 60.0
+
+
+def _margin(
+    xyz: np.ndarray, prim: Primitive, changed: bool, others: dict[str, Primitive] | None, cache: dict
+) -> np.ndarray:
+    """Distance (m) from each point of a changed surface to that surface's version in the other epoch
+    (0 for unchanged surfaces, inf when it has no other version): how far the change really moved it."""
+    if not changed:
+        return np.zeros(len(xyz), np.float32)
+    other = (others or {}).get(prim.key)
+    if other is None:
+        return np.full(len(xyz), np.inf, np.float32)
+    tree = cache.get(prim.key)
+    if tree is None:
+        from scipy.spatial import cKDTree
+
+        rng = np.random.default_rng(zlib.crc32(prim.key.encode()))
+        n = max(10, int(MARGIN_DENSITY_PTS_M2 * other.area_m2()))
+        tree = cKDTree(SAMPLE[other.kind](n, rng, *other.params))
+        cache[prim.key] = tree
+    return tree.query(xyz, k=1)[0].astype(np.float32)
+
+
 def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochChunk]:
     """Stream the LiDAR points of epoch ``e`` in chunks of at most ``spec.chunk_points``."""
     ep = site.epochs[e]
     prims = site.primitives(e)
-    prev = _keys(site.primitives(e - 1)) if e > 0 else None
-    nxt = _keys(site.primitives(e + 1)) if e + 1 < len(site.epochs) else None
+    prev_prims = site.primitives(e - 1) if e > 0 else None
+    next_prims = site.primitives(e + 1) if e + 1 < len(site.epochs) else None
+    prev = _keys(prev_prims) if prev_prims is not None else None
+    nxt = _keys(next_prims) if next_prims is not None else None
+    prev_by_key = {p.key: p for p in prev_prims} if prev_prims else None
+    next_by_key = {p.key: p for p in next_prims} if next_prims else None
+    cache_prev: dict = {}
+    cache_next: dict = {}
     occ = OcclusionBuffers(prims, spec, seed=site.seed * 1000 + e * 7 + 1)
     t0 = gps_week_seconds(ep.time.timestamp())
     base_seed = site.seed * 100_003 + e * 1009
@@ -178,9 +211,12 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
             xyz = xyz[occ.visible(xyz)]
             if not len(xyz):
                 continue
-            yield _finish(
+            chunk = _finish(
                 xyz, prim, rng, spec, t0, ep, occ, (jib_c, jib_d, jib_len), changed_prev, changed_next
             )
+            chunk.margin_previous_m = _margin(chunk.xyz, prim, changed_prev, prev_by_key, cache_prev)
+            chunk.margin_next_m = _margin(chunk.xyz, prim, changed_next, next_by_key, cache_next)
+            yield chunk
     if ep.snow:
         rng = np.random.default_rng([base_seed, 99_991])
         x0, x1, y0, y1 = m.TERRAIN_M
@@ -225,4 +261,6 @@ def _finish(xyz, prim, rng, spec, t0, ep, occ, jib, changed_prev, changed_next) 
         object_id=np.full(n, prim.object_id, np.int32),
         changed_since_previous=np.full(n, changed_prev),
         changed_until_next=np.full(n, changed_next),
+        margin_previous_m=np.zeros(n, np.float32),
+        margin_next_m=np.zeros(n, np.float32),
     )

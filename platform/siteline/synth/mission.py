@@ -100,6 +100,8 @@ def _write_las(
         NpyAppender(truth_dir / "changed_since_previous.npy", bool) as since,
         NpyAppender(truth_dir / "changed_until_next.npy", bool) as until,
         NpyAppender(truth_dir / "las_class.npy", np.uint8) as cls,
+        NpyAppender(truth_dir / "margin_previous_m.npy", np.float32) as mprev,
+        NpyAppender(truth_dir / "margin_next_m.npy", np.float32) as mnext,
     ):
         for chunk in sample_epoch(site, e, spec):
             rec = laspy.ScaleAwarePointRecord.zeros(len(chunk.xyz), header=header)
@@ -117,6 +119,8 @@ def _write_las(
             since.append(chunk.changed_since_previous)
             until.append(chunk.changed_until_next)
             cls.append(chunk.las_class)
+            mprev.append(chunk.margin_previous_m)
+            mnext.append(chunk.margin_next_m)
             n += len(chunk.xyz)
             keep = rng.random(len(chunk.xyz)) < keep_p
             keep &= chunk.las_class != m.SNOW  # airborne flakes are invisible to the camera
@@ -220,6 +224,8 @@ def write_epoch(
                     "changed_since_previous": "changed_since_previous.npy",
                     "changed_until_next": "changed_until_next.npy",
                     "las_class": "las_class.npy",
+                    "margin_previous_m": "margin_previous_m.npy",
+                    "margin_next_m": "margin_next_m.npy",
                 },
             },
             indent=1,

@@ -61,7 +61,9 @@ class SceneTiles:
     """A scene's tile store opened for reading. Coordinates come back site-local float32 metres
     (computed in float64 from the int32 counts and the tile origins, then cast)."""
 
-    def __init__(self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec, cache_bytes: int = 256 * 2**20) -> None:
+    def __init__(
+        self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec, cache_bytes: int = 256 * 2**20
+    ) -> None:
         import zarr
 
         self.uri = str(uri)

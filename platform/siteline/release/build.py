@@ -1,0 +1,342 @@
+"""Building draft releases and publishing them (DESIGN.md §8).
+
+A draft lives in ``releases/<name>/.drafts/<version>/`` and may be rebuilt; publishing verifies its
+checksums and renames it to ``releases/<name>/<version>/`` (atomic on one file system), makes it
+read-only and marks the catalog row published. A published version is never rewritten.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import sqlalchemy as sa
+
+from siteline import __version__
+from siteline.catalog import Catalog
+from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
+from siteline.catalog.scenes import list_pairs, list_scenes
+from siteline.catalog.sites import get_site
+from siteline.config import Settings
+from siteline.errors import ImmutableError, NotFoundError, ReleaseError
+from siteline.pairs import PairParams, pair_view_ids, process_pair
+from siteline.release import datasheet
+from siteline.release.manifest import (
+    METRIC_DEFINITION,
+    file_entries,
+    read_manifest,
+    verify_files,
+    write_manifest,
+)
+from siteline.release.splits import split_pairs
+
+Progress = Callable[[str, int, int | None], None]
+
+
+@dataclass
+class ReleaseInfo:
+    name: str
+    version: str
+    status: str
+    root: str
+    items: int
+    manifest_sha256: str | None
+    stats: dict[str, Any]
+
+
+def releases_dir(settings: Settings) -> Path:
+    return settings.home / "releases"
+
+
+def draft_path(settings: Settings, name: str, version: str) -> Path:
+    return releases_dir(settings) / name / ".drafts" / version
+
+
+def published_path(settings: Settings, name: str, version: str) -> Path:
+    return releases_dir(settings) / name / version
+
+
+def _semver(v: str) -> tuple[int, int, int]:
+    a, b, c = (int(x) for x in v.split("."))
+    return a, b, c
+
+
+def next_version(session, name: str, lineage_key: dict) -> str:  # noqa: ANN001
+    """1.0.0 first; a major bump when pairs or label/split parameters change, else a minor one."""
+    rows = session.execute(sa.select(Release).where(Release.name == name)).scalars().all()
+    if not rows:
+        return "1.0.0"
+    latest = max(rows, key=lambda r: _semver(r.version))
+    major, minor, _ = _semver(latest.version)
+    if (latest.parameters or {}).get("lineage_key") != lineage_key:
+        return f"{major + 1}.0.0"
+    return f"{major}.{minor + 1}.0"
+
+
+def _lineage(session, site: Site, pair_rows: list[Pair], outputs: dict[int, Any]) -> dict[str, Any]:  # noqa: ANN001
+    scene_ids = sorted({p.t1_scene_id for p in pair_rows} | {p.t2_scene_id for p in pair_rows})
+    scenes = []
+    for sid in scene_ids:
+        sc = session.get(Scene, sid)
+        mission = session.get(Mission, sc.mission_id)
+        scenes.append(
+            {
+                "id": sc.id,
+                "capture_time": sc.capture_time.isoformat(),
+                "mission_manifest_sha256": mission.manifest_sha256,
+                "label_set_version": 1,
+                "registration": sc.registration,
+                "tile_checksum": (sc.statistics or {}).get("tiles", {}).get("checksum"),
+            }
+        )
+    pairs = [
+        {
+            "id": p.id,
+            "t1": p.t1_scene_id,
+            "t2": p.t2_scene_id,
+            "radius_m": outputs[p.id].radius_m,
+            "labels": outputs[p.id].labels,
+        }
+        for p in pair_rows
+    ]
+    return {
+        "sites": [{"name": site.name, "crs": site.crs, "origin": list(site.origin), "fence_m": site.fence}],
+        "scenes": scenes,
+        "pairs": pairs,
+    }
+
+
+def build_release(
+    catalog: Catalog,
+    settings: Settings,
+    site_name: str,
+    name: str,
+    params: PairParams | None = None,
+    pair_ids: list[int] | None = None,
+    version: str | None = None,
+    preset: str | None = None,
+    progress: Progress | None = None,
+    device: str = "cpu",
+) -> ReleaseInfo:
+    """Process the site's pairs (or ``pair_ids``) and assemble a draft release ``name``."""
+    params = params or PairParams()
+    with catalog.transaction() as s:
+        site = get_site(s, site_name)
+        scenes = list_scenes(s, site)
+        if len(scenes) < 2:
+            raise ReleaseError(
+                f"site {site_name} has {len(scenes)} scene(s); a release needs at least two "
+                "(ingest another mission). Nothing was written."
+            )
+        all_pairs = {p.id: p for p in list_pairs(s, site)}
+        if pair_ids:
+            for pid in pair_ids:
+                row = s.get(Pair, pid)
+                if row is None:
+                    raise NotFoundError(f"no pair with id {pid}. Nothing was written.")
+                if row.site_id != site.id:
+                    other = s.get(Site, row.site_id)
+                    raise ReleaseError(
+                        f"pair {pid} belongs to site {other.name}, not {site_name}: a release draws on "
+                        "one site's pairs. Nothing was written."
+                    )
+            chosen = sorted(set(pair_ids))
+        else:
+            chosen = sorted(all_pairs)
+        if not chosen:
+            raise ReleaseError(f"site {site_name} has no pairs. Nothing was written.")
+        lineage_key = {"pairs": chosen, "params": params.to_dict()}
+        if version is None:
+            version = next_version(s, name, lineage_key)
+        existing = s.execute(
+            sa.select(Release).where(Release.name == name, Release.version == version)
+        ).scalar_one_or_none()
+        if existing is not None and existing.status == "published":
+            raise ImmutableError(
+                f"release {name} {version} is already published and is never rewritten: build another "
+                "version. Nothing was written."
+            )
+    try:
+        _semver(version)
+    except ValueError as exc:
+        raise ReleaseError(f"version {version!r} is not semantic (MAJOR.MINOR.PATCH).") from exc
+    outputs = {
+        pid: process_pair(catalog, settings, pid, params, progress=progress, device=device) for pid in chosen
+    }
+    splits = split_pairs(chosen, params.seed)
+    split_of = {pid: sp for sp, ids in splits.items() for pid in ids}
+    final = draft_path(settings, name, version)
+    tmp = final.with_name(f".{version}.partial-{uuid.uuid4().hex[:8]}")
+    items = []
+    try:
+        for pid in chosen:
+            out = outputs[pid]
+            for v in out.views:
+                item_id = f"{site_name}_p{pid:04d}_v{v['index']:04d}"
+                sp = split_of[pid]
+                for sub in ("A", "B", "label"):
+                    dest = tmp / sp / sub / f"{item_id}.png"
+                    dest.parent.mkdir(parents=True, exist_ok=True)
+                    shutil.copyfile(out.root / sub / v["file"], dest)
+                items.append(
+                    {
+                        "id": item_id,
+                        "split": sp,
+                        "pair": pid,
+                        "view": v["index"],
+                        "strategy": v["strategy"],
+                        "coverage": min(v["coverage_a"], v["coverage_b"]),
+                        "change_ratio": v["change_ratio"],
+                        "valid": v["valid"],
+                    }
+                )
+        stats = datasheet.statistics(tmp, items)
+        (tmp / "stats.json").write_text(__import__("json").dumps(stats, indent=1) + "\n")
+        datasheet.montage(tmp, [it for it in items if it["valid"] > 0.2] or items).save(tmp / "montage.png")
+        with catalog.transaction() as s:
+            site = get_site(s, site_name)
+            pair_rows = [s.get(Pair, pid) for pid in chosen]
+            lineage = _lineage(s, site, pair_rows, outputs) | {
+                "parameters": params.to_dict(),
+                "preset": preset,
+                "seeds": {"views": params.seed, "splits": params.seed},
+            }
+        doc = {
+            "format": "siteline-release/1",
+            "name": name,
+            "version": version,
+            "created": datetime.now(UTC).isoformat(),
+            "code_version": __version__,
+            "files": [],
+            "lineage": lineage,
+            "splits": splits,
+            "items": items,
+            "metric": METRIC_DEFINITION,
+            "stats": stats,
+        }
+        (tmp / "README.md").write_text(datasheet.datasheet(doc, stats))
+        doc["files"] = file_entries(tmp)
+        manifest_sha = write_manifest(tmp, doc)
+        if final.exists():
+            shutil.rmtree(final)  # a draft may be rebuilt; published versions live elsewhere
+        final.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _record_draft(catalog, name, version, params, preset, lineage_key, final, manifest_sha, items, chosen)
+    return ReleaseInfo(name, version, "draft", str(final), len(items), manifest_sha, stats)
+
+
+def _record_draft(
+    catalog: Catalog,
+    name: str,
+    version: str,
+    params: PairParams,
+    preset: str | None,
+    lineage_key: dict,
+    root: Path,
+    manifest_sha: str,
+    items: list[dict],
+    chosen: list[int],
+) -> None:
+    with catalog.transaction() as s:
+        rel = s.execute(
+            sa.select(Release).where(Release.name == name, Release.version == version)
+        ).scalar_one_or_none()
+        if rel is None:
+            rel = Release(name=name, version=version)
+            s.add(rel)
+        rel.status = "draft"
+        rel.parameters = {
+            "pair_params": params.to_dict(),
+            "preset": preset,
+            "lineage_key": lineage_key,
+            "pairs": chosen,
+        }
+        rel.root_uri = str(root)
+        rel.manifest_sha256 = manifest_sha
+        s.flush()
+        s.execute(sa.delete(ReleaseItem).where(ReleaseItem.release_id == rel.id))
+        view_ids: dict[int, dict[int, int]] = {}
+        for it in items:
+            if it["pair"] not in view_ids:
+                view_ids[it["pair"]] = pair_view_ids(catalog, it["pair"], params)
+            s.add(
+                ReleaseItem(
+                    release_id=rel.id,
+                    item_id=it["id"],
+                    pair_id=it["pair"],
+                    view_id=view_ids[it["pair"]].get(it["view"]),
+                    split=it["split"],
+                    coverage=it["coverage"],
+                    change_ratio=it["change_ratio"],
+                    files={sub: f"{it['split']}/{sub}/{it['id']}.png" for sub in ("A", "B", "label")},
+                )
+            )
+
+
+def _read_only(root: Path) -> None:
+    for p in root.rglob("*"):
+        mode = p.stat().st_mode
+        p.chmod(mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+
+
+def publish_release(catalog: Catalog, settings: Settings, name: str, version: str) -> ReleaseInfo:
+    """Verify the draft's checksums, move it into place, make it read-only, mark it published."""
+    with catalog.transaction() as s:
+        rel = s.execute(
+            sa.select(Release).where(Release.name == name, Release.version == version)
+        ).scalar_one_or_none()
+        if rel is None:
+            raise NotFoundError(f"no release {name} {version}; build it first (`siteline release build`).")
+        if rel.status == "published":
+            raise ImmutableError(
+                f"release {name} {version} is already published: a published version is never rewritten."
+            )
+    draft = draft_path(settings, name, version)
+    final = published_path(settings, name, version)
+    problems = verify_files(draft)
+    if problems:
+        raise ReleaseError(
+            f"draft {name} {version} does not match its manifest ({len(problems)} problems, e.g. "
+            f"{problems[0]}): rebuild it."
+        )
+    if final.exists():
+        raise ImmutableError(f"{final} already exists: a published version is never rewritten.")
+    os.replace(draft, final)
+    try:
+        with catalog.transaction() as s:
+            rel = s.execute(
+                sa.select(Release).where(Release.name == name, Release.version == version)
+            ).scalar_one()
+            rel.status = "published"
+            rel.published_at = datetime.now(UTC)
+            rel.root_uri = str(final)
+            sha = rel.manifest_sha256
+            items = s.execute(
+                sa.select(sa.func.count(ReleaseItem.id)).where(ReleaseItem.release_id == rel.id)
+            ).scalar_one()
+    except BaseException:
+        os.replace(final, draft)
+        raise
+    _read_only(final)
+    stats = read_manifest(final).get("stats", {})
+    return ReleaseInfo(name, version, "published", str(final), items, sha, stats)
+
+
+def release_root(catalog: Catalog, name: str, version: str) -> tuple[Path, str]:
+    with catalog.transaction() as s:
+        rel = s.execute(
+            sa.select(Release).where(Release.name == name, Release.version == version)
+        ).scalar_one_or_none()
+        if rel is None:
+            raise NotFoundError(f"no release {name} {version}; see `siteline release list`.")
+        return Path(rel.root_uri), rel.status

@@ -1,0 +1,79 @@
+"""Release manifests: file checksums, verification, and the datasheet's figures."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+from siteline.ingest.inventory import sha256_file
+from siteline.schemas import validate
+
+MANIFEST = "manifest.json"
+METRIC_DEFINITION = {
+    "name": "siteline-cd-metrics/1",
+    "confusion": "one 2x2 confusion matrix accumulated over every pixel of the split; label 255 excluded",
+    "reported": [
+        "iou_unchanged",
+        "iou_changed",
+        "miou (mean of the two IoUs)",
+        "precision/recall/f1 of changed",
+        "overall accuracy",
+        "cohen kappa",
+    ],
+    "note": "per-image averaging gives very different numbers; siteline never reports it",
+}
+
+
+def file_entries(root: Path) -> list[dict[str, Any]]:
+    """Every file under ``root`` except the manifest: POSIX path, size, sha256, sorted by path."""
+    out = []
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.name != MANIFEST:
+            out.append(
+                {"path": p.relative_to(root).as_posix(), "size": p.stat().st_size, "sha256": sha256_file(p)}
+            )
+    return out
+
+
+def write_manifest(root: Path, doc: dict[str, Any]) -> str:
+    """Validate and write ``manifest.json``; return its sha256."""
+    validate(doc, "release.schema.json", f"manifest of {root}")
+    data = (json.dumps(doc, indent=1, sort_keys=False) + "\n").encode()
+    (root / MANIFEST).write_bytes(data)
+    return hashlib.sha256(data).hexdigest()
+
+
+def read_manifest(root: Path) -> dict[str, Any]:
+    from siteline.errors import ReleaseError
+
+    path = Path(root) / MANIFEST
+    if not path.is_file():
+        raise ReleaseError(f"{root} holds no {MANIFEST}: not a siteline release (or not built yet).")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ReleaseError(f"{path} is not valid JSON: {exc}") from exc
+
+
+def verify_files(root: Path) -> list[str]:
+    """Problems found by recomputing every checksum of the manifest: one line per file."""
+    doc = read_manifest(root)
+    problems = []
+    listed = set()
+    for f in doc["files"]:
+        listed.add(f["path"])
+        p = Path(root) / f["path"]
+        if not p.is_file():
+            problems.append(f"{f['path']}: missing")
+            continue
+        if p.stat().st_size != f["size"]:
+            problems.append(f"{f['path']}: size {p.stat().st_size} != {f['size']}")
+            continue
+        if sha256_file(p) != f["sha256"]:
+            problems.append(f"{f['path']}: sha256 differs from the manifest")
+    for p in sorted(Path(root).rglob("*")):
+        if p.is_file() and p.name != MANIFEST and p.relative_to(root).as_posix() not in listed:
+            problems.append(f"{p.relative_to(root).as_posix()}: not in the manifest")
+    return problems

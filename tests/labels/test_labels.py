@@ -1,0 +1,170 @@
+"""3D change labels: brute-force equality, agreement with the synthetic truth, origin invariance."""
+
+from __future__ import annotations
+
+import json
+
+import laspy
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+from sitehelpers import SYNTH, epoch_dirs
+
+from siteline.labels import CHANGED, IGNORED, UNCHANGED, change_flags, write_labels
+from siteline.synth import LAS_RELPATH
+from siteline.taxonomy import default_taxonomy
+from siteline.tiles import SceneTiles, write_tiles
+
+TAX = default_taxonomy()
+IGN = TAX.ignored_lut()
+
+
+def _brute(a_xyz, a_cls, b_xyz, b_cls, r):
+    """Reference: for each point, scan every point of B (no tree, no tiles)."""
+    out = np.full(len(a_xyz), IGNORED, np.uint8)
+    keep = ~IGN[b_cls]
+    for i in range(len(a_xyz)):
+        if IGN[a_cls[i]]:
+            continue
+        d = np.linalg.norm(b_xyz[keep] - a_xyz[i], axis=1)
+        if d.size == 0 or d.min() > r:
+            out[i] = CHANGED
+        else:
+            out[i] = UNCHANGED if b_cls[keep][d.argmin()] == a_cls[i] else CHANGED
+    return out
+
+
+def test_change_flags_equal_brute_force_on_small_scenes() -> None:
+    rng = np.random.default_rng(0)
+    a = rng.uniform(0, 5, (600, 3))
+    b = np.concatenate([a[:400] + rng.normal(0, 0.01, (400, 3)), rng.uniform(0, 5, (100, 3))])
+    ac = rng.choice(np.array([1, 2, 3, 10], np.uint8), 600)
+    bc = np.concatenate([ac[:400], rng.choice(np.array([1, 2, 255], np.uint8), 100)])
+    bc[:50] = 4  # the same place, another class
+    for r in (0.05, 0.3):
+        assert np.array_equal(change_flags(a, ac, b, bc, r, IGN), _brute(a, ac, b, bc, r))
+
+
+def test_edge_cases() -> None:
+    a = np.zeros((3, 3))
+    cls = np.array([1, 10, 2], np.uint8)  # ground, snow (ignored), building
+    assert change_flags(a, cls, np.zeros((0, 3)), np.zeros(0, np.uint8), 0.5, IGN).tolist() == [
+        CHANGED,
+        IGNORED,
+        CHANGED,
+    ]
+    only_ignored = np.array([255, 9], np.uint8)
+    assert change_flags(a, cls, np.zeros((2, 3)), only_ignored, 0.5, IGN).tolist() == [
+        CHANGED,
+        IGNORED,
+        CHANGED,
+    ]
+
+
+def _site_tiles(tmp_path, synth_site, index, origin=SYNTH.origin, name="s"):
+    import pyproj
+
+    from siteline.fence import load_fence_geojson
+    from siteline.site import make_site_spec
+
+    ring = load_fence_geojson(synth_site / "fence.geojson", SYNTH.origin)
+    site = make_site_spec("s", SYNTH.crs, origin, [*ring, ring[0]])
+    las = epoch_dirs(synth_site)[index] / LAS_RELPATH
+    r = write_tiles(las, site, pyproj.CRS(SYNTH.crs), tmp_path / f"{name}{index}.zarr", workers=1)
+    return SceneTiles.open(r.uri)
+
+
+def test_tiled_labels_equal_whole_cloud_labels(tmp_path, synth_site) -> None:
+    t1, t2 = _site_tiles(tmp_path, synth_site, 0), _site_tiles(tmp_path, synth_site, 1)
+    r = 0.5
+    res = write_labels(t1, t2, r, IGN, tmp_path / "labels.zarr")
+    for tiles, other, side in ((t1, t2, "t1"), (t2, t1, "t2")):
+        tiles.attach("change", tmp_path / "labels.zarr" / side)
+        mine = tiles.points(attributes=("class", "change"))
+        theirs = other.points(attributes=("class",))
+        whole = change_flags(mine["xyz"], mine["class"], theirs["xyz"], theirs["class"], r, IGN)
+        assert np.array_equal(mine["change"], whole)
+    assert res.counts["t1"]["changed"] > 0 and res.counts["t2"]["unchanged"] > 0
+
+
+def _truth(site, index, key):
+    name = epoch_dirs(site)[index].name
+    return np.load(site / "truth" / name / f"{key}.npy")
+
+
+def _local(site, index):
+    """Site-local points and site classes as ingest makes them (taxonomy, outside the fence -> ignore)."""
+    from siteline.fence import inside_fence, load_fence_geojson
+
+    las = laspy.read(epoch_dirs(site)[index] / LAS_RELPATH)
+    xyz = np.c_[las.x, las.y, las.z] - np.asarray(SYNTH.origin)
+    lut, _ = TAX.code_lut("las")
+    cls = lut[np.asarray(las.classification)]
+    fence = load_fence_geojson(site / "fence.geojson", SYNTH.origin)
+    return xyz, np.where(inside_fence(xyz[:, :2], fence), cls, TAX.ignore_id).astype(np.uint8)
+
+
+def _near_fence(xy, site, distance_m=1.0):
+    import shapely
+
+    from siteline.fence import load_fence_geojson
+
+    ring = shapely.LinearRing(load_fence_geojson(site / "fence.geojson", SYNTH.origin))
+    return shapely.distance(ring, shapely.points(xy)) < distance_m
+
+
+@pytest.mark.parametrize("pair", [(0, 1), (1, 2)])
+def test_labels_agree_with_synthetic_truth(synth_site, pair) -> None:
+    i, j = pair
+    xa, ca = _local(synth_site, i)
+    xb, cb = _local(synth_site, j)
+    spacing = max(cKDTree(x).query(x[:20000], k=2)[0][:, 1].mean() for x in (xa, xb))
+    r = 2.5 * spacing
+    ta, tb = _truth(synth_site, i, "changed_until_next"), _truth(synth_site, j, "changed_since_previous")
+    ma, mb = _truth(synth_site, i, "margin_next_m"), _truth(synth_site, j, "margin_previous_m")
+    for x, c, t_mine, m_mine, xo, co, t_other in ((xa, ca, ta, ma, xb, cb, tb), (xb, cb, tb, mb, xa, ca, ta)):
+        flags = change_flags(x, c, xo, co, r, IGN)
+        live = flags != IGNORED
+        # object boundaries: within 1 m (horizontally) of a truly changed point of either scene
+        changed_xy = np.concatenate([x[t_mine][:, :2], xo[t_other][:, :2]])
+        near = cKDTree(changed_xy).query(x[:, :2], distance_upper_bound=1.0)[0] < np.inf
+        near |= _near_fence(x[:, :2], synth_site)  # the fence line is an object boundary too
+        unchanged = live & ~t_mine & ~near
+        assert (flags[unchanged] == UNCHANGED).mean() >= 0.99
+        # changes that moved a surface by more than the radius (smaller ones are below the method's
+        # resolution: the truth's margin says by how much each changed point moved)
+        detectable = live & t_mine & (m_mine > r)
+        assert detectable.sum() > 100
+        assert (flags[detectable] == CHANGED).mean() >= 0.98
+
+
+def test_labels_identical_at_origin_and_georeferenced(tmp_path) -> None:
+    from siteline.synth import SynthConfig, write_site
+
+    outs = []
+    for k, origin in enumerate([(0.0, 0.0, 0.0), (445_000.0, 5_030_000.0, 80.0)]):
+        d = tmp_path / f"s{k}"
+        write_site(
+            d, SynthConfig(epochs=2, density_pts_m2=1.5, seed=9, origin=origin, photos=False, colmap=False)
+        )
+        xa = laspy.read(epoch_dirs(d)[0] / LAS_RELPATH)
+        xb = laspy.read(epoch_dirs(d)[1] / LAS_RELPATH)
+        la = np.c_[xa.x, xa.y, xa.z] - np.asarray(origin)
+        lb = np.c_[xb.x, xb.y, xb.z] - np.asarray(origin)
+        lut, _ = TAX.code_lut("las")
+        outs.append(
+            change_flags(
+                la.astype(np.float32),
+                lut[np.asarray(xa.classification)],
+                lb.astype(np.float32),
+                lut[np.asarray(xb.classification)],
+                0.8,
+                IGN,
+            )
+        )
+    assert np.array_equal(outs[0], outs[1])
+
+
+def test_truth_sidecar_is_json_describable(synth_site) -> None:
+    doc = json.loads((synth_site / "truth" / "site.json").read_text())
+    assert len(doc["epochs"]) == SYNTH.epochs
