@@ -1,43 +1,120 @@
-"""``siteline demo``: the whole pipeline on the embedded default (SQLite, local files, a generated site)."""
+"""``siteline demo``: the whole pipeline on the embedded default (SQLite, local files, a generated site):
+synthetic missions -> ingest and tiles -> pairs -> release build and publish -> a short evaluation."""
 
 from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
 
 import typer
 
 from siteline.catalog import migrate, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site, get_site, scene_count
-from siteline.cli.common import console, print_record, settings
+from siteline.cli.common import console, print_record, print_table, settings
 from siteline.cli.site import site_record
 from siteline.errors import SiteNotFoundError
+from siteline.fence import load_fence_geojson
+from siteline.ingest.mission import ingest_mission
+from siteline.pairs import PairParams
+from siteline.release import build_release, publish_release
+from siteline.release.query import get_release
 from siteline.site import make_site_spec
+from siteline.synth import SynthConfig, write_site
+from siteline.tiles import tile_scene
 
 DEMO_SITE = "demo"
-DEMO_ORIGIN = (445_000.0, 5_030_000.0, 80.0)
-# site-local metres: a 120 m x 90 m construction site
-DEMO_FENCE_M = [(-60.0, -45.0), (60.0, -45.0), (60.0, 45.0), (-60.0, 45.0), (-60.0, -45.0)]
+DEMO_RELEASE = "demo-cd"
+# the synthetic photos are 660 x 495 (1/8 of the L2 sensor): renders at half of that, 3 px points
+DEMO_PARAMS = PairParams(scale=0.5, point_size_px=3, views=24, seed=0, min_coverage=0.5)
 
 
-def demo(site_name: str = typer.Option(DEMO_SITE, "--site", help="Name of the demo site.")) -> None:
-    """Initialise SITELINE_HOME, migrate the catalog, create the demo site and show it."""
+def demo(
+    site_name: str = typer.Option(DEMO_SITE, "--site", help="Name of the demo site."),
+    epochs: int = typer.Option(4, "--epochs", help="Synthetic epochs."),
+    train_iters: int = typer.Option(20, "--train-iters", help="Baseline training iterations."),
+) -> None:
+    """Run the whole pipeline on a generated site and print where the release is and its statistics."""
+    t_start = time.perf_counter()
     cfg = settings()
     cfg.home.mkdir(parents=True, exist_ok=True)
-    cfg.store_dir.mkdir(parents=True, exist_ok=True)
-    console.rule("1. catalog")
     engine = make_engine(cfg.database_url)
     migrate.upgrade(engine)
     engine.dispose()
+    console.rule("1. catalog")
     console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}")
+    console.rule("2. synthetic site")
+    synth_dir = cfg.home / "synthetic-site"
+    synth = SynthConfig(epochs=epochs)
+    if not (synth_dir / "truth" / "site.json").exists():
+        write_site(synth_dir, synth, progress=lambda name: console.print(f"  generated epoch {name}"))
+    missions = [
+        synth_dir / e["mission_dir"]
+        for e in json.loads((synth_dir / "truth" / "site.json").read_text())["epochs"]
+    ]
     cat = open_catalog(cfg)
     try:
-        console.rule("2. site")
         with cat.transaction() as s:
             try:
                 site = get_site(s, site_name)
-                console.print(f"site {site_name} already exists: reusing it")
+                console.print(f"site {site_name} exists: reusing it")
             except SiteNotFoundError:
-                site = add_site(s, make_site_spec(site_name, "EPSG:32618", DEMO_ORIGIN, DEMO_FENCE_M))
+                ring = load_fence_geojson(synth_dir / "fence.geojson", synth.origin)
+                site = add_site(s, make_site_spec(site_name, synth.crs, synth.origin, [*ring, ring[0]]))
             record = site_record(site, scene_count(s, site))
-        print_record(f"site {site_name}", record)
+        print_record(
+            f"site {site_name}",
+            {k: record[k] for k in ("name", "crs", "origin", "fence_area_m2", "taxonomy")},
+        )
+        console.rule("3. ingest and tile")
+        for m in missions:
+            r = ingest_mission(cat, cfg, m, site_name)
+            if r.scene_id is not None:
+                tile_scene(cat, cfg, r.scene_id)
+            console.print(f"  {r.message}")
+        console.rule("4. release")
+        with cat.transaction() as s:
+            existing = [
+                r
+                for r in __import__("siteline.release.query", fromlist=["list_releases"]).list_releases(
+                    s, DEMO_RELEASE
+                )
+                if r.status == "published"
+            ]
+        if existing:
+            info_root, version = Path(existing[-1].root_uri), existing[-1].version
+            console.print(f"release {DEMO_RELEASE} {version} already published: reusing it")
+        else:
+            info = build_release(
+                cat, cfg, site_name, DEMO_RELEASE, DEMO_PARAMS, progress=lambda task, n, total: None
+            )
+            pub = publish_release(cat, cfg, DEMO_RELEASE, info.version)
+            info_root, version = Path(pub.root), pub.version
+        stats = json.loads((info_root / "stats.json").read_text())
+        print_table(
+            f"release {DEMO_RELEASE} {version} at {info_root}",
+            ["split", "images", "changed", "unchanged", "ignore"],
+            [
+                [k, v["images"], v["changed"], v["unchanged"], v["ignore"]]
+                for k, v in stats["class_balance"].items()
+            ],
+        )
+        with cat.transaction() as s:
+            manifest_sha = get_release(s, DEMO_RELEASE, version).manifest_sha256
+        console.print(f"manifest sha256 {manifest_sha}; datasheet {info_root / 'README.md'}")
     finally:
         cat.dispose()
+    console.rule("5. baseline (FC-Siam-diff, a short run)")
+    from siteline.baseline import evaluate, train
+
+    out = cfg.home / "baseline" / f"{DEMO_RELEASE}-{version}"
+    log = train(info_root, out, max_iters=train_iters, crop=128)
+    split = "test" if stats["class_balance"].get("test") else "train"
+    result = evaluate(info_root, out / "model.pt", out / f"results-{split}.json", split)
+    console.print(
+        f"trained {log['iterations']} iterations (loss {log['losses'][0]:.3f} -> {log['losses'][-1]:.3f}); "
+        f"{split} mIoU {result['scores']['miou']:.3f}, F1 changed {result['scores']['f1']:.3f} "
+        f"-> {out / f'results-{split}.json'}"
+    )
+    console.rule(f"done in {time.perf_counter() - t_start:.0f} s")

@@ -1,0 +1,255 @@
+"""``siteline release ...``, ``siteline train`` and ``siteline evaluate``."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+
+import typer
+from rich.progress import Progress
+
+from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
+from siteline.errors import ReleaseError
+from siteline.pairs import PairParams
+from siteline.release import build_release, publish_release, release_root, verify_files
+from siteline.release.query import diff_releases, get_release, list_releases, query_items, release_record
+
+app = typer.Typer(help="Versioned, immutable dataset releases.", no_args_is_help=True)
+
+
+def _progress(bar: Progress):  # noqa: ANN202
+    tasks: dict[str, int] = {}
+
+    def report(task: str, n: int, total: int | None) -> None:
+        if task not in tasks:
+            tasks[task] = bar.add_task(task, total=total)
+        bar.update(tasks[task], advance=n, total=total)
+
+    return report
+
+
+def parse_radius(text: str) -> float | None:
+    if text == "auto":
+        return None
+    try:
+        return float(text)
+    except ValueError as exc:
+        raise ReleaseError(f"--radius {text!r} must be 'auto' or a number of metres.") from exc
+
+
+@app.command("build")
+def build(
+    site: str = typer.Option(..., "--site", help="Site whose pairs the release draws on."),
+    name: str = typer.Option(..., "--name", help="Release name."),
+    pairs: list[int] | None = typer.Option(
+        None, "--pairs", help="Pair ids (repeatable; default: every pair of the site)."
+    ),
+    scale: float = typer.Option(
+        0.125, "--scale", help="Render scale of the cameras' image size (1, 0.5, 0.25, 0.125)."
+    ),
+    point_size: int = typer.Option(1, "--point-size", help="Point size in pixels (1 or 3)."),
+    views: int = typer.Option(300, "--views", help="Views per pair."),
+    radius: str = typer.Option(
+        "auto", "--radius", help="Change radius in metres, or 'auto' (2.5 x median spacing)."
+    ),
+    seed: int = typer.Option(0, "--seed", help="Seed of view sampling and splits."),
+    min_coverage: float = typer.Option(
+        0.5, "--min-coverage", help="Reject views covering less of the image."
+    ),
+    version: str | None = typer.Option(
+        None, "--version", help="Version (default: next, major bump when labels or pairs change)."
+    ),
+    device: str = typer.Option("cpu", "--device", help="torch device for rendering."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
+    params = PairParams(
+        scale=scale,
+        point_size_px=point_size,
+        views=views,
+        radius_m=parse_radius(radius),
+        seed=seed,
+        min_coverage=min_coverage,
+    )
+    with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
+        info = build_release(
+            cat,
+            settings(),
+            site,
+            name,
+            params,
+            pairs or None,
+            version,
+            progress=_progress(bar),
+            device=device,
+        )
+    record = info.__dict__
+    emit(
+        as_json,
+        record,
+        lambda: console.print(
+            f"draft {info.name} {info.version}: {info.items} items at {info.root}; "
+            f"publish with `siteline release publish {info.name} {info.version}`"
+        ),
+    )
+
+
+@app.command("publish")
+def publish(
+    name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
+) -> None:
+    """Publish a draft: verify its checksums, move it into place read-only. Never rewrites a version."""
+    with catalog() as cat:
+        info = publish_release(cat, settings(), name, version)
+    emit(as_json, info.__dict__, lambda: console.print(f"published {name} {version} at {info.root}"))
+
+
+@app.command("list")
+def list_(name: str | None = typer.Option(None, "--name"), as_json: bool = JsonOption) -> None:
+    """List releases."""
+    with catalog() as cat, cat.transaction() as s:
+        records = [release_record(s, r) for r in list_releases(s, name)]
+    emit(
+        as_json,
+        records,
+        lambda: print_table(
+            "releases",
+            ["name", "version", "status", "items", "root"],
+            [[r["name"], r["version"], r["status"], sum(r["items"].values()), r["root"]] for r in records],
+        ),
+    )
+
+
+@app.command("show")
+def show(
+    name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
+) -> None:
+    """Show one release."""
+    with catalog() as cat, cat.transaction() as s:
+        record = release_record(s, get_release(s, name, version))
+    emit(as_json, record, lambda: print_record(f"release {name} {version}", record))
+
+
+@app.command("diff")
+def diff(
+    name: str = typer.Argument(...),
+    v1: str = typer.Argument(...),
+    v2: str = typer.Argument(...),
+    as_json: bool = JsonOption,
+) -> None:
+    """Pairs, parameters, label sets and files that differ between two versions."""
+    with catalog() as cat, cat.transaction() as s:
+        record = diff_releases(s, name, v1, v2)
+    emit(as_json, record, lambda: print_record(f"{name} {v1} -> {v2}", record))
+
+
+@app.command("verify")
+def verify(
+    name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
+) -> None:
+    """Recompute every checksum of a release; name each file that differs (exit status 1 if any)."""
+    with catalog() as cat:
+        root, status = release_root(cat, name, version)
+    problems = verify_files(root)
+    emit(
+        as_json,
+        {"name": name, "version": version, "root": str(root), "ok": not problems, "problems": problems},
+        lambda: console.print(
+            "\n".join(problems) if problems else f"{name} {version}: every checksum matches"
+        ),
+    )
+    if problems:
+        raise typer.Exit(1)
+
+
+@app.command("query")
+def query(
+    name: str = typer.Argument(...),
+    version: str = typer.Argument(...),
+    min_change_ratio: float | None = typer.Option(
+        None, "--min-change-ratio", help="Only views whose change ratio is above this."
+    ),
+    split: str | None = typer.Option(None, "--split"),
+    since: datetime | None = typer.Option(
+        None, "--since", help="Pairs whose t1 was captured on or after (ISO date)."
+    ),
+    until: datetime | None = typer.Option(
+        None, "--until", help="Pairs whose t2 was captured on or before (ISO date)."
+    ),
+    as_json: bool = JsonOption,
+) -> None:
+    """Query a release's views from the catalog."""
+    from datetime import UTC
+
+    since = since.replace(tzinfo=since.tzinfo or UTC) if since else None
+    until = until.replace(tzinfo=until.tzinfo or UTC) if until else None
+    with catalog() as cat, cat.transaction() as s:
+        rows = query_items(s, name, version, min_change_ratio, split, since, until)
+    emit(
+        as_json,
+        rows,
+        lambda: print_table(
+            f"{name} {version}: {len(rows)} views",
+            ["id", "split", "pair", "change ratio"],
+            [[r["id"], r["split"], r["pair"], f"{r['change_ratio']:.3f}"] for r in rows],
+        ),
+    )
+
+
+def train_cmd(
+    name: str = typer.Option(..., "--release", help="Release name."),
+    version: str = typer.Option(..., "--version"),
+    out: Path = typer.Option(..., "--out", help="Folder for model.pt and train_log.json."),
+    epochs: int = typer.Option(1, "--epochs"),
+    max_iters: int | None = typer.Option(None, "--max-iters"),
+    crop: int = typer.Option(256, "--crop"),
+    device: str = typer.Option("cpu", "--device"),
+    workers: int = typer.Option(0, "--workers", help="DataLoader worker processes."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Train FC-Siam-diff on a release (SGD 1e-3, momentum 0.9, wd 1e-4, poly 0.9, batch 4)."""
+    from siteline.baseline import train
+
+    with catalog() as cat:
+        root, _ = release_root(cat, name, version)
+    with Progress(console=console, transient=True, disable=as_json) as bar:
+        task = bar.add_task("training", total=None)
+        log = train(
+            root,
+            out,
+            epochs=epochs,
+            max_iters=max_iters,
+            crop=crop,
+            device=device,
+            workers=workers,
+            progress=lambda it, total, loss: bar.update(
+                task, completed=it, total=total, description=f"training loss {loss:.3f}"
+            ),
+        )
+    summary = {k: log[k] for k in ("release", "iterations", "seconds", "parameters")} | {
+        "first_loss": log["losses"][0] if log["losses"] else None,
+        "last_loss": log["losses"][-1] if log["losses"] else None,
+    }
+    emit(as_json, summary, lambda: print_record("training", summary))
+
+
+def evaluate_cmd(
+    name: str = typer.Option(..., "--release"),
+    version: str = typer.Option(..., "--version"),
+    checkpoint: Path = typer.Option(..., "--checkpoint"),
+    split: str = typer.Option("test", "--split"),
+    out: Path = typer.Option(..., "--out", help="Results JSON."),
+    device: str = typer.Option("cpu", "--device"),
+    as_json: bool = JsonOption,
+) -> None:
+    """Evaluate a checkpoint on a split: one confusion matrix, IoU/mIoU/F1/OA/kappa, results JSON."""
+    from siteline.baseline import evaluate
+
+    with catalog() as cat:
+        root, _ = release_root(cat, name, version)
+    result = evaluate(root, checkpoint, out, split, device)
+    emit(
+        as_json,
+        result,
+        lambda: print_record(f"{name} {version} {split}", result["scores"] | {"results": str(out)}),
+    )

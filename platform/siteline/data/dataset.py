@@ -1,0 +1,84 @@
+"""A torch Dataset over a siteline release (TorchGeo-style change detection samples)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from PIL import Image
+from torch.utils.data import Dataset
+
+from siteline.errors import ReleaseError
+from siteline.release.manifest import read_manifest
+
+SPLITS = ("train", "val", "test")
+
+
+class ChangeDetectionDataset(Dataset):
+    """Samples ``{"image": float32 (2, 3, H, W) in [0, 1], "mask": int64 (1, H, W) in {0, 1, 255},
+    "id": str, "pair": int, "view": int}`` of one split of a release, in id order.
+
+    root: a release folder (``manifest.json``, ``<split>/A|B|label``). transforms: a callable on the
+    sample dict (e.g. :class:`siteline.data.transforms.TrainTransforms`). Works with DataLoader workers.
+    """
+
+    def __init__(
+        self, root: str | Path, split: str = "train", transforms: Callable[[dict], dict] | None = None
+    ) -> None:
+        self.root = Path(root)
+        if split not in SPLITS:
+            raise ReleaseError(f"split {split!r} is not one of {SPLITS}.")
+        if not self.root.is_dir():
+            raise ReleaseError(
+                f"release folder {self.root} does not exist: build and publish one "
+                "(`siteline release build`), or pass its path."
+            )
+        manifest = read_manifest(self.root)
+        self.items = sorted((it for it in manifest["items"] if it["split"] == split), key=lambda it: it["id"])
+        self.split = split
+        self.transforms = transforms
+        self.manifest_name = f"{manifest['name']} {manifest['version']}"
+        for it in self.items[:1]:
+            for sub in ("A", "B", "label"):
+                p = self.root / split / sub / f"{it['id']}.png"
+                if not p.is_file():
+                    raise ReleaseError(
+                        f"{p} is missing: the release at {self.root} is incomplete (run `siteline release verify`)."
+                    )
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def _image(self, sub: str, item_id: str) -> torch.Tensor:
+        arr = np.asarray(
+            Image.open(self.root / self.split / sub / f"{item_id}.png").convert("RGB"), dtype=np.float32
+        )
+        return torch.from_numpy(arr / 255.0).permute(2, 0, 1)
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        it = self.items[index]
+        a, b = self._image("A", it["id"]), self._image("B", it["id"])
+        mask = np.asarray(Image.open(self.root / self.split / "label" / f"{it['id']}.png"), dtype=np.int64)
+        sample = {
+            "image": torch.stack([a, b]),
+            "mask": torch.from_numpy(mask)[None],
+            "id": it["id"],
+            "pair": it["pair"],
+            "view": it["view"],
+        }
+        if self.transforms is not None:
+            sample = self.transforms(sample)
+        return sample
+
+    def plot(self, index: int) -> Image.Image:
+        """t1 | t2 | mask (green unchanged, red changed, white ignore) as one image."""
+        from siteline.release.datasheet import colour_mask
+
+        s = self[index]
+        a = (s["image"][0].permute(1, 2, 0).numpy() * 255).astype(np.uint8)
+        b = (s["image"][1].permute(1, 2, 0).numpy() * 255).astype(np.uint8)
+        m = colour_mask(s["mask"][0].numpy().astype(np.uint8))
+        return Image.fromarray(np.concatenate([a, b, m], axis=1))

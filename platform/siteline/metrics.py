@@ -1,0 +1,65 @@
+"""Change-detection metrics from one confusion matrix over a whole split (DESIGN.md §8).
+
+Pixels labelled 255 are excluded. Reported: IoU per class, mIoU (mean of unchanged and changed IoU),
+precision, recall and F1 of the changed class, overall accuracy, Cohen's kappa. Per-image averaging
+gives very different numbers and is never reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+
+IGNORE = 255
+
+
+def confusion(
+    pred: torch.Tensor | np.ndarray, target: torch.Tensor | np.ndarray, num_classes: int = 2
+) -> np.ndarray:
+    """(C, C) int64 counts, rows = target, columns = prediction, pixels where target is 255 skipped."""
+    p = torch.as_tensor(pred).reshape(-1).long()
+    t = torch.as_tensor(target).reshape(-1).long()
+    keep = t != IGNORE
+    p, t = p[keep], t[keep]
+    if p.numel() and (p.min() < 0 or p.max() >= num_classes or t.max() >= num_classes):
+        raise ValueError(f"labels must lie in [0, {num_classes}) or be {IGNORE}.")
+    cm = torch.bincount(t * num_classes + p, minlength=num_classes * num_classes)
+    return cm.reshape(num_classes, num_classes).cpu().numpy().astype(np.int64)
+
+
+@dataclass
+class Scores:
+    iou_unchanged: float
+    iou_changed: float
+    miou: float
+    precision: float
+    recall: float
+    f1: float
+    oa: float
+    kappa: float
+    pixels: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _div(a: float, b: float) -> float:
+    return float(a / b) if b else 0.0
+
+
+def scores(cm: np.ndarray) -> Scores:
+    """Scores of a 2x2 confusion matrix (rows target, columns prediction; class 1 = changed)."""
+    cm = np.asarray(cm, dtype=np.float64)
+    tn, fp, fn, tp = cm[0, 0], cm[0, 1], cm[1, 0], cm[1, 1]
+    n = cm.sum()
+    iou0 = _div(tn, tn + fp + fn)
+    iou1 = _div(tp, tp + fp + fn)
+    precision = _div(tp, tp + fp)
+    recall = _div(tp, tp + fn)
+    f1 = _div(2 * precision * recall, precision + recall)
+    oa = _div(tp + tn, n)
+    pe = _div((tp + fp) * (tp + fn) + (tn + fn) * (tn + fp), n * n)
+    kappa = _div(oa - pe, 1 - pe)
+    return Scores(iou0, iou1, (iou0 + iou1) / 2, precision, recall, f1, oa, kappa, int(n))
