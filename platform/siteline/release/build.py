@@ -129,12 +129,6 @@ def build_release(
     params = params or PairParams()
     with catalog.transaction() as s:
         site = get_site(s, site_name)
-        scenes = list_scenes(s, site)
-        if len(scenes) < 2:
-            raise ReleaseError(
-                f"site {site_name} has {len(scenes)} scene(s); a release needs at least two "
-                "(ingest another mission). Nothing was written."
-            )
         all_pairs = {p.id: p for p in list_pairs(s, site)}
         if pair_ids:
             for pid in pair_ids:
@@ -150,6 +144,12 @@ def build_release(
             chosen = sorted(set(pair_ids))
         else:
             chosen = sorted(all_pairs)
+        scenes = list_scenes(s, site)
+        if len(scenes) < 2:
+            raise ReleaseError(
+                f"site {site_name} has {len(scenes)} scene(s); a release needs at least two "
+                "(ingest another mission). Nothing was written."
+            )
         if not chosen:
             raise ReleaseError(f"site {site_name} has no pairs. Nothing was written.")
         lineage_key = {"pairs": chosen, "params": params.to_dict()}

@@ -1,0 +1,160 @@
+"""Releases: layout, manifest, verify, immutability, bad requests, diff, query, symmetry."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from siteline.catalog.models import Pair, Release
+from siteline.catalog.sites import add_site
+from siteline.errors import ImmutableError, NotFoundError, ReleaseError
+from siteline.pairs import PairParams, pair_mask
+from siteline.release import build_release, publish_release, read_manifest, verify_files
+from siteline.release.query import diff_releases, query_items
+from siteline.schemas import validate
+from siteline.site import make_site_spec
+
+from .conftest import PARAMS
+
+
+def test_layout_manifest_and_datasheet(built) -> None:
+    settings, cat, pub = built
+    root = Path(pub.root)
+    doc = read_manifest(root)
+    validate(doc, "release.schema.json", "test")
+    assert doc["version"] == "1.0.0" and pub.status == "published"
+    assert (root / "README.md").read_text().startswith("# rel 1.0.0")
+    assert Image.open(root / "montage.png").size[0] == 1200
+    stats = json.loads((root / "stats.json").read_text())
+    assert stats["images"] == len(doc["items"]) > 0
+    for it in doc["items"]:
+        for sub in ("A", "B", "label"):
+            assert (root / it["split"] / sub / f"{it['id']}.png").is_file()
+        m = np.asarray(Image.open(root / it["split"] / "label" / f"{it['id']}.png"))
+        assert set(np.unique(m)) <= {0, 1, 255}
+    # splits are disjoint by pair
+    seen = {}
+    for it in doc["items"]:
+        assert seen.setdefault(it["pair"], it["split"]) == it["split"]
+    assert sorted(p for ids in doc["splits"].values() for p in ids) == sorted(
+        {it["pair"] for it in doc["items"]}
+    )
+    lin = doc["lineage"]
+    assert lin["parameters"]["scale"] == 0.5 and lin["sites"][0]["name"] == "demo"
+    assert all(s["mission_manifest_sha256"] for s in lin["scenes"])
+    assert verify_files(root) == []
+
+
+def test_verify_names_a_flipped_byte(built, tmp_path) -> None:
+    import shutil
+
+    _, _, pub = built
+    copy = tmp_path / "copy"
+    shutil.copytree(pub.root, copy)
+    for p in copy.rglob("*"):
+        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    victim = next((copy / "train" / "label").glob("*.png"))
+    data = bytearray(victim.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    victim.write_bytes(bytes(data))
+    problems = verify_files(copy)
+    assert len(problems) == 1 and victim.name in problems[0] and "sha256" in problems[0]
+
+
+def test_published_release_is_read_only_and_never_republished(built) -> None:
+    settings, cat, pub = built
+    some = next(Path(pub.root).rglob("*.png"))
+    assert not os.access(some, os.W_OK) or os.geteuid() == 0  # root ignores permission bits
+    assert not (some.stat().st_mode & 0o222)
+    with pytest.raises(ImmutableError, match="already published"):
+        publish_release(cat, settings, "rel", "1.0.0")
+    with pytest.raises(ImmutableError, match="already published"):
+        build_release(cat, settings, "demo", "rel", PARAMS, version="1.0.0")
+    with pytest.raises(ImmutableError), cat.transaction() as s:
+        rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
+        rel.parameters = {}
+
+
+def test_bad_requests_write_nothing(built) -> None:
+    settings, cat, _ = built
+    with cat.transaction() as s:
+        add_site(s, make_site_spec("lonely", "EPSG:32618", (0.0, 0.0, 0.0)))
+    before = {p for p in (settings.home / "releases").rglob("*")}
+    with pytest.raises(ReleaseError, match="0 scene"):
+        build_release(cat, settings, "lonely", "x", PARAMS)
+    with cat.transaction() as s:
+        pid = s.query(Pair).first().id
+    with pytest.raises(ReleaseError, match="belongs to site demo"):
+        build_release(cat, settings, "lonely2" if False else "lonely", "x", PARAMS, pair_ids=[pid])
+    with pytest.raises(NotFoundError):
+        publish_release(cat, settings, "nope", "1.0.0")
+    assert {p for p in (settings.home / "releases").rglob("*")} == before
+    with cat.transaction() as s:
+        assert s.query(Release).filter_by(name="x").count() == 0
+
+
+def test_new_parameters_bump_the_major_version_and_diff(built) -> None:
+    settings, cat, pub = built
+    info = build_release(
+        cat,
+        settings,
+        "demo",
+        "rel",
+        PairParams(scale=0.5, point_size_px=3, views=4, seed=1, min_coverage=0.3),
+    )
+    assert info.version == "2.0.0" and info.status == "draft"
+    publish_release(cat, settings, "rel", "2.0.0")
+    with cat.transaction() as s:
+        d = diff_releases(s, "rel", "1.0.0", "2.0.0")
+    assert d["parameters"]["views"] == [6, 4] and d["parameters"]["seed"] == [0, 1]
+    assert d["files"]["changed"] or d["files"]["added"] or d["files"]["removed"]
+
+
+def test_query_by_change_ratio_and_dates(built) -> None:
+    from datetime import UTC, datetime
+
+    _, cat, pub = built
+    doc = read_manifest(pub.root)
+    with cat.transaction() as s:
+        everything = query_items(s, "rel", "1.0.0")
+        high = query_items(s, "rel", "1.0.0", min_change_ratio=0.05)
+        none = query_items(s, "rel", "1.0.0", until=datetime(2000, 1, 1, tzinfo=UTC))
+    assert len(everything) == len(doc["items"])
+    assert all(r["change_ratio"] > 0.05 for r in high) and len(high) <= len(everything)
+    assert none == []
+
+
+def test_pair_mask_is_symmetric() -> None:
+    rng = np.random.default_rng(0)
+    hit_a, hit_b = rng.random((20, 30)) < 0.9, rng.random((20, 30)) < 0.9
+    ca = rng.choice(np.array([0, 1, 255], np.uint8), (20, 30))
+    cb = rng.choice(np.array([0, 1, 255], np.uint8), (20, 30))
+    assert np.array_equal(pair_mask(hit_a, ca, hit_b, cb), pair_mask(hit_b, cb, hit_a, ca))
+    m = pair_mask(hit_a, ca, hit_b, cb)
+    assert (m[~hit_a] == 255).all() and (m[(ca == 1) & hit_a & hit_b & (cb != 255)] == 1).all()
+
+
+def test_swapping_scenes_gives_the_same_mask(built) -> None:
+    settings, cat, pub = built
+    from siteline.cameras import Camera
+    from siteline.catalog.models import Scene
+    from siteline.labels import attach_labels
+    from siteline.pairs.render import render_pair_view
+    from siteline.tiles import open_scene_tiles
+
+    doc = read_manifest(pub.root)
+    pair = doc["lineage"]["pairs"][0]
+    label_uri = pair["labels"]["uri"]
+    with cat.transaction() as s:
+        t1 = attach_labels(open_scene_tiles(s, s.get(Scene, pair["t1"])), label_uri, "t1")
+        t2 = attach_labels(open_scene_tiles(s, s.get(Scene, pair["t2"])), label_uri, "t2")
+    cam = Camera.look_at((-50.0, -50.0, 35.0), (0.0, 0.0, 0.0), 320, 240, fx=260.0)
+    a = render_pair_view(t1, t2, cam, 1.0, 1)
+    b = render_pair_view(t2, t1, cam, 1.0, 1)
+    assert np.array_equal(a.mask, b.mask) and (a.mask != 255).any()
+    assert np.array_equal(a.a, b.b)
