@@ -7,7 +7,7 @@ import sys
 import typer
 
 from siteline import __version__
-from siteline.cli import db, demo, ingest, release, render, site, synth
+from siteline.cli import db, demo, ingest, release, render, site, synth, watch
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
@@ -32,6 +32,7 @@ app.add_typer(ingest.photo_app, name="photo")
 app.add_typer(release.app, name="release")
 app.command("train")(release.train_cmd)
 app.command("evaluate")(release.evaluate_cmd)
+app.command("watch")(watch.watch)
 
 
 @app.callback()

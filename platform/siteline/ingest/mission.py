@@ -19,9 +19,10 @@ import numpy as np
 import sqlalchemy as sa
 
 from siteline.catalog import Catalog
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site, StageRun
+from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
 from siteline.catalog.scenes import add_cameras, ensure_pair, mission_by_manifest, neighbours, scene_at
 from siteline.catalog.sites import get_site, site_spec
+from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import MissionError, PhotoError, RegistrationError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
@@ -196,10 +197,12 @@ def ingest_mission(
     site_name: str,
     opts: IngestOptions | None = None,
     reporter: Reporter | None = None,
+    run_id: str | None = None,
 ) -> IngestResult:
     """Inventory, validate, georegister and register ``mission_dir`` as a scene of ``site_name``."""
     opts = opts or IngestOptions()
     rep = reporter or Reporter()
+    started = datetime.now(UTC)
     root = Path(mission_dir).resolve() if Path(mission_dir).exists() else Path(mission_dir)
     with catalog.transaction() as s:
         site = get_site(s, site_name)
@@ -303,6 +306,8 @@ def ingest_mission(
             when,
             sample_sha,
             opts,
+            started,
+            run_id,
         )
     except BaseException:
         with catalog.transaction() as s:
@@ -329,6 +334,8 @@ def _commit(
     when: datetime,
     sample_sha: str,
     opts: IngestOptions,
+    started: datetime,
+    run_id: str | None,
 ) -> IngestResult:
     name = next(
         (Path(e.path).parts[0] for e in entries if RAW_FOLDER.match(Path(e.path).parts[0])), root.name
@@ -394,20 +401,18 @@ def _commit(
                 pairs.append(ensure_pair(s, site, before, scene).id)
             if after is not None:
                 pairs.append(ensure_pair(s, site, scene, after).id)
-            now = datetime.now(UTC)
             s.add(
-                StageRun(
-                    stage="ingest",
-                    subject=f"mission:{sha}",
-                    status="completed",
-                    started_at=now,
-                    finished_at=now,
-                    parameters={
+                completed(
+                    "ingest",
+                    f"mission:{sha}",
+                    {
                         "site": site_name,
                         "storage": opts.storage,
                         "crs": opts.crs,
                         "accept_misalignment": opts.accept_misalignment,
                     },
+                    started,
+                    run_id,
                 )
             )
             mission_id, scene_id = mission.id, scene.id

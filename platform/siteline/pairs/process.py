@@ -17,9 +17,10 @@ import numpy as np
 import sqlalchemy as sa
 
 from siteline.catalog import Catalog
-from siteline.catalog.models import Pair, Render, Scene, Site, StageRun, View
+from siteline.catalog.models import Pair, Render, Scene, Site, View
 from siteline.catalog.scenes import scene_cameras
 from siteline.catalog.sites import site_spec
+from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import ReleaseError
 from siteline.labels.store import attach_labels, auto_radius, write_labels
@@ -59,6 +60,7 @@ def process_pair(
     params: PairParams | None = None,
     progress: Progress | None = None,
     device: str = "cpu",
+    run_id: str | None = None,
 ) -> PairOutput:
     """Labels, views and renders of ``pair_id`` with ``params`` (reused when already made)."""
     params = params or PairParams()
@@ -91,6 +93,7 @@ def process_pair(
                 doc["views"],
                 root,
                 datetime.now(UTC),
+                run_id,
             )
         return PairOutput(pair_id, ids[0], ids[1], doc["radius_m"], root, doc["views"], doc["labels"])
     started = datetime.now(UTC)
@@ -186,7 +189,7 @@ def process_pair(
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
         raise
-    _record(catalog, pair_id, ids, params, radius, labels, records, root, started)
+    _record(catalog, pair_id, ids, params, radius, labels, records, root, started, run_id)
     return PairOutput(pair_id, ids[0], ids[1], radius, root, records, labels)
 
 
@@ -200,6 +203,7 @@ def _record(
     records: list[dict],
     root: Path,
     started: datetime,
+    run_id: str | None = None,
 ) -> None:
     digest = params.digest()
     with catalog.transaction() as s:
@@ -243,13 +247,8 @@ def _record(
                     )
                 )
         s.add(
-            StageRun(
-                stage="process_pair",
-                subject=f"pair:{pair_id}",
-                status="completed",
-                started_at=started,
-                finished_at=datetime.now(UTC),
-                parameters=params.to_dict() | {"radius_m": radius},
+            completed(
+                "process_pair", f"pair:{pair_id}", params.to_dict() | {"radius_m": radius}, started, run_id
             )
         )
 

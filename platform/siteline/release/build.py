@@ -24,6 +24,7 @@ from siteline.catalog import Catalog
 from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
 from siteline.catalog.scenes import list_pairs, list_scenes
 from siteline.catalog.sites import get_site
+from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.pairs import PairParams, pair_view_ids, process_pair
@@ -124,9 +125,11 @@ def build_release(
     preset: str | None = None,
     progress: Progress | None = None,
     device: str = "cpu",
+    run_id: str | None = None,
 ) -> ReleaseInfo:
     """Process the site's pairs (or ``pair_ids``) and assemble a draft release ``name``."""
     params = params or PairParams()
+    started = datetime.now(UTC)
     with catalog.transaction() as s:
         site = get_site(s, site_name)
         all_pairs = {p.id: p for p in list_pairs(s, site)}
@@ -231,7 +234,20 @@ def build_release(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    _record_draft(catalog, name, version, params, preset, lineage_key, final, manifest_sha, items, chosen)
+    _record_draft(
+        catalog,
+        name,
+        version,
+        params,
+        preset,
+        lineage_key,
+        final,
+        manifest_sha,
+        items,
+        chosen,
+        started,
+        run_id,
+    )
     return ReleaseInfo(name, version, "draft", str(final), len(items), manifest_sha, stats)
 
 
@@ -246,6 +262,8 @@ def _record_draft(
     manifest_sha: str,
     items: list[dict],
     chosen: list[int],
+    started: datetime | None = None,
+    run_id: str | None = None,
 ) -> None:
     with catalog.transaction() as s:
         rel = s.execute(
@@ -281,6 +299,15 @@ def _record_draft(
                     files={sub: f"{it['split']}/{sub}/{it['id']}.png" for sub in ("A", "B", "label")},
                 )
             )
+        s.add(
+            completed(
+                "build_release",
+                f"release:{name}:{version}",
+                {"pair_params": params.to_dict(), "preset": preset, "pairs": chosen},
+                started or datetime.now(UTC),
+                run_id,
+            )
+        )
 
 
 def _read_only(root: Path) -> None:
@@ -289,7 +316,9 @@ def _read_only(root: Path) -> None:
         p.chmod(mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
 
 
-def publish_release(catalog: Catalog, settings: Settings, name: str, version: str) -> ReleaseInfo:
+def publish_release(
+    catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None = None
+) -> ReleaseInfo:
     """Verify the draft's checksums, move it into place, make it read-only, mark it published."""
     with catalog.transaction() as s:
         rel = s.execute(
@@ -319,6 +348,7 @@ def publish_release(catalog: Catalog, settings: Settings, name: str, version: st
             ).scalar_one()
             rel.status = "published"
             rel.published_at = datetime.now(UTC)
+            s.add(completed("publish_release", f"release:{name}:{version}", {}, rel.published_at, run_id))
             rel.root_uri = str(final)
             sha = rel.manifest_sha256
             items = s.execute(

@@ -11,8 +11,9 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog import Catalog
-from siteline.catalog.models import Mission, MissionFile, Node, Scene, StageRun
+from siteline.catalog.models import Mission, MissionFile, Node, Scene
 from siteline.catalog.sites import site_spec
+from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.crs import parse_crs
 from siteline.errors import TileError
@@ -51,6 +52,7 @@ def tile_scene(
     spec: TileSpec | None = None,
     workers: int = 2,
     progress: Callable[[str, int, int | None], None] | None = None,
+    run_id: str | None = None,
 ) -> tuple[TileResult | None, str]:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone.
 
@@ -104,13 +106,8 @@ def tile_scene(
                 "tiles": result.summary() | {"spec": spec.to_dict()},
             }
             s.add(
-                StageRun(
-                    stage="tile",
-                    subject=f"scene:{scene_id}",
-                    status="completed",
-                    started_at=started,
-                    finished_at=datetime.now(UTC),
-                    parameters={"spec": spec.to_dict(), "workers": workers},
+                completed(
+                    "tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, started, run_id
                 )
             )
     except BaseException:

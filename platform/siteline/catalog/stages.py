@@ -1,0 +1,83 @@
+"""Stage-run records: what ran on which subject, with which parameters, and how it ended.
+
+Library stages write their own ``completed`` record in the transaction that commits their outputs
+(stamped with the orchestrator's run id when one is given); an orchestrator records a failure with
+:func:`record_failure`, in a transaction of its own, so the catalog shows the failed stage while the
+stage itself left nothing half-written.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+import sqlalchemy as sa
+
+from siteline.catalog import Catalog
+from siteline.catalog.models import StageRun
+
+
+def completed(
+    stage: str, subject: str, parameters: dict[str, Any], started: datetime, run_id: str | None
+) -> StageRun:
+    """A ``completed`` row to add in the caller's transaction."""
+    return StageRun(
+        stage=stage,
+        subject=subject,
+        status="completed",
+        parameters=parameters,
+        started_at=started,
+        finished_at=datetime.now(UTC),
+        orchestrator_run_id=run_id,
+    )
+
+
+def record_failure(
+    catalog: Catalog,
+    stage: str,
+    subject: str,
+    parameters: dict[str, Any],
+    error: BaseException,
+    run_id: str | None = None,
+    started: datetime | None = None,
+) -> int:
+    """Record a failed stage run; returns its id."""
+    with catalog.transaction() as s:
+        row = StageRun(
+            stage=stage,
+            subject=subject,
+            status="failed",
+            parameters=parameters,
+            started_at=started or datetime.now(UTC),
+            finished_at=datetime.now(UTC),
+            error_text=f"{type(error).__name__}: {error}"[:4000],
+            orchestrator_run_id=run_id,
+        )
+        s.add(row)
+        s.flush()
+        return row.id
+
+
+def stage_runs(
+    catalog: Catalog, subject: str | None = None, stage: str | None = None
+) -> list[dict[str, Any]]:
+    with catalog.transaction() as s:
+        q = sa.select(StageRun).order_by(StageRun.started_at, StageRun.id)
+        if subject:
+            q = q.where(StageRun.subject == subject)
+        if stage:
+            q = q.where(StageRun.stage == stage)
+        return [
+            {
+                "id": r.id,
+                "stage": r.stage,
+                "subject": r.subject,
+                "status": r.status,
+                "started_at": r.started_at,
+                "finished_at": r.finished_at,
+                "error": r.error_text,
+                "run_id": r.orchestrator_run_id,
+                "parameters": r.parameters,
+            }
+            for r in s.execute(q).scalars()
+        ]

@@ -1,0 +1,185 @@
+"""The Prefect wiring, exercised once under a session-scoped test harness."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+import sqlalchemy as sa
+
+FLOWS = Path(__file__).resolve().parents[2] / "flows"
+sys.path.insert(0, str(FLOWS))
+
+
+@pytest.fixture(scope="module")
+def harness(tmp_path_factory):
+    os.environ["PREFECT_HOME"] = str(tmp_path_factory.mktemp("prefect-home"))
+    os.environ["PREFECT_SERVER_ANALYTICS_ENABLED"] = "false"
+    from prefect.testing.utilities import prefect_test_harness
+
+    with prefect_test_harness(server_startup_timeout=90):
+        yield
+
+
+@pytest.fixture(scope="module")
+def small_site(tmp_path_factory):
+    from siteline.synth import SynthConfig, write_site
+
+    out = tmp_path_factory.mktemp("flow-site")
+    write_site(out, SynthConfig(epochs=2, density_pts_m2=2.0, seed=5))
+    return out
+
+
+def _home(tmp_path, site_dir, monkeypatch):
+    from sitehelpers import make_home
+
+    settings = make_home(tmp_path, site_dir=site_dir)
+    monkeypatch.setenv("SITELINE_HOME", str(settings.home))
+    monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
+    return settings
+
+
+def _missions(site_dir):
+    import json
+
+    return [
+        site_dir / e["mission_dir"]
+        for e in json.loads((site_dir / "truth" / "site.json").read_text())["epochs"]
+    ]
+
+
+SMALL = {"scale": 0.25, "point_size_px": 3, "views": 3, "min_coverage": 0.2}
+
+
+def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkeypatch) -> None:
+    import asyncio
+
+    import pipeline
+    from prefect.client.orchestration import get_client
+
+    settings = _home(tmp_path, small_site, monkeypatch)
+    monkeypatch.setenv("SITELINE_RELEASE_POLICY", "every-pair")
+    monkeypatch.setenv("SITELINE_RELEASE_NAME", "flowrel")
+    scenes = [pipeline.ingest_mission_flow(str(m), "demo") for m in _missions(small_site)]
+    assert scenes == [1, 2]
+    outs = pipeline.process_scene_pairs_flow(scenes[1], SMALL)
+    assert len(outs) == 1 and outs[0]["views"] > 0
+    rel = settings.home / "releases" / "flowrel" / "1.0.0" / "manifest.json"
+    assert rel.is_file()
+
+    async def artifacts():
+        async with get_client() as client:
+            return {a.key for a in await client.read_artifacts() if a.key}
+
+    keys = asyncio.run(artifacts())
+    assert {"mission-demo-" + _missions(small_site)[0].name.lower().replace("_", "-")} & keys or any(
+        k.startswith("mission-demo-") for k in keys
+    )
+    assert any(k.startswith("scene-demo-") for k in keys)
+    assert "pair-demo-1" in keys and "renders-demo-1" in keys and "pair-1-progress" in keys
+    assert "release-demo-flowrel-1-0-0" in keys
+    from siteline.catalog import open_catalog
+    from siteline.catalog.stages import stage_runs
+
+    cat = open_catalog(settings)
+    runs = stage_runs(cat)
+    cat.dispose()
+    assert {r["stage"] for r in runs} >= {
+        "ingest",
+        "tile",
+        "process_pair",
+        "build_release",
+        "publish_release",
+    }
+    assert all(r["status"] == "completed" and r["run_id"] for r in runs)
+
+
+def test_retry_then_success_and_permanent_failure_recorded(
+    harness, small_site, tmp_path, monkeypatch
+) -> None:
+    import pipeline
+
+    import siteline.tiles as tiles_pkg
+    from siteline.catalog import open_catalog
+    from siteline.catalog.models import Node, Scene
+    from siteline.catalog.stages import stage_runs
+    from siteline.ingest.mission import ingest_mission
+
+    settings = _home(tmp_path, small_site, monkeypatch)
+    cat = open_catalog(settings)
+    sid = ingest_mission(cat, settings, _missions(small_site)[0], "demo").scene_id
+    real = tiles_pkg.tile_scene
+    calls = {"n": 0}
+
+    def flaky(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise OSError("disk hiccup")
+        return real(*a, **k)
+
+    monkeypatch.setattr(tiles_pkg, "tile_scene", flaky)
+    assert pipeline.tile_scene_flow(sid)["points"] > 0
+    assert calls["n"] == 2
+
+    sid2 = ingest_mission(cat, settings, _missions(small_site)[1], "demo").scene_id
+
+    def broken(*a, **k):
+        raise OSError("store unreachable")
+
+    monkeypatch.setattr(tiles_pkg, "tile_scene", broken)
+    state = pipeline.tile_scene_flow(sid2, return_state=True)
+    assert state.is_failed()
+    failed = [r for r in stage_runs(cat, subject=f"scene:{sid2}") if r["status"] == "failed"]
+    assert failed and "store unreachable" in failed[-1]["error"] and failed[-1]["run_id"]
+    with cat.transaction() as s:
+        assert s.get(Scene, sid2).status == "registered"
+        assert s.execute(sa.select(sa.func.count(Node.id)).where(Node.scene_id == sid2)).scalar_one() == 0
+    assert not (settings.store_dir / "tiles" / f"scene-{sid2}.zarr").exists()
+    monkeypatch.setattr(tiles_pkg, "tile_scene", real)
+    assert pipeline.tile_scene_flow(sid2)["points"] > 0
+    cat.dispose()
+
+
+def test_upload_event_reaches_the_api(harness, tmp_path) -> None:
+    from prefect.settings import PREFECT_API_URL
+
+    from siteline.cli.watch import post_events, upload_event
+
+    post_events(PREFECT_API_URL.value(), [upload_event(tmp_path / "m9", "demo")])
+
+
+def test_dask_runner_gives_the_same_tiles_and_labels(harness, small_site, tmp_path, monkeypatch) -> None:
+    import pipeline
+    from prefect_dask import DaskTaskRunner
+
+    from siteline.catalog import open_catalog
+    from siteline.ingest.mission import ingest_mission
+
+    results = {}
+    for kind in ("threads", "dask"):
+        settings = _home(tmp_path / kind, small_site, monkeypatch)
+        cat = open_catalog(settings)
+        for m in _missions(small_site):
+            ingest_mission(cat, settings, m, "demo")
+        cat.dispose()
+        if kind == "dask":
+            runner = DaskTaskRunner(
+                cluster_kwargs={
+                    "n_workers": 2,
+                    "threads_per_worker": 1,
+                    "host": "127.0.0.1",
+                    "dashboard_address": None,
+                }
+            )
+            flows = (
+                pipeline.tile_scene_flow.with_options(task_runner=runner),
+                pipeline.process_pair_flow.with_options(task_runner=runner),
+            )
+        else:
+            flows = (pipeline.tile_scene_flow, pipeline.process_pair_flow)
+        tiles = [flows[0](sid)["checksum"] for sid in (1, 2)]
+        pair = flows[1](1, SMALL)
+        results[kind] = (tiles, pair["labels"], pair["radius_m"])
+    assert results["threads"] == results["dask"]
