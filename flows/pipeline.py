@@ -98,11 +98,11 @@ def tile_task(scene_id: int) -> dict | None:
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def process_pair_task(pair_id: int, params: dict | None) -> dict:
+def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
     from siteline.pairs import PairParams, process_pair
 
     p = PairParams.from_dict(params) if params else PairParams()
-    key = artifact_key("pair", pair_id, "progress")
+    key = artifact_key("progress", site, "pair", pair_id)
     progress_id = create_progress_artifact(0.0, key=key, description=f"renders of pair {pair_id}")
     done = {"n": 0}
 
@@ -155,6 +155,16 @@ def _site_of_scene(scene_id: int) -> str:
         with cat.transaction() as s:
             scene = s.get(Scene, scene_id)
             return s.get(Site, scene.site_id).name
+    finally:
+        cat.dispose()
+
+
+def _site_of_pair(pair_id: int) -> str:
+    settings = load_settings()
+    cat = open_catalog(settings)
+    try:
+        with cat.transaction() as s:
+            return s.get(Site, s.get(Pair, pair_id).site_id).name
     finally:
         cat.dispose()
 
@@ -238,7 +248,7 @@ def tile_scene_flow(scene_id: int) -> dict | None:
 
 @flow(name="process-pair", flow_run_name="process-pair-{pair_id}", task_runner=task_runner())
 def process_pair_flow(pair_id: int, params: dict | None = None) -> dict:
-    out = process_pair_task(pair_id, params)
+    out = process_pair_task(pair_id, params, _site_of_pair(pair_id))
     _pair_dashboards(out)
     return out
 
@@ -303,7 +313,7 @@ def process_scene_pairs_flow(
     finally:
         cat.dispose()
     with tags(f"site:{site}"):
-        futures = [process_pair_task.submit(pid, params) for pid in pair_ids]
+        futures = [process_pair_task.submit(pid, params, site) for pid in pair_ids]
         outs = [f.result() for f in futures]
     for out in outs:
         _pair_dashboards(out)

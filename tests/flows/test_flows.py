@@ -78,7 +78,7 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
         k.startswith("mission-demo-") for k in keys
     )
     assert any(k.startswith("scene-demo-") for k in keys)
-    assert "pair-demo-1" in keys and "renders-demo-1" in keys and "pair-1-progress" in keys
+    assert "pair-demo-1" in keys and "renders-demo-1" in keys and "progress-demo-pair-1" in keys
     assert "release-demo-flowrel-1-0-0" in keys
     from siteline.catalog import open_catalog
     from siteline.catalog.stages import stage_runs
