@@ -8,6 +8,27 @@ from scipy.spatial import cKDTree
 UNCHANGED, CHANGED, IGNORED = 0, 1, 255
 
 
+NN_BACKENDS = ("pykdtree", "ckdtree")
+
+
+def nearest(b_xyz: np.ndarray, a_xyz: np.ndarray, radius_m: float, backend: str = "pykdtree") -> tuple[np.ndarray, np.ndarray]:
+    """Distance to and index of each query's nearest point of ``b_xyz`` within ``radius_m`` (inf and
+    an out-of-range index beyond it). pykdtree works in float32 site-local coordinates (the faster
+    here, bench/release.py); ckdtree in float64 on every core."""
+    if backend == "pykdtree":
+        from pykdtree.kdtree import KDTree
+
+        tree = KDTree(np.ascontiguousarray(b_xyz, dtype=np.float32))
+        d, i = tree.query(np.ascontiguousarray(a_xyz, dtype=np.float32), k=1, distance_upper_bound=radius_m)
+        d = np.asarray(d, dtype=np.float64)
+        d[d > radius_m] = np.inf
+        return d, np.asarray(i, dtype=np.int64)
+    if backend == "ckdtree":
+        tree = cKDTree(np.asarray(b_xyz, dtype=np.float64))
+        return tree.query(np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1)
+    raise ValueError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
+
+
 def change_flags(
     a_xyz: np.ndarray,
     a_cls: np.ndarray,
@@ -15,6 +36,7 @@ def change_flags(
     b_cls: np.ndarray,
     radius_m: float,
     ignored: np.ndarray,
+    backend: str = "pykdtree",
 ) -> np.ndarray:
     """Change of each point of A against B, (N,) uint8: 0 unchanged, 1 changed, 255 ignored.
 
@@ -31,8 +53,7 @@ def change_flags(
     if not b_keep.any():
         out[live] = CHANGED
         return out
-    tree = cKDTree(np.asarray(b_xyz[b_keep], dtype=np.float64))
-    dist, idx = tree.query(np.asarray(a_xyz[live], dtype=np.float64), k=1, distance_upper_bound=radius_m)
+    dist, idx = nearest(b_xyz[b_keep], a_xyz[live], radius_m, backend)
     found = np.isfinite(dist)
     same = np.zeros(len(dist), dtype=bool)
     same[found] = b_cls[b_keep][idx[found]] == a_cls[live][found]
