@@ -7,7 +7,7 @@ import sys
 import typer
 
 from siteline import __version__
-from siteline.cli import db, demo, ingest, release, render, site, synth, watch
+from siteline.cli import bench, db, demo, ingest, release, render, site, synth, watch
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
@@ -33,6 +33,7 @@ app.add_typer(release.app, name="release")
 app.command("train")(release.train_cmd)
 app.command("evaluate")(release.evaluate_cmd)
 app.command("watch")(watch.watch)
+app.add_typer(bench.app, name="bench")
 
 
 @app.callback()

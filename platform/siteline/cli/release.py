@@ -60,6 +60,11 @@ def build(
         None, "--version", help="Version (default: next, major bump when labels or pairs change)."
     ),
     device: str = typer.Option("cpu", "--device", help="torch device for rendering."),
+    preset: str | None = typer.Option(
+        None,
+        "--preset",
+        help="fast, balanced or exact (docs/performance.md): sets scale, point size, LOD and radius.",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
@@ -71,6 +76,10 @@ def build(
         seed=seed,
         min_coverage=min_coverage,
     )
+    if preset is not None:
+        from siteline.presets import preset_params
+
+        params = preset_params(preset, params)
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
         info = build_release(
             cat,
@@ -80,6 +89,7 @@ def build(
             params,
             pairs or None,
             version,
+            preset=preset,
             progress=_progress(bar),
             device=device,
         )

@@ -11,7 +11,9 @@ UNCHANGED, CHANGED, IGNORED = 0, 1, 255
 NN_BACKENDS = ("pykdtree", "ckdtree")
 
 
-def nearest(b_xyz: np.ndarray, a_xyz: np.ndarray, radius_m: float, backend: str = "pykdtree") -> tuple[np.ndarray, np.ndarray]:
+def nearest(
+    b_xyz: np.ndarray, a_xyz: np.ndarray, radius_m: float, backend: str = "pykdtree"
+) -> tuple[np.ndarray, np.ndarray]:
     """Distance to and index of each query's nearest point of ``b_xyz`` within ``radius_m`` (inf and
     an out-of-range index beyond it). pykdtree works in float32 site-local coordinates (the faster
     here, bench/release.py); ckdtree in float64 on every core."""
