@@ -42,7 +42,8 @@ def test_change_flags_equal_brute_force_on_small_scenes() -> None:
     bc = np.concatenate([ac[:400], rng.choice(np.array([1, 2, 255], np.uint8), 100)])
     bc[:50] = 4  # the same place, another class
     for r in (0.05, 0.3):
-        assert np.array_equal(change_flags(a, ac, b, bc, r, IGN), _brute(a, ac, b, bc, r))
+        for backend in ("pykdtree", "ckdtree"):
+            assert np.array_equal(change_flags(a, ac, b, bc, r, IGN, backend), _brute(a, ac, b, bc, r))
 
 
 def test_edge_cases() -> None:

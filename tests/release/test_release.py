@@ -158,3 +158,16 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     b = render_pair_view(t2, t1, cam, 1.0, 1)
     assert np.array_equal(a.mask, b.mask) and (a.mask != 255).any()
     assert np.array_equal(a.a, b.b)
+
+
+def test_preset_is_applied_and_recorded(built) -> None:
+    from siteline.presets import PRESETS, preset_params
+
+    settings, cat, _ = built
+    p = preset_params("fast", PairParams(views=3, min_coverage=0.2))
+    assert (p.scale, p.point_size_px, p.lod_factor) == (0.125, 3, 2.0) and p.views == 3
+    with pytest.raises(ReleaseError, match="unknown preset"):
+        preset_params("turbo")
+    info = build_release(cat, settings, "demo", "presetrel", p, preset="fast")
+    lin = read_manifest(info.root)["lineage"]
+    assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
