@@ -46,3 +46,13 @@ def make_home(
         add_site(s, make_site_spec(name, SYNTH.crs, SYNTH.origin, fence))
     cat.dispose()
     return settings
+
+
+def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
+    """Run the siteline CLI in-process; return (exit status, stdout, stderr)."""
+    from siteline.cli import main
+
+    capsys.readouterr()
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err

@@ -5,17 +5,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from siteline.cli import main
+from sitehelpers import run_cli
+
 from siteline.synth import SynthConfig, write_site
 
 REAL_PHOTO = Path(__file__).resolve().parents[1] / "data" / "DJI_H20T.jpg"
 
 
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
+run = run_cli
 
 
 def test_photo_inspect_real_dji_photo(capsys) -> None:

@@ -6,20 +6,16 @@ import json
 
 import numpy as np
 from PIL import Image
+from sitehelpers import run_cli
 
 from siteline.cameras import Camera
-from siteline.cli import main
 from siteline.fence import fence_geojson
 from siteline.lasio import write_las
 
 ORIGIN = (445000.0, 5030000.0, 80.0)
 
 
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
+run = run_cli
 
 
 def _cloud(tmp_path):

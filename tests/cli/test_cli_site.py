@@ -6,15 +6,9 @@ import json
 
 import pytest
 import sqlalchemy as sa
+from sitehelpers import run_cli
 
-from siteline.cli import main
-
-
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    capsys.readouterr()
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
+run = run_cli
 
 
 @pytest.fixture
