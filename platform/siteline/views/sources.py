@@ -16,15 +16,12 @@ class PointSource(Protocol):
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
         """(N, 3) float32 site-local points a render of ``camera`` at ``scale`` needs."""
-        ...
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         """(M,) distance in metres from each query (M, 3) to the nearest point."""
-        ...
 
     def count_above(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
         """(M,) number of points higher than each query within ``radius_m`` horizontally."""
-        ...
 
 
 class ArrayPointSource:
