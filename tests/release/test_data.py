@@ -27,10 +27,9 @@ def test_dataset_samples(built) -> None:
 
 def test_dataloader_with_two_workers(built) -> None:
     _, _, pub = built
-    ds = ChangeDetectionDataset(
-        pub.root, "train", TrainTransforms(crop=64, generator=torch.Generator().manual_seed(0))
-    )
-    batches = list(DataLoader(ds, batch_size=2, num_workers=2))
+    ds = ChangeDetectionDataset(pub.root, "train", TrainTransforms(crop=64, seed=0))
+    # spawned workers: forking a process that runs threads (zarr, Prefect) is unsafe
+    batches = list(DataLoader(ds, batch_size=2, num_workers=2, multiprocessing_context="spawn"))
     assert sum(len(b["id"]) for b in batches) == len(ds)
     assert batches[0]["image"].shape[1:] == (2, 3, 64, 64) and batches[0]["mask"].shape[1:] == (1, 64, 64)
 

@@ -53,8 +53,7 @@ def train(
 ) -> dict[str, Any]:
     """Train on the release's train split; write ``model.pt`` and ``train_log.json`` into ``out_dir``."""
     torch.manual_seed(seed)
-    gen = torch.Generator().manual_seed(seed)
-    ds = ChangeDetectionDataset(root, "train", TrainTransforms(crop=crop, generator=gen))
+    ds = ChangeDetectionDataset(root, "train", TrainTransforms(crop=crop, seed=seed))
     if len(ds) == 0:
         raise ReleaseError(f"release {root} has no training images.")
     loader = DataLoader(
@@ -65,6 +64,8 @@ def train(
         drop_last=len(ds) >= batch_size,
         generator=torch.Generator().manual_seed(seed),
         persistent_workers=workers > 0,
+        # spawned, not forked: zarr and Prefect run threads a forked worker must not inherit
+        multiprocessing_context="spawn" if workers > 0 else None,
     )
     model = FCSiamDiff().to(device)
     loss_fn = torch.nn.CrossEntropyLoss(weight=class_weights(root).to(device), ignore_index=IGNORE)

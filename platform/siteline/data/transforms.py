@@ -3,7 +3,7 @@ rotation, which would turn cranes upside down)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -12,14 +12,31 @@ import torch
 class TrainTransforms:
     """Random crop to ``crop`` pixels (padding the mask with 255 when the image is smaller), horizontal
     and vertical flips (p=0.5 each, same for both images and the mask), and per-image brightness /
-    contrast jitter of +-``jitter``. ``generator`` makes it reproducible."""
+    contrast jitter of +-``jitter``. ``seed`` makes it reproducible; each DataLoader worker draws from
+    its own stream (seed + worker id), so the object pickles into spawned workers."""
 
     crop: int = 256
     jitter: float = 0.2
-    generator: torch.Generator | None = None
+    seed: int | None = None
+    _generator: torch.Generator | None = field(default=None, init=False, repr=False)
+    _worker: int | None = field(default=None, init=False, repr=False)
+
+    def __getstate__(self) -> dict:
+        return {
+            "crop": self.crop,
+            "jitter": self.jitter,
+            "seed": self.seed,
+            "_generator": None,
+            "_worker": None,
+        }
 
     def _rand(self) -> float:
-        return float(torch.rand((), generator=self.generator))
+        info = torch.utils.data.get_worker_info()
+        worker = info.id if info is not None else -1
+        if self.seed is not None and (self._generator is None or self._worker != worker):
+            self._generator = torch.Generator().manual_seed(self.seed + worker + 1)
+            self._worker = worker
+        return float(torch.rand((), generator=self._generator))
 
     def __call__(self, sample: dict) -> dict:
         img, mask = sample["image"], sample["mask"]
