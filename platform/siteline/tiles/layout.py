@@ -36,7 +36,9 @@ class TileSpec:
     """How a scene is tiled; stored in the Zarr group's attributes and the scene's statistics.
 
     quantum_m: coordinate quantum (1 mm). tile_size_m: the site grid. root_spacing_m: spacing of
-    level 0 (default tile / 8). min_spacing_m: the last level takes every remaining point once the
+    level 0 (default: the largest power-of-two number of quanta within tile / 8, 4.096 m for 50 m
+    tiles, so every level's cube is a whole number of quanta and nests in the level above).
+    min_spacing_m: the last level takes every remaining point once the
     spacing would fall below this. chunk_points / shard_points: Zarr inner chunk and shard length.
     clevel: blosc-zstd level.
     """
@@ -62,7 +64,9 @@ class TileSpec:
 
     @property
     def level0_spacing_m(self) -> float:
-        return self.root_spacing_m if self.root_spacing_m is not None else self.tile_size_m / 8.0
+        if self.root_spacing_m is not None:
+            return self.root_spacing_m
+        return 2.0 ** math.floor(math.log2(self.tile_size_m / 8.0 / self.quantum_m)) * self.quantum_m
 
     def spacing(self, level: int) -> float:
         return self.level0_spacing_m / 2.0**level
