@@ -56,3 +56,20 @@ def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
     code = main(list(argv))
     out, err = capsys.readouterr()
     return code, out, err
+
+
+def cli_create_site(capsys, fence: Path, *extra: str, name: str = "demo") -> tuple[int, str, str]:
+    """``siteline site create`` of the synthetic site's origin and CRS with ``fence``."""
+    return run_cli(
+        capsys,
+        "site",
+        "create",
+        name,
+        "--crs",
+        SYNTH.crs,
+        "--origin",
+        *(str(v) for v in SYNTH.origin),
+        "--fence",
+        str(fence),
+        *extra,
+    )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from sitehelpers import run_cli
+from sitehelpers import cli_create_site, run_cli
 
 from siteline.synth import SynthConfig, write_site
 
@@ -59,20 +59,7 @@ def test_ingest_cli_scene_and_mission_commands(home, capsys, tmp_path) -> None:
     site = tmp_path / "site"
     write_site(site, SynthConfig(epochs=2, density_pts_m2=2.0, seed=4))
     assert run(capsys, "init")[0] == 0
-    code, _, err = run(
-        capsys,
-        "site",
-        "create",
-        "demo",
-        "--crs",
-        "EPSG:32618",
-        "--origin",
-        "445000",
-        "5030000",
-        "80",
-        "--fence",
-        str(site / "fence.geojson"),
-    )
+    code, _, err = cli_create_site(capsys, site / "fence.geojson")
     assert code == 0, err
     missions = sorted((site / "missions").iterdir())
     code, out, err = run(capsys, "ingest", str(missions[0]), "--site", "demo", "--json")

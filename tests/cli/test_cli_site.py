@@ -6,7 +6,7 @@ import json
 
 import pytest
 import sqlalchemy as sa
-from sitehelpers import run_cli
+from sitehelpers import cli_create_site, run_cli
 
 run = run_cli
 
@@ -44,21 +44,7 @@ def test_site_create_list_show_json(initialised, capsys, tmp_path) -> None:
             }
         )
     )
-    code, out, err = run(
-        capsys,
-        "site",
-        "create",
-        "demo",
-        "--crs",
-        "EPSG:32618",
-        "--origin",
-        "445000",
-        "5030000",
-        "80",
-        "--fence",
-        str(fence),
-        "--json",
-    )
+    code, out, err = cli_create_site(capsys, fence, "--json")
     assert code == 0, err
     created = json.loads(out)
     assert created["origin"] == [445000.0, 5030000.0, 80.0]

@@ -36,6 +36,7 @@ from siteline.release.manifest import (
     verify_files,
     write_manifest,
 )
+from siteline.release.query import find_release, get_release
 from siteline.release.splits import split_pairs
 
 Progress = Callable[[str, int, int | None], None]
@@ -158,9 +159,7 @@ def build_release(
         lineage_key = {"pairs": chosen, "params": params.to_dict()}
         if version is None:
             version = next_version(s, name, lineage_key)
-        existing = s.execute(
-            sa.select(Release).where(Release.name == name, Release.version == version)
-        ).scalar_one_or_none()
+        existing = find_release(s, name, version)
         if existing is not None and existing.status == "published":
             raise ImmutableError(
                 f"release {name} {version} is already published and is never rewritten: build another "
@@ -266,9 +265,7 @@ def _record_draft(
     run_id: str | None = None,
 ) -> None:
     with catalog.transaction() as s:
-        rel = s.execute(
-            sa.select(Release).where(Release.name == name, Release.version == version)
-        ).scalar_one_or_none()
+        rel = find_release(s, name, version)
         if rel is None:
             rel = Release(name=name, version=version)
             s.add(rel)
@@ -321,9 +318,7 @@ def publish_release(
 ) -> ReleaseInfo:
     """Verify the draft's checksums, move it into place, make it read-only, mark it published."""
     with catalog.transaction() as s:
-        rel = s.execute(
-            sa.select(Release).where(Release.name == name, Release.version == version)
-        ).scalar_one_or_none()
+        rel = find_release(s, name, version)
         if rel is None:
             raise NotFoundError(f"no release {name} {version}; build it first (`siteline release build`).")
         if rel.status == "published":
@@ -343,9 +338,7 @@ def publish_release(
     os.replace(draft, final)
     try:
         with catalog.transaction() as s:
-            rel = s.execute(
-                sa.select(Release).where(Release.name == name, Release.version == version)
-            ).scalar_one()
+            rel = get_release(s, name, version)
             rel.status = "published"
             rel.published_at = datetime.now(UTC)
             s.add(completed("publish_release", f"release:{name}:{version}", {}, rel.published_at, run_id))
@@ -364,9 +357,5 @@ def publish_release(
 
 def release_root(catalog: Catalog, name: str, version: str) -> tuple[Path, str]:
     with catalog.transaction() as s:
-        rel = s.execute(
-            sa.select(Release).where(Release.name == name, Release.version == version)
-        ).scalar_one_or_none()
-        if rel is None:
-            raise NotFoundError(f"no release {name} {version}; see `siteline release list`.")
+        rel = get_release(s, name, version)
         return Path(rel.root_uri), rel.status

@@ -13,10 +13,16 @@ from siteline.errors import NotFoundError
 from siteline.release.manifest import read_manifest
 
 
-def get_release(session: Session, name: str, version: str) -> Release:
-    rel = session.execute(
+def find_release(session: Session, name: str, version: str) -> Release | None:
+    """The release row ``name`` ``version``, or None."""
+    return session.execute(
         sa.select(Release).where(Release.name == name, Release.version == version)
     ).scalar_one_or_none()
+
+
+def get_release(session: Session, name: str, version: str) -> Release:
+    """The release row ``name`` ``version``; :class:`NotFoundError` when there is none."""
+    rel = find_release(session, name, version)
     if rel is None:
         raise NotFoundError(f"no release {name} {version}; see `siteline release list`.")
     return rel

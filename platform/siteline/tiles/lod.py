@@ -72,15 +72,20 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, seed: int) -> np.ndarray:
     return levels
 
 
-def _assign_by_sorting(pts: np.ndarray, order: np.ndarray, cells: list[int], last: int, levels: np.ndarray) -> np.ndarray:
+def _assign_by_sorting(
+    pts: np.ndarray, order: np.ndarray, cells: list[int], last: int, levels: np.ndarray
+) -> np.ndarray:
     remaining = order
     for level in range(last):
         if remaining.size == 0:
             return levels
         cell = cells[level]
         p = pts[remaining]
-        key = (np.floor_divide(p[:, 0], cell) + (1 << 20)) | ((np.floor_divide(p[:, 1], cell) + (1 << 20)) << 21) | (
-            np.floor_divide(p[:, 2], cell) << 42)
+        key = (
+            (np.floor_divide(p[:, 0], cell) + (1 << 20))
+            | ((np.floor_divide(p[:, 1], cell) + (1 << 20)) << 21)
+            | (np.floor_divide(p[:, 2], cell) << 42)
+        )
         _, first = np.unique(key, return_index=True)  # first occurrence in the shuffled order
         levels[remaining[first]] = level
         keep = np.ones(remaining.size, dtype=bool)
