@@ -28,11 +28,12 @@ from prefect.runtime import flow_run
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from runner import task_runner  # noqa: E402
 
+from siteline import stores  # noqa: E402
 from siteline.catalog import open_catalog  # noqa: E402
 from siteline.catalog.models import Pair, Scene, Site  # noqa: E402
 from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import load_settings  # noqa: E402
-from siteline.errors import SitelineError  # noqa: E402
+from siteline.errors import SitelineError, StoreError  # noqa: E402
 
 RELEASE_POLICIES = ("every-pair", "on-demand")
 
@@ -43,9 +44,11 @@ def artifact_key(*parts: Any) -> str:
 
 
 def transient(task, task_run, state) -> bool:  # noqa: ANN001
-    """Retry I/O and database hiccups, never bad input (a SitelineError says what to fix)."""
+    """Retry I/O, store and database hiccups, never bad input (a SitelineError says what to fix)."""
     try:
         state.result()
+    except StoreError:
+        return True
     except SitelineError:
         return False
     except Exception:
@@ -119,15 +122,15 @@ def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
         "t2": out.t2,
         "radius_m": out.radius_m,
         "views": out.view_count,
-        "root": str(out.root),
+        "root": out.root,
         "labels": out.labels.get("counts"),
         "samples": [
             {
                 "view": v["index"],
                 "strategy": v["strategy"],
                 "change_ratio": v["change_ratio"],
-                "a": str(out.root / "A" / v["file"]),
-                "mask": str(out.root / "label" / v["file"]),
+                "a": stores.join(out.root, "A", v["file"]),
+                "mask": stores.join(out.root, "label", v["file"]),
             }
             for v in out.views[:6]
         ],

@@ -5,6 +5,10 @@ Environment variables (read here and nowhere else):
 - ``SITELINE_HOME``: folder holding the SQLite catalog and the data stores (default ``~/.siteline``).
 - ``SITELINE_DATABASE_URL``: SQLAlchemy URL of the catalog; overrides the SQLite file in the home,
   e.g. ``postgresql+psycopg://postgres@127.0.0.1:5432/siteline`` for shared use.
+- ``SITELINE_STORE_URL``: root of the data stores, a local folder or an fsspec URL such as
+  ``s3://bucket/siteline`` that workers on several machines share (default ``$SITELINE_HOME/stores``).
+  The file system's endpoint and credentials come from fsspec's configuration (e.g.
+  ``FSSPEC_S3='{"endpoint_url": "http://127.0.0.1:9000", "key": "...", "secret": "..."}'``).
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from siteline.errors import ConfigError
+from siteline.stores import Store
 
 CATALOG_FILENAME = "catalog.sqlite"
 
@@ -22,17 +27,20 @@ CATALOG_FILENAME = "catalog.sqlite"
 class Settings:
     """Where siteline keeps its catalog and stores.
 
-    home: folder for the default SQLite catalog and the data stores.
+    home: folder for the default SQLite catalog, releases, and local staging and caches.
     database_url: SQLAlchemy URL of the catalog.
+    store_url: root of the data stores (mission blobs, tiles, labels, renders): a local folder or an
+    fsspec URL; empty means ``home/stores``.
     """
 
     home: Path
     database_url: str
+    store_url: str = ""
 
     @property
-    def store_dir(self) -> Path:
-        """Content-addressed mission files and tile stores live under here."""
-        return self.home / "stores"
+    def store(self) -> Store:
+        """The data stores; folders for remote stores are built under ``home/staging`` first."""
+        return Store(self.store_url or str(self.home / "stores"), self.home / "staging")
 
     @property
     def is_sqlite(self) -> bool:
@@ -59,4 +67,9 @@ def load_settings(environ: dict[str, str] | None = None) -> Settings:
             f"SITELINE_DATABASE_URL={url!r} is not a database URL: use e.g. "
             "'postgresql+psycopg://postgres@127.0.0.1:5432/siteline' or 'sqlite:////path/catalog.sqlite'."
         )
-    return Settings(home=home.resolve(), database_url=url)
+    store = env.get("SITELINE_STORE_URL", "").strip()
+    if store.startswith("file://"):
+        store = store[len("file://") :]
+    if store and "://" not in store:
+        store = str(Path(store).expanduser().resolve())
+    return Settings(home=home.resolve(), database_url=url, store_url=store)

@@ -86,3 +86,8 @@ class TileError(SitelineError, RuntimeError):
 
 class ReleaseError(SitelineError, ValueError):
     """A release cannot be built, published or verified."""
+
+
+class StoreError(SitelineError, OSError):
+    """The data store (a local folder or an fsspec URL) cannot be read or written as asked; often
+    transient on a remote store, so orchestration retries it."""

@@ -136,7 +136,7 @@ def test_retry_then_success_and_permanent_failure_recorded(
     with cat.transaction() as s:
         assert s.get(Scene, sid2).status == "registered"
         assert s.execute(sa.select(sa.func.count(Node.id)).where(Node.scene_id == sid2)).scalar_one() == 0
-    assert not (settings.store_dir / "tiles" / f"scene-{sid2}.zarr").exists()
+    assert not (Path(settings.store.url) / "tiles" / f"scene-{sid2}.zarr").exists()
     monkeypatch.setattr(tiles_pkg, "tile_scene", real)
     assert pipeline.tile_scene_flow(sid2)["points"] > 0
     cat.dispose()

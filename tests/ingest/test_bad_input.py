@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import shutil
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,7 +32,7 @@ def _assert_nothing_written(cat, home) -> None:
     with cat.transaction() as s:
         for model in (Mission, MissionFile, Scene, Camera, StageRun):
             assert s.execute(sa.select(sa.func.count()).select_from(model)).scalar_one() == 0, model
-    blobs = home.store_dir / "blobs"
+    blobs = Path(home.store.url) / "blobs"
     assert not blobs.exists() or not [p for p in blobs.rglob("*") if p.is_file()]
 
 

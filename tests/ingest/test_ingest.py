@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import threading
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -64,13 +65,13 @@ def test_georegistration_recovers_true_poses(cat, home, synth_site) -> None:
 def test_copy_store_holds_every_file_and_reference_keeps_paths(cat, home, synth_site, tmp_path) -> None:
     mission = epoch_dirs(synth_site)[0]
     ingest_mission(cat, home, mission, "demo")
-    blobs = [p for p in (home.store_dir / "blobs").rglob("*") if p.is_file()]
+    blobs = [p for p in (Path(home.store.url) / "blobs").rglob("*") if p.is_file()]
     n_files = sum(1 for p in mission.rglob("*") if p.is_file())
     assert len(blobs) == n_files + 1  # every file, plus the scene's alignment sample
     other = make_home(tmp_path / "ref", site_dir=synth_site)
     c2 = open_catalog(other)
     ingest_mission(c2, other, mission, "demo", IngestOptions(storage="reference"))
-    assert len([p for p in (other.store_dir / "blobs").rglob("*") if p.is_file()]) == 1
+    assert len([p for p in (Path(other.store.url) / "blobs").rglob("*") if p.is_file()]) == 1
     with c2.transaction() as s:
         m = s.execute(sa.select(Mission)).scalar_one()
         assert m.storage == "reference" and m.root_uri == str(mission.resolve())

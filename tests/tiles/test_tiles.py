@@ -225,7 +225,7 @@ def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> 
         [sys.executable, "-c", KILL_SCRIPT, str(sid)], env=_env(settings), capture_output=True
     )
     assert proc.returncode == -9, proc.stderr.decode()[-2000:]
-    tiles_dir = settings.store_dir / "tiles"
+    tiles_dir = Path(settings.store.url) / "tiles"
     assert not (tiles_dir / f"scene-{sid}.zarr").exists()
     cat = open_catalog(settings)
     with cat.transaction() as s:

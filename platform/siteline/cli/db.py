@@ -21,7 +21,7 @@ def init() -> None:
     """Create SITELINE_HOME and its stores, and migrate the catalog to the newest revision."""
     cfg = settings()
     cfg.home.mkdir(parents=True, exist_ok=True)
-    cfg.store_dir.mkdir(parents=True, exist_ok=True)
+    cfg.store.ensure()
     engine = _engine()
     try:
         migrate.upgrade(engine, "head")

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
+from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
 from siteline.catalog.scenes import add_cameras, ensure_pair, mission_by_manifest, neighbours, scene_at
@@ -28,7 +29,7 @@ from siteline.errors import MissionError, PhotoError, RegistrationError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
 from siteline.ingest.photos import PhotoMeta, read_photo_meta
 from siteline.ingest.pointcloud import LasScan, scan_las
-from siteline.ingest.store import blob_path, put_blob, remove_blobs
+from siteline.ingest.store import blob_uri, put_blob, remove_blobs
 from siteline.register.georegister import georegister
 from siteline.register.icp import point_to_plane_icp
 from siteline.register.xmp import camera_from_photo, photo_center_crs
@@ -177,8 +178,8 @@ def _load_sample(settings: Settings, scene: Scene) -> np.ndarray | None:
     sha = (scene.statistics or {}).get("stable_sample_sha256")
     if not sha:
         return None
-    path = blob_path(settings.store_dir, sha)
-    return np.load(path) if path.exists() else None
+    uri = blob_uri(settings.store, sha)
+    return np.load(io.BytesIO(stores.read_bytes(uri))) if stores.exists(uri) else None
 
 
 def _sample_blob(sample: np.ndarray) -> tuple[bytes, str]:
@@ -279,17 +280,14 @@ def ingest_mission(
     new_blobs: list[str] = []
     try:
         sample_bytes, sample_sha = _sample_blob(scan.stable_sample)
-        dest = blob_path(settings.store_dir, sample_sha)
-        if not dest.exists():
-            dest.parent.mkdir(parents=True, exist_ok=True)
-            tmp = dest.with_name(dest.name + ".tmp")
-            tmp.write_bytes(sample_bytes)
-            tmp.replace(dest)
+        dest = blob_uri(settings.store, sample_sha)
+        if not stores.exists(dest):
+            stores.put_bytes(sample_bytes, dest)
             new_blobs.append(sample_sha)
         if opts.storage == "copy":
             rep.start("storing", sum(e.size_bytes for e in entries))
             for e in entries:
-                if put_blob(settings.store_dir, root / e.path, e.sha256):
+                if put_blob(settings.store, root / e.path, e.sha256):
                     new_blobs.append(e.sha256)
                 rep.advance("storing", e.size_bytes)
         result = _commit(
@@ -315,7 +313,7 @@ def ingest_mission(
                 s.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(new_blobs))).scalars()
             )
         # content another mission committed meanwhile stays; only this ingest's own blobs go
-        remove_blobs(settings.store_dir, [b for b in new_blobs if b not in shared])
+        remove_blobs(settings.store, [b for b in new_blobs if b not in shared])
         raise
     return result
 

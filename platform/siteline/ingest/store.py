@@ -1,47 +1,41 @@
-"""The content-addressed file store under ``SITELINE_HOME/stores/blobs`` (sha256 names)."""
+"""The content-addressed file store under ``<store>/blobs`` (sha256 names)."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import uuid
 from pathlib import Path
 
-from siteline.errors import MissionError
+from siteline import stores
+from siteline.errors import StoreError
+from siteline.stores import Store
 
 
-def blob_path(store_dir: Path, sha256: str) -> Path:
-    return Path(store_dir) / "blobs" / sha256[:2] / sha256[2:]
+def blob_uri(store: Store, sha256: str) -> str:
+    return store.uri("blobs", sha256[:2], sha256[2:])
 
 
-def put_blob(store_dir: Path, source: Path, sha256: str) -> bool:
-    """Copy ``source`` into the store under its hash (temporary name, fsync, rename); return whether
-    it was new. An existing blob is left as it is."""
-    dest = blob_path(store_dir, sha256)
-    if dest.exists():
+def put_blob(store: Store, source: Path, sha256: str) -> bool:
+    """Copy ``source`` into the store under its hash (whole or not at all); return whether it was new.
+    An existing blob is left as it is."""
+    dest = blob_uri(store, sha256)
+    if stores.exists(dest):
         return False
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    # unique temporary name: concurrent ingests may copy the same content at the same time
-    tmp = dest.with_name(f".{dest.name}.tmp-{uuid.uuid4().hex}")
-    try:
-        with open(source, "rb") as src, open(tmp, "wb") as out:
-            shutil.copyfileobj(src, out, 8 * 2**20)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(tmp, dest)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise MissionError(f"cannot copy {source} into the store {store_dir}: {exc}") from exc
+    stores.put_file(source, dest)
     return True
 
 
-def remove_blobs(store_dir: Path, shas: list[str]) -> None:
+def remove_blobs(store: Store, shas: list[str]) -> None:
     for sha in shas:
-        blob_path(store_dir, sha).unlink(missing_ok=True)
+        stores.remove(blob_uri(store, sha))
 
 
-def resolve_file(store_dir: Path, storage: str, root_uri: str, rel: str, sha256: str) -> Path:
-    """Where a mission file's bytes are: its blob (copied missions) or its original path (referenced)."""
+def resolve_file(store: Store, storage: str, root_uri: str, rel: str, sha256: str) -> Path:
+    """A local path holding a mission file's bytes: its blob (copied missions; fetched into the local
+    cache from a remote store) or its original path (referenced missions)."""
     if storage == "copy":
-        return blob_path(store_dir, sha256)
+        uri = blob_uri(store, sha256)
+        if not stores.exists(uri):
+            raise StoreError(
+                f"mission file {rel} (sha256 {sha256[:12]}) is missing from the store {store.url}."
+            )
+        return store.local_file(uri, sha256)
     return Path(root_uri) / rel

@@ -5,15 +5,14 @@ level order), 0 unchanged, 1 changed or 255 ignored."""
 from __future__ import annotations
 
 import hashlib
-import os
 import shutil
 import time
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from siteline import stores
 from siteline.errors import TileError
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
 from siteline.tiles.reader import SceneTiles
@@ -87,31 +86,28 @@ def write_labels(
     t1: SceneTiles, t2: SceneTiles, radius_m: float, ignored: np.ndarray, out: Path
 ) -> LabelResult:
     """Compute both directions tile by tile (each tile against the other scene's points within the
-    tile's bounds plus a halo of ``radius_m``) into ``out`` (written under a temporary name, renamed)."""
+    tile's bounds plus a halo of ``radius_m``) into the new Zarr group ``out`` (removed again on an
+    error; publish it through ``siteline.stores.Store.publish`` for all-or-nothing)."""
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
         raise TileError(f"label store {out} already exists.")
     out.parent.mkdir(parents=True, exist_ok=True)
-    for stale in out.parent.glob(f".{out.name}.partial-*"):
-        shutil.rmtree(stale, ignore_errors=True)
-    partial = out.with_name(f".{out.name}.partial-{uuid.uuid4().hex[:12]}")
     import zarr
 
     try:
-        root = zarr.open_group(str(partial), mode="w")
-        c1, h1, n1 = _label_side(t1, t2, radius_m, ignored, str(partial), "t1")
-        c2, h2, n2 = _label_side(t2, t1, radius_m, ignored, str(partial), "t2")
+        root = zarr.open_group(str(out), mode="w")
+        c1, h1, n1 = _label_side(t1, t2, radius_m, ignored, str(out), "t1")
+        c2, h2, n2 = _label_side(t2, t1, radius_m, ignored, str(out), "t2")
         checksum = hashlib.sha256(f"{h1}:{h2}".encode()).hexdigest()
         root.attrs.update({"radius_m": radius_m, "counts": {"t1": c1, "t2": c2}, "checksum": checksum})
-        os.replace(partial, out)
     except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
+        shutil.rmtree(out, ignore_errors=True)
         raise
     return LabelResult(str(out), radius_m, {"t1": c1, "t2": c2}, checksum, time.perf_counter() - t0, n1 + n2)
 
 
 def attach_labels(tiles: SceneTiles, label_uri: str, side: str) -> SceneTiles:
     """Let ``tiles`` read the attribute ``change`` from a pair's label store for scene ``side``."""
-    tiles.attach("change", Path(label_uri) / side)
+    tiles.attach("change", stores.join(str(label_uri), side))
     return tiles

@@ -5,17 +5,14 @@ recorded in the catalog; a pair already processed with the same parameters is re
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from pathlib import Path
 
 import numpy as np
 import sqlalchemy as sa
 
+from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import Pair, Render, Scene, Site, View
 from siteline.catalog.scenes import scene_cameras
@@ -40,7 +37,7 @@ class PairOutput:
     t1: int
     t2: int
     radius_m: float
-    root: Path
+    root: str
     views: list[dict]
     labels: dict
 
@@ -49,8 +46,8 @@ class PairOutput:
         return len(self.views)
 
 
-def _output_root(settings: Settings, pair_id: int, params: PairParams) -> Path:
-    return settings.store_dir / "pairs" / f"pair-{pair_id}" / params.digest()
+def _output_root(settings: Settings, pair_id: int, params: PairParams) -> str:
+    return settings.store.uri("pairs", f"pair-{pair_id}", params.digest())
 
 
 def process_pair(
@@ -79,9 +76,8 @@ def process_pair(
     for sid in untiled:
         tile_scene(catalog, settings, sid)
     root = _output_root(settings, pair_id, params)
-    summary_path = root / "summary.json"
-    if summary_path.exists():
-        doc = json.loads(summary_path.read_text())
+    if stores.is_complete(root):
+        doc = json.loads(stores.read_bytes(stores.join(root, "summary.json")))
         if not pair_view_ids(catalog, pair_id, params):  # outputs landed but the catalog rows did not
             _record(
                 catalog,
@@ -106,18 +102,18 @@ def process_pair(
         radius, radius_info = auto_radius(tiles1, tiles2, params.radius_multiplier)
     else:
         radius, radius_info = params.radius_m, {"given": True}
-    label_uri = settings.store_dir / "labels" / f"pair-{pair_id}-r{int(round(radius * 1e6))}um.zarr"
-    if label_uri.exists():
-        import zarr
-
-        labels = dict(zarr.open_group(str(label_uri), mode="r").attrs)
+    label_uri = settings.store.uri("labels", f"pair-{pair_id}-r{int(round(radius * 1e6))}um.zarr")
+    if stores.is_complete(label_uri):
+        labels = dict(stores.open_group(label_uri).attrs) | {"uri": label_uri}
     else:
         if progress:
             progress("labels", 0, None)
-        labels = write_labels(tiles1, tiles2, radius, ignored, label_uri).to_dict()
+        stores.remove(label_uri)
+        with settings.store.publish(label_uri) as work:
+            labels = write_labels(tiles1, tiles2, radius, ignored, work).to_dict() | {"uri": label_uri}
     labels = labels | {"radius": radius_info}
-    attach_labels(tiles1, str(label_uri), "t1")
-    attach_labels(tiles2, str(label_uri), "t2")
+    attach_labels(tiles1, label_uri, "t1")
+    attach_labels(tiles2, label_uri, "t2")
     if not cams:
         raise ReleaseError(
             f"pair {pair_id}: the later scene {ids[1]} has no cameras to derive views from "
@@ -145,11 +141,10 @@ def process_pair(
             f"pair {pair_id}: every synthetic view was rejected ({view_set.rejected}); lower "
             "--min-coverage or check the cameras."
         )
-    partial = root.with_name(f".{root.name}.partial-{uuid.uuid4().hex[:8]}")
-    for sub in ("A", "B", "label"):
-        (partial / sub).mkdir(parents=True)
     records = []
-    try:
+    with settings.store.publish(root) as partial:
+        for sub in ("A", "B", "label"):
+            (partial / sub).mkdir(parents=True)
         for v in view_set.views:
             r = render_pair_view(
                 tiles1, tiles2, v.camera, params.scale, params.point_size_px, params.lod_factor, device
@@ -184,11 +179,6 @@ def process_pair(
             "views": records,
         }
         (partial / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-        root.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(partial, root)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
     _record(catalog, pair_id, ids, params, radius, labels, records, root, started, run_id)
     return PairOutput(pair_id, ids[0], ids[1], radius, root, records, labels)
 
@@ -201,7 +191,7 @@ def _record(
     radius: float,
     labels: dict,
     records: list[dict],
-    root: Path,
+    root: str,
     started: datetime,
     run_id: str | None = None,
 ) -> None:
@@ -241,8 +231,8 @@ def _record(
                         coverage=rec["coverage_a" if side == "A" else "coverage_b"],
                         change_ratio=rec["change_ratio"],
                         paths={
-                            "image": str(root / side / rec["file"]),
-                            "label": str(root / "label" / rec["file"]),
+                            "image": stores.join(root, side, rec["file"]),
+                            "label": stores.join(root, "label", rec["file"]),
                         },
                     )
                 )

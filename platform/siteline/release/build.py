@@ -19,7 +19,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
-from siteline import __version__
+from siteline import __version__, stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
 from siteline.catalog.scenes import list_pairs, list_scenes
@@ -186,7 +186,7 @@ def build_release(
                 for sub in ("A", "B", "label"):
                     dest = tmp / sp / sub / f"{item_id}.png"
                     dest.parent.mkdir(parents=True, exist_ok=True)
-                    shutil.copyfile(out.root / sub / v["file"], dest)
+                    stores.get_file(stores.join(out.root, sub, v["file"]), dest)
                 items.append(
                     {
                         "id": item_id,

@@ -4,7 +4,7 @@ from siteline.tiles.export import export_las
 from siteline.tiles.layout import TileSpec
 from siteline.tiles.lod import assign_levels
 from siteline.tiles.reader import SceneTiles
-from siteline.tiles.scene import open_scene_tiles, store_path, tile_scene
+from siteline.tiles.scene import open_scene_tiles, store_uri, tile_scene
 from siteline.tiles.writer import NodeInfo, TileResult, write_tiles
 
 __all__ = [
@@ -15,7 +15,7 @@ __all__ = [
     "assign_levels",
     "export_las",
     "open_scene_tiles",
-    "store_path",
+    "store_uri",
     "tile_scene",
     "write_tiles",
 ]

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from siteline import stores
 from siteline.cameras import Camera
 from siteline.errors import TileError
 from siteline.tiles.layout import ATTRIBUTES, TileSpec, dequantise, parse_tile_key, tile_origin_local
@@ -57,6 +58,13 @@ def box_distance(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     return float(np.linalg.norm(d))
 
 
+def _open(uri: str, what: str, fix: str):  # noqa: ANN202
+    """The Zarr group at ``uri`` (a local path or an fsspec URL), or a TileError saying it is missing."""
+    if not stores.exists(stores.join(uri, "zarr.json")):
+        raise TileError(f"{what} {uri} is missing: {fix}.")
+    return stores.open_group(uri, mode="r")
+
+
 class SceneTiles:
     """A scene's tile store opened for reading. Coordinates come back site-local float32 metres
     (computed in float64 from the int32 counts and the tile origins, then cast)."""
@@ -64,12 +72,8 @@ class SceneTiles:
     def __init__(
         self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec, cache_bytes: int = 256 * 2**20
     ) -> None:
-        import zarr
-
         self.uri = str(uri)
-        if not Path(self.uri).is_dir():
-            raise TileError(f"tile store {self.uri} is missing; re-run `siteline scene tile`.")
-        self.root = zarr.open_group(self.uri, mode="r")
+        self.root = _open(self.uri, "tile store", "re-run `siteline scene tile`")
         self.spec = spec
         self.nodes = list(nodes)
         self.by_tile: dict[str, list[NodeInfo]] = defaultdict(list)
@@ -110,18 +114,12 @@ class SceneTiles:
     def attach(self, name: str, uri: str | Path) -> None:
         """Read attribute ``name`` from another Zarr group laid out like this store's ``tiles/<tile>/<name>``
         (per-point labels of a pair), aligned point for point with this scene's tiles."""
-        import zarr
-
-        if not Path(uri).is_dir():
-            raise TileError(f"attribute store {uri} is missing.")
-        self.extra[name] = zarr.open_group(str(uri), mode="r")
+        self.extra[name] = _open(str(uri), "attribute store", "process the pair again")
 
     @classmethod
     def open(cls, uri: str | Path) -> SceneTiles:
         """Open from the store alone (its attributes hold the spec and the node table)."""
-        import zarr
-
-        attrs = dict(zarr.open_group(str(uri), mode="r").attrs)
+        attrs = dict(_open(str(uri), "tile store", "tile the scene again").attrs)
         if "nodes" not in attrs:
             raise TileError(f"{uri} is not a siteline tile store.")
         nodes = [

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
@@ -10,6 +9,7 @@ from pathlib import Path
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import Mission, MissionFile, Node, Scene
 from siteline.catalog.sites import site_spec
@@ -35,14 +35,14 @@ def scene_las(session: Session, settings: Settings, scene: Scene) -> Path:
     ).scalar_one_or_none()
     if row is None:
         raise TileError(f"scene {scene.id}: its mission records no point cloud file.")
-    path = resolve_file(settings.store_dir, mission.storage, mission.root_uri, row.path, row.sha256)
+    path = resolve_file(settings.store, mission.storage, mission.root_uri, row.path, row.sha256)
     if not path.is_file():
         raise TileError(f"scene {scene.id}: point cloud {path} is missing from the store.")
     return path
 
 
-def store_path(settings: Settings, scene_id: int) -> Path:
-    return settings.store_dir / "tiles" / f"scene-{scene_id}.zarr"
+def store_uri(settings: Settings, scene_id: int) -> str:
+    return settings.store.uri("tiles", f"scene-{scene_id}.zarr")
 
 
 def tile_scene(
@@ -56,15 +56,15 @@ def tile_scene(
 ) -> tuple[TileResult | None, str]:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone.
 
-    The store is written under a temporary name and renamed; only then are the node rows, the store
-    URI and the scene status committed in one transaction. A store without rows (a crash between the
-    rename and the commit) is replaced.
+    The store is built locally and published whole (stores.Store.publish); only then are the node
+    rows, the store URI and the scene status committed in one transaction. A store without rows (a
+    crash between the publish and the commit) is replaced.
     """
     with catalog.transaction() as s:
         scene = s.get(Scene, scene_id)
         if scene is None:
             raise TileError(f"no scene with id {scene_id}.")
-        if scene.status == "tiled" and scene.tile_store_uri and Path(scene.tile_store_uri).is_dir():
+        if scene.status == "tiled" and scene.tile_store_uri and stores.is_complete(scene.tile_store_uri):
             return None, f"scene {scene_id} is already tiled at {scene.tile_store_uri}: nothing to do."
         from siteline.catalog.models import Site
 
@@ -72,11 +72,12 @@ def tile_scene(
         las = scene_las(s, settings, scene)
         src = parse_crs_or_site((scene.statistics or {}).get("source_crs"), site)
     spec = spec or TileSpec(tile_size_m=site.tile_size_m)
-    out = store_path(settings, scene_id)
-    if out.exists():
-        shutil.rmtree(out)
+    out = store_uri(settings, scene_id)
+    stores.remove(out)
     started = datetime.now(UTC)
-    result = write_tiles(las, site, src, out, spec, workers=workers, seed=scene_id, progress=progress)
+    with settings.store.publish(out) as work:
+        result = write_tiles(las, site, src, work, spec, workers=workers, seed=scene_id, progress=progress)
+    result.uri = out
     try:
         with catalog.transaction() as s:
             scene = s.get(Scene, scene_id)
@@ -111,7 +112,7 @@ def tile_scene(
                 )
             )
     except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
+        stores.remove(out)
         raise
     return (
         result,

@@ -3,8 +3,8 @@
 Memory stays bounded: one streaming pass spills every chunk's points into per-tile files (an external
 partition), then each tile is loaded alone, levelled, sorted by level and written. Workers each own
 whole tiles, i.e. whole arrays and their shards (concurrent partial-shard writes lose data, zarr-python
-issue 3682). Everything is written under a hidden temporary name and renamed into place at the end,
-so a crash leaves no visible store.
+issue 3682). The store is written in place: callers that need all-or-nothing publish it through
+``siteline.stores.Store.publish`` (``tiles.scene.tile_scene`` does).
 """
 
 from __future__ import annotations
@@ -197,12 +197,6 @@ def _dir_bytes(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
 
 
-def clear_partials(out: Path) -> None:
-    """Remove what crashed writers left under hidden temporary names next to ``out``."""
-    for p in out.parent.glob(f".{out.name}.partial-*"):
-        shutil.rmtree(p, ignore_errors=True)
-
-
 def write_tiles(
     las_path: Path,
     site: SiteSpec,
@@ -213,7 +207,8 @@ def write_tiles(
     seed: int = 0,
     progress: Callable[[str, int, int | None], None] | None = None,
 ) -> TileResult:
-    """Tile ``las_path`` into the Zarr group ``out`` (which must not exist); return its nodes."""
+    """Tile ``las_path`` into the new Zarr group ``out`` (which must not exist; removed again on an
+    error); return its nodes."""
     import zarr
 
     t0 = time.perf_counter()
@@ -222,10 +217,7 @@ def write_tiles(
     if out.exists():
         raise TileError(f"tile store {out} already exists; remove it or tile into another path.")
     out.parent.mkdir(parents=True, exist_ok=True)
-    clear_partials(out)
-    token = uuid.uuid4().hex[:12]
-    partial = out.with_name(f".{out.name}.partial-{token}")
-    spill_dir = out.with_name(f".{out.name}.partial-{token}-spill")
+    spill_dir = out.with_name(f".{out.name}.spill-{uuid.uuid4().hex[:12]}")
     spill_dir.mkdir(parents=True)
     try:
         tr = source_transformer(las_path, site, src_crs)
@@ -239,11 +231,11 @@ def write_tiles(
         )
         if not counts:
             raise TileError(f"point cloud {las_path} holds no points to tile.")
-        root = zarr.open_group(str(partial), mode="w")
+        root = zarr.open_group(str(out), mode="w")
         root.create_group("tiles")
         keys = sorted(counts)
         results = []
-        args = [(k, str(spill_dir / f"{k}.bin"), str(partial), spec.to_dict(), seed) for k in keys]
+        args = [(k, str(spill_dir / f"{k}.bin"), str(out), spec.to_dict(), seed) for k in keys]
         total_points = sum(counts.values())
         # worker start-up (~1 s: imports) only pays off on big scenes
         if workers > 1 and len(keys) > 1 and total_points >= PARALLEL_MIN_POINTS:
@@ -278,10 +270,9 @@ def write_tiles(
                 "nodes": [n.to_dict() for n in nodes],
             }
         )
-        size = _dir_bytes(partial)
-        os.replace(partial, out)
+        size = _dir_bytes(out)
     except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
+        shutil.rmtree(out, ignore_errors=True)
         raise
     finally:
         shutil.rmtree(spill_dir, ignore_errors=True)
