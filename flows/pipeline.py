@@ -195,6 +195,7 @@ def ingest_mission_flow(
     """Ingest an uploaded mission, tile its scene, publish dashboards, announce the scene."""
     _tag_run(f"site:{site}")
     with tags(f"site:{site}"):
+        # in the flow's own process: the upload folder is on this machine, not on the runner's workers
         res = ingest_task(mission_dir, site, crs, accept_misalignment)
         mission = Path(mission_dir).name
         scan = res.get("scan") or {}
@@ -214,7 +215,7 @@ def ingest_mission_flow(
         )
         if res["scene_id"] is None:
             return None
-        tiles = tile_task(res["scene_id"])
+        tiles = tile_task.submit(res["scene_id"]).result()
         if scan:
             rows = [
                 {"statistic": k, "value": str(v)}
@@ -246,12 +247,12 @@ def ingest_mission_flow(
 @flow(name="tile-scene", flow_run_name="tile-scene-{scene_id}", task_runner=task_runner())
 def tile_scene_flow(scene_id: int) -> dict | None:
     _tag_run(f"site:{_site_of_scene(scene_id)}")
-    return tile_task(scene_id)
+    return tile_task.submit(scene_id).result()
 
 
 @flow(name="process-pair", flow_run_name="process-pair-{pair_id}", task_runner=task_runner())
 def process_pair_flow(pair_id: int, params: dict | None = None) -> dict:
-    out = process_pair_task(pair_id, params, _site_of_pair(pair_id))
+    out = process_pair_task.submit(pair_id, params, _site_of_pair(pair_id)).result()
     _pair_dashboards(out)
     return out
 

@@ -97,3 +97,46 @@ def synth_site(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("synth-site")
     write_site(out, SYNTH)
     return out
+
+
+@pytest.fixture(scope="session")
+def s3_endpoint() -> Iterator[str]:
+    """A local S3 server (moto) on 127.0.0.1: the object store that "other machines" share. fsspec's
+    configuration points s3:// at it, in this process and (through FSSPEC_S3) in any child."""
+    import json
+    import logging
+
+    import fsspec
+    from moto.server import ThreadedMotoServer
+
+    logging.getLogger("werkzeug").setLevel(logging.ERROR)
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    server.start()
+    host, port = server.get_host_and_port()
+    endpoint = f"http://{host}:{port}"
+    conf = {"endpoint_url": endpoint, "key": "siteline-test", "secret": "siteline-test"}
+    saved = (fsspec.config.conf.get("s3"), os.environ.get("FSSPEC_S3"))
+    fsspec.config.conf["s3"] = conf
+    os.environ["FSSPEC_S3"] = json.dumps(conf)
+    try:
+        yield endpoint
+    finally:
+        server.stop()
+        if saved[0] is None:
+            fsspec.config.conf.pop("s3", None)
+        else:
+            fsspec.config.conf["s3"] = saved[0]
+        if saved[1] is None:
+            os.environ.pop("FSSPEC_S3", None)
+        else:
+            os.environ["FSSPEC_S3"] = saved[1]
+
+
+@pytest.fixture
+def s3_store(s3_endpoint: str) -> str:
+    """``s3://<fresh bucket>/stores`` on the local S3 server."""
+    import fsspec
+
+    bucket = f"siteline-{uuid.uuid4().hex[:12]}"
+    fsspec.filesystem("s3").mkdir(bucket)
+    return f"s3://{bucket}/stores"

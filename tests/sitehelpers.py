@@ -30,10 +30,16 @@ def copy_mission(site: Path, index: int, dest: Path) -> Path:
 
 
 def make_home(
-    root: Path, url: str | None = None, site_dir: Path | None = None, name: str = "demo"
+    root: Path,
+    url: str | None = None,
+    site_dir: Path | None = None,
+    name: str = "demo",
+    store_url: str = "",
 ) -> Settings:
     home = root / "home"
-    settings = Settings(home=home, database_url=url or sqlite_url(home / "catalog.sqlite"))
+    settings = Settings(
+        home=home, database_url=url or sqlite_url(home / "catalog.sqlite"), store_url=store_url
+    )
     engine = make_engine(settings.database_url)
     migrate.upgrade(engine)
     engine.dispose()

@@ -150,27 +150,43 @@ def test_upload_event_reaches_the_api(harness, tmp_path) -> None:
     post_events(PREFECT_API_URL.value(), [upload_event(tmp_path / "m9", "demo")])
 
 
-def test_dask_runner_gives_the_same_tiles_and_labels(harness, small_site, tmp_path, monkeypatch) -> None:
+def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
+    harness, small_site, tmp_path, monkeypatch, postgres_url, s3_store
+) -> None:
+    """Threads on one machine (SQLite, local store) against Dask workers that, like workers on other
+    machines, share nothing with the flow but the PostgreSQL catalog and an S3 store: each worker has
+    its own SITELINE_HOME. Tiles, labels and renders must come out identical."""
     import pipeline
     from prefect_dask import DaskTaskRunner
 
+    from siteline import stores
     from siteline.catalog import open_catalog
     from siteline.ingest.mission import ingest_mission
 
     results = {}
     for kind in ("threads", "dask"):
-        settings = _home(tmp_path / kind, small_site, monkeypatch)
+        if kind == "threads":
+            settings = _home(tmp_path / kind, small_site, monkeypatch)
+        else:
+            from sitehelpers import make_home
+
+            settings = make_home(tmp_path / kind, postgres_url, small_site, store_url=s3_store)
+            monkeypatch.setenv("SITELINE_HOME", str(settings.home))
+            monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
+            monkeypatch.setenv("SITELINE_STORE_URL", s3_store)
         cat = open_catalog(settings)
         for m in _missions(small_site):
             ingest_mission(cat, settings, m, "demo")
         cat.dispose()
         if kind == "dask":
+            worker_home = tmp_path / "worker-home"
             runner = DaskTaskRunner(
                 cluster_kwargs={
                     "n_workers": 2,
                     "threads_per_worker": 1,
                     "host": "127.0.0.1",
                     "dashboard_address": None,
+                    "env": {"SITELINE_HOME": str(worker_home)},
                 }
             )
             flows = (
@@ -181,5 +197,14 @@ def test_dask_runner_gives_the_same_tiles_and_labels(harness, small_site, tmp_pa
             flows = (pipeline.tile_scene_flow, pipeline.process_pair_flow)
         tiles = [flows[0](sid)["checksum"] for sid in (1, 2)]
         pair = flows[1](1, SMALL)
-        results[kind] = (tiles, pair["labels"], pair["radius_m"])
+        renders = [stores.read_bytes(s["mask"]) for s in pair["samples"]]
+        results[kind] = (tiles, pair["labels"], pair["radius_m"], renders)
+        if kind == "dask":
+            assert pair["root"].startswith(s3_store + "/pairs/")
+            assert stores.is_complete(f"{s3_store}/tiles/scene-1.zarr")
+            um = int(round(pair["radius_m"] * 1e6))
+            assert stores.is_complete(f"{s3_store}/labels/pair-1-r{um}um.zarr")
+            # nothing landed in either machine's local store; the workers fetched the LAS into their cache
+            assert not (settings.home / "stores").exists() and not (worker_home / "stores").exists()
+            assert list((worker_home / "staging" / "cache").rglob("*"))
     assert results["threads"] == results["dask"]

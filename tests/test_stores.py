@@ -1,0 +1,151 @@
+"""The store layer on a local folder and on an object store (a local S3 server): the same contract."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from siteline import stores
+from siteline.config import load_settings
+from siteline.errors import StoreError
+from siteline.stores import MARKER, Store
+
+
+@pytest.fixture(params=["local", "s3"])
+def store(request: pytest.FixtureRequest, tmp_path: Path) -> Store:
+    url = str(tmp_path / "stores") if request.param == "local" else request.getfixturevalue("s3_store")
+    st = Store(url, tmp_path / "staging")
+    st.ensure()
+    return st
+
+
+def _listing(uri: str) -> list[str]:
+    """Every file under ``uri``, relative, sorted (local or remote)."""
+    if not stores.is_remote(uri):
+        root = Path(uri)
+        return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
+    import fsspec
+
+    fs, path = fsspec.core.url_to_fs(uri)
+    fs.invalidate_cache()
+    return sorted(f[len(path) + 1 :] for f in fs.find(path))
+
+
+def test_bytes_and_files_round_trip(store: Store, tmp_path: Path) -> None:
+    uri = store.uri("blobs", "ab", "cdef")
+    assert not stores.exists(uri)
+    stores.put_bytes(b"hello", uri)
+    assert stores.exists(uri) and stores.read_bytes(uri) == b"hello"
+    src = tmp_path / "src.bin"
+    src.write_bytes(b"x" * 1000)
+    other = store.uri("blobs", "12", "3456")
+    stores.put_file(src, other)
+    out = tmp_path / "back.bin"
+    stores.get_file(other, out)
+    assert out.read_bytes() == src.read_bytes()
+    stores.remove(uri)
+    assert not stores.exists(uri)
+    stores.remove(uri)  # removing what is gone is fine
+    with pytest.raises(StoreError, match="cdef"):
+        stores.read_bytes(uri)
+
+
+def _tree(work: Path) -> None:
+    import zarr
+
+    g = zarr.open_group(str(work), mode="w")
+    g.create_array("a", data=np.arange(100, dtype=np.int32), chunks=(10,))
+    g.attrs["checksum"] = "abc"
+    (work / "notes").mkdir()
+    (work / "notes" / "summary.json").write_text("{}")
+
+
+def test_publish_is_whole_and_readable(store: Store) -> None:
+    uri = store.uri("tiles", "scene-1.zarr")
+    with store.publish(uri) as work:
+        assert not work.exists()
+        _tree(work)
+    assert stores.is_complete(uri)
+    files = _listing(uri)
+    assert MARKER in files and "notes/summary.json" in files and "zarr.json" in files
+    g = stores.open_group(uri)
+    assert g.attrs["checksum"] == "abc"
+    np.testing.assert_array_equal(g["a"][:], np.arange(100))
+    assert not list(store.staging.glob("publish-*"))  # staging is cleaned up
+
+
+def test_failed_publish_leaves_nothing(store: Store) -> None:
+    uri = store.uri("labels", "pair-1.zarr")
+    with pytest.raises(RuntimeError, match="boom"), store.publish(uri) as work:
+        _tree(work)
+        raise RuntimeError("boom")
+    assert not stores.is_complete(uri)
+    assert not stores.exists(stores.join(uri, "zarr.json"))
+    if not store.remote:
+        assert not [p for p in Path(store.url, "labels").iterdir()]  # no hidden partial either
+    assert not list(store.staging.glob("publish-*"))
+    with pytest.raises(StoreError, match="nothing was built"), store.publish(uri):
+        pass
+
+
+def test_unfinished_upload_is_not_complete_and_is_replaced(store: Store) -> None:
+    """A writer killed mid-upload leaves files without the marker: invisible, and replaced."""
+    uri = store.uri("pairs", "pair-1", "d1")
+    stores.put_bytes(b"stale", stores.join(uri, "A", "0000.png"))
+    assert not stores.is_complete(uri)
+    with store.publish(uri) as work:
+        (work / "B").mkdir(parents=True)
+        (work / "B" / "0000.png").write_bytes(b"new")
+    assert stores.is_complete(uri)
+    assert _listing(uri) == [MARKER, "B/0000.png"]
+
+
+def test_a_complete_folder_is_kept(store: Store) -> None:
+    """Two workers publishing the same (deterministic) folder: the first one stays."""
+    uri = store.uri("pairs", "pair-2", "d1")
+    for content in (b"first", b"second"):
+        with store.publish(uri) as work:
+            work.mkdir()
+            (work / "f").write_bytes(content)
+    assert stores.read_bytes(stores.join(uri, "f")) == b"first"
+    stores.remove(uri)
+    assert not stores.is_complete(uri) and not stores.exists(stores.join(uri, "f"))
+
+
+def test_local_file_fetches_checks_and_caches(store: Store, tmp_path: Path) -> None:
+    data = b"point cloud bytes"
+    sha = hashlib.sha256(data).hexdigest()
+    uri = store.uri("blobs", sha[:2], sha[2:])
+    stores.put_bytes(data, uri)
+    path = store.local_file(uri, sha)
+    assert path.read_bytes() == data
+    if store.remote:
+        assert store.staging in path.parents
+        stores.remove(uri)
+        assert store.local_file(uri, sha) == path  # served from the cache
+        bad = store.uri("blobs", "00", "bad")
+        stores.put_bytes(b"damaged", bad)
+        with pytest.raises(StoreError, match="does not match its checksum"):
+            store.local_file(bad, "00" + "0" * 62)
+    else:
+        assert path == Path(uri)
+
+
+def test_unknown_file_system_and_missing_bucket_are_clear(s3_endpoint: str, tmp_path: Path) -> None:
+    with pytest.raises(StoreError, match="nosuchfs://bucket"):
+        stores.exists("nosuchfs://bucket/x")
+    with pytest.raises(StoreError, match="needs its bucket 'no-such-bucket'"):
+        Store("s3://no-such-bucket/stores", tmp_path).ensure()
+
+
+def test_store_url_setting(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    env = {"SITELINE_HOME": str(tmp_path / "h")}
+    assert load_settings(env).store.url == str(tmp_path / "h" / "stores")
+    assert load_settings(env | {"SITELINE_STORE_URL": "s3://b/p/"}).store.url == "s3://b/p"
+    monkeypatch.chdir(tmp_path)
+    assert load_settings(env | {"SITELINE_STORE_URL": "shared"}).store.url == str(tmp_path / "shared")
+    local = load_settings(env | {"SITELINE_STORE_URL": f"file://{tmp_path}/x"}).store
+    assert local.url == f"{tmp_path}/x" and not local.remote
