@@ -42,4 +42,7 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
         return {f["path"]: f["sha256"] for f in doc["files"] if f["path"].endswith((".png", "stats.json"))}
 
     assert contents(pub.root) == contents(local.root)
-    assert read_manifest(Path(pub.root))["lineage"]["scenes"] == read_manifest(Path(local.root))["lineage"]["scenes"]
+    assert (
+        read_manifest(Path(pub.root))["lineage"]["scenes"]
+        == read_manifest(Path(local.root))["lineage"]["scenes"]
+    )

@@ -87,10 +87,21 @@ class SceneTiles:
         }
         self.last_stats = ReadStats()
         self.extra: dict[str, object] = {}
+        self._handles: dict[tuple[str, str], object] = {}
         # many views of one pair read the same tiles: keep recent tile prefixes (LRU, byte budget)
         self.cache_bytes = cache_bytes
         self._cache: OrderedDict[tuple[str, str], np.ndarray] = OrderedDict()
         self._cached = 0
+
+    def _handle(self, tile: str, name: str):  # noqa: ANN202
+        """The Zarr array ``tiles/<tile>/<name>``, opened once (each open reads metadata: a request
+        per level of the hierarchy on an object store)."""
+        key = (tile, name)
+        arr = self._handles.get(key)
+        if arr is None:
+            src = self.extra.get(name, self.root)
+            arr = self._handles[key] = src[f"tiles/{tile}/{name}"]
+        return arr
 
     def _array(self, tile: str, name: str, k: int) -> np.ndarray:
         """The first ``k`` values of ``tiles/<tile>/<name>`` (one zarr call on a cache miss)."""
@@ -99,8 +110,7 @@ class SceneTiles:
         if hit is not None and len(hit) >= k:
             self._cache.move_to_end(key)
             return hit[:k]
-        src = self.extra[name]["tiles"][tile] if name in self.extra else self.root["tiles"][tile]
-        values = src[name][:k]
+        values = self._handle(tile, name)[:k]
         if values.nbytes <= self.cache_bytes:
             if hit is not None:
                 self._cached -= hit.nbytes
@@ -115,6 +125,10 @@ class SceneTiles:
         """Read attribute ``name`` from another Zarr group laid out like this store's ``tiles/<tile>/<name>``
         (per-point labels of a pair), aligned point for point with this scene's tiles."""
         self.extra[name] = _open(str(uri), "attribute store", "process the pair again")
+        for key in [k for k in self._handles if k[1] == name]:
+            del self._handles[key]
+        for key in [k for k in self._cache if k[1] == name]:
+            self._cached -= self._cache.pop(key).nbytes
 
     @classmethod
     def open(cls, uri: str | Path) -> SceneTiles:
@@ -169,8 +183,7 @@ class SceneTiles:
                 out[a] = np.concatenate(chunks)
             else:
                 shape = (0, 3) if a in ("xyz", "rgb") else (0,)
-                src = self.extra.get(a, self.root)
-                dtype = np.float64 if a == "xyz" else src["tiles"][next(iter(self.by_tile))][a].dtype
+                dtype = np.float64 if a == "xyz" else self._handle(next(iter(self.by_tile)), a).dtype
                 out[a] = np.zeros(shape, dtype=dtype)
         self.last_stats = stats
         return out
