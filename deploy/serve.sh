@@ -6,7 +6,9 @@
 #   SITELINE_WATCH_DIR  folder to drop mission uploads into (default $SITELINE_HOME/uploads)
 #   SITELINE_SITE       site the uploads belong to (default demo; created from the synthetic fence if missing)
 #   SITELINE_RELEASE_POLICY  every-pair (default here) or on-demand
+#   SITELINE_STORE_URL  data stores: a folder or an fsspec URL such as s3://bucket/siteline (default $SITELINE_HOME/stores)
 #   PostgreSQL instead of SQLite, for both: deploy/postgres.env (see docs in it).
+#   Workers on several machines (PostgreSQL, an object store, Dask): deploy/shared.env.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export SITELINE_REPO="$PWD"

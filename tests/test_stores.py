@@ -149,3 +149,14 @@ def test_store_url_setting(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> N
     assert load_settings(env | {"SITELINE_STORE_URL": "shared"}).store.url == str(tmp_path / "shared")
     local = load_settings(env | {"SITELINE_STORE_URL": f"file://{tmp_path}/x"}).store
     assert local.url == f"{tmp_path}/x" and not local.remote
+
+
+def test_cli_init_names_the_store(capsys, home, monkeypatch, s3_store) -> None:
+    from sitehelpers import run_cli
+
+    monkeypatch.setenv("SITELINE_STORE_URL", "s3://siteline-missing-bucket/stores")
+    rc, _, err = run_cli(capsys, "init")
+    assert rc != 0 and "needs its bucket 'siteline-missing-bucket'" in err
+    monkeypatch.setenv("SITELINE_STORE_URL", s3_store)
+    rc, out, _ = run_cli(capsys, "init")
+    assert rc == 0 and f"stores at {s3_store}" in out.replace("\n", "")
