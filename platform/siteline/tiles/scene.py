@@ -37,7 +37,12 @@ def scene_las(session: Session, settings: Settings, scene: Scene) -> Path:
         raise TileError(f"scene {scene.id}: its mission records no point cloud file.")
     path = resolve_file(settings.store, mission.storage, mission.root_uri, row.path, row.sha256)
     if not path.is_file():
-        raise TileError(f"scene {scene.id}: point cloud {path} is missing from the store.")
+        where = (
+            "the store"
+            if mission.storage == "copy"
+            else "its mission folder (a referenced mission must stay on a path every worker sees)"
+        )
+        raise TileError(f"scene {scene.id}: point cloud {path} is missing from {where}.")
     return path
 
 
