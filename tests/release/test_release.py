@@ -1,4 +1,4 @@
-"""Releases: layout, manifest, verify, immutability, bad requests, diff, query, symmetry."""
+"""Releases: layout, manifest, verify, immutability, bad requests, diff, query, symmetry, object store."""
 
 from __future__ import annotations
 
@@ -8,16 +8,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import sqlalchemy as sa
 from PIL import Image
+from sitehelpers import epoch_dirs, make_home
 
-from siteline.catalog.models import Pair, Release
+from siteline import stores
+from siteline.catalog import open_catalog
+from siteline.catalog.models import Pair, Release, Render, Scene
 from siteline.catalog.sites import add_site
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
+from siteline.ingest.mission import ingest_mission
 from siteline.pairs import PairParams, pair_mask
 from siteline.release import build_release, publish_release, read_manifest, verify_files
 from siteline.release.query import diff_releases, query_items
 from siteline.schemas import validate
 from siteline.site import make_site_spec
+from siteline.tiles import tile_scene
 
 from .conftest import PARAMS
 
@@ -171,3 +177,41 @@ def test_preset_is_applied_and_recorded(built) -> None:
     info = build_release(cat, settings, "demo", "presetrel", p, preset="fast")
     lin = read_manifest(info.root)["lineage"]
     assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
+
+
+def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_store) -> None:
+    """The first pair released from an S3 store: the same images, masks and lineage as the local one."""
+    _, _, local = built
+    settings = make_home(tmp_path, site_dir=synth_site, store_url=s3_store)
+    cat = open_catalog(settings)
+    try:
+        for m in epoch_dirs(synth_site)[:2]:
+            r = ingest_mission(cat, settings, m, "demo")
+            tile_scene(cat, settings, r.scene_id, workers=1)
+        info = build_release(cat, settings, "demo", "rel", PARAMS)
+        pub = publish_release(cat, settings, "rel", info.version)
+        with cat.transaction() as s:
+            uris = [sc.tile_store_uri for sc in s.execute(sa.select(Scene)).scalars()]
+            paths = [r.paths["image"] for r in s.execute(sa.select(Render)).scalars()]
+    finally:
+        cat.dispose()
+    assert uris and all(u.startswith(f"{s3_store}/tiles/") and stores.is_complete(u) for u in uris)
+    assert paths and all(p.startswith(f"{s3_store}/pairs/") and stores.exists(p) for p in paths)
+    assert not (settings.home / "stores").exists()  # nothing went to the local folder
+    assert verify_files(Path(pub.root)) == []
+
+    def by_item(root: str) -> dict[str, str]:
+        """sha256 of every image and mask of pair 1, by item and kind (splits differ with the pairs)."""
+        doc = read_manifest(Path(root))
+        sha = {f["path"]: f["sha256"] for f in doc["files"]}
+        return {
+            (it["id"], sub): sha[f"{it['split']}/{sub}/{it['id']}.png"]
+            for it in doc["items"]
+            if it["pair"] == 1
+            for sub in ("A", "B", "label")
+        }
+
+    mine = by_item(pub.root)
+    assert mine and mine == by_item(local.root)
+    scenes = {sc["id"]: sc for sc in read_manifest(Path(local.root))["lineage"]["scenes"]}
+    assert read_manifest(Path(pub.root))["lineage"]["scenes"] == [scenes[1], scenes[2]]
