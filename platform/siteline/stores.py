@@ -79,12 +79,13 @@ def read_bytes(uri: str) -> bytes:
             return local_path(uri).read_bytes()
         fs, path = _fs(uri)
         return fs.cat_file(path)
-    except (OSError, FileNotFoundError) as exc:
+    except OSError as exc:
         raise StoreError(f"cannot read {uri} from the store: {exc}") from exc
 
 
-def _atomic_local_copy(write, dest: Path) -> None:  # noqa: ANN001
-    """Write through ``write(fh)`` into a unique temporary name next to ``dest``, fsync, rename."""
+def atomic_local_write(dest: Path, write) -> None:  # noqa: ANN001
+    """Write the local file ``dest`` through ``write(fh)`` into a unique temporary name next to it,
+    fsync, rename: readers see the old file or the whole new one."""
     dest.parent.mkdir(parents=True, exist_ok=True)
     # unique temporary name: concurrent writers may store the same content at the same time
     tmp = dest.with_name(f".{dest.name}.tmp-{uuid.uuid4().hex}")
@@ -103,7 +104,7 @@ def put_bytes(data: bytes, uri: str) -> None:
     """Store ``data`` at ``uri`` whole or not at all (a rename locally; one PUT on object stores)."""
     try:
         if not is_remote(uri):
-            _atomic_local_copy(lambda fh: fh.write(data), local_path(uri))
+            atomic_local_write(local_path(uri), lambda fh: fh.write(data))
             return
         fs, path = _fs(uri)
         fs.pipe_file(path, data)
@@ -116,7 +117,7 @@ def put_file(source: Path, uri: str) -> None:
     try:
         if not is_remote(uri):
             with open(source, "rb") as src:
-                _atomic_local_copy(lambda fh: shutil.copyfileobj(src, fh, 8 * 2**20), local_path(uri))
+                atomic_local_write(local_path(uri), lambda fh: shutil.copyfileobj(src, fh, 8 * 2**20))
             return
         fs, path = _fs(uri)
         fs.put_file(str(source), path)

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from siteline import stores
-from siteline.errors import StoreError
 from siteline.stores import Store
 
 
@@ -32,10 +31,5 @@ def resolve_file(store: Store, storage: str, root_uri: str, rel: str, sha256: st
     """A local path holding a mission file's bytes: its blob (copied missions; fetched into the local
     cache from a remote store) or its original path (referenced missions)."""
     if storage == "copy":
-        uri = blob_uri(store, sha256)
-        if not stores.exists(uri):
-            raise StoreError(
-                f"mission file {rel} (sha256 {sha256[:12]}) is missing from the store {store.url}."
-            )
-        return store.local_file(uri, sha256)
+        return store.local_file(blob_uri(store, sha256), sha256)
     return Path(root_uri) / rel

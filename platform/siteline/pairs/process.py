@@ -108,7 +108,6 @@ def process_pair(
     else:
         if progress:
             progress("labels", 0, None)
-        stores.remove(label_uri)
         with settings.store.publish(label_uri) as work:
             labels = write_labels(tiles1, tiles2, radius, ignored, work).to_dict() | {"uri": label_uri}
     labels = labels | {"radius": radius_info}
