@@ -84,6 +84,14 @@ class TileError(SitelineError, RuntimeError):
     """A tile store is missing, partial or inconsistent."""
 
 
+class LabelError(SitelineError, ValueError):
+    """Label values or label parameters are out of range (a class code, a mask value, a backend)."""
+
+
+class SynthError(SitelineError, ValueError):
+    """A synthetic-site parameter is out of range."""
+
+
 class ReleaseError(SitelineError, ValueError):
     """A release cannot be built, published or verified."""
 

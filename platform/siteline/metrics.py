@@ -12,6 +12,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
+from siteline.errors import LabelError
+
 IGNORE = 255
 
 
@@ -24,7 +26,7 @@ def confusion(
     keep = t != IGNORE
     p, t = p[keep], t[keep]
     if p.numel() and (p.min() < 0 or p.max() >= num_classes or t.max() >= num_classes):
-        raise ValueError(f"labels must lie in [0, {num_classes}) or be {IGNORE}.")
+        raise LabelError(f"labels must lie in [0, {num_classes}) or be {IGNORE}.")
     cm = torch.bincount(t * num_classes + p, minlength=num_classes * num_classes)
     return cm.reshape(num_classes, num_classes).cpu().numpy().astype(np.int64)
 

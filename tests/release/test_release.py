@@ -72,6 +72,35 @@ def test_verify_names_a_flipped_byte(built, tmp_path) -> None:
     assert len(problems) == 1 and victim.name in problems[0] and "sha256" in problems[0]
 
 
+def test_installed_verify_exits_1_on_a_tampered_release_and_0_once_restored(built) -> None:
+    import subprocess
+    import sys
+
+    settings, _, pub = built
+    exe = Path(sys.executable).with_name("siteline")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")}
+    env |= {"SITELINE_HOME": str(settings.home), "SITELINE_DATABASE_URL": settings.database_url}
+    victim = next((Path(pub.root) / "train" / "A").glob("*.png"))
+    original = victim.read_bytes()
+    mode = victim.stat().st_mode
+    os.chmod(victim, 0o644)
+    try:
+        victim.write_bytes(original[:-1] + bytes([original[-1] ^ 0xFF]))
+        bad = subprocess.run(
+            [str(exe), "release", "verify", "rel", pub.version], env=env, capture_output=True, text=True
+        )
+    finally:
+        victim.write_bytes(original)
+        os.chmod(victim, mode)
+    assert bad.returncode == 1, (bad.stdout, bad.stderr)
+    assert victim.name in bad.stdout and "sha256" in bad.stdout
+    good = subprocess.run(
+        [str(exe), "release", "verify", "rel", pub.version, "--json"], env=env, capture_output=True, text=True
+    )
+    assert good.returncode == 0, good.stderr
+    assert json.loads(good.stdout)["ok"] is True
+
+
 def test_published_release_is_read_only_and_never_republished(built) -> None:
     settings, cat, pub = built
     some = next(Path(pub.root).rglob("*.png"))

@@ -39,7 +39,13 @@ def make_engine(url: str) -> sa.Engine:
     if parsed.get_backend_name() == "postgresql" and parsed.get_driver_name() in ("", "psycopg2"):
         # psycopg 3 is the driver we ship; a bare postgresql:// URL would ask for psycopg2.
         parsed = parsed.set(drivername="postgresql+psycopg")
-    return sa.create_engine(parsed, pool_pre_ping=True)
+    try:
+        return sa.create_engine(parsed, pool_pre_ping=True)
+    except (sa.exc.NoSuchModuleError, ImportError) as exc:
+        raise CatalogError(
+            f"catalog URL {url!r}: no database driver for {parsed.drivername!r} ({exc}); use "
+            "sqlite:///PATH or postgresql+psycopg://USER@HOST/DB."
+        ) from exc
 
 
 def ping(engine: sa.Engine) -> None:

@@ -11,6 +11,22 @@ from siteline.cli import bench, db, demo, ingest, release, render, site, synth, 
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
+
+def _click_errors() -> tuple[type[Exception], ...]:
+    """The ClickException classes the app may raise: recent typer vendors click as ``typer._click``."""
+    import importlib
+
+    found: list[type[Exception]] = []
+    for module in ("typer._click.exceptions", "click.exceptions"):
+        try:
+            found.append(importlib.import_module(module).ClickException)
+        except (ImportError, AttributeError):
+            continue
+    return tuple(found)
+
+
+_CLICK_ERRORS = _click_errors()
+
 app = typer.Typer(
     name="siteline",
     help="Drone surveys of construction sites turned into change-detection datasets.",
@@ -36,17 +52,31 @@ app.command("watch")(watch.watch)
 app.add_typer(bench.app, name="bench")
 
 
-@app.callback()
-def _root(version: bool = typer.Option(False, "--version", help="Print the version and exit.")) -> None:
-    if version:
+def _print_version(value: bool) -> None:
+    if value:
         typer.echo(__version__)
         raise typer.Exit()
 
 
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", help="Print the version and exit.", callback=_print_version, is_eager=True
+    ),
+) -> None:
+    """Drone surveys of construction sites turned into change-detection datasets."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the CLI; siteline errors print one clear line and exit with status 2."""
+    """Entry point: run the CLI and return its exit status.
+
+    0 success; 1 a command that ran but reports a failure (``release verify`` on a tampered release,
+    ``release score`` with missing predictions); 2 a bad request (siteline errors, usage errors).
+    With ``standalone_mode=False`` click *returns* the code of a ``typer.Exit`` instead of raising it,
+    so the return value is passed on, never dropped.
+    """
     try:
-        app(args=argv, standalone_mode=False)
+        rc = app(args=argv, standalone_mode=False)
     except SitelineError as exc:
         err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
         return 2
@@ -55,14 +85,10 @@ def main(argv: list[str] | None = None) -> int:
     except typer.Abort:
         err_console.print("aborted")
         return 1
-    except Exception as exc:  # click usage errors
-        import click
-
-        if isinstance(exc, click.ClickException):
-            exc.show()
-            return exc.exit_code
-        raise
-    return 0
+    except _CLICK_ERRORS as exc:  # usage errors: unknown option or command, bad value (status 2)
+        exc.show()
+        return exc.exit_code
+    return rc if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

@@ -7,7 +7,6 @@ from pathlib import Path
 import typer
 
 from siteline.cli.common import console
-from siteline.trade import TradeGrid, run_trade
 
 app = typer.Typer(help="Measurements.", no_args_is_help=True)
 
@@ -27,6 +26,8 @@ def trade(
     ),
 ) -> None:
     """Sweep scale x point size x level of detail x label radius x nearest-neighbour backend."""
+    from siteline.trade import TradeGrid, run_trade
+
     grid = (
         TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,)) if quick else TradeGrid()
     )

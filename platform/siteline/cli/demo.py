@@ -16,18 +16,13 @@ from siteline.cli.common import console, print_record, print_table, settings
 from siteline.cli.site import site_record
 from siteline.errors import SiteNotFoundError
 from siteline.fence import load_fence_geojson
-from siteline.ingest.mission import ingest_mission
-from siteline.pairs import PairParams
-from siteline.release import build_release, publish_release
 from siteline.release.query import get_release
 from siteline.site import make_site_spec
-from siteline.synth import SynthConfig, write_site
-from siteline.tiles import tile_scene
 
 DEMO_SITE = "demo"
 DEMO_RELEASE = "demo-cd"
 # the synthetic photos are 660 x 495 (1/8 of the L2 sensor): renders at half of that, 3 px points
-DEMO_PARAMS = PairParams(scale=0.5, point_size_px=3, views=24, seed=0, min_coverage=0.5)
+DEMO_PARAMS = {"scale": 0.5, "point_size_px": 3, "views": 24, "seed": 0, "min_coverage": 0.5}
 
 
 def demo(
@@ -36,6 +31,12 @@ def demo(
     train_iters: int = typer.Option(20, "--train-iters", help="Baseline training iterations."),
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""
+    from siteline.ingest.mission import ingest_mission
+    from siteline.pairs import PairParams
+    from siteline.release import build_release, publish_release
+    from siteline.synth import SynthConfig, write_site
+    from siteline.tiles import tile_scene
+
     t_start = time.perf_counter()
     cfg = settings()
     cfg.home.mkdir(parents=True, exist_ok=True)
@@ -87,7 +88,12 @@ def demo(
             console.print(f"release {DEMO_RELEASE} {version} already published: reusing it")
         else:
             info = build_release(
-                cat, cfg, site_name, DEMO_RELEASE, DEMO_PARAMS, progress=lambda task, n, total: None
+                cat,
+                cfg,
+                site_name,
+                DEMO_RELEASE,
+                PairParams(**DEMO_PARAMS),
+                progress=lambda task, n, total: None,
             )
             pub = publish_release(cat, cfg, DEMO_RELEASE, info.version)
             info_root, version = Path(pub.root), pub.version

@@ -10,8 +10,7 @@ from rich.progress import Progress
 
 from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
 from siteline.errors import ReleaseError
-from siteline.pairs import PairParams
-from siteline.release import build_release, publish_release, release_root, verify_files
+from siteline.release.manifest import verify_files
 from siteline.release.query import diff_releases, get_release, list_releases, query_items, release_record
 
 app = typer.Typer(help="Versioned, immutable dataset releases.", no_args_is_help=True)
@@ -68,6 +67,9 @@ def build(
     as_json: bool = JsonOption,
 ) -> None:
     """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
+    from siteline.pairs import PairParams
+    from siteline.release.build import build_release
+
     params = PairParams(
         scale=scale,
         point_size_px=point_size,
@@ -109,6 +111,8 @@ def publish(
     name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
 ) -> None:
     """Publish a draft: verify its checksums, move it into place read-only. Never rewrites a version."""
+    from siteline.release.build import publish_release
+
     with catalog() as cat:
         info = publish_release(cat, settings(), name, version)
     emit(as_json, info.__dict__, lambda: console.print(f"published {name} {version} at {info.root}"))
@@ -158,6 +162,8 @@ def verify(
     name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
 ) -> None:
     """Recompute every checksum of a release; name each file that differs (exit status 1 if any)."""
+    from siteline.release.build import release_root
+
     with catalog() as cat:
         root, status = release_root(cat, name, version)
     problems = verify_files(root)
@@ -219,6 +225,7 @@ def train_cmd(
 ) -> None:
     """Train FC-Siam-diff on a release (SGD 1e-3, momentum 0.9, wd 1e-4, poly 0.9, batch 4)."""
     from siteline.baseline import train
+    from siteline.release.build import release_root
 
     with catalog() as cat:
         root, _ = release_root(cat, name, version)
@@ -254,6 +261,7 @@ def evaluate_cmd(
 ) -> None:
     """Evaluate a checkpoint on a split: one confusion matrix, IoU/mIoU/F1/OA/kappa, results JSON."""
     from siteline.baseline import evaluate
+    from siteline.release.build import release_root
 
     with catalog() as cat:
         root, _ = release_root(cat, name, version)

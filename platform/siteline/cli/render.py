@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
@@ -13,11 +14,11 @@ from siteline.cameras import Camera
 from siteline.cli.common import JsonOption, console, emit, print_record
 from siteline.errors import CameraError, SchemaError
 from siteline.fence import load_fence_geojson
-from siteline.lasio import read_site_local
-from siteline.render import RenderSettings, render_points, write_render
 from siteline.schemas import load_json
 from siteline.taxonomy import default_taxonomy, load_taxonomy
-from siteline.views import ArrayPointSource, NamedCamera, ViewParams, fit_ground_plane, generate_views
+
+if TYPE_CHECKING:
+    from siteline.views import NamedCamera
 
 views_app = typer.Typer(
     help="Synthetic viewpoints (vertical, mirror, forward sampling).", no_args_is_help=True
@@ -31,6 +32,8 @@ OriginOption = typer.Option(
 
 
 def _camera_file(path: Path) -> list[NamedCamera]:
+    from siteline.views import NamedCamera
+
     doc = load_json(path, "camera")
     items = doc.get("cameras", doc) if isinstance(doc, dict) else doc
     if isinstance(items, dict):
@@ -69,6 +72,9 @@ def render(
     as_json: bool = JsonOption,
 ) -> None:
     """Render a point cloud through a camera into RGB, hit mask and depth."""
+    from siteline.lasio import read_site_local
+    from siteline.render import RenderSettings, render_points, write_render
+
     settings = RenderSettings(scale=scale, point_size_px=point_size, precision=precision)
     cam = _camera_file(camera)[0].camera
     cloud = read_site_local(input, origin)
@@ -114,6 +120,9 @@ def views_generate(
     as_json: bool = JsonOption,
 ) -> None:
     """Generate synthetic views: 32 candidates per real camera, rejection, stratified sample of N."""
+    from siteline.lasio import read_site_local
+    from siteline.views import ArrayPointSource, ViewParams, fit_ground_plane, generate_views
+
     params = ViewParams(n_views=n, seed=seed, render_scale=scale, min_coverage=min_coverage)
     real = _camera_file(cameras)
     fence_m = load_fence_geojson(fence, origin) if fence is not None else None

@@ -9,7 +9,6 @@ import typer
 from rich.progress import Progress
 
 from siteline.cli.common import JsonOption, console, emit, print_table
-from siteline.synth import SynthConfig, write_site
 
 app = typer.Typer(help="Synthetic construction sites with ground truth.", no_args_is_help=True)
 
@@ -39,6 +38,8 @@ def site(
     as_json: bool = JsonOption,
 ) -> None:
     """Write one DJI mission folder per epoch and a ground-truth sidecar."""
+    from siteline.synth import SynthConfig, write_site
+
     cfg = SynthConfig(
         epochs=epochs,
         density_pts_m2=density,

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from siteline.errors import LabelError
+
 UNCHANGED, CHANGED, IGNORED = 0, 1, 255
 
 
@@ -28,7 +30,7 @@ def nearest(
     if backend == "ckdtree":
         tree = cKDTree(np.asarray(b_xyz, dtype=np.float64))
         return tree.query(np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1)
-    raise ValueError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
+    raise LabelError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
 
 
 def change_flags(

@@ -26,7 +26,7 @@ import pyproj
 from scipy.spatial.transform import Rotation
 
 from siteline.crs import parse_crs, parse_origin
-from siteline.errors import SitelineError
+from siteline.errors import SynthError
 from siteline.fence import fence_geojson
 from siteline.lasio import las_header
 from siteline.synth import model as m
@@ -58,9 +58,9 @@ class SynthConfig:
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.density_pts_m2) and 0.1 <= self.density_pts_m2 <= 10_000):
-            raise SitelineError(f"density {self.density_pts_m2} points/m2 must be between 0.1 and 10000.")
+            raise SynthError(f"density {self.density_pts_m2} points/m2 must be between 0.1 and 10000.")
         if not 0.01 <= self.photo_scale <= 1:
-            raise SitelineError(f"photo scale {self.photo_scale} must be between 0.01 and 1.")
+            raise SynthError(f"photo scale {self.photo_scale} must be between 0.01 and 1.")
         parse_origin(self.origin)
         parse_crs(self.crs)
 

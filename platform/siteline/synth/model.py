@@ -13,6 +13,7 @@ from datetime import UTC, datetime, timedelta
 
 import numpy as np
 
+from siteline.errors import SynthError
 from siteline.synth.primitives import Primitive
 
 # LAS source codes understood by the default taxonomy (schema/taxonomy.default.json)
@@ -67,7 +68,7 @@ class SiteModel:
 
     def __post_init__(self) -> None:
         if not 1 <= self.n_epochs <= 12:
-            raise ValueError(f"epochs must be between 1 and 12, got {self.n_epochs}.")
+            raise SynthError(f"epochs must be between 1 and 12, got {self.n_epochs}.")
         rng = np.random.default_rng(self.seed)
         pile_sites = 4
         self.epochs = []
