@@ -153,6 +153,20 @@ class Camera:
         R = self.R
         return self.with_pose(R, -R @ np.asarray(center, dtype=np.float64))
 
+    def snapped(self, center_quantum_m: float, rotation_quantum: float) -> Camera:
+        """The same camera with its centre rounded to ``center_quantum_m`` (site-local metres) and its
+        rotation to a unit quaternion (w >= 0) whose components are rounded to ``rotation_quantum``:
+        poses that differ only by registration noise below the quanta become bit-identical."""
+        from scipy.spatial.transform import Rotation
+
+        q = Rotation.from_matrix(self.R).as_quat()  # x, y, z, w
+        if q[3] < 0:
+            q = -q
+        q = np.round(q / rotation_quantum) * rotation_quantum
+        R = Rotation.from_quat(q).as_matrix()
+        C = np.round(self.center / center_quantum_m) * center_quantum_m
+        return self.with_pose(R, -R @ C)
+
     def scaled(self, s: float) -> Camera:
         """The camera rendering at scale ``s`` (as pycolmap ``Camera.rescale(s)``).
 

@@ -15,6 +15,7 @@ import shapely
 from shapely.validation import explain_validity
 
 from siteline.errors import GeometryError
+from siteline.tolerances import LENGTH_TOL_M
 
 # A fence vertex further than this from the site origin means the file is in another frame or unit.
 MAX_FENCE_EXTENT_M = 50_000.0
@@ -101,11 +102,20 @@ def fence_geojson(vertices_m: Sequence[Sequence[float]], origin: Sequence[float]
     return {"type": "Polygon", "coordinates": [ring]}
 
 
-def inside_fence(xy_m: np.ndarray, vertices_m: Sequence[Sequence[float]]) -> np.ndarray:
-    """Which points lie inside (or on) the fence. xy_m: (N, 2+) site-local metres. Returns (N,) bool."""
+def inside_fence(
+    xy_m: np.ndarray, vertices_m: Sequence[Sequence[float]], tol_m: float = LENGTH_TOL_M
+) -> np.ndarray:
+    """Which points lie inside the fence, or within ``tol_m`` of it (on the fence counts as inside,
+    at every coordinate magnitude: siteline.tolerances). xy_m: (N, 2+) site-local metres.
+    Returns (N,) bool."""
     poly = shapely.Polygon(vertices_m)
     xy = np.asarray(xy_m, dtype=np.float64)
-    return shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
+    inside = shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
+    out = ~inside
+    if tol_m > 0 and out.any():
+        near = shapely.distance(poly.exterior, shapely.points(xy[out, 0], xy[out, 1])) <= tol_m
+        inside[np.flatnonzero(out)[near]] = True
+    return inside
 
 
 def fence_area_m2(vertices_m: Sequence[Sequence[float]]) -> float:

@@ -183,3 +183,74 @@ def test_sample_is_stratified() -> None:
     assert [id(v) for v in stratified_sample(views, 30, 3)] == [
         id(v) for v in stratified_sample(views, 30, 3)
     ]
+
+
+def _ring_at(origin: tuple[float, float]) -> list[tuple[float, float]]:
+    """The synthetic fence written in the site CRS at ``origin`` and read back to site-local metres."""
+    import json
+
+    from siteline.fence import fence_geojson, load_fence_geojson
+    from siteline.synth.model import FENCE_M
+
+    ring = [[x * 1.1 + 0.123456789, y * 0.9 - 0.987654321] for x, y in FENCE_M]  # not dyadic
+    doc = fence_geojson(ring, (*origin, 0.0))
+    return [tuple(v) for v in load_fence_geojson_doc(json.dumps(doc), origin, load_fence_geojson)]
+
+
+def load_fence_geojson_doc(text: str, origin, loader):  # noqa: ANN001, ANN201
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "fence.geojson"
+        path.write_text(text)
+        return loader(path, (*origin, 0.0))
+
+
+def test_candidate_on_a_fence_segment_gets_one_verdict_at_both_magnitudes() -> None:
+    small, large = _ring_at((1000.0, 2000.0)), _ring_at((-8_400_000.0, 5_600_000.0))
+    assert small != large  # the origin round trip leaves ~1e-9 m differences in the vertices
+    a, b = np.asarray(small[0]), np.asarray(small[1])
+    normal = np.array([-(b - a)[1], (b - a)[0]]) / np.linalg.norm(b - a)
+    on = np.array([a + t * (b - a) for t in np.linspace(0.05, 0.95, 19)])
+    noisy = np.concatenate([on, on + 1e-6 * normal, on - 1e-6 * normal])
+    for ring in (small, large):
+        assert inside_fence(noisy, ring).all()  # within LENGTH_TOL_M of the fence: inside
+    for ring in (small, large):  # 1 cm is no longer on the fence: one side in, the other out
+        inside_a = inside_fence(on + 0.01 * normal, ring)
+        inside_b = inside_fence(on - 0.01 * normal, ring)
+        assert (inside_a ^ inside_b).all()
+        assert np.array_equal(inside_a, inside_fence(on + 0.01 * normal, small))
+
+
+def test_mirror_of_a_camera_above_the_fence_is_kept_at_both_magnitudes() -> None:
+    from siteline.views import mirror
+
+    for ring in (_ring_at((1000.0, 2000.0)), _ring_at((-8_400_000.0, 5_600_000.0))):
+        a, b = np.asarray(ring[0]), np.asarray(ring[1])
+        c = (a + b) / 2
+        cam = Camera.look_at((c[0], c[1], 40.0), (c[0] + 5.0, c[1] + 5.0, 0.0), 64, 48, 50.0)
+        mirrored, _ = mirror(cam, ring)
+        assert inside_fence(mirrored.center[None, :2], ring)[0]
+
+
+def test_removing_one_candidate_changes_at_most_one_sampled_view() -> None:
+    strategies_ = [f"v{v}-{m}-f{f}" for v in (1, 0.5) for m in ("orig", "mirror") for f in (0, 0.5)]
+    pool = [SyntheticView(f"IMG_{p:04d}.JPG", s, {}, _fake(s, p).camera) for p in range(12) for s in strategies_]
+    ident = [(v.parent, v.strategy) for v in pool]
+    for n in (10, 40, 90):
+        base = {(v.parent, v.strategy) for v in stratified_sample(pool, n, seed=3)}
+        for i in range(0, len(pool), 7):
+            rest = pool[:i] + pool[i + 1 :]
+            again = {(v.parent, v.strategy) for v in stratified_sample(rest, n, seed=3)}
+            if ident[i] in base:
+                assert len(base - again) == 1 and len(again - base) <= 1
+            else:
+                assert again == base
+
+
+def test_sample_order_does_not_depend_on_pool_order() -> None:
+    pool = [_fake(s, i) for s in ("a", "b", "c") for i in range(10)]
+    one = stratified_sample(pool, 12, seed=1)
+    two = stratified_sample(list(reversed(pool)), 12, seed=1)
+    assert [(v.parent, v.strategy) for v in one] == [(v.parent, v.strategy) for v in two]

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from siteline.errors import ReleaseError
-from siteline.views import ViewParams
+from siteline.views import SAMPLER_VERSION, ViewParams
 
 
 @dataclass(frozen=True)
@@ -18,7 +18,9 @@ class PairParams:
     """scale, point_size_px: render knobs (DESIGN.md §6). views: views kept per pair. radius_m: change
     radius in metres, or None for ``radius_multiplier`` x the median spacing of the sparser scene.
     lod_factor: level of detail read per view (1 = spacing within a pixel footprint). seed: view
-    sampling. min_coverage: views covering less of the image at ``scale`` are rejected."""
+    sampling. min_coverage: views covering less of the image at ``scale`` are rejected. sampler: the
+    view sampler's version (pose snapping and keyed stratified sample, siteline.views.generate),
+    recorded in the lineage and part of the outputs' key, so outputs of another sampler are not reused."""
 
     scale: float = 0.125
     point_size_px: int = 1
@@ -29,8 +31,14 @@ class PairParams:
     seed: int = 0
     min_coverage: float = 0.5
     view_params: dict[str, Any] = field(default_factory=dict)
+    sampler: str = SAMPLER_VERSION
 
     def __post_init__(self) -> None:
+        if self.sampler != SAMPLER_VERSION:
+            raise ReleaseError(
+                f"view sampler {self.sampler!r} is not this version's ({SAMPLER_VERSION!r}); outputs of "
+                "another sampler cannot be rebuilt: drop the 'sampler' key to use the current one."
+            )
         if self.radius_m is not None and not (math.isfinite(self.radius_m) and self.radius_m > 0):
             raise ReleaseError(f"radius {self.radius_m!r} m must be a positive number or 'auto'.")
         if not self.radius_multiplier > 0:

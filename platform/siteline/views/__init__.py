@@ -1,9 +1,11 @@
 """Synthetic views: ground plane, vertical / mirror / forward strategies, rejection, sampling (DESIGN.md §5)."""
 
 from siteline.views.generate import (
+    SAMPLER_VERSION,
     NamedCamera,
     SyntheticView,
     ViewSet,
+    candidate_key,
     candidate_views,
     generate_views,
     strategy_key,
@@ -15,6 +17,7 @@ from siteline.views.sources import ArrayPointSource, PointSource
 from siteline.views.strategies import forward, mirror, vertical
 
 __all__ = [
+    "SAMPLER_VERSION",
     "ArrayPointSource",
     "GroundPlane",
     "NamedCamera",
@@ -22,6 +25,7 @@ __all__ = [
     "SyntheticView",
     "ViewParams",
     "ViewSet",
+    "candidate_key",
     "candidate_views",
     "fit_ground_plane",
     "forward",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -13,6 +14,13 @@ from siteline.cameras import Camera
 from siteline.errors import ViewsError
 from siteline.fence import inside_fence
 from siteline.render import RenderSettings, render_points
+from siteline.tolerances import (
+    LENGTH_TOL_M,
+    POSE_CENTER_QUANTUM_M,
+    POSE_ROTATION_QUANTUM,
+    RATIO_TOL,
+    at_least,
+)
 from siteline.views import strategies
 from siteline.views.ground import GroundPlane
 from siteline.views.params import ViewParams
@@ -76,6 +84,7 @@ class ViewSet:
     def to_dict(self) -> dict[str, Any]:
         return {
             "params": self.params.to_dict(),
+            "sampler": SAMPLER_VERSION,
             "ground_plane": self.ground.to_dict(),
             "candidates": self.candidates,
             "rejected": self.rejected,
@@ -165,7 +174,10 @@ def reject(
     params: ViewParams,
 ) -> None:
     """Set ``rejected`` on views underground, outside the fence after mirroring, within
-    ``clearance_m`` of a surface, under geometry, or below ``min_coverage``; set ``coverage`` on the rest."""
+    ``clearance_m`` of a surface, under geometry, or below ``min_coverage``; set ``coverage`` on the rest.
+
+    Each threshold is compared with the tolerances of :mod:`siteline.tolerances`: a view on the fence,
+    at exactly ``clearance_m`` or ``min_height_m``, or at exactly ``min_coverage`` is kept."""
     live = [v for v in views if v.rejected is None]
     if not live:
         return
@@ -176,34 +188,53 @@ def reject(
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
     settings = RenderSettings(scale=params.render_scale)
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
-        if h < params.min_height_m:
+        if not at_least(h, params.min_height_m, LENGTH_TOL_M):
             v.rejected = "underground"
         elif v.params["mirrored"] and not ins:
             v.rejected = "outside_fence"
-        elif dist < params.clearance_m:
+        elif not at_least(dist, params.clearance_m, LENGTH_TOL_M):
             v.rejected = "near_surface"
         elif up > 0:
             v.rejected = "under_geometry"
         else:
             r = render_points(source.points_for_view(v.camera, params.render_scale), v.camera, settings)
             v.coverage = r.coverage
-            if r.coverage < params.min_coverage:
+            if not at_least(r.coverage, params.min_coverage, RATIO_TOL):
                 v.rejected = "low_coverage"
 
 
+# Recorded with every view set (lineage): how the sample was drawn.
+SAMPLER_VERSION = "keyed-sha256-1"
+
+
+def _key(*parts: object) -> int:
+    digest = hashlib.sha256("\0".join(str(p) for p in parts).encode()).digest()
+    return int.from_bytes(digest[:8], "big")
+
+
+def candidate_key(seed: int, parent: str, strategy: str) -> int:
+    """The sampling key of one candidate: a hash of the seed, its parent image and its strategy, so
+    that a candidate's rank never depends on which other candidates survived rejection."""
+    return _key("siteline-view", seed, parent, strategy)
+
+
 def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list[SyntheticView]:
-    """Draw ``n`` views (all if fewer), round-robin over strategy strata in a seeded order, so stratum
-    counts differ by at most one wherever strata have views to give."""
-    rng = np.random.default_rng(seed)
+    """Draw ``n`` views (all if fewer), round-robin over strategy strata, so stratum counts differ by
+    at most one wherever strata have views to give.
+
+    Members of a stratum are ranked by :func:`candidate_key`, strata by a hash of the seed and their
+    name: removing one candidate from the pool changes at most one chosen view (the removed one is
+    replaced by the next of its stratum, or by one more of another stratum). The sample is returned
+    in key order, so its order does not depend on the pool either.
+    """
     strata: dict[str, list[SyntheticView]] = defaultdict(list)
     for v in views:
         strata[v.strategy].append(v)
-    keys = sorted(strata)
-    pools = {}
-    for k in keys:
-        order = rng.permutation(len(strata[k]))
-        pools[k] = [strata[k][i] for i in order]
-    key_order = [keys[i] for i in rng.permutation(len(keys))]
+    pools = {
+        k: sorted(vs, key=lambda v: (candidate_key(seed, v.parent, v.strategy), v.parent))
+        for k, vs in strata.items()
+    }
+    key_order = sorted(pools, key=lambda k: (_key("siteline-stratum", seed, k), k))
     chosen: list[SyntheticView] = []
     depth = 0
     while len(chosen) < n and any(len(pools[k]) > depth for k in key_order):
@@ -213,7 +244,7 @@ def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list
             if len(pools[k]) > depth:
                 chosen.append(pools[k][depth])
         depth += 1
-    return chosen
+    return sorted(chosen, key=lambda v: (candidate_key(seed, v.parent, v.strategy), v.parent, v.strategy))
 
 
 def generate_views(
@@ -225,9 +256,14 @@ def generate_views(
     progress: Callable[[int], None] | None = None,
 ) -> ViewSet:
     """Synthetic views of one scene (the later scene of a pair): candidates for every real camera,
-    rejection, then a seeded stratified sample of ``params.n_views``, indexed 0..n-1."""
+    rejection, then a seeded stratified sample of ``params.n_views``, indexed 0..n-1.
+
+    Real camera poses are snapped first (siteline.tolerances), so the same site at any coordinate
+    magnitude gives bit-identical views."""
     params = params or ViewParams()
-    cams = list(cameras)
+    cams = [
+        NamedCamera(c.name, c.camera.snapped(POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM)) for c in cameras
+    ]
     if not cams:
         raise ViewsError("no real cameras to generate views from.")
 
