@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pyproj
@@ -36,7 +38,153 @@ def parse_crs(text: str) -> pyproj.CRS:
         raise CRSError(f"CRS {text!r} ({crs.name}) is not a projected CRS.")
     unit = crs.axis_info[0].unit_name if crs.axis_info else "metre"
     if unit not in ("metre", "meter", "m"):
-        raise CRSError(f"CRS {text!r} ({crs.name}) has horizontal unit {unit!r}; siteline needs metres.")
+        raise CRSError(
+            f"site CRS {text!r} ({crs.name}) has horizontal unit {unit!r}; a site's frame is in metres "
+            f"(radii, spacings and tile sizes are metres). Create the site in a metric CRS such as "
+            f"{metric_alternative(crs)}; missions in {crs_text(crs)} are then converted at ingest, "
+            "z included (`siteline ingest --crs`, `--z-unit`)."
+        )
+    return crs
+
+
+def metric_alternative(crs: pyproj.CRS) -> str:
+    """A metric CRS (``EPSG:nnnn (name)``) covering ``crs``'s area of use: the UTM zone of its
+    datum at the centre of that area, or of WGS 84."""
+    from pyproj.aoi import AreaOfInterest
+    from pyproj.database import query_utm_crs_info
+
+    area = crs.area_of_use
+    if area is None:
+        return "the UTM zone of the site (EPSG:326xx north, EPSG:327xx south)"
+    lon, lat = (area.west + area.east) / 2.0, (area.south + area.north) / 2.0
+    aoi = AreaOfInterest(lon, lat, lon, lat)
+    geodetic = crs.geodetic_crs
+    datum = geodetic.datum.name if geodetic is not None else ""
+    for name in ("NAD83" if datum.startswith("NAD83") else datum, "WGS 84"):
+        found = [i for i in query_utm_crs_info(datum_name=name, area_of_interest=aoi) if not i.deprecated]
+        if found:
+            return f"{found[0].auth_name}:{found[0].code} ({found[0].name})"
+    return "the UTM zone of the site (EPSG:326xx north, EPSG:327xx south)"
+
+
+def parse_source_crs(text: str) -> pyproj.CRS:
+    """The CRS of a mission's data (``--crs``): any CRS PROJ knows, projected in any unit, geographic
+    or compound; ingest transforms it into the site CRS (:func:`to_site_transform`)."""
+    if not isinstance(text, str) or not text.strip():
+        raise CRSError("CRS is empty: give an EPSG code such as EPSG:2994, or a WKT string.")
+    try:
+        return pyproj.CRS.from_user_input(text.strip())
+    except PyprojCRSError as exc:
+        raise CRSError(f"CRS {text!r} is not known to PROJ: {exc}. Give e.g. EPSG:32618.") from exc
+
+
+# metres per unit of the vertical units ``--z-unit`` accepts
+Z_UNITS_M = {
+    "m": ("metre", 1.0),
+    "metre": ("metre", 1.0),
+    "ft": ("foot", 0.3048),
+    "foot": ("foot", 0.3048),
+    "ftus": ("US survey foot", 1200.0 / 3937.0),
+    "us-ft": ("US survey foot", 1200.0 / 3937.0),
+    "us survey foot": ("US survey foot", 1200.0 / 3937.0),
+}
+
+
+@dataclass(frozen=True)
+class ZUnit:
+    """The unit of a mission's z values: ``name``, ``metres`` per unit, and ``source`` (where the
+    choice came from: ``vertical CRS``, ``horizontal unit``, ``--z-unit``), recorded in the scene."""
+
+    name: str
+    metres: float
+    source: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "metres": self.metres, "source": self.source}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> ZUnit:
+        return cls(str(doc["name"]), float(doc["metres"]), str(doc["source"]))
+
+
+def parse_z_unit(text: str) -> ZUnit:
+    """``--z-unit``: m, ft or ftUS (also metre, foot, us-ft)."""
+    key = str(text).strip().lower()
+    if key not in Z_UNITS_M:
+        raise CRSError(
+            f"--z-unit {text!r} is not known: use m, ft (international foot) or ftUS (US survey foot)."
+        )
+    name, metres = Z_UNITS_M[key]
+    return ZUnit(name, metres, "--z-unit")
+
+
+def z_unit_of(src: pyproj.CRS, override: ZUnit | None = None) -> ZUnit:
+    """The unit of z in data of CRS ``src``: ``override`` when given, else the unit of ``src``'s
+    vertical CRS (compound or 3D), else its horizontal unit (a LAS in a feet CRS with no vertical CRS
+    holds feet in z too, as autzen.laz does); degrees of a geographic CRS mean metres of height."""
+    if override is not None:
+        return override
+    vertical = [c for c in src.sub_crs_list if c.is_vertical] if src.is_compound else []
+    if vertical and vertical[0].axis_info:
+        ax = vertical[0].axis_info[0]
+        return ZUnit(ax.unit_name, float(ax.unit_conversion_factor), "vertical CRS")
+    if len(src.axis_info) >= 3:
+        ax = src.axis_info[2]
+        return ZUnit(ax.unit_name, float(ax.unit_conversion_factor), "vertical CRS")
+    if src.is_geographic or not src.axis_info:
+        return ZUnit("metre", 1.0, "horizontal unit")
+    ax = src.axis_info[0]
+    return ZUnit(ax.unit_name, float(ax.unit_conversion_factor), "horizontal unit")
+
+
+class ToSiteCRS:
+    """Float64 transformation of (N, 3) points from a source CRS into the site CRS, z in metres.
+
+    x, y go through PROJ from the source's horizontal CRS to the site's; z is multiplied by the
+    source's :class:`ZUnit` (PROJ leaves z untouched between CRSs without a vertical component). When
+    both CRSs are compound and no ``--z-unit`` is given, PROJ's full 3D transformation does it all.
+    """
+
+    def __init__(self, src: pyproj.CRS, dst: pyproj.CRS, z_unit: ZUnit) -> None:
+        self.src, self.dst, self.z_unit = src, dst, z_unit
+        self.full_3d = src.is_compound and dst.is_compound and z_unit.source != "--z-unit"
+        horizontal = _horizontal(src)
+        self.identity_xy = horizontal.equals(_horizontal(dst), ignore_axis_order=True)
+        if self.full_3d:
+            self._tr = transformer(src, dst)
+        else:
+            self._tr = None if self.identity_xy else transformer(horizontal, _horizontal(dst))
+
+    @property
+    def is_identity(self) -> bool:
+        return self._tr is None and self.z_unit.metres == 1.0
+
+    def __call__(self, xyz: np.ndarray) -> np.ndarray:
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if self.full_3d:
+            x, y, z = self._tr.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2], errcheck=False)
+            return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=1)
+        if self._tr is None:
+            x, y = xyz[:, 0], xyz[:, 1]
+        else:
+            x, y = self._tr.transform(xyz[:, 0], xyz[:, 1], errcheck=False)
+        z = xyz[:, 2] * self.z_unit.metres if self.z_unit.metres != 1.0 else xyz[:, 2]
+        return np.stack([np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64), z], axis=1)
+
+    def probe(self, xy_site: Sequence[float]) -> np.ndarray:
+        """The source coordinates of a site-CRS position (checks that an inverse exists)."""
+        tr = self._tr or transformer(_horizontal(self.dst), _horizontal(self.src))
+        if self._tr is None:
+            return np.asarray(tr.transform(xy_site[0], xy_site[1], errcheck=True))
+        return np.asarray(tr.transform(xy_site[0], xy_site[1], errcheck=True, direction="INVERSE")[:2])
+
+
+def _horizontal(crs: pyproj.CRS) -> pyproj.CRS:
+    """The horizontal part of a compound CRS (the CRS itself otherwise)."""
+    if crs.is_compound:
+        for sub in crs.sub_crs_list:
+            if not sub.is_vertical:
+                return sub
     return crs
 
 

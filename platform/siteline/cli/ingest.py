@@ -44,7 +44,15 @@ def ingest(
     ),
     site: str = typer.Option(..., "--site", help="Site the mission belongs to."),
     crs: str | None = typer.Option(
-        None, "--crs", help="CRS of a LAS file that records none, e.g. EPSG:32618."
+        None,
+        "--crs",
+        help="CRS of a LAS file that records none, e.g. EPSG:2994: any CRS, feet included; points "
+        "are transformed into the site CRS.",
+    ),
+    z_unit: str | None = typer.Option(
+        None,
+        "--z-unit",
+        help="Unit of the file's z: m, ft or ftUS (default: its vertical CRS, else its horizontal unit).",
     ),
     copy: bool = typer.Option(
         True,
@@ -65,6 +73,7 @@ def ingest(
     """Ingest a mission folder as a new scene of a site and tile it (a re-run of the same content does nothing)."""
     opts = IngestOptions(
         crs=crs,
+        z_unit=z_unit,
         storage="copy" if copy else "reference",
         accept_misalignment=accept_misalignment,
         max_georegistration_rms_m=max_rms_m,
@@ -164,6 +173,7 @@ def scene_record(s, scene) -> dict:  # noqa: ANN001
         "density_pts_m2": stats.get("density_pts_m2"),
         "source_crs": stats.get("source_crs"),
         "transformed": stats.get("transformed"),
+        "z_unit": stats.get("z_unit"),
         "colour": stats.get("colour"),
         "registration": scene.registration,
         "cameras": len(scene_cameras(s, scene.id)),

@@ -25,6 +25,7 @@ from siteline.catalog.scenes import add_cameras, ensure_pair, mission_by_manifes
 from siteline.catalog.sites import get_site, site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
+from siteline.crs import parse_z_unit
 from siteline.errors import MissionError, PhotoError, RegistrationError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
 from siteline.ingest.photos import PhotoMeta, read_photo_meta
@@ -43,7 +44,8 @@ GPS_UTC_OFFSET_S = 18
 
 @dataclass(frozen=True)
 class IngestOptions:
-    """crs: CRS of a LAS without one. storage: ``copy`` (content-addressed store) or ``reference``.
+    """crs: CRS of a LAS without one (any CRS PROJ knows). z_unit: unit of the LAS z (m, ft, ftUS;
+    default: the unit its CRS implies, siteline.crs.z_unit_of). storage: ``copy`` (content-addressed store) or ``reference``.
     Thresholds: georegistration RMS (m) and RANSAC inlier distance (m); alignment against the previous
     scene: largest ICP correction (m) and residual (m) accepted without ``accept_misalignment``. The
     alignment check catches gross misregistration (a wrong CRS, offset or datum): construction changes
@@ -51,6 +53,7 @@ class IngestOptions:
     so the default limit is 0.5 m; the measured correction is recorded either way."""
 
     crs: str | None = None
+    z_unit: str | None = None
     storage: str = "copy"
     accept_misalignment: bool = False
     max_georegistration_rms_m: float = 0.1
@@ -59,6 +62,8 @@ class IngestOptions:
     max_alignment_residual_m: float = 0.15
 
     def __post_init__(self) -> None:
+        if self.z_unit is not None:
+            parse_z_unit(self.z_unit)
         if self.storage not in ("copy", "reference"):
             raise MissionError(f"storage must be 'copy' or 'reference', got {self.storage!r}.")
 
@@ -243,7 +248,13 @@ def ingest_mission(
     except Exception:
         with_header = None
     rep.start("reading points", with_header)
-    scan = scan_las(root / las.path, spec, opts.crs, progress=lambda n: rep.advance("reading points", n))
+    scan = scan_las(
+        root / las.path,
+        spec,
+        opts.crs,
+        z_unit=parse_z_unit(opts.z_unit) if opts.z_unit else None,
+        progress=lambda n: rep.advance("reading points", n),
+    )
     scan.path = las.path
     photos = read_photos(entries, root)
     cameras, registration, cam_source = register_cameras(photos, colmap_dir(entries, root), spec, opts)
@@ -407,6 +418,7 @@ def _commit(
                         "site": site_name,
                         "storage": opts.storage,
                         "crs": opts.crs,
+                        "z_unit": opts.z_unit,
                         "accept_misalignment": opts.accept_misalignment,
                     },
                     started,

@@ -17,7 +17,8 @@ from typing import Any
 
 from siteline.errors import PhotoError
 
-DJI_NAMESPACES = ("http://www.dji.com/drone-dji/1.0/", "http://www.dji.com")
+# compared without a trailing slash: legacy cameras write both "http://www.dji.com" and ".../"
+DJI_NAMESPACES = ("http://www.dji.com/drone-dji/1.0", "http://www.dji.com")
 _XMP_START = b"<x:xmpmeta"
 _XMP_END = b"</x:xmpmeta>"
 # scan at most this much of a file for the XMP packet (DJI writes it in the first APP1 segments)
@@ -125,21 +126,25 @@ def _dji_fields(xmp: bytes) -> dict[str, str]:
     try:
         root = ET.fromstring(xmp)
     except ET.ParseError:
-        # some firmware writes stray bytes; fall back to a tolerant attribute scan
+        # stray bytes or an undeclared prefix (some legacy firmware): a tolerant scan of the
+        # drone-dji: and DJI: attributes and elements
         out = {}
         for m in re.finditer(rb'(?:drone-dji|DJI):(\w+)="([^"]*)"', xmp):
             out[m.group(1).decode()] = m.group(2).decode(errors="replace")
+        for m in re.finditer(rb"<(drone-dji|DJI):(\w+)>([^<]*)</\1:\2>", xmp):
+            if m.group(3).strip():
+                out[m.group(2).decode()] = m.group(3).decode(errors="replace").strip()
         return out
     out: dict[str, str] = {}
     for el in root.iter():
         for key, value in el.attrib.items():
             if key.startswith("{"):
                 ns, local = key[1:].split("}", 1)
-                if ns in DJI_NAMESPACES:
+                if ns.rstrip("/") in DJI_NAMESPACES:
                     out[local] = value
         if el.tag.startswith("{"):
             ns, local = el.tag[1:].split("}", 1)
-            if ns in DJI_NAMESPACES and el.text and el.text.strip():
+            if ns.rstrip("/") in DJI_NAMESPACES and el.text and el.text.strip():
                 out[local] = el.text.strip()
     return out
 

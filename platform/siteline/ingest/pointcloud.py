@@ -12,7 +12,7 @@ import laspy
 import numpy as np
 import pyproj
 
-from siteline.crs import crs_text, parse_crs, transformer
+from siteline.crs import ToSiteCRS, ZUnit, crs_text, parse_source_crs, z_unit_of
 from siteline.errors import CRSError, PointCloudError
 from siteline.fence import inside_fence
 from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
@@ -54,6 +54,7 @@ class LasScan:
     scale: list[float]
     offset: list[float]
     gps_time_range: list[float] | None
+    z_unit: dict
     stable_sample: np.ndarray = field(repr=False)
 
     def to_dict(self) -> dict:
@@ -79,12 +80,12 @@ def source_crs(path: Path, crs_override: str | None) -> pyproj.CRS:
     if (
         in_file is not None
         and crs_override is not None
-        and not in_file.equals(parse_crs(crs_override), ignore_axis_order=True)
+        and not in_file.equals(parse_source_crs(crs_override), ignore_axis_order=True)
     ):
         raise CRSError(
             f"point cloud {path} declares {in_file.name} but --crs says {crs_override}: remove --crs or fix the file."
         )
-    src = in_file if in_file is not None else parse_crs(crs_override)
+    src = in_file if in_file is not None else parse_source_crs(crs_override)
     if not (src.is_projected or src.is_compound or src.is_geographic):
         raise CRSError(
             f"point cloud {path}: CRS {src.name} is neither projected nor geographic; it cannot be "
@@ -93,14 +94,16 @@ def source_crs(path: Path, crs_override: str | None) -> pyproj.CRS:
     return src
 
 
-def source_transformer(path: Path, site: SiteSpec, src: pyproj.CRS) -> pyproj.Transformer | None:
-    """A float64 transformer from the file's CRS to the site's, None when they are the same."""
+def source_transformer(
+    path: Path, site: SiteSpec, src: pyproj.CRS, z_unit: ZUnit | None = None
+) -> ToSiteCRS | None:
+    """A float64 transformation from the file's CRS (z in ``z_unit``, else the unit
+    :func:`siteline.crs.z_unit_of` finds) to the site's, None when there is nothing to do."""
     dst = site.pyproj_crs
-    if src.equals(dst, ignore_axis_order=True):
-        return None
-    tr = transformer(src, dst)
+    unit = z_unit_of(src, z_unit)
     try:
-        probe = tr.transform(site.origin[0], site.origin[1], errcheck=True, direction="INVERSE")
+        tr = ToSiteCRS(src, dst, unit)
+        probe = tr.probe(site.origin[:2])
     except Exception as exc:
         raise CRSError(
             f"point cloud {path}: no usable transformation from {src.name} to the site CRS "
@@ -108,11 +111,11 @@ def source_transformer(path: Path, site: SiteSpec, src: pyproj.CRS) -> pyproj.Tr
         ) from exc
     if not np.isfinite(probe).all():
         raise CRSError(f"point cloud {path}: {src.name} cannot be transformed to the site CRS {dst.name}.")
-    return tr
+    return None if tr.is_identity else tr
 
 
 def site_chunks(
-    path: Path, site: SiteSpec, tr: pyproj.Transformer | None, chunk_points: int = DEFAULT_CHUNK_POINTS
+    path: Path, site: SiteSpec, tr: ToSiteCRS | None, chunk_points: int = DEFAULT_CHUNK_POINTS
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
     origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore."""
@@ -122,8 +125,7 @@ def site_chunks(
     for chunk in iter_chunks(path, chunk_points):
         xyz = chunk.xyz_crs
         if tr is not None:
-            x, y, z = tr.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2], errcheck=False)
-            xyz = np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=1)
+            xyz = tr(xyz)
         local = xyz - origin
         if not np.isfinite(local).all():
             bad = int((~np.isfinite(local).all(axis=1)).sum())
@@ -150,13 +152,15 @@ def scan_las(
     site: SiteSpec,
     crs_override: str | None = None,
     *,
+    z_unit: ZUnit | None = None,
     sample_max: int = 200_000,
     chunk_points: int = DEFAULT_CHUNK_POINTS,
     progress: Callable[[int], None] | None = None,
     seed: int = 0,
 ) -> LasScan:
     """Read ``path`` once in chunks: bring coordinates into the site CRS in float64, refuse non-finite
-    or absurd ones, map classes through the site taxonomy, and gather statistics."""
+    or absurd ones, map classes through the site taxonomy, and gather statistics. z is converted to
+    metres from ``z_unit`` (``--z-unit``) or the unit the file's CRS implies (recorded in the scan)."""
     path = Path(path)
     with open_las(path) as reader:
         header = reader.header
@@ -170,7 +174,7 @@ def scan_las(
             f"point cloud {path}: header scale {scale} / offset {offset} is not finite and non-zero."
         )
     src = source_crs(path, crs_override)
-    tr = source_transformer(path, site, src)
+    tr = source_transformer(path, site, src, z_unit)
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
     rng = np.random.default_rng(seed)
     keep_p = min(1.0, sample_max / max(n_total, 1))
@@ -208,7 +212,7 @@ def scan_las(
     names = {c.id: c.name for c in site.taxonomy.classes}
     return LasScan(
         path=str(path),
-        source_crs=crs_text(src) if (src.is_projected or src.is_compound) else src.to_wkt(),
+        source_crs=crs_text(src),
         transformed=tr is not None,
         point_count=count,
         bounds_min=lo.tolist(),
@@ -223,5 +227,6 @@ def scan_las(
         scale=scale,
         offset=offset,
         gps_time_range=[tmin, tmax] if np.isfinite(tmin) else None,
+        z_unit=z_unit_of(src, z_unit).to_dict(),
         stable_sample=np.concatenate(samples) if samples else np.zeros((0, 3)),
     )

@@ -15,7 +15,7 @@ from siteline.catalog.models import Mission, MissionFile, Node, Scene
 from siteline.catalog.sites import site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
-from siteline.crs import parse_crs
+from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
 from siteline.ingest.store import resolve_file
 from siteline.site import SiteSpec
@@ -76,12 +76,16 @@ def tile_scene(
         site = site_spec(s.get(Site, scene.site_id))
         las = scene_las(s, settings, scene)
         src = parse_crs_or_site((scene.statistics or {}).get("source_crs"), site)
+        z_doc = (scene.statistics or {}).get("z_unit")
+        z_unit = ZUnit.from_dict(z_doc) if z_doc else None
     spec = spec or TileSpec(tile_size_m=site.tile_size_m)
     out = store_uri(settings, scene_id)
     stores.remove(out)
     started = datetime.now(UTC)
     with settings.store.publish(out) as work:
-        result = write_tiles(las, site, src, work, spec, workers=workers, seed=scene_id, progress=progress)
+        result = write_tiles(
+            las, site, src, work, spec, workers=workers, seed=scene_id, progress=progress, z_unit=z_unit
+        )
     result.uri = out
     try:
         with catalog.transaction() as s:
@@ -127,17 +131,8 @@ def tile_scene(
 
 
 def parse_crs_or_site(text: str | None, site: SiteSpec):  # noqa: ANN201
-    return (
-        parse_crs(text)
-        if text and text.startswith("EPSG:")
-        else (site.pyproj_crs if not text else _wkt(text))
-    )
-
-
-def _wkt(text: str):  # noqa: ANN202
-    import pyproj
-
-    return pyproj.CRS.from_user_input(text)
+    """The source CRS recorded at ingest (EPSG code or WKT), or the site's when none was recorded."""
+    return parse_source_crs(text) if text else site.pyproj_crs
 
 
 def scene_nodes(session: Session, scene_id: int) -> list[NodeInfo]:

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
+from siteline.crs import ZUnit
 from siteline.errors import TileError
 from siteline.ingest.pointcloud import site_chunks, source_transformer
 from siteline.site import SiteSpec
@@ -206,9 +207,11 @@ def write_tiles(
     workers: int = 2,
     seed: int = 0,
     progress: Callable[[str, int, int | None], None] | None = None,
+    z_unit: ZUnit | None = None,
 ) -> TileResult:
     """Tile ``las_path`` into the new Zarr group ``out`` (which must not exist; removed again on an
-    error); return its nodes."""
+    error); return its nodes. ``z_unit``: the unit of the file's z recorded at ingest (None: the unit
+    its CRS implies)."""
     import zarr
 
     t0 = time.perf_counter()
@@ -220,7 +223,7 @@ def write_tiles(
     spill_dir = out.with_name(f".{out.name}.spill-{uuid.uuid4().hex[:12]}")
     spill_dir.mkdir(parents=True)
     try:
-        tr = source_transformer(las_path, site, src_crs)
+        tr = source_transformer(las_path, site, src_crs, z_unit)
         counts = _spill(
             las_path,
             site,
