@@ -33,8 +33,13 @@ def confusion(
 
 @dataclass
 class Scores:
-    iou_unchanged: float
-    iou_changed: float
+    """Split-level scores of one confusion matrix. An IoU is None when its class is absent from both
+    truth and prediction (its union is empty); mIoU is the mean over the classes that are present, as
+    torchmetrics' JaccardIndex does (a perfect prediction of an all-unchanged split scores mIoU 1).
+    Precision, recall and F1 of an absent changed class are 0 (torchmetrics' ``zero_division=0``)."""
+
+    iou_unchanged: float | None
+    iou_changed: float | None
     miou: float
     precision: float
     recall: float
@@ -56,12 +61,14 @@ def scores(cm: np.ndarray) -> Scores:
     cm = np.asarray(cm, dtype=np.float64)
     tn, fp, fn, tp = cm[0, 0], cm[0, 1], cm[1, 0], cm[1, 1]
     n = cm.sum()
-    iou0 = _div(tn, tn + fp + fn)
-    iou1 = _div(tp, tp + fp + fn)
+    iou0 = _div(tn, tn + fp + fn) if tn + fp + fn else None
+    iou1 = _div(tp, tp + fp + fn) if tp + fp + fn else None
+    present = [v for v in (iou0, iou1) if v is not None]
     precision = _div(tp, tp + fp)
     recall = _div(tp, tp + fn)
     f1 = _div(2 * precision * recall, precision + recall)
     oa = _div(tp + tn, n)
     pe = _div((tp + fp) * (tp + fn) + (tn + fn) * (tn + fp), n * n)
     kappa = _div(oa - pe, 1 - pe)
-    return Scores(iou0, iou1, (iou0 + iou1) / 2, precision, recall, f1, oa, kappa, int(n))
+    miou = sum(present) / len(present) if present else 0.0
+    return Scores(iou0, iou1, miou, precision, recall, f1, oa, kappa, int(n))

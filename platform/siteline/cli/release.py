@@ -59,6 +59,11 @@ def build(
         None, "--version", help="Version (default: next, major bump when labels or pairs change)."
     ),
     device: str = typer.Option("cpu", "--device", help="torch device for rendering."),
+    pad: bool = typer.Option(
+        True,
+        "--pad/--no-pad",
+        help="Pad images (right, bottom) to sides that are multiples of 32 and at least 256 px.",
+    ),
     preset: str | None = typer.Option(
         None,
         "--preset",
@@ -94,6 +99,7 @@ def build(
             preset=preset,
             progress=_progress(bar),
             device=device,
+            pad=pad,
         )
     record = info.__dict__
     emit(
@@ -176,6 +182,74 @@ def verify(
     )
     if problems:
         raise typer.Exit(1)
+
+
+@app.command("export")
+def export(
+    name: str = typer.Argument(...),
+    version: str = typer.Argument(...),
+    profile: str = typer.Option(
+        ...,
+        "--profile",
+        help="opencd, torchgeo-levircd, torchgeo-levircdplus, changemamba, changeformer or torchange.",
+    ),
+    out: Path = typer.Option(..., "--out", help="New folder for the export (outside the release)."),
+    copy: bool = typer.Option(False, "--copy", help="Copy files instead of relative symlinks."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Lay a release out as one toolbox's stock loader expects; print the setting that honours ignore."""
+    from siteline.release.build import release_root
+    from siteline.release.export import export_release
+
+    with catalog() as cat:
+        root, _ = release_root(cat, name, version)
+    result = export_release(root, profile, out, copy=copy)
+    emit(
+        as_json,
+        result.to_dict(),
+        lambda: console.print(
+            f"exported {name} {version} for {profile} to {result.out}: {result.files} files, "
+            f"images per split {result.splits}"
+            + (
+                f", splits mapped {result.split_map}"
+                if any(k != v for k, v in result.split_map.items())
+                else ""
+            )
+            + f"\nlabel/ is LEVIR-CD 0/255; the tool reads it as: {result.label_rule}."
+            + f"\nignore pixels read as unchanged there; {result.honour_ignore}."
+        ),
+    )
+
+
+@app.command("score")
+def score(
+    name: str = typer.Argument(...),
+    version: str = typer.Argument(...),
+    split: str = typer.Option("test", "--split"),
+    pred: Path = typer.Option(..., "--pred", help="Folder of <id>.png predictions, 0/255 or 0/1."),
+    out: Path | None = typer.Option(None, "--out", help="Also write the results JSON here."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Score predictions against the ignore-aware truth: one confusion matrix over the split."""
+    import json
+
+    from siteline.release.build import release_root
+    from siteline.release.score import score_predictions
+
+    with catalog() as cat:
+        root, _ = release_root(cat, name, version)
+    result = score_predictions(root, split, pred)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(result, indent=1) + "\n")
+    emit(
+        as_json,
+        result,
+        lambda: print_record(
+            f"{name} {version} {split}: {result['images']} predictions",
+            result["scores"] | ({"results": str(out)} if out else {}),
+        ),
+    )
 
 
 @app.command("query")

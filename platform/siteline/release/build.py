@@ -7,6 +7,7 @@ read-only and marks the catalog row published. A published version is never rewr
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 import stat
@@ -17,7 +18,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import sqlalchemy as sa
+from PIL import Image
 
 from siteline import __version__, stores
 from siteline.catalog import Catalog
@@ -28,7 +31,7 @@ from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.pairs import PairParams, pair_view_ids, process_pair
-from siteline.release import datasheet
+from siteline.release import datasheet, layout
 from siteline.release.manifest import (
     METRIC_DEFINITION,
     file_entries,
@@ -127,8 +130,11 @@ def build_release(
     progress: Progress | None = None,
     device: str = "cpu",
     run_id: str | None = None,
+    pad: bool = True,
 ) -> ReleaseInfo:
-    """Process the site's pairs (or ``pair_ids``) and assemble a draft release ``name``."""
+    """Process the site's pairs (or ``pair_ids``) and assemble a draft release ``name`` in format 2
+    (siteline.release.layout): A, B, label (LEVIR-CD 0/255), ignore and label_ignore (0/1/255) per
+    item; ``pad`` pads every image to sides that are multiples of 32 and at least 256 pixels."""
     params = params or PairParams()
     started = datetime.now(UTC)
     with catalog.transaction() as s:
@@ -156,7 +162,7 @@ def build_release(
             )
         if not chosen:
             raise ReleaseError(f"site {site_name} has no pairs. Nothing was written.")
-        lineage_key = {"pairs": chosen, "params": params.to_dict()}
+        lineage_key = {"pairs": chosen, "params": params.to_dict(), "format": layout.FORMAT, "pad": pad}
         if version is None:
             version = next_version(s, name, lineage_key)
         existing = find_release(s, name, version)
@@ -183,10 +189,15 @@ def build_release(
             for v in out.views:
                 item_id = f"{site_name}_p{pid:04d}_v{v['index']:04d}"
                 sp = split_of[pid]
-                for sub in ("A", "B", "label"):
+                rendered = {
+                    sub: _read_png(stores.join(out.root, sub, v["file"])) for sub in ("A", "B", "label")
+                }
+                arrays = layout.item_images(rendered["A"], rendered["B"], rendered["label"], pad)
+                for sub, arr in arrays.items():
                     dest = tmp / sp / sub / f"{item_id}.png"
                     dest.parent.mkdir(parents=True, exist_ok=True)
-                    stores.get_file(stores.join(out.root, sub, v["file"]), dest)
+                    Image.fromarray(arr).save(dest, format="PNG")
+                h, w = rendered["label"].shape
                 items.append(
                     {
                         "id": item_id,
@@ -197,6 +208,8 @@ def build_release(
                         "coverage": min(v["coverage_a"], v["coverage_b"]),
                         "change_ratio": v["change_ratio"],
                         "valid": v["valid"],
+                        "size_px": [int(w), int(h)],
+                        "padded_px": [int(arrays["label"].shape[1]), int(arrays["label"].shape[0])],
                     }
                 )
         stats = datasheet.statistics(tmp, items)
@@ -211,7 +224,8 @@ def build_release(
                 "seeds": {"views": params.seed, "splits": params.seed},
             }
         doc = {
-            "format": "siteline-release/1",
+            "format": layout.FORMAT,
+            "layout": layout.layout_record(pad),
             "name": name,
             "version": version,
             "created": datetime.now(UTC).isoformat(),
@@ -248,6 +262,11 @@ def build_release(
         run_id,
     )
     return ReleaseInfo(name, version, "draft", str(final), len(items), manifest_sha, stats)
+
+
+def _read_png(uri: str) -> np.ndarray:
+    """A pair output PNG from the store as an array (RGB (H, W, 3) or mask (H, W) uint8)."""
+    return np.asarray(Image.open(io.BytesIO(stores.read_bytes(uri))))
 
 
 def _record_draft(
@@ -293,7 +312,7 @@ def _record_draft(
                     split=it["split"],
                     coverage=it["coverage"],
                     change_ratio=it["change_ratio"],
-                    files={sub: f"{it['split']}/{sub}/{it['id']}.png" for sub in ("A", "B", "label")},
+                    files={sub: f"{it['split']}/{sub}/{it['id']}.png" for sub in layout.FOLDERS},
                 )
             )
         s.add(

@@ -25,7 +25,7 @@ def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int 
     for it in items[:count]:
         a = np.asarray(Image.open(root / it["split"] / "A" / f"{it['id']}.png").convert("RGB"))
         b = np.asarray(Image.open(root / it["split"] / "B" / f"{it['id']}.png").convert("RGB"))
-        m = colour_mask(np.asarray(Image.open(root / it["split"] / "label" / f"{it['id']}.png")))
+        m = colour_mask(np.asarray(Image.open(root / it["split"] / "label_ignore" / f"{it['id']}.png")))
         rows.append(np.concatenate([a, b, m], axis=1))
     grid = np.concatenate(rows, axis=0) if rows else np.zeros((10, 30, 3), np.uint8)
     img = Image.fromarray(grid)
@@ -33,11 +33,12 @@ def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int 
 
 
 def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
-    """Pixel class balance per split, coverage and per-pair change ratio."""
+    """Pixel class balance per split (from ``label_ignore/``; padding counts as ignore), coverage and
+    per-pair change ratio."""
     per_split: dict[str, dict[str, int]] = {}
     per_pair: dict[int, list[float]] = {}
     for it in items:
-        m = np.asarray(Image.open(root / it["split"] / "label" / f"{it['id']}.png"))
+        m = np.asarray(Image.open(root / it["split"] / "label_ignore" / f"{it['id']}.png"))
         s = per_split.setdefault(it["split"], {"unchanged": 0, "changed": 0, "ignore": 0, "images": 0})
         s["unchanged"] += int((m == 0).sum())
         s["changed"] += int((m == 1).sum())
@@ -53,6 +54,12 @@ def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _ignore_share(stats: dict[str, Any]) -> float:
+    s = stats["class_balance"].values()
+    total = sum(v["unchanged"] + v["changed"] + v["ignore"] for v in s)
+    return sum(v["ignore"] for v in s) / max(total, 1)
+
+
 def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
     """README.md of a release: what it is, where it comes from, how it was made, how to use it."""
     lin = doc["lineage"]
@@ -65,11 +72,32 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         "",
         "![samples: t1, t2, mask (green unchanged, red changed, white ignore)](montage.png)",
         "",
-        "## Layout (LEVIR-CD / Open-CD style)",
+        "## Layout (format 2: LEVIR-CD, with the ignore information beside it)",
         "",
-        "`<split>/A/<id>.png` (t1), `<split>/B/<id>.png` (t2), `<split>/label/<id>.png` (0 unchanged, 1 changed, "
-        "255 ignore: no point rendered or an ignored class). `manifest.json` lists every file with its size and sha256, "
-        "the lineage and the splits; `stats.json` holds the figures below.",
+        *[f"- `<split>/{k}/<id>.png`: {v}" for k, v in doc["layout"]["folders"].items()],
+        "",
+        "`manifest.json` lists every file with its size and sha256, the lineage and the splits; `stats.json` "
+        "holds the figures below.",
+        "",
+        "### Which folder your tool should read",
+        "",
+        "- Every toolbox (Open-CD, TorchGeo, ChangeMamba, torchange, ChangeFormer/BIT) reads `label/` correctly "
+        "with its stock settings: 255 is changed, everything else unchanged. **Scores computed on `label/` alone "
+        "count the ignore pixels as unchanged** "
+        f"({_ignore_share(stats):.1%} of the pixels here), which inflates accuracy and mIoU.",
+        "- To honour ignore, read `label_ignore/` (0/1/255) with `ignore_index=255`, or mask with `ignore/`. "
+        "`siteline release export NAME VERSION --profile TOOL --out DIR` lays the release out for one tool and "
+        "prints the one setting that tool needs; `siteline release score` scores a folder of predictions against "
+        "the ignore-aware truth.",
+        *(
+            [
+                f"- Images are padded (right and bottom) to sides that are multiples of {doc['layout']['padding']['multiple_px']} "
+                f"and at least {doc['layout']['padding']['min_side_px']} px: images and `label/` with 0, `ignore/` and "
+                "`label_ignore/` with ignore. `items[].size_px` in the manifest is the rendered size."
+            ]
+            if doc["layout"]["padding"]["enabled"]
+            else []
+        ),
         "",
         "## Sources",
         "",
@@ -106,11 +134,12 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         "",
         "```python",
         "from siteline.data import ChangeDetectionDataset",
-        f"ds = ChangeDetectionDataset('{'<this folder>'}', split='train')  # image (2, 3, H, W) float32, mask (1, H, W) int64",
+        f"ds = ChangeDetectionDataset('{'<this folder>'}', split='train')  # image (2, 3, H, W) float32, mask (1, H, W) int64 0/1/255",
         "```",
         "",
         "Metrics: one confusion matrix over the whole split, 255 excluded; IoU per class, mIoU (mean of unchanged and "
-        "changed IoU), precision/recall/F1 of changed, OA, kappa (`siteline.metrics`).",
+        "changed IoU over the classes present in truth or prediction), precision/recall/F1 of changed, OA, kappa "
+        "(`siteline.metrics`, `siteline release score`).",
         "",
         f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
         "",

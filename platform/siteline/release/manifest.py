@@ -17,7 +17,8 @@ METRIC_DEFINITION = {
     "reported": [
         "iou_unchanged",
         "iou_changed",
-        "miou (mean of the two IoUs)",
+        "miou (mean of the IoUs of the classes present in truth or prediction; a class absent from both has "
+        "no IoU, as in torchmetrics)",
         "precision/recall/f1 of changed",
         "overall accuracy",
         "cohen kappa",
