@@ -8,7 +8,6 @@ and publishes a release (``on-demand``: run ``build-release`` yourself).
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 from pathlib import Path
@@ -30,12 +29,14 @@ from runner import task_runner  # noqa: E402
 
 from siteline import stores  # noqa: E402
 from siteline.catalog import open_catalog  # noqa: E402
-from siteline.catalog.models import Pair, Scene, Site  # noqa: E402
+from siteline.catalog.scenes import (  # noqa: E402
+    pair_ids_of_scene,
+    site_name_of_pair,
+    site_name_of_scene,
+)
 from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import load_settings  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
-
-RELEASE_POLICIES = ("every-pair", "on-demand")
 
 
 def artifact_key(*parts: Any) -> str:
@@ -44,15 +45,22 @@ def artifact_key(*parts: Any) -> str:
 
 
 def transient(task, task_run, state) -> bool:  # noqa: ANN001
-    """Retry I/O, store and database hiccups, never bad input (a SitelineError says what to fix)."""
+    """Retry I/O only: store errors, OS and network errors, a lost database connection. Never bad
+    input (a SitelineError says what to fix) and never a programming error (it would fail again)."""
+    import sqlalchemy as sa
+
     try:
         state.result()
     except StoreError:
         return True
     except SitelineError:
         return False
-    except Exception:
+    except (OSError, TimeoutError, ConnectionError):
         return True
+    except sa.exc.DBAPIError as exc:
+        return bool(exc.connection_invalidated) or isinstance(exc, sa.exc.OperationalError)
+    except Exception:
+        return False
     return False
 
 
@@ -102,7 +110,8 @@ def tile_task(scene_id: int) -> dict | None:
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
-    from siteline.pairs import PairParams, process_pair
+    from siteline import pipeline
+    from siteline.pairs import PairParams
 
     p = PairParams.from_dict(params) if params else PairParams()
     key = artifact_key("progress", site, "pair", pair_id)
@@ -114,7 +123,10 @@ def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
             done["n"] += n
             update_progress_artifact(progress_id, 100.0 * done["n"] / total)
 
-    out = _stage("process_pair", f"pair:{pair_id}", p.to_dict(), process_pair, pair_id, p, progress=report)
+    outs = _stage(
+        "process_pair", f"pair:{pair_id}", p.to_dict(), pipeline.process_pairs, [pair_id], p, progress=report
+    )
+    out = outs[pair_id]
     update_progress_artifact(progress_id, 100.0)
     return {
         "pair": out.pair_id,
@@ -139,11 +151,12 @@ def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
 
 @task(retries=1, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def build_release_task(site: str, name: str, params: dict | None, publish: bool) -> dict:
+    from siteline import pipeline
     from siteline.pairs import PairParams
-    from siteline.release import build_release, publish_release
+    from siteline.release import publish_release
 
     p = PairParams.from_dict(params) if params else PairParams()
-    info = _stage("build_release", f"release:{name}", p.to_dict(), build_release, site, name, p)
+    info = _stage("build_release", f"release:{name}", p.to_dict(), pipeline.release, site, name, p)
     if publish:
         info = _stage(
             "publish_release", f"release:{name}:{info.version}", {}, publish_release, name, info.version
@@ -151,25 +164,22 @@ def build_release_task(site: str, name: str, params: dict | None, publish: bool)
     return info.__dict__
 
 
-def _site_of_scene(scene_id: int) -> str:
-    settings = load_settings()
-    cat = open_catalog(settings)
+def _read(fn, *args):  # noqa: ANN001, ANN202
+    """One catalog read function (siteline.catalog) in its own transaction."""
+    cat = open_catalog(load_settings())
     try:
         with cat.transaction() as s:
-            scene = s.get(Scene, scene_id)
-            return s.get(Site, scene.site_id).name
+            return fn(s, *args)
     finally:
         cat.dispose()
+
+
+def _site_of_scene(scene_id: int) -> str:
+    return _read(site_name_of_scene, scene_id)
 
 
 def _site_of_pair(pair_id: int) -> str:
-    settings = load_settings()
-    cat = open_catalog(settings)
-    try:
-        with cat.transaction() as s:
-            return s.get(Site, s.get(Pair, pair_id).site_id).name
-    finally:
-        cat.dispose()
+    return _read(site_name_of_pair, pair_id)
 
 
 def _tag_run(*extra: str) -> None:
@@ -299,33 +309,15 @@ def process_scene_pairs_flow(
     scene_id: int, params: dict | None = None, release_name: str | None = None
 ) -> list[dict]:
     """Process every pair the new scene belongs to; then apply the release policy."""
-    import sqlalchemy as sa
-
     site = _site_of_scene(scene_id)
     _tag_run(f"site:{site}")
     settings = load_settings()
-    cat = open_catalog(settings)
-    try:
-        with cat.transaction() as s:
-            pair_ids = list(
-                s.execute(
-                    sa.select(Pair.id)
-                    .where((Pair.t1_scene_id == scene_id) | (Pair.t2_scene_id == scene_id))
-                    .order_by(Pair.id)
-                ).scalars()
-            )
-    finally:
-        cat.dispose()
+    pair_ids = _read(pair_ids_of_scene, scene_id)
     with tags(f"site:{site}"):
         futures = [process_pair_task.submit(pid, params, site) for pid in pair_ids]
         outs = [f.result() for f in futures]
     for out in outs:
         _pair_dashboards(out)
-    policy = os.environ.get("SITELINE_RELEASE_POLICY", "on-demand")
-    if policy not in RELEASE_POLICIES:
-        raise ValueError(f"SITELINE_RELEASE_POLICY={policy!r}: use one of {RELEASE_POLICIES}.")
-    if outs and policy == "every-pair":
-        build_release_flow(
-            site, release_name or os.environ.get("SITELINE_RELEASE_NAME", f"{site}-cd"), params, True
-        )
+    if outs and settings.release_policy == "every-pair":
+        build_release_flow(site, release_name or settings.release_name or f"{site}-cd", params, True)
     return outs

@@ -1,18 +1,14 @@
-"""The task runner comes from configuration; the flow code is the same for all of them.
-
-``SITELINE_TASK_RUNNER``: ``threads`` (default), ``processes``, or ``dask``; ``SITELINE_DASK_ADDRESS``
-points at a running scheduler (``tcp://host:8786``), else a LocalCluster is started.
-``SITELINE_TASK_WORKERS``: workers for threads/processes (default 2).
-"""
+"""The task runner comes from configuration (``siteline.config``: ``SITELINE_TASK_RUNNER``,
+``SITELINE_TASK_WORKERS``, ``SITELINE_DASK_ADDRESS``); the flow code is the same for all of them."""
 
 from __future__ import annotations
 
-import os
+from siteline.config import load_settings
 
 
 def task_runner():  # noqa: ANN201
-    kind = os.environ.get("SITELINE_TASK_RUNNER", "threads").strip().lower()
-    workers = int(os.environ.get("SITELINE_TASK_WORKERS", "2"))
+    settings = load_settings()
+    kind, workers = settings.task_runner, settings.task_workers
     if kind == "threads":
         from prefect.task_runners import ThreadPoolTaskRunner
 
@@ -21,18 +17,15 @@ def task_runner():  # noqa: ANN201
         from prefect.task_runners import ProcessPoolTaskRunner
 
         return ProcessPoolTaskRunner(max_workers=workers)
-    if kind == "dask":
-        from prefect_dask import DaskTaskRunner
+    from prefect_dask import DaskTaskRunner
 
-        address = os.environ.get("SITELINE_DASK_ADDRESS")
-        if address:
-            return DaskTaskRunner(address=address)
-        return DaskTaskRunner(
-            cluster_kwargs={
-                "n_workers": workers,
-                "threads_per_worker": 1,
-                "host": "127.0.0.1",
-                "dashboard_address": None,
-            }
-        )
-    raise ValueError(f"SITELINE_TASK_RUNNER={kind!r}: use threads, processes or dask.")
+    if settings.dask_address:
+        return DaskTaskRunner(address=settings.dask_address)
+    return DaskTaskRunner(
+        cluster_kwargs={
+            "n_workers": workers,
+            "threads_per_worker": 1,
+            "host": "127.0.0.1",
+            "dashboard_address": None,
+        }
+    )

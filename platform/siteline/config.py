@@ -9,6 +9,11 @@ Environment variables (read here and nowhere else):
   ``s3://bucket/siteline`` that workers on several machines share (default ``$SITELINE_HOME/stores``).
   The file system's endpoint and credentials come from fsspec's configuration (e.g.
   ``FSSPEC_S3='{"endpoint_url": "http://127.0.0.1:9000", "key": "...", "secret": "..."}'``).
+- ``SITELINE_TASK_RUNNER``: the flows' task runner: ``threads`` (default), ``processes`` or ``dask``;
+  ``SITELINE_TASK_WORKERS`` its workers (default 2); ``SITELINE_DASK_ADDRESS`` a running Dask
+  scheduler (``tcp://host:8786``; default: a LocalCluster on 127.0.0.1).
+- ``SITELINE_RELEASE_POLICY``: ``on-demand`` (default) or ``every-pair`` (the flows build a release
+  after every processed pair); ``SITELINE_RELEASE_NAME`` that release's name (default ``<site>-cd``).
 """
 
 from __future__ import annotations
@@ -21,6 +26,8 @@ from siteline.errors import ConfigError
 from siteline.stores import Store
 
 CATALOG_FILENAME = "catalog.sqlite"
+TASK_RUNNERS = ("threads", "processes", "dask")
+RELEASE_POLICIES = ("every-pair", "on-demand")
 
 
 @dataclass(frozen=True)
@@ -36,6 +43,11 @@ class Settings:
     home: Path
     database_url: str
     store_url: str = ""
+    task_runner: str = "threads"
+    task_workers: int = 2
+    dask_address: str = ""
+    release_policy: str = "on-demand"
+    release_name: str = ""
 
     @property
     def store(self) -> Store:
@@ -72,4 +84,22 @@ def load_settings(environ: dict[str, str] | None = None) -> Settings:
         store = store[len("file://") :]
     if store and "://" not in store:
         store = str(Path(store).expanduser().resolve())
-    return Settings(home=home.resolve(), database_url=url, store_url=store)
+    runner = env.get("SITELINE_TASK_RUNNER", "threads").strip().lower() or "threads"
+    if runner not in TASK_RUNNERS:
+        raise ConfigError(f"SITELINE_TASK_RUNNER={runner!r}: use one of {', '.join(TASK_RUNNERS)}.")
+    raw_workers = env.get("SITELINE_TASK_WORKERS", "2").strip() or "2"
+    if not raw_workers.isdigit() or int(raw_workers) < 1:
+        raise ConfigError(f"SITELINE_TASK_WORKERS={raw_workers!r} must be a positive whole number.")
+    policy = env.get("SITELINE_RELEASE_POLICY", "on-demand").strip() or "on-demand"
+    if policy not in RELEASE_POLICIES:
+        raise ConfigError(f"SITELINE_RELEASE_POLICY={policy!r}: use one of {', '.join(RELEASE_POLICIES)}.")
+    return Settings(
+        home=home.resolve(),
+        database_url=url,
+        store_url=store,
+        task_runner=runner,
+        task_workers=int(raw_workers),
+        dask_address=env.get("SITELINE_DASK_ADDRESS", "").strip(),
+        release_policy=policy,
+        release_name=env.get("SITELINE_RELEASE_NAME", "").strip(),
+    )

@@ -92,6 +92,10 @@ class SynthError(SitelineError, ValueError):
     """A synthetic-site parameter is out of range."""
 
 
+class PairError(SitelineError, ValueError):
+    """A pair cannot be processed (unknown, untiled scenes, no cameras to derive views from)."""
+
+
 class ReleaseError(SitelineError, ValueError):
     """A release cannot be built, published or verified."""
 

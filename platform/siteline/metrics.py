@@ -12,9 +12,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
+from siteline.codes import IGNORE
 from siteline.errors import LabelError
-
-IGNORE = 255
 
 
 def confusion(

@@ -1,5 +1,5 @@
-"""Load the JSON Schemas of siteline's contracts from the repository's ``schema/`` folder and
-validate documents against them."""
+"""Load the JSON Schemas of siteline's contracts (``siteline/schema/``, shipped inside the package;
+the repository's top-level ``schema/`` links to it) and validate documents against them."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 from siteline.errors import SchemaError
 
-SCHEMA_DIR = Path(__file__).resolve().parents[2] / "schema"
+SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
 
 
 def schema_path(name: str) -> Path:
@@ -18,7 +18,7 @@ def schema_path(name: str) -> Path:
     path = SCHEMA_DIR / name
     if not path.is_file():
         raise SchemaError(
-            f"schema file {path} is missing: siteline must run from its source tree (pip install -e)."
+            f"schema file {path} is missing: the siteline installation is incomplete (reinstall it)."
         )
     return path
 

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from siteline.errors import StoreError
+from siteline.hashing import sha256_file
 
 MARKER = ".siteline-complete"
 _LOCAL_PROTOCOLS = {"file", "local"}
@@ -256,8 +257,6 @@ class Store:
     def local_file(self, uri: str, sha256: str | None = None) -> Path:
         """A local path holding the bytes of ``uri``: itself on a local store, else a cached download
         (checked against ``sha256`` when given)."""
-        from siteline.ingest.inventory import sha256_file
-
         if not is_remote(uri):
             return local_path(uri)
         name = sha256 or hashlib.sha256(uri.encode()).hexdigest()
@@ -274,3 +273,34 @@ class Store:
         finally:
             tmp.unlink(missing_ok=True)
         return cached
+
+
+# -- the content-addressed blob store of mission files (<store>/blobs, sha256 names) --------------
+
+
+def blob_uri(store: Store, sha256: str) -> str:
+    """Address of the content-addressed blob ``sha256`` under ``<store>/blobs``."""
+    return store.uri("blobs", sha256[:2], sha256[2:])
+
+
+def put_blob(store: Store, source: Path, sha256: str) -> bool:
+    """Copy ``source`` into the store under its hash (whole or not at all); return whether it was new.
+    An existing blob is left as it is."""
+    dest = blob_uri(store, sha256)
+    if exists(dest):
+        return False
+    put_file(source, dest)
+    return True
+
+
+def remove_blobs(store: Store, shas: list[str]) -> None:
+    for sha in shas:
+        remove(blob_uri(store, sha))
+
+
+def resolve_file(store: Store, storage: str, root_uri: str, rel: str, sha256: str) -> Path:
+    """A local path holding a mission file's bytes: its blob (copied missions; fetched into the local
+    cache from a remote store) or its original path (referenced missions)."""
+    if storage == "copy":
+        return store.local_file(blob_uri(store, sha256), sha256)
+    return Path(root_uri) / rel

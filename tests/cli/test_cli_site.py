@@ -17,21 +17,31 @@ def initialised(home, capsys):
     return home
 
 
+def _every_command() -> list[list[str]]:
+    """The argv of every command and group of the CLI, found by walking its click tree."""
+    import typer
+
+    from siteline.cli import app
+
+    out: list[list[str]] = []
+
+    def walk(cmd, path: list[str]) -> None:  # noqa: ANN001
+        out.append(path)
+        for name, sub in sorted(getattr(cmd, "commands", {}).items()):
+            walk(sub, [*path, name])
+
+    walk(typer.main.get_command(app), [])
+    return out
+
+
 def test_every_command_has_help(capsys) -> None:
-    for argv in (
-        ["--help"],
-        ["init", "--help"],
-        ["db", "--help"],
-        ["db", "upgrade", "--help"],
-        ["db", "downgrade", "--help"],
-        ["db", "current", "--help"],
-        ["site", "--help"],
-        ["site", "create", "--help"],
-        ["site", "list", "--help"],
-        ["site", "show", "--help"],
-    ):
-        code, out, _ = run(capsys, *argv)
+    commands = _every_command()
+    assert len(commands) > 35 and ["release", "export"] in commands and ["release", "score"] in commands
+    for argv in commands:
+        code, out, _ = run(capsys, *argv, "--help")
         assert code == 0 and "Usage" in out, argv
+        usage = " ".join(out.split()).split("Usage: ", 1)[1]
+        assert usage.split(" ", 1)[1].startswith(" ".join(argv)), argv  # the help of that command
 
 
 def test_site_create_list_show_json(initialised, capsys, tmp_path) -> None:

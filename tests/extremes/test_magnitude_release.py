@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from siteline import pipeline
 from siteline.catalog import migrate, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
@@ -17,7 +18,6 @@ from siteline.config import Settings, sqlite_url
 from siteline.fence import load_fence_geojson
 from siteline.ingest.mission import ingest_mission
 from siteline.pairs import PairParams
-from siteline.release import build_release
 from siteline.site import make_site_spec
 from siteline.synth import SynthConfig, write_site
 from siteline.tiles import tile_scene
@@ -43,7 +43,7 @@ def _release(root: Path, origin: tuple[float, float, float]) -> Path:
     for e in truth["epochs"]:
         r = ingest_mission(cat, settings, site_dir / e["mission_dir"], "mag")
         tile_scene(cat, settings, r.scene_id, workers=1)
-    info = build_release(cat, settings, "mag", "rel", PARAMS)
+    info = pipeline.release(cat, settings, "mag", "rel", PARAMS)
     cat.dispose()
     return Path(info.root)
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from siteline.ingest.photos import read_photo_meta
+from siteline.photos import read_photo_meta
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "data"))
 from legacy_dji import legacy_photo  # noqa: E402

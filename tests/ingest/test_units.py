@@ -133,7 +133,9 @@ def test_crs_option_in_feet_is_accepted_and_z_unit_overrides(ft_home, capsys, tm
 
 
 def test_site_in_a_feet_crs_is_refused_naming_a_metric_crs(ft_home, capsys) -> None:
-    code, _, err = run_cli(capsys, "site", "create", "ft", "--crs", OREGON_FT, "--origin", "636000", "849000", "0")
+    code, _, err = run_cli(
+        capsys, "site", "create", "ft", "--crs", OREGON_FT, "--origin", "636000", "849000", "0"
+    )
     assert code == 2
     assert "foot" in err and "EPSG:26910" in err and "--z-unit" in err
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 import pytest
 from sitehelpers import epoch_dirs, make_home
 
+from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.ingest.mission import ingest_mission
 from siteline.pairs import PairParams
-from siteline.release import build_release, publish_release
+from siteline.release import publish_release
 from siteline.tiles import tile_scene
 
 PARAMS = PairParams(scale=0.5, point_size_px=3, views=6, seed=0, min_coverage=0.3)
@@ -21,7 +22,7 @@ def built(tmp_path_factory, synth_site):
     for m in epoch_dirs(synth_site):
         r = ingest_mission(cat, settings, m, "demo")
         tile_scene(cat, settings, r.scene_id, workers=1)
-    info = build_release(cat, settings, "demo", "rel", PARAMS)
+    info = pipeline.release(cat, settings, "demo", "rel", PARAMS)
     pub = publish_release(cat, settings, "rel", info.version)
     yield settings, cat, pub
     cat.dispose()

@@ -12,14 +12,14 @@ import sqlalchemy as sa
 from PIL import Image
 from sitehelpers import epoch_dirs, make_home
 
-from siteline import stores
+from siteline import pipeline, stores
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Pair, Release, Render, Scene
 from siteline.catalog.sites import add_site
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.ingest.mission import ingest_mission
 from siteline.pairs import PairParams, pair_mask
-from siteline.release import build_release, publish_release, read_manifest, verify_files
+from siteline.release import publish_release, read_manifest, verify_files
 from siteline.release.query import diff_releases, query_items
 from siteline.schemas import validate
 from siteline.site import make_site_spec
@@ -109,7 +109,7 @@ def test_published_release_is_read_only_and_never_republished(built) -> None:
     with pytest.raises(ImmutableError, match="already published"):
         publish_release(cat, settings, "rel", "1.0.0")
     with pytest.raises(ImmutableError, match="already published"):
-        build_release(cat, settings, "demo", "rel", PARAMS, version="1.0.0")
+        pipeline.release(cat, settings, "demo", "rel", PARAMS, version="1.0.0")
     with pytest.raises(ImmutableError), cat.transaction() as s:
         rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
         rel.parameters = {}
@@ -121,11 +121,11 @@ def test_bad_requests_write_nothing(built) -> None:
         add_site(s, make_site_spec("lonely", "EPSG:32618", (0.0, 0.0, 0.0)))
     before = {p for p in (settings.home / "releases").rglob("*")}
     with pytest.raises(ReleaseError, match="0 scene"):
-        build_release(cat, settings, "lonely", "x", PARAMS)
+        pipeline.release(cat, settings, "lonely", "x", PARAMS)
     with cat.transaction() as s:
         pid = s.query(Pair).first().id
     with pytest.raises(ReleaseError, match="belongs to site demo"):
-        build_release(cat, settings, "lonely2" if False else "lonely", "x", PARAMS, pair_ids=[pid])
+        pipeline.release(cat, settings, "lonely2" if False else "lonely", "x", PARAMS, pair_ids=[pid])
     with pytest.raises(NotFoundError):
         publish_release(cat, settings, "nope", "1.0.0")
     assert {p for p in (settings.home / "releases").rglob("*")} == before
@@ -135,7 +135,7 @@ def test_bad_requests_write_nothing(built) -> None:
 
 def test_new_parameters_bump_the_major_version_and_diff(built) -> None:
     settings, cat, pub = built
-    info = build_release(
+    info = pipeline.release(
         cat,
         settings,
         "demo",
@@ -203,7 +203,7 @@ def test_preset_is_applied_and_recorded(built) -> None:
     assert (p.scale, p.point_size_px, p.lod_factor) == (0.125, 3, 2.0) and p.views == 3
     with pytest.raises(ReleaseError, match="unknown preset"):
         preset_params("turbo")
-    info = build_release(cat, settings, "demo", "presetrel", p, preset="fast")
+    info = pipeline.release(cat, settings, "demo", "presetrel", p, preset="fast")
     lin = read_manifest(info.root)["lineage"]
     assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
 
@@ -217,7 +217,7 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
         for m in epoch_dirs(synth_site)[:2]:
             r = ingest_mission(cat, settings, m, "demo")
             tile_scene(cat, settings, r.scene_id, workers=1)
-        info = build_release(cat, settings, "demo", "rel", PARAMS)
+        info = pipeline.release(cat, settings, "demo", "rel", PARAMS)
         pub = publish_release(cat, settings, "rel", info.version)
         with cat.transaction() as s:
             uris = [sc.tile_store_uri for sc in s.execute(sa.select(Scene)).scalars()]

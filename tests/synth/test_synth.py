@@ -16,7 +16,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from siteline.cameras import Camera
-from siteline.ingest.photos import read_photo_meta
+from siteline.photos import read_photo_meta
 from siteline.register import camera_from_photo
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 from siteline.synth import model as m

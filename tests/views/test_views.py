@@ -236,7 +236,9 @@ def test_mirror_of_a_camera_above_the_fence_is_kept_at_both_magnitudes() -> None
 
 def test_removing_one_candidate_changes_at_most_one_sampled_view() -> None:
     strategies_ = [f"v{v}-{m}-f{f}" for v in (1, 0.5) for m in ("orig", "mirror") for f in (0, 0.5)]
-    pool = [SyntheticView(f"IMG_{p:04d}.JPG", s, {}, _fake(s, p).camera) for p in range(12) for s in strategies_]
+    pool = [
+        SyntheticView(f"IMG_{p:04d}.JPG", s, {}, _fake(s, p).camera) for p in range(12) for s in strategies_
+    ]
     ident = [(v.parent, v.strategy) for v in pool]
     for n in (10, 40, 90):
         base = {(v.parent, v.strategy) for v in stratified_sample(pool, n, seed=3)}

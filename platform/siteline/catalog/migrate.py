@@ -12,14 +12,15 @@ from alembic.script import ScriptDirectory
 
 from siteline.errors import CatalogError, RevisionMismatchError
 
-MIGRATIONS_DIR = Path(__file__).resolve().parents[3] / "migrations"
+# shipped inside the package (the repository's top-level migrations/ links here)
+MIGRATIONS_DIR = Path(__file__).resolve().parents[1] / "migrations"
 
 
 def alembic_config(engine: sa.Engine) -> Config:
     """An Alembic config whose migrations run on ``engine``."""
     if not (MIGRATIONS_DIR / "env.py").is_file():
         raise CatalogError(
-            f"migrations folder {MIGRATIONS_DIR} is missing: run siteline from its source tree."
+            f"migrations folder {MIGRATIONS_DIR} is missing: the siteline installation is incomplete (reinstall it)."
         )
     cfg = Config()
     cfg.set_main_option("script_location", str(MIGRATIONS_DIR))

@@ -120,3 +120,28 @@ def list_pairs(session: Session, site: Site) -> list[Pair]:
             .order_by(t1.capture_time)
         ).scalars()
     )
+
+
+def pair_ids_of_scene(session: Session, scene_id: int) -> list[int]:
+    """Ids of the pairs ``scene_id`` belongs to (as t1 or t2), ascending."""
+    return list(
+        session.execute(
+            sa.select(Pair.id)
+            .where((Pair.t1_scene_id == scene_id) | (Pair.t2_scene_id == scene_id))
+            .order_by(Pair.id)
+        ).scalars()
+    )
+
+
+def site_name_of_scene(session: Session, scene_id: int) -> str:
+    """The name of the site of scene ``scene_id``; :class:`NotFoundError` when there is none."""
+    scene = get_scene(session, scene_id)
+    return session.get(Site, scene.site_id).name
+
+
+def site_name_of_pair(session: Session, pair_id: int) -> str:
+    """The name of the site of pair ``pair_id``; :class:`NotFoundError` when there is none."""
+    pair = session.get(Pair, pair_id)
+    if pair is None:
+        raise NotFoundError(f"no pair with id {pair_id}.")
+    return session.get(Site, pair.site_id).name

@@ -31,11 +31,9 @@ def demo(
     train_iters: int = typer.Option(20, "--train-iters", help="Baseline training iterations."),
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""
-    from siteline.ingest.mission import ingest_mission
+    from siteline import pipeline
     from siteline.pairs import PairParams
-    from siteline.release import build_release, publish_release
     from siteline.synth import SynthConfig, write_site
-    from siteline.tiles import tile_scene
 
     t_start = time.perf_counter()
     cfg = settings()
@@ -70,9 +68,7 @@ def demo(
         )
         console.rule("3. ingest and tile")
         for m in missions:
-            r = ingest_mission(cat, cfg, m, site_name)
-            if r.scene_id is not None:
-                tile_scene(cat, cfg, r.scene_id)
+            r, _ = pipeline.ingest(cat, cfg, m, site_name)
             console.print(f"  {r.message}")
         console.rule("4. release")
         with cat.transaction() as s:
@@ -87,15 +83,7 @@ def demo(
             info_root, version = Path(existing[-1].root_uri), existing[-1].version
             console.print(f"release {DEMO_RELEASE} {version} already published: reusing it")
         else:
-            info = build_release(
-                cat,
-                cfg,
-                site_name,
-                DEMO_RELEASE,
-                PairParams(**DEMO_PARAMS),
-                progress=lambda task, n, total: None,
-            )
-            pub = publish_release(cat, cfg, DEMO_RELEASE, info.version)
+            pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, PairParams(**DEMO_PARAMS), publish=True)
             info_root, version = Path(pub.root), pub.version
         stats = json.loads((info_root / "stats.json").read_text())
         print_table(

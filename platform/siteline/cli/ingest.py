@@ -7,12 +7,13 @@ from pathlib import Path
 import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
+from siteline import pipeline
 from siteline.catalog.models import Node
 from siteline.catalog.scenes import get_scene, list_missions, list_pairs, list_scenes, scene_cameras
 from siteline.catalog.sites import get_site
 from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
-from siteline.ingest.mission import IngestOptions, Reporter, ingest_mission
-from siteline.ingest.photos import read_photo_meta
+from siteline.ingest.mission import IngestOptions, Reporter
+from siteline.photos import read_photo_meta
 from siteline.tiles import export_las, open_scene_tiles, tile_scene
 
 mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
@@ -86,22 +87,20 @@ def ingest(
         TimeRemainingColumn(),
     ]
     with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
-        result = ingest_mission(cat, cfg, mission_dir, site, opts, BarReporter(bar))
-        tiled = None
-        if result.scene_id is not None:
-            rep = BarReporter(bar)
-            tiled, tile_msg = tile_scene(
-                cat,
-                cfg,
-                result.scene_id,
-                workers=workers,
-                progress=lambda task, n, total: (
-                    rep.start(task, total) if task not in rep.tasks else None,
-                    rep.advance(task, n),
-                ),
-            )
-            if tiled is not None:
-                result.message += f"; {tile_msg}"
+        rep = BarReporter(bar)
+        result, tiled = pipeline.ingest(
+            cat,
+            cfg,
+            mission_dir,
+            site,
+            opts,
+            rep,
+            workers=workers,
+            progress=lambda task, n, total: (
+                rep.start(task, total) if task not in rep.tasks else None,
+                rep.advance(task, n),
+            ),
+        )
     record = result.to_dict()
     record["tiles"] = tiled.summary() if tiled is not None else None
     emit(

@@ -72,8 +72,8 @@ def build(
     as_json: bool = JsonOption,
 ) -> None:
     """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
+    from siteline import pipeline
     from siteline.pairs import PairParams
-    from siteline.release.build import build_release
 
     params = PairParams(
         scale=scale,
@@ -83,12 +83,8 @@ def build(
         seed=seed,
         min_coverage=min_coverage,
     )
-    if preset is not None:
-        from siteline.presets import preset_params
-
-        params = preset_params(preset, params)
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
-        info = build_release(
+        info = pipeline.release(
             cat,
             settings(),
             site,

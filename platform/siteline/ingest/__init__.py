@@ -1,5 +1,5 @@
-"""Mission ingest: inventory, photo metadata, point-cloud statistics (DESIGN.md §1, §9)."""
+"""Mission ingest: inventory, validation, georegistration, the scene's catalog rows (DESIGN.md §1, §9).
 
-from siteline.ingest.photos import PhotoMeta, read_photo_meta
-
-__all__ = ["PhotoMeta", "read_photo_meta"]
+Only the CLI, the flows and ``siteline.pipeline`` import this package; the primitives it builds on
+(``siteline.photos``, ``siteline.sitestream``, ``siteline.hashing``, ``siteline.stores``) live below it.
+"""

@@ -11,8 +11,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path, PurePosixPath
 
 from siteline.errors import MissionError
+from siteline.hashing import sha256_file
 
-HASH_BLOCK_BYTES = 4 * 2**20
 RAW_SUFFIXES = {
     ".ldr",
     ".clc",
@@ -116,16 +116,6 @@ def _walk(root: Path) -> list[tuple[PurePosixPath, Path]]:
                     raise MissionError(f"mission {root}: {rel} is a broken symlink.")
             out.append((rel, full))
     return out
-
-
-def sha256_file(path: Path, progress: Callable[[int], None] | None = None) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(HASH_BLOCK_BYTES):
-            h.update(block)
-            if progress:
-                progress(len(block))
-    return h.hexdigest()
 
 
 def inventory(

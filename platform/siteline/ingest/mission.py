@@ -28,13 +28,13 @@ from siteline.config import Settings
 from siteline.crs import parse_z_unit
 from siteline.errors import MissionError, PhotoError, RegistrationError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
-from siteline.ingest.photos import PhotoMeta, read_photo_meta
 from siteline.ingest.pointcloud import LasScan, scan_las
-from siteline.ingest.store import blob_uri, put_blob, remove_blobs
+from siteline.photos import PhotoMeta, read_photo_meta
 from siteline.register.georegister import georegister
 from siteline.register.icp import point_to_plane_icp
 from siteline.register.xmp import camera_from_photo, photo_center_crs
 from siteline.site import SiteSpec
+from siteline.stores import blob_uri, put_blob, remove_blobs
 
 PREFERRED_LAS = ("lidars/terra_las/cloud_merged.las", "lidars/terra_las/cloud_merged.laz")
 RAW_FOLDER = re.compile(r"^DJI_(\d{12})_\d{3}_")

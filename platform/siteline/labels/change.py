@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from siteline.codes import CHANGED, UNCHANGED
+from siteline.codes import IGNORE as IGNORED
 from siteline.errors import LabelError
-
-UNCHANGED, CHANGED, IGNORED = 0, 1, 255
-
 
 NN_BACKENDS = ("pykdtree", "ckdtree")
 

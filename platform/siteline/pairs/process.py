@@ -19,13 +19,13 @@ from siteline.catalog.scenes import scene_cameras
 from siteline.catalog.sites import site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
-from siteline.errors import ReleaseError
+from siteline.errors import PairError
 from siteline.labels.store import attach_labels, auto_radius, write_labels
 from siteline.pairs.params import PairParams
 from siteline.pairs.render import render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.render.outputs import png_bytes
-from siteline.tiles import open_scene_tiles, tile_scene
+from siteline.tiles import open_scene_tiles
 from siteline.views import NamedCamera, SyntheticView, fit_ground_plane, generate_views
 
 Progress = Callable[[str, int, int | None], None]
@@ -50,6 +50,36 @@ def _output_root(settings: Settings, pair_id: int, params: PairParams) -> str:
     return settings.store.uri("pairs", f"pair-{pair_id}", params.digest())
 
 
+def pair_output(
+    catalog: Catalog, settings: Settings, pair_id: int, params: PairParams, run_id: str | None = None
+) -> PairOutput | None:
+    """The stored outputs of ``pair_id`` processed with ``params``, None when it was not. Outputs whose
+    catalog rows are missing (a crash between the publish and the commit) get them now."""
+    root = _output_root(settings, pair_id, params)
+    if not stores.is_complete(root):
+        return None
+    with catalog.transaction() as s:
+        pair = s.get(Pair, pair_id)
+        if pair is None:
+            raise PairError(f"no pair with id {pair_id}.")
+        ids = (pair.t1_scene_id, pair.t2_scene_id)
+    doc = json.loads(stores.read_bytes(stores.join(root, "summary.json")))
+    if not pair_view_ids(catalog, pair_id, params):
+        _record(
+            catalog,
+            pair_id,
+            ids,
+            params,
+            doc["radius_m"],
+            doc["labels"],
+            doc["views"],
+            root,
+            datetime.now(UTC),
+            run_id,
+        )
+    return PairOutput(pair_id, ids[0], ids[1], doc["radius_m"], root, doc["views"], doc["labels"])
+
+
 def process_pair(
     catalog: Catalog,
     settings: Settings,
@@ -59,39 +89,30 @@ def process_pair(
     device: str = "cpu",
     run_id: str | None = None,
 ) -> PairOutput:
-    """Labels, views and renders of ``pair_id`` with ``params`` (reused when already made)."""
+    """Labels, views and renders of ``pair_id`` with ``params`` (reused when already made).
+
+    Both scenes must be tiled (:class:`PairError` names the command otherwise); tiling them is the
+    pipeline's job (``siteline.pipeline.process_pairs``), not this stage's."""
     params = params or PairParams()
     with catalog.transaction() as s:
         pair = s.get(Pair, pair_id)
         if pair is None:
-            raise ReleaseError(f"no pair with id {pair_id}.")
+            raise PairError(f"no pair with id {pair_id}.")
         t1, t2 = s.get(Scene, pair.t1_scene_id), s.get(Scene, pair.t2_scene_id)
         if t1.site_id != t2.site_id or pair.site_id != t1.site_id:
-            raise ReleaseError(
-                f"pair {pair_id} joins scenes of different sites ({t1.site_id}, {t2.site_id})."
-            )
+            raise PairError(f"pair {pair_id} joins scenes of different sites ({t1.site_id}, {t2.site_id}).")
         site = site_spec(s.get(Site, t1.site_id))
         ids = (t1.id, t2.id)
         untiled = [sc.id for sc in (t1, t2) if sc.status != "tiled"]
-    for sid in untiled:
-        tile_scene(catalog, settings, sid)
+    if untiled:
+        raise PairError(
+            f"pair {pair_id}: scene {untiled[0]} is not tiled: run `siteline scene tile {untiled[0]}` "
+            "(or `siteline release build`, which tiles and processes what it needs)."
+        )
     root = _output_root(settings, pair_id, params)
-    if stores.is_complete(root):
-        doc = json.loads(stores.read_bytes(stores.join(root, "summary.json")))
-        if not pair_view_ids(catalog, pair_id, params):  # outputs landed but the catalog rows did not
-            _record(
-                catalog,
-                pair_id,
-                ids,
-                params,
-                doc["radius_m"],
-                doc["labels"],
-                doc["views"],
-                root,
-                datetime.now(UTC),
-                run_id,
-            )
-        return PairOutput(pair_id, ids[0], ids[1], doc["radius_m"], root, doc["views"], doc["labels"])
+    existing = pair_output(catalog, settings, pair_id, params, run_id)
+    if existing is not None:
+        return existing
     started = datetime.now(UTC)
     with catalog.transaction() as s:
         tiles1 = open_scene_tiles(s, s.get(Scene, ids[0]))
@@ -114,7 +135,7 @@ def process_pair(
     attach_labels(tiles1, label_uri, "t1")
     attach_labels(tiles2, label_uri, "t2")
     if not cams:
-        raise ReleaseError(
+        raise PairError(
             f"pair {pair_id}: the later scene {ids[1]} has no cameras to derive views from "
             "(a LiDAR-only mission); ingest photos with it."
         )
@@ -136,7 +157,7 @@ def process_pair(
         progress=(lambda k: progress("views", k, len(cams))) if progress else None,
     )
     if not view_set.views:
-        raise ReleaseError(
+        raise PairError(
             f"pair {pair_id}: every synthetic view was rejected ({view_set.rejected}); lower "
             "--min-coverage or check the cameras."
         )

@@ -8,11 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from siteline.cameras import Camera
+from siteline.codes import CHANGED as MASK_CHANGED
+from siteline.codes import IGNORE as MASK_IGNORE
+from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.render import RenderSettings, render_points
 from siteline.tiles.reader import SceneTiles
-
-MASK_UNCHANGED, MASK_CHANGED, MASK_IGNORE = 0, 1, 255
 
 
 @dataclass

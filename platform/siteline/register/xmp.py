@@ -10,7 +10,7 @@ import pyproj
 from siteline.cameras import Camera
 from siteline.dji import cam_from_world_rotation, grid_convergence_deg
 from siteline.errors import PhotoError
-from siteline.ingest.photos import PhotoMeta
+from siteline.photos import PhotoMeta
 
 
 def photo_center_crs(meta: PhotoMeta, crs: pyproj.CRS) -> np.ndarray:

@@ -30,7 +30,7 @@ from siteline.catalog.sites import get_site
 from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
-from siteline.pairs import PairParams, pair_view_ids, process_pair
+from siteline.pairs import PairParams, pair_output, pair_view_ids
 from siteline.release import datasheet, layout
 from siteline.release.manifest import (
     METRIC_DEFINITION,
@@ -118,6 +118,36 @@ def _lineage(session, site: Site, pair_rows: list[Pair], outputs: dict[int, Any]
     }
 
 
+def choose_pairs(session, site_name: str, pair_ids: list[int] | None = None) -> list[int]:  # noqa: ANN001
+    """The pairs a release of ``site_name`` draws on: ``pair_ids`` (checked to be the site's) or every
+    pair of the site, ascending; :class:`ReleaseError` when the site cannot make a release."""
+    site = get_site(session, site_name)
+    all_pairs = {p.id: p for p in list_pairs(session, site)}
+    if pair_ids:
+        for pid in pair_ids:
+            row = session.get(Pair, pid)
+            if row is None:
+                raise NotFoundError(f"no pair with id {pid}. Nothing was written.")
+            if row.site_id != site.id:
+                other = session.get(Site, row.site_id)
+                raise ReleaseError(
+                    f"pair {pid} belongs to site {other.name}, not {site_name}: a release draws on "
+                    "one site's pairs. Nothing was written."
+                )
+        chosen = sorted(set(pair_ids))
+    else:
+        chosen = sorted(all_pairs)
+    scenes = list_scenes(session, site)
+    if len(scenes) < 2:
+        raise ReleaseError(
+            f"site {site_name} has {len(scenes)} scene(s); a release needs at least two "
+            "(ingest another mission). Nothing was written."
+        )
+    if not chosen:
+        raise ReleaseError(f"site {site_name} has no pairs. Nothing was written.")
+    return chosen
+
+
 def build_release(
     catalog: Catalog,
     settings: Settings,
@@ -127,41 +157,24 @@ def build_release(
     pair_ids: list[int] | None = None,
     version: str | None = None,
     preset: str | None = None,
-    progress: Progress | None = None,
-    device: str = "cpu",
     run_id: str | None = None,
     pad: bool = True,
 ) -> ReleaseInfo:
-    """Process the site's pairs (or ``pair_ids``) and assemble a draft release ``name`` in format 2
+    """Assemble a draft release ``name`` from the site's processed pairs (or ``pair_ids``) in format 2
     (siteline.release.layout): A, B, label (LEVIR-CD 0/255), ignore and label_ignore (0/1/255) per
-    item; ``pad`` pads every image to sides that are multiples of 32 and at least 256 pixels."""
+    item; ``pad`` pads every image to sides that are multiples of 32 and at least 256 pixels.
+
+    ``preset`` is applied to ``params`` here (siteline.presets) and recorded. Every pair must already
+    be processed with these parameters: :class:`ReleaseError` names the command otherwise
+    (``siteline.pipeline.release`` tiles and processes what is missing, then calls this)."""
     params = params or PairParams()
+    if preset is not None:
+        from siteline.presets import preset_params
+
+        params = preset_params(preset, params)
     started = datetime.now(UTC)
     with catalog.transaction() as s:
-        site = get_site(s, site_name)
-        all_pairs = {p.id: p for p in list_pairs(s, site)}
-        if pair_ids:
-            for pid in pair_ids:
-                row = s.get(Pair, pid)
-                if row is None:
-                    raise NotFoundError(f"no pair with id {pid}. Nothing was written.")
-                if row.site_id != site.id:
-                    other = s.get(Site, row.site_id)
-                    raise ReleaseError(
-                        f"pair {pid} belongs to site {other.name}, not {site_name}: a release draws on "
-                        "one site's pairs. Nothing was written."
-                    )
-            chosen = sorted(set(pair_ids))
-        else:
-            chosen = sorted(all_pairs)
-        scenes = list_scenes(s, site)
-        if len(scenes) < 2:
-            raise ReleaseError(
-                f"site {site_name} has {len(scenes)} scene(s); a release needs at least two "
-                "(ingest another mission). Nothing was written."
-            )
-        if not chosen:
-            raise ReleaseError(f"site {site_name} has no pairs. Nothing was written.")
+        chosen = choose_pairs(s, site_name, pair_ids)
         lineage_key = {"pairs": chosen, "params": params.to_dict(), "format": layout.FORMAT, "pad": pad}
         if version is None:
             version = next_version(s, name, lineage_key)
@@ -175,9 +188,14 @@ def build_release(
         _semver(version)
     except ValueError as exc:
         raise ReleaseError(f"version {version!r} is not semantic (MAJOR.MINOR.PATCH).") from exc
-    outputs = {
-        pid: process_pair(catalog, settings, pid, params, progress=progress, device=device) for pid in chosen
-    }
+    outputs = {pid: pair_output(catalog, settings, pid, params, run_id) for pid in chosen}
+    unprocessed = [pid for pid, out in outputs.items() if out is None]
+    if unprocessed:
+        raise ReleaseError(
+            f"pair {unprocessed[0]} is not processed with these parameters ({len(unprocessed)} of "
+            f"{len(chosen)} pairs): run `siteline release build`, which processes pairs first. "
+            "Nothing was written."
+        )
     splits = split_pairs(chosen, params.seed)
     split_of = {pid: sp for sp, ids in splits.items() for pid in ids}
     final = draft_path(settings, name, version)

@@ -11,9 +11,10 @@ from typing import Any
 
 import numpy as np
 
+from siteline.codes import CHANGED, IGNORE
+
 FORMAT = 2
 FORMAT_1 = "siteline-release/1"
-UNCHANGED, CHANGED, IGNORE = 0, 1, 255
 
 FOLDERS = {
     "A": "t1 image (RGB, 8-bit)",

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from siteline.ingest.inventory import sha256_file
+from siteline.hashing import sha256_file
 from siteline.schemas import validate
 
 MANIFEST = "manifest.json"

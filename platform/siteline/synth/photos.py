@@ -14,7 +14,7 @@ from scipy.ndimage import distance_transform_edt
 
 from siteline.cameras import Camera
 from siteline.dji import cam_from_world_rotation, grid_convergence_deg
-from siteline.ingest.photos import dji_xmp, signed
+from siteline.photos import dji_xmp, signed
 from siteline.render import RenderSettings, render_points
 
 # Zenmuse L2 RGB sensor, full size; photos are written at a fraction of it

@@ -17,8 +17,8 @@ from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
-from siteline.ingest.store import resolve_file
 from siteline.site import SiteSpec
+from siteline.stores import resolve_file
 from siteline.tiles.layout import TileSpec
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.writer import NodeInfo, TileResult, write_tiles

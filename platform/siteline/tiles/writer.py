@@ -26,8 +26,8 @@ import pyproj
 
 from siteline.crs import ZUnit
 from siteline.errors import TileError
-from siteline.ingest.pointcloud import site_chunks, source_transformer
 from siteline.site import SiteSpec
+from siteline.sitestream import site_chunks, source_transformer
 from siteline.tiles.layout import (
     SPILL_DTYPE,
     TileSpec,

@@ -1,4 +1,5 @@
-"""DJI photo metadata (DESIGN.md §9.2): the ``drone-dji`` XMP packet, with EXIF as fallback.
+"""DJI photo metadata (DESIGN.md §9.2), read and written: the ``drone-dji`` XMP packet, with EXIF as
+fallback; a shared primitive (ingest, registration and the synthetic site use it).
 
 The XMP packet is found in the raw bytes; values may be attributes or elements, signed strings
 ("+32.50"); both the current namespace ``http://www.dji.com/drone-dji/1.0/`` and the old thermal one

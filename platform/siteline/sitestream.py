@@ -1,0 +1,116 @@
+"""The one LAS/LAZ -> site frame stream (DESIGN.md §2): a file's CRS, the float64 transformation into
+the site CRS (z in metres), subtraction of the site origin, refusal of non-finite or absurd
+coordinates, taxonomy mapping and the fence. Ingest's scan and the tile writer both read through it."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pyproj
+
+from siteline.crs import ToSiteCRS, ZUnit, parse_source_crs, z_unit_of
+from siteline.errors import CRSError, PointCloudError
+from siteline.fence import inside_fence
+from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
+from siteline.site import SiteSpec
+
+
+@dataclass
+class SiteChunk:
+    """A chunk in the site frame: local (N, 3) float64 site-local metres, the raw chunk, site classes
+    (N,) uint8 after the taxonomy and the fence, which raw codes the taxonomy knows, which points lie
+    outside the fence."""
+
+    local: np.ndarray
+    chunk: PointChunk
+    classes: np.ndarray
+    known_code: np.ndarray
+    outside: np.ndarray
+
+
+def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
+    """The CRS of a LAS header (WKT or GeoTIFF keys), None when it has none."""
+    try:
+        return reader.header.parse_crs()
+    except Exception as exc:  # laspy/pyproj raise many types on malformed records
+        raise CRSError(f"point cloud {path}: its CRS record cannot be parsed ({exc}); pass --crs.") from exc
+
+
+def source_crs(path: Path, crs_override: str | None) -> pyproj.CRS:
+    """The CRS of a point cloud: its own record, or ``crs_override`` when it has none."""
+    with open_las(path) as reader:
+        in_file = file_crs(reader, path)
+    if in_file is None and crs_override is None:
+        raise CRSError(f"point cloud {path} has no CRS record; pass --crs (e.g. --crs EPSG:32618).")
+    if (
+        in_file is not None
+        and crs_override is not None
+        and not in_file.equals(parse_source_crs(crs_override), ignore_axis_order=True)
+    ):
+        raise CRSError(
+            f"point cloud {path} declares {in_file.name} but --crs says {crs_override}: remove --crs or fix the file."
+        )
+    src = in_file if in_file is not None else parse_source_crs(crs_override)
+    if not (src.is_projected or src.is_compound or src.is_geographic):
+        raise CRSError(
+            f"point cloud {path}: CRS {src.name} is neither projected nor geographic; it cannot be "
+            "transformed to the site CRS."
+        )
+    return src
+
+
+def source_transformer(
+    path: Path, site: SiteSpec, src: pyproj.CRS, z_unit: ZUnit | None = None
+) -> ToSiteCRS | None:
+    """A float64 transformation from the file's CRS (z in ``z_unit``, else the unit
+    :func:`siteline.crs.z_unit_of` finds) to the site's, None when there is nothing to do."""
+    dst = site.pyproj_crs
+    unit = z_unit_of(src, z_unit)
+    try:
+        tr = ToSiteCRS(src, dst, unit)
+        probe = tr.probe(site.origin[:2])
+    except Exception as exc:
+        raise CRSError(
+            f"point cloud {path}: no usable transformation from {src.name} to the site CRS "
+            f"{dst.name} ({exc})."
+        ) from exc
+    if not np.isfinite(probe).all():
+        raise CRSError(f"point cloud {path}: {src.name} cannot be transformed to the site CRS {dst.name}.")
+    return None if tr.is_identity else tr
+
+
+def site_chunks(
+    path: Path, site: SiteSpec, tr: ToSiteCRS | None, chunk_points: int = DEFAULT_CHUNK_POINTS
+) -> Iterator[SiteChunk]:
+    """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
+    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore."""
+    tax = site.taxonomy
+    lut, known = tax.code_lut("las")
+    origin = np.asarray(site.origin, dtype=np.float64)
+    for chunk in iter_chunks(path, chunk_points):
+        xyz = chunk.xyz_crs
+        if tr is not None:
+            xyz = tr(xyz)
+        local = xyz - origin
+        if not np.isfinite(local).all():
+            bad = int((~np.isfinite(local).all(axis=1)).sum())
+            raise PointCloudError(
+                f"point cloud {path}: {bad} points have non-finite coordinates (NaN or inf)."
+            )
+        far = float(np.abs(local).max(initial=0.0))
+        if far > MAX_SITE_LOCAL_M:
+            raise PointCloudError(
+                f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(origin)} (limit "
+                f"{MAX_SITE_LOCAL_M:,.0f} m): wrong site, wrong CRS or corrupt coordinates."
+            )
+        codes = chunk.classification
+        cls = lut[codes]
+        outside = np.zeros(len(cls), dtype=bool)
+        if site.fence is not None:
+            outside = ~inside_fence(local[:, :2], site.fence)
+            cls = np.where(outside, tax.ignore_id, cls)
+        yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside)

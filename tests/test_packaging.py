@@ -1,0 +1,40 @@
+"""A non-editable install carries the contracts' schemas and the catalog migrations."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+CHECK = """
+import siteline, sqlalchemy as sa
+assert siteline.__file__.startswith({target!r}), siteline.__file__
+from siteline.schemas import load_schema
+from siteline.catalog.engine import make_engine
+from siteline.catalog.migrate import upgrade
+from siteline.taxonomy import default_taxonomy
+assert load_schema("release.schema.json")["title"]
+engine = make_engine("sqlite:///" + {target!r} + "/catalog.sqlite")
+upgrade(engine)
+assert "release" in sa.inspect(engine).get_table_names()
+assert default_taxonomy().classes
+"""
+
+
+def test_wheel_install_finds_schemas_and_migrations(tmp_path) -> None:
+    wheels, target = tmp_path / "wheels", tmp_path / "target"
+    pip = [sys.executable, "-m", "pip", "-q"]
+    subprocess.run(
+        [*pip, "wheel", "--no-deps", "--no-build-isolation", str(REPO), "-w", str(wheels)],
+        check=True,
+        cwd=tmp_path,
+    )
+    wheel = next(wheels.glob("siteline-*.whl"))
+    subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)], check=True)
+    env = {"PYTHONPATH": str(target), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    proc = subprocess.run(
+        [sys.executable, "-c", CHECK.format(target=str(target))], env=env, capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
