@@ -26,14 +26,12 @@ from siteline.catalog.sites import get_site, site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.crs import parse_z_unit
-from siteline.errors import MissionError, PhotoError, RegistrationError
+from siteline.errors import MissionError, PhotoError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
 from siteline.ingest.pointcloud import LasScan, scan_las
+from siteline.lasio import open_las
 from siteline.photos import PhotoMeta, read_photo_meta
-from siteline.register.georegister import georegister
-from siteline.register.icp import point_to_plane_icp
-from siteline.register.xmp import camera_from_photo, photo_center_crs
-from siteline.site import SiteSpec
+from siteline.register import AlignmentPolicy, check_alignment, register_cameras
 from siteline.stores import blob_uri, put_blob, remove_blobs
 
 PREFERRED_LAS = ("lidars/terra_las/cloud_merged.las", "lidars/terra_las/cloud_merged.laz")
@@ -160,25 +158,6 @@ def capture_time(
     return t
 
 
-def register_cameras(
-    photos: dict[str, PhotoMeta], model: Path | None, spec: SiteSpec, opts: IngestOptions
-) -> tuple[dict, dict[str, Any], str | None]:
-    """Cameras by image name (site-local), the registration record, and the camera source."""
-    if not photos:
-        return {}, {"source": "none", "note": "LiDAR-only mission: no photos"}, None
-    crs = spec.pyproj_crs
-    origin = np.asarray(spec.origin, dtype=np.float64)
-    by_name = {Path(p).name: m for p, m in photos.items()}
-    if model is not None:
-        locations = {name: photo_center_crs(m, crs) - origin for name, m in by_name.items()}
-        reg = georegister(
-            model, locations, max_error_m=opts.ransac_max_error_m, max_rms_m=opts.max_georegistration_rms_m
-        )
-        return reg.cameras, reg.to_dict(), "colmap"
-    cams = {name: camera_from_photo(m, crs, spec.origin) for name, m in by_name.items()}
-    return cams, {"source": "xmp", "images": len(cams)}, "xmp"
-
-
 def _load_sample(settings: Settings, scene: Scene) -> np.ndarray | None:
     sha = (scene.statistics or {}).get("stable_sample_sha256")
     if not sha:
@@ -238,16 +217,8 @@ def ingest_mission(
                 len(entries),
             )
     las = choose_las(entries, root)
-    with_header = None
-    rep.start("reading points", None)
-    import laspy
-
-    try:
-        with laspy.open(root / las.path) as r:
-            with_header = int(r.header.point_count)
-    except Exception:
-        with_header = None
-    rep.start("reading points", with_header)
+    with open_las(root / las.path) as r:  # a file laspy cannot open is refused here, naming it
+        rep.start("reading points", int(r.header.point_count))
     scan = scan_las(
         root / las.path,
         spec,
@@ -257,7 +228,9 @@ def ingest_mission(
     )
     scan.path = las.path
     photos = read_photos(entries, root)
-    cameras, registration, cam_source = register_cameras(photos, colmap_dir(entries, root), spec, opts)
+    cameras, registration, cam_source = register_cameras(
+        photos, colmap_dir(entries, root), spec, opts.ransac_max_error_m, opts.max_georegistration_rms_m
+    )
     when = capture_time(photos, entries, scan, root)
     with catalog.transaction() as s:
         site = s.get(Site, site_id)
@@ -269,25 +242,14 @@ def ingest_mission(
         before, _ = neighbours(s, site, when)
         previous = (before.id, _load_sample(settings, before)) if before is not None else None
     if previous is not None and previous[1] is not None:
-        check = point_to_plane_icp(scan.stable_sample, previous[1])
-        registration["alignment"] = check.to_dict() | {"against_scene": previous[0]}
-        overlap = check.matched / max(len(scan.stable_sample), 1)
-        registration["alignment"]["overlap"] = overlap
-        bad = (
-            check.translation_m > opts.max_alignment_translation_m
-            or overlap < 0.2
-            or not np.isfinite(check.residual_m)
-            or check.residual_m > opts.max_alignment_residual_m
+        registration["alignment"] = check_alignment(
+            scan.stable_sample,
+            previous[1],
+            previous[0],
+            root.name,
+            AlignmentPolicy(opts.max_alignment_translation_m, opts.max_alignment_residual_m),
+            opts.accept_misalignment,
         )
-        registration["alignment"]["accepted"] = not bad or opts.accept_misalignment
-        if bad and not opts.accept_misalignment:
-            raise RegistrationError(
-                f"mission {root.name} is misaligned with scene {previous[0]}: ICP on ground and building moves it by "
-                f"{check.translation_m:.3f} m (limit {opts.max_alignment_translation_m} m) with residual "
-                f"{check.residual_m:.3f} m (limit {opts.max_alignment_residual_m} m), {overlap:.0%} of its stable points "
-                "overlap the previous scene. Check the CRS and the georeferencing, "
-                "or pass --accept-misalignment to register it anyway. Nothing was ingested."
-            )
     new_blobs: list[str] = []
     try:
         sample_bytes, sample_sha = _sample_blob(scan.stable_sample)

@@ -1,0 +1,82 @@
+"""Scene registration, the stage's entry points: real camera poses for a mission's photos, and the
+check that a new scene lines up with the previous one (DESIGN.md §3)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from siteline.errors import RegistrationError
+from siteline.photos import PhotoMeta
+from siteline.register.georegister import georegister
+from siteline.register.icp import point_to_plane_icp
+from siteline.register.xmp import camera_from_photo, photo_center_crs
+from siteline.site import SiteSpec
+
+
+@dataclass(frozen=True)
+class AlignmentPolicy:
+    """When a new scene counts as aligned with the previous one: the ICP correction (m), residual (m)
+    and the share of its stable points that overlap the previous scene. Construction changes between
+    epochs bias ICP by up to ~0.2 m on the synthetic site, so the default correction limit is 0.5 m."""
+
+    max_translation_m: float = 0.5
+    max_residual_m: float = 0.15
+    min_overlap: float = 0.2
+
+
+def register_cameras(
+    photos: dict[str, PhotoMeta],
+    model: Path | None,
+    spec: SiteSpec,
+    ransac_max_error_m: float,
+    max_rms_m: float,
+) -> tuple[dict, dict[str, Any], str | None]:
+    """Cameras by image name (site-local), the registration record, and the camera source: a COLMAP
+    model georegistered by a Sim3 to the photos' RTK positions, else the photos' XMP poses."""
+    if not photos:
+        return {}, {"source": "none", "note": "LiDAR-only mission: no photos"}, None
+    crs = spec.pyproj_crs
+    origin = np.asarray(spec.origin, dtype=np.float64)
+    by_name = {Path(p).name: m for p, m in photos.items()}
+    if model is not None:
+        locations = {name: photo_center_crs(m, crs) - origin for name, m in by_name.items()}
+        reg = georegister(model, locations, max_error_m=ransac_max_error_m, max_rms_m=max_rms_m)
+        return reg.cameras, reg.to_dict(), "colmap"
+    cams = {name: camera_from_photo(m, crs, spec.origin) for name, m in by_name.items()}
+    return cams, {"source": "xmp", "images": len(cams)}, "xmp"
+
+
+def check_alignment(
+    sample_new: np.ndarray,
+    sample_previous: np.ndarray,
+    previous_scene: int,
+    mission: str,
+    policy: AlignmentPolicy,
+    accept_misalignment: bool = False,
+) -> dict[str, Any]:
+    """Align the new scene's stable-class sample (N, 3) site-local metres onto the previous scene's;
+    return the record. :class:`RegistrationError` when it breaks ``policy`` and not
+    ``accept_misalignment``."""
+    check = point_to_plane_icp(sample_new, sample_previous)
+    overlap = check.matched / max(len(sample_new), 1)
+    bad = (
+        check.translation_m > policy.max_translation_m
+        or overlap < policy.min_overlap
+        or not np.isfinite(check.residual_m)
+        or check.residual_m > policy.max_residual_m
+    )
+    record = check.to_dict() | {"against_scene": previous_scene, "overlap": overlap}
+    record["accepted"] = not bad or accept_misalignment
+    if bad and not accept_misalignment:
+        raise RegistrationError(
+            f"mission {mission} is misaligned with scene {previous_scene}: ICP on ground and building moves it by "
+            f"{check.translation_m:.3f} m (limit {policy.max_translation_m} m) with residual "
+            f"{check.residual_m:.3f} m (limit {policy.max_residual_m} m), {overlap:.0%} of its stable points "
+            f"overlap the previous scene (at least {policy.min_overlap:.0%} needed). Check the CRS and the "
+            "georeferencing, or pass --accept-misalignment to register it anyway. Nothing was ingested."
+        )
+    return record
