@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from siteline.errors import CameraError
+from siteline.poses import Rigid
 from siteline.schemas import validate
 
 ORTHONORMAL_TOL = 1e-6
@@ -130,6 +131,20 @@ class Camera:
     def t(self) -> np.ndarray:
         """cam_from_world translation (3,) float64, metres."""
         return np.asarray(self.translation, dtype=np.float64)
+
+    @property
+    def cam_from_world(self) -> Rigid:
+        """The pose: world (site-local metres) -> camera axes (x right, y down, z forward)."""
+        return Rigid("cam", "world", self.R, self.t)
+
+    @classmethod
+    def from_rigid(
+        cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float, cam_from_world: Rigid
+    ) -> Camera:
+        """From intrinsics (pixels) and a ``cam_from_world`` :class:`siteline.poses.Rigid`."""
+        if cam_from_world.name != "cam_from_world":
+            raise CameraError(f"a camera pose must be cam_from_world, got {cam_from_world.name}.")
+        return cls.from_pose(width, height, fx, fy, cx, cy, cam_from_world.R, cam_from_world.t)
 
     @property
     def center(self) -> np.ndarray:

@@ -10,16 +10,16 @@ import numpy as np
 
 from siteline.cameras import Camera
 from siteline.errors import RegistrationError
+from siteline.poses import Sim3
 
 
 @dataclass
 class Georegistration:
-    """site_from_model Sim3 (scale, R (3, 3), t (3,) metres) and the per-image residuals: distance in
-    metres between each registered camera centre and its RTK position (site-local)."""
+    """``site_from_model``: the Sim3 from the COLMAP model's frame to the site-local frame (metres), and
+    the per-image residuals: distance in metres between each registered camera centre and its RTK
+    position (site-local)."""
 
-    scale: float
-    rotation: np.ndarray
-    translation: np.ndarray
+    site_from_model: Sim3
     residuals_m: dict[str, float]
     cameras: dict[str, Camera]
 
@@ -32,9 +32,9 @@ class Georegistration:
         return {
             "source": "colmap",
             "site_from_model": {
-                "scale": self.scale,
-                "rotation": self.rotation.tolist(),
-                "translation": self.translation.tolist(),
+                "scale": float(self.site_from_model.scale),
+                "rotation": self.site_from_model.R.tolist(),
+                "translation": self.site_from_model.t.tolist(),
             },
             "residuals_m": self.residuals_m,
             "rms_m": self.rms_m,
@@ -101,9 +101,10 @@ def georegister(
         cameras[img.name] = cam
         if img.name in locations_m:
             residuals[img.name] = float(np.linalg.norm(cam.center - np.asarray(locations_m[img.name])))
-    result = Georegistration(
-        float(sim.scale), np.asarray(sim.rotation.matrix()), np.asarray(sim.translation), residuals, cameras
+    site_from_model = Sim3(
+        "site", "model", float(sim.scale), np.asarray(sim.rotation.matrix()), np.asarray(sim.translation)
     )
+    result = Georegistration(site_from_model, residuals, cameras)
     if not np.isfinite(result.rms_m) or result.rms_m > max_rms_m:
         worst = max(residuals, key=residuals.get)
         raise RegistrationError(

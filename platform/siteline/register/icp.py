@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
+
+from siteline.poses import Rigid
 
 
 @dataclass
@@ -15,6 +17,7 @@ class AlignmentCheck:
 
     residual_m: RMS point-to-plane distance of the matched points after alignment.
     translation_m, rotation_deg: the rigid correction ICP found (what the new scene is off by).
+    prev_from_new: that correction as a pose, site-local metres of the new scene -> the previous one.
     matched: matched point pairs; degenerate: the geometry cannot fix every direction (a flat scene),
     so the correction along unconstrained directions is reported as zero.
     """
@@ -22,13 +25,27 @@ class AlignmentCheck:
     residual_m: float
     translation_m: float
     rotation_deg: float
-    correction: list[list[float]]
+    prev_from_new: Rigid
     matched: int
     degenerate: bool
     iterations: int
 
+    @property
+    def correction(self) -> list[list[float]]:
+        """``prev_from_new`` as a (4, 4) homogeneous matrix (nested lists)."""
+        return self.prev_from_new.matrix().tolist()
+
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {
+            "residual_m": self.residual_m,
+            "translation_m": self.translation_m,
+            "rotation_deg": self.rotation_deg,
+            "correction": self.correction,
+            "correction_frames": self.prev_from_new.name,
+            "matched": self.matched,
+            "degenerate": self.degenerate,
+            "iterations": self.iterations,
+        }
 
 
 def _normals(tree: cKDTree, pts: np.ndarray, k: int = 12) -> np.ndarray:
@@ -113,7 +130,7 @@ def point_to_plane_icp(
         residual_m=float(np.sqrt(np.mean(resid**2))) if resid.size else float("inf"),
         translation_m=float(np.linalg.norm(T[:3, 3])),
         rotation_deg=angle,
-        correction=T_site.tolist(),
+        prev_from_new=Rigid("prev", "new", Rotation.from_matrix(T_site[:3, :3]).as_matrix(), T_site[:3, 3]),
         matched=int(ok.sum()),
         degenerate=bool(degenerate),
         iterations=it,
