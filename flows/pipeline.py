@@ -76,7 +76,8 @@ def _stage(stage: str, subject: str, params: dict, fn, *args, **kwargs):  # noqa
     try:
         return fn(cat, settings, *args, run_id=_run_id(), **kwargs)
     except Exception as exc:
-        record_failure(cat, stage, subject, params, exc, run_id=_run_id())
+        with cat.transaction() as s:
+            record_failure(s, stage, subject, params, exc, run_id=_run_id())
         raise
     finally:
         cat.dispose()
@@ -89,7 +90,7 @@ def ingest_task(mission_dir: str, site: str, crs: str | None, accept_misalignmen
     opts = IngestOptions(crs=crs, accept_misalignment=accept_misalignment)
     res = _stage(
         "ingest",
-        f"mission-dir:{mission_dir}",
+        f"mission:{mission_dir}",
         {"site": site, "crs": crs},
         ingest_mission,
         Path(mission_dir),

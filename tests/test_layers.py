@@ -10,7 +10,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "platform" / "siteline"
 PRIMITIVES = {
     "errors", "codes", "tolerances", "hashing", "config", "stores", "crs", "lasio", "sitestream",
-    "photos", "dji", "cameras", "poses", "fence", "site", "taxonomy", "schemas", "metrics",
+    "photos", "dji", "cameras", "poses", "specs", "progress", "fence", "site", "taxonomy", "schemas", "metrics",
 }  # fmt: skip
 STAGES = {"ingest", "register", "tiles", "labels", "views", "render", "pairs", "release"}
 TOP = {"pipeline", "cli", "__main__"}

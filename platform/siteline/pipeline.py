@@ -5,7 +5,7 @@ only its own stage and refuses, naming the command, when a precondition is missi
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from pathlib import Path
 
 from siteline.catalog import Catalog
@@ -13,11 +13,9 @@ from siteline.catalog.scenes import get_scene
 from siteline.config import Settings
 from siteline.ingest.mission import IngestOptions, IngestResult, Reporter, ingest_mission
 from siteline.pairs import PairOutput, PairParams, process_pair
+from siteline.progress import Progress
 from siteline.release.build import ReleaseInfo, build_release, choose_pairs, publish_release
 from siteline.tiles import TileResult, tile_scene
-
-# (task name, amount done, total or None): the one progress callback shape of the stages
-Progress = Callable[[str, int, int | None], None]
 
 
 def ingest(

@@ -168,6 +168,7 @@ def test_database_url_override(home, capsys, postgres_url, monkeypatch) -> None:
     assert not (home / "catalog.sqlite").exists()
 
 
+@pytest.mark.e2e
 def test_demo_runs_and_is_rerunnable(home, capsys) -> None:
     # two epochs (one pair) and two training steps: every stage of `make demo`, at half its cost
     code, out, err = run(capsys, "demo", "--epochs", "2", "--train-iters", "2")

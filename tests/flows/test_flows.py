@@ -53,6 +53,7 @@ def _missions(site_dir):
 SMALL = {"scale": 0.25, "point_size_px": 3, "views": 3, "min_coverage": 0.2}
 
 
+@pytest.mark.e2e
 def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkeypatch) -> None:
     import asyncio
 
@@ -84,7 +85,8 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     from siteline.catalog.stages import stage_runs
 
     cat = open_catalog(settings)
-    runs = stage_runs(cat)
+    with cat.transaction() as s:
+        runs = stage_runs(s)
     cat.dispose()
     assert {r["stage"] for r in runs} >= {
         "ingest",
@@ -131,7 +133,8 @@ def test_retry_then_success_and_permanent_failure_recorded(
     monkeypatch.setattr(tiles_pkg, "tile_scene", broken)
     state = pipeline.tile_scene_flow(sid2, return_state=True)
     assert state.is_failed()
-    failed = [r for r in stage_runs(cat, subject=f"scene:{sid2}") if r["status"] == "failed"]
+    with cat.transaction() as s:
+        failed = [r for r in stage_runs(s, subject=f"scene:{sid2}") if r["status"] == "failed"]
     assert failed and "store unreachable" in failed[-1]["error"] and failed[-1]["run_id"]
     with cat.transaction() as s:
         assert s.get(Scene, sid2).status == "registered"
@@ -150,6 +153,7 @@ def test_upload_event_reaches_the_api(harness, tmp_path) -> None:
     post_events(PREFECT_API_URL.value(), [upload_event(tmp_path / "m9", "demo")])
 
 
+@pytest.mark.e2e
 def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
     harness, small_site, tmp_path, monkeypatch, postgres_url, s3_store
 ) -> None:

@@ -1,4 +1,4 @@
-"""A small synthetic site shared by the ingest tests, and a migrated home with a site."""
+"""A small synthetic site shared by the ingest tests, and the settings of a migrated home with a site (``site_settings``)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ from siteline.config import Settings
 
 
 @pytest.fixture
-def home(tmp_path, synth_site) -> Settings:
+def site_settings(tmp_path, synth_site) -> Settings:
     return make_home(tmp_path, site_dir=synth_site)
 
 
 @pytest.fixture
-def cat(home):
-    c = open_catalog(home)
+def cat(site_settings):
+    c = open_catalog(site_settings)
     yield c
     c.dispose()

@@ -32,10 +32,10 @@ def _truth_cameras(site, index):
     }
 
 
-def test_two_epochs_become_two_scenes_and_a_pair(cat, home, synth_site) -> None:
+def test_two_epochs_become_two_scenes_and_a_pair(cat, site_settings, synth_site) -> None:
     e0, e1 = epoch_dirs(synth_site)[:2]
-    r0 = ingest_mission(cat, home, e0, "demo")
-    r1 = ingest_mission(cat, home, e1, "demo")
+    r0 = ingest_mission(cat, site_settings, e0, "demo")
+    r1 = ingest_mission(cat, site_settings, e1, "demo")
     assert r0.created and r1.created and r1.pairs
     with cat.transaction() as s:
         scenes = list_scenes(s, get_site(s, "demo"))
@@ -44,14 +44,14 @@ def test_two_epochs_become_two_scenes_and_a_pair(cat, home, synth_site) -> None:
         assert (pair.t1_scene_id, pair.t2_scene_id) == (r0.scene_id, r1.scene_id)
         assert scenes[0].capture_time < scenes[1].capture_time
         assert scenes[1].registration["alignment"]["translation_m"] < 0.5
-    again = ingest_mission(cat, home, e0, "demo")
+    again = ingest_mission(cat, site_settings, e0, "demo")
     assert not again.created and "nothing new" in again.message and again.scene_id == r0.scene_id
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Mission.id))).scalar_one() == 2
 
 
-def test_georegistration_recovers_true_poses(cat, home, synth_site) -> None:
-    r = ingest_mission(cat, home, epoch_dirs(synth_site)[0], "demo")
+def test_georegistration_recovers_true_poses(cat, site_settings, synth_site) -> None:
+    r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
     assert r.registration["source"] == "colmap" and r.registration["rms_m"] < 0.01
     truth = _truth_cameras(synth_site, 0)
     with cat.transaction() as s:
@@ -62,10 +62,12 @@ def test_georegistration_recovers_true_poses(cat, home, synth_site) -> None:
         assert np.abs(cam.R - truth[name].R).max() < 1e-6
 
 
-def test_copy_store_holds_every_file_and_reference_keeps_paths(cat, home, synth_site, tmp_path) -> None:
+def test_copy_store_holds_every_file_and_reference_keeps_paths(
+    cat, site_settings, synth_site, tmp_path
+) -> None:
     mission = epoch_dirs(synth_site)[0]
-    ingest_mission(cat, home, mission, "demo")
-    blobs = [p for p in (Path(home.store.url) / "blobs").rglob("*") if p.is_file()]
+    ingest_mission(cat, site_settings, mission, "demo")
+    blobs = [p for p in (Path(site_settings.store.url) / "blobs").rglob("*") if p.is_file()]
     n_files = sum(1 for p in mission.rglob("*") if p.is_file())
     assert len(blobs) == n_files + 1  # every file, plus the scene's alignment sample
     other = make_home(tmp_path / "ref", site_dir=synth_site)
@@ -78,10 +80,10 @@ def test_copy_store_holds_every_file_and_reference_keeps_paths(cat, home, synth_
     c2.dispose()
 
 
-def test_xmp_poses_without_colmap_model(cat, home, synth_site, tmp_path) -> None:
+def test_xmp_poses_without_colmap_model(cat, site_settings, synth_site, tmp_path) -> None:
     mission = copy_mission(synth_site, 0, tmp_path)
     shutil.rmtree(mission / "colmap")
-    r = ingest_mission(cat, home, mission, "demo")
+    r = ingest_mission(cat, site_settings, mission, "demo")
     assert r.registration["source"] == "xmp"
     truth = _truth_cameras(synth_site, 0)
     with cat.transaction() as s:
@@ -154,8 +156,8 @@ def test_other_crs_is_transformed_in_float64(tmp_path) -> None:
     cat.dispose()
 
 
-def test_misaligned_scene_is_refused_unless_accepted(cat, home, synth_site, tmp_path) -> None:
-    ingest_mission(cat, home, epoch_dirs(synth_site)[0], "demo")
+def test_misaligned_scene_is_refused_unless_accepted(cat, site_settings, synth_site, tmp_path) -> None:
+    ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
     mission = copy_mission(synth_site, 1, tmp_path)
     las_path = mission / LAS_RELPATH
     las = laspy.read(las_path)
@@ -165,10 +167,10 @@ def test_misaligned_scene_is_refused_unless_accepted(cat, home, synth_site, tmp_
     las.z = np.asarray(las.z) - 1.0
     las.write(las_path)
     with pytest.raises(RegistrationError, match="misaligned"):
-        ingest_mission(cat, home, mission, "demo")
+        ingest_mission(cat, site_settings, mission, "demo")
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Scene.id))).scalar_one() == 1
-    r = ingest_mission(cat, home, mission, "demo", IngestOptions(accept_misalignment=True))
+    r = ingest_mission(cat, site_settings, mission, "demo", IngestOptions(accept_misalignment=True))
     assert r.registration["alignment"]["translation_m"] > 0.9 and r.registration["alignment"]["accepted"]
 
 

@@ -145,3 +145,15 @@ def site_name_of_pair(session: Session, pair_id: int) -> str:
     if pair is None:
         raise NotFoundError(f"no pair with id {pair_id}.")
     return session.get(Site, pair.site_id).name
+
+
+def node_summary(session: Session, scene_id: int) -> dict[str, int]:
+    """How scene ``scene_id`` is tiled: node rows, distinct tiles, and levels (0 when untiled)."""
+    from siteline.catalog.models import Node
+
+    nodes, tiles, top = session.execute(
+        sa.select(
+            sa.func.count(Node.id), sa.func.count(sa.distinct(Node.tile)), sa.func.max(Node.level)
+        ).where(Node.scene_id == scene_id)
+    ).one()
+    return {"nodes": int(nodes), "tiles": int(tiles), "levels": int(top) + 1 if top is not None else 0}

@@ -2,8 +2,12 @@
 
 Library stages write their own ``completed`` record in the transaction that commits their outputs
 (stamped with the orchestrator's run id when one is given); an orchestrator records a failure with
-:func:`record_failure`, in a transaction of its own, so the catalog shows the failed stage while the
-stage itself left nothing half-written.
+:func:`record_failure` in a transaction of its own, so the catalog shows the failed stage while the
+stage itself left nothing half-written. Functions take a session; the caller owns the transaction.
+
+Subjects name what a stage ran on, one scheme for library and orchestrator alike: ``mission:<path>``
+before a mission is hashed and ``mission:<sha256>`` after, ``scene:<id>``, ``pair:<id>``,
+``release:<name>`` before a version is chosen and ``release:<name>:<version>`` after.
 """
 
 from __future__ import annotations
@@ -12,8 +16,8 @@ from datetime import UTC, datetime
 from typing import Any
 
 import sqlalchemy as sa
+from sqlalchemy.orm import Session
 
-from siteline.catalog import Catalog
 from siteline.catalog.models import StageRun
 
 
@@ -33,7 +37,7 @@ def completed(
 
 
 def record_failure(
-    catalog: Catalog,
+    session: Session,
     stage: str,
     subject: str,
     parameters: dict[str, Any],
@@ -42,42 +46,41 @@ def record_failure(
     started: datetime | None = None,
 ) -> int:
     """Record a failed stage run; returns its id."""
-    with catalog.transaction() as s:
-        row = StageRun(
-            stage=stage,
-            subject=subject,
-            status="failed",
-            parameters=parameters,
-            started_at=started or datetime.now(UTC),
-            finished_at=datetime.now(UTC),
-            error_text=f"{type(error).__name__}: {error}"[:4000],
-            orchestrator_run_id=run_id,
-        )
-        s.add(row)
-        s.flush()
-        return row.id
+    row = StageRun(
+        stage=stage,
+        subject=subject,
+        status="failed",
+        parameters=parameters,
+        started_at=started or datetime.now(UTC),
+        finished_at=datetime.now(UTC),
+        error_text=f"{type(error).__name__}: {error}"[:4000],
+        orchestrator_run_id=run_id,
+    )
+    session.add(row)
+    session.flush()
+    return row.id
 
 
 def stage_runs(
-    catalog: Catalog, subject: str | None = None, stage: str | None = None
+    session: Session, subject: str | None = None, stage: str | None = None
 ) -> list[dict[str, Any]]:
-    with catalog.transaction() as s:
-        q = sa.select(StageRun).order_by(StageRun.started_at, StageRun.id)
-        if subject:
-            q = q.where(StageRun.subject == subject)
-        if stage:
-            q = q.where(StageRun.stage == stage)
-        return [
-            {
-                "id": r.id,
-                "stage": r.stage,
-                "subject": r.subject,
-                "status": r.status,
-                "started_at": r.started_at,
-                "finished_at": r.finished_at,
-                "error": r.error_text,
-                "run_id": r.orchestrator_run_id,
-                "parameters": r.parameters,
-            }
-            for r in s.execute(q).scalars()
-        ]
+    """Stage runs (optionally of one subject or stage), oldest first, as dicts."""
+    q = sa.select(StageRun).order_by(StageRun.started_at, StageRun.id)
+    if subject:
+        q = q.where(StageRun.subject == subject)
+    if stage:
+        q = q.where(StageRun.stage == stage)
+    return [
+        {
+            "id": r.id,
+            "stage": r.stage,
+            "subject": r.subject,
+            "status": r.status,
+            "started_at": r.started_at,
+            "finished_at": r.finished_at,
+            "error": r.error_text,
+            "run_id": r.orchestrator_run_id,
+            "parameters": r.parameters,
+        }
+        for r in session.execute(q).scalars()
+    ]

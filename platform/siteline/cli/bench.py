@@ -11,6 +11,27 @@ from siteline.cli.common import console
 app = typer.Typer(help="Measurements.", no_args_is_help=True)
 
 
+def _bench_trade():  # noqa: ANN202
+    """``bench/trade.py`` of the source checkout: a benchmark, not part of the installed library."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "bench" / "trade.py"
+    if not path.is_file():
+        from siteline.errors import ConfigError
+
+        raise ConfigError(
+            f"siteline bench trade runs bench/trade.py from a source checkout of siteline; {path} is missing."
+        )
+    spec = importlib.util.spec_from_file_location("siteline_bench_trade", path)
+    module = importlib.util.module_from_spec(spec)
+    import sys
+
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 @app.command("trade")
 def trade(
     site_density: float = typer.Option(
@@ -26,7 +47,8 @@ def trade(
     ),
 ) -> None:
     """Sweep scale x point size x level of detail x label radius x nearest-neighbour backend."""
-    from siteline.trade import TradeGrid, run_trade
+    trade_module = _bench_trade()
+    TradeGrid, run_trade = trade_module.TradeGrid, trade_module.run_trade  # noqa: N806
 
     grid = (
         TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,)) if quick else TradeGrid()

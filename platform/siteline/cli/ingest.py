@@ -8,8 +8,14 @@ import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
 from siteline import pipeline
-from siteline.catalog.models import Node
-from siteline.catalog.scenes import get_scene, list_missions, list_pairs, list_scenes, scene_cameras
+from siteline.catalog.scenes import (
+    get_scene,
+    list_missions,
+    list_pairs,
+    list_scenes,
+    node_summary,
+    scene_cameras,
+)
 from siteline.catalog.sites import get_site
 from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
 from siteline.ingest.mission import IngestOptions, Reporter
@@ -150,13 +156,7 @@ def mission_list(
 
 
 def scene_record(s, scene) -> dict:  # noqa: ANN001
-    import sqlalchemy as sa
-
-    nodes = s.execute(
-        sa.select(
-            sa.func.count(Node.id), sa.func.count(sa.distinct(Node.tile)), sa.func.max(Node.level)
-        ).where(Node.scene_id == scene.id)
-    ).one()
+    nodes = node_summary(s, scene.id)
     stats = scene.statistics or {}
     tiles = stats.get("tiles", {})
     return {
@@ -177,9 +177,9 @@ def scene_record(s, scene) -> dict:  # noqa: ANN001
         "registration": scene.registration,
         "cameras": len(scene_cameras(s, scene.id)),
         "tile_store": scene.tile_store_uri,
-        "tiles": nodes[1],
-        "nodes": nodes[0],
-        "levels": (nodes[2] + 1) if nodes[2] is not None else 0,
+        "tiles": nodes["tiles"],
+        "nodes": nodes["nodes"],
+        "levels": nodes["levels"],
         "bytes_per_point": tiles.get("bytes_per_point"),
     }
 

@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from siteline.errors import ReleaseError
+from siteline.specs import parse_spec
 from siteline.views import SAMPLER_VERSION, ViewParams
 
 
@@ -60,7 +61,8 @@ class PairParams:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> PairParams:
-        return cls(**doc)
+        """From the JSON form; ReleaseError names an unknown key or a wrongly typed value."""
+        return cls(**parse_spec(cls, doc, "pair parameters", ReleaseError))
 
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""

@@ -5,16 +5,16 @@ recorded in the catalog; a pair already processed with the same parameters is re
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 
 import numpy as np
-import sqlalchemy as sa
 
 from siteline import stores
 from siteline.catalog import Catalog
-from siteline.catalog.models import Pair, Render, Scene, Site, View
+from siteline.catalog.models import Pair, Scene, Site
+from siteline.catalog.pairs import pair_view_ids as catalog_pair_view_ids
+from siteline.catalog.pairs import record_pair_outputs
 from siteline.catalog.scenes import scene_cameras
 from siteline.catalog.sites import site_spec
 from siteline.catalog.stages import completed
@@ -24,11 +24,10 @@ from siteline.labels.store import attach_labels, auto_radius, write_labels
 from siteline.pairs.params import PairParams
 from siteline.pairs.render import render_pair_view
 from siteline.pairs.sources import TilePointSource
+from siteline.progress import Progress
 from siteline.render.outputs import png_bytes
 from siteline.tiles import open_scene_tiles
-from siteline.views import NamedCamera, SyntheticView, fit_ground_plane, generate_views
-
-Progress = Callable[[str, int, int | None], None]
+from siteline.views import NamedCamera, fit_ground_plane, generate_views
 
 
 @dataclass
@@ -68,7 +67,6 @@ def pair_output(
         _record(
             catalog,
             pair_id,
-            ids,
             params,
             doc["radius_m"],
             doc["labels"],
@@ -199,14 +197,13 @@ def process_pair(
             "views": records,
         }
         (partial / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    _record(catalog, pair_id, ids, params, radius, labels, records, root, started, run_id)
+    _record(catalog, pair_id, params, radius, labels, records, root, started, run_id)
     return PairOutput(pair_id, ids[0], ids[1], radius, root, records, labels)
 
 
 def _record(
     catalog: Catalog,
     pair_id: int,
-    ids: tuple[int, int],
     params: PairParams,
     radius: float,
     labels: dict,
@@ -215,47 +212,8 @@ def _record(
     started: datetime,
     run_id: str | None = None,
 ) -> None:
-    digest = params.digest()
     with catalog.transaction() as s:
-        pair = s.get(Pair, pair_id)
-        pair.radius_m = radius
-        pair.status = "processed"
-        pair.parameters = {**(pair.parameters or {}), digest: {"params": params.to_dict(), "labels": labels}}
-        s.execute(sa.delete(View).where(View.pair_id == pair_id, View.param_digest == digest))
-        cams = {
-            name: cid
-            for cid, name in s.execute(
-                sa.text("SELECT id, image_name FROM camera WHERE scene_id = :sid"), {"sid": ids[1]}
-            ).all()
-        }
-        for rec in records:
-            v = SyntheticView.from_dict(rec)
-            view = View(
-                pair_id=pair_id,
-                param_digest=digest,
-                index=rec["index"],
-                strategy=rec["strategy"],
-                parent_camera_id=cams.get(v.parent),
-                parameters=rec["params"],
-                camera=rec["camera"],
-            )
-            s.add(view)
-            s.flush()
-            for side, sid in (("A", ids[0]), ("B", ids[1])):
-                s.add(
-                    Render(
-                        view_id=view.id,
-                        scene_id=sid,
-                        scale=params.scale,
-                        point_size_px=params.point_size_px,
-                        coverage=rec["coverage_a" if side == "A" else "coverage_b"],
-                        change_ratio=rec["change_ratio"],
-                        paths={
-                            "image": stores.join(root, side, rec["file"]),
-                            "label": stores.join(root, "label", rec["file"]),
-                        },
-                    )
-                )
+        record_pair_outputs(s, pair_id, params.digest(), params.to_dict(), radius, labels, records, root)
         s.add(
             completed(
                 "process_pair", f"pair:{pair_id}", params.to_dict() | {"radius_m": radius}, started, run_id
@@ -264,11 +222,6 @@ def _record(
 
 
 def pair_view_ids(catalog: Catalog, pair_id: int, params: PairParams) -> dict[int, int]:
-    """View index -> view row id for a processed pair."""
+    """View index -> view row id for a processed pair (in a transaction of its own)."""
     with catalog.transaction() as s:
-        rows = s.execute(
-            sa.select(View.index, View.id).where(
-                View.pair_id == pair_id, View.param_digest == params.digest()
-            )
-        ).all()
-    return dict(rows)
+        return catalog_pair_view_ids(s, pair_id, params.digest())

@@ -12,7 +12,6 @@ import os
 import shutil
 import stat
 import uuid
-from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -25,12 +24,13 @@ from PIL import Image
 from siteline import __version__, stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
+from siteline.catalog.pairs import pair_view_ids
 from siteline.catalog.scenes import list_pairs, list_scenes
 from siteline.catalog.sites import get_site
 from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
-from siteline.pairs import PairParams, pair_output, pair_view_ids
+from siteline.pairs import PairParams, pair_output
 from siteline.release import datasheet, layout
 from siteline.release.manifest import (
     METRIC_DEFINITION,
@@ -39,10 +39,9 @@ from siteline.release.manifest import (
     verify_files,
     write_manifest,
 )
+from siteline.release.params import ReleaseParams
 from siteline.release.query import find_release, get_release
 from siteline.release.splits import split_pairs
-
-Progress = Callable[[str, int, int | None], None]
 
 
 @dataclass
@@ -175,6 +174,7 @@ def build_release(
     started = datetime.now(UTC)
     with catalog.transaction() as s:
         chosen = choose_pairs(s, site_name, pair_ids)
+        release_params = ReleaseParams(params, preset, pad)
         lineage_key = {"pairs": chosen, "params": params.to_dict(), "format": layout.FORMAT, "pad": pad}
         if version is None:
             version = next_version(s, name, lineage_key)
@@ -239,6 +239,7 @@ def build_release(
             lineage = _lineage(s, site, pair_rows, outputs) | {
                 "parameters": params.to_dict(),
                 "preset": preset,
+                "release_params": release_params.to_dict(),
                 "seeds": {"views": params.seed, "splits": params.seed},
             }
         doc = {
@@ -310,6 +311,7 @@ def _record_draft(
         rel.parameters = {
             "pair_params": params.to_dict(),
             "preset": preset,
+            "release_params": ReleaseParams(params, preset, lineage_key["pad"]).to_dict(),
             "lineage_key": lineage_key,
             "pairs": chosen,
         }
@@ -320,7 +322,7 @@ def _record_draft(
         view_ids: dict[int, dict[int, int]] = {}
         for it in items:
             if it["pair"] not in view_ids:
-                view_ids[it["pair"]] = pair_view_ids(catalog, it["pair"], params)
+                view_ids[it["pair"]] = pair_view_ids(s, it["pair"], params.digest())
             s.add(
                 ReleaseItem(
                     release_id=rel.id,

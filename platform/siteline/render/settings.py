@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from siteline.errors import RenderError
+from siteline.specs import parse_spec
 
 PRECISIONS = ("float32", "float64")
 
@@ -50,4 +51,5 @@ class RenderSettings:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> RenderSettings:
-        return cls(**doc)
+        """From the JSON form; RenderError names an unknown key or a wrongly typed value."""
+        return cls(**parse_spec(cls, doc, "render settings", RenderError))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
+from siteline.progress import Progress
 from siteline.site import SiteSpec
 from siteline.stores import resolve_file
 from siteline.tiles.layout import TileSpec
@@ -56,7 +56,7 @@ def tile_scene(
     scene_id: int,
     spec: TileSpec | None = None,
     workers: int = 2,
-    progress: Callable[[str, int, int | None], None] | None = None,
+    progress: Progress | None = None,
     run_id: str | None = None,
 ) -> tuple[TileResult | None, str]:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone.

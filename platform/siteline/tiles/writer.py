@@ -26,6 +26,7 @@ import pyproj
 
 from siteline.crs import ZUnit
 from siteline.errors import TileError
+from siteline.progress import Progress
 from siteline.site import SiteSpec
 from siteline.sitestream import site_chunks, source_transformer
 from siteline.tiles.layout import (
@@ -206,7 +207,7 @@ def write_tiles(
     spec: TileSpec | None = None,
     workers: int = 2,
     seed: int = 0,
-    progress: Callable[[str, int, int | None], None] | None = None,
+    progress: Progress | None = None,
     z_unit: ZUnit | None = None,
 ) -> TileResult:
     """Tile ``las_path`` into the new Zarr group ``out`` (which must not exist; removed again on an

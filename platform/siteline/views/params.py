@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from siteline.errors import ViewsError
+from siteline.specs import parse_spec
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,8 @@ class ViewParams:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> ViewParams:
-        doc = dict(doc)
+        """From the JSON form; ViewsError names an unknown key or a wrongly typed value."""
+        doc = parse_spec(cls, doc, "view parameters", ViewsError)
         for key in ("vertical_fractions", "forward_fractions"):
             if key in doc:
                 doc[key] = tuple(doc[key])

@@ -312,3 +312,21 @@ def write_outputs(out_dir: Path, rows: list[dict], rows3d: list[dict], meta: dic
         fig.tight_layout()
         fig.savefig(out_dir / name, dpi=100)
         plt.close(fig)
+
+
+if __name__ == "__main__":
+    import argparse
+
+    ap = argparse.ArgumentParser(description="The speed/accuracy sweep behind the presets (quick grid).")
+    ap.add_argument("--site-density", type=float, default=10.0, help="points per m2")
+    ap.add_argument("--views", type=int, default=8)
+    ap.add_argument("--out", type=Path, default=Path("trade"))
+    ap.add_argument("--full", action="store_true", help="the whole grid (default: the quick one)")
+    a = ap.parse_args()
+    g = (
+        TradeGrid()
+        if a.full
+        else TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,))
+    )
+    run_trade(a.out, a.site_density, a.views, 0, g, progress=print)
+    print((a.out / "trade.md").read_text())

@@ -1,0 +1,43 @@
+"""Release parameters: everything that decides a release's files, recorded identically in the catalog
+(``release.parameters["release_params"]``) and the manifest's lineage (``lineage.release_params``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from siteline.errors import ReleaseError
+from siteline.pairs.params import PairParams
+from siteline.release.layout import FORMAT
+
+
+@dataclass(frozen=True)
+class ReleaseParams:
+    """pair: the pair-processing parameters (after the preset). preset: its name, or None. pad: images
+    padded to multiples of 32 and at least 256 px. format: the release layout (2)."""
+
+    pair: PairParams = field(default_factory=PairParams)
+    preset: str | None = None
+    pad: bool = True
+    format: int = FORMAT
+
+    def __post_init__(self) -> None:
+        if self.format != FORMAT:
+            raise ReleaseError(f"release format {self.format!r}: this siteline builds format {FORMAT}.")
+        if not isinstance(self.pad, bool):
+            raise ReleaseError(f"pad must be true or false, got {self.pad!r}.")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"pair": self.pair.to_dict(), "preset": self.preset, "pad": self.pad, "format": self.format}
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> ReleaseParams:
+        unknown = sorted(set(doc) - {"pair", "preset", "pad", "format"})
+        if unknown:
+            raise ReleaseError(f"release parameters: unknown key(s) {unknown}.")
+        return cls(
+            PairParams.from_dict(doc.get("pair", {})),
+            doc.get("preset"),
+            doc.get("pad", True),
+            doc.get("format", FORMAT),
+        )

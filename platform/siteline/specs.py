@@ -1,0 +1,39 @@
+"""Validation of persisted parameter specs (frozen dataclasses with a JSON round trip): a document read
+back from JSON, a flow parameter or the catalog is checked field by field before it becomes a spec."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import MISSING, fields
+from typing import Any
+
+from siteline.errors import SitelineError
+
+
+def parse_spec(cls: type, doc: Any, what: str, error: type[SitelineError]) -> dict[str, Any]:
+    """``doc`` as keyword arguments of the dataclass ``cls``: :class:`error` names ``what`` and the
+    fix when it is not an object, holds unknown keys, or a value has the wrong type for its field
+    (judged by the field's default: bool, int, float, str)."""
+    if not isinstance(doc, Mapping):
+        raise error(f"{what} must be a JSON object, got {type(doc).__name__}.")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(doc) - set(known))
+    if unknown:
+        raise error(f"{what}: unknown parameter(s) {unknown}; known: {sorted(known)}.")
+    for name, value in doc.items():
+        default = known[name].default
+        if default is MISSING or default is None:
+            continue
+        if isinstance(default, bool):
+            ok = isinstance(value, bool)
+        elif isinstance(default, int):
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        elif isinstance(default, float):
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+        elif isinstance(default, str):
+            ok = isinstance(value, str)
+        else:
+            ok = True
+        if not ok:
+            raise error(f"{what}: {name}={value!r} must be a {type(default).__name__}.")
+    return dict(doc)
