@@ -157,3 +157,45 @@ def node_summary(session: Session, scene_id: int) -> dict[str, int]:
         ).where(Node.scene_id == scene_id)
     ).one()
     return {"nodes": int(nodes), "tiles": int(tiles), "levels": int(top) + 1 if top is not None else 0}
+
+
+def scene_of_mission(session: Session, mission_id: int) -> Scene | None:
+    """The scene made from mission ``mission_id``, or None."""
+    return session.execute(sa.select(Scene).where(Scene.mission_id == mission_id)).scalar_one_or_none()
+
+
+def blobs_in_use(session: Session, shas: list[str]) -> set[str]:
+    """Which of ``shas`` some mission's files reference (blobs another ingest committed)."""
+    if not shas:
+        return set()
+    return set(session.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(shas))).scalars())
+
+
+def lock_site(session: Session, site_id: int) -> Site:
+    """The site row, locked for the rest of the transaction (one registration per site at a time)."""
+    return session.execute(sa.select(Site).where(Site.id == site_id).with_for_update()).scalar_one()
+
+
+def mission_file(session: Session, mission_id: int, path: str | None) -> MissionFile | None:
+    """The file ``path`` of mission ``mission_id``, or None."""
+    return session.execute(
+        sa.select(MissionFile).where(MissionFile.mission_id == mission_id, MissionFile.path == path)
+    ).scalar_one_or_none()
+
+
+def node_rows(session: Session, scene_id: int) -> list:
+    """The node rows of scene ``scene_id`` by tile and level."""
+    from siteline.catalog.models import Node
+
+    return list(
+        session.execute(
+            sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.level)
+        ).scalars()
+    )
+
+
+def clear_nodes(session: Session, scene_id: int) -> None:
+    """Remove scene ``scene_id``'s node rows (before a re-tile writes them again)."""
+    from siteline.catalog.models import Node
+
+    session.execute(sa.delete(Node).where(Node.scene_id == scene_id))

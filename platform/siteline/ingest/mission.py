@@ -21,7 +21,16 @@ import sqlalchemy as sa
 from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
-from siteline.catalog.scenes import add_cameras, ensure_pair, mission_by_manifest, neighbours, scene_at
+from siteline.catalog.scenes import (
+    add_cameras,
+    blobs_in_use,
+    ensure_pair,
+    lock_site,
+    mission_by_manifest,
+    neighbours,
+    scene_at,
+    scene_of_mission,
+)
 from siteline.catalog.sites import get_site, site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
@@ -158,6 +167,23 @@ def capture_time(
     return t
 
 
+@dataclass
+class CheckedMission:
+    """Everything ingest read and checked about one mission before anything is stored: its files and
+    manifest hash, the LAS scan, the registered cameras and their record, the capture time, and the
+    stable-point sample's blob hash."""
+
+    root: Path
+    entries: list[FileEntry]
+    sha: str
+    scan: LasScan
+    cameras: dict
+    camera_source: str | None
+    registration: dict
+    capture_time: datetime
+    sample_sha: str = ""
+
+
 def _load_sample(settings: Settings, scene: Scene) -> np.ndarray | None:
     sha = (scene.statistics or {}).get("stable_sample_sha256")
     if not sha:
@@ -206,7 +232,7 @@ def ingest_mission(
                 raise MissionError(
                     f"mission {root} (manifest {sha[:12]}) was already ingested into site {other.name}."
                 )
-            scene = s.execute(sa.select(Scene).where(Scene.mission_id == existing.id)).scalar_one_or_none()
+            scene = scene_of_mission(s, existing.id)
             return IngestResult(
                 False,
                 f"mission {root.name} is already ingested as mission {existing.id}"
@@ -263,28 +289,13 @@ def ingest_mission(
                 if put_blob(settings.store, root / e.path, e.sha256):
                     new_blobs.append(e.sha256)
                 rep.advance("storing", e.size_bytes)
-        result = _commit(
-            catalog,
-            site_id,
-            site_name,
-            root,
-            entries,
-            sha,
-            scan,
-            cameras,
-            cam_source,
-            registration,
-            when,
-            sample_sha,
-            opts,
-            started,
-            run_id,
+        checked = CheckedMission(
+            root, entries, sha, scan, cameras, cam_source, registration, when, sample_sha
         )
+        result = _commit(catalog, site_id, site_name, checked, opts, started, run_id)
     except BaseException:
         with catalog.transaction() as s:
-            shared = set(
-                s.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(new_blobs))).scalars()
-            )
+            shared = blobs_in_use(s, new_blobs)
         # content another mission committed meanwhile stays; only this ingest's own blobs go
         remove_blobs(settings.store, [b for b in new_blobs if b not in shared])
         raise
@@ -295,26 +306,22 @@ def _commit(
     catalog: Catalog,
     site_id: int,
     site_name: str,
-    root: Path,
-    entries: list[FileEntry],
-    sha: str,
-    scan: LasScan,
-    cameras: dict,
-    cam_source: str | None,
-    registration: dict,
-    when: datetime,
-    sample_sha: str,
+    checked: CheckedMission,
     opts: IngestOptions,
     started: datetime,
     run_id: str | None,
 ) -> IngestResult:
+    """One transaction: the mission, its files, the scene, cameras, label set 1, pairs, the stage run."""
+    root, entries, sha, scan = checked.root, checked.entries, checked.sha, checked.scan
+    cameras, cam_source, registration = checked.cameras, checked.camera_source, checked.registration
+    when, sample_sha = checked.capture_time, checked.sample_sha
     name = next(
         (Path(e.path).parts[0] for e in entries if RAW_FOLDER.match(Path(e.path).parts[0])), root.name
     )
     try:
         with catalog.transaction() as s:
             # one registration per site at a time: pairs are formed from the scenes around this one
-            site = s.execute(sa.select(Site).where(Site.id == site_id).with_for_update()).scalar_one()
+            site = lock_site(s, site_id)
             if mission_by_manifest(s, sha) is not None:
                 raise MissionError(f"mission {root.name} was ingested concurrently; nothing new.")
             mission = Mission(

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline import stores
-from siteline.errors import TileError
+from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
 from siteline.tiles.reader import SceneTiles
 
@@ -91,7 +91,7 @@ def write_labels(
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
-        raise TileError(f"label store {out} already exists.")
+        raise LabelError(f"label store {out} already exists: remove it or write the labels elsewhere.")
     out.parent.mkdir(parents=True, exist_ok=True)
     import zarr
 

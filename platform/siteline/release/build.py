@@ -18,13 +18,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import sqlalchemy as sa
 from PIL import Image
 
 from siteline import __version__, stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
 from siteline.catalog.pairs import pair_view_ids
+from siteline.catalog.releases import (
+    clear_release_items,
+    find_release,
+    get_release,
+    release_item_counts,
+    releases_named,
+)
 from siteline.catalog.scenes import list_pairs, list_scenes
 from siteline.catalog.sites import get_site
 from siteline.catalog.stages import completed
@@ -40,7 +46,6 @@ from siteline.release.manifest import (
     write_manifest,
 )
 from siteline.release.params import ReleaseParams
-from siteline.release.query import find_release, get_release
 from siteline.release.splits import split_pairs
 
 
@@ -74,7 +79,7 @@ def _semver(v: str) -> tuple[int, int, int]:
 
 def next_version(session, name: str, lineage_key: dict) -> str:  # noqa: ANN001
     """1.0.0 first; a major bump when pairs or label/split parameters change, else a minor one."""
-    rows = session.execute(sa.select(Release).where(Release.name == name)).scalars().all()
+    rows = releases_named(session, name)
     if not rows:
         return "1.0.0"
     latest = max(rows, key=lambda r: _semver(r.version))
@@ -318,7 +323,7 @@ def _record_draft(
         rel.root_uri = str(root)
         rel.manifest_sha256 = manifest_sha
         s.flush()
-        s.execute(sa.delete(ReleaseItem).where(ReleaseItem.release_id == rel.id))
+        clear_release_items(s, rel.id)
         view_ids: dict[int, dict[int, int]] = {}
         for it in items:
             if it["pair"] not in view_ids:
@@ -383,9 +388,7 @@ def publish_release(
             s.add(completed("publish_release", f"release:{name}:{version}", {}, rel.published_at, run_id))
             rel.root_uri = str(final)
             sha = rel.manifest_sha256
-            items = s.execute(
-                sa.select(sa.func.count(ReleaseItem.id)).where(ReleaseItem.release_id == rel.id)
-            ).scalar_one()
+            items = sum(release_item_counts(s, rel.id).values())
     except BaseException:
         os.replace(final, draft)
         raise

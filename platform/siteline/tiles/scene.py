@@ -5,12 +5,12 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from pathlib import Path
 
-import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline import stores
 from siteline.catalog import Catalog
-from siteline.catalog.models import Mission, MissionFile, Node, Scene
+from siteline.catalog.models import Mission, Node, Scene
+from siteline.catalog.scenes import clear_nodes, mission_file, node_rows
 from siteline.catalog.sites import site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
@@ -28,11 +28,7 @@ def scene_las(session: Session, settings: Settings, scene: Scene) -> Path:
     """Where the scene's LAS/LAZ bytes are (the store's blob, or the referenced original)."""
     stats = scene.statistics or {}
     mission = session.get(Mission, scene.mission_id)
-    row = session.execute(
-        sa.select(MissionFile).where(
-            MissionFile.mission_id == mission.id, MissionFile.path == stats.get("las_file")
-        )
-    ).scalar_one_or_none()
+    row = mission_file(session, mission.id, stats.get("las_file"))
     if row is None:
         raise TileError(f"scene {scene.id}: its mission records no point cloud file.")
     path = resolve_file(settings.store, mission.storage, mission.root_uri, row.path, row.sha256)
@@ -90,7 +86,7 @@ def tile_scene(
     try:
         with catalog.transaction() as s:
             scene = s.get(Scene, scene_id)
-            s.execute(sa.delete(Node).where(Node.scene_id == scene_id))
+            clear_nodes(s, scene_id)
             for n in result.nodes:
                 s.add(
                     Node(
@@ -136,9 +132,7 @@ def parse_crs_or_site(text: str | None, site: SiteSpec):  # noqa: ANN201
 
 
 def scene_nodes(session: Session, scene_id: int) -> list[NodeInfo]:
-    rows = session.execute(
-        sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.level)
-    ).scalars()
+    rows = node_rows(session, scene_id)
     return [
         NodeInfo(
             r.key,
