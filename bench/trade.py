@@ -156,7 +156,7 @@ def run_trade(
     ]
     ground = b.xyz[b.cls == site.taxonomy.id_of("ground")]
     plane = fit_ground_plane(ground, seed=seed)
-    vp = ViewParams(n_views=views, seed=seed, render_scale=0.25, min_coverage=0.3)
+    vp = ViewParams(views=views, seed=seed, scale=0.25, min_coverage=0.3)
     view_set = generate_views(cams, plane, site.fence, TilePointSource(b.tiles, np.array([], np.uint8)), vp)
     say(f"{len(view_set.views)} views")
 

@@ -6,6 +6,7 @@ then to site-local by float64 subtraction of the site origin, chunk by chunk; on
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -55,11 +56,15 @@ def open_las(path: Path) -> laspy.LasReader:
 
 
 def iter_chunks(
-    path: Path, chunk_points: int = DEFAULT_CHUNK_POINTS, eight_bit: bool | None = None
+    path: Path,
+    chunk_points: int = DEFAULT_CHUNK_POINTS,
+    eight_bit: bool | None = None,
+    reader: laspy.LasReader | None = None,
 ) -> Iterator[PointChunk]:
     """Stream a LAS/LAZ file as :class:`PointChunk` s. ``eight_bit`` (colour stored as 0-255 in 16-bit
-    fields) is detected from the first chunk when None."""
-    with open_las(path) as reader:
+    fields) is detected from the first chunk when None. ``reader``: the file already opened (by
+    :func:`open_las`), so a caller that read its header does not open it twice."""
+    with contextlib.nullcontext(reader) if reader is not None else open_las(path) as reader:
         has_rgb = "red" in reader.header.point_format.dimension_names
         has_time = "gps_time" in reader.header.point_format.dimension_names
         try:

@@ -40,10 +40,14 @@ def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
         raise CRSError(f"point cloud {path}: its CRS record cannot be parsed ({exc}); pass --crs.") from exc
 
 
-def source_crs(path: Path, crs_override: str | None) -> pyproj.CRS:
-    """The CRS of a point cloud: its own record, or ``crs_override`` when it has none."""
-    with open_las(path) as reader:
+def source_crs(path: Path, crs_override: str | None, reader: laspy.LasReader | None = None) -> pyproj.CRS:
+    """The CRS of a point cloud: its own record, or ``crs_override`` when it has none. ``reader``: the
+    file already opened."""
+    if reader is not None:
         in_file = file_crs(reader, path)
+    else:
+        with open_las(path) as opened:
+            in_file = file_crs(opened, path)
     if in_file is None and crs_override is None:
         raise CRSError(f"point cloud {path} has no CRS record; pass --crs (e.g. --crs EPSG:32618).")
     if (
@@ -84,14 +88,19 @@ def source_transformer(
 
 
 def site_chunks(
-    path: Path, site: SiteSpec, tr: ToSiteCRS | None, chunk_points: int = DEFAULT_CHUNK_POINTS
+    path: Path,
+    site: SiteSpec,
+    tr: ToSiteCRS | None,
+    chunk_points: int = DEFAULT_CHUNK_POINTS,
+    reader: laspy.LasReader | None = None,
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
-    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore."""
+    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
+    ``reader``: the file already opened."""
     tax = site.taxonomy
     lut, known = tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
-    for chunk in iter_chunks(path, chunk_points):
+    for chunk in iter_chunks(path, chunk_points, reader=reader):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)

@@ -23,7 +23,7 @@ from siteline.views import (
 )
 
 FENCE = [(-40.0, -40.0), (40.0, -40.0), (40.0, 40.0), (-40.0, 40.0)]
-PARAMS = ViewParams(render_scale=0.25, depth_probe_scale=0.25, min_coverage=0.3, n_views=40)
+PARAMS = ViewParams(scale=0.25, depth_probe_scale=0.25, min_coverage=0.3, views=40)
 
 
 def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -123,7 +123,7 @@ def views_generate(
     from siteline.lasio import read_site_local
     from siteline.views import ArrayPointSource, ViewParams, fit_ground_plane, generate_views
 
-    params = ViewParams(n_views=n, seed=seed, render_scale=scale, min_coverage=min_coverage)
+    params = ViewParams(views=n, seed=seed, scale=scale, min_coverage=min_coverage)
     real = _camera_file(cameras)
     fence_m = load_fence_geojson(fence, origin) if fence is not None else None
     cloud = read_site_local(ground, origin)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import re
 from dataclasses import asdict, dataclass, field
-from datetime import UTC, datetime, timedelta
+from datetime import UTC, date, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +38,6 @@ from siteline.crs import parse_z_unit
 from siteline.errors import MissionError, PhotoError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
 from siteline.ingest.pointcloud import LasScan, scan_las
-from siteline.lasio import open_las
 from siteline.photos import PhotoMeta, read_photo_meta
 from siteline.register import AlignmentPolicy, check_alignment, register_cameras
 from siteline.stores import blob_uri, put_blob, remove_blobs
@@ -152,10 +151,7 @@ def capture_time(
         m = RAW_FOLDER.match(Path(e.path).parts[0])
         if m:
             return datetime.strptime(m.group(1), "%Y%m%d%H%M").replace(tzinfo=UTC)
-    import laspy
-
-    with laspy.open(root / scan.path) as r:
-        day = r.header.creation_date
+    day = date.fromisoformat(scan.creation_date) if scan.creation_date else None
     if day is None:
         raise MissionError(
             f"mission {root}: no photo time, no DJI raw folder name and no LAS creation date: the "
@@ -243,14 +239,14 @@ def ingest_mission(
                 len(entries),
             )
     las = choose_las(entries, root)
-    with open_las(root / las.path) as r:  # a file laspy cannot open is refused here, naming it
-        rep.start("reading points", int(r.header.point_count))
+    rep.start("reading points", None)
     scan = scan_las(
         root / las.path,
         spec,
         opts.crs,
         z_unit=parse_z_unit(opts.z_unit) if opts.z_unit else None,
         progress=lambda n: rep.advance("reading points", n),
+        total=lambda n: rep.start("reading points", n),
     )
     scan.path = las.path
     photos = read_photos(entries, root)

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import laspy
 import numpy as np
 
 from siteline.crs import ZUnit, crs_text, z_unit_of
@@ -39,6 +40,7 @@ class LasScan:
     offset: list[float]
     gps_time_range: list[float] | None
     z_unit: dict
+    creation_date: str | None
     stable_sample: np.ndarray = field(repr=False)
 
     def to_dict(self) -> dict:
@@ -56,24 +58,47 @@ def scan_las(
     sample_max: int = 200_000,
     chunk_points: int = DEFAULT_CHUNK_POINTS,
     progress: Callable[[int], None] | None = None,
+    total: Callable[[int], None] | None = None,
     seed: int = 0,
 ) -> LasScan:
-    """Read ``path`` once in chunks: bring coordinates into the site CRS in float64, refuse non-finite
-    or absurd ones, map classes through the site taxonomy, and gather statistics. z is converted to
-    metres from ``z_unit`` (``--z-unit``) or the unit the file's CRS implies (recorded in the scan)."""
+    """Read ``path`` once in chunks (one open of the file): bring coordinates into the site CRS in
+    float64, refuse non-finite or absurd ones, map classes through the site taxonomy, and gather
+    statistics. z is converted to metres from ``z_unit`` (``--z-unit``) or the unit the file's CRS
+    implies (recorded in the scan). ``total`` receives the header's point count before reading,
+    ``progress`` the points read as they go."""
     path = Path(path)
     with open_las(path) as reader:
-        header = reader.header
-        n_total = int(header.point_count)
-        version = f"{header.version.major}.{header.version.minor}"
-        pf = int(header.point_format.id)
-        scale = [float(v) for v in header.scales]
-        offset = [float(v) for v in header.offsets]
+        return _scan(
+            reader, path, site, crs_override, z_unit, sample_max, chunk_points, progress, total, seed
+        )
+
+
+def _scan(
+    reader: laspy.LasReader,
+    path: Path,
+    site: SiteSpec,
+    crs_override: str | None,
+    z_unit: ZUnit | None,
+    sample_max: int,
+    chunk_points: int,
+    progress: Callable[[int], None] | None,
+    total: Callable[[int], None] | None,
+    seed: int,
+) -> LasScan:
+    header = reader.header
+    n_total = int(header.point_count)
+    version = f"{header.version.major}.{header.version.minor}"
+    pf = int(header.point_format.id)
+    scale = [float(v) for v in header.scales]
+    offset = [float(v) for v in header.offsets]
+    day = header.creation_date
+    if total:
+        total(n_total)
     if not (np.isfinite(scale).all() and np.isfinite(offset).all()) or min(abs(s) for s in scale) == 0:
         raise PointCloudError(
             f"point cloud {path}: header scale {scale} / offset {offset} is not finite and non-zero."
         )
-    src = source_crs(path, crs_override)
+    src = source_crs(path, crs_override, reader)
     tr = source_transformer(path, site, src, z_unit)
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
     rng = np.random.default_rng(seed)
@@ -86,7 +111,7 @@ def scan_las(
     tmin, tmax = np.inf, -np.inf
     samples = []
     colour = "none"
-    for sc in site_chunks(path, site, tr, chunk_points):
+    for sc in site_chunks(path, site, tr, chunk_points, reader=reader):
         local, chunk, cls = sc.local, sc.chunk, sc.classes
         unknown += np.bincount(chunk.classification[~sc.known_code], minlength=256)
         outside += int(sc.outside.sum())
@@ -128,5 +153,6 @@ def scan_las(
         offset=offset,
         gps_time_range=[tmin, tmax] if np.isfinite(tmin) else None,
         z_unit=z_unit_of(src, z_unit).to_dict(),
+        creation_date=day.isoformat() if day is not None else None,
         stable_sample=np.concatenate(samples) if samples else np.zeros((0, 3)),
     )

@@ -5,23 +5,29 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from siteline.errors import ReleaseError
+from siteline.errors import ReleaseError, SitelineError
+from siteline.labels.params import LabelParams
+from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views import SAMPLER_VERSION, ViewParams
 
 
 @dataclass(frozen=True)
 class PairParams:
-    """scale, point_size_px: render knobs (DESIGN.md §6). views: views kept per pair. radius_m: change
-    radius in metres, or None for ``radius_multiplier`` x the median spacing of the sparser scene.
-    lod_factor: level of detail read per view (1 = spacing within a pixel footprint). seed: view
-    sampling. min_coverage: views covering less of the image at ``scale`` are rejected. sampler: the
-    view sampler's version (pose snapping and keyed stratified sample, siteline.views.generate),
-    recorded in the lineage and part of the outputs' key, so outputs of another sampler are not reused."""
+    """Every knob of pair processing, one name each, composed of the stages' own specs:
+    :meth:`render_settings` (``scale``, ``point_size_px``; DESIGN.md §6), :meth:`view_params`
+    (``scale``, ``views``, ``seed``, ``min_coverage`` and any other ViewParams field in ``view_params``;
+    §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
+    spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
+    lod_factor: level of detail read per view (1 = spacing within a pixel footprint). sampler: the view
+    sampler's version (pose snapping and keyed stratified sample, siteline.views.generate), recorded
+    in the lineage and part of the outputs' key, so outputs of another sampler are not reused.
+
+    The persisted JSON stays flat (the knobs above), so the catalog, the lineage and ``release diff``
+    show each knob once under its one name."""
 
     scale: float = 0.125
     point_size_px: int = 1
@@ -40,21 +46,33 @@ class PairParams:
                 f"view sampler {self.sampler!r} is not this version's ({SAMPLER_VERSION!r}); outputs of "
                 "another sampler cannot be rebuilt: drop the 'sampler' key to use the current one."
             )
-        if self.radius_m is not None and not (math.isfinite(self.radius_m) and self.radius_m > 0):
-            raise ReleaseError(f"radius {self.radius_m!r} m must be a positive number or 'auto'.")
-        if not self.radius_multiplier > 0:
-            raise ReleaseError("radius multiplier must be positive.")
-        if self.views < 1:
-            raise ReleaseError(f"views must be at least 1, got {self.views}.")
+        clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage"})
+        if clash:
+            raise ReleaseError(
+                f"view_params {clash}: set these knobs on the pair parameters themselves (one name each)."
+            )
+        try:
+            self.render_settings(), self.view_params_spec(), self.label_params()
+        except SitelineError as exc:
+            raise ReleaseError(f"pair parameters: {exc}") from exc
 
-    def view_params_obj(self) -> ViewParams:
+    def render_settings(self) -> RenderSettings:
+        """The render knobs as the renderer's own spec."""
+        return RenderSettings(scale=self.scale, point_size_px=self.point_size_px)
+
+    def view_params_spec(self) -> ViewParams:
+        """The view-generation knobs as ViewParams (``view_params`` holds the less common ones)."""
         base = {
-            "n_views": self.views,
+            "views": self.views,
             "seed": self.seed,
-            "render_scale": self.scale,
+            "scale": self.scale,
             "min_coverage": self.min_coverage,
         }
         return ViewParams.from_dict({**base, **self.view_params})
+
+    def label_params(self) -> LabelParams:
+        """The change-label knobs as LabelParams."""
+        return LabelParams(self.radius_m, self.radius_multiplier)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

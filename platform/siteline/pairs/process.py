@@ -117,10 +117,11 @@ def process_pair(
         tiles2 = open_scene_tiles(s, s.get(Scene, ids[1]))
         cams = scene_cameras(s, ids[1])
     ignored = site.taxonomy.ignored_lut()
-    if params.radius_m is None:
-        radius, radius_info = auto_radius(tiles1, tiles2, params.radius_multiplier)
+    label_params = params.label_params()
+    if label_params.radius_m is None:
+        radius, radius_info = auto_radius(tiles1, tiles2, label_params.radius_multiplier)
     else:
-        radius, radius_info = params.radius_m, {"given": True}
+        radius, radius_info = label_params.radius_m, {"given": True}
     label_uri = settings.store.uri("labels", f"pair-{pair_id}-r{int(round(radius * 1e6))}um.zarr")
     if stores.is_complete(label_uri):
         labels = dict(stores.open_group(label_uri).attrs) | {"uri": label_uri}
@@ -145,7 +146,7 @@ def process_pair(
         dtype=np.uint8,
     )
     source = TilePointSource(tiles2, skip)
-    vp = params.view_params_obj()
+    vp = params.view_params_spec()
     view_set = generate_views(
         [NamedCamera(n, c) for n, c in cams],
         plane,

@@ -186,7 +186,7 @@ def reject(
     near = source.nearest_distance(centers)
     above = source.count_above(centers, params.overhead_radius_m)
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
-    settings = RenderSettings(scale=params.render_scale)
+    settings = RenderSettings(scale=params.scale)
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
         if not at_least(h, params.min_height_m, LENGTH_TOL_M):
             v.rejected = "underground"
@@ -197,7 +197,7 @@ def reject(
         elif up > 0:
             v.rejected = "under_geometry"
         else:
-            r = render_points(source.points_for_view(v.camera, params.render_scale), v.camera, settings)
+            r = render_points(source.points_for_view(v.camera, params.scale), v.camera, settings)
             v.coverage = r.coverage
             if not at_least(r.coverage, params.min_coverage, RATIO_TOL):
                 v.rejected = "low_coverage"
@@ -256,7 +256,7 @@ def generate_views(
     progress: Callable[[int], None] | None = None,
 ) -> ViewSet:
     """Synthetic views of one scene (the later scene of a pair): candidates for every real camera,
-    rejection, then a seeded stratified sample of ``params.n_views``, indexed 0..n-1.
+    rejection, then a seeded stratified sample of ``params.views``, indexed 0..n-1.
 
     Real camera poses are snapped first (siteline.tolerances), so the same site at any coordinate
     magnitude gives bit-identical views."""
@@ -278,7 +278,7 @@ def generate_views(
         if progress is not None:
             progress(1)
     kept = [v for v in candidates if v.rejected is None]
-    sample = stratified_sample(kept, params.n_views, params.seed)
+    sample = stratified_sample(kept, params.views, params.seed)
     for i, v in enumerate(sample):
         v.index = i
     rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))

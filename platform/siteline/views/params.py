@@ -22,8 +22,9 @@ class ViewParams:
     min_height_m: reject views lower than this above the ground plane (underground).
     overhead_radius_m: reject views with points above them within this horizontal radius (under a
     slab, inside a building).
-    render_scale, min_coverage: reject views whose coverage at this scale is below min_coverage.
-    n_views: views kept per pair (seeded sample, stratified by strategy).
+    scale, min_coverage: reject views whose coverage at render scale ``scale`` is below min_coverage.
+    views: views kept per pair (seeded sample, stratified by strategy). ``scale`` and ``views`` are the
+    knobs of the same names in PairParams and RenderSettings.
     """
 
     vertical_fractions: tuple[float, ...] = (1.0, 0.75, 0.5, 0.25)
@@ -34,9 +35,9 @@ class ViewParams:
     clearance_m: float = 1.0
     min_height_m: float = 1.0
     overhead_radius_m: float = 1.0
-    render_scale: float = 0.125
+    scale: float = 0.125
     min_coverage: float = 0.5
-    n_views: int = 300
+    views: int = 300
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -52,9 +53,9 @@ class ViewParams:
             raise ViewsError(f"central_fraction {self.central_fraction} must lie in (0, 1].")
         if not 0 <= self.min_coverage <= 1:
             raise ViewsError(f"min_coverage {self.min_coverage} must lie in [0, 1].")
-        if self.n_views < 1:
-            raise ViewsError(f"n_views must be at least 1, got {self.n_views}.")
-        for name in ("clearance_m", "overhead_radius_m", "render_scale", "depth_probe_scale"):
+        if not isinstance(self.views, int) or self.views < 1:
+            raise ViewsError(f"views must be at least 1, got {self.views}.")
+        for name in ("clearance_m", "overhead_radius_m", "scale", "depth_probe_scale"):
             if not getattr(self, name) > 0:
                 raise ViewsError(f"{name} must be positive.")
 
