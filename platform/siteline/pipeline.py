@@ -11,7 +11,7 @@ from pathlib import Path
 from siteline.catalog import Catalog
 from siteline.catalog.scenes import get_scene
 from siteline.config import Settings
-from siteline.ingest.mission import IngestOptions, IngestResult, Reporter, ingest_mission
+from siteline.ingest.mission import IngestOptions, IngestResult, ingest_mission
 from siteline.pairs import PairOutput, PairParams, process_pair
 from siteline.progress import Progress
 from siteline.release.build import ReleaseInfo, build_release, choose_pairs, publish_release
@@ -24,14 +24,13 @@ def ingest(
     mission_dir: Path,
     site: str,
     opts: IngestOptions | None = None,
-    reporter: Reporter | None = None,
     workers: int = 2,
     progress: Progress | None = None,
     run_id: str | None = None,
 ) -> tuple[IngestResult, TileResult | None]:
-    """Ingest ``mission_dir`` as a scene of ``site`` and tile it. A mission already ingested is not
-    ingested again; its scene is tiled if it is not yet."""
-    result = ingest_mission(catalog, settings, Path(mission_dir), site, opts, reporter, run_id=run_id)
+    """Ingest ``mission_dir`` as a scene of ``site`` and tile it (``progress`` follows both). A mission
+    already ingested is not ingested again; its scene is tiled if it is not yet."""
+    result = ingest_mission(catalog, settings, Path(mission_dir), site, opts, progress, run_id=run_id)
     tiled = None
     if result.scene_id is not None:
         tiled, message = tile_scene(

@@ -79,3 +79,18 @@ def emit(as_json: bool, data: Any, human: Callable[[], None]) -> None:
         print_json(data)
     else:
         human()
+
+
+def bar_progress(bar: Any):  # noqa: ANN201
+    """A :class:`siteline.progress.Progress` drawing one rich bar per task on ``bar``."""
+    tasks: dict[str, int] = {}
+
+    def report(task: str, amount: int, total: int | None) -> None:
+        if task not in tasks:
+            tasks[task] = bar.add_task(task, total=total)
+        elif total is not None:
+            bar.update(tasks[task], total=total)
+        if amount:
+            bar.advance(tasks[task], amount)
+
+    return report

@@ -17,32 +17,23 @@ from siteline.catalog.scenes import (
     scene_cameras,
 )
 from siteline.catalog.sites import get_site
-from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
-from siteline.ingest.mission import IngestOptions, Reporter
+from siteline.cli.common import (
+    JsonOption,
+    bar_progress,
+    catalog,
+    console,
+    emit,
+    print_record,
+    print_table,
+    settings,
+)
+from siteline.ingest.mission import IngestOptions
 from siteline.photos import read_photo_meta
 from siteline.tiles import export_las, open_scene_tiles, tile_scene
 
 mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
 scene_app = typer.Typer(help="Scenes (epochs) of a site.", no_args_is_help=True)
 photo_app = typer.Typer(help="DJI photo metadata.", no_args_is_help=True)
-
-
-class BarReporter(Reporter):
-    """Rich progress bars for ingest stages (bytes for hashing and storing, points for reading)."""
-
-    def __init__(self, bar: Progress) -> None:
-        self.bar = bar
-        self.tasks: dict[str, int] = {}
-
-    def start(self, task: str, total: float | None) -> None:
-        if task in self.tasks:
-            self.bar.update(self.tasks[task], total=total)
-        else:
-            self.tasks[task] = self.bar.add_task(task, total=total)
-
-    def advance(self, task: str, amount: float) -> None:
-        if task in self.tasks:
-            self.bar.advance(self.tasks[task], amount)
 
 
 def ingest(
@@ -93,19 +84,8 @@ def ingest(
         TimeRemainingColumn(),
     ]
     with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
-        rep = BarReporter(bar)
         result, tiled = pipeline.ingest(
-            cat,
-            cfg,
-            mission_dir,
-            site,
-            opts,
-            rep,
-            workers=workers,
-            progress=lambda task, n, total: (
-                rep.start(task, total) if task not in rep.tasks else None,
-                rep.advance(task, n),
-            ),
+            cat, cfg, mission_dir, site, opts, workers=workers, progress=bar_progress(bar)
         )
     record = result.to_dict()
     record["tiles"] = tiled.summary() if tiled is not None else None
@@ -255,17 +235,7 @@ def scene_tile(
     """Tile a registered scene into its Zarr store (a scene already tiled is left alone)."""
     cfg = settings()
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
-        rep = BarReporter(bar)
-        result, message = tile_scene(
-            cat,
-            cfg,
-            scene_id,
-            workers=workers,
-            progress=lambda task, n, total: (
-                rep.start(task, total) if task not in rep.tasks else None,
-                rep.advance(task, n),
-            ),
-        )
+        result, message = tile_scene(cat, cfg, scene_id, workers=workers, progress=bar_progress(bar))
     emit(
         as_json,
         {"message": message, "tiles": result.summary() if result else None},

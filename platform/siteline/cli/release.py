@@ -8,23 +8,21 @@ from pathlib import Path
 import typer
 from rich.progress import Progress
 
-from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table, settings
+from siteline.cli.common import (
+    JsonOption,
+    bar_progress,
+    catalog,
+    console,
+    emit,
+    print_record,
+    print_table,
+    settings,
+)
 from siteline.errors import ReleaseError
 from siteline.release.manifest import verify_files
 from siteline.release.query import diff_releases, get_release, list_releases, query_items, release_record
 
 app = typer.Typer(help="Versioned, immutable dataset releases.", no_args_is_help=True)
-
-
-def _progress(bar: Progress):  # noqa: ANN202
-    tasks: dict[str, int] = {}
-
-    def report(task: str, n: int, total: int | None) -> None:
-        if task not in tasks:
-            tasks[task] = bar.add_task(task, total=total)
-        bar.update(tasks[task], advance=n, total=total)
-
-    return report
 
 
 def parse_radius(text: str) -> float | None:
@@ -93,7 +91,7 @@ def build(
             pairs or None,
             version,
             preset=preset,
-            progress=_progress(bar),
+            progress=bar_progress(bar),
             device=device,
             pad=pad,
         )

@@ -39,6 +39,7 @@ from siteline.errors import MissionError, PhotoError
 from siteline.ingest.inventory import FileEntry, inventory, manifest_sha256
 from siteline.ingest.pointcloud import LasScan, scan_las
 from siteline.photos import PhotoMeta, read_photo_meta
+from siteline.progress import Progress
 from siteline.register import AlignmentPolicy, check_alignment, register_cameras
 from siteline.stores import blob_uri, put_blob, remove_blobs
 
@@ -88,14 +89,6 @@ class IngestResult:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-class Reporter:
-    """Progress callbacks of a long ingest; the CLI draws bars, flows write artifacts."""
-
-    def start(self, task: str, total: float | None) -> None: ...
-
-    def advance(self, task: str, amount: float) -> None: ...
 
 
 def choose_las(entries: list[FileEntry], root: Path) -> FileEntry:
@@ -203,22 +196,24 @@ def ingest_mission(
     mission_dir: Path,
     site_name: str,
     opts: IngestOptions | None = None,
-    reporter: Reporter | None = None,
+    progress: Progress | None = None,
     run_id: str | None = None,
 ) -> IngestResult:
     """Inventory, validate, georegister and register ``mission_dir`` as a scene of ``site_name``."""
     opts = opts or IngestOptions()
-    rep = reporter or Reporter()
+
+    def rep(task: str, amount: int, total: int | None = None) -> None:
+        if progress is not None:
+            progress(task, amount, total)
+
     started = datetime.now(UTC)
     root = Path(mission_dir).resolve() if Path(mission_dir).exists() else Path(mission_dir)
     with catalog.transaction() as s:
         site = get_site(s, site_name)
         spec = site_spec(site)
         site_id = site.id
-    rep.start("hashing", None)
-    entries = inventory(
-        root, progress=lambda n: rep.advance("hashing", n), total=lambda t: rep.start("hashing", t)
-    )
+    rep("hashing", 0)
+    entries = inventory(root, progress=lambda n: rep("hashing", n), total=lambda t: rep("hashing", 0, t))
     sha = manifest_sha256(entries)
     with catalog.transaction() as s:
         existing = mission_by_manifest(s, sha)
@@ -239,14 +234,14 @@ def ingest_mission(
                 len(entries),
             )
     las = choose_las(entries, root)
-    rep.start("reading points", None)
+    rep("reading points", 0)
     scan = scan_las(
         root / las.path,
         spec,
         opts.crs,
         z_unit=parse_z_unit(opts.z_unit) if opts.z_unit else None,
-        progress=lambda n: rep.advance("reading points", n),
-        total=lambda n: rep.start("reading points", n),
+        progress=lambda n: rep("reading points", n),
+        total=lambda n: rep("reading points", 0, n),
     )
     scan.path = las.path
     photos = read_photos(entries, root)
@@ -280,11 +275,11 @@ def ingest_mission(
             stores.put_bytes(sample_bytes, dest)
             new_blobs.append(sample_sha)
         if opts.storage == "copy":
-            rep.start("storing", sum(e.size_bytes for e in entries))
+            rep("storing", 0, sum(e.size_bytes for e in entries))
             for e in entries:
                 if put_blob(settings.store, root / e.path, e.sha256):
                     new_blobs.append(e.sha256)
-                rep.advance("storing", e.size_bytes)
+                rep("storing", e.size_bytes)
         checked = CheckedMission(
             root, entries, sha, scan, cameras, cam_source, registration, when, sample_sha
         )
