@@ -243,21 +243,15 @@ class Camera:
 
     @classmethod
     def from_pycolmap(cls, camera, cam_from_world) -> Camera:  # noqa: ANN001
-        """From a pycolmap PINHOLE (or SIMPLE_PINHOLE) camera and a Rigid3d ``cam_from_world``."""
-        model = camera.model_name if hasattr(camera, "model_name") else str(camera.model)
-        p = [float(v) for v in camera.params]
-        if model.endswith("SIMPLE_PINHOLE"):
-            fx = fy = p[0]
-            cx, cy = p[1], p[2]
-        elif model.endswith("PINHOLE"):
-            fx, fy, cx, cy = p[:4]
-        else:
-            raise CameraError(
-                f"camera model {model} has distortion; undistort the images first (DESIGN.md §3)."
-            )
+        """From a pycolmap camera and a Rigid3d ``cam_from_world``. PINHOLE and SIMPLE_PINHOLE are taken
+        as they are; any other model pycolmap knows (OPENCV, SIMPLE_RADIAL, FULL_OPENCV, ...) becomes
+        its undistorted pinhole camera (:func:`undistorted_pinhole`, DESIGN.md §3), the camera COLMAP's
+        image undistorter writes: renders are distortion-free."""
+        pinhole = undistorted_pinhole(camera)
+        fx, fy, cx, cy = (float(v) for v in pinhole.params)
         return cls.from_pose(
-            camera.width,
-            camera.height,
+            pinhole.width,
+            pinhole.height,
             fx,
             fy,
             cx,
@@ -299,3 +293,53 @@ class Camera:
             )
         except CameraError as exc:
             raise CameraError(f"{source}: {exc}") from exc
+
+
+def model_name(camera) -> str:  # noqa: ANN001
+    """The COLMAP model name of a pycolmap camera (``OPENCV``, ``PINHOLE``, ...)."""
+    name = camera.model_name if hasattr(camera, "model_name") else str(camera.model)
+    return name.split(".")[-1]
+
+
+def undistorted_pinhole(camera):  # noqa: ANN001, ANN201
+    """The PINHOLE pycolmap camera of a pycolmap camera of any model: itself when it has no
+    distortion (PINHOLE, SIMPLE_PINHOLE as PINHOLE), else ``pycolmap.undistort_camera`` with COLMAP's
+    default options (the size and principal point change: 5280 x 3956 raw -> ~5645 x 4082)."""
+    import pycolmap
+
+    name = model_name(camera)
+    p = [float(v) for v in camera.params]
+    if name == "PINHOLE":
+        return camera
+    if name == "SIMPLE_PINHOLE":
+        return pycolmap.Camera(
+            model="PINHOLE", width=camera.width, height=camera.height, params=[p[0], p[0], p[1], p[2]]
+        )
+    try:
+        out = pycolmap.undistort_camera(pycolmap.UndistortCameraOptions(), camera)
+    except Exception as exc:  # pycolmap raises plain RuntimeErrors on unusable parameters
+        raise CameraError(f"camera model {name} with parameters {p} cannot be undistorted: {exc}") from exc
+    if model_name(out) != "PINHOLE":
+        raise CameraError(f"undistorting a {name} camera gave a {model_name(out)} camera, not PINHOLE.")
+    return out
+
+
+def distortion_record(camera) -> dict[str, Any] | None:  # noqa: ANN001
+    """What the catalog records of a distorted camera: its model, size and parameters, and the
+    undistorted pinhole renders use; None for a pinhole camera."""
+    name = model_name(camera)
+    if name in ("PINHOLE", "SIMPLE_PINHOLE"):
+        return None
+    pinhole = undistorted_pinhole(camera)
+    return {
+        "model": name,
+        "width": int(camera.width),
+        "height": int(camera.height),
+        "params": [float(v) for v in camera.params],
+        "undistorted": {
+            "model": "PINHOLE",
+            "width": int(pinhole.width),
+            "height": int(pinhole.height),
+            "params": [float(v) for v in pinhole.params],
+        },
+    }

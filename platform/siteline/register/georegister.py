@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.cameras import Camera
+from siteline.cameras import Camera, distortion_record
 from siteline.errors import RegistrationError
 from siteline.poses import Sim3
 
@@ -20,6 +20,7 @@ class Georegistration:
     position (site-local)."""
 
     site_from_model: Sim3
+    camera_models: dict[str, dict]
     residuals_m: dict[str, float]
     cameras: dict[str, Camera]
 
@@ -36,6 +37,7 @@ class Georegistration:
                 "rotation": self.site_from_model.R.tolist(),
                 "translation": self.site_from_model.t.tolist(),
             },
+            "camera_models": self.camera_models,
             "residuals_m": self.residuals_m,
             "rms_m": self.rms_m,
             "images": len(self.residuals_m),
@@ -104,7 +106,12 @@ def georegister(
     site_from_model = Sim3(
         "site", "model", float(sim.scale), np.asarray(sim.rotation.matrix()), np.asarray(sim.translation)
     )
-    result = Georegistration(site_from_model, residuals, cameras)
+    models = {}
+    for cam_id, cam in rec.cameras.items():
+        record = distortion_record(cam)
+        if record is not None:
+            models[str(cam_id)] = record
+    result = Georegistration(site_from_model, models, residuals, cameras)
     if not np.isfinite(result.rms_m) or result.rms_m > max_rms_m:
         worst = max(residuals, key=residuals.get)
         raise RegistrationError(

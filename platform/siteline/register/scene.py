@@ -9,11 +9,12 @@ from typing import Any
 
 import numpy as np
 
+from siteline.cameras import distortion_record
 from siteline.errors import RegistrationError
 from siteline.photos import PhotoMeta
 from siteline.register.georegister import georegister
 from siteline.register.icp import point_to_plane_icp
-from siteline.register.xmp import camera_from_photo, photo_center_crs
+from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
 from siteline.site import SiteSpec
 
 
@@ -47,7 +48,13 @@ def register_cameras(
         reg = georegister(model, locations, max_error_m=ransac_max_error_m, max_rms_m=max_rms_m)
         return reg.cameras, reg.to_dict(), "colmap"
     cams = {name: camera_from_photo(m, crs, spec.origin) for name, m in by_name.items()}
-    return cams, {"source": "xmp", "images": len(cams)}, "xmp"
+    record: dict[str, Any] = {"source": "xmp", "images": len(cams)}
+    models = {
+        name: distortion_record(c) for name, m in by_name.items() if (c := dewarp_camera(m)) is not None
+    }
+    if models:
+        record["camera_models"] = models  # the DewarpData distortion each undistorted camera came from
+    return cams, record, "xmp"
 
 
 def check_alignment(

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 import pyproj
 
-from siteline.cameras import Camera
+from siteline.cameras import Camera, undistorted_pinhole
 from siteline.dji import cam_from_world_rotation, grid_convergence_deg
 from siteline.errors import PhotoError
 from siteline.photos import PhotoMeta
@@ -26,10 +26,42 @@ def photo_center_crs(meta: PhotoMeta, crs: pyproj.CRS) -> np.ndarray:
     return out
 
 
+def dewarp_camera(meta: PhotoMeta):  # noqa: ANN201
+    """The distorted pycolmap camera DJI's ``DewarpData`` describes (FULL_OPENCV: fx, fy, principal
+    point = image centre + the cx, cy offsets, k1, k2, p1, p2, k3), or None when the photo has no
+    DewarpData or all its distortion coefficients are zero."""
+    import pycolmap
+
+    d = meta.dewarp
+    if d is None or meta.width is None or meta.height is None:
+        return None
+    if len(d) != 9:
+        raise PhotoError(
+            f"photo {meta.file}: DewarpData has {len(d)} numbers, expected 9 (fx,fy,cx,cy,k1,k2,p1,p2,k3)."
+        )
+    fx, fy, dcx, dcy, k1, k2, p1, p2, k3 = d
+    if not any((k1, k2, p1, p2, k3)):
+        return None
+    return pycolmap.Camera(
+        model="FULL_OPENCV",
+        width=meta.width,
+        height=meta.height,
+        params=[fx, fy, meta.width / 2.0 + dcx, meta.height / 2.0 + dcy, k1, k2, p1, p2, k3, 0.0, 0.0, 0.0],
+    )
+
+
+def dewarp_pinhole(meta: PhotoMeta):  # noqa: ANN201
+    """The undistorted pinhole of :func:`dewarp_camera` (the camera a COLMAP model with the same
+    distortion gives), or None."""
+    cam = dewarp_camera(meta)
+    return undistorted_pinhole(cam) if cam is not None else None
+
+
 def camera_from_photo(meta: PhotoMeta, crs: pyproj.CRS, origin: Sequence[float]) -> Camera:
     """The photo's pinhole camera in the site-local frame of ``origin`` (float64, ``crs`` units).
 
-    Intrinsics come from CalibratedFocalLength / CalibratedOpticalCenterX/Y and the image size;
+    Intrinsics come from ``DewarpData`` when it carries distortion (its undistorted pinhole, as for a
+    COLMAP model), else from CalibratedFocalLength / CalibratedOpticalCenterX/Y and the image size;
     orientation from the gimbal angles, yaw corrected by the grid convergence at the photo.
     """
     if not meta.has_orientation:
@@ -50,6 +82,15 @@ def camera_from_photo(meta: PhotoMeta, crs: pyproj.CRS, origin: Sequence[float])
         else meta.height / 2.0
     )
     center = photo_center_crs(meta, crs) - np.asarray(origin, dtype=np.float64)
+    dewarped = dewarp_pinhole(meta)
+    if dewarped is not None:
+        w, h = int(dewarped.width), int(dewarped.height)
+        fx, fy, cx, cy = (float(v) for v in dewarped.params)
+        conv = grid_convergence_deg(crs, meta.longitude_deg, meta.latitude_deg)
+        R = cam_from_world_rotation(
+            meta.gimbal_yaw_deg, meta.gimbal_pitch_deg, meta.gimbal_roll_deg or 0.0, conv
+        )
+        return Camera.from_pose(w, h, fx, fy, cx, cy, R, -R @ center)
     conv = grid_convergence_deg(crs, meta.longitude_deg, meta.latitude_deg)
     R = cam_from_world_rotation(meta.gimbal_yaw_deg, meta.gimbal_pitch_deg, meta.gimbal_roll_deg or 0.0, conv)
     return Camera.from_pose(meta.width, meta.height, fx, fx, cx, cy, R, -R @ center)
