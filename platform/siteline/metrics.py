@@ -71,3 +71,25 @@ def scores(cm: np.ndarray) -> Scores:
     kappa = _div(oa - pe, 1 - pe)
     miou = sum(present) / len(present) if present else 0.0
     return Scores(iou0, iou1, miou, precision, recall, f1, oa, kappa, int(n))
+
+
+def per_image_scores(cms: list[np.ndarray]) -> dict[str, float | int | None]:
+    """The paper's (Pylon's) convention: per image, the IoU of each class from that image's own 2x2
+    confusion matrix, NaN when the class is absent from both the image's truth and prediction; each
+    class's IoU is the mean over images ignoring NaN (nanmean); mIoU is the mean of the two classes.
+    Differs from :func:`scores` (one matrix over the split) by a few points on real models."""
+    ious = []
+    for cm in cms:
+        cm = np.asarray(cm, dtype=np.float64)
+        tn, fp, fn, tp = cm[0, 0], cm[0, 1], cm[1, 0], cm[1, 1]
+        u0, u1 = tn + fp + fn, tp + fp + fn
+        ious.append((tn / u0 if u0 else np.nan, tp / u1 if u1 else np.nan))
+    arr = np.array(ious, dtype=np.float64).reshape(-1, 2)
+    per_class = [float(np.nanmean(arr[:, c])) if np.isfinite(arr[:, c]).any() else None for c in (0, 1)]
+    present = [v for v in per_class if v is not None]
+    return {
+        "iou_unchanged": per_class[0],
+        "iou_changed": per_class[1],
+        "miou": float(np.mean(present)) if present else 0.0,
+        "images": len(cms),
+    }

@@ -66,3 +66,25 @@ def test_scores_of_known_predictions(tmp_path) -> None:
     s = nothing["scores"]
     assert s["f1"] == 0.0 and s["iou_changed"] == 0.0 and s["iou_unchanged"] == pytest.approx(tn / (tn + fn))
     assert s["miou"] == pytest.approx((tn / (tn + fn)) / 2)
+
+
+def test_both_metric_conventions_on_hand_made_confusions() -> None:
+    from siteline.metrics import per_image_scores, scores
+
+    a = np.array([[90, 10], [0, 0]])  # image 1: changed absent from truth, predicted 10 times
+    b = np.array([[50, 0], [10, 40]])  # image 2
+    c = np.array([[100, 0], [0, 0]])  # image 3: changed absent from truth and prediction: NaN, skipped
+    paper = per_image_scores([a, b, c])
+    assert paper["iou_unchanged"] == pytest.approx((0.9 + 50 / 60 + 1.0) / 3)
+    assert paper["iou_changed"] == pytest.approx((0.0 + 0.8) / 2)  # image 3 has no changed IoU
+    assert paper["miou"] == pytest.approx((paper["iou_unchanged"] + paper["iou_changed"]) / 2)
+    split = scores(a + b + c)
+    assert split.iou_changed == pytest.approx(40 / 60) and split.iou_unchanged == pytest.approx(240 / 260)
+    assert abs(split.miou - paper["miou"]) > 0.01  # the conventions differ: say which one a number is
+    assert per_image_scores([c])["iou_changed"] is None and per_image_scores([c])["miou"] == 1.0
+
+
+def test_score_reports_both_conventions(tmp_path) -> None:
+    r = score_predictions(TINY, "test", _write(tmp_path / "p", lambda t: np.where(t == 1, 255, 0)))
+    assert r["scores_per_image"]["miou"] == 1.0 and r["scores_per_image"]["images"] == 1
+    assert "per_image" in r["metric_definition"]

@@ -12,6 +12,7 @@ from siteline.errors import ViewsError
 from siteline.fence import inside_fence
 from siteline.views import (
     ArrayPointSource,
+    GroundPlane,
     NamedCamera,
     SyntheticView,
     ViewParams,
@@ -80,8 +81,8 @@ def test_thirty_two_candidates_per_real_camera() -> None:
 
 def test_mirroring_twice_gives_the_original() -> None:
     cam = _real_cameras()[0].camera
-    once, seg = mirror(cam, FENCE)
-    twice, seg2 = mirror(once, FENCE)
+    once, seg = mirror(cam, FENCE, rule="reflect")
+    twice, seg2 = mirror(once, FENCE, rule="reflect")
     assert seg == seg2
     assert np.allclose(twice.R, cam.R, atol=1e-12) and np.allclose(twice.center, cam.center, atol=1e-9)
     assert inside_fence(once.center[None, :2], FENCE)[0]
@@ -230,7 +231,7 @@ def test_mirror_of_a_camera_above_the_fence_is_kept_at_both_magnitudes() -> None
         a, b = np.asarray(ring[0]), np.asarray(ring[1])
         c = (a + b) / 2
         cam = Camera.look_at((c[0], c[1], 40.0), (c[0] + 5.0, c[1] + 5.0, 0.0), 64, 48, 50.0)
-        mirrored, _ = mirror(cam, ring)
+        mirrored, _ = mirror(cam, ring, GroundPlane((0.0, 0.0, 1.0), 0.0))
         assert inside_fence(mirrored.center[None, :2], ring)[0]
 
 
@@ -256,3 +257,36 @@ def test_sample_order_does_not_depend_on_pool_order() -> None:
     one = stratified_sample(pool, 12, seed=1)
     two = stratified_sample(list(reversed(pool)), 12, seed=1)
     assert [(v.parent, v.strategy) for v in one] == [(v.parent, v.strategy) for v in two]
+
+
+@pytest.mark.parametrize("pitch_deg", [-20.0, -35.0, -50.0, -70.0])
+def test_mirrored_views_of_a_camera_outside_the_fence_look_into_the_site(pitch_deg: float) -> None:
+    from siteline.dji import cam_from_world_rotation
+    from siteline.views.strategies import ground_target
+
+    ground = GroundPlane((0.0, 0.0, 1.0), 0.0)
+    hits_reflect = 0
+    for yaw_deg in range(0, 360, 30):
+        R = cam_from_world_rotation(float(yaw_deg), pitch_deg, 0.0)
+        cam = Camera.from_pose(64, 48, 50.0, 50.0, 32.0, 24.0, R, -R @ np.array([10.0, -55.0, 40.0]))
+        aimed, _ = mirror(cam, FENCE, ground)
+        assert inside_fence(aimed.center[None, :2], FENCE)[0]
+        target = ground_target(aimed, ground)
+        assert target is not None and inside_fence(target[None, :2], FENCE)[0], yaw_deg  # looks into the site
+        assert np.linalg.det(aimed.R) == pytest.approx(1.0)
+        reflected, _ = mirror(cam, FENCE, rule="reflect")
+        t = ground_target(reflected, ground)
+        hits_reflect += t is not None and bool(inside_fence(t[None, :2], FENCE)[0])
+    if pitch_deg > -40:  # oblique views: the reflect rule sends some axes out of the site; aim-site never does
+        assert hits_reflect < 12
+
+
+def test_mirror_rule_is_recorded_in_the_view_parameters() -> None:
+    cams = _real_cameras()[:1]
+    cands = candidate_views(cams[0], GroundPlane((0.0, 0.0, 1.0), 0.0), FENCE, lambda c: 30.0, ViewParams())
+    rules = {v.params["mirror_rule"] for v in cands if v.params["mirrored"]}
+    assert rules == {"aim-site"}
+    assert {v.params["mirror_rule"] for v in cands if not v.params["mirrored"]} == {None}
+    assert ViewParams(mirror_rule="reflect").to_dict()["mirror_rule"] == "reflect"
+    with pytest.raises(ViewsError, match="mirror_rule"):
+        ViewParams(mirror_rule="sideways")

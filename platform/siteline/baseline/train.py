@@ -18,7 +18,7 @@ from torch.utils.data import DataLoader
 from siteline.baseline.model import FCSiamDiff, parameter_count
 from siteline.data import ChangeDetectionDataset, TrainTransforms
 from siteline.errors import ReleaseError
-from siteline.metrics import IGNORE, confusion, scores
+from siteline.metrics import IGNORE, confusion, per_image_scores, scores
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
 
 
@@ -133,11 +133,13 @@ def evaluate(
     if len(ds) == 0:
         raise ReleaseError(f"release {root} has no {split} images.")
     cm = np.zeros((2, 2), np.int64)
+    per_image = []
     for i in range(len(ds)):
         s = ds[i]
         h, w = s["mask"].shape[-2:]
         logits = model(_pad16(s["image"])[None].to(device))[..., :h, :w]
-        cm += confusion(logits.argmax(1)[0].cpu(), s["mask"][0])
+        per_image.append(confusion(logits.argmax(1)[0].cpu(), s["mask"][0]))
+        cm += per_image[-1]
     manifest_sha = hashlib.sha256((Path(root) / MANIFEST).read_bytes()).hexdigest()
     doc = read_manifest(root)
     result = {
@@ -149,6 +151,7 @@ def evaluate(
         "metric_definition": METRIC_DEFINITION,
         "confusion": cm.tolist(),
         "scores": scores(cm).to_dict(),
+        "scores_per_image": per_image_scores(per_image),
     }
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps(result, indent=1) + "\n")

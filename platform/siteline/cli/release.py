@@ -25,6 +25,16 @@ from siteline.release.query import diff_releases, get_release, list_releases, qu
 app = typer.Typer(help="Versioned, immutable dataset releases.", no_args_is_help=True)
 
 
+def _both_metrics(result: dict) -> dict:
+    """Split-level scores (one confusion matrix) and the paper's per-image mIoU, each named."""
+    split = {f"{k} (split)": v for k, v in result["scores"].items()}
+    paper = result["scores_per_image"]
+    return split | {
+        "miou (per image, paper/Pylon)": paper["miou"],
+        "iou_changed (per image, paper/Pylon)": paper["iou_changed"],
+    }
+
+
 def parse_radius(text: str) -> float | None:
     if text == "auto":
         return None
@@ -57,6 +67,14 @@ def build(
         None, "--version", help="Version (default: next, major bump when labels or pairs change)."
     ),
     device: str = typer.Option("cpu", "--device", help="torch device for rendering."),
+    one_side_hole: str = typer.Option(
+        "ignore",
+        "--one-side-hole",
+        help="A pixel changed in one render and a hole in the other: 'ignore' (default) or 'changed'.",
+    ),
+    all_points: bool = typer.Option(
+        False, "--all-points", help="Render every point in the frustum (no level of detail; slower)."
+    ),
     pad: bool = typer.Option(
         True,
         "--pad/--no-pad",
@@ -80,6 +98,8 @@ def build(
         radius_m=parse_radius(radius),
         seed=seed,
         min_coverage=min_coverage,
+        one_side_hole=one_side_hole,
+        all_points=all_points,
     )
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
         info = pipeline.release(
@@ -241,7 +261,7 @@ def score(
         result,
         lambda: print_record(
             f"{name} {version} {split}: {result['images']} predictions",
-            result["scores"] | ({"results": str(out)} if out else {}),
+            _both_metrics(result) | ({"results": str(out)} if out else {}),
         ),
     )
 
@@ -337,5 +357,5 @@ def evaluate_cmd(
     emit(
         as_json,
         result,
-        lambda: print_record(f"{name} {version} {split}", result["scores"] | {"results": str(out)}),
+        lambda: print_record(f"{name} {version} {split}", _both_metrics(result) | {"results": str(out)}),
     )

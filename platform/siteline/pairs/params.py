@@ -22,7 +22,9 @@ class PairParams:
     (``scale``, ``views``, ``seed``, ``min_coverage`` and any other ViewParams field in ``view_params``;
     §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
-    lod_factor: level of detail read per view (1 = spacing within a pixel footprint). sampler: the view
+    lod_factor: level of detail read per view (1 = spacing within a pixel footprint); all_points: read
+    every point (no level of detail). one_side_hole: a pixel changed on one side and a hole on the
+    other is ``ignore`` or ``changed`` (siteline.pairs.render.pair_mask). sampler: the view
     sampler's version (pose snapping and keyed stratified sample, siteline.views.generate), recorded
     in the lineage and part of the outputs' key, so outputs of another sampler are not reused.
 
@@ -38,6 +40,8 @@ class PairParams:
     seed: int = 0
     min_coverage: float = 0.5
     view_params: dict[str, Any] = field(default_factory=dict)
+    one_side_hole: str = "ignore"
+    all_points: bool = False
     sampler: str = SAMPLER_VERSION
 
     def __post_init__(self) -> None:
@@ -46,6 +50,8 @@ class PairParams:
                 f"view sampler {self.sampler!r} is not this version's ({SAMPLER_VERSION!r}); outputs of "
                 "another sampler cannot be rebuilt: drop the 'sampler' key to use the current one."
             )
+        if self.one_side_hole not in ("ignore", "changed"):
+            raise ReleaseError(f"one_side_hole {self.one_side_hole!r}: use 'ignore' or 'changed'.")
         clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage"})
         if clash:
             raise ReleaseError(

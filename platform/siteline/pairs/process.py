@@ -20,6 +20,7 @@ from siteline.catalog.sites import site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import PairError
+from siteline.labels.params import expected_false_change
 from siteline.labels.store import attach_labels, auto_radius, write_labels
 from siteline.pairs.params import PairParams
 from siteline.pairs.render import render_pair_view
@@ -118,10 +119,17 @@ def process_pair(
         cams = scene_cameras(s, ids[1])
     ignored = site.taxonomy.ignored_lut()
     label_params = params.label_params()
+    auto, radius_info = auto_radius(tiles1, tiles2, label_params.radius_multiplier)
     if label_params.radius_m is None:
-        radius, radius_info = auto_radius(tiles1, tiles2, label_params.radius_multiplier)
+        radius = auto
     else:
-        radius, radius_info = label_params.radius_m, {"given": True}
+        radius = label_params.radius_m
+        radius_info = radius_info | {
+            "given": True,
+            "multiplier": radius / (auto / label_params.radius_multiplier),
+        }
+    # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
+    radius_info["expected_false_change"] = expected_false_change(radius_info["multiplier"])
     label_uri = settings.store.uri("labels", f"pair-{pair_id}-r{int(round(radius * 1e6))}um.zarr")
     if stores.is_complete(label_uri):
         labels = dict(stores.open_group(label_uri).attrs) | {"uri": label_uri}
@@ -166,7 +174,15 @@ def process_pair(
             (partial / sub).mkdir(parents=True)
         for v in view_set.views:
             r = render_pair_view(
-                tiles1, tiles2, v.camera, params.scale, params.point_size_px, params.lod_factor, device
+                tiles1,
+                tiles2,
+                v.camera,
+                params.scale,
+                params.point_size_px,
+                params.lod_factor,
+                device,
+                one_side_hole=params.one_side_hole,
+                all_points=params.all_points,
             )
             name = f"{v.index:04d}.png"
             (partial / "A" / name).write_bytes(png_bytes(r.a))

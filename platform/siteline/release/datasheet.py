@@ -54,6 +54,21 @@ def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+def _radius_lines(pairs: list[dict[str, Any]]) -> list[str]:
+    """One line per pair: its radius and the false change it implies on unchanged surfaces."""
+    out = []
+    for q in pairs:
+        info = (q.get("labels") or {}).get("radius") or {}
+        fc = info.get("expected_false_change")
+        if fc:
+            out.append(
+                f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing: expected false "
+                f"change on unchanged surfaces {fc['per_direction']:.2%} per direction, {fc['union']:.2%} in the "
+                "mask (2^(-k^2) per direction)"
+            )
+    return out
+
+
 def _ignore_share(stats: dict[str, Any]) -> float:
     s = stats["class_balance"].values()
     total = sum(v["unchanged"] + v["changed"] + v["ignore"] for v in s)
@@ -112,6 +127,11 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         f"- render scale {p['scale']}, point size {p['point_size_px']} px, level-of-detail factor {p['lod_factor']}",
         f"- views per pair {p['views']}, seed {p['seed']}, minimum coverage {p['min_coverage']}",
         f"- change radius: {'auto (' + str(p['radius_multiplier']) + ' x median spacing)' if p['radius_m'] is None else str(p['radius_m']) + ' m'}",
+        *_radius_lines(lin["pairs"]),
+        "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
+        "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
+        f"**{p.get('one_side_hole', 'ignore')}**; change is the union (OR) of the two directions.",
+        f"- level of detail: {'none (every point rendered)' if p.get('all_points') else 'LOD factor ' + str(p['lod_factor'])}",
         "",
         "## Splits (disjoint by pair)",
         "",
@@ -137,9 +157,14 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         f"ds = ChangeDetectionDataset('{'<this folder>'}', split='train')  # image (2, 3, H, W) float32, mask (1, H, W) int64 0/1/255",
         "```",
         "",
-        "Metrics: one confusion matrix over the whole split, 255 excluded; IoU per class, mIoU (mean of unchanged and "
-        "changed IoU over the classes present in truth or prediction), precision/recall/F1 of changed, OA, kappa "
-        "(`siteline.metrics`, `siteline release score`).",
+        "Metrics, two conventions, each named where it is reported (`siteline evaluate`, `siteline release score`):",
+        "",
+        "- **split** (siteline's default): one confusion matrix over the whole split, 255 excluded; IoU per class, "
+        "mIoU (mean of unchanged and changed IoU over the classes present in truth or prediction), "
+        "precision/recall/F1 of changed, OA, kappa.",
+        "- **per image** (the paper's table, Pylon's code): per-image IoU per class, NaN when the class is absent "
+        "from the image's truth and prediction, nan-mean over images, mIoU the mean of the two classes. The two "
+        "differ by a few mIoU points: compare numbers of one convention only.",
         "",
         f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
         "",

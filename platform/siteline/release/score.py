@@ -10,7 +10,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.errors import ReleaseError
-from siteline.metrics import confusion, scores
+from siteline.metrics import confusion, per_image_scores, scores
 from siteline.release.layout import ignore_aware_folder
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
 
@@ -57,6 +57,7 @@ def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
         )
     folder = ignore_aware_folder(doc)
     cm = np.zeros((2, 2), np.int64)
+    per_image = []
     for it in items:
         truth = np.asarray(Image.open(root / split / folder / f"{it['id']}.png"), dtype=np.int64)
         pred_path = pred_dir / f"{it['id']}.png"
@@ -66,7 +67,9 @@ def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
                 f"prediction {pred_path} is {pred.shape[1]} x {pred.shape[0]} px; the release image is "
                 f"{truth.shape[1]} x {truth.shape[0]} px."
             )
-        cm += confusion(pred, truth)
+        image_cm = confusion(pred, truth)
+        per_image.append(image_cm)
+        cm += image_cm
     return {
         "release": {
             "name": doc["name"],
@@ -79,4 +82,5 @@ def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
         "metric_definition": METRIC_DEFINITION,
         "confusion": cm.tolist(),
         "scores": scores(cm).to_dict(),
+        "scores_per_image": per_image_scores(per_image),
     }

@@ -134,7 +134,7 @@ def candidate_views(
                 if fence_m is None:
                     cam_m, reason = None, "no_fence"
                 else:
-                    cam_m, segment = strategies.mirror(cam_v, fence_m)
+                    cam_m, segment = strategies.mirror(cam_v, fence_m, ground, params.mirror_rule)
             depth = depth_of(cam_m) if cam_m is not None else None
             for ff in params.forward_fractions:
                 base = {
@@ -142,6 +142,7 @@ def candidate_views(
                     "mirrored": mirrored,
                     "forward_fraction": ff,
                     "mirror_segment_m": segment,
+                    "mirror_rule": params.mirror_rule if mirrored else None,
                     "central_depth_m": depth,
                 }
                 key = strategy_key(vf, mirrored, ff)

@@ -14,7 +14,9 @@ from siteline.specs import parse_spec
 class ViewParams:
     """vertical_fractions: camera heights kept, as fractions of the real camera's height above the
     ground plane (moved along the plane normal, orientation kept).
-    mirror: add a mirror of each view across the nearest fence segment.
+    mirror: add a mirror of each view across the nearest fence segment; mirror_rule: how a mirrored
+    camera is oriented (``aim-site``: at the real camera's ground target, or the site's centre;
+    ``reflect``: the reflected direction; siteline.views.strategies.mirror).
     forward_fractions: steps along the optical axis, as fractions of the median depth of the central
     image region (``central_fraction`` of the width and height).
     depth_probe_scale: render scale of the depth probe that measures that median (of the real image).
@@ -29,6 +31,7 @@ class ViewParams:
 
     vertical_fractions: tuple[float, ...] = (1.0, 0.75, 0.5, 0.25)
     mirror: bool = True
+    mirror_rule: str = "aim-site"
     forward_fractions: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75)
     central_fraction: float = 0.5
     depth_probe_scale: float = 0.0625
@@ -49,6 +52,8 @@ class ViewParams:
             raise ViewsError(f"vertical_fractions must lie in (0, 1], got {self.vertical_fractions}.")
         if not all(0 <= v < 1 for v in self.forward_fractions):
             raise ViewsError(f"forward_fractions must lie in [0, 1), got {self.forward_fractions}.")
+        if self.mirror_rule not in ("aim-site", "reflect"):
+            raise ViewsError(f"mirror_rule {self.mirror_rule!r}: use 'aim-site' or 'reflect'.")
         if not 0 < self.central_fraction <= 1:
             raise ViewsError(f"central_fraction {self.central_fraction} must lie in (0, 1].")
         if not 0 <= self.min_coverage <= 1:

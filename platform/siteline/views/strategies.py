@@ -5,9 +5,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+import shapely
 
 from siteline.cameras import Camera
-from siteline.fence import nearest_segment
+from siteline.errors import ViewsError
+from siteline.fence import inside_fence, nearest_segment
 from siteline.views.ground import GroundPlane
 
 
@@ -26,26 +28,68 @@ def mirror_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) - 2.0 * np.outer(m, m)
 
 
-def mirror(
-    camera: Camera, fence_m: Sequence[Sequence[float]]
-) -> tuple[Camera, tuple[tuple[float, float], tuple[float, float]]]:
-    """Reflect the camera's centre and viewing direction across the nearest fence segment.
+MIRROR_RULES = ("aim-site", "reflect")
 
-    The optical axis and the image-down axis are reflected and the right axis recomputed, so the
-    result is a proper camera (not a mirror image) looking back across the fence. Mirroring twice
-    across the same segment gives the original camera. Returns the camera and the segment used.
+
+def ground_target(camera: Camera, ground: GroundPlane) -> np.ndarray | None:
+    """Where the camera's optical axis meets the ground plane ((3,) site-local metres), or None when
+    it looks level or up."""
+    n = np.asarray(ground.normal, dtype=np.float64)
+    C, f = camera.center, camera.forward
+    denom = float(f @ n)
+    if denom >= -1e-6:
+        return None
+    t = -float(ground.height(C[None])[0]) / denom
+    return C + t * f if t > 0 else None
+
+
+def mirror(
+    camera: Camera,
+    fence_m: Sequence[Sequence[float]],
+    ground: GroundPlane | None = None,
+    rule: str = "aim-site",
+) -> tuple[Camera, tuple[tuple[float, float], tuple[float, float]]]:
+    """Reflect the camera's centre across the nearest fence segment, and orient it by ``rule``:
+
+    - ``aim-site`` (default): look at the ground point the real camera looked at when that lies
+      inside the fence, else at the ground below the fence's centroid; image up stays world up. Its
+      optical axis therefore meets the ground inside the site. (Reflecting the direction too sent the
+      axis out of the site for half of the mirrored oblique views: 15 of 32 met the ground inside.)
+    - ``reflect``: reflect the optical axis and the image-down axis as well (the earlier rule), a
+      proper camera looking back across the fence; mirroring twice gives the original camera.
+
+    Returns the camera and the segment used.
     """
+    if rule not in MIRROR_RULES:
+        raise ViewsError(f"mirror rule {rule!r}: use one of {MIRROR_RULES}.")
     C = camera.center
     a, b = nearest_segment(C[:2], fence_m)
     M = mirror_matrix(a, b)
     anchor = np.array([a[0], a[1], 0.0])
     C2 = M @ (C - anchor) + anchor
+    segment = ((float(a[0]), float(a[1])), (float(b[0]), float(b[1])))
+    if rule == "aim-site":
+        if ground is None:
+            raise ViewsError("the aim-site mirror rule needs the ground plane.")
+        target = ground_target(camera, ground)
+        if target is None or not inside_fence(target[None, :2], fence_m)[0]:
+            centroid = np.asarray(shapely.Polygon(fence_m).centroid.coords[0], dtype=np.float64)
+            n = np.asarray(ground.normal, dtype=np.float64)
+            # the ground point below the centroid: solve n . (x, y, z) + d = 0 for z
+            target = np.array(
+                [centroid[0], centroid[1], -(n[0] * centroid[0] + n[1] * centroid[1] + ground.d) / n[2]]
+            )
+        if np.linalg.norm(target - C2) > 1e-6:
+            aimed = Camera.look_at(
+                C2, target, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy
+            )
+            return aimed, segment
     axes = camera.R  # rows: camera x, y, z in the world
     z2 = M @ axes[2]
     y2 = M @ axes[1]
     x2 = np.cross(y2, z2)
     R2 = np.stack([x2, y2, z2])
-    return camera.with_pose(R2, -R2 @ C2), ((float(a[0]), float(a[1])), (float(b[0]), float(b[1])))
+    return camera.with_pose(R2, -R2 @ C2), segment
 
 
 def forward(camera: Camera, distance_m: float) -> Camera:
