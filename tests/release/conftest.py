@@ -1,4 +1,5 @@
-"""A published release of the small synthetic site, built once per module."""
+"""A published release of the small synthetic site, built once per test session (tests that add
+versions or sites do so under other names)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from siteline.tiles import tile_scene
 PARAMS = PairParams(scale=0.5, point_size_px=3, views=6, seed=0, min_coverage=0.3)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def built(tmp_path_factory, synth_site):
     settings = make_home(tmp_path_factory.mktemp("release"), site_dir=synth_site)
     cat = open_catalog(settings)

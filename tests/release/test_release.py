@@ -193,6 +193,10 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     b = render_pair_view(t2, t1, cam, 1.0, 1)
     assert np.array_equal(a.mask, b.mask) and (a.mask != 255).any()
     assert np.array_equal(a.a, b.b)
+    coarse = render_pair_view(t1, t2, cam, 0.25, 1, lod_factor=2.0)
+    every = render_pair_view(t1, t2, cam, 0.25, 1, lod_factor=2.0, all_points=True)
+    assert every.points_read > coarse.points_read  # --all-points: no level of detail
+    assert every.coverage_a >= coarse.coverage_a
 
 
 def test_preset_is_applied_and_recorded(built) -> None:
