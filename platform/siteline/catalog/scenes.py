@@ -199,3 +199,30 @@ def clear_nodes(session: Session, scene_id: int) -> None:
     from siteline.catalog.models import Node
 
     session.execute(sa.delete(Node).where(Node.scene_id == scene_id))
+
+
+def replace_nodes(session: Session, scene_id: int, nodes: list[dict]) -> None:
+    """Replace scene ``scene_id``'s node rows. Each node: key, tile, level, bounds_min and bounds_max
+    ((3,) site-local metres), count (points), start (offset in the tile's arrays), spacing_m."""
+    from siteline.catalog.models import Node
+
+    clear_nodes(session, scene_id)
+    for n in nodes:
+        (x0, y0, z0), (x1, y1, z1) = n["bounds_min"], n["bounds_max"]
+        session.add(
+            Node(
+                scene_id=scene_id,
+                key=n["key"],
+                tile=n["tile"],
+                level=n["level"],
+                min_x=x0,
+                min_y=y0,
+                min_z=z0,
+                max_x=x1,
+                max_y=y1,
+                max_z=z1,
+                point_count=n["count"],
+                start=n["start"],
+                spacing_m=n["spacing_m"],
+            )  # fmt: skip
+        )

@@ -20,11 +20,10 @@ import sqlalchemy as sa
 
 from siteline import stores
 from siteline.catalog import Catalog
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
+from siteline.catalog.missions import FileRow, record_mission_scene
+from siteline.catalog.models import Scene, Site
 from siteline.catalog.scenes import (
-    add_cameras,
     blobs_in_use,
-    ensure_pair,
     lock_site,
     mission_by_manifest,
     neighbours,
@@ -315,26 +314,6 @@ def _commit(
             site = lock_site(s, site_id)
             if mission_by_manifest(s, sha) is not None:
                 raise MissionError(f"mission {root.name} was ingested concurrently; nothing new.")
-            mission = Mission(
-                site_id=site.id,
-                manifest_sha256=sha,
-                name=name,
-                status="ingested",
-                storage=opts.storage,
-                root_uri=str(root),
-            )
-            s.add(mission)
-            s.flush()
-            for e in entries:
-                s.add(
-                    MissionFile(
-                        mission_id=mission.id,
-                        path=e.path,
-                        size_bytes=e.size_bytes,
-                        sha256=e.sha256,
-                        kind=e.kind,
-                    )
-                )
             stats = scan.to_dict() | {
                 "las_file": scan.path,
                 "las_sha256": next(e.sha256 for e in entries if e.path == scan.path),
@@ -342,34 +321,24 @@ def _commit(
                 "photos": sum(e.kind == "photo" for e in entries),
                 "cameras": len(cameras),
             }
-            scene = Scene(
-                site_id=site.id,
-                mission_id=mission.id,
+            mission, scene, pairs = record_mission_scene(
+                s,
+                site,
+                manifest_sha256=sha,
+                name=name,
+                storage=opts.storage,
+                root_uri=str(root),
+                files=[FileRow(e.path, e.size_bytes, e.sha256, e.kind) for e in entries],
                 capture_time=when,
                 point_count=scan.point_count,
                 bounds={"min": scan.bounds_min, "max": scan.bounds_max},
                 registration=registration,
                 statistics=stats,
-                status="registered",
+                cameras=cameras,
+                camera_source=cam_source or "xmp",
+                label_source=f"las classification ({scan.path})",
+                class_histogram=scan.class_histogram,
             )
-            s.add(scene)
-            s.flush()
-            if cameras:
-                add_cameras(s, scene.id, cameras, cam_source or "xmp")
-            s.add(
-                LabelSet(
-                    scene_id=scene.id,
-                    version=1,
-                    source=f"las classification ({scan.path})",
-                    class_histogram=scan.class_histogram,
-                )
-            )
-            before, after = neighbours(s, site, when)
-            pairs = []
-            if before is not None:
-                pairs.append(ensure_pair(s, site, before, scene).id)
-            if after is not None:
-                pairs.append(ensure_pair(s, site, scene, after).id)
             s.add(
                 completed(
                     "ingest",

@@ -9,8 +9,8 @@ from sqlalchemy.orm import Session
 
 from siteline import stores
 from siteline.catalog import Catalog
-from siteline.catalog.models import Mission, Node, Scene
-from siteline.catalog.scenes import clear_nodes, mission_file, node_rows
+from siteline.catalog.models import Mission, Scene
+from siteline.catalog.scenes import mission_file, node_rows, replace_nodes
 from siteline.catalog.sites import site_spec
 from siteline.catalog.stages import completed
 from siteline.config import Settings
@@ -86,25 +86,23 @@ def tile_scene(
     try:
         with catalog.transaction() as s:
             scene = s.get(Scene, scene_id)
-            clear_nodes(s, scene_id)
-            for n in result.nodes:
-                s.add(
-                    Node(
-                        scene_id=scene_id,
-                        key=n.key,
-                        tile=n.tile,
-                        level=n.level,
-                        min_x=n.bounds_min[0],
-                        min_y=n.bounds_min[1],
-                        min_z=n.bounds_min[2],
-                        max_x=n.bounds_max[0],
-                        max_y=n.bounds_max[1],
-                        max_z=n.bounds_max[2],
-                        point_count=n.count,
-                        start=n.start,
-                        spacing_m=n.spacing_m,
-                    )
-                )
+            replace_nodes(
+                s,
+                scene_id,
+                [
+                    {
+                        "key": n.key,
+                        "tile": n.tile,
+                        "level": n.level,
+                        "bounds_min": n.bounds_min,
+                        "bounds_max": n.bounds_max,
+                        "count": n.count,
+                        "start": n.start,
+                        "spacing_m": n.spacing_m,
+                    }
+                    for n in result.nodes
+                ],  # fmt: skip
+            )
             scene.tile_store_uri = result.uri
             scene.status = "tiled"
             scene.statistics = {
