@@ -79,3 +79,13 @@ def cli_create_site(capsys, fence: Path, *extra: str, name: str = "demo") -> tup
         str(fence),
         *extra,
     )
+
+
+def writable_copy(release_root: Path | str, dest: Path) -> Path:
+    """A writable copy of a (read-only, published) release folder at ``dest``."""
+    import os
+
+    shutil.copytree(release_root, dest)
+    for p in dest.rglob("*"):
+        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    return dest

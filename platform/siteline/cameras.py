@@ -18,6 +18,7 @@ import numpy as np
 from siteline.errors import CameraError
 from siteline.poses import Rigid
 from siteline.schemas import validate
+from siteline.tolerances import snap
 
 ORTHONORMAL_TOL = 1e-6
 
@@ -177,9 +178,8 @@ class Camera:
         q = Rotation.from_matrix(self.R).as_quat()  # x, y, z, w
         if q[3] < 0:
             q = -q
-        q = np.round(q / rotation_quantum) * rotation_quantum
-        R = Rotation.from_quat(q).as_matrix()
-        C = np.round(self.center / center_quantum_m) * center_quantum_m
+        R = Rotation.from_quat(snap(q, rotation_quantum)).as_matrix()
+        C = snap(self.center, center_quantum_m)
         return self.with_pose(R, -R @ C)
 
     def scaled(self, s: float) -> Camera:

@@ -149,11 +149,12 @@ class ToSiteCRS:
         self.src, self.dst, self.z_unit = src, dst, z_unit
         self.full_3d = src.is_compound and dst.is_compound and z_unit.source != "--z-unit"
         horizontal = _horizontal(src)
-        self.identity_xy = horizontal.equals(_horizontal(dst), ignore_axis_order=True)
         if self.full_3d:
             self._tr = transformer(src, dst)
+        elif horizontal.equals(_horizontal(dst), ignore_axis_order=True):
+            self._tr = None
         else:
-            self._tr = None if self.identity_xy else transformer(horizontal, _horizontal(dst))
+            self._tr = transformer(horizontal, _horizontal(dst))
 
     @property
     def is_identity(self) -> bool:
@@ -172,11 +173,10 @@ class ToSiteCRS:
         return np.stack([np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64), z], axis=1)
 
     def probe(self, xy_site: Sequence[float]) -> np.ndarray:
-        """The source coordinates of a site-CRS position (checks that an inverse exists)."""
-        tr = self._tr or transformer(_horizontal(self.dst), _horizontal(self.src))
+        """The source (x, y) of a site-CRS position (checks that an inverse exists)."""
         if self._tr is None:
-            return np.asarray(tr.transform(xy_site[0], xy_site[1], errcheck=True))
-        return np.asarray(tr.transform(xy_site[0], xy_site[1], errcheck=True, direction="INVERSE")[:2])
+            return np.asarray(xy_site[:2], dtype=np.float64)
+        return np.asarray(self._tr.transform(xy_site[0], xy_site[1], errcheck=True, direction="INVERSE")[:2])
 
 
 def _horizontal(crs: pyproj.CRS) -> pyproj.CRS:

@@ -9,7 +9,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from siteline.catalog import Catalog
-from siteline.catalog.scenes import get_scene
+from siteline.catalog.scenes import get_scene, scene_ids_of_pairs
 from siteline.config import Settings
 from siteline.ingest.mission import IngestOptions, IngestResult, ingest_mission
 from siteline.pairs import PairOutput, PairParams, process_pair
@@ -71,17 +71,11 @@ def process_pairs(
     run_id: str | None = None,
 ) -> dict[int, PairOutput]:
     """Tile the pairs' scenes where needed, then process every pair (outputs are reused when made)."""
-    from siteline.catalog.models import Pair
-
     params = params or PairParams()
     ids = list(pair_ids)
-    scene_ids: list[int] = []
     with catalog.transaction() as s:
-        for pid in ids:
-            pair = s.get(Pair, pid)
-            if pair is not None:
-                scene_ids += [sid for sid in (pair.t1_scene_id, pair.t2_scene_id) if sid not in scene_ids]
-    tile_scenes(catalog, settings, scene_ids, run_id=run_id)
+        scene_ids = scene_ids_of_pairs(s, ids)
+    tile_scenes(catalog, settings, scene_ids, progress=progress, run_id=run_id)
     return {
         pid: process_pair(catalog, settings, pid, params, progress=progress, device=device, run_id=run_id)
         for pid in ids
@@ -112,9 +106,21 @@ def release(
         params = preset_params(preset, params)
     with catalog.transaction() as s:
         chosen = choose_pairs(s, site, pair_ids)
-    process_pairs(catalog, settings, chosen, params, progress=progress, device=device, run_id=run_id)
+    outputs = process_pairs(
+        catalog, settings, chosen, params, progress=progress, device=device, run_id=run_id
+    )
     info = build_release(
-        catalog, settings, site, name, params, chosen, version, preset, run_id=run_id, pad=pad
+        catalog,
+        settings,
+        site,
+        name,
+        params,
+        chosen,
+        version,
+        preset,
+        run_id=run_id,
+        pad=pad,
+        outputs=outputs,
     )
     if publish:
         info = publish_release(catalog, settings, name, info.version, run_id=run_id)

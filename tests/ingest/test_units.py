@@ -91,15 +91,19 @@ def _check_round_trip(las: laspy.LasData, xyz_ft: np.ndarray, z_metres_per_unit:
     assert 123.0 < got[:, 2].min() and got[:, 2].max() < 159.0  # 406-520 ft are 124-158 m
 
 
-def test_feet_lidar_in_a_utm_site_comes_back_in_metres(ft_home, capsys, tmp_path) -> None:
-    xyz = _autzen_like()
-    _utm_site(capsys, xyz)
-    mission = _mission(tmp_path / "m1", xyz, OREGON_FT)
-    code, out, err = run_cli(capsys, "ingest", str(mission), "--site", "oregon", "--json")
+def _ingest_and_show(capsys, mission: Path, *extra: str) -> tuple[int, dict]:  # noqa: ANN001
+    """``siteline ingest`` the mission into site oregon; return its scene id and ``scene show``."""
+    code, out, err = run_cli(capsys, "ingest", str(mission), "--site", "oregon", *extra, "--json")
     assert code == 0, err
     scene = json.loads(out)["scene_id"]
     code, out, _ = run_cli(capsys, "scene", "show", str(scene), "--json")
-    shown = json.loads(out)
+    return scene, json.loads(out)
+
+
+def test_feet_lidar_in_a_utm_site_comes_back_in_metres(ft_home, capsys, tmp_path) -> None:
+    xyz = _autzen_like()
+    _utm_site(capsys, xyz)
+    scene, shown = _ingest_and_show(capsys, _mission(tmp_path / "m1", xyz, OREGON_FT))
     assert shown["z_unit"] == {"name": "foot", "metres": 0.3048, "source": "horizontal unit"}
     assert shown["transformed"] is True
     _check_round_trip(_export(capsys, tmp_path, scene), xyz, 0.3048)
@@ -108,13 +112,9 @@ def test_feet_lidar_in_a_utm_site_comes_back_in_metres(ft_home, capsys, tmp_path
 def test_compound_crs_in_us_survey_feet_converts_z_from_its_vertical_crs(ft_home, capsys, tmp_path) -> None:
     xyz = _autzen_like(seed=1)
     _utm_site(capsys, xyz)
-    mission = _mission(tmp_path / "m2", xyz, OREGON_FT_COMPOUND)
-    code, out, err = run_cli(capsys, "ingest", str(mission), "--site", "oregon", "--json")
-    assert code == 0, err
-    scene = json.loads(out)["scene_id"]
-    code, out, _ = run_cli(capsys, "scene", "show", str(scene), "--json")
-    assert json.loads(out)["z_unit"]["source"] == "vertical CRS"
-    assert json.loads(out)["z_unit"]["metres"] == pytest.approx(US_FT, rel=1e-15)
+    scene, shown = _ingest_and_show(capsys, _mission(tmp_path / "m2", xyz, OREGON_FT_COMPOUND))
+    assert shown["z_unit"]["source"] == "vertical CRS"
+    assert shown["z_unit"]["metres"] == pytest.approx(US_FT, rel=1e-15)
     _check_round_trip(_export(capsys, tmp_path, scene), xyz, US_FT)
 
 
@@ -122,13 +122,8 @@ def test_crs_option_in_feet_is_accepted_and_z_unit_overrides(ft_home, capsys, tm
     xyz = _autzen_like(seed=2)
     _utm_site(capsys, xyz)
     mission = _mission(tmp_path / "m3", xyz, None)
-    code, out, err = run_cli(
-        capsys, "ingest", str(mission), "--site", "oregon", "--crs", OREGON_FT, "--z-unit", "ftUS", "--json"
-    )
-    assert code == 0, err
-    scene = json.loads(out)["scene_id"]
-    code, out, _ = run_cli(capsys, "scene", "show", str(scene), "--json")
-    assert json.loads(out)["z_unit"] == {"name": "US survey foot", "metres": US_FT, "source": "--z-unit"}
+    scene, shown = _ingest_and_show(capsys, mission, "--crs", OREGON_FT, "--z-unit", "ftUS")
+    assert shown["z_unit"] == {"name": "US survey foot", "metres": US_FT, "source": "--z-unit"}
     _check_round_trip(_export(capsys, tmp_path, scene), xyz, US_FT)
 
 

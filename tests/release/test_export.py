@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 from PIL import Image
+from sitehelpers import writable_copy
 
 from siteline.data import ChangeDetectionDataset
 from siteline.errors import ReleaseError
@@ -269,10 +270,7 @@ def test_metrics_when_a_class_is_absent() -> None:
 
 def test_format_1_release_stays_readable_and_verifiable(built, tmp_path) -> None:
     _, _, pub = built
-    old = tmp_path / "old"
-    shutil.copytree(pub.root, old)
-    for p in old.rglob("*"):
-        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    old = writable_copy(pub.root, tmp_path / "old")
     doc = read_manifest(old)
     for split in ("train", "val", "test"):
         if (old / split).exists():

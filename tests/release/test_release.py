@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 from PIL import Image
-from sitehelpers import epoch_dirs, make_home
+from sitehelpers import epoch_dirs, make_home, writable_copy
 
 from siteline import pipeline, stores
 from siteline.catalog import open_catalog
@@ -57,13 +57,8 @@ def test_layout_manifest_and_datasheet(built) -> None:
 
 
 def test_verify_names_a_flipped_byte(built, tmp_path) -> None:
-    import shutil
-
     _, _, pub = built
-    copy = tmp_path / "copy"
-    shutil.copytree(pub.root, copy)
-    for p in copy.rglob("*"):
-        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    copy = writable_copy(pub.root, tmp_path / "copy")
     victim = next((copy / "train" / "label").glob("*.png"))
     data = bytearray(victim.read_bytes())
     data[len(data) // 2] ^= 0xFF

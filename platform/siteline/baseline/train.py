@@ -4,7 +4,6 @@ proportional to pixel counts, flips + colour jitter + crops, no rotation."""
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from collections.abc import Callable
@@ -18,8 +17,9 @@ from torch.utils.data import DataLoader
 from siteline.baseline.model import FCSiamDiff, parameter_count
 from siteline.data import ChangeDetectionDataset, TrainTransforms
 from siteline.errors import ReleaseError
-from siteline.metrics import IGNORE, confusion, per_image_scores, scores
-from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
+from siteline.metrics import IGNORE, confusion
+from siteline.release.manifest import read_manifest
+from siteline.release.score import score_record
 
 
 def class_weights(root: Path, split: str = "train") -> torch.Tensor:
@@ -132,27 +132,13 @@ def evaluate(
     ds = ChangeDetectionDataset(root, split)
     if len(ds) == 0:
         raise ReleaseError(f"release {root} has no {split} images.")
-    cm = np.zeros((2, 2), np.int64)
     per_image = []
     for i in range(len(ds)):
         s = ds[i]
         h, w = s["mask"].shape[-2:]
         logits = model(_pad16(s["image"])[None].to(device))[..., :h, :w]
         per_image.append(confusion(logits.argmax(1)[0].cpu(), s["mask"][0]))
-        cm += per_image[-1]
-    manifest_sha = hashlib.sha256((Path(root) / MANIFEST).read_bytes()).hexdigest()
-    doc = read_manifest(root)
-    result = {
-        "release": {"name": doc["name"], "version": doc["version"], "manifest_sha256": manifest_sha},
-        "split": split,
-        "images": len(ds),
-        "checkpoint": str(checkpoint),
-        "model": "FC-Siam-diff",
-        "metric_definition": METRIC_DEFINITION,
-        "confusion": cm.tolist(),
-        "scores": scores(cm).to_dict(),
-        "scores_per_image": per_image_scores(per_image),
-    }
+    result = score_record(root, split, per_image) | {"checkpoint": str(checkpoint), "model": "FC-Siam-diff"}
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps(result, indent=1) + "\n")
     return result

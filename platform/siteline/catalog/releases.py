@@ -34,11 +34,6 @@ def list_releases(session: Session, name: str | None = None) -> list[Release]:
     return list(session.execute(q).scalars())
 
 
-def releases_named(session: Session, name: str) -> list[Release]:
-    """Every version of release ``name``."""
-    return list(session.execute(sa.select(Release).where(Release.name == name)).scalars())
-
-
 def release_item_counts(session: Session, release_id: int) -> dict[str, int]:
     """Items of a release per split."""
     rows = session.execute(

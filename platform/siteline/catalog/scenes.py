@@ -9,7 +9,7 @@ from sqlalchemy.orm import Session
 
 from siteline.cameras import Camera
 from siteline.catalog.models import Camera as CameraRow
-from siteline.catalog.models import Mission, MissionFile, Pair, Scene, Site
+from siteline.catalog.models import Mission, MissionFile, Node, Pair, Scene, Site
 from siteline.errors import NotFoundError
 
 
@@ -149,8 +149,6 @@ def site_name_of_pair(session: Session, pair_id: int) -> str:
 
 def node_summary(session: Session, scene_id: int) -> dict[str, int]:
     """How scene ``scene_id`` is tiled: node rows, distinct tiles, and levels (0 when untiled)."""
-    from siteline.catalog.models import Node
-
     nodes, tiles, top = session.execute(
         sa.select(
             sa.func.count(Node.id), sa.func.count(sa.distinct(Node.tile)), sa.func.max(Node.level)
@@ -185,8 +183,6 @@ def mission_file(session: Session, mission_id: int, path: str | None) -> Mission
 
 def node_rows(session: Session, scene_id: int) -> list:
     """The node rows of scene ``scene_id`` by tile and level."""
-    from siteline.catalog.models import Node
-
     return list(
         session.execute(
             sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.level)
@@ -196,16 +192,12 @@ def node_rows(session: Session, scene_id: int) -> list:
 
 def clear_nodes(session: Session, scene_id: int) -> None:
     """Remove scene ``scene_id``'s node rows (before a re-tile writes them again)."""
-    from siteline.catalog.models import Node
-
     session.execute(sa.delete(Node).where(Node.scene_id == scene_id))
 
 
 def replace_nodes(session: Session, scene_id: int, nodes: list[dict]) -> None:
     """Replace scene ``scene_id``'s node rows. Each node: key, tile, level, bounds_min and bounds_max
     ((3,) site-local metres), count (points), start (offset in the tile's arrays), spacing_m."""
-    from siteline.catalog.models import Node
-
     clear_nodes(session, scene_id)
     for n in nodes:
         (x0, y0, z0), (x1, y1, z1) = n["bounds_min"], n["bounds_max"]
@@ -226,3 +218,13 @@ def replace_nodes(session: Session, scene_id: int, nodes: list[dict]) -> None:
                 spacing_m=n["spacing_m"],
             )  # fmt: skip
         )
+
+
+def scene_ids_of_pairs(session: Session, pair_ids: list[int]) -> list[int]:
+    """The scenes the pairs ``pair_ids`` join, each once, in pair order (unknown pairs are skipped)."""
+    out: list[int] = []
+    for pid in pair_ids:
+        pair = session.get(Pair, pid)
+        if pair is not None:
+            out += [sid for sid in (pair.t1_scene_id, pair.t2_scene_id) if sid not in out]
+    return out

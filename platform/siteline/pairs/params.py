@@ -10,6 +10,7 @@ from typing import Any
 
 from siteline.errors import ReleaseError, SitelineError
 from siteline.labels.params import LabelParams
+from siteline.pairs.render import HOLE_RULES
 from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views import SAMPLER_VERSION, ViewParams
@@ -18,7 +19,7 @@ from siteline.views import SAMPLER_VERSION, ViewParams
 @dataclass(frozen=True)
 class PairParams:
     """Every knob of pair processing, one name each, composed of the stages' own specs:
-    :meth:`render_settings` (``scale``, ``point_size_px``; DESIGN.md §6), :meth:`view_params`
+    :meth:`render_settings` (``scale``, ``point_size_px``; DESIGN.md §6), :meth:`view_params_spec`
     (``scale``, ``views``, ``seed``, ``min_coverage`` and any other ViewParams field in ``view_params``;
     §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
@@ -50,8 +51,8 @@ class PairParams:
                 f"view sampler {self.sampler!r} is not this version's ({SAMPLER_VERSION!r}); outputs of "
                 "another sampler cannot be rebuilt: drop the 'sampler' key to use the current one."
             )
-        if self.one_side_hole not in ("ignore", "changed"):
-            raise ReleaseError(f"one_side_hole {self.one_side_hole!r}: use 'ignore' or 'changed'.")
+        if self.one_side_hole not in HOLE_RULES:
+            raise ReleaseError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
         clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage"})
         if clash:
             raise ReleaseError(

@@ -28,15 +28,15 @@ from siteline.catalog.releases import (
     clear_release_items,
     find_release,
     get_release,
+    list_releases,
     release_item_counts,
-    releases_named,
 )
 from siteline.catalog.scenes import list_pairs, list_scenes
 from siteline.catalog.sites import get_site
 from siteline.catalog.stages import completed
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
-from siteline.pairs import PairParams, pair_output
+from siteline.pairs import PairOutput, PairParams, pair_output
 from siteline.release import datasheet, layout
 from siteline.release.manifest import (
     METRIC_DEFINITION,
@@ -79,7 +79,7 @@ def _semver(v: str) -> tuple[int, int, int]:
 
 def next_version(session, name: str, lineage_key: dict) -> str:  # noqa: ANN001
     """1.0.0 first; a major bump when pairs or label/split parameters change, else a minor one."""
-    rows = releases_named(session, name)
+    rows = list_releases(session, name)
     if not rows:
         return "1.0.0"
     latest = max(rows, key=lambda r: _semver(r.version))
@@ -163,6 +163,7 @@ def build_release(
     preset: str | None = None,
     run_id: str | None = None,
     pad: bool = True,
+    outputs: dict[int, PairOutput] | None = None,
 ) -> ReleaseInfo:
     """Assemble a draft release ``name`` from the site's processed pairs (or ``pair_ids``) in format 2
     (siteline.release.layout): A, B, label (LEVIR-CD 0/255), ignore and label_ignore (0/1/255) per
@@ -170,7 +171,8 @@ def build_release(
 
     ``preset`` is applied to ``params`` here (siteline.presets) and recorded. Every pair must already
     be processed with these parameters: :class:`ReleaseError` names the command otherwise
-    (``siteline.pipeline.release`` tiles and processes what is missing, then calls this)."""
+    (``siteline.pipeline.release`` tiles and processes what is missing, then calls this with the
+    ``outputs`` it made, so they are not read from the store again)."""
     params = params or PairParams()
     if preset is not None:
         from siteline.presets import preset_params
@@ -193,7 +195,8 @@ def build_release(
         _semver(version)
     except ValueError as exc:
         raise ReleaseError(f"version {version!r} is not semantic (MAJOR.MINOR.PATCH).") from exc
-    outputs = {pid: pair_output(catalog, settings, pid, params, run_id) for pid in chosen}
+    given = outputs or {}
+    outputs = {pid: given.get(pid) or pair_output(catalog, settings, pid, params, run_id) for pid in chosen}
     unprocessed = [pid for pid, out in outputs.items() if out is None]
     if unprocessed:
         raise ReleaseError(
@@ -275,8 +278,7 @@ def build_release(
         catalog,
         name,
         version,
-        params,
-        preset,
+        release_params,
         lineage_key,
         final,
         manifest_sha,
@@ -297,8 +299,7 @@ def _record_draft(
     catalog: Catalog,
     name: str,
     version: str,
-    params: PairParams,
-    preset: str | None,
+    release_params: ReleaseParams,
     lineage_key: dict,
     root: Path,
     manifest_sha: str,
@@ -307,6 +308,7 @@ def _record_draft(
     started: datetime | None = None,
     run_id: str | None = None,
 ) -> None:
+    params, preset = release_params.pair, release_params.preset
     with catalog.transaction() as s:
         rel = find_release(s, name, version)
         if rel is None:
@@ -316,7 +318,7 @@ def _record_draft(
         rel.parameters = {
             "pair_params": params.to_dict(),
             "preset": preset,
-            "release_params": ReleaseParams(params, preset, lineage_key["pad"]).to_dict(),
+            "release_params": release_params.to_dict(),
             "lineage_key": lineage_key,
             "pairs": chosen,
         }

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from siteline.codes import CHANGED, IGNORE
+from siteline.errors import ReleaseError
 
 FORMAT = 2
 FORMAT_1 = "siteline-release/1"
@@ -39,8 +40,6 @@ def manifest_format(doc: dict[str, Any]) -> int:
         return 1
     if fmt == FORMAT:
         return 2
-    from siteline.errors import ReleaseError
-
     raise ReleaseError(f"release {doc.get('name')} {doc.get('version')}: unknown format {fmt!r}.")
 
 

@@ -23,8 +23,6 @@ def read_prediction(path: Path) -> np.ndarray:
     except OSError as exc:
         raise ReleaseError(f"prediction {path} is not a readable image: {exc}") from exc
     values = set(np.unique(arr).tolist())
-    if arr.dtype == bool:
-        return arr.astype(np.int64)
     if values <= {0, 255}:
         return (arr == 255).astype(np.int64)
     if values <= {0, 1}:
@@ -56,7 +54,6 @@ def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
             f"{', '.join(m + '.png' for m in missing[:3])}."
         )
     folder = ignore_aware_folder(doc)
-    cm = np.zeros((2, 2), np.int64)
     per_image = []
     for it in items:
         truth = np.asarray(Image.open(root / split / folder / f"{it['id']}.png"), dtype=np.int64)
@@ -67,18 +64,24 @@ def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
                 f"prediction {pred_path} is {pred.shape[1]} x {pred.shape[0]} px; the release image is "
                 f"{truth.shape[1]} x {truth.shape[0]} px."
             )
-        image_cm = confusion(pred, truth)
-        per_image.append(image_cm)
-        cm += image_cm
+        per_image.append(confusion(pred, truth))
+    return score_record(root, split, per_image) | {"predictions": str(pred_dir)}
+
+
+def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> dict[str, Any]:
+    """The results of scoring ``split`` of the release at ``root`` from each image's 2x2 confusion
+    matrix: the release and its manifest hash, the metric definition, the split's confusion matrix,
+    the split-level scores and the paper's per-image ones (the same record for every scorer)."""
+    doc = read_manifest(root)
+    cm = np.sum(per_image, axis=0, dtype=np.int64) if per_image else np.zeros((2, 2), np.int64)
     return {
         "release": {
             "name": doc["name"],
             "version": doc["version"],
-            "manifest_sha256": hashlib.sha256((root / MANIFEST).read_bytes()).hexdigest(),
+            "manifest_sha256": hashlib.sha256((Path(root) / MANIFEST).read_bytes()).hexdigest(),
         },
         "split": split,
-        "images": len(items),
-        "predictions": str(pred_dir),
+        "images": len(per_image),
         "metric_definition": METRIC_DEFINITION,
         "confusion": cm.tolist(),
         "scores": scores(cm).to_dict(),

@@ -8,6 +8,7 @@ from typing import Any
 
 from siteline.errors import ViewsError
 from siteline.specs import parse_spec
+from siteline.views.strategies import MIRROR_RULES
 
 
 @dataclass(frozen=True)
@@ -52,8 +53,8 @@ class ViewParams:
             raise ViewsError(f"vertical_fractions must lie in (0, 1], got {self.vertical_fractions}.")
         if not all(0 <= v < 1 for v in self.forward_fractions):
             raise ViewsError(f"forward_fractions must lie in [0, 1), got {self.forward_fractions}.")
-        if self.mirror_rule not in ("aim-site", "reflect"):
-            raise ViewsError(f"mirror_rule {self.mirror_rule!r}: use 'aim-site' or 'reflect'.")
+        if self.mirror_rule not in MIRROR_RULES:
+            raise ViewsError(f"mirror_rule {self.mirror_rule!r}: use one of {MIRROR_RULES}.")
         if not 0 < self.central_fraction <= 1:
             raise ViewsError(f"central_fraction {self.central_fraction} must lie in (0, 1].")
         if not 0 <= self.min_coverage <= 1:
