@@ -3,7 +3,10 @@
 Chain: an upload event (``siteline.mission.uploaded``, from ``siteline watch`` or POST /api/events)
 triggers ``ingest-mission``; it registers and tiles the scene and emits ``siteline.scene.registered``,
 which triggers ``process-scene-pairs``; with ``SITELINE_RELEASE_POLICY=every-pair`` that flow then builds
-and publishes a release (``on-demand``: run ``build-release`` yourself).
+and publishes a release (``on-demand``: run ``build-release`` yourself). ``siteline labels import``
+posts ``siteline.labels.imported`` once a corrected label set is recorded; it triggers
+``process-scene-pairs`` for that scene too, which processes its pairs with the newest label sets (new
+outputs beside the old) and applies the same release policy.
 """
 
 from __future__ import annotations
@@ -309,7 +312,8 @@ def build_release_flow(site: str, name: str, params: dict | None = None, publish
 def process_scene_pairs_flow(
     scene_id: int, params: dict | None = None, release_name: str | None = None
 ) -> list[dict]:
-    """Process every pair the new scene belongs to; then apply the release policy."""
+    """Process every pair the scene belongs to (a new scene, or a scene with a new label-set version:
+    each scene's newest label set is used); then apply the release policy."""
     site = _site_of_scene(scene_id)
     _tag_run(f"site:{site}")
     settings = load_settings()

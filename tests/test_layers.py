@@ -12,7 +12,7 @@ PRIMITIVES = {
     "errors", "codes", "tolerances", "hashing", "config", "stores", "crs", "lasio", "sitestream",
     "photos", "dji", "cameras", "poses", "specs", "progress", "fence", "site", "taxonomy", "schemas", "metrics",
 }  # fmt: skip
-STAGES = {"ingest", "register", "tiles", "labels", "views", "render", "pairs", "release"}
+STAGES = {"ingest", "register", "tiles", "labels", "labelsets", "views", "render", "pairs", "release"}
 TOP = {"pipeline", "cli", "__main__"}
 
 

@@ -103,3 +103,7 @@ class ReleaseError(SitelineError, ValueError):
 class StoreError(SitelineError, OSError):
     """The data store (a local folder or an fsspec URL) cannot be read or written as asked; often
     transient on a remote store, so orchestration retries it."""
+
+
+class LabelSetError(LabelError):
+    """A label-set version is unknown, or a corrected labels file cannot be imported as one."""

@@ -213,3 +213,36 @@ def write_las(
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with laspy.open(path, mode="w", header=header) as writer:
         writer.write_points(record)
+
+
+LABELS_VLR_USER = "siteline"
+LABELS_VLR_RECORD = 1
+
+
+def labels_vlr(doc: dict) -> laspy.VLR:
+    """A VLR carrying what a file's classification means (site, scene, label-set version, taxonomy)
+    as JSON, so a file corrected elsewhere can be checked when it comes back."""
+    import json
+
+    return laspy.VLR(
+        user_id=LABELS_VLR_USER,
+        record_id=LABELS_VLR_RECORD,
+        description="siteline label set",
+        record_data=json.dumps(doc, sort_keys=True).encode(),
+    )
+
+
+def read_labels_vlr(header: laspy.LasHeader, path: Path) -> dict | None:
+    """The document of :func:`labels_vlr` in a header, None when the file has none (an editor may
+    drop VLRs); :class:`PointCloudError` when it is there but unreadable."""
+    import json
+
+    for vlr in [*header.vlrs, *(getattr(header, "evlrs", None) or [])]:
+        if vlr.user_id == LABELS_VLR_USER and vlr.record_id == LABELS_VLR_RECORD:
+            try:
+                return json.loads(bytes(vlr.record_data).decode())
+            except (UnicodeDecodeError, ValueError) as exc:
+                raise PointCloudError(
+                    f"point cloud {path}: its siteline label-set record is corrupt ({exc})."
+                ) from exc
+    return None

@@ -69,15 +69,26 @@ def process_pairs(
     progress: Progress | None = None,
     device: str = "cpu",
     run_id: str | None = None,
+    label_sets: dict[int, int] | None = None,
 ) -> dict[int, PairOutput]:
-    """Tile the pairs' scenes where needed, then process every pair (outputs are reused when made)."""
+    """Tile the pairs' scenes where needed, then process every pair (outputs are reused when made)
+    with each scene's newest label set, or the version ``label_sets`` (scene id -> version) pins."""
     params = params or PairParams()
     ids = list(pair_ids)
     with catalog.transaction() as s:
         scene_ids = scene_ids_of_pairs(s, ids)
     tile_scenes(catalog, settings, scene_ids, progress=progress, run_id=run_id)
     return {
-        pid: process_pair(catalog, settings, pid, params, progress=progress, device=device, run_id=run_id)
+        pid: process_pair(
+            catalog,
+            settings,
+            pid,
+            params,
+            progress=progress,
+            device=device,
+            run_id=run_id,
+            label_sets=label_sets,
+        )
         for pid in ids
     }
 
@@ -96,9 +107,11 @@ def release(
     device: str = "cpu",
     pad: bool = True,
     run_id: str | None = None,
+    label_sets: dict[int, int] | None = None,
 ) -> ReleaseInfo:
     """Everything a release of ``site`` needs, in order: the pairs (``pair_ids`` or all) processed
-    with ``params`` (after ``preset``), a draft built from them, and published when ``publish``."""
+    with ``params`` (after ``preset``) on each scene's newest label set (or the version
+    ``label_sets`` pins), a draft built from them, and published when ``publish``."""
     params = params or PairParams()
     if preset is not None:
         from siteline.presets import preset_params
@@ -107,7 +120,14 @@ def release(
     with catalog.transaction() as s:
         chosen = choose_pairs(s, site, pair_ids)
     outputs = process_pairs(
-        catalog, settings, chosen, params, progress=progress, device=device, run_id=run_id
+        catalog,
+        settings,
+        chosen,
+        params,
+        progress=progress,
+        device=device,
+        run_id=run_id,
+        label_sets=label_sets,
     )
     info = build_release(
         catalog,
@@ -121,6 +141,7 @@ def release(
         run_id=run_id,
         pad=pad,
         outputs=outputs,
+        label_sets=label_sets,
     )
     if publish:
         info = publish_release(catalog, settings, name, info.version, run_id=run_id)

@@ -93,12 +93,14 @@ def site_chunks(
     tr: ToSiteCRS | None,
     chunk_points: int = DEFAULT_CHUNK_POINTS,
     reader: laspy.LasReader | None = None,
+    class_lut: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
     origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
-    ``reader``: the file already opened."""
+    ``reader``: the file already opened. ``class_lut``: (256,) uint8 site class id per file code and
+    (256,) bool of the codes it maps; None: the taxonomy's LAS source codes."""
     tax = site.taxonomy
-    lut, known = tax.code_lut("las")
+    lut, known = class_lut if class_lut is not None else tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
     for chunk in iter_chunks(path, chunk_points, reader=reader):
         xyz = chunk.xyz_crs

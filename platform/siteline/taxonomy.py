@@ -97,6 +97,31 @@ class Taxonomy:
             known[code] = True
         return lut, known
 
+    def id_lut(self, mapping: dict[int, str | int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Like :meth:`code_lut` for files whose codes are site class ids (a ``scene export``), or,
+        with ``mapping``, codes mapped to a class (by name or id) of this taxonomy."""
+        lut = np.full(256, self.ignore_id, dtype=np.uint8)
+        known = np.zeros(256, dtype=bool)
+        ids = {c.id for c in self.classes}
+        if mapping is None:
+            for i in ids:
+                lut[i], known[i] = i, True
+            return lut, known
+        for code, target in mapping.items():
+            if not 0 <= int(code) <= 255:
+                raise SchemaError(f"taxonomy map: code {code} is not a LAS class code (0-255).")
+            if isinstance(target, int) or (isinstance(target, str) and target.isdigit()):
+                if int(target) not in ids:
+                    raise SchemaError(
+                        f"taxonomy map: code {code} maps to class id {target}, which taxonomy "
+                        f"{self.name!r} does not have (ids {sorted(ids)})."
+                    )
+                lut[int(code)] = int(target)
+            else:
+                lut[int(code)] = self.id_of(str(target))
+            known[int(code)] = True
+        return lut, known
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,

@@ -60,7 +60,7 @@ def test_round_trip_within_half_a_quantum(tmp_path, origin, crs, scale) -> None:
     extent = 100.0 if scale == 1e-7 else 120.0
     geo = _cloud(tmp_path / "c.las", origin, crs=crs, scale=scale, extent=extent)
     site, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, crs)
-    data = tiles.read({t: tiles._prefix(t, None) for t in tiles.by_tile}, ALL)
+    data = tiles.read({t: tiles.prefix(t, None) for t in tiles.by_tile}, ALL)
     ids = data["gps_time"].astype(np.int64)
     assert np.array_equal(np.sort(ids), np.arange(len(geo)))
     back = data["xyz"] + np.asarray(origin)  # float64 georeferenced
@@ -75,7 +75,7 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
     _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)
     assert sum(n.count for n in result.nodes) == result.points == 40_000
     for tile, nodes in tiles.by_tile.items():
-        data = tiles.read({tile: tiles._prefix(tile, None)}, ("gps_time",))
+        data = tiles.read({tile: tiles.prefix(tile, None)}, ("gps_time",))
         assert len(np.unique(data["gps_time"])) == len(data["gps_time"])  # no duplicates
         i, j = parse_tile_key(tile)
         counts = np.rint((data["xyz"] - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(

@@ -130,6 +130,10 @@ class Camera(Base):
 
 
 class LabelSet(Base):
+    """One version of a scene's semantic classes. Version 1 is the ingested LAS classification, held
+    in the tile store itself (``uri`` NULL); later versions are imported corrections, each a store of
+    ``tiles/<tile>/class`` aligned point for point with the tile store (siteline.labelsets)."""
+
     __tablename__ = "label_set"
     __table_args__ = (
         sa.UniqueConstraint("scene_id", "version"),
@@ -142,6 +146,13 @@ class LabelSet(Base):
     source: Mapped[str] = mapped_column(sa.Text)
     class_histogram: Mapped[dict[str, int]] = mapped_column(sa.JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    uri: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
+    parent_version: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
+    source_sha256: Mapped[str | None] = mapped_column(sa.String(64), nullable=True)
+    note: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
+    changed_points: Mapped[int | None] = mapped_column(sa.BigInteger, nullable=True)
+    # matching statistics and the changed points per (old class, new class)
+    details: Mapped[dict[str, Any] | None] = mapped_column(sa.JSON, nullable=True)
 
 
 class Node(Base):

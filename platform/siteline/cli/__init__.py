@@ -7,7 +7,7 @@ import sys
 import typer
 
 from siteline import __version__
-from siteline.cli import bench, db, demo, ingest, release, render, site, synth, watch
+from siteline.cli import bench, db, demo, ingest, labels, release, render, site, synth, watch
 from siteline.cli.common import err_console
 from siteline.errors import SitelineError
 
@@ -45,6 +45,7 @@ app.command("ingest")(ingest.ingest)
 app.add_typer(ingest.mission_app, name="mission")
 app.add_typer(ingest.scene_app, name="scene")
 app.add_typer(ingest.photo_app, name="photo")
+app.add_typer(labels.app, name="labels")
 app.add_typer(release.app, name="release")
 app.command("train")(release.train_cmd)
 app.command("evaluate")(release.evaluate_cmd)

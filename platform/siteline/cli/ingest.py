@@ -29,7 +29,7 @@ from siteline.cli.common import (
 )
 from siteline.ingest.mission import IngestOptions
 from siteline.photos import read_photo_meta
-from siteline.tiles import export_las, open_scene_tiles, tile_scene
+from siteline.tiles import export_las, tile_scene
 
 mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
 scene_app = typer.Typer(help="Scenes (epochs) of a site.", no_args_is_help=True)
@@ -251,15 +251,31 @@ def scene_export(
         None, "--bounds", help="xmin ymin xmax ymax (site-local metres); repeat 4 times."
     ),
     level: int | None = typer.Option(None, "--level", help="Deepest level of detail (default: all)."),
+    label_set: int | None = typer.Option(
+        None, "--label-set", help="Label-set version whose classes to write (default: the newest)."
+    ),
     as_json: bool = JsonOption,
 ) -> None:
-    """Export a tiled scene (or a region, or coarse levels) to LAS/LAZ in the site CRS."""
+    """Export a tiled scene (or a region, or coarse levels) to LAS/LAZ in the site CRS, with the
+    classes of a label set (site class ids, the taxonomy in a siteline VLR) for correction."""
     from siteline.catalog.models import Site
     from siteline.catalog.sites import site_spec
+    from siteline.labelsets import open_labelled_tiles
 
     with catalog() as cat, cat.transaction() as s:
         scene = get_scene(s, scene_id)
-        tiles = open_scene_tiles(s, scene)
+        tiles, version = open_labelled_tiles(s, scene, label_set)
         spec = site_spec(s.get(Site, scene.site_id))
-    n = export_las(tiles, spec, out, bounds=bounds or None, level=level)
-    emit(as_json, {"out": str(out), "points": n}, lambda: console.print(f"wrote {n:,} points to {out}"))
+    about = {
+        "site": spec.name,
+        "scene": scene_id,
+        "label_set_version": version,
+        "classification": "site class ids",
+        "taxonomy": spec.taxonomy.to_dict(),
+    }
+    n = export_las(tiles, spec, out, bounds=bounds or None, level=level, labels=about)
+    emit(
+        as_json,
+        {"out": str(out), "points": n, "label_set_version": version},
+        lambda: console.print(f"wrote {n:,} points to {out} (classes of label set {version})"),
+    )

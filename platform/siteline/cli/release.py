@@ -85,6 +85,11 @@ def build(
         "--preset",
         help="fast, balanced or exact (docs/performance.md): sets scale, point size, LOD and radius.",
     ),
+    label_set: list[str] | None = typer.Option(
+        None,
+        "--label-set",
+        help="SCENE=VERSION: use that label-set version of a scene (repeatable; default: each scene's newest).",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
@@ -114,6 +119,7 @@ def build(
             progress=bar_progress(bar),
             device=device,
             pad=pad,
+            label_sets=parse_label_sets(label_set or []),
         )
     record = info.__dict__
     emit(
@@ -124,6 +130,20 @@ def build(
             f"publish with `siteline release publish {info.name} {info.version}`"
         ),
     )
+
+
+def parse_label_sets(values: list[str]) -> dict[int, int] | None:
+    """``SCENE=VERSION`` strings -> {scene id: version}; ReleaseError on a malformed one."""
+    from siteline.errors import ReleaseError
+
+    out: dict[int, int] = {}
+    for text in values:
+        scene, _, version = text.partition("=")
+        try:
+            out[int(scene)] = int(version)
+        except ValueError as exc:
+            raise ReleaseError(f"--label-set {text!r}: write SCENE=VERSION, e.g. --label-set 3=2.") from exc
+    return out or None
 
 
 @app.command("publish")

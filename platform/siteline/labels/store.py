@@ -40,8 +40,8 @@ def auto_radius(
     measured on the full-density points of each scene's most populated tile."""
     spacing = {}
     for name, tiles in (("t1", a), ("t2", b)):
-        tile = max(tiles.by_tile, key=lambda t: tiles._prefix(t, None))
-        pts = tiles.read({tile: tiles._prefix(tile, None)}, ())["xyz"]
+        tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t, None))
+        pts = tiles.read({tile: tiles.prefix(tile, None)}, ())["xyz"]
         spacing[name] = median_spacing(pts, max_points)
     sparse = max(spacing.values())
     return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}
@@ -58,7 +58,7 @@ def _label_side(
     digest = hashlib.sha256()
     n_total = 0
     for tile in sorted(src.by_tile):
-        mine = src.read({tile: src._prefix(tile, None)}, ("class",))
+        mine = src.read({tile: src.prefix(tile, None)}, ("class",))
         lo = mine["xyz"].min(axis=0) - radius_m
         hi = mine["xyz"].max(axis=0) + radius_m
         theirs = other.points(bounds=(*lo, *hi), attributes=("class",))  # the tile plus a halo of r

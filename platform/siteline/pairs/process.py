@@ -1,17 +1,20 @@
 """Process a pair: 3D change both ways, synthetic views from the later scene, and every view rendered
-on both scenes with its symmetric mask. Outputs live in the store, keyed by the parameters, and are
-recorded in the catalog; a pair already processed with the same parameters is reused."""
+on both scenes with its symmetric mask. Outputs live in the store, keyed by the parameters and the
+label-set versions of both scenes, and are recorded in the catalog; a pair already processed with the
+same parameters and label sets is reused, and a new label-set version never overwrites old outputs."""
 
 from __future__ import annotations
 
+import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
 import numpy as np
 
 from siteline import stores
 from siteline.catalog import Catalog
+from siteline.catalog.labelsets import label_set, newest_versions
 from siteline.catalog.models import Pair, Scene, Site
 from siteline.catalog.pairs import pair_view_ids as catalog_pair_view_ids
 from siteline.catalog.pairs import record_pair_outputs
@@ -22,17 +25,20 @@ from siteline.config import Settings
 from siteline.errors import PairError
 from siteline.labels.params import expected_false_change
 from siteline.labels.store import attach_labels, auto_radius, write_labels
+from siteline.labelsets import open_labelled_tiles
 from siteline.pairs.params import PairParams
 from siteline.pairs.render import render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress
 from siteline.render.outputs import png_bytes
-from siteline.tiles import open_scene_tiles
 from siteline.views import NamedCamera, fit_ground_plane, generate_views
 
 
 @dataclass
 class PairOutput:
+    """A processed pair's outputs. label_sets: the label-set version of t1 and t2 they used; digest:
+    the key of these outputs (parameters and label sets, :func:`output_digest`)."""
+
     pair_id: int
     t1: int
     t2: int
@@ -40,35 +46,68 @@ class PairOutput:
     root: str
     views: list[dict]
     labels: dict
+    label_sets: dict[str, int] = field(default_factory=lambda: {"t1": 1, "t2": 1})
+    digest: str = ""
 
     @property
     def view_count(self) -> int:
         return len(self.views)
 
 
-def _output_root(settings: Settings, pair_id: int, params: PairParams) -> str:
-    return settings.store.uri("pairs", f"pair-{pair_id}", params.digest())
+def output_digest(params: PairParams, label_sets: tuple[int, int]) -> str:
+    """The key of a pair's outputs: the parameters' digest, extended by the label-set versions when
+    either is not 1 (so outputs made before label sets were versioned keep their key)."""
+    if label_sets == (1, 1):
+        return params.digest()
+    text = f"{params.digest()}:labels:{label_sets[0]}:{label_sets[1]}"
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
-def pair_output(
-    catalog: Catalog, settings: Settings, pair_id: int, params: PairParams, run_id: str | None = None
-) -> PairOutput | None:
-    """The stored outputs of ``pair_id`` processed with ``params``, None when it was not. Outputs whose
-    catalog rows are missing (a crash between the publish and the commit) get them now."""
-    root = _output_root(settings, pair_id, params)
-    if not stores.is_complete(root):
-        return None
+def _output_root(settings: Settings, pair_id: int, digest: str) -> str:
+    return settings.store.uri("pairs", f"pair-{pair_id}", digest)
+
+
+def _pair_scenes(
+    catalog: Catalog, pair_id: int, label_sets: dict[int, int] | None
+) -> tuple[int, int, tuple[int, int]]:
+    """(t1 id, t2 id, (t1 version, t2 version)): the versions in ``label_sets`` (scene id -> version)
+    or each scene's newest; LabelSetError when a pinned version does not exist."""
     with catalog.transaction() as s:
         pair = s.get(Pair, pair_id)
         if pair is None:
             raise PairError(f"no pair with id {pair_id}.")
         ids = (pair.t1_scene_id, pair.t2_scene_id)
+        newest = newest_versions(s, list(ids))
+        pinned = label_sets or {}
+        versions = tuple(
+            label_set(s, sid, pinned[sid]).version if sid in pinned else newest.get(sid, 1) for sid in ids
+        )
+    return ids[0], ids[1], versions
+
+
+def pair_output(
+    catalog: Catalog,
+    settings: Settings,
+    pair_id: int,
+    params: PairParams,
+    run_id: str | None = None,
+    label_sets: dict[int, int] | None = None,
+) -> PairOutput | None:
+    """The stored outputs of ``pair_id`` processed with ``params`` and the label sets ``label_sets``
+    (scene id -> version; each scene's newest by default), None when it was not. Outputs whose
+    catalog rows are missing (a crash between the publish and the commit) get them now."""
+    t1, t2, versions = _pair_scenes(catalog, pair_id, label_sets)
+    digest = output_digest(params, versions)
+    root = _output_root(settings, pair_id, digest)
+    if not stores.is_complete(root):
+        return None
     doc = json.loads(stores.read_bytes(stores.join(root, "summary.json")))
-    if not pair_view_ids(catalog, pair_id, params):
+    if not _view_ids(catalog, pair_id, digest):
         _record(
             catalog,
             pair_id,
             params,
+            digest,
             doc["radius_m"],
             doc["labels"],
             doc["views"],
@@ -76,7 +115,8 @@ def pair_output(
             datetime.now(UTC),
             run_id,
         )
-    return PairOutput(pair_id, ids[0], ids[1], doc["radius_m"], root, doc["views"], doc["labels"])
+    used = {"t1": versions[0], "t2": versions[1]}
+    return PairOutput(pair_id, t1, t2, doc["radius_m"], root, doc["views"], doc["labels"], used, digest)
 
 
 def process_pair(
@@ -87,8 +127,10 @@ def process_pair(
     progress: Progress | None = None,
     device: str = "cpu",
     run_id: str | None = None,
+    label_sets: dict[int, int] | None = None,
 ) -> PairOutput:
-    """Labels, views and renders of ``pair_id`` with ``params`` (reused when already made).
+    """Labels, views and renders of ``pair_id`` with ``params`` and the classes of ``label_sets``
+    (scene id -> label-set version; each scene's newest by default), reused when already made.
 
     Both scenes must be tiled (:class:`PairError` names the command otherwise); tiling them is the
     pipeline's job (``siteline.pipeline.process_pairs``), not this stage's."""
@@ -108,14 +150,17 @@ def process_pair(
             f"pair {pair_id}: scene {untiled[0]} is not tiled: run `siteline scene tile {untiled[0]}` "
             "(or `siteline release build`, which tiles and processes what it needs)."
         )
-    root = _output_root(settings, pair_id, params)
-    existing = pair_output(catalog, settings, pair_id, params, run_id)
+    _, _, versions = _pair_scenes(catalog, pair_id, label_sets)
+    pinned = dict(zip(ids, versions, strict=True))
+    digest = output_digest(params, versions)
+    root = _output_root(settings, pair_id, digest)
+    existing = pair_output(catalog, settings, pair_id, params, run_id, pinned)
     if existing is not None:
         return existing
     started = datetime.now(UTC)
     with catalog.transaction() as s:
-        tiles1 = open_scene_tiles(s, s.get(Scene, ids[0]))
-        tiles2 = open_scene_tiles(s, s.get(Scene, ids[1]))
+        tiles1, _ = open_labelled_tiles(s, s.get(Scene, ids[0]), versions[0])
+        tiles2, _ = open_labelled_tiles(s, s.get(Scene, ids[1]), versions[1])
         cams = scene_cameras(s, ids[1])
     ignored = site.taxonomy.ignored_lut()
     label_params = params.label_params()
@@ -130,7 +175,8 @@ def process_pair(
         }
     # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
     radius_info["expected_false_change"] = expected_false_change(radius_info["multiplier"])
-    label_uri = settings.store.uri("labels", f"pair-{pair_id}-r{int(round(radius * 1e6))}um.zarr")
+    classes = "" if versions == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
+    label_uri = settings.store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius * 1e6))}um.zarr")
     if stores.is_complete(label_uri):
         labels = dict(stores.open_group(label_uri).attrs) | {"uri": label_uri}
     else:
@@ -207,6 +253,7 @@ def process_pair(
             "t2": ids[1],
             "radius_m": radius,
             "params": params.to_dict(),
+            "label_sets": {"t1": versions[0], "t2": versions[1]},
             "labels": labels,
             "ground_plane": plane.to_dict(),
             "candidates": view_set.candidates,
@@ -214,14 +261,16 @@ def process_pair(
             "views": records,
         }
         (partial / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
-    _record(catalog, pair_id, params, radius, labels, records, root, started, run_id)
-    return PairOutput(pair_id, ids[0], ids[1], radius, root, records, labels)
+    _record(catalog, pair_id, params, digest, radius, labels, records, root, started, run_id)
+    used = {"t1": versions[0], "t2": versions[1]}
+    return PairOutput(pair_id, ids[0], ids[1], radius, root, records, labels, used, digest)
 
 
 def _record(
     catalog: Catalog,
     pair_id: int,
     params: PairParams,
+    digest: str,
     radius: float,
     labels: dict,
     records: list[dict],
@@ -230,7 +279,7 @@ def _record(
     run_id: str | None = None,
 ) -> None:
     with catalog.transaction() as s:
-        record_pair_outputs(s, pair_id, params.digest(), params.to_dict(), radius, labels, records, root)
+        record_pair_outputs(s, pair_id, digest, params.to_dict(), radius, labels, records, root)
         s.add(
             completed(
                 "process_pair", f"pair:{pair_id}", params.to_dict() | {"radius_m": radius}, started, run_id
@@ -238,7 +287,6 @@ def _record(
         )
 
 
-def pair_view_ids(catalog: Catalog, pair_id: int, params: PairParams) -> dict[int, int]:
-    """View index -> view row id for a processed pair (in a transaction of its own)."""
+def _view_ids(catalog: Catalog, pair_id: int, digest: str) -> dict[int, int]:
     with catalog.transaction() as s:
-        return catalog_pair_view_ids(s, pair_id, params.digest())
+        return catalog_pair_view_ids(s, pair_id, digest)

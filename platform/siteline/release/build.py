@@ -22,6 +22,7 @@ from PIL import Image
 
 from siteline import __version__, stores
 from siteline.catalog import Catalog
+from siteline.catalog.labelsets import label_set
 from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
 from siteline.catalog.pairs import pair_view_ids
 from siteline.catalog.releases import (
@@ -78,29 +79,51 @@ def _semver(v: str) -> tuple[int, int, int]:
 
 
 def next_version(session, name: str, lineage_key: dict) -> str:  # noqa: ANN001
-    """1.0.0 first; a major bump when pairs or label/split parameters change, else a minor one."""
+    """1.0.0 first; a major bump when pairs, label sets or label/split parameters change, else a
+    minor one. A version recorded before label sets were versioned used version 1 of every scene."""
     rows = list_releases(session, name)
     if not rows:
         return "1.0.0"
     latest = max(rows, key=lambda r: _semver(r.version))
     major, minor, _ = _semver(latest.version)
-    if (latest.parameters or {}).get("lineage_key") != lineage_key:
+    previous = dict((latest.parameters or {}).get("lineage_key") or {})
+    previous.setdefault("label_sets", dict.fromkeys(lineage_key.get("label_sets", {}), 1))
+    if previous != lineage_key:
         return f"{major + 1}.0.0"
     return f"{major}.{minor + 1}.0"
 
 
+def used_label_sets(outputs: dict[int, PairOutput]) -> dict[str, int]:
+    """Scene id (as text, a JSON key) -> the label-set version the pairs' outputs used; ReleaseError
+    when two pairs used different versions of one scene."""
+    used: dict[str, int] = {}
+    for out in outputs.values():
+        for sid, side in ((out.t1, "t1"), (out.t2, "t2")):
+            v = out.label_sets[side]
+            if used.setdefault(str(sid), v) != v:
+                raise ReleaseError(
+                    f"scene {sid} is labelled with version {used[str(sid)]} in one pair and {v} in pair "
+                    f"{out.pair_id}: a release uses one label set per scene. Nothing was written."
+                )
+    return dict(sorted(used.items(), key=lambda kv: int(kv[0])))
+
+
 def _lineage(session, site: Site, pair_rows: list[Pair], outputs: dict[int, Any]) -> dict[str, Any]:  # noqa: ANN001
     scene_ids = sorted({p.t1_scene_id for p in pair_rows} | {p.t2_scene_id for p in pair_rows})
+    versions = used_label_sets(outputs)
     scenes = []
     for sid in scene_ids:
         sc = session.get(Scene, sid)
         mission = session.get(Mission, sc.mission_id)
+        labels = label_set(session, sid, versions[str(sid)])
         scenes.append(
             {
                 "id": sc.id,
                 "capture_time": sc.capture_time.isoformat(),
                 "mission_manifest_sha256": mission.manifest_sha256,
-                "label_set_version": 1,
+                "label_set_version": labels.version,
+                "label_set_source": labels.source,
+                "label_set_sha256": labels.source_sha256,
                 "registration": sc.registration,
                 "tile_checksum": (sc.statistics or {}).get("tiles", {}).get("checksum"),
             }
@@ -111,6 +134,7 @@ def _lineage(session, site: Site, pair_rows: list[Pair], outputs: dict[int, Any]
             "t1": p.t1_scene_id,
             "t2": p.t2_scene_id,
             "radius_m": outputs[p.id].radius_m,
+            "label_sets": outputs[p.id].label_sets,
             "labels": outputs[p.id].labels,
         }
         for p in pair_rows
@@ -164,6 +188,7 @@ def build_release(
     run_id: str | None = None,
     pad: bool = True,
     outputs: dict[int, PairOutput] | None = None,
+    label_sets: dict[int, int] | None = None,
 ) -> ReleaseInfo:
     """Assemble a draft release ``name`` from the site's processed pairs (or ``pair_ids``) in format 2
     (siteline.release.layout): A, B, label (LEVIR-CD 0/255), ignore and label_ignore (0/1/255) per
@@ -172,7 +197,10 @@ def build_release(
     ``preset`` is applied to ``params`` here (siteline.presets) and recorded. Every pair must already
     be processed with these parameters: :class:`ReleaseError` names the command otherwise
     (``siteline.pipeline.release`` tiles and processes what is missing, then calls this with the
-    ``outputs`` it made, so they are not read from the store again)."""
+    ``outputs`` it made, so they are not read from the store again). Each scene's newest label set
+    is used unless ``label_sets`` (scene id -> version) pins one; the versions are recorded in the
+    lineage and a change of any of them from the previous version of ``name`` bumps the major
+    version."""
     params = params or PairParams()
     if preset is not None:
         from siteline.presets import preset_params
@@ -181,8 +209,27 @@ def build_release(
     started = datetime.now(UTC)
     with catalog.transaction() as s:
         chosen = choose_pairs(s, site_name, pair_ids)
+    given = outputs or {}
+    outputs = {
+        pid: given.get(pid) or pair_output(catalog, settings, pid, params, run_id, label_sets)
+        for pid in chosen
+    }
+    unprocessed = [pid for pid, out in outputs.items() if out is None]
+    if unprocessed:
+        raise ReleaseError(
+            f"pair {unprocessed[0]} is not processed with these parameters and label sets "
+            f"({len(unprocessed)} of {len(chosen)} pairs): run `siteline release build`, which processes "
+            "pairs first. Nothing was written."
+        )
+    with catalog.transaction() as s:
         release_params = ReleaseParams(params, preset, pad)
-        lineage_key = {"pairs": chosen, "params": params.to_dict(), "format": layout.FORMAT, "pad": pad}
+        lineage_key = {
+            "pairs": chosen,
+            "params": params.to_dict(),
+            "format": layout.FORMAT,
+            "pad": pad,
+            "label_sets": used_label_sets(outputs),
+        }
         if version is None:
             version = next_version(s, name, lineage_key)
         existing = find_release(s, name, version)
@@ -195,15 +242,6 @@ def build_release(
         _semver(version)
     except ValueError as exc:
         raise ReleaseError(f"version {version!r} is not semantic (MAJOR.MINOR.PATCH).") from exc
-    given = outputs or {}
-    outputs = {pid: given.get(pid) or pair_output(catalog, settings, pid, params, run_id) for pid in chosen}
-    unprocessed = [pid for pid, out in outputs.items() if out is None]
-    if unprocessed:
-        raise ReleaseError(
-            f"pair {unprocessed[0]} is not processed with these parameters ({len(unprocessed)} of "
-            f"{len(chosen)} pairs): run `siteline release build`, which processes pairs first. "
-            "Nothing was written."
-        )
     splits = split_pairs(chosen, params.seed)
     split_of = {pid: sp for sp, ids in splits.items() for pid in ids}
     final = draft_path(settings, name, version)
@@ -283,7 +321,7 @@ def build_release(
         final,
         manifest_sha,
         items,
-        chosen,
+        {pid: out.digest for pid, out in outputs.items()},
         started,
         run_id,
     )
@@ -304,11 +342,13 @@ def _record_draft(
     root: Path,
     manifest_sha: str,
     items: list[dict],
-    chosen: list[int],
+    digests: dict[int, str],
     started: datetime | None = None,
     run_id: str | None = None,
 ) -> None:
+    """The draft's catalog rows; ``digests``: pair id -> the key of the outputs it drew on."""
     params, preset = release_params.pair, release_params.preset
+    chosen = sorted(digests)
     with catalog.transaction() as s:
         rel = find_release(s, name, version)
         if rel is None:
@@ -321,6 +361,7 @@ def _record_draft(
             "release_params": release_params.to_dict(),
             "lineage_key": lineage_key,
             "pairs": chosen,
+            "label_sets": lineage_key["label_sets"],
         }
         rel.root_uri = str(root)
         rel.manifest_sha256 = manifest_sha
@@ -329,7 +370,7 @@ def _record_draft(
         view_ids: dict[int, dict[int, int]] = {}
         for it in items:
             if it["pair"] not in view_ids:
-                view_ids[it["pair"]] = pair_view_ids(s, it["pair"], params.digest())
+                view_ids[it["pair"]] = pair_view_ids(s, it["pair"], digests[it["pair"]])
             s.add(
                 ReleaseItem(
                     release_id=rel.id,

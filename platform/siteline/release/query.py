@@ -47,7 +47,8 @@ def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
 
 
 def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, Any]:
-    """Pairs, parameters, label sets and files that differ between two versions."""
+    """Pairs, parameters, label sets (each scene's label-set version; each pair's change labels) and
+    files that differ between two versions."""
     a, b = get_release(session, name, v1), get_release(session, name, v2)
     ma, mb = read_manifest(a.root_uri), read_manifest(b.root_uri)
     pa = {p["id"]: p for p in ma["lineage"]["pairs"]}
@@ -55,11 +56,22 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, An
     fa = {f["path"]: f["sha256"] for f in ma["files"]}
     fb = {f["path"]: f["sha256"] for f in mb["files"]}
     flat_a, flat_b = _flat(ma["lineage"]["parameters"]), _flat(mb["lineage"]["parameters"])
-    labels = {
+    pair_labels = {
         pid: {"radius_m": [pa[pid]["radius_m"], pb[pid]["radius_m"]]}
         for pid in sorted(set(pa) & set(pb))
         if pa[pid].get("radius_m") != pb[pid].get("radius_m")
         or pa[pid].get("labels", {}).get("checksum") != pb[pid].get("labels", {}).get("checksum")
+    }
+    # a lineage written before label sets were versioned used version 1 of every scene
+    sa_ = {sc["id"]: sc for sc in ma["lineage"]["scenes"]}
+    sb_ = {sc["id"]: sc for sc in mb["lineage"]["scenes"]}
+    scene_labels = {
+        sid: {
+            "version": [sa_[sid].get("label_set_version", 1), sb_[sid].get("label_set_version", 1)],
+            "source": [sa_[sid].get("label_set_source"), sb_[sid].get("label_set_source")],
+        }
+        for sid in sorted(set(sa_) & set(sb_))
+        if sa_[sid].get("label_set_version", 1) != sb_[sid].get("label_set_version", 1)
     }
     return {
         "name": name,
@@ -71,7 +83,7 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, An
             for k in sorted(set(flat_a) | set(flat_b))
             if flat_a.get(k) != flat_b.get(k)
         },
-        "label_sets": labels,
+        "label_sets": {"scenes": scene_labels, "pairs": pair_labels},
         "splits": {
             s: [ma["splits"][s], mb["splits"][s]]
             for s in ("train", "val", "test")

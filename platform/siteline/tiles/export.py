@@ -8,7 +8,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from siteline.lasio import las_header
+from siteline.lasio import labels_vlr, las_header
 from siteline.site import SiteSpec
 from siteline.tiles.reader import SceneTiles, in_bounds
 
@@ -21,13 +21,19 @@ def export_las(
     out: Path,
     bounds: Sequence[float] | None = None,
     level: int | None = None,
+    labels: dict | None = None,
 ) -> int:
     """Write the scene's points (in ``bounds``, up to ``level``) to ``out`` (.las or .laz by suffix):
-    LAS 1.4 point format 7, classification = site class ids, scale = the tile quantum, offset near the
-    data, the site CRS (WKT). Tiles are read and written one at a time; returns the point count."""
+    LAS 1.4 point format 7, classification = site class ids (of the label set attached to ``tiles``),
+    GPS time and return number as stored (they identify each point when corrected labels come back),
+    scale = the tile quantum, offset near the data, the site CRS (WKT). ``labels``: what the classes
+    mean (site, scene, label-set version, taxonomy), written as a siteline VLR. Tiles are read and
+    written one at a time; returns the point count."""
     out = Path(out)
     lo = np.min([n.bounds_min for n in tiles.nodes], axis=0) + np.asarray(site.origin)
     header = las_header(site.crs, lo, scale=tiles.spec.quantum_m, point_format=7, version="1.4")
+    if labels is not None:
+        header.vlrs.append(labels_vlr(labels))
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp{out.suffix}")
     n = 0
@@ -35,7 +41,7 @@ def export_las(
     try:
         with laspy.open(tmp, mode="w", header=header) as writer:
             for tile in sorted(tiles.by_tile):
-                data = tiles.read({tile: tiles._prefix(tile, level)}, ATTRS)
+                data = tiles.read({tile: tiles.prefix(tile, level)}, ATTRS)
                 xyz = data["xyz"]  # float64 site-local: export never goes through float32
                 if bounds is not None:
                     keep = in_bounds(xyz, bounds)

@@ -154,7 +154,9 @@ class SceneTiles:
                 return level
         return levels[-1]
 
-    def _prefix(self, tile: str, level: int | None) -> int:
+    def prefix(self, tile: str, level: int | None = None) -> int:
+        """How many of ``tile``'s points levels 0..``level`` hold (all levels when None): a read of
+        that many values from the start of each array returns exactly those levels."""
         return sum(n.count for n in self.by_tile[tile] if level is None or n.level <= level)
 
     def read(self, prefixes: dict[str, int], attributes: Sequence[str]) -> dict[str, np.ndarray]:
@@ -209,7 +211,7 @@ class SceneTiles:
         for tile, (tlo, thi) in self.tile_bounds.items():
             if lo is not None and (np.any(thi < lo) or np.any(tlo > hi)):
                 continue
-            prefixes[tile] = self._prefix(tile, level)
+            prefixes[tile] = self.prefix(tile, level)
         out = self.read(prefixes, attributes)
         if bounds is not None:
             keep = in_bounds(out["xyz"], bounds)
@@ -247,7 +249,7 @@ class SceneTiles:
                 lv = self.level_for_resolution(lod_factor * footprint)
             else:
                 lv = level
-            prefixes[tile] = self._prefix(tile, lv)
+            prefixes[tile] = self.prefix(tile, lv)
             chosen[tile] = -1 if lv is None else int(lv)
         out = self.read(prefixes, attributes)
         xyz = out["xyz"]

@@ -1,0 +1,217 @@
+"""Corrected labels come back as new label-set versions: export, edit with laspy as an outside editor
+would, import; exactly the edited points change, earlier versions stay readable, bad files leave
+nothing behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+from sitehelpers import run_cli
+
+from labelsets.edits import centre_box, export, shuffled, versions
+from siteline.catalog.labelsets import label_set
+from siteline.errors import LabelSetError, PointCloudError
+from siteline.labelsets import import_labels, labelset_uri
+from siteline.lasio import read_labels_vlr
+
+GROUND, BUILDING, MATERIAL, WORKS = 1, 2, 4, 6
+SITELINE = Path(os.environ.get("VIRTUAL_ENV", ".venv")) / "bin" / "siteline"
+
+
+def _cli(settings, *argv: str) -> subprocess.CompletedProcess:  # noqa: ANN001
+    exe = SITELINE if SITELINE.exists() else Path(".venv/bin/siteline").resolve()
+    env = os.environ | {"SITELINE_HOME": str(settings.home), "SITELINE_DATABASE_URL": settings.database_url}
+    env.pop("PREFECT_API_URL", None)
+    return subprocess.run([str(exe), *argv], capture_output=True, text=True, env=env, timeout=120)
+
+
+def test_cli_export_edit_import_changes_exactly_the_edited_points(
+    scenes, tmp_path, capsys, monkeypatch
+) -> None:
+    settings, cat = scenes
+    before = versions(cat, 1)
+    out = tmp_path / "scene1.laz"
+    r = _cli(settings, "scene", "export", "1", "--out", str(out), "--json")
+    assert r.returncode == 0, r.stderr
+    original = laspy.read(out)
+    doc = read_labels_vlr(original.header, out)
+    assert doc["scene"] == 1 and doc["site"] == "demo" and doc["label_set_version"] == before[-1]
+    assert {c["name"] for c in doc["taxonomy"]["classes"]} >= {"ground", "material", "ignore"}
+    assert np.unique(original.gps_time).size > 1 and set(np.unique(original.return_number)) >= {1}
+    cls0 = np.asarray(original.classification).copy()
+
+    edited, perm = shuffled(laspy.read(out))
+    cls = np.asarray(edited.classification).copy()
+    region = centre_box(edited, 15.0) & (cls == GROUND)
+    assert region.sum() > 100
+    cls[region] = MATERIAL
+    edited.classification = cls
+    fixed = tmp_path / "fixed.laz"
+    edited.write(fixed)
+
+    r = _cli(settings, "labels", "import", "1", str(fixed), "--note", "stockpile by the crane", "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["created"] and res["version"] == before[-1] + 1 and res["parent_version"] == before[-1]
+    assert res["matched"] == len(cls0) and res["unmatched"] == res["duplicated"] == res["untouched"] == 0
+    assert res["changed"] == int(region.sum()) and res["changes"] == {"ground->material": int(region.sum())}
+    assert versions(cat, 1) == [*before, res["version"]]
+
+    # the new version differs from its parent exactly at the edited points, wherever the editor put them
+    new = export(cat, 1, tmp_path / "v_new.las", res["version"])
+    changed = np.zeros(len(cls0), dtype=bool)
+    changed[perm[region]] = True
+    assert np.array_equal(np.asarray(new.classification) != cls0, changed)
+    assert np.all(np.asarray(new.classification)[changed] == MATERIAL)
+    # the parent is untouched and still readable
+    old = export(cat, 1, tmp_path / "v_old.las", before[-1])
+    assert np.array_equal(np.asarray(old.classification), cls0)
+
+    r = _cli(settings, "labels", "diff", "1", "--json")
+    assert r.returncode == 0, r.stderr
+    diff = json.loads(r.stdout)
+    assert diff["from"] == before[-1] and diff["to"] == res["version"]
+    assert diff["changed"] == int(region.sum()) and diff["changes"] == {"ground->material": int(region.sum())}
+    monkeypatch.setenv("SITELINE_HOME", str(settings.home))
+    monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    code, stdout, _ = run_cli(capsys, "labels", "show", "1", "--json")
+    shown = json.loads(stdout)
+    assert shown["note"] == "stockpile by the crane" and shown["changed_points"] == int(region.sum())
+    assert shown["class_histogram"]["material"] == int((cls0 == MATERIAL).sum() + region.sum())
+    code, stdout, _ = run_cli(capsys, "labels", "list", "1", "--json")
+    assert [v["version"] for v in json.loads(stdout)] == versions(cat, 1)
+    # importing the same file again changes nothing: no new version, exit 0
+    code, stdout, _ = run_cli(capsys, "labels", "import", "1", str(fixed), "--json")
+    assert code == 0 and not json.loads(stdout)["created"]
+    assert versions(cat, 1) == [*before, res["version"]]
+
+
+def test_region_export_is_corrected_alone(scenes, tmp_path) -> None:
+    settings, cat = scenes
+    parent = versions(cat, 1)[-1]
+    full = export(cat, 1, tmp_path / "full.las")
+    xs, ys = np.asarray(full.x) - settings_origin(cat)[0], np.asarray(full.y) - settings_origin(cat)[1]
+    cx, cy = float(np.median(xs)), float(np.median(ys))
+    bounds = [cx - 30, cy - 30, cx, cy]
+    region = export(cat, 1, tmp_path / "region.laz", bounds=bounds)
+    assert 0 < len(region.points) < len(full.points)
+    cls = np.asarray(region.classification).copy()
+    target = (cls != 255) & (cls != WORKS)
+    cls[target] = WORKS
+    region.classification = cls
+    region.write(tmp_path / "region_fixed.laz")
+
+    res = import_labels(cat, settings, 1, tmp_path / "region_fixed.laz", note="formwork")
+    assert res.created and res.parent_version == parent
+    assert res.matched == len(region.points) and res.untouched == len(full.points) - len(region.points)
+    assert res.changed == int(target.sum())
+    after = export(cat, 1, tmp_path / "after.las")
+    inside = (xs >= bounds[0]) & (xs <= bounds[2]) & (ys >= bounds[1]) & (ys <= bounds[3])
+    before_cls, after_cls = np.asarray(full.classification), np.asarray(after.classification)
+    assert np.array_equal(before_cls[~inside], after_cls[~inside])  # outside: the previous version's
+    assert np.all(after_cls[inside & (before_cls != 255)] == WORKS)
+
+
+def settings_origin(cat) -> tuple[float, float, float]:  # noqa: ANN001
+    from siteline.catalog.models import Site
+
+    with cat.transaction() as s:
+        return s.get(Site, 1).origin
+
+
+def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
+    settings, cat = scenes
+    las = export(cat, 2, tmp_path / "s2.las")
+    site_to_asprs = {GROUND: 2, BUILDING: 6, 3: 64, MATERIAL: 65, 5: 66, WORKS: 67, 7: 3, 8: 68, 255: 0}
+    cls = np.asarray(las.classification)
+    coded = np.array([site_to_asprs.get(int(c), 0) for c in range(256)], np.uint8)[cls]
+    edit = centre_box(las, 10.0) & (cls == GROUND)
+    coded[edit] = 6  # ground -> building
+    las.classification = coded
+    las.write(tmp_path / "s2_asprs.las")
+    mapping = {str(v): k for k, v in site_to_asprs.items()}
+    (tmp_path / "map.json").write_text(json.dumps(mapping))
+    with pytest.raises(LabelSetError, match=r"class codes \[.*65.*\].*--taxonomy-map"):
+        import_labels(cat, settings, 2, tmp_path / "s2_asprs.las")  # ASPRS codes read as site ids
+    from siteline.labelsets import read_taxonomy_map
+
+    res = import_labels(cat, settings, 2, tmp_path / "s2_asprs.las", read_taxonomy_map(tmp_path / "map.json"))
+    assert res.changed == int(edit.sum()) and res.changes == {"ground->building": int(edit.sum())}
+
+
+def _store_listing(settings, scene_id: int) -> list[str]:  # noqa: ANN001
+    root = Path(labelset_uri(settings, scene_id, 1)).parent
+    return sorted(p.name for p in root.iterdir()) if root.exists() else []
+
+
+def _refused(cat, settings, path: Path, error, match: str, **kw) -> None:  # noqa: ANN001
+    before, listing = versions(cat, 1), _store_listing(settings, 1)
+    with pytest.raises(error, match=match):
+        import_labels(cat, settings, 1, path, **kw)
+    assert versions(cat, 1) == before
+    assert _store_listing(settings, 1) == listing
+    assert not list((settings.home / "tmp").glob("labels-scene-*"))
+
+
+def test_bad_files_are_refused_and_leave_nothing(scenes, tmp_path) -> None:
+    settings, cat = scenes
+    other = export(cat, 2, tmp_path / "scene2.las")
+    _refused(cat, settings, tmp_path / "scene2.las", LabelSetError, r"exported from scene 2 of site demo")
+
+    # the same file with its siteline record dropped (as some editors do): refused by matching
+    bare = laspy.LasData(laspy.LasHeader(point_format=7, version="1.4"))
+    bare.header.scales, bare.header.offsets = other.header.scales, other.header.offsets
+    bare.header.add_crs(other.header.parse_crs())
+    bare.points = other.points.copy()
+    bare.write(tmp_path / "scene2_bare.las")
+    _refused(cat, settings, tmp_path / "scene2_bare.las", LabelSetError, r"match no point of scene 1")
+
+    mine = export(cat, 1, tmp_path / "scene1.las")
+    n = len(mine.points)
+    dup = laspy.read(tmp_path / "scene1.las")
+    dup.points = laspy.ScaleAwarePointRecord(
+        np.concatenate([mine.points.array, mine.points.array[: n // 50]]), mine.header.point_format,
+        mine.header.scales, mine.header.offsets,
+    )  # fmt: skip
+    dup.write(tmp_path / "dup.las")
+    _refused(
+        cat, settings, tmp_path / "dup.las", LabelSetError, rf"{n // 50:,} repeat a point already matched"
+    )
+    # under the documented threshold a few repeats are tolerated (and reported)
+    few = laspy.read(tmp_path / "scene1.las")
+    cls = np.asarray(few.classification).copy()
+    cls[np.flatnonzero((cls != 255) & (cls != 8))[:10]] = 8  # ten points become workers
+    few.classification = cls
+    few.points = laspy.ScaleAwarePointRecord(
+        np.concatenate([few.points.array, few.points.array[:3]]), few.header.point_format,
+        few.header.scales, few.header.offsets,
+    )  # fmt: skip
+    few.write(tmp_path / "few.las")
+    res = import_labels(cat, settings, 1, tmp_path / "few.las")
+    assert res.duplicated == 3 and res.created and res.changed == 10
+
+    bad = laspy.read(tmp_path / "scene1.las")
+    cls = np.asarray(bad.classification).copy()
+    cls[:7] = 77
+    bad.classification = cls
+    bad.write(tmp_path / "codes.las")
+    _refused(cat, settings, tmp_path / "codes.las", LabelSetError, r"class codes \[77\] \(7 points\)")
+
+    mine.write(tmp_path / "scene1.laz")
+    data = (tmp_path / "scene1.laz").read_bytes()
+    (tmp_path / "cut.laz").write_bytes(data[: len(data) // 2])
+    _refused(cat, settings, tmp_path / "cut.laz", PointCloudError, r"cut\.laz")
+    _refused(cat, settings, tmp_path / "missing.laz", LabelSetError, r"missing\.laz does not exist")
+
+
+def test_unknown_version_is_named(scenes) -> None:
+    _, cat = scenes
+    with cat.transaction() as s, pytest.raises(LabelSetError, match=r"no label-set version 99 \(it has 1"):
+        label_set(s, 1, 99)

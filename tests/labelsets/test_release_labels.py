@@ -1,0 +1,73 @@
+"""Releases follow label sets: each scene's newest unless pinned, versions in the lineage, a major
+bump when they change, `release diff` names the change, and old pair outputs and releases stay."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sitehelpers import run_cli
+
+from labelsets.edits import centre_box, export, versions
+from siteline import pipeline, stores
+from siteline.errors import LabelSetError
+from siteline.labelsets import import_labels
+from siteline.pairs import PairParams
+from siteline.release import publish_release
+from siteline.release.manifest import read_manifest
+
+PARAMS = PairParams(scale=0.25, point_size_px=3, views=3, seed=0, min_coverage=0.2)
+
+
+def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, monkeypatch) -> None:
+    settings, cat = scenes
+    pinned = {1: versions(cat, 1)[-1], 2: versions(cat, 2)[-1]}
+    first = pipeline.release(cat, settings, "demo", "lab", PARAMS, label_sets=pinned, publish=True)
+    assert first.version == "1.0.0"
+
+    las = export(cat, 1, tmp_path / "s1.las")
+    cls = np.asarray(las.classification).copy()
+    edit = centre_box(las, 20.0) & (cls != 255) & (cls != 5)
+    cls[edit] = 5  # a fleet of vehicles appears in the correction
+    las.classification = cls
+    las.write(tmp_path / "s1_fixed.las")
+    new = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las", note="vehicles")
+    assert new.created
+
+    second = pipeline.release(cat, settings, "demo", "lab", PARAMS, publish=True)
+    assert second.version == "2.0.0"  # a label set changed: major bump
+    lineage = read_manifest(second.root)["lineage"]
+    scenes_ = {sc["id"]: sc for sc in lineage["scenes"]}
+    assert scenes_[1]["label_set_version"] == new.version and scenes_[2]["label_set_version"] == pinned[2]
+    assert scenes_[1]["label_set_sha256"] == new.source_sha256
+    assert lineage["pairs"][0]["label_sets"] == {"t1": new.version, "t2": pinned[2]}
+    old = read_manifest(first.root)["lineage"]
+    assert {sc["id"]: sc["label_set_version"] for sc in old["scenes"]} == pinned
+    # the old pair outputs were not overwritten: both output folders are complete
+    roots = sorted(
+        p for p in (Path(settings.store.url) / "pairs" / "pair-1").iterdir() if not p.name.startswith(".")
+    )
+    assert len([r for r in roots if stores.is_complete(str(r))]) >= 2
+
+    # the same label sets again: a minor version
+    third = pipeline.release(cat, settings, "demo", "lab", PARAMS)
+    assert third.version == "2.1.0"
+
+    monkeypatch.setenv("SITELINE_HOME", str(settings.home))
+    monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
+    code, out, _ = run_cli(capsys, "release", "diff", "lab", "1.0.0", "2.0.0", "--json")
+    assert code == 0
+    diff = json.loads(out)
+    change = diff["label_sets"]["scenes"]
+    assert list(change) == ["1"] and change["1"]["version"] == [pinned[1], new.version]
+    assert change["1"]["source"][1] == "import s1_fixed.las"
+    assert any(p.startswith("train/label/") or "/label/" in p for p in diff["files"]["changed"])
+    code, out, _ = run_cli(capsys, "release", "verify", "lab", "1.0.0")
+    assert code == 0
+    publish_release(cat, settings, "lab", "2.1.0")
+
+    # pinning a version that does not exist is refused before anything is built
+    with pytest.raises(LabelSetError, match="no label-set version 42"):
+        pipeline.release(cat, settings, "demo", "lab", PARAMS, label_sets={1: 42})
