@@ -38,6 +38,7 @@ BAD_REQUESTS = {
     "mission": (["mission", "list", "--site", "nosuch"], "unknown site 'nosuch'"),
     "scene": (["scene", "show", "99"], "no scene with id 99"),
     "photo": (["photo", "inspect", "missing.jpg"], "missing.jpg"),
+    "labels": (["labels", "import", "1", "fixed.laz"], "labels file fixed.laz does not exist"),
     "release": (["release", "show", "nosuch", "1.0.0"], "no release nosuch 1.0.0"),
     "train": (["train", "--release", "nosuch", "--version", "1.0.0", "--out", "t"], "no release nosuch"),
     "evaluate": (

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 from pathlib import Path
@@ -96,6 +97,43 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
         "publish_release",
     }
     assert all(r["status"] == "completed" and r["run_id"] for r in runs)
+
+    # the annotation loop: a corrected label set is imported and announced; the deployment's trigger
+    # runs process-scene-pairs for the event's scene, which re-processes the pair on the new version
+    # and publishes the next release (a major version: a label set changed)
+    from prefect.settings import PREFECT_API_URL
+
+    from siteline.cli.labels import imported_event
+    from siteline.cli.watch import post_events
+    from siteline.labelsets import import_labels
+    from siteline.tiles import export_las
+
+    cat = open_catalog(settings)
+    from siteline.catalog.models import Scene, Site
+    from siteline.catalog.sites import site_spec
+    from siteline.labelsets import open_labelled_tiles
+
+    with cat.transaction() as s:
+        tiles, _ = open_labelled_tiles(s, s.get(Scene, 1))
+        spec = site_spec(s.get(Site, 1))
+    export_las(tiles, spec, tmp_path / "s1.las")
+    import laspy
+    import numpy as np
+
+    las = laspy.read(tmp_path / "s1.las")
+    cls = np.asarray(las.classification).copy()
+    cls[(cls != 255) & (cls != 5)] = 5
+    las.classification = cls
+    las.write(tmp_path / "s1_fixed.las")
+    res = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las")
+    cat.dispose()
+    event = imported_event(1, res.version, "demo")
+    post_events(PREFECT_API_URL.value(), [event])
+    outs = pipeline.process_scene_pairs_flow(event["payload"]["scene_id"], SMALL)
+    assert len(outs) == 1
+    rel2 = settings.home / "releases" / "flowrel" / "2.0.0" / "manifest.json"
+    lineage = json.loads(rel2.read_text())["lineage"]
+    assert {sc["id"]: sc["label_set_version"] for sc in lineage["scenes"]} == {1: res.version, 2: 1}
 
 
 def test_retry_then_success_and_permanent_failure_recorded(

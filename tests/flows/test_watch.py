@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from siteline.cli.watch import UPLOADED, upload_event
 from siteline.watch import MARKER, UploadWatcher
@@ -41,3 +42,27 @@ def test_upload_event_schema(tmp_path) -> None:
     assert ev["event"] == UPLOADED and ev["resource"]["prefect.resource.id"] == "siteline.mission.m1"
     assert ev["payload"] == {"mission_dir": str((tmp_path / "m1").resolve()), "site": "demo"}
     json.dumps(ev)
+
+
+def test_labels_imported_event_matches_the_deployment_trigger() -> None:
+    """The event `siteline labels import` posts is the one the process-scene-pairs deployment's
+    trigger expects, and it carries the scene id the trigger passes on."""
+    import fnmatch
+
+    import yaml
+
+    from siteline.cli.labels import IMPORTED, imported_event
+
+    doc = yaml.safe_load((Path(__file__).resolve().parents[2] / "deploy" / "prefect.yaml").read_text())
+    ev = imported_event(3, 2, "demo")
+    json.dumps(ev)
+    hits = [
+        (d["name"], t)
+        for d in doc["deployments"]
+        for t in d.get("triggers", [])
+        if IMPORTED in t["expect"]
+        and fnmatch.fnmatchcase(ev["resource"]["prefect.resource.id"], t["match"]["prefect.resource.id"])
+    ]
+    assert [name for name, _ in hits] == ["process-scene-pairs"]
+    assert hits[0][1]["parameters"] == {"scene_id": "{{ event.payload.scene_id }}"}
+    assert ev["payload"]["scene_id"] == 3 and ev["resource"]["siteline.site"] == "demo"

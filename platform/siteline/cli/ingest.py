@@ -8,6 +8,7 @@ import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
 from siteline import pipeline
+from siteline.catalog.labelsets import label_sets
 from siteline.catalog.scenes import (
     get_scene,
     list_missions,
@@ -161,6 +162,7 @@ def scene_record(s, scene) -> dict:  # noqa: ANN001
         "nodes": nodes["nodes"],
         "levels": nodes["levels"],
         "bytes_per_point": tiles.get("bytes_per_point"),
+        "label_sets": [r.version for r in label_sets(s, scene.id)],
     }
 
 
