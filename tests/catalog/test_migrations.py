@@ -80,3 +80,43 @@ def test_sqlite_uses_wal_and_foreign_keys(sqlite_url: str) -> None:
         assert conn.execute(sa.text("PRAGMA journal_mode")).scalar() == "wal"
         assert conn.execute(sa.text("PRAGMA foreign_keys")).scalar() == 1
     engine.dispose()
+
+
+def test_label_set_versions_migrate_up_and_down_with_data(db_url: str) -> None:
+    """0001 -> 0002 keeps version-1 rows (their classes are the tile store's); 0002 -> 0001 drops the
+    imported versions' rows and columns and keeps version 1."""
+    engine = make_engine(db_url)
+    migrate.upgrade(engine, "0001")
+    with engine.begin() as conn:
+        conn.execute(sa.text(
+            "INSERT INTO site (name, crs, origin_x, origin_y, origin_z, taxonomy, tile_size_m, created_at) "
+            "VALUES ('a', 'EPSG:32618', 0, 0, 0, '{}', 50, CURRENT_TIMESTAMP)"
+        ))  # fmt: skip
+        conn.execute(sa.text(
+            "INSERT INTO mission (site_id, manifest_sha256, name, received_at, status, storage, root_uri) "
+            "VALUES (1, 'm', 'm', CURRENT_TIMESTAMP, 'ingested', 'copy', '/x')"
+        ))  # fmt: skip
+        conn.execute(sa.text(
+            "INSERT INTO scene (site_id, mission_id, capture_time, point_count, bounds, registration, "
+            "statistics, status, created_at) VALUES (1, 1, CURRENT_TIMESTAMP, 1, '{}', '{}', '{}', "
+            "'registered', CURRENT_TIMESTAMP)"
+        ))  # fmt: skip
+        conn.execute(sa.text(
+            "INSERT INTO label_set (scene_id, version, source, class_histogram, created_at) "
+            "VALUES (1, 1, 'las', '{}', CURRENT_TIMESTAMP)"
+        ))  # fmt: skip
+    migrate.upgrade(engine)
+    assert _diff(engine) == []
+    with engine.begin() as conn:
+        assert conn.execute(sa.text("SELECT version, uri FROM label_set")).all() == [(1, None)]
+        conn.execute(sa.text(
+            "INSERT INTO label_set (scene_id, version, source, class_histogram, created_at, uri, "
+            "parent_version, changed_points) VALUES (1, 2, 'import f.laz', '{}', CURRENT_TIMESTAMP, "
+            "'/x/v2.zarr', 1, 5)"
+        ))  # fmt: skip
+    migrate.downgrade(engine, "0001")
+    with engine.begin() as conn:
+        assert conn.execute(sa.text("SELECT version FROM label_set")).all() == [(1,)]
+    assert "uri" not in {c["name"] for c in sa.inspect(engine).get_columns("label_set")}
+    migrate.downgrade(engine, "base")
+    engine.dispose()

@@ -161,3 +161,27 @@ def test_pair_refuses_same_scene_twice(cat) -> None:
         sc = _scene(s, site, _mission(s, site, "a" * 64), T0)
     with pytest.raises(sa.exc.IntegrityError), cat.transaction() as s:
         s.add(Pair(site_id=site.id, t1_scene_id=sc.id, t2_scene_id=sc.id))
+
+
+def test_label_set_versions_are_unique_and_newest_is_found(cat) -> None:
+    from siteline.catalog.labelsets import add_label_set, label_set, newest_versions
+    from siteline.catalog.models import LabelSet
+    from siteline.errors import LabelSetError
+
+    with cat.transaction() as s:
+        site = _site(s)
+        scene = _scene(s, site, _mission(s, site, "a" * 64), T0)
+        s.add(LabelSet(scene_id=scene.id, version=1, source="las", class_histogram={"ground": 10}))
+        s.flush()
+        add_label_set(s, scene.id, 2, "/x/v2.zarr", 1, "import f.laz", "b" * 64, "fix", {"ground": 9}, 1,
+                      {"changes": {"ground->building": 1}})  # fmt: skip
+        sid = scene.id
+    with cat.transaction() as s:
+        assert newest_versions(s, [sid]) == {sid: 2}
+        row = label_set(s, sid)
+        assert (row.version, row.parent_version, row.changed_points, row.note) == (2, 1, 1, "fix")
+        assert row.details["changes"] == {"ground->building": 1} and label_set(s, sid, 1).uri is None
+        with pytest.raises(LabelSetError, match="no label-set version 3"):
+            label_set(s, sid, 3)
+    with pytest.raises(sa.exc.IntegrityError), cat.transaction() as s:
+        add_label_set(s, sid, 2, "/x/again.zarr", 1, "import g.laz", "c" * 64, None, {}, 0, {})
