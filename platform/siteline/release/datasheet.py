@@ -117,7 +117,11 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         "## Sources",
         "",
         f"- sites: {', '.join(s['name'] + ' (' + s['crs'] + ')' for s in lin['sites'])}",
-        f"- scenes: {', '.join(str(s['id']) + ' @ ' + s['capture_time'][:10] for s in lin['scenes'])}",
+        "- scenes: "
+        + ", ".join(
+            f"{s['id']} @ {s['capture_time'][:10]} (label set {s.get('label_set_version', 1)})"
+            for s in lin["scenes"]
+        ),
         "- pairs: "
         + ", ".join(f"{q['id']} ({q['t1']}->{q['t2']}, r={q['radius_m']:.3f} m)" for q in lin["pairs"]),
         "",
