@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DEMO_HOME ?= $(CURDIR)/demo-home
 PYTEST_ARGS ?=
 
-.PHONY: install demo test test-all lint bench clean serve
+.PHONY: install demo test test-all lint bench bench-scale clean serve
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -31,7 +31,11 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 bench: $(STAMP)
-	for b in bench/*.py; do $(PY) $$b || exit 1; done
+	for b in bench/*.py; do [ $$b = bench/paper_scale.py ] || $(PY) $$b || exit 1; done
+
+# one 2-epoch pair at 1000 points/m2 and at 250, 300 views (tens of minutes on 2 cores)
+bench-scale: $(STAMP)
+	$(PY) bench/paper_scale.py
 
 clean:
 	rm -rf $(VENV) $(DEMO_HOME) .pytest_cache .ruff_cache .hypothesis

@@ -140,3 +140,22 @@ def s3_store(s3_endpoint: str) -> str:
     bucket = f"siteline-{uuid.uuid4().hex[:12]}"
     fsspec.filesystem("s3").mkdir(bucket)
     return f"s3://{bucket}/stores"
+
+
+@pytest.fixture(scope="session")
+def scenes(tmp_path_factory, synth_site):
+    """(settings, catalog) of a home with the first two epochs of ``synth_site`` ingested and tiled
+    (scenes 1 and 2, pair 1). Tests may add label-set versions and pair outputs, never remove them."""
+    from sitehelpers import epoch_dirs, make_home
+
+    from siteline.catalog import open_catalog
+    from siteline.ingest.mission import ingest_mission
+    from siteline.tiles import tile_scene
+
+    settings = make_home(tmp_path_factory.mktemp("scenes"), site_dir=synth_site)
+    cat = open_catalog(settings)
+    for m in epoch_dirs(synth_site)[:2]:
+        r = ingest_mission(cat, settings, m, "demo")
+        tile_scene(cat, settings, r.scene_id, workers=1)
+    yield settings, cat
+    cat.dispose()

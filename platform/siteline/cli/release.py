@@ -63,6 +63,12 @@ def build(
     min_coverage: float = typer.Option(
         0.5, "--min-coverage", help="Reject views covering less of the image."
     ),
+    min_valid: float = typer.Option(
+        0.25,
+        "--min-valid",
+        help="Reject rendered views with a smaller fraction of valid (not ignored) pixels; the next "
+        "view of the stratified order replaces each.",
+    ),
     version: str | None = typer.Option(
         None, "--version", help="Version (default: next, major bump when labels or pairs change)."
     ),
@@ -103,6 +109,7 @@ def build(
         radius_m=parse_radius(radius),
         seed=seed,
         min_coverage=min_coverage,
+        min_valid=min_valid,
         one_side_hole=one_side_hole,
         all_points=all_points,
     )

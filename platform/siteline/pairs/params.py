@@ -23,6 +23,9 @@ class PairParams:
     (``scale``, ``views``, ``seed``, ``min_coverage`` and any other ViewParams field in ``view_params``;
     §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
+    min_valid: reject a rendered view whose valid fraction (pixels neither ignored nor a hole in
+    either scene) is below this, and render the next view of the stratified order in its place
+    (``min_coverage`` judges one scene's coverage before rendering; this judges what the pair teaches).
     lod_factor: level of detail read per view (1 = spacing within a pixel footprint); all_points: read
     every point (no level of detail). one_side_hole: a pixel changed on one side and a hole on the
     other is ``ignore`` or ``changed`` (siteline.pairs.render.pair_mask). sampler: the view
@@ -40,6 +43,7 @@ class PairParams:
     lod_factor: float = 1.0
     seed: int = 0
     min_coverage: float = 0.5
+    min_valid: float = 0.25
     view_params: dict[str, Any] = field(default_factory=dict)
     one_side_hole: str = "ignore"
     all_points: bool = False
@@ -51,6 +55,8 @@ class PairParams:
                 f"view sampler {self.sampler!r} is not this version's ({SAMPLER_VERSION!r}); outputs of "
                 "another sampler cannot be rebuilt: drop the 'sampler' key to use the current one."
             )
+        if not 0.0 <= self.min_valid <= 1.0:
+            raise ReleaseError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if self.one_side_hole not in HOLE_RULES:
             raise ReleaseError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
         clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage"})

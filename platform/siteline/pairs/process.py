@@ -31,7 +31,9 @@ from siteline.pairs.render import render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress
 from siteline.render.outputs import png_bytes
+from siteline.tolerances import RATIO_TOL, at_least
 from siteline.views import NamedCamera, fit_ground_plane, generate_views
+from siteline.views.generate import SyntheticView, key_sorted
 
 
 @dataclass
@@ -199,7 +201,7 @@ def process_pair(
         [site.taxonomy.id_of(c) for c in ("snow", "noise") if c in {k.name for k in site.taxonomy.classes}],
         dtype=np.uint8,
     )
-    source = TilePointSource(tiles2, skip)
+    source = TilePointSource(tiles2, skip, lod_factor=params.lod_factor)
     vp = params.view_params_spec()
     view_set = generate_views(
         [NamedCamera(n, c) for n, c in cams],
@@ -215,10 +217,14 @@ def process_pair(
             "--min-coverage or check the cameras."
         )
     records = []
+    queue, reserve = list(view_set.views), list(view_set.reserve)
+    rejected = dict(view_set.rejected)
     with settings.store.publish(root) as partial:
         for sub in ("A", "B", "label"):
             (partial / sub).mkdir(parents=True)
-        for v in view_set.views:
+        kept: list[tuple[SyntheticView, dict]] = []
+        while queue:
+            v = queue.pop(0)
             r = render_pair_view(
                 tiles1,
                 tiles2,
@@ -230,23 +236,48 @@ def process_pair(
                 one_side_hole=params.one_side_hole,
                 all_points=params.all_points,
             )
-            name = f"{v.index:04d}.png"
-            (partial / "A" / name).write_bytes(png_bytes(r.a))
-            (partial / "B" / name).write_bytes(png_bytes(r.b))
-            (partial / "label" / name).write_bytes(png_bytes(r.mask))
-            records.append(
-                v.to_dict()
-                | {
-                    "file": name,
-                    "coverage_a": r.coverage_a,
-                    "coverage_b": r.coverage_b,
-                    "valid": r.valid,
-                    "change_ratio": r.change_ratio,
-                    "points_read": r.points_read,
-                }
-            )
             if progress:
                 progress("renders", 1, len(view_set.views))
+            if not at_least(r.valid, params.min_valid, RATIO_TOL):
+                rejected["low_valid"] = rejected.get("low_valid", 0) + 1
+                if reserve:
+                    queue.append(reserve.pop(0))
+                    if progress:
+                        progress("renders", 0, len(view_set.views) + rejected["low_valid"])
+                continue
+            tmp = f"tmp-{len(kept):05d}.png"
+            (partial / "A" / tmp).write_bytes(png_bytes(r.a))
+            (partial / "B" / tmp).write_bytes(png_bytes(r.b))
+            (partial / "label" / tmp).write_bytes(png_bytes(r.mask))
+            kept.append(
+                (
+                    v,
+                    {
+                        "tmp": tmp,
+                        "coverage_a": r.coverage_a,
+                        "coverage_b": r.coverage_b,
+                        "valid": r.valid,
+                        "change_ratio": r.change_ratio,
+                        "points_read": r.points_read,
+                    },
+                )
+            )
+        if not kept:
+            raise PairError(
+                f"pair {pair_id}: every rendered view had less than {params.min_valid:.0%} valid pixels "
+                f"({rejected.get('low_valid', 0)} views); lower --min-valid or check the scenes' overlap."
+            )
+        # the kept views in key order, indexed 0..n-1 (an order that does not depend on the pool)
+        by_view = {id(v): rec for v, rec in kept}
+        for i, v in enumerate(key_sorted([v for v, _ in kept], params.seed)):
+            v.index = i
+            rec = by_view[id(v)]
+            name = f"{i:04d}.png"
+            tmp = rec.pop("tmp")
+            for sub in ("A", "B", "label"):
+                (partial / sub / tmp).rename(partial / sub / name)
+            records.append(v.to_dict() | {"file": name} | rec)
+        rejected = dict(sorted(rejected.items()))
         summary = {
             "pair": pair_id,
             "t1": ids[0],
@@ -257,7 +288,7 @@ def process_pair(
             "labels": labels,
             "ground_plane": plane.to_dict(),
             "candidates": view_set.candidates,
-            "rejected": view_set.rejected,
+            "rejected": rejected,
             "views": records,
         }
         (partial / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")

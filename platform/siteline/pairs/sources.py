@@ -11,22 +11,30 @@ from siteline.views.sources import ArrayPointSource
 
 class TilePointSource:
     """A :class:`siteline.views.PointSource` over a tiled scene for view generation, which renders
-    hundreds of probes per real camera: they all draw on one in-memory copy of the scene read once at
-    ``probe_m`` spacing (depth and coverage probes need no finer), and clearance and overhead checks
-    on a coarse copy (``coarse_m``) of its solid geometry (airborne snow and noise left out)."""
+    hundreds of probes per real camera. Each probe reads only what it needs: the tiles its frustum
+    meets, each at the coarsest level whose spacing is within ``lod_factor`` pixel footprints of the
+    probe's own render scale (``SceneTiles.points_for_view``), so a probe's cost grows with its pixels,
+    not with the scene's density; the tile reader's cache keeps the tiles a pair's probes share.
+    Clearance and overhead checks use a coarse copy (``coarse_m``) of the solid geometry, whose size
+    grows with the site's area, not its density. Airborne snow and noise are left out of both."""
 
     def __init__(
-        self, tiles: SceneTiles, skip_classes: np.ndarray, coarse_m: float = 0.25, probe_m: float = 0.05
+        self, tiles: SceneTiles, skip_classes: np.ndarray, coarse_m: float = 0.25, lod_factor: float = 1.0
     ) -> None:
         self.tiles = tiles
-        probe = tiles.points(resolution=probe_m, attributes=("class",))
-        self._probe = probe["xyz"][~np.isin(probe["class"], skip_classes)]
+        self.skip = np.asarray(skip_classes, dtype=np.uint8)
+        self.lod_factor = lod_factor
+        self.points_read = 0
+        self.reads = 0
         coarse = tiles.points(resolution=coarse_m, attributes=("class",))
-        keep = ~np.isin(coarse["class"], skip_classes)
+        keep = ~np.isin(coarse["class"], self.skip)
         self._coarse = ArrayPointSource(coarse["xyz"][keep])
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
-        return self._probe
+        out = self.tiles.points_for_view(camera, scale, attributes=("class",), lod_factor=self.lod_factor)
+        self.points_read += self.tiles.last_stats.points_read
+        self.reads += 1
+        return out["xyz"][~np.isin(out["class"], self.skip)]
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         return self._coarse.nearest_distance(xyz)

@@ -80,6 +80,9 @@ class ViewSet:
     ground: GroundPlane
     candidates: int
     rejected: dict[str, int] = field(default_factory=dict)
+    # kept candidates beyond the sample, in stratified order: replacements for views a later stage
+    # rejects (siteline.pairs: too few valid pixels)
+    reserve: list[SyntheticView] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -219,15 +222,10 @@ def candidate_key(seed: int, parent: str, strategy: str) -> int:
     return _key("siteline-view", seed, parent, strategy)
 
 
-def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list[SyntheticView]:
-    """Draw ``n`` views (all if fewer), round-robin over strategy strata, so stratum counts differ by
-    at most one wherever strata have views to give.
-
-    Members of a stratum are ranked by :func:`candidate_key`, strata by a hash of the seed and their
-    name: removing one candidate from the pool changes at most one chosen view (the removed one is
-    replaced by the next of its stratum, or by one more of another stratum). The sample is returned
-    in key order, so its order does not depend on the pool either.
-    """
+def stratified_order(views: Sequence[SyntheticView], seed: int) -> list[SyntheticView]:
+    """Every view, round-robin over strategy strata: members of a stratum ranked by
+    :func:`candidate_key`, strata by a hash of the seed and their name. Any prefix of it is a
+    stratified sample; the views after a prefix are its replacements, in order."""
     strata: dict[str, list[SyntheticView]] = defaultdict(list)
     for v in views:
         strata[v.strategy].append(v)
@@ -236,16 +234,28 @@ def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list
         for k, vs in strata.items()
     }
     key_order = sorted(pools, key=lambda k: (_key("siteline-stratum", seed, k), k))
-    chosen: list[SyntheticView] = []
+    order: list[SyntheticView] = []
     depth = 0
-    while len(chosen) < n and any(len(pools[k]) > depth for k in key_order):
-        for k in key_order:
-            if len(chosen) >= n:
-                break
-            if len(pools[k]) > depth:
-                chosen.append(pools[k][depth])
+    while any(len(pools[k]) > depth for k in key_order):
+        order.extend(pools[k][depth] for k in key_order if len(pools[k]) > depth)
         depth += 1
-    return sorted(chosen, key=lambda v: (candidate_key(seed, v.parent, v.strategy), v.parent, v.strategy))
+    return order
+
+
+def key_sorted(views: Sequence[SyntheticView], seed: int) -> list[SyntheticView]:
+    """``views`` in candidate-key order (the order of a sample, which does not depend on the pool)."""
+    return sorted(views, key=lambda v: (candidate_key(seed, v.parent, v.strategy), v.parent, v.strategy))
+
+
+def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list[SyntheticView]:
+    """Draw ``n`` views (all if fewer), round-robin over strategy strata, so stratum counts differ by
+    at most one wherever strata have views to give (the first ``n`` of :func:`stratified_order`).
+
+    Removing one candidate from the pool changes at most one chosen view (the removed one is
+    replaced by the next of its stratum, or by one more of another stratum). The sample is returned
+    in key order, so its order does not depend on the pool either.
+    """
+    return key_sorted(stratified_order(views, seed)[:n], seed)
 
 
 def generate_views(
@@ -279,8 +289,9 @@ def generate_views(
         if progress is not None:
             progress(1)
     kept = [v for v in candidates if v.rejected is None]
-    sample = stratified_sample(kept, params.views, params.seed)
+    order = stratified_order(kept, params.seed)
+    sample = key_sorted(order[: params.views], params.seed)
     for i, v in enumerate(sample):
         v.index = i
     rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))
-    return ViewSet(sample, params, ground, len(candidates), rejected)
+    return ViewSet(sample, params, ground, len(candidates), rejected, order[params.views :])

@@ -1,0 +1,201 @@
+"""Paper-scale benchmark: one 2-epoch synthetic pair at a real LiDAR density and at 1/4 of it, in the
+same run, so growth with density is a ratio. Each stage runs in its own process (its peak memory is
+that process's); the figures printed per density are seconds and peak RSS of synth, ingest + tile and
+pair processing (labels, view generation, renders), points read per covered pixel per scene, coverage,
+valid fraction, seconds per view, and the high/low ratios.
+
+The synthetic photos are 660 x 495 (1/8 of a Zenmuse L2 frame), so the release scale 1.0 used here
+renders 660 x 495 images: the paper's 706 x 510 at 1/8 of a 5645 x 4082 frame, within 9 % of its pixels.
+
+    python bench/paper_scale.py [--density 1000] [--views 300] [--scale 1.0] [--json out.json]
+    make bench-scale
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _peak_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def stage_synth(work: Path, density: float) -> dict:
+    from siteline.synth import SynthConfig, write_site
+
+    t0 = time.perf_counter()
+    write_site(work / "site", SynthConfig(epochs=2, density_pts_m2=density, seed=0))
+    doc = json.loads((work / "site" / "truth" / "site.json").read_text())
+    return {"seconds": time.perf_counter() - t0, "points": [e["points"] for e in doc["epochs"]]}
+
+
+def _settings(work: Path):  # noqa: ANN202
+    from siteline.config import Settings, sqlite_url
+
+    home = work / "home"
+    return Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
+
+
+def stage_ingest(work: Path) -> dict:
+    from siteline import pipeline
+    from siteline.catalog import migrate, open_catalog
+    from siteline.catalog.engine import make_engine
+    from siteline.catalog.sites import add_site
+    from siteline.fence import load_fence_geojson
+    from siteline.site import make_site_spec
+    from siteline.synth import SynthConfig
+
+    settings = _settings(work)
+    engine = make_engine(settings.database_url)
+    migrate.upgrade(engine)
+    engine.dispose()
+    cat = open_catalog(settings)
+    cfg = SynthConfig()
+    ring = load_fence_geojson(work / "site" / "fence.geojson", cfg.origin)
+    with cat.transaction() as s:
+        add_site(s, make_site_spec("bench", cfg.crs, cfg.origin, [*ring, ring[0]]))
+    doc = json.loads((work / "site" / "truth" / "site.json").read_text())
+    t0 = time.perf_counter()
+    for e in doc["epochs"]:
+        pipeline.ingest(cat, settings, work / "site" / e["mission_dir"], "bench", workers=2)
+    cat.dispose()
+    return {"seconds": time.perf_counter() - t0}
+
+
+def stage_pair(work: Path, views: int, scale: float, min_valid: float | None) -> dict:
+    from siteline.catalog import open_catalog
+    from siteline.pairs import PairParams, process_pair
+
+    settings = _settings(work)
+    cat = open_catalog(settings)
+    first: dict[str, float] = {}
+    last: dict[str, float] = {}
+
+    def progress(task: str, n: int, total: int | None) -> None:
+        now = time.perf_counter()
+        first.setdefault(task, now)
+        last[task] = now
+
+    extra = {} if min_valid is None else {"min_valid": min_valid}
+    params = PairParams(scale=scale, views=views, **extra)
+    t0 = time.perf_counter()
+    out = process_pair(cat, settings, 1, params, progress=progress)
+    total = time.perf_counter() - t0
+    cat.dispose()
+    summary = json.loads((Path(out.root) / "summary.json").read_text())
+    recs = out.views
+    w, h = recs[0]["camera"]["width"], recs[0]["camera"]["height"]
+    px = w * scale * h * scale
+    covered = np.array([(r["coverage_a"] + r["coverage_b"]) * px for r in recs])
+    read = np.array([r["points_read"] for r in recs], dtype=float)
+    # stages in the order process_pair runs them: labels, views, renders
+    t_views = first.get("renders", t0 + total) - first.get("views", t0)
+    t_renders = last.get("renders", t0 + total) - first.get("renders", t0 + total)
+    return {
+        "seconds": total,
+        "labels_s": first.get("views", t0) - t0,
+        "views_s": t_views,
+        "renders_s": t_renders,
+        "views": len(recs),
+        "candidates": summary["candidates"],
+        "rejected": summary["rejected"],
+        "seconds_per_view": t_renders / max(len(recs), 1),
+        "points_read_per_covered_px": float(read.sum() / max(covered.sum(), 1.0)),
+        "coverage_median": float(np.median([min(r["coverage_a"], r["coverage_b"]) for r in recs])),
+        "valid_median": float(np.median([r["valid"] for r in recs])),
+        "valid_min": float(min(r["valid"] for r in recs)),
+        "ignore_fraction": float(1 - np.mean([r["valid"] for r in recs])),
+        "image_px": [round(w * scale), round(h * scale)],
+    }
+
+
+def child(stage: str, work: str, args: list[str]) -> None:
+    work_p = Path(work)
+    if stage == "synth":
+        res = stage_synth(work_p, float(args[0]))
+    elif stage == "ingest":
+        res = stage_ingest(work_p)
+    else:
+        res = stage_pair(work_p, int(args[0]), float(args[1]), None if args[2] == "-" else float(args[2]))
+    res["peak_mib"] = _peak_mib()
+    print("RESULT " + json.dumps(res))
+
+
+def _run(stage: str, work: Path, *args: str) -> dict:
+    proc = subprocess.run(
+        [sys.executable, __file__, "--child", stage, str(work), *args], capture_output=True, text=True
+    )
+    if proc.returncode:
+        sys.stderr.write(proc.stderr[-4000:])
+        raise SystemExit(f"stage {stage} failed")
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")][-1]
+    return json.loads(line[len("RESULT ") :])
+
+
+def run_density(root: Path, density: float, views: int, scale: float, min_valid: float | None) -> dict:
+    work = root / f"d{density:g}"
+    work.mkdir()
+    out = {"density_pts_m2": density}
+    out["synth"] = _run("synth", work, str(density))
+    out["ingest_tile"] = _run("ingest", work)
+    out["pair"] = _run("pair", work, str(views), str(scale), "-" if min_valid is None else str(min_valid))
+    return out
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--child":
+        child(sys.argv[2], sys.argv[3], sys.argv[4:])
+        return
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--density", type=float, default=1000.0, help="points/m2 of the dense run")
+    ap.add_argument("--ratio", type=float, default=4.0, help="the sparse run has density / ratio")
+    ap.add_argument("--views", type=int, default=300)
+    ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument(
+        "--min-valid", type=float, default=None, help="PairParams.min_valid (default: its default)"
+    )
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory(prefix="paper-scale-") as d:
+        runs = [
+            run_density(Path(d), args.density / args.ratio, args.views, args.scale, args.min_valid),
+            run_density(Path(d), args.density, args.views, args.scale, args.min_valid),
+        ]
+    lo, hi = runs
+    ratios = {
+        "points": sum(hi["synth"]["points"]) / sum(lo["synth"]["points"]),
+        "ingest_tile_s": hi["ingest_tile"]["seconds"] / lo["ingest_tile"]["seconds"],
+        **{
+            k: hi["pair"][k] / max(lo["pair"][k], 1e-9)
+            for k in ("seconds", "labels_s", "views_s", "renders_s", "peak_mib", "points_read_per_covered_px")
+        },
+    }
+    report = {"runs": runs, "ratios_dense_over_sparse": ratios}
+    for r in runs:
+        p = r["pair"]
+        print(
+            f"{r['density_pts_m2']:g} pts/m2 ({sum(r['synth']['points']):,} points): synth {r['synth']['seconds']:.0f} s "
+            f"({r['synth']['peak_mib']:.0f} MiB), ingest+tile {r['ingest_tile']['seconds']:.0f} s "
+            f"({r['ingest_tile']['peak_mib']:.0f} MiB), pair {p['seconds']:.0f} s ({p['peak_mib']:.0f} MiB): "
+            f"labels {p['labels_s']:.0f} s, views {p['views_s']:.0f} s ({p['candidates']} candidates), "
+            f"renders {p['renders_s']:.0f} s = {p['seconds_per_view']:.2f} s/view for {p['views']} views at "
+            f"{p['image_px'][0]}x{p['image_px'][1]}; {p['points_read_per_covered_px']:.2f} points read per "
+            f"covered pixel per scene; median coverage {p['coverage_median']:.2f}, median valid "
+            f"{p['valid_median']:.2f} (min {p['valid_min']:.2f}); rejected {p['rejected']}"
+        )
+    print("dense / sparse: " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios.items()))
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,77 @@
+"""View generation on a tiled scene reads what each probe needs (frustum-culled tiles at the probe's
+own level of detail), never the whole scene, and keeps what the whole-cloud probes kept."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from siteline.catalog.models import Scene, Site
+from siteline.catalog.scenes import scene_cameras
+from siteline.catalog.sites import site_spec
+from siteline.pairs.sources import TilePointSource
+from siteline.tiles import open_scene_tiles
+from siteline.tiles.reader import SceneTiles
+from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
+
+PARAMS = ViewParams(scale=0.25, views=12, min_coverage=0.3)
+SKIP = np.array([9, 10], np.uint8)
+
+
+def _inputs(cat):  # noqa: ANN001, ANN202
+    with cat.transaction() as s:
+        tiles = open_scene_tiles(s, s.get(Scene, 2))
+        cams = [NamedCamera(n, c) for n, c in scene_cameras(s, 2)[:8]]
+        site = site_spec(s.get(Site, 1))
+    g = tiles.points(resolution=0.5, attributes=("class",))
+    plane = fit_ground_plane(g["xyz"][g["class"] == site.taxonomy.id_of("ground")], seed=0)
+    return tiles, cams, site, plane
+
+
+class WholeCloud(TilePointSource):
+    """The previous source: every probe rendered the whole scene read once at 5 cm."""
+
+    def __init__(self, tiles: SceneTiles, skip: np.ndarray) -> None:
+        super().__init__(tiles, skip)
+        probe = tiles.points(resolution=0.05, attributes=("class",))
+        self._probe = probe["xyz"][~np.isin(probe["class"], skip)]
+
+    def points_for_view(self, camera, scale):  # noqa: ANN001, ANN201
+        return self._probe
+
+
+def test_probes_read_culled_tiles_only(scenes, monkeypatch) -> None:
+    _, cat = scenes
+    tiles, cams, site, plane = _inputs(cat)
+    source = TilePointSource(tiles, SKIP)
+
+    def whole_scene_read(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        raise AssertionError("view generation read the scene without a frustum")
+
+    monkeypatch.setattr(SceneTiles, "points", whole_scene_read)
+    view_set = generate_views(cams, plane, site.fence, source, PARAMS)
+    assert view_set.views and source.reads > len(cams)
+    # each probe read a fraction of the scene: the frustum's tiles at the probe's level of detail
+    assert source.points_read / source.reads < 0.5 * tiles.point_count
+
+
+def test_tiled_probes_keep_the_whole_cloud_views(scenes) -> None:
+    """The level of detail changes a probe's coverage by a few pixels: the same views pass, up to a
+    view whose coverage lies that close to ``min_coverage`` (none here)."""
+    _, cat = scenes
+    tiles, cams, site, plane = _inputs(cat)
+    new = generate_views(cams, plane, site.fence, TilePointSource(tiles, SKIP), PARAMS)
+    old = generate_views(cams, plane, site.fence, WholeCloud(tiles, SKIP), PARAMS)
+    assert [(v.parent, v.strategy) for v in new.views] == [(v.parent, v.strategy) for v in old.views]
+    cov_new = np.array([v.coverage for v in new.views])
+    cov_old = np.array([v.coverage for v in old.views])
+    assert np.abs(cov_new - cov_old).max() < 0.05
+
+
+@pytest.mark.parametrize("n", [1, 5, 40])
+def test_stratified_order_prefixes_are_the_samples(n) -> None:
+    from siteline.views.generate import SyntheticView, key_sorted, stratified_order, stratified_sample
+    views = [SyntheticView(f"img{i % 7}", f"s{i % 3}", {}, None) for i in range(30)]  # no geometry needed
+    order = stratified_order(views, seed=3)
+    assert len(order) == 30 and len({id(v) for v in order}) == 30
+    assert stratified_sample(views, n, seed=3) == key_sorted(order[:n], seed=3)
