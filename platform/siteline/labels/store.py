@@ -15,6 +15,7 @@ import numpy as np
 from siteline import stores
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
+from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
 
 SIDES = ("t1", "t2")
@@ -47,64 +48,136 @@ def auto_radius(
     return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}
 
 
-def _label_side(
-    src: SceneTiles, other: SceneTiles, radius_m: float, ignored: np.ndarray, out_root: str, side: str
-) -> tuple[dict[str, int], str, int]:
-    import zarr
+class _Decoded:
+    """One scene's tiles decoded once each (float32 site-local xyz and classes), with the edge strips a
+    neighbouring tile's halo takes from them; a tile is dropped once no tile left to label needs it."""
+
+    def __init__(self, tiles: SceneTiles, radius_m: float) -> None:
+        self.tiles = tiles
+        self.r = radius_m
+        self.size = tiles.spec.tile_size_m
+        self._cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]] = {}
+        self.keys = {parse_tile_key(t): t for t in tiles.by_tile}
+
+    def get(self, ij: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]] | None:
+        if ij not in self.keys:
+            return None
+        hit = self._cache.get(ij)
+        if hit is None:
+            tile = self.keys[ij]
+            data = self.tiles.read({tile: self.tiles.prefix(tile)}, ("class",))
+            xyz, cls = data["xyz"].astype(np.float32), data["class"]
+            x0, y0 = ij[0] * self.size, ij[1] * self.size
+            x, y = data["xyz"][:, 0], data["xyz"][:, 1]
+            strips = {
+                "w": np.flatnonzero(x <= x0 + self.r),
+                "e": np.flatnonzero(x >= x0 + self.size - self.r),
+                "s": np.flatnonzero(y <= y0 + self.r),
+                "n": np.flatnonzero(y >= y0 + self.size - self.r),
+            }
+            hit = self._cache[ij] = (xyz, cls, strips)
+        return hit
+
+    def halo(self, ij: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """This scene's points in the grid cell of tile ``ij`` widened by the radius: the tile itself
+        and, of each of its 8 neighbours, the strip within the radius of the shared edge or corner."""
+        parts_xyz, parts_cls = [], []
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                got = self.get((ij[0] + dx, ij[1] + dy))
+                if got is None:
+                    continue
+                xyz, cls, strips = got
+                if dx == 0 and dy == 0:
+                    idx = slice(None)
+                else:
+                    # the neighbour east of ij (dx 1) gives its west strip, and so on
+                    sel = [strips[{-1: "e", 1: "w"}[dx]]] if dx else []
+                    sel += [strips[{-1: "n", 1: "s"}[dy]]] if dy else []
+                    idx = sel[0] if len(sel) == 1 else np.intersect1d(sel[0], sel[1], assume_unique=True)
+                parts_xyz.append(xyz[idx])
+                parts_cls.append(cls[idx])
+        if not parts_xyz:
+            return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
+        return np.concatenate(parts_xyz), np.concatenate(parts_cls)
+
+    def release_before(self, column: int) -> None:
+        """Drop decoded tiles of columns left of ``column`` - 1 (no tile from ``column`` on needs them)."""
+        for ij in [ij for ij in self._cache if ij[0] < column - 1]:
+            del self._cache[ij]
+
+
+def _write_flags(group, tile: str, flags: np.ndarray, spec) -> None:  # noqa: ANN001
     from zarr.codecs import BloscCodec, BloscShuffle
 
-    group = zarr.open_group(out_root, mode="a").require_group(side).require_group("tiles")
-    counts = {"unchanged": 0, "changed": 0, "ignored": 0}
-    digest = hashlib.sha256()
-    n_total = 0
-    for tile in sorted(src.by_tile):
-        mine = src.read({tile: src.prefix(tile, None)}, ("class",))
-        lo = mine["xyz"].min(axis=0) - radius_m
-        hi = mine["xyz"].max(axis=0) + radius_m
-        theirs = other.points(bounds=(*lo, *hi), attributes=("class",))  # the tile plus a halo of r
-        flags = change_flags(mine["xyz"], mine["class"], theirs["xyz"], theirs["class"], radius_m, ignored)
-        arr = group.create_group(tile).create_array(
-            "change",
-            shape=flags.shape,
-            dtype="uint8",
-            chunks=(src.spec.chunk_points,),
-            shards=(src.spec.shard_points,),
-            compressors=BloscCodec(cname="zstd", clevel=3, shuffle=BloscShuffle.bitshuffle),
-            fill_value=IGNORED,
-        )
-        arr[...] = flags
-        digest.update(tile.encode())
-        digest.update(flags.tobytes())
-        counts["unchanged"] += int((flags == UNCHANGED).sum())
-        counts["changed"] += int((flags == CHANGED).sum())
-        counts["ignored"] += int((flags == IGNORED).sum())
-        n_total += len(flags)
-    return counts, digest.hexdigest(), n_total
+    arr = group.create_group(tile).create_array(
+        "change",
+        shape=flags.shape,
+        dtype="uint8",
+        chunks=(spec.chunk_points,),
+        shards=(spec.shard_points,),
+        compressors=BloscCodec(cname="zstd", clevel=3, shuffle=BloscShuffle.bitshuffle),
+        fill_value=IGNORED,
+    )
+    arr[...] = flags
+
+
+def _count(flags: np.ndarray, counts: dict[str, int]) -> None:
+    counts["unchanged"] += int((flags == UNCHANGED).sum())
+    counts["changed"] += int((flags == CHANGED).sum())
+    counts["ignored"] += int((flags == IGNORED).sum())
 
 
 def write_labels(
     t1: SceneTiles, t2: SceneTiles, radius_m: float, ignored: np.ndarray, out: Path
 ) -> LabelResult:
-    """Compute both directions tile by tile (each tile against the other scene's points within the
-    tile's bounds plus a halo of ``radius_m``) into the new Zarr group ``out`` (removed again on an
-    error; publish it through ``siteline.stores.Store.publish`` for all-or-nothing)."""
+    """Compute both directions in one pass over the site grid (each tile of each scene against the
+    other scene's points in the tile's grid cell widened by ``radius_m``) into the new Zarr group
+    ``out`` (removed again on an error; publish it through ``siteline.stores.Store.publish`` for
+    all-or-nothing). Each tile of each scene is read and decoded once; decoded tiles live until the
+    columns of tiles that need them for a halo are done (at most three columns per scene)."""
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
         raise LabelError(f"label store {out} already exists: remove it or write the labels elsewhere.")
+    if t1.spec.tile_size_m != t2.spec.tile_size_m:
+        raise LabelError("the two scenes are tiled on different grids: tile them again with one tile size.")
     out.parent.mkdir(parents=True, exist_ok=True)
     import zarr
 
     try:
         root = zarr.open_group(str(out), mode="w")
-        c1, h1, n1 = _label_side(t1, t2, radius_m, ignored, str(out), "t1")
-        c2, h2, n2 = _label_side(t2, t1, radius_m, ignored, str(out), "t2")
-        checksum = hashlib.sha256(f"{h1}:{h2}".encode()).hexdigest()
-        root.attrs.update({"radius_m": radius_m, "counts": {"t1": c1, "t2": c2}, "checksum": checksum})
+        sides = {"t1": (t1, _Decoded(t1, radius_m)), "t2": (t2, _Decoded(t2, radius_m))}
+        other = {"t1": "t2", "t2": "t1"}
+        groups = {side: root.require_group(side).require_group("tiles") for side in sides}
+        counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
+        digests: dict[str, dict[str, str]] = {side: {} for side in sides}
+        n_total = 0
+        grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
+        for ij in grid:
+            for dec in (sides["t1"][1], sides["t2"][1]):
+                dec.release_before(ij[0])
+            for side, (tiles, dec) in sides.items():
+                mine = dec.get(ij)
+                if mine is None:
+                    continue
+                their_xyz, their_cls = sides[other[side]][1].halo(ij)
+                flags = change_flags(mine[0], mine[1], their_xyz, their_cls, radius_m, ignored)
+                tile = dec.keys[ij]
+                _write_flags(groups[side], tile, flags, tiles.spec)
+                digests[side][tile] = hashlib.sha256(flags.tobytes()).hexdigest()
+                _count(flags, counts[side])
+                n_total += len(flags)
+        h = {
+            side: hashlib.sha256("".join(f"{t}:{d}" for t, d in sorted(dg.items())).encode()).hexdigest()
+            for side, dg in digests.items()
+        }
+        checksum = hashlib.sha256(f"{h['t1']}:{h['t2']}".encode()).hexdigest()
+        root.attrs.update({"radius_m": radius_m, "counts": counts, "checksum": checksum})
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
-    return LabelResult(str(out), radius_m, {"t1": c1, "t2": c2}, checksum, time.perf_counter() - t0, n1 + n2)
+    return LabelResult(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)
 
 
 def attach_labels(tiles: SceneTiles, label_uri: str, side: str) -> SceneTiles:
