@@ -71,7 +71,9 @@ def test_tiled_probes_keep_the_whole_cloud_views(scenes) -> None:
 @pytest.mark.parametrize("n", [1, 5, 40])
 def test_stratified_order_prefixes_are_the_samples(n) -> None:
     from siteline.views.generate import SyntheticView, key_sorted, stratified_order, stratified_sample
+
     views = [SyntheticView(f"img{i % 7}", f"s{i % 3}", {}, None) for i in range(30)]  # no geometry needed
     order = stratified_order(views, seed=3)
     assert len(order) == 30 and len({id(v) for v in order}) == 30
     assert stratified_sample(views, n, seed=3) == key_sorted(order[:n], seed=3)
+
