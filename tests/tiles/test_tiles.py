@@ -82,19 +82,34 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
             np.int64
         )
         zmin = counts[:, 2].min()
-        starts = {n.level: n.start for n in nodes}
-        for n in nodes:
-            if n.level == level_count(spec) - 1:
+        levels = sorted({n.level for n in nodes})
+        ends = {lv: max(n.start + n.count for n in nodes if n.level == lv) for lv in levels}
+        for lv in levels:
+            # levels 0..lv are a prefix of the tile's arrays
+            assert ends[lv] == sum(m.count for m in nodes if m.level <= lv)
+            if lv == level_count(spec) - 1:
                 continue
-            cell = int(round(spec.spacing(n.level) / spec.quantum_m))
+            cell = int(round(spec.spacing(lv) / spec.quantum_m))
 
             def key(c: np.ndarray, cell: int = cell, zmin: int = zmin) -> set:
                 return set(map(tuple, np.c_[c[:, 0] // cell, c[:, 1] // cell, (c[:, 2] - zmin) // cell]))
 
             # every cube of this level's spacing that holds a point holds one of levels <= this one
-            upto = n.start + n.count
-            assert key(counts[:upto]) == key(counts)
-            assert starts[n.level] == sum(m.count for m in nodes if m.level < n.level)
+            assert key(counts[: ends[lv]]) == key(counts)
+        # octree nodes: contiguous, disjoint ranges covering the tile, each inside its cube
+        ranges = sorted((n.start, n.start + n.count) for n in nodes)
+        assert ranges[0][0] == 0 and ranges[-1][1] == len(counts)
+        assert all(a[1] == b[0] for a, b in zip(ranges, ranges[1:], strict=False))
+        n_tile = int(round(spec.tile_size_m / spec.quantum_m))
+        for n in nodes:
+            edge = n_tile >> min(n.level, spec.max_node_depth)
+            c = counts[n.start : n.start + n.count]
+            cube = np.c_[np.clip(c[:, :2] // edge, 0, n_tile // edge - 1), c[:, 2] // edge]
+            assert n.cell is not None and (cube == np.array(n.cell)).all()
+            lo, hi = np.array(n.bounds_min), np.array(n.bounds_max)
+            xyz = data["xyz"][n.start : n.start + n.count]
+            assert (xyz >= lo - 1e-9).all() and (xyz <= hi + 1e-9).all()
+    assert max(len(ns) for ns in tiles.by_tile.values()) > level_count(spec)  # levels split into cubes
 
 
 def test_frustum_read_equals_brute_force(tmp_path) -> None:
@@ -111,6 +126,12 @@ def test_frustum_read_equals_brute_force(tmp_path) -> None:
     assert tiles.last_stats.points_read < 30_000  # culled tiles were not read
     auto = tiles.points_for_view(cam, 0.125, attributes=("gps_time",))
     assert len(auto["xyz"]) < len(got["xyz"])
+    assert set(auto["gps_time"].astype(int)) <= set(brute)  # a coarser read is a subset
+    # per node: near nodes deeper than far ones, so the read is finer than one level for every tile
+    chosen, _ = tiles.levels_for_view(cam, 0.125)
+    lv = np.concatenate([tiles.node_arrays[t][2][sel] for t, sel in chosen.items()])
+    capped = tiles.points_for_view(cam, 0.125, attributes=("gps_time",), level=int(lv.max()))
+    assert len(auto["xyz"]) < len(capped["xyz"])
 
 
 def test_points_by_bounds_and_resolution(tmp_path) -> None:

@@ -156,7 +156,8 @@ class LabelSet(Base):
 
 
 class Node(Base):
-    """One level-of-detail node of a scene's tile store; bounds in site-local metres."""
+    """One level-of-detail node of a scene's tile store (a level of one octree cube of a tile, one
+    contiguous range of the tile's arrays); bounds in site-local metres."""
 
     __tablename__ = "node"
     __table_args__ = (
@@ -179,6 +180,10 @@ class Node(Base):
     point_count: Mapped[int] = mapped_column(sa.BigInteger)
     start: Mapped[int] = mapped_column(sa.BigInteger)
     spacing_m: Mapped[float] = mapped_column(Float64)
+    # the node's octree cube in the tile (NULL: a whole-tile level, a store written before octree nodes)
+    cell_x: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
+    cell_y: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
+    cell_z: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
 
 
 class Pair(Base):

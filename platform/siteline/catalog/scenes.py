@@ -185,7 +185,7 @@ def node_rows(session: Session, scene_id: int) -> list:
     """The node rows of scene ``scene_id`` by tile and level."""
     return list(
         session.execute(
-            sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.level)
+            sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.start)
         ).scalars()
     )
 
@@ -196,28 +196,24 @@ def clear_nodes(session: Session, scene_id: int) -> None:
 
 
 def replace_nodes(session: Session, scene_id: int, nodes: list[dict]) -> None:
-    """Replace scene ``scene_id``'s node rows. Each node: key, tile, level, bounds_min and bounds_max
-    ((3,) site-local metres), count (points), start (offset in the tile's arrays), spacing_m."""
+    """Replace scene ``scene_id``'s node rows (one bulk insert). Each node: key, tile, level,
+    bounds_min and bounds_max ((3,) site-local metres), count (points), start (offset in the tile's
+    arrays), spacing_m, and cell (the octree cube (x, y, z), or None)."""
     clear_nodes(session, scene_id)
+    rows = []
     for n in nodes:
         (x0, y0, z0), (x1, y1, z1) = n["bounds_min"], n["bounds_max"]
-        session.add(
-            Node(
-                scene_id=scene_id,
-                key=n["key"],
-                tile=n["tile"],
-                level=n["level"],
-                min_x=x0,
-                min_y=y0,
-                min_z=z0,
-                max_x=x1,
-                max_y=y1,
-                max_z=z1,
-                point_count=n["count"],
-                start=n["start"],
-                spacing_m=n["spacing_m"],
-            )  # fmt: skip
-        )
+        cell = n.get("cell") or (None, None, None)
+        rows.append(
+            {
+                "scene_id": scene_id, "key": n["key"], "tile": n["tile"], "level": n["level"],
+                "min_x": x0, "min_y": y0, "min_z": z0, "max_x": x1, "max_y": y1, "max_z": z1,
+                "point_count": n["count"], "start": n["start"], "spacing_m": n["spacing_m"],
+                "cell_x": cell[0], "cell_y": cell[1], "cell_z": cell[2],
+            }
+        )  # fmt: skip
+    if rows:
+        session.execute(sa.insert(Node), rows)
 
 
 def scene_ids_of_pairs(session: Session, pair_ids: list[int]) -> list[int]:

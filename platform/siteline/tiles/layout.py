@@ -3,7 +3,10 @@
 Tile (i, j) covers site-local x in [i T, (i + 1) T) and y in [j T, (j + 1) T), T = the site's tile
 size, so the same tile covers the same ground in every scene. Inside a tile, level L keeps one point
 per occupied cube of edge ``root_spacing_m / 2**L`` among the points no earlier level kept (an
-additive level of detail); the tile's arrays are sorted by level, so levels 0..L are a prefix.
+additive level of detail). A node is the points of one level inside one cube of the tile's octree at
+depth d = min(L, ``max_node_depth``) (edge T / 2**d, from the tile origin; COPC/EPT-like): the tile's
+arrays are sorted by (level, cube), so every node is one contiguous range and levels 0..L are still
+a prefix.
 Coordinates are int32 counts of ``quantum_m`` relative to the tile's float64 origin (the site origin
 plus (i T, j T, 0)).
 """
@@ -39,7 +42,9 @@ class TileSpec:
     level 0 (default: the largest power-of-two number of quanta within tile / 8, 4.096 m for 50 m
     tiles, so every level's cube is a whole number of quanta and nests in the level above).
     min_spacing_m: the last level takes every remaining point once the
-    spacing would fall below this. chunk_points / shard_points: Zarr inner chunk and shard length.
+    spacing would fall below this. max_node_depth: the deepest octree depth that splits a level into
+    nodes (3: cubes of T / 8, 6.25 m for 50 m tiles; deeper levels share that grid), so a view reads
+    fine levels only where it needs them. chunk_points / shard_points: Zarr inner chunk and shard length.
     clevel: blosc-zstd level.
     """
 
@@ -48,6 +53,7 @@ class TileSpec:
     root_spacing_m: float | None = None
     min_spacing_m: float = 0.02
     max_levels: int = 12
+    max_node_depth: int = 3
     chunk_points: int = 65_536
     shard_points: int = 1_048_576
     clevel: int = 3
@@ -59,6 +65,8 @@ class TileSpec:
             raise TileError(
                 f"tile size {self.tile_size_m} m at quantum {self.quantum_m} m overflows int32 counts."
             )
+        if not 0 <= self.max_node_depth <= 10:
+            raise TileError(f"max_node_depth {self.max_node_depth} must lie in 0..10.")
         if self.shard_points % self.chunk_points:
             raise TileError("shard_points must be a multiple of chunk_points.")
 
@@ -93,8 +101,22 @@ def parse_tile_key(key: str) -> tuple[int, int]:
     return int(i), int(j)
 
 
-def node_key(tile: str, level: int) -> str:
-    return f"{tile}/{level}"
+def node_key(tile: str, level: int, cell: tuple[int, int, int] | None = None) -> str:
+    """``t<i>_<j>/<level>/<x>_<y>_<z>`` (the octree cube); ``t<i>_<j>/<level>`` for a whole-tile level
+    (stores written before octree nodes)."""
+    return f"{tile}/{level}" if cell is None else f"{tile}/{level}/{cell[0]}_{cell[1]}_{cell[2]}"
+
+
+def node_cells(counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
+    """(N, 3) int64 octree cube of each point's node: its position in int32 counts relative to the
+    tile origin, floored by the cube edge at depth min(level, max_node_depth); x and y clamped into
+    the tile (a point rounded onto the far edge stays in the last cube)."""
+    n_tile = int(round(spec.tile_size_m / spec.quantum_m))
+    depth = np.minimum(levels.astype(np.int64), spec.max_node_depth)
+    edge = np.maximum(n_tile >> depth, 1)[:, None]
+    cells = np.floor_divide(counts.astype(np.int64), edge)
+    cells[:, :2] = np.clip(cells[:, :2], 0, (1 << depth)[:, None] - 1)
+    return cells
 
 
 def tile_origin_local(i: int, j: int, tile_size_m: float) -> np.ndarray:

@@ -13,7 +13,7 @@ from siteline import stores
 from siteline.cameras import Camera
 from siteline.errors import TileError
 from siteline.tiles.layout import ATTRIBUTES, TileSpec, dequantise, parse_tile_key, tile_origin_local
-from siteline.tiles.writer import NodeInfo
+from siteline.tiles.writer import NodeInfo, node_from_dict
 
 DEFAULT_ATTRIBUTES = ("rgb", "class")
 
@@ -52,6 +52,17 @@ def box_in_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
     return bool((vals >= 0).any(axis=0).all())
 
 
+def boxes_in_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M,) bool, vectorised :func:`box_in_frustum` over M boxes (M, 3) lo and hi."""
+    corners = np.stack(
+        [np.stack([lo[:, 0] if a == 0 else hi[:, 0], lo[:, 1] if b == 0 else hi[:, 1], lo[:, 2] if c == 0 else hi[:, 2]], axis=1)
+         for a in (0, 1) for b in (0, 1) for c in (0, 1)],
+        axis=1,
+    )  # (M, 8, 3)  # fmt: skip
+    vals = corners @ planes[:, :3].T + planes[:, 3]  # (M, 8, 6)
+    return (vals >= 0).any(axis=1).all(axis=1)
+
+
 def box_distance(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     """Distance (m) from a point to an axis-aligned box (0 inside)."""
     d = np.maximum(np.maximum(lo - point, 0.0), point - hi)
@@ -80,9 +91,20 @@ class SceneTiles:
         for n in self.nodes:
             self.by_tile[n.tile].append(n)
         for v in self.by_tile.values():
-            v.sort(key=lambda n: n.level)
+            v.sort(key=lambda n: n.start)
         self.tile_bounds = {
             t: (np.min([n.bounds_min for n in ns], axis=0), np.max([n.bounds_max for n in ns], axis=0))
+            for t, ns in self.by_tile.items()
+        }
+        # per tile, its nodes as arrays (in array order): bounds, level, start, count
+        self.node_arrays = {
+            t: (
+                np.array([n.bounds_min for n in ns], dtype=np.float64),
+                np.array([n.bounds_max for n in ns], dtype=np.float64),
+                np.array([n.level for n in ns], dtype=np.int64),
+                np.array([n.start for n in ns], dtype=np.int64),
+                np.array([n.count for n in ns], dtype=np.int64),
+            )
             for t, ns in self.by_tile.items()
         }
         self.last_stats = ReadStats()
@@ -136,10 +158,7 @@ class SceneTiles:
         attrs = dict(_open(str(uri), "tile store", "tile the scene again").attrs)
         if "nodes" not in attrs:
             raise TileError(f"{uri} is not a siteline tile store.")
-        nodes = [
-            NodeInfo(**{**n, "bounds_min": tuple(n["bounds_min"]), "bounds_max": tuple(n["bounds_max"])})
-            for n in attrs["nodes"]
-        ]
+        nodes = [node_from_dict(n) for n in attrs["nodes"]]
         return cls(uri, nodes, TileSpec.from_dict(attrs["spec"]))
 
     @property
@@ -220,6 +239,70 @@ class SceneTiles:
         self.last_stats.points_returned = len(out["xyz"])
         return out
 
+    def levels_for_view(self, camera: Camera, scale: float, lod_factor: float = 1.0, near_m: float = 1e-3):  # noqa: ANN201
+        """Per tile met by the frustum of ``camera`` at ``scale``: the indices (into ``node_arrays``) of
+        its nodes in the frustum whose level is at most the coarsest level with spacing within
+        ``lod_factor`` pixel footprints at that node's nearest distance."""
+        cam = camera.scaled(scale)
+        planes = cam.frustum_planes(near_m)
+        centre = cam.center
+        f = min(cam.fx, cam.fy)
+        out = {}
+        for tile, (tlo, thi) in self.tile_bounds.items():
+            if not box_in_frustum(planes, tlo, thi):
+                continue
+            lo, hi, level, _, _ = self.node_arrays[tile]
+            inside = boxes_in_frustum(planes, lo, hi)
+            dist = np.linalg.norm(np.maximum(np.maximum(lo - centre, 0.0), centre - hi), axis=1)
+            allowed = self.levels_for_resolutions(lod_factor * np.maximum(dist, near_m) / f)
+            sel = np.flatnonzero(inside & (level <= allowed))
+            if len(sel):
+                out[tile] = sel
+        return out, planes
+
+    def levels_for_resolutions(self, resolution_m: np.ndarray) -> np.ndarray:
+        """Vectorised :meth:`level_for_resolution`."""
+        levels = np.array(sorted({n.level for n in self.nodes}), dtype=np.int64)
+        spacing = np.array([self.spec.spacing(int(v)) for v in levels])
+        k = np.searchsorted(-spacing, -np.asarray(resolution_m, dtype=np.float64), side="left")
+        return levels[np.minimum(k, len(levels) - 1)]
+
+    def read_nodes(
+        self, selection: dict[str, np.ndarray], attributes: Sequence[str]
+    ) -> dict[str, np.ndarray]:
+        """Read the nodes ``selection[tile]`` (indices into ``node_arrays[tile]``) of each tile: the
+        tile's arrays are read up to the last selected node (cached), then the nodes' ranges taken."""
+        bad = [a for a in attributes if (a not in ATTRIBUTES or a == "xyz") and a not in self.extra]
+        if bad:
+            raise TileError(f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != 'xyz']}.")
+        parts: dict[str, list[np.ndarray]] = {a: [] for a in ("xyz", *attributes)}
+        stats = ReadStats()
+        for tile in sorted(selection):
+            sel = selection[tile]
+            _, _, _, start, count = self.node_arrays[tile]
+            starts, counts = start[sel], count[sel]
+            k = int((starts + counts).max())
+            idx = np.repeat(starts - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(int(counts.sum()))
+            i, j = parse_tile_key(tile)
+            raw = self._array(tile, "xyz", k)[idx]
+            parts["xyz"].append(
+                dequantise(raw, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m)
+            )
+            for a in attributes:
+                parts[a].append(self._array(tile, a, k)[idx])
+            stats.tiles_read += 1
+            stats.points_read += len(idx)
+        out = {}
+        for a, chunks in parts.items():
+            if chunks:
+                out[a] = np.concatenate(chunks)
+            else:
+                shape = (0, 3) if a in ("xyz", "rgb") else (0,)
+                dtype = np.float64 if a == "xyz" else self._handle(next(iter(self.by_tile)), a).dtype
+                out[a] = np.zeros(shape, dtype=dtype)
+        self.last_stats = stats
+        return out
+
     def points_for_view(
         self,
         camera: Camera,
@@ -229,33 +312,31 @@ class SceneTiles:
         near_m: float = 1e-3,
         lod_factor: float = 1.0,
     ) -> dict[str, np.ndarray]:
-        """Points a render of ``camera`` at ``scale`` needs: tiles culled by the frustum, and per tile
-        the coarsest level whose spacing is within ``lod_factor`` pixel footprints at the tile's
-        nearest distance (``level="auto"``; an int caps every tile at that level; None reads all
-        levels). lod_factor 1 reads ~1-4 points per pixel of a surface; larger reads fewer, at some
-        coverage cost (bench/tiles.py measures it).
-        Points outside the frustum are dropped (float64 test), so at full level the result is exactly
-        the brute-force frustum selection."""
-        cam = camera.scaled(scale)
-        planes = cam.frustum_planes(near_m)
-        centre = cam.center
-        f = min(cam.fx, cam.fy)
-        prefixes, chosen = {}, {}
-        for tile, (lo, hi) in self.tile_bounds.items():
-            if not box_in_frustum(planes, lo, hi):
-                continue
-            if level == "auto":
-                footprint = max(box_distance(centre, lo, hi), near_m) / f
-                lv = self.level_for_resolution(lod_factor * footprint)
-            else:
-                lv = level
-            prefixes[tile] = self.prefix(tile, lv)
-            chosen[tile] = -1 if lv is None else int(lv)
-        out = self.read(prefixes, attributes)
+        """Points a render of ``camera`` at ``scale`` needs: nodes culled by the frustum, and per node
+        the levels whose spacing is within ``lod_factor`` pixel footprints at the node's nearest
+        distance (``level="auto"``; an int caps every node at that level; None reads all levels).
+        lod_factor 1 reads ~1-4 points per pixel of a surface; larger reads fewer, at some coverage
+        cost (bench/tiles.py measures it). Points outside the frustum are dropped (float64 test), so at
+        full level the result is exactly the brute-force frustum selection."""
+        if level == "auto":
+            selection, planes = self.levels_for_view(camera, scale, lod_factor, near_m)
+        else:
+            cam = camera.scaled(scale)
+            planes = cam.frustum_planes(near_m)
+            selection = {}
+            for tile, (tlo, thi) in self.tile_bounds.items():
+                if not box_in_frustum(planes, tlo, thi):
+                    continue
+                lo, hi, lv, _, _ = self.node_arrays[tile]
+                keep = boxes_in_frustum(planes, lo, hi) & (True if level is None else lv <= level)
+                sel = np.flatnonzero(keep)
+                if len(sel):
+                    selection[tile] = sel
+        out = self.read_nodes(selection, attributes)
         xyz = out["xyz"]
         keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
         out = {k: v[keep] for k, v in out.items()}
         out["xyz"] = out["xyz"].astype(np.float32)
         self.last_stats.points_returned = len(out["xyz"])
-        self.last_stats.levels = chosen
+        self.last_stats.levels = {t: int(self.node_arrays[t][2][sel].max()) for t, sel in selection.items()}
         return out

@@ -99,6 +99,7 @@ def tile_scene(
                         "count": n.count,
                         "start": n.start,
                         "spacing_m": n.spacing_m,
+                        "cell": n.cell,
                     }
                     for n in result.nodes
                 ],  # fmt: skip
@@ -141,6 +142,7 @@ def scene_nodes(session: Session, scene_id: int) -> list[NodeInfo]:
             r.point_count,
             r.start,
             r.spacing_m,
+            None if r.cell_x is None else (r.cell_x, r.cell_y, r.cell_z),
         )
         for r in rows
     ]

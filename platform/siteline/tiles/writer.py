@@ -33,7 +33,7 @@ from siteline.tiles.layout import (
     SPILL_DTYPE,
     TileSpec,
     dequantise,
-    level_count,
+    node_cells,
     node_key,
     parse_tile_key,
     quantise,
@@ -49,8 +49,10 @@ PARALLEL_MIN_POINTS = 2_000_000
 
 @dataclass(frozen=True)
 class NodeInfo:
-    """One node: a level of a tile. Bounds in site-local metres; ``start``/``count`` index the tile's
-    arrays; ``spacing_m`` is the level's cube edge."""
+    """One node: the points of one level in one octree cube of a tile (siteline.tiles.layout). Bounds
+    (of its points) in site-local metres; ``start``/``count`` index the tile's arrays; ``spacing_m``
+    is the level's cube edge; ``cell``: the octree cube (None: the whole tile, stores written before
+    octree nodes)."""
 
     key: str
     tile: str
@@ -60,6 +62,7 @@ class NodeInfo:
     count: int
     start: int
     spacing_m: float
+    cell: tuple[int, int, int] | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -91,6 +94,19 @@ class TileResult:
             "checksum": self.checksum,
             "seconds": self.seconds,
         }
+
+
+def node_from_dict(doc: dict) -> NodeInfo:
+    """A NodeInfo from its JSON form (store attributes, worker results)."""
+    cell = doc.get("cell")
+    return NodeInfo(
+        **{
+            **doc,
+            "bounds_min": tuple(doc["bounds_min"]),
+            "bounds_max": tuple(doc["bounds_max"]),
+            "cell": tuple(cell) if cell is not None else None,
+        }
+    )
 
 
 def _codec(spec: TileSpec):  # noqa: ANN202
@@ -147,8 +163,9 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
     spec = TileSpec.from_dict(spec_doc)
     rec = np.fromfile(spill_path, dtype=SPILL_DTYPE)
     levels = assign_levels(rec["xyz"], spec, _tile_seed(key, seed))
-    order = np.argsort(levels, kind="stable")
-    rec, levels = rec[order], levels[order]
+    cells = node_cells(rec["xyz"], levels, spec)
+    order = np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0], levels))
+    rec, levels, cells = rec[order], levels[order], cells[order]
     n = len(rec)
     group = zarr.open_group(group_path, mode="a").require_group("tiles").create_group(key)
     digest = hashlib.sha256()
@@ -172,23 +189,28 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
         digest.update(values.tobytes())
     i, j = parse_tile_key(key)
     origin = tile_origin_local(i, j, spec.tile_size_m)
+    local = dequantise(rec["xyz"], origin, spec.quantum_m)
+    new = np.ones(n, dtype=bool)
+    if n > 1:
+        new[1:] = (levels[1:] != levels[:-1]) | np.any(cells[1:] != cells[:-1], axis=1)
+    starts = np.flatnonzero(new)
+    ends = np.r_[starts[1:], n]
+    lo = np.minimum.reduceat(local, starts, axis=0)
+    hi = np.maximum.reduceat(local, starts, axis=0)
     nodes = []
-    bounds = np.searchsorted(levels, np.arange(level_count(spec) + 1))
-    for level in range(level_count(spec)):
-        s, e = int(bounds[level]), int(bounds[level + 1])
-        if e <= s:
-            continue
-        local = dequantise(rec["xyz"][s:e], origin, spec.quantum_m)
+    for k, (s, e) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
+        level, cell = int(levels[s]), tuple(int(c) for c in cells[s])
         nodes.append(
             NodeInfo(
-                node_key(key, level),
+                node_key(key, level, cell),
                 key,
                 level,
-                tuple(local.min(axis=0).tolist()),
-                tuple(local.max(axis=0).tolist()),
+                tuple(lo[k].tolist()),
+                tuple(hi[k].tolist()),
                 e - s,
                 s,
                 spec.spacing(level),
+                cell,
             ).to_dict()
         )
     os.unlink(spill_path)
@@ -254,11 +276,7 @@ def write_tiles(
                 results.append(write_tile(*a))
                 if progress:
                     progress("writing tiles", 1, len(keys))
-        nodes = [
-            NodeInfo(**{**n, "bounds_min": tuple(n["bounds_min"]), "bounds_max": tuple(n["bounds_max"])})
-            for r in results
-            for n in r["nodes"]
-        ]
+        nodes = [node_from_dict(n) for r in results for n in r["nodes"]]
         checksum = hashlib.sha256(
             "\n".join(f"{r['key']}:{r['checksum']}" for r in sorted(results, key=lambda r: r["key"])).encode()
         ).hexdigest()
