@@ -284,3 +284,34 @@ def test_two_processes_tile_two_scenes_at_once(tmp_path, synth_dir) -> None:
             assert total == scene.point_count
             assert SceneTiles.open(scene.tile_store_uri).point_count == scene.point_count
     cat.dispose()
+
+
+def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
+    """A store written before octree nodes indexes one node per tile level (no cube): every read still
+    works, with per-tile culling."""
+    from siteline.tiles.reader import SceneTiles
+    from siteline.tiles.writer import NodeInfo
+
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    geo = _cloud(tmp_path / "c.las", origin, n=20_000)
+    _, _, tiles = _tile(tmp_path, tmp_path / "c.las", origin)
+    merged = []
+    for tile, nodes in tiles.by_tile.items():
+        for lv in sorted({n.level for n in nodes}):
+            ns = [n for n in nodes if n.level == lv]
+            merged.append(
+                NodeInfo(
+                    f"{tile}/{lv}", tile, lv,
+                    tuple(np.min([n.bounds_min for n in ns], axis=0)), tuple(np.max([n.bounds_max for n in ns], axis=0)),
+                    sum(n.count for n in ns), min(n.start for n in ns), ns[0].spacing_m,
+                )
+            )  # fmt: skip
+    old = SceneTiles(tiles.uri, merged, tiles.spec)
+    cam = Camera.look_at((-40, -50, 30), (5, 5, 0), 320, 240, fx=200.0)
+    local = geo - np.asarray(origin)
+    planes = cam.scaled(0.5).frustum_planes(1e-3)
+    brute = np.flatnonzero(np.all(local @ planes[:, :3].T + planes[:, 3] >= 0, axis=1))
+    got = old.points_for_view(cam, 0.5, attributes=("gps_time",), level=None)
+    assert set(got["gps_time"].astype(int)) == set(brute)
+    auto = old.points_for_view(cam, 0.125, attributes=("gps_time",))
+    assert 0 < len(auto["xyz"]) and set(auto["gps_time"].astype(int)) <= set(brute)
