@@ -215,3 +215,30 @@ def test_unknown_version_is_named(scenes) -> None:
     _, cat = scenes
     with cat.transaction() as s, pytest.raises(LabelSetError, match=r"no label-set version 99 \(it has 1"):
         label_set(s, 1, 99)
+
+
+def test_a_label_set_of_another_tiling_is_refused(scenes, tmp_path) -> None:
+    """A label-set store follows the order of the tile arrays it was written for; after a re-tile it
+    is refused, naming the file to import again, instead of read misaligned."""
+    from siteline.catalog.models import Scene
+    from siteline.labelsets import open_labelled_tiles
+
+    settings, cat = scenes
+    las = export(cat, 2, tmp_path / "s2.las")
+    cls = np.asarray(las.classification).copy()
+    cls[np.flatnonzero((cls != 255) & (cls != 8))[:5]] = 8
+    las.classification = cls
+    las.write(tmp_path / "s2_fixed.las")
+    res = import_labels(cat, settings, 2, tmp_path / "s2_fixed.las")
+    with cat.transaction() as s:
+        scene = s.get(Scene, 2)
+        saved = scene.statistics
+        scene.statistics = {**saved, "tiles": {**saved["tiles"], "checksum": "another tiling"}}
+    try:
+        with cat.transaction() as s, pytest.raises(LabelSetError, match=r"another tiling.*s2_fixed\.las"):
+            open_labelled_tiles(s, s.get(Scene, 2), res.version)
+        with cat.transaction() as s:
+            open_labelled_tiles(s, s.get(Scene, 2), 1)  # version 1 is the tile store's own classes
+    finally:
+        with cat.transaction() as s:
+            s.get(Scene, 2).statistics = saved

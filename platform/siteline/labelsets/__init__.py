@@ -2,12 +2,11 @@
 new version, and comparing versions (DESIGN.md §1: a correction is a new version, never an overwrite)."""
 
 from siteline.labelsets.imports import DEFAULT_MAX_UNMATCHED, ImportResult, import_labels, read_taxonomy_map
-from siteline.labelsets.store import attach_label_set, labelset_uri, open_labelled_tiles
+from siteline.labelsets.store import labelset_uri, open_labelled_tiles
 
 __all__ = [
     "DEFAULT_MAX_UNMATCHED",
     "ImportResult",
-    "attach_label_set",
     "import_labels",
     "labelset_uri",
     "open_labelled_tiles",

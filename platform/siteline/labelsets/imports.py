@@ -33,7 +33,7 @@ from siteline.errors import LabelSetError, SchemaError
 from siteline.hashing import sha256_file
 from siteline.labelsets.compare import changes_by_class, histogram, pair_counts
 from siteline.labelsets.match import match_points, point_keys
-from siteline.labelsets.store import labelset_uri, open_labelled_tiles, write_tile_classes
+from siteline.labelsets.store import labelset_uri, open_labelled_tiles, tile_checksum, write_tile_classes
 from siteline.lasio import open_las, read_labels_vlr
 from siteline.progress import Progress
 from siteline.site import SiteSpec
@@ -204,6 +204,7 @@ def import_labels(
         site = site_spec(s.get(Site, scene.site_id))
         tiles, parent = open_labelled_tiles(s, scene)
         version = max(r.version for r in label_sets(s, scene_id)) + 1
+        tiling = tile_checksum(scene)
     try:
         lut = site.taxonomy.id_lut(taxonomy_map)
     except SchemaError as exc:
@@ -241,7 +242,13 @@ def import_labels(
             import zarr
 
             zarr.open_group(str(work), mode="a").attrs.update(
-                {"siteline_labelset": 1, "scene": scene_id, "version": version, "parent_version": parent}
+                {
+                    "siteline_labelset": 1,
+                    "scene": scene_id,
+                    "version": version,
+                    "parent_version": parent,
+                    "tile_checksum": tiling,
+                }
             )
     finally:
         shutil.rmtree(spill_dir, ignore_errors=True)

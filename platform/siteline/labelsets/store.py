@@ -14,6 +14,7 @@ from sqlalchemy.orm import Session
 from siteline.catalog.labelsets import label_set
 from siteline.catalog.models import Scene
 from siteline.config import Settings
+from siteline.errors import LabelSetError
 from siteline.tiles import open_scene_tiles
 from siteline.tiles.layout import TileSpec
 from siteline.tiles.reader import SceneTiles
@@ -25,19 +26,27 @@ def labelset_uri(settings: Settings, scene_id: int, version: int) -> str:
     return settings.store.uri("labelsets", f"scene-{scene_id}", f"v{version}.zarr")
 
 
-def attach_label_set(tiles: SceneTiles, uri: str | None) -> SceneTiles:
-    """Let ``tiles`` read ``class`` from the label-set store at ``uri`` (None: the tile store's own)."""
-    if uri is not None:
-        tiles.attach("class", uri)
-    return tiles
+def tile_checksum(scene: Scene) -> str | None:
+    """The checksum of the scene's tile store (its arrays' order is what a label-set store follows)."""
+    return ((scene.statistics or {}).get("tiles") or {}).get("checksum")
 
 
 def open_labelled_tiles(session: Session, scene: Scene, version: int | None = None) -> tuple[SceneTiles, int]:
     """The scene's tiles reading the classes of label-set ``version`` (None: the newest), and that
-    version."""
+    version. LabelSetError when that version was written for another tiling of the scene (the scene
+    was tiled again since: its points are in another order)."""
     row = label_set(session, scene.id, version)
     tiles = open_scene_tiles(session, scene)
-    return attach_label_set(tiles, row.uri), row.version
+    if row.uri is not None:
+        tiles.attach("class", row.uri)
+        made_for = tiles.extra["class"].attrs.get("tile_checksum")
+        if made_for is not None and made_for != tile_checksum(scene):
+            raise LabelSetError(
+                f"label set {row.version} of scene {scene.id} was written for another tiling of the scene "
+                f"(the scene was tiled again since): import its file again ({row.source}, sha256 "
+                f"{row.source_sha256})."
+            )
+    return tiles, row.version
 
 
 def tile_classes(tiles: SceneTiles, tile: str) -> np.ndarray:
