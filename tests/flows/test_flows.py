@@ -106,17 +106,10 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     from siteline.cli.labels import imported_event
     from siteline.cli.watch import post_events
     from siteline.labelsets import import_labels
-    from siteline.tiles import export_las
+    from siteline.labelsets.export import export_label_set
 
     cat = open_catalog(settings)
-    from siteline.catalog.models import Scene, Site
-    from siteline.catalog.sites import site_spec
-    from siteline.labelsets import open_labelled_tiles
-
-    with cat.transaction() as s:
-        tiles, _ = open_labelled_tiles(s, s.get(Scene, 1))
-        spec = site_spec(s.get(Site, 1))
-    export_las(tiles, spec, tmp_path / "s1.las")
+    export_label_set(cat, 1, tmp_path / "s1.las")
     import laspy
     import numpy as np
 

@@ -8,26 +8,12 @@ import laspy
 import numpy as np
 
 from siteline.catalog.labelsets import label_sets
-from siteline.catalog.models import Site
-from siteline.catalog.scenes import get_scene
-from siteline.catalog.sites import site_spec
-from siteline.labelsets import open_labelled_tiles
-from siteline.tiles import export_las
+from siteline.labelsets.export import export_label_set
 
 
 def export(cat, scene_id: int, out: Path, version: int | None = None, bounds=None) -> laspy.LasData:  # noqa: ANN001
     """``scene export`` through the library (the CLI test runs the executable)."""
-    with cat.transaction() as s:
-        scene = get_scene(s, scene_id)
-        tiles, v = open_labelled_tiles(s, scene, version)
-        spec = site_spec(s.get(Site, scene.site_id))
-    about = {
-        "site": spec.name,
-        "scene": scene_id,
-        "label_set_version": v,
-        "taxonomy": spec.taxonomy.to_dict(),
-    }
-    export_las(tiles, spec, out, bounds=bounds, labels=about)
+    export_label_set(cat, scene_id, out, version, bounds)
     return laspy.read(out)
 
 

@@ -30,7 +30,7 @@ from siteline.cli.common import (
 )
 from siteline.ingest.mission import IngestOptions
 from siteline.photos import read_photo_meta
-from siteline.tiles import export_las, tile_scene
+from siteline.tiles import tile_scene
 
 mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
 scene_app = typer.Typer(help="Scenes (epochs) of a site.", no_args_is_help=True)
@@ -260,22 +260,10 @@ def scene_export(
 ) -> None:
     """Export a tiled scene (or a region, or coarse levels) to LAS/LAZ in the site CRS, with the
     classes of a label set (site class ids, the taxonomy in a siteline VLR) for correction."""
-    from siteline.catalog.models import Site
-    from siteline.catalog.sites import site_spec
-    from siteline.labelsets import open_labelled_tiles
+    from siteline.labelsets.export import export_label_set
 
-    with catalog() as cat, cat.transaction() as s:
-        scene = get_scene(s, scene_id)
-        tiles, version = open_labelled_tiles(s, scene, label_set)
-        spec = site_spec(s.get(Site, scene.site_id))
-    about = {
-        "site": spec.name,
-        "scene": scene_id,
-        "label_set_version": version,
-        "classification": "site class ids",
-        "taxonomy": spec.taxonomy.to_dict(),
-    }
-    n = export_las(tiles, spec, out, bounds=bounds or None, level=level, labels=about)
+    with catalog() as cat:
+        n, version = export_label_set(cat, scene_id, out, label_set, bounds or None, level)
     emit(
         as_json,
         {"out": str(out), "points": n, "label_set_version": version},

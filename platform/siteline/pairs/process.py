@@ -236,14 +236,14 @@ def process_pair(
                 one_side_hole=params.one_side_hole,
                 all_points=params.all_points,
             )
-            if progress:
-                progress("renders", 1, len(view_set.views))
-            if not at_least(r.valid, params.min_valid, RATIO_TOL):
+            low = not at_least(r.valid, params.min_valid, RATIO_TOL)
+            if low:
                 rejected["low_valid"] = rejected.get("low_valid", 0) + 1
                 if reserve:
                     queue.append(reserve.pop(0))
-                    if progress:
-                        progress("renders", 0, len(view_set.views) + rejected["low_valid"])
+            if progress:  # the total grows by each replacement
+                progress("renders", 1, len(kept) + len(queue) + rejected.get("low_valid", 0) + (not low))
+            if low:
                 continue
             tmp = f"tmp-{len(kept):05d}.png"
             (partial / "A" / tmp).write_bytes(png_bytes(r.a))

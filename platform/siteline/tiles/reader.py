@@ -180,24 +180,30 @@ class SceneTiles:
 
     def read(self, prefixes: dict[str, int], attributes: Sequence[str]) -> dict[str, np.ndarray]:
         """Read the first ``prefixes[tile]`` points of each tile: one call per tile and attribute."""
+        return self._gather({t: (k, None) for t, k in prefixes.items() if k > 0}, attributes)
+
+    def _gather(
+        self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]
+    ) -> dict[str, np.ndarray]:
+        """Per tile of ``plan``: read its arrays' first ``k`` values (cached), keep ``idx`` of them
+        (all when None), dequantise ``xyz`` to site-local float64 metres; concatenate over tiles."""
         bad = [a for a in attributes if (a not in ATTRIBUTES or a == "xyz") and a not in self.extra]
         if bad:
             raise TileError(f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != 'xyz']}.")
         parts: dict[str, list[np.ndarray]] = {a: [] for a in ("xyz", *attributes)}
         stats = ReadStats()
-        for tile in sorted(prefixes):
-            k = prefixes[tile]
-            if k <= 0:
-                continue
+        for tile in sorted(plan):
+            k, idx = plan[tile]
             i, j = parse_tile_key(tile)
-            counts = self._array(tile, "xyz", k)
-            parts["xyz"].append(
-                dequantise(counts, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m)
-            )
-            for a in attributes:
-                parts[a].append(self._array(tile, a, k))
+            for a in ("xyz", *attributes):
+                values = self._array(tile, a, k)
+                values = values if idx is None else values[idx]
+                if a == "xyz":
+                    origin = tile_origin_local(i, j, self.spec.tile_size_m)
+                    values = dequantise(values, origin, self.spec.quantum_m)
+                parts[a].append(values)
             stats.tiles_read += 1
-            stats.points_read += k
+            stats.points_read += k if idx is None else len(idx)
         out = {}
         for a, chunks in parts.items():
             if chunks:
@@ -272,36 +278,13 @@ class SceneTiles:
     ) -> dict[str, np.ndarray]:
         """Read the nodes ``selection[tile]`` (indices into ``node_arrays[tile]``) of each tile: the
         tile's arrays are read up to the last selected node (cached), then the nodes' ranges taken."""
-        bad = [a for a in attributes if (a not in ATTRIBUTES or a == "xyz") and a not in self.extra]
-        if bad:
-            raise TileError(f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != 'xyz']}.")
-        parts: dict[str, list[np.ndarray]] = {a: [] for a in ("xyz", *attributes)}
-        stats = ReadStats()
-        for tile in sorted(selection):
-            sel = selection[tile]
+        plan = {}
+        for tile, sel in selection.items():
             _, _, _, start, count = self.node_arrays[tile]
             starts, counts = start[sel], count[sel]
-            k = int((starts + counts).max())
             idx = np.repeat(starts - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(int(counts.sum()))
-            i, j = parse_tile_key(tile)
-            raw = self._array(tile, "xyz", k)[idx]
-            parts["xyz"].append(
-                dequantise(raw, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m)
-            )
-            for a in attributes:
-                parts[a].append(self._array(tile, a, k)[idx])
-            stats.tiles_read += 1
-            stats.points_read += len(idx)
-        out = {}
-        for a, chunks in parts.items():
-            if chunks:
-                out[a] = np.concatenate(chunks)
-            else:
-                shape = (0, 3) if a in ("xyz", "rgb") else (0,)
-                dtype = np.float64 if a == "xyz" else self._handle(next(iter(self.by_tile)), a).dtype
-                out[a] = np.zeros(shape, dtype=dtype)
-        self.last_stats = stats
-        return out
+            plan[tile] = (int((starts + counts).max()), idx)
+        return self._gather(plan, attributes)
 
     def points_for_view(
         self,
