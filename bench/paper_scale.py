@@ -71,7 +71,9 @@ def stage_ingest(work: Path) -> dict:
     return {"seconds": time.perf_counter() - t0}
 
 
-def stage_pair(work: Path, views: int, scale: float, min_valid: float | None) -> dict:
+def stage_pair(
+    work: Path, views: int, scale: float, min_valid: float | None, point_size: int, lod_factor: float
+) -> dict:
     from siteline.catalog import open_catalog
     from siteline.pairs import PairParams, process_pair
 
@@ -86,7 +88,7 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None) ->
         last[task] = now
 
     extra = {} if min_valid is None else {"min_valid": min_valid}
-    params = PairParams(scale=scale, views=views, **extra)
+    params = PairParams(scale=scale, views=views, point_size_px=point_size, lod_factor=lod_factor, **extra)
     t0 = time.perf_counter()
     out = process_pair(cat, settings, 1, params, progress=progress)
     total = time.perf_counter() - t0
@@ -125,7 +127,14 @@ def child(stage: str, work: str, args: list[str]) -> None:
     elif stage == "ingest":
         res = stage_ingest(work_p)
     else:
-        res = stage_pair(work_p, int(args[0]), float(args[1]), None if args[2] == "-" else float(args[2]))
+        res = stage_pair(
+            work_p,
+            int(args[0]),
+            float(args[1]),
+            None if args[2] == "-" else float(args[2]),
+            int(args[3]),
+            float(args[4]),
+        )
     res["peak_mib"] = _peak_mib()
     print("RESULT " + json.dumps(res))
 
@@ -141,13 +150,16 @@ def _run(stage: str, work: Path, *args: str) -> dict:
     return json.loads(line[len("RESULT ") :])
 
 
-def run_density(root: Path, density: float, views: int, scale: float, min_valid: float | None) -> dict:
+def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
     work = root / f"d{density:g}"
     work.mkdir()
     out = {"density_pts_m2": density}
     out["synth"] = _run("synth", work, str(density))
     out["ingest_tile"] = _run("ingest", work)
-    out["pair"] = _run("pair", work, str(views), str(scale), "-" if min_valid is None else str(min_valid))
+    mv = "-" if args.min_valid is None else str(args.min_valid)
+    out["pair"] = _run(
+        "pair", work, str(args.views), str(args.scale), mv, str(args.point_size), str(args.lod_factor)
+    )
     return out
 
 
@@ -163,12 +175,14 @@ def main() -> None:
     ap.add_argument(
         "--min-valid", type=float, default=None, help="PairParams.min_valid (default: its default)"
     )
+    ap.add_argument("--point-size", type=int, default=3, help="px (3: every preset's)")
+    ap.add_argument("--lod-factor", type=float, default=1.0)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="paper-scale-") as d:
         runs = [
-            run_density(Path(d), args.density / args.ratio, args.views, args.scale, args.min_valid),
-            run_density(Path(d), args.density, args.views, args.scale, args.min_valid),
+            run_density(Path(d), args.density / args.ratio, args),
+            run_density(Path(d), args.density, args),
         ]
     lo, hi = runs
     ratios = {

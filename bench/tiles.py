@@ -2,7 +2,7 @@
 bytes per point, peak memory at two sizes, a codec comparison, and for a 1/8-scale view of a dense
 scene the points read per covered pixel and the batched read throughput.
 
-    python bench/tiles.py [--points 20000000] [--small 5000000]
+    python bench/tiles.py [--points 20000000] [--small 5000000] [--view-only]
 """
 
 from __future__ import annotations
@@ -99,48 +99,60 @@ def codecs(n: int = 2_000_000) -> None:
 
 
 def view_read(points: int) -> None:
-    """1/8-scale nadir view over a dense scene: points read per covered pixel, read throughput."""
+    """1/8-scale nadir view over a dense scene: points read per covered pixel and coverage, per LOD
+    factor and point size, in a store with shuffled nodes (partial levels) and one in input order
+    (whole levels, as stores written before shuffled nodes); read throughput."""
     import pyproj
 
     from siteline.cameras import Camera
     from siteline.render import RenderSettings, render_points
     from siteline.site import make_site_spec
-    from siteline.tiles import SceneTiles, write_tiles
+    from siteline.tiles import SceneTiles, TileSpec, write_tiles
 
     with tempfile.TemporaryDirectory() as d:
         las = Path(d) / "c.las"
         make_las(las, points, z_noise_m=0.02)  # a surface, as LiDAR samples it
-        r = write_tiles(
-            las,
-            make_site_spec("b", "EPSG:32618", ORIGIN),
-            pyproj.CRS("EPSG:32618"),
-            Path(d) / "s.zarr",
-            workers=2,
-        )
-        tiles = SceneTiles.open(r.uri)
+        stores = {}
+        for order in ("random", "input"):
+            r = write_tiles(
+                las,
+                make_site_spec("b", "EPSG:32618", ORIGIN),
+                pyproj.CRS("EPSG:32618"),
+                Path(d) / f"{order}.zarr",
+                TileSpec(node_order=order),
+                workers=2,
+            )
+            stores[order] = SceneTiles.open(r.uri)
         cam = Camera.look_at((0, 0, 80), (0, 0, 0), 5645, 4082, 4000.0)
         density = points / 300.0**2
         print(
             f"\n1/8-scale nadir view from 80 m of a {points / 1e6:.0f}M-point scene ({density:.0f} points/m2):"
         )
         print(
-            "| lod factor | points read | points returned | covered pixels | read per covered pixel | coverage | read M pts/s |"
+            "| node order | lod factor | point size px | points read | covered pixels | read per covered pixel | "
+            "coverage | coverage, all levels | read M pts/s |"
         )
-        print("|---|---|---|---|---|---|---|")
-        for factor in (1.0, 1.41, None):
-            t = time.perf_counter()
-            if factor is None:
-                pts = tiles.points_for_view(cam, 0.125, level=None)
-            else:
-                pts = tiles.points_for_view(cam, 0.125, lod_factor=factor)
-            sec = time.perf_counter() - t
-            st = tiles.last_stats
-            img = render_points(pts["xyz"], cam, RenderSettings(scale=0.125))
-            covered = int(img.hit.sum())
-            print(
-                f"| {factor if factor else 'all levels'} | {st.points_read:,} | {st.points_returned:,} | {covered:,} | "
-                f"{st.points_read / max(covered, 1):.2f} | {img.coverage:.2%} | {st.points_read / sec / 1e6:.1f} |"
-            )
+        print("|---|---|---|---|---|---|---|---|---|")
+        for order, tiles in stores.items():
+            every = tiles.points_for_view(cam, 0.125, level=None)
+            for size in (1, 3):
+                settings = RenderSettings(scale=0.125, point_size_px=size)
+                full = render_points(every["xyz"], cam, settings)
+                for factor in (1.0, 1.41, 2.0, None):
+                    t = time.perf_counter()
+                    if factor is None:
+                        pts = tiles.points_for_view(cam, 0.125, level=None)
+                    else:
+                        pts = tiles.points_for_view(cam, 0.125, lod_factor=factor, point_size_px=size)
+                    sec = time.perf_counter() - t
+                    st = tiles.last_stats
+                    img = render_points(pts["xyz"], cam, settings)
+                    covered = int(img.hit.sum())
+                    print(
+                        f"| {order} | {factor if factor else 'all levels'} | {size} | {st.points_read:,} | "
+                        f"{covered:,} | {st.points_read / max(covered, 1):.2f} | {img.coverage:.2%} | "
+                        f"{full.coverage:.2%} | {st.points_read / sec / 1e6:.1f} |"
+                    )
 
 
 def main() -> None:
@@ -148,9 +160,13 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=20_000_000)
     ap.add_argument("--small", type=int, default=5_000_000)
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    ap.add_argument("--view-only", action="store_true", help="only the view-read table")
     args = ap.parse_args()
     if args.child:
         child(*args.child)
+        return
+    if args.view_only:
+        view_read(args.points)
         return
     codecs()
     rows = []

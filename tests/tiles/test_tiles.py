@@ -3,6 +3,7 @@ crash safety, concurrency, interop and export."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -16,6 +17,7 @@ import pytest
 
 from siteline.cameras import Camera
 from siteline.lasio import write_las
+from siteline.render import RenderSettings, render_points
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, TileSpec, export_las, write_tiles
 from siteline.tiles.layout import level_count, parse_tile_key, tile_origin_local
@@ -129,7 +131,7 @@ def test_frustum_read_equals_brute_force(tmp_path) -> None:
     assert set(auto["gps_time"].astype(int)) <= set(brute)  # a coarser read is a subset
     # per node: near nodes deeper than far ones, so the read is finer than one level for every tile
     chosen, _ = tiles.levels_for_view(cam, 0.125)
-    lv = np.concatenate([tiles.node_arrays[t][2][sel] for t, sel in chosen.items()])
+    lv = np.concatenate([tiles.node_arrays[t][2][sel] for t, (sel, _) in chosen.items()])
     capped = tiles.points_for_view(cam, 0.125, attributes=("gps_time",), level=int(lv.max()))
     assert len(auto["xyz"]) < len(capped["xyz"])
 
@@ -306,7 +308,11 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
                     sum(n.count for n in ns), min(n.start for n in ns), ns[0].spacing_m,
                 )
             )  # fmt: skip
-    old = SceneTiles(tiles.uri, merged, tiles.spec)
+    assert (
+        TileSpec.from_dict({k: v for k, v in tiles.spec.to_dict().items() if k != "node_order"}).node_order
+        == "input"
+    )
+    old = SceneTiles(tiles.uri, merged, dataclasses.replace(tiles.spec, node_order="input"))
     cam = Camera.look_at((-40, -50, 30), (5, 5, 0), 320, 240, fx=200.0)
     local = geo - np.asarray(origin)
     planes = cam.scaled(0.5).frustum_planes(1e-3)
@@ -315,3 +321,41 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
     assert set(got["gps_time"].astype(int)) == set(brute)
     auto = old.points_for_view(cam, 0.125, attributes=("gps_time",))
     assert 0 < len(auto["xyz"]) and set(auto["gps_time"].astype(int)) <= set(brute)
+    chosen, _ = old.levels_for_view(cam, 0.125)  # input order: whole nodes only, never a part
+    assert all(np.array_equal(take, old.node_arrays[t][4][sel]) for t, (sel, take) in chosen.items())
+
+
+def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
+    """Shuffled nodes: a node's prefix is spread over the whole node, and a nadir view over a dense
+    surface reads about one point per drawn half point, at the coverage of reading everything."""
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    rng = np.random.default_rng(3)
+    n = 358_400  # 100 points/m2 over 64 x 56 m
+    local = np.c_[rng.uniform(-32, 32, n), rng.uniform(-28, 28, n), rng.normal(0, 0.02, n)]
+    write_las(
+        tmp_path / "p.las",
+        local + np.asarray(origin),
+        crs="EPSG:32618",
+        classification=np.full(n, 2, np.uint8),
+    )
+    _, _, tiles = _tile(tmp_path, tmp_path / "p.las", origin)
+    assert tiles.spec.node_order == "random"
+    tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t))
+    node = max(tiles.by_tile[tile], key=lambda nd: nd.count)
+    xyz = tiles.read_nodes(
+        {tile: (np.array([tiles.by_tile[tile].index(node)]), np.array([node.count // 10]))}, ()
+    )["xyz"]
+    span = (xyz.max(axis=0) - xyz.min(axis=0))[:2] / (np.array(node.bounds_max) - node.bounds_min)[:2]
+    assert np.all(span > 0.9), span  # the first tenth spans the node, not a corner of it
+    cam = Camera.look_at((0, 0, 40), (0, 0, 0), 150, 125, fx=100.0)  # 0.4 m pixels over 0.1 m data
+    every = tiles.points_for_view(cam, 1.0, level=None)
+    for size, most in ((1, 6.0), (3, 0.8)):
+        settings = RenderSettings(scale=1.0, point_size_px=size)
+        full = render_points(every["xyz"], cam, settings)
+        pts = tiles.points_for_view(cam, 1.0, point_size_px=size)
+        img = render_points(pts["xyz"], cam, settings)
+        per_pixel = tiles.last_stats.points_read / img.hit.sum()
+        assert per_pixel < most and per_pixel < len(every["xyz"]) / full.hit.sum() / 2.5, (size, per_pixel)
+        assert img.coverage >= full.coverage - 0.01, (size, img.coverage, full.coverage)
+    coarse = tiles.points_for_view(cam, 1.0, point_size_px=3, lod_factor=2.0)
+    assert len(coarse["xyz"]) < 0.4 * len(pts["xyz"])  # the read follows the factor continuously

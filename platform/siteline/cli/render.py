@@ -113,6 +113,9 @@ def views_generate(
     min_coverage: float = typer.Option(
         0.5, "--min-coverage", help="Reject views covering less than this at --scale."
     ),
+    point_size: int = typer.Option(
+        1, "--point-size", help="Point size (odd, px) of the coverage render: the one you render with."
+    ),
     taxonomy: Path | None = typer.Option(
         None, "--taxonomy", help="Taxonomy JSON mapping LAS codes (default: schema/)."
     ),
@@ -123,7 +126,7 @@ def views_generate(
     from siteline.lasio import read_site_local
     from siteline.views import ArrayPointSource, ViewParams, fit_ground_plane, generate_views
 
-    params = ViewParams(views=n, seed=seed, scale=scale, min_coverage=min_coverage)
+    params = ViewParams(views=n, seed=seed, scale=scale, min_coverage=min_coverage, point_size_px=point_size)
     real = _camera_file(cameras)
     fence_m = load_fence_geojson(fence, origin) if fence is not None else None
     cloud = read_site_local(ground, origin)

@@ -20,13 +20,15 @@ from siteline.views import SAMPLER_VERSION, ViewParams
 class PairParams:
     """Every knob of pair processing, one name each, composed of the stages' own specs:
     :meth:`render_settings` (``scale``, ``point_size_px``; DESIGN.md §6), :meth:`view_params_spec`
-    (``scale``, ``views``, ``seed``, ``min_coverage`` and any other ViewParams field in ``view_params``;
+    (``scale``, ``views``, ``seed``, ``min_coverage``, ``point_size_px`` and any other ViewParams field in ``view_params``;
     §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
     min_valid: reject a rendered view whose valid fraction (pixels neither ignored nor a hole in
     either scene) is below this, and render the next view of the stratified order in its place
     (``min_coverage`` judges one scene's coverage before rendering; this judges what the pair teaches).
-    lod_factor: level of detail read per view (1 = spacing within a pixel footprint); all_points: read
+    lod_factor: level of detail read per view (1 = points read at a spacing of half a drawn point,
+    ``point_size_px / 2`` pixel footprints, which keeps coverage within a point of reading
+    everything; 2 = one drawn point's width); all_points: read
     every point (no level of detail). one_side_hole: a pixel changed on one side and a hole on the
     other is ``ignore`` or ``changed`` (siteline.pairs.render.pair_mask). sampler: the view
     sampler's version (pose snapping and keyed stratified sample, siteline.views.generate), recorded
@@ -59,7 +61,7 @@ class PairParams:
             raise ReleaseError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if self.one_side_hole not in HOLE_RULES:
             raise ReleaseError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
-        clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage"})
+        clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage", "point_size_px"})
         if clash:
             raise ReleaseError(
                 f"view_params {clash}: set these knobs on the pair parameters themselves (one name each)."
@@ -80,6 +82,7 @@ class PairParams:
             "seed": self.seed,
             "scale": self.scale,
             "min_coverage": self.min_coverage,
+            "point_size_px": self.point_size_px,
         }
         return ViewParams.from_dict({**base, **self.view_params})
 

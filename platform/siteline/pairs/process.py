@@ -201,7 +201,7 @@ def process_pair(
         [site.taxonomy.id_of(c) for c in ("snow", "noise") if c in {k.name for k in site.taxonomy.classes}],
         dtype=np.uint8,
     )
-    source = TilePointSource(tiles2, skip, lod_factor=params.lod_factor)
+    source = TilePointSource(tiles2, skip, lod_factor=params.lod_factor, point_size_px=params.point_size_px)
     vp = params.view_params_spec()
     view_set = generate_views(
         [NamedCamera(n, c) for n, c in cams],

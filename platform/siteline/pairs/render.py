@@ -85,6 +85,7 @@ def render_pair_view(
             scale,
             attributes=("rgb", "change"),
             lod_factor=lod_factor,
+            point_size_px=point_size_px,
             level=None if all_points else "auto",
         )
         read += tiles.last_stats.points_read

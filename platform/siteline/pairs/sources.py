@@ -12,18 +12,24 @@ from siteline.views.sources import ArrayPointSource
 class TilePointSource:
     """A :class:`siteline.views.PointSource` over a tiled scene for view generation, which renders
     hundreds of probes per real camera. Each probe reads only what it needs: the tiles its frustum
-    meets, each at the coarsest level whose spacing is within ``lod_factor`` pixel footprints of the
-    probe's own render scale (``SceneTiles.points_for_view``), so a probe's cost grows with its pixels,
+    meets, at the spacing its own render scale and ``point_size_px`` need (``lod_factor``:
+    ``SceneTiles.points_for_view``; the probes must render with the same point size), so a probe's cost grows with its pixels,
     not with the scene's density; the tile reader's cache keeps the tiles a pair's probes share.
     Clearance and overhead checks use a coarse copy (``coarse_m``) of the solid geometry, whose size
     grows with the site's area, not its density. Airborne snow and noise are left out of both."""
 
     def __init__(
-        self, tiles: SceneTiles, skip_classes: np.ndarray, coarse_m: float = 0.25, lod_factor: float = 1.0
+        self,
+        tiles: SceneTiles,
+        skip_classes: np.ndarray,
+        coarse_m: float = 0.25,
+        lod_factor: float = 1.0,
+        point_size_px: int = 1,
     ) -> None:
         self.tiles = tiles
         self.skip = np.asarray(skip_classes, dtype=np.uint8)
         self.lod_factor = lod_factor
+        self.point_size_px = point_size_px
         self.points_read = 0
         self.reads = 0
         coarse = tiles.points(resolution=coarse_m, attributes=("class",))
@@ -31,7 +37,9 @@ class TilePointSource:
         self._coarse = ArrayPointSource(coarse["xyz"][keep])
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
-        out = self.tiles.points_for_view(camera, scale, attributes=("class",), lod_factor=self.lod_factor)
+        out = self.tiles.points_for_view(
+            camera, scale, attributes=("class",), lod_factor=self.lod_factor, point_size_px=self.point_size_px
+        )
         self.points_read += self.tiles.last_stats.points_read
         self.reads += 1
         return out["xyz"][~np.isin(out["class"], self.skip)]

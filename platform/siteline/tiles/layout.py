@@ -6,7 +6,8 @@ per occupied cube of edge ``root_spacing_m / 2**L`` among the points no earlier 
 additive level of detail). A node is the points of one level inside one cube of the tile's octree at
 depth d = min(L, ``max_node_depth``) (edge T / 2**d, from the tile origin; COPC/EPT-like): the tile's
 arrays are sorted by (level, cube), so every node is one contiguous range and levels 0..L are still
-a prefix.
+a prefix; inside a node the points are shuffled (seeded), so a node's first k points are a uniform
+subsample of it and a view can read a level in part (a continuous level of detail).
 Coordinates are int32 counts of ``quantum_m`` relative to the tile's float64 origin (the site origin
 plus (i T, j T, 0)).
 """
@@ -33,6 +34,8 @@ SPILL_DTYPE = np.dtype(
     ]
 )
 
+NODE_ORDERS = ("random", "input")
+
 
 @dataclass(frozen=True)
 class TileSpec:
@@ -44,8 +47,10 @@ class TileSpec:
     min_spacing_m: the last level takes every remaining point once the
     spacing would fall below this. max_node_depth: the deepest octree depth that splits a level into
     nodes (3: cubes of T / 8, 6.25 m for 50 m tiles; deeper levels share that grid), so a view reads
-    fine levels only where it needs them. chunk_points / shard_points: Zarr inner chunk and shard length.
-    clevel: blosc-zstd level.
+    fine levels only where it needs them. node_order: order of the points inside a node, "random"
+    (seeded shuffle, so every prefix of a node is a uniform subsample of it and a view can read part
+    of a level) or "input" (stores written before it: only whole nodes are read).
+    chunk_points / shard_points: Zarr inner chunk and shard length. clevel: blosc-zstd level.
     """
 
     tile_size_m: float = 50.0
@@ -54,6 +59,7 @@ class TileSpec:
     min_spacing_m: float = 0.02
     max_levels: int = 12
     max_node_depth: int = 3
+    node_order: str = "random"
     chunk_points: int = 65_536
     shard_points: int = 1_048_576
     clevel: int = 3
@@ -67,6 +73,8 @@ class TileSpec:
             )
         if not 0 <= self.max_node_depth <= 10:
             raise TileError(f"max_node_depth {self.max_node_depth} must lie in 0..10.")
+        if self.node_order not in NODE_ORDERS:
+            raise TileError(f"node order {self.node_order!r} must be one of {NODE_ORDERS}.")
         if self.shard_points % self.chunk_points:
             raise TileError("shard_points must be a multiple of chunk_points.")
 
@@ -84,7 +92,8 @@ class TileSpec:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> TileSpec:
-        return cls(**doc)
+        """The spec a store recorded; one written before ``node_order`` existed kept input order."""
+        return cls(**{"node_order": "input", **doc})
 
 
 def tile_index(xy_local: np.ndarray, tile_size_m: float) -> np.ndarray:

@@ -107,6 +107,12 @@ class SceneTiles:
             )
             for t, ns in self.by_tile.items()
         }
+        # per tile, its points per level (index = level), for partial reads of a level
+        self._spacing = np.array([spec.spacing(v) for v in range(64)])
+        self.level_totals = {
+            t: np.bincount(lv, weights=cnt, minlength=64).astype(np.int64)
+            for t, (_, _, lv, _, cnt) in self.node_arrays.items()
+        }
         self.last_stats = ReadStats()
         self.extra: dict[str, object] = {}
         self._handles: dict[tuple[str, str], object] = {}
@@ -245,45 +251,63 @@ class SceneTiles:
         self.last_stats.points_returned = len(out["xyz"])
         return out
 
-    def levels_for_view(self, camera: Camera, scale: float, lod_factor: float = 1.0, near_m: float = 1e-3):  # noqa: ANN201
-        """Per tile met by the frustum of ``camera`` at ``scale``: the indices (into ``node_arrays``) of
-        its nodes in the frustum whose level is at most the coarsest level with spacing within
-        ``lod_factor`` pixel footprints at that node's nearest distance."""
+    def levels_for_view(self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3):  # noqa: ANN201
+        """Per tile met by the frustum of ``camera`` at ``scale``: ``(indices, take)``, the nodes to
+        read (indices into ``node_arrays``) and how many of each node's points, so that each node's
+        surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance.
+
+        Levels coarser than that spacing are read whole. In a store whose nodes are shuffled
+        (``node_order="random"``) the level that crosses it is read in part: the first ``take`` points
+        of each of its nodes, ``take / count = (r - 1) N_<a / N_a`` with ``r = (spacing(a-1) / need)**2``
+        (a surface's density grows as 1 / spacing**2) and ``N`` the tile's points per level, so the
+        density read is what the footprint needs, whatever the data hold. Otherwise that level is
+        read whole (1-4 points per footprint of a surface)."""
         cam = camera.scaled(scale)
         planes = cam.frustum_planes(near_m)
         centre = cam.center
         f = min(cam.fx, cam.fy)
+        partial = self.spec.node_order == "random"
         out = {}
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
-            lo, hi, level, _, _ = self.node_arrays[tile]
+            lo, hi, level, _, count = self.node_arrays[tile]
             inside = boxes_in_frustum(planes, lo, hi)
             dist = np.linalg.norm(np.maximum(np.maximum(lo - centre, 0.0), centre - hi), axis=1)
-            allowed = self.levels_for_resolutions(lod_factor * np.maximum(dist, near_m) / f)
+            need = spacing_px * np.maximum(dist, near_m) / f
+            allowed = self.levels_for_resolutions(need)
             sel = np.flatnonzero(inside & (level <= allowed))
-            if len(sel):
-                out[tile] = sel
+            if not len(sel):
+                continue
+            take = count[sel].copy()
+            if partial:
+                edge = np.flatnonzero((level[sel] == allowed[sel]) & (level[sel] > 0))
+                a = level[sel[edge]]
+                totals = self.level_totals[tile]
+                below = np.cumsum(totals)[a - 1]
+                r = (self._spacing[a - 1] / need[sel[edge]]) ** 2
+                frac = np.clip((r - 1.0) * below / np.maximum(totals[a], 1), 0.0, 1.0)
+                take[edge] = np.maximum(np.ceil(frac * take[edge]).astype(np.int64), 1)
+            out[tile] = (sel, take)
         return out, planes
 
     def levels_for_resolutions(self, resolution_m: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`level_for_resolution`."""
         levels = np.array(sorted({n.level for n in self.nodes}), dtype=np.int64)
-        spacing = np.array([self.spec.spacing(int(v)) for v in levels])
-        k = np.searchsorted(-spacing, -np.asarray(resolution_m, dtype=np.float64), side="left")
+        k = np.searchsorted(-self._spacing[levels], -np.asarray(resolution_m, dtype=np.float64), side="left")
         return levels[np.minimum(k, len(levels) - 1)]
 
     def read_nodes(
-        self, selection: dict[str, np.ndarray], attributes: Sequence[str]
+        self, selection: dict[str, tuple[np.ndarray, np.ndarray]], attributes: Sequence[str]
     ) -> dict[str, np.ndarray]:
-        """Read the nodes ``selection[tile]`` (indices into ``node_arrays[tile]``) of each tile: the
-        tile's arrays are read up to the last selected node (cached), then the nodes' ranges taken."""
+        """Read, per tile, the first ``take[k]`` points of each node ``indices[k]`` of
+        ``selection[tile] = (indices, take)`` (indices into ``node_arrays[tile]``): the tile's arrays
+        are read up to the last point wanted (cached), then the nodes' ranges taken."""
         plan = {}
-        for tile, sel in selection.items():
-            _, _, _, start, count = self.node_arrays[tile]
-            starts, counts = start[sel], count[sel]
-            idx = np.repeat(starts - np.r_[0, np.cumsum(counts)[:-1]], counts) + np.arange(int(counts.sum()))
-            plan[tile] = (int((starts + counts).max()), idx)
+        for tile, (sel, take) in selection.items():
+            starts = self.node_arrays[tile][3][sel]
+            idx = np.repeat(starts - np.r_[0, np.cumsum(take)[:-1]], take) + np.arange(int(take.sum()))
+            plan[tile] = (int((starts + take).max()), idx)
         return self._gather(plan, attributes)
 
     def points_for_view(
@@ -294,15 +318,19 @@ class SceneTiles:
         level: int | str = "auto",
         near_m: float = 1e-3,
         lod_factor: float = 1.0,
+        point_size_px: int = 1,
     ) -> dict[str, np.ndarray]:
-        """Points a render of ``camera`` at ``scale`` needs: nodes culled by the frustum, and per node
-        the levels whose spacing is within ``lod_factor`` pixel footprints at the node's nearest
-        distance (``level="auto"``; an int caps every node at that level; None reads all levels).
-        lod_factor 1 reads ~1-4 points per pixel of a surface; larger reads fewer, at some coverage
-        cost (bench/tiles.py measures it). Points outside the frustum are dropped (float64 test), so at
+        """Points a render of ``camera`` at ``scale`` with ``point_size_px`` disks needs: nodes culled
+        by the frustum, and per node the points that give a spacing of ``lod_factor`` x half a drawn
+        point (``lod_factor * point_size_px / 2`` pixel footprints) at the node's nearest distance
+        (``level="auto"``, the last level in part: see :meth:`levels_for_view`; an int caps every node
+        at that level; None reads all levels). lod_factor 1 keeps coverage within a point of reading
+        everything (~4 points read per pixel of a surface for 1 px points, ~0.5 for 3 px disks); larger
+        reads fewer at some coverage cost (bench/tiles.py measures both). Stores written before
+        shuffled nodes read whole levels, up to 4x more. Points outside the frustum are dropped (float64 test), so at
         full level the result is exactly the brute-force frustum selection."""
         if level == "auto":
-            selection, planes = self.levels_for_view(camera, scale, lod_factor, near_m)
+            selection, planes = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)
         else:
             cam = camera.scaled(scale)
             planes = cam.frustum_planes(near_m)
@@ -310,16 +338,18 @@ class SceneTiles:
             for tile, (tlo, thi) in self.tile_bounds.items():
                 if not box_in_frustum(planes, tlo, thi):
                     continue
-                lo, hi, lv, _, _ = self.node_arrays[tile]
+                lo, hi, lv, _, count = self.node_arrays[tile]
                 keep = boxes_in_frustum(planes, lo, hi) & (True if level is None else lv <= level)
                 sel = np.flatnonzero(keep)
                 if len(sel):
-                    selection[tile] = sel
+                    selection[tile] = (sel, count[sel])
         out = self.read_nodes(selection, attributes)
         xyz = out["xyz"]
         keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
         out = {k: v[keep] for k, v in out.items()}
         out["xyz"] = out["xyz"].astype(np.float32)
         self.last_stats.points_returned = len(out["xyz"])
-        self.last_stats.levels = {t: int(self.node_arrays[t][2][sel].max()) for t, sel in selection.items()}
+        self.last_stats.levels = {
+            t: int(self.node_arrays[t][2][sel].max()) for t, (sel, _) in selection.items()
+        }
         return out

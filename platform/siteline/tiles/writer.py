@@ -164,7 +164,10 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
     rec = np.fromfile(spill_path, dtype=SPILL_DTYPE)
     levels = assign_levels(rec["xyz"], spec, _tile_seed(key, seed))
     cells = node_cells(rec["xyz"], levels, spec)
-    order = np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0], levels))
+    keys = (cells[:, 2], cells[:, 1], cells[:, 0], levels)
+    if spec.node_order == "random":  # inside a node, a seeded shuffle: any prefix is a uniform subsample
+        keys = (np.random.default_rng(_tile_seed(key, seed) ^ 0x5EED).permutation(len(rec)), *keys)
+    order = np.lexsort(keys)
     rec, levels, cells = rec[order], levels[order], cells[order]
     n = len(rec)
     group = zarr.open_group(group_path, mode="a").require_group("tiles").create_group(key)

@@ -104,7 +104,7 @@ def central_median_depth(camera: Camera, source: PointSource, params: ViewParams
     r = render_points(
         source.points_for_view(camera, params.depth_probe_scale),
         camera,
-        RenderSettings(scale=params.depth_probe_scale),
+        RenderSettings(scale=params.depth_probe_scale, point_size_px=params.point_size_px),
     )
     H, W = r.hit.shape
     fh, fw = max(1, int(round(H * params.central_fraction))), max(1, int(round(W * params.central_fraction)))
@@ -190,7 +190,7 @@ def reject(
     near = source.nearest_distance(centers)
     above = source.count_above(centers, params.overhead_radius_m)
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
-    settings = RenderSettings(scale=params.scale)
+    settings = RenderSettings(scale=params.scale, point_size_px=params.point_size_px)
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
         if not at_least(h, params.min_height_m, LENGTH_TOL_M):
             v.rejected = "underground"

@@ -26,6 +26,8 @@ class ViewParams:
     overhead_radius_m: reject views with points above them within this horizontal radius (under a
     slab, inside a building).
     scale, min_coverage: reject views whose coverage at render scale ``scale`` is below min_coverage.
+    point_size_px: point size of the coverage and depth probes: the pair's, so a probe's coverage is
+    the real render's and a tiled source reads the density that point size needs.
     views: views kept per pair (seeded sample, stratified by strategy). ``scale`` and ``views`` are the
     knobs of the same names in PairParams and RenderSettings.
     """
@@ -43,6 +45,7 @@ class ViewParams:
     min_coverage: float = 0.5
     views: int = 300
     seed: int = 0
+    point_size_px: int = 1
 
     def __post_init__(self) -> None:
         for name in ("vertical_fractions", "forward_fractions"):
@@ -64,6 +67,8 @@ class ViewParams:
         for name in ("clearance_m", "overhead_radius_m", "scale", "depth_probe_scale"):
             if not getattr(self, name) > 0:
                 raise ViewsError(f"{name} must be positive.")
+        if not isinstance(self.point_size_px, int) or self.point_size_px < 1 or self.point_size_px % 2 == 0:
+            raise ViewsError(f"point_size_px {self.point_size_px!r} must be an odd positive integer.")
 
     @property
     def per_camera(self) -> int:
