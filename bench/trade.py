@@ -45,6 +45,14 @@ class TradeGrid:
     backends: tuple[str, ...] = ("pykdtree", "ckdtree")
 
 
+# The grid at paper density (1000 points/m2): the preset scales, both point sizes, three LOD factors;
+# one label radius and backend (the 3D label trade does not depend on density).
+DENSE = TradeGrid(
+    scales=(0.25, 0.125), lod_factors=(1.0, 1.41, 2.0), radius_multipliers=(2.5,), backends=("pykdtree",)
+)
+QUICK = TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,))
+
+
 @dataclass
 class Scene:
     xyz: np.ndarray  # (N, 3) float64 site-local
@@ -183,7 +191,9 @@ def run_trade(
                             outs = {}
                             n_read = 0
                             for sc, name in ((a, "t1"), (b, "t2")):
-                                pts = sc.tiles.points_for_view(v.camera, scale, ("gps_time",), lod_factor=lod)
+                                pts = sc.tiles.points_for_view(
+                                    v.camera, scale, ("gps_time",), lod_factor=lod, point_size_px=ps
+                                )
                                 n_read += sc.tiles.last_stats.points_read
                                 idx = pts["gps_time"].astype(np.int64)
                                 outs[name] = render_points(
@@ -322,11 +332,8 @@ if __name__ == "__main__":
     ap.add_argument("--views", type=int, default=8)
     ap.add_argument("--out", type=Path, default=Path("trade"))
     ap.add_argument("--full", action="store_true", help="the whole grid (default: the quick one)")
+    ap.add_argument("--dense", action="store_true", help="the paper-density grid (DENSE)")
     a = ap.parse_args()
-    g = (
-        TradeGrid()
-        if a.full
-        else TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,))
-    )
+    g = TradeGrid() if a.full else DENSE if a.dense else QUICK
     run_trade(a.out, a.site_density, a.views, 0, g, progress=print)
     print((a.out / "trade.md").read_text())

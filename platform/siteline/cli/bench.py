@@ -45,14 +45,20 @@ def trade(
     quick: bool = typer.Option(
         False, "--quick", help="A reduced grid (scale 1 and 1/4, radius x2.5) for a smoke run."
     ),
+    dense: bool = typer.Option(
+        False,
+        "--dense",
+        help="The grid for paper density (use with --site-density 1000): scales 1/4 and 1/8, point "
+        "sizes 1 and 3, LOD 1, 1.41 and 2, radius x2.5, pykdtree.",
+    ),
 ) -> None:
     """Sweep scale x point size x level of detail x label radius x nearest-neighbour backend."""
     trade_module = _bench_trade()
     TradeGrid, run_trade = trade_module.TradeGrid, trade_module.run_trade  # noqa: N806
 
-    grid = (
-        TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,)) if quick else TradeGrid()
-    )
+    if quick and dense:
+        raise typer.BadParameter("choose --quick or --dense, not both.")
+    grid = trade_module.QUICK if quick else trade_module.DENSE if dense else TradeGrid()
     rows = run_trade(out, site_density, views, seed, grid, progress=lambda m: console.print(m))
     console.print((out / "trade.md").read_text())
     console.print(f"{len(rows)} settings measured; CSV, tables and plots in {out}")
