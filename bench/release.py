@@ -63,12 +63,12 @@ def main() -> None:
         t0 = time.perf_counter()
         for a, b in ((pa, pb), (pb, pa)):
             keep = ~ign[b["class"]]
-            tree = cKDTree(b["xyz"][keep].astype(np.float64))
-            tree.query(a["xyz"].astype(np.float64), k=1, distance_upper_bound=0.4)
+            tree = cKDTree(b["xyz_m"][keep].astype(np.float64))
+            tree.query(a["xyz_m"].astype(np.float64), k=1, distance_upper_bound=0.4)
         whole = time.perf_counter() - t0
         t0 = time.perf_counter()
         for a, b in ((pa, pb), (pb, pa)):
-            change_flags(a["xyz"], a["class"], b["xyz"], b["class"], 0.4, ign)
+            change_flags(a["xyz_m"], a["class"], b["xyz_m"], b["class"], 0.4, ign)
         whole_ours = time.perf_counter() - t0
         print(f"labels, {n:,} points (both scenes, both directions):")
         print("| method | seconds | points/s |")

@@ -197,7 +197,7 @@ def run_trade(
                                 n_read += sc.tiles.last_stats.points_read
                                 idx = pts["gps_time"].astype(np.int64)
                                 outs[name] = render_points(
-                                    pts["xyz"],
+                                    pts["xyz_m"],
                                     v.camera,
                                     RenderSettings(scale=scale, point_size_px=ps),
                                     {"pred": pred_flags[name][idx], "truth": truth_flag[name][idx]},

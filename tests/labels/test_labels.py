@@ -83,7 +83,7 @@ def test_tiled_labels_equal_whole_cloud_labels(tmp_path, synth_site) -> None:
         tiles.attach("change", tmp_path / "labels.zarr" / side)
         mine = tiles.points(attributes=("class", "change"))
         theirs = other.points(attributes=("class",))
-        whole = change_flags(mine["xyz"], mine["class"], theirs["xyz"], theirs["class"], r, IGN)
+        whole = change_flags(mine["xyz_m"], mine["class"], theirs["xyz_m"], theirs["class"], r, IGN)
         assert np.array_equal(mine["change"], whole)
     assert res.counts["t1"]["changed"] > 0 and res.counts["t2"]["unchanged"] > 0
 

@@ -24,7 +24,7 @@ def _inputs(cat):  # noqa: ANN001, ANN202
         cams = [NamedCamera(n, c) for n, c in scene_cameras(s, 2)[:8]]
         site = site_spec(s.get(Site, 1))
     g = tiles.points(resolution=0.5, attributes=("class",))
-    plane = fit_ground_plane(g["xyz"][g["class"] == site.taxonomy.id_of("ground")], seed=0)
+    plane = fit_ground_plane(g["xyz_m"][g["class"] == site.taxonomy.id_of("ground")], seed=0)
     return tiles, cams, site, plane
 
 
@@ -34,7 +34,7 @@ class WholeCloud(TilePointSource):
     def __init__(self, tiles: SceneTiles, skip: np.ndarray) -> None:
         super().__init__(tiles, skip)
         probe = tiles.points(resolution=0.05, attributes=("class",))
-        self._probe = probe["xyz"][~np.isin(probe["class"], skip)]
+        self._probe = probe["xyz_m"][~np.isin(probe["class"], skip)]
 
     def points_for_view(self, camera, scale):  # noqa: ANN001, ANN201
         return self._probe
@@ -76,4 +76,3 @@ def test_stratified_order_prefixes_are_the_samples(n) -> None:
     order = stratified_order(views, seed=3)
     assert len(order) == 30 and len({id(v) for v in order}) == 30
     assert stratified_sample(views, n, seed=3) == key_sorted(order[:n], seed=3)
-

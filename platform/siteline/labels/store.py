@@ -42,7 +42,7 @@ def auto_radius(
     spacing = {}
     for name, tiles in (("t1", a), ("t2", b)):
         tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t, None))
-        pts = tiles.read({tile: tiles.prefix(tile, None)}, ())["xyz"]
+        pts = tiles.read({tile: tiles.prefix(tile, None)}, ())["xyz_m"]
         spacing[name] = median_spacing(pts, max_points)
     sparse = max(spacing.values())
     return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}
@@ -66,9 +66,9 @@ class _Decoded:
         if hit is None:
             tile = self.keys[ij]
             data = self.tiles.read({tile: self.tiles.prefix(tile)}, ("class",))
-            xyz, cls = data["xyz"].astype(np.float32), data["class"]
+            xyz, cls = data["xyz_m"].astype(np.float32), data["class"]
             x0, y0 = ij[0] * self.size, ij[1] * self.size
-            x, y = data["xyz"][:, 0], data["xyz"][:, 1]
+            x, y = data["xyz_m"][:, 0], data["xyz_m"][:, 1]
             strips = {
                 "w": np.flatnonzero(x <= x0 + self.r),
                 "e": np.flatnonzero(x >= x0 + self.size - self.r),

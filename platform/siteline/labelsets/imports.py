@@ -330,7 +330,7 @@ def _match_tiles(
         origin = tile_origin_local(i, j, spec.tile_size_m)
         data = tiles.read({tile: tiles.prefix(tile)}, ("gps_time", "return_number", "class"))
         stored = point_keys(
-            quantise(data["xyz"], origin, spec.quantum_m),
+            quantise(data["xyz_m"], origin, spec.quantum_m),
             data["gps_time"] if has_time else None,
             data["return_number"],
         )

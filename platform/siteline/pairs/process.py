@@ -196,7 +196,7 @@ def process_pair(
         )
     ground_id = site.taxonomy.id_of("ground")
     ground = tiles2.points(resolution=0.5, attributes=("class",))
-    plane = fit_ground_plane(ground["xyz"][ground["class"] == ground_id], seed=params.seed)
+    plane = fit_ground_plane(ground["xyz_m"][ground["class"] == ground_id], seed=params.seed)
     skip = np.array(
         [site.taxonomy.id_of(c) for c in ("snow", "noise") if c in {k.name for k in site.taxonomy.classes}],
         dtype=np.uint8,

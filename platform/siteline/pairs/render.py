@@ -91,7 +91,7 @@ def render_pair_view(
         read += tiles.last_stats.points_read
         out.append(
             render_points(
-                pts["xyz"], camera, settings, {"rgb": pts["rgb"], "change": pts["change"]}, device=device
+                pts["xyz_m"], camera, settings, {"rgb": pts["rgb"], "change": pts["change"]}, device=device
             )
         )
     ra, rb = out

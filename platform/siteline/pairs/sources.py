@@ -34,7 +34,7 @@ class TilePointSource:
         self.reads = 0
         coarse = tiles.points(resolution=coarse_m, attributes=("class",))
         keep = ~np.isin(coarse["class"], self.skip)
-        self._coarse = ArrayPointSource(coarse["xyz"][keep])
+        self._coarse = ArrayPointSource(coarse["xyz_m"][keep])
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
         out = self.tiles.points_for_view(
@@ -42,7 +42,7 @@ class TilePointSource:
         )
         self.points_read += self.tiles.last_stats.points_read
         self.reads += 1
-        return out["xyz"][~np.isin(out["class"], self.skip)]
+        return out["xyz_m"][~np.isin(out["class"], self.skip)]
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         return self._coarse.nearest_distance(xyz)

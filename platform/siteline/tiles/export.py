@@ -42,11 +42,11 @@ def export_las(
         with laspy.open(tmp, mode="w", header=header) as writer:
             for tile in sorted(tiles.by_tile):
                 data = tiles.read({tile: tiles.prefix(tile, level)}, ATTRS)
-                xyz = data["xyz"]  # float64 site-local: export never goes through float32
+                xyz = data["xyz_m"]  # float64 site-local: export never goes through float32
                 if bounds is not None:
                     keep = in_bounds(xyz, bounds)
                     data = {k: v[keep] for k, v in data.items()}
-                    xyz = data["xyz"]
+                    xyz = data["xyz_m"]
                 if not len(xyz):
                     continue
                 rec = laspy.ScaleAwarePointRecord.zeros(len(xyz), header=header)

@@ -22,10 +22,16 @@ import numpy as np
 
 from siteline.errors import TileError
 
-ATTRIBUTES = ("xyz", "rgb", "intensity", "class", "gps_time", "return_number")
+# Stored arrays per tile. Positions are stored as ``xyz_counts`` (int32 quanta from the tile origin)
+# and come back from reads as ``xyz_m`` (site-local metres): the two never share a name. Stores
+# written before the rename call the counts ``xyz`` (LEGACY_COUNTS); reads fall back to it.
+COUNTS = "xyz_counts"
+LEGACY_COUNTS = "xyz"
+METRES = "xyz_m"
+ATTRIBUTES = (COUNTS, "rgb", "intensity", "class", "gps_time", "return_number")
 SPILL_DTYPE = np.dtype(
     [
-        ("xyz", "<i4", (3,)),
+        (COUNTS, "<i4", (3,)),
         ("rgb", "u1", (3,)),
         ("intensity", "<u2"),
         ("class", "u1"),

@@ -12,7 +12,16 @@ import numpy as np
 from siteline import stores
 from siteline.cameras import Camera
 from siteline.errors import TileError
-from siteline.tiles.layout import ATTRIBUTES, TileSpec, dequantise, parse_tile_key, tile_origin_local
+from siteline.tiles.layout import (
+    ATTRIBUTES,
+    COUNTS,
+    LEGACY_COUNTS,
+    METRES,
+    TileSpec,
+    dequantise,
+    parse_tile_key,
+    tile_origin_local,
+)
 from siteline.tiles.writer import NodeInfo, node_from_dict
 
 DEFAULT_ATTRIBUTES = ("rgb", "class")
@@ -128,7 +137,13 @@ class SceneTiles:
         arr = self._handles.get(key)
         if arr is None:
             src = self.extra.get(name, self.root)
-            arr = self._handles[key] = src[f"tiles/{tile}/{name}"]
+            try:
+                arr = src[f"tiles/{tile}/{name}"]
+            except KeyError:
+                if name != COUNTS:
+                    raise
+                arr = src[f"tiles/{tile}/{LEGACY_COUNTS}"]  # a store written before the rename
+            self._handles[key] = arr
         return arr
 
     def _array(self, tile: str, name: str, k: int) -> np.ndarray:
@@ -192,19 +207,23 @@ class SceneTiles:
         self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]
     ) -> dict[str, np.ndarray]:
         """Per tile of ``plan``: read its arrays' first ``k`` values (cached), keep ``idx`` of them
-        (all when None), dequantise ``xyz`` to site-local float64 metres; concatenate over tiles."""
-        bad = [a for a in attributes if (a not in ATTRIBUTES or a == "xyz") and a not in self.extra]
+        (all when None), dequantise ``xyz_counts`` to site-local float64 metres ``xyz_m``;
+        concatenate over tiles."""
+        bad = [a for a in attributes if (a not in ATTRIBUTES or a == COUNTS) and a not in self.extra]
         if bad:
-            raise TileError(f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != 'xyz']}.")
-        parts: dict[str, list[np.ndarray]] = {a: [] for a in ("xyz", *attributes)}
+            raise TileError(
+                f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != COUNTS]} "
+                f"(positions always come back as {METRES!r})."
+            )
+        parts: dict[str, list[np.ndarray]] = {a: [] for a in (METRES, *attributes)}
         stats = ReadStats()
         for tile in sorted(plan):
             k, idx = plan[tile]
             i, j = parse_tile_key(tile)
-            for a in ("xyz", *attributes):
-                values = self._array(tile, a, k)
+            for a in (METRES, *attributes):
+                values = self._array(tile, COUNTS if a == METRES else a, k)
                 values = values if idx is None else values[idx]
-                if a == "xyz":
+                if a == METRES:
                     origin = tile_origin_local(i, j, self.spec.tile_size_m)
                     values = dequantise(values, origin, self.spec.quantum_m)
                 parts[a].append(values)
@@ -215,8 +234,8 @@ class SceneTiles:
             if chunks:
                 out[a] = np.concatenate(chunks)
             else:
-                shape = (0, 3) if a in ("xyz", "rgb") else (0,)
-                dtype = np.float64 if a == "xyz" else self._handle(next(iter(self.by_tile)), a).dtype
+                shape = (0, 3) if a in (METRES, "rgb") else (0,)
+                dtype = np.float64 if a == METRES else self._handle(next(iter(self.by_tile)), a).dtype
                 out[a] = np.zeros(shape, dtype=dtype)
         self.last_stats = stats
         return out
@@ -230,7 +249,7 @@ class SceneTiles:
     ) -> dict[str, np.ndarray]:
         """Points in ``bounds`` ((xmin, ymin, xmax, ymax) or 6 values with z, site-local metres) up to
         ``level`` (or the level that reaches ``resolution`` metres; all levels when both are None).
-        Returns ``xyz`` (N, 3) float32 site-local and the requested attributes."""
+        Returns ``xyz_m`` (N, 3) float32 site-local metres and the requested attributes."""
         if level is not None and resolution is not None:
             raise TileError("give level or resolution, not both.")
         if resolution is not None:
@@ -245,10 +264,10 @@ class SceneTiles:
             prefixes[tile] = self.prefix(tile, level)
         out = self.read(prefixes, attributes)
         if bounds is not None:
-            keep = in_bounds(out["xyz"], bounds)
+            keep = in_bounds(out[METRES], bounds)
             out = {k: v[keep] for k, v in out.items()}
-        out["xyz"] = out["xyz"].astype(np.float32)
-        self.last_stats.points_returned = len(out["xyz"])
+        out[METRES] = out[METRES].astype(np.float32)
+        self.last_stats.points_returned = len(out[METRES])
         return out
 
     def levels_for_view(self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3):  # noqa: ANN201
@@ -344,11 +363,11 @@ class SceneTiles:
                 if len(sel):
                     selection[tile] = (sel, count[sel])
         out = self.read_nodes(selection, attributes)
-        xyz = out["xyz"]
+        xyz = out[METRES]
         keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
         out = {k: v[keep] for k, v in out.items()}
-        out["xyz"] = out["xyz"].astype(np.float32)
-        self.last_stats.points_returned = len(out["xyz"])
+        out[METRES] = out[METRES].astype(np.float32)
+        self.last_stats.points_returned = len(out[METRES])
         self.last_stats.levels = {
             t: int(self.node_arrays[t][2][sel].max()) for t, (sel, _) in selection.items()
         }

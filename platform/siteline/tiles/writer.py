@@ -30,6 +30,8 @@ from siteline.progress import Progress
 from siteline.site import SiteSpec
 from siteline.sitestream import site_chunks, source_transformer
 from siteline.tiles.layout import (
+    ATTRIBUTES,
+    COUNTS,
     SPILL_DTYPE,
     TileSpec,
     dequantise,
@@ -138,7 +140,7 @@ def _spill(
             i, j = (int(v) for v in ij[part[0]])
             key = tile_key(i, j)
             rec = np.empty(len(part), SPILL_DTYPE)
-            rec["xyz"] = quantise(sc.local[part], tile_origin_local(i, j, spec.tile_size_m), spec.quantum_m)
+            rec[COUNTS] = quantise(sc.local[part], tile_origin_local(i, j, spec.tile_size_m), spec.quantum_m)
             rec["rgb"] = rgb[part]
             rec["intensity"] = ch.intensity[part]
             rec["class"] = sc.classes[part]
@@ -162,8 +164,8 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
 
     spec = TileSpec.from_dict(spec_doc)
     rec = np.fromfile(spill_path, dtype=SPILL_DTYPE)
-    levels = assign_levels(rec["xyz"], spec, _tile_seed(key, seed))
-    cells = node_cells(rec["xyz"], levels, spec)
+    levels = assign_levels(rec[COUNTS], spec, _tile_seed(key, seed))
+    cells = node_cells(rec[COUNTS], levels, spec)
     keys = (cells[:, 2], cells[:, 1], cells[:, 0], levels)
     if spec.node_order == "random":  # inside a node, a seeded shuffle: any prefix is a uniform subsample
         keys = (np.random.default_rng(_tile_seed(key, seed) ^ 0x5EED).permutation(len(rec)), *keys)
@@ -173,7 +175,7 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
     group = zarr.open_group(group_path, mode="a").require_group("tiles").create_group(key)
     digest = hashlib.sha256()
     codec = _codec(spec)
-    for name in ("xyz", "rgb", "intensity", "class", "gps_time", "return_number"):
+    for name in ATTRIBUTES:
         values = np.ascontiguousarray(rec[name])
         shape = values.shape
         chunks = (spec.chunk_points, *shape[1:])
@@ -192,7 +194,7 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
         digest.update(values.tobytes())
     i, j = parse_tile_key(key)
     origin = tile_origin_local(i, j, spec.tile_size_m)
-    local = dequantise(rec["xyz"], origin, spec.quantum_m)
+    local = dequantise(rec[COUNTS], origin, spec.quantum_m)
     new = np.ones(n, dtype=bool)
     if n > 1:
         new[1:] = (levels[1:] != levels[:-1]) | np.any(cells[1:] != cells[:-1], axis=1)
