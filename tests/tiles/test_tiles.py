@@ -362,3 +362,26 @@ def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
         assert img.coverage >= full.coverage - 0.01, (size, img.coverage, full.coverage)
     coarse = tiles.points_for_view(cam, 1.0, point_size_px=3, lod_factor=2.0)
     assert len(coarse["xyz_m"]) < 0.4 * len(pts["xyz_m"])  # the read follows the factor continuously
+
+
+def test_reads_decode_only_the_chunks_they_touch(tmp_path) -> None:
+    """A node read decodes the inner chunks its points lie in, not the tile's prefix; a repeat comes
+    from the cache; a cache too small for the read still returns the right values."""
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    _cloud(tmp_path / "c.las", origin, n=40_000, extent=40.0)
+    spec = TileSpec(chunk_points=1024, shard_points=8192)
+    _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)
+    tile = max(tiles.by_tile, key=tiles.prefix)
+    whole = tiles.read({tile: tiles.prefix(tile)}, ("gps_time",))
+    last = len(tiles.by_tile[tile]) - 1  # the deepest node: at the end of the arrays
+    node = tiles.by_tile[tile][last]
+    for cache in (256 * 2**20, 4096):
+        fresh = SceneTiles(result.uri, tiles.nodes, tiles.spec, cache_bytes=cache)
+        got = fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
+        want = slice(node.start, node.start + node.count)
+        assert np.array_equal(got["gps_time"], whole["gps_time"][want])
+        assert np.array_equal(got["xyz_m"], whole["xyz_m"][want])
+        first, end = node.start // 1024, -(-(node.start + node.count) // 1024)
+        assert fresh.last_stats.points_decoded <= 2 * (end - first) * 1024 < tiles.prefix(tile)
+        fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
+        assert (fresh.last_stats.points_decoded == 0) == (cache > 4096)

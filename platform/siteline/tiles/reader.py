@@ -31,6 +31,7 @@ DEFAULT_ATTRIBUTES = ("rgb", "class")
 class ReadStats:
     tiles_read: int = 0
     points_read: int = 0
+    points_decoded: int = 0  # points in the inner chunks decoded from the store (cache misses)
     points_returned: int = 0
     levels: dict[str, int] = field(default_factory=dict)
 
@@ -125,9 +126,9 @@ class SceneTiles:
         self.last_stats = ReadStats()
         self.extra: dict[str, object] = {}
         self._handles: dict[tuple[str, str], object] = {}
-        # many views of one pair read the same tiles: keep recent tile prefixes (LRU, byte budget)
+        # many views of one pair read the same tiles: keep recent inner chunks (LRU, byte budget)
         self.cache_bytes = cache_bytes
-        self._cache: OrderedDict[tuple[str, str], np.ndarray] = OrderedDict()
+        self._cache: OrderedDict[tuple[str, str, int], np.ndarray] = OrderedDict()
         self._cached = 0
 
     def _handle(self, tile: str, name: str):  # noqa: ANN202
@@ -146,23 +147,43 @@ class SceneTiles:
             self._handles[key] = arr
         return arr
 
-    def _array(self, tile: str, name: str, k: int) -> np.ndarray:
-        """The first ``k`` values of ``tiles/<tile>/<name>`` (one zarr call on a cache miss)."""
-        key = (tile, name)
-        hit = self._cache.get(key)
-        if hit is not None and len(hit) >= k:
-            self._cache.move_to_end(key)
-            return hit[:k]
-        values = self._handle(tile, name)[:k]
-        if values.nbytes <= self.cache_bytes:
-            if hit is not None:
-                self._cached -= hit.nbytes
-            self._cache[key] = values
-            self._cached += values.nbytes
-            while self._cached > self.cache_bytes:
-                _, old = self._cache.popitem(last=False)
-                self._cached -= old.nbytes
-        return values
+    def _values(self, tile: str, name: str, k: int, idx: np.ndarray | None) -> np.ndarray:
+        """Values ``idx`` (ascending; the first ``k`` when None) of ``tiles/<tile>/<name>``, read by
+        the array's inner chunks: only the chunks they touch are decoded, each kept in the reader's
+        LRU cache, so a view that needs a few nodes of a tile never decodes the rest of it."""
+        arr = self._handle(tile, name)
+        c = int(arr.chunks[0])
+        ids = np.arange(-(-k // c)) if idx is None else np.unique(idx // c)
+        blocks = self._chunks(tile, name, arr, c, ids)
+        buf = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+        if idx is None:
+            return buf[:k]
+        return buf[np.searchsorted(ids, idx // c) * c + idx % c]  # every chunk but the array's last is full
+
+    def _chunks(self, tile: str, name: str, arr, c: int, ids: np.ndarray) -> list[np.ndarray]:  # noqa: ANN001
+        """Inner chunks ``ids`` of ``arr`` from the cache; each run of missing ones in one zarr call."""
+        out: list[np.ndarray | None] = [self._cache.get((tile, name, int(i))) for i in ids]
+        missing = [q for q, v in enumerate(out) if v is None]
+        runs = np.split(np.array(missing), np.flatnonzero(np.diff(ids[missing]) != 1) + 1) if missing else []
+        for run in runs:
+            first, last = int(ids[run[0]]), int(ids[run[-1]])
+            values = arr[first * c : (last + 1) * c]
+            self.last_stats.points_decoded += len(values)
+            for q in run:
+                lo = (int(ids[q]) - first) * c
+                block = values[lo : lo + c]
+                out[q] = block = block.copy() if len(run) > 1 else block  # evictable one by one
+                key = (tile, name, int(ids[q]))
+                self._cache[key] = block
+                self._cached += block.nbytes
+        fresh = set(missing)
+        for q, i in enumerate(ids):
+            if q not in fresh:
+                self._cache.move_to_end((tile, name, int(i)))
+        while self._cached > self.cache_bytes and len(self._cache) > len(ids):
+            _, old = self._cache.popitem(last=False)
+            self._cached -= old.nbytes
+        return out  # type: ignore[return-value]
 
     def attach(self, name: str, uri: str | Path) -> None:
         """Read attribute ``name`` from another Zarr group laid out like this store's ``tiles/<tile>/<name>``
@@ -206,8 +227,8 @@ class SceneTiles:
     def _gather(
         self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]
     ) -> dict[str, np.ndarray]:
-        """Per tile of ``plan``: read its arrays' first ``k`` values (cached), keep ``idx`` of them
-        (all when None), dequantise ``xyz_counts`` to site-local float64 metres ``xyz_m``;
+        """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
+        cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres ``xyz_m``;
         concatenate over tiles."""
         bad = [a for a in attributes if (a not in ATTRIBUTES or a == COUNTS) and a not in self.extra]
         if bad:
@@ -216,13 +237,12 @@ class SceneTiles:
                 f"(positions always come back as {METRES!r})."
             )
         parts: dict[str, list[np.ndarray]] = {a: [] for a in (METRES, *attributes)}
-        stats = ReadStats()
+        stats = self.last_stats = ReadStats()
         for tile in sorted(plan):
             k, idx = plan[tile]
             i, j = parse_tile_key(tile)
             for a in (METRES, *attributes):
-                values = self._array(tile, COUNTS if a == METRES else a, k)
-                values = values if idx is None else values[idx]
+                values = self._values(tile, COUNTS if a == METRES else a, k, idx)
                 if a == METRES:
                     origin = tile_origin_local(i, j, self.spec.tile_size_m)
                     values = dequantise(values, origin, self.spec.quantum_m)
@@ -237,7 +257,6 @@ class SceneTiles:
                 shape = (0, 3) if a in (METRES, "rgb") else (0,)
                 dtype = np.float64 if a == METRES else self._handle(next(iter(self.by_tile)), a).dtype
                 out[a] = np.zeros(shape, dtype=dtype)
-        self.last_stats = stats
         return out
 
     def points(
