@@ -268,20 +268,31 @@ class SceneTiles:
     ) -> dict[str, np.ndarray]:
         """Points in ``bounds`` ((xmin, ymin, xmax, ymax) or 6 values with z, site-local metres) up to
         ``level`` (or the level that reaches ``resolution`` metres; all levels when both are None).
+        In a store with shuffled nodes, ``resolution`` reads the level that crosses it in part, as a
+        view does (:meth:`node_takes`), so the result has about that spacing whatever the density.
         Returns ``xyz_m`` (N, 3) float32 site-local metres and the requested attributes."""
         if level is not None and resolution is not None:
             raise TileError("give level or resolution, not both.")
-        if resolution is not None:
-            level = self.level_for_resolution(resolution)
+        if resolution is not None and self.spec.node_order != "random":
+            level, resolution = self.level_for_resolution(resolution), None
         lo = hi = None
         if bounds is not None:
             lo, hi = bounds_box(bounds)
-        prefixes = {}
-        for tile, (tlo, thi) in self.tile_bounds.items():
-            if lo is not None and (np.any(thi < lo) or np.any(tlo > hi)):
-                continue
-            prefixes[tile] = self.prefix(tile, level)
-        out = self.read(prefixes, attributes)
+        tiles = [
+            t
+            for t, (tlo, thi) in self.tile_bounds.items()
+            if lo is None or not (np.any(thi < lo) or np.any(tlo > hi))
+        ]
+        if resolution is not None:
+            selection = {}
+            for tile in tiles:
+                need = np.full(len(self.node_arrays[tile][2]), float(resolution))
+                sel, take = self.node_takes(tile, np.ones(len(need), bool), need)
+                if len(sel):
+                    selection[tile] = (sel, take)
+            out = self.read_nodes(selection, attributes)
+        else:
+            out = self.read({t: self.prefix(t, level) for t in tiles}, attributes)
         if bounds is not None:
             keep = in_bounds(out[METRES], bounds)
             out = {k: v[keep] for k, v in out.items()}
@@ -304,30 +315,39 @@ class SceneTiles:
         planes = cam.frustum_planes(near_m)
         centre = cam.center
         f = min(cam.fx, cam.fy)
-        partial = self.spec.node_order == "random"
         out = {}
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
-            lo, hi, level, _, count = self.node_arrays[tile]
+            lo, hi, _, _, _ = self.node_arrays[tile]
             inside = boxes_in_frustum(planes, lo, hi)
             dist = np.linalg.norm(np.maximum(np.maximum(lo - centre, 0.0), centre - hi), axis=1)
             need = spacing_px * np.maximum(dist, near_m) / f
-            allowed = self.levels_for_resolutions(need)
-            sel = np.flatnonzero(inside & (level <= allowed))
-            if not len(sel):
-                continue
-            take = count[sel].copy()
-            if partial:
-                edge = np.flatnonzero((level[sel] == allowed[sel]) & (level[sel] > 0))
-                a = level[sel[edge]]
-                totals = self.level_totals[tile]
-                below = np.cumsum(totals)[a - 1]
-                r = (self._spacing[a - 1] / need[sel[edge]]) ** 2
-                frac = np.clip((r - 1.0) * below / np.maximum(totals[a], 1), 0.0, 1.0)
-                take[edge] = np.maximum(np.ceil(frac * take[edge]).astype(np.int64), 1)
-            out[tile] = (sel, take)
+            sel, take = self.node_takes(tile, inside, need)
+            if len(sel):
+                out[tile] = (sel, take)
         return out, planes
+
+    def node_takes(
+        self, tile: str, candidates: np.ndarray, need_m: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Which of ``tile``'s nodes (a mask over ``node_arrays[tile]``) to read, and how many points
+        of each, for a spacing of ``need_m`` metres per node: the levels coarser than it whole and,
+        in a store with shuffled nodes, the level that crosses it in part (see :meth:`levels_for_view`);
+        in one with input order that level whole."""
+        _, _, level, _, count = self.node_arrays[tile]
+        allowed = self.levels_for_resolutions(need_m)
+        sel = np.flatnonzero(candidates & (level <= allowed))
+        take = count[sel].copy()
+        if self.spec.node_order == "random" and len(sel):
+            edge = np.flatnonzero((level[sel] == allowed[sel]) & (level[sel] > 0))
+            a = level[sel[edge]]
+            totals = self.level_totals[tile]
+            below = np.cumsum(totals)[a - 1]
+            r = (self._spacing[a - 1] / need_m[sel[edge]]) ** 2
+            frac = np.clip((r - 1.0) * below / np.maximum(totals[a], 1), 0.0, 1.0)
+            take[edge] = np.maximum(np.ceil(frac * take[edge]).astype(np.int64), 1)
+        return sel, take
 
     def levels_for_resolutions(self, resolution_m: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`level_for_resolution`."""
