@@ -232,12 +232,21 @@ def photo_inspect(
 def scene_tile(
     scene_id: int = typer.Argument(..., help="Scene id."),
     workers: int = typer.Option(2, "--workers", help="Processes writing tiles."),
+    retile: bool = typer.Option(
+        False,
+        "--retile",
+        help="Tile a tiled scene again in the current layout (a store written before shuffled octree "
+        "nodes reads up to 4x the points a view needs). Its pairs are then processed again, and "
+        "imported label sets must be imported again.",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
-    """Tile a registered scene into its Zarr store (a scene already tiled is left alone)."""
+    """Tile a registered scene into its Zarr store (a scene already tiled is left alone unless --retile)."""
     cfg = settings()
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
-        result, message = tile_scene(cat, cfg, scene_id, workers=workers, progress=bar_progress(bar))
+        result, message = tile_scene(
+            cat, cfg, scene_id, workers=workers, progress=bar_progress(bar), retile=retile
+        )
     emit(
         as_json,
         {"message": message, "tiles": result.summary() if result else None},

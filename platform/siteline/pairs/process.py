@@ -31,6 +31,7 @@ from siteline.pairs.render import render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress
 from siteline.render.outputs import png_bytes
+from siteline.tiles.scene import tiling_generation
 from siteline.tolerances import RATIO_TOL, at_least
 from siteline.views import NamedCamera, fit_ground_plane, generate_views
 from siteline.views.generate import SyntheticView, key_sorted
@@ -56,12 +57,16 @@ class PairOutput:
         return len(self.views)
 
 
-def output_digest(params: PairParams, label_sets: tuple[int, int]) -> str:
+def output_digest(params: PairParams, label_sets: tuple[int, int], tilings: tuple[int, int] = (0, 0)) -> str:
     """The key of a pair's outputs: the parameters' digest, extended by the label-set versions when
-    either is not 1 (so outputs made before label sets were versioned keep their key)."""
-    if label_sets == (1, 1):
+    either is not 1 and by the scenes' tiling generations when either was re-tiled (so outputs made
+    before either was recorded keep their key, and a re-tiled scene never reuses outputs aligned
+    with its old tile order)."""
+    if label_sets == (1, 1) and tilings == (0, 0):
         return params.digest()
     text = f"{params.digest()}:labels:{label_sets[0]}:{label_sets[1]}"
+    if tilings != (0, 0):
+        text += f":tiles:{tilings[0]}:{tilings[1]}"
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
@@ -71,9 +76,10 @@ def _output_root(settings: Settings, pair_id: int, digest: str) -> str:
 
 def _pair_scenes(
     catalog: Catalog, pair_id: int, label_sets: dict[int, int] | None
-) -> tuple[int, int, tuple[int, int]]:
-    """(t1 id, t2 id, (t1 version, t2 version)): the versions in ``label_sets`` (scene id -> version)
-    or each scene's newest; LabelSetError when a pinned version does not exist."""
+) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
+    """(t1 id, t2 id, (t1 version, t2 version), (t1 tiling, t2 tiling)): the versions in
+    ``label_sets`` (scene id -> version) or each scene's newest, and each scene's tiling generation
+    (0 until it is re-tiled); LabelSetError when a pinned version does not exist."""
     with catalog.transaction() as s:
         pair = s.get(Pair, pair_id)
         if pair is None:
@@ -84,7 +90,8 @@ def _pair_scenes(
         versions = tuple(
             label_set(s, sid, pinned[sid]).version if sid in pinned else newest.get(sid, 1) for sid in ids
         )
-    return ids[0], ids[1], versions
+        tilings = tuple(tiling_generation(s.get(Scene, sid)) for sid in ids)
+    return ids[0], ids[1], versions, tilings
 
 
 def pair_output(
@@ -98,8 +105,8 @@ def pair_output(
     """The stored outputs of ``pair_id`` processed with ``params`` and the label sets ``label_sets``
     (scene id -> version; each scene's newest by default), None when it was not. Outputs whose
     catalog rows are missing (a crash between the publish and the commit) get them now."""
-    t1, t2, versions = _pair_scenes(catalog, pair_id, label_sets)
-    digest = output_digest(params, versions)
+    t1, t2, versions, tilings = _pair_scenes(catalog, pair_id, label_sets)
+    digest = output_digest(params, versions, tilings)
     root = _output_root(settings, pair_id, digest)
     if not stores.is_complete(root):
         return None
@@ -152,9 +159,9 @@ def process_pair(
             f"pair {pair_id}: scene {untiled[0]} is not tiled: run `siteline scene tile {untiled[0]}` "
             "(or `siteline release build`, which tiles and processes what it needs)."
         )
-    _, _, versions = _pair_scenes(catalog, pair_id, label_sets)
+    _, _, versions, tilings = _pair_scenes(catalog, pair_id, label_sets)
     pinned = dict(zip(ids, versions, strict=True))
-    digest = output_digest(params, versions)
+    digest = output_digest(params, versions, tilings)
     root = _output_root(settings, pair_id, digest)
     existing = pair_output(catalog, settings, pair_id, params, run_id, pinned)
     if existing is not None:

@@ -42,8 +42,27 @@ def scene_las(session: Session, settings: Settings, scene: Scene) -> Path:
     return path
 
 
-def store_uri(settings: Settings, scene_id: int) -> str:
-    return settings.store.uri("tiles", f"scene-{scene_id}.zarr")
+def store_uri(settings: Settings, scene_id: int, generation: int = 0) -> str:
+    """``tiles/scene-<id>.zarr``; a re-tiling (generation g > 0) writes ``scene-<id>-g<g>.zarr`` beside
+    it, so the old store stays whole until the new one is committed."""
+    name = f"scene-{scene_id}.zarr" if generation == 0 else f"scene-{scene_id}-g{generation}.zarr"
+    return settings.store.uri("tiles", name)
+
+
+def tiling_generation(scene: Scene) -> int:
+    """How many times the scene was tiled again (0 until ``--retile``); part of its pairs' output keys."""
+    return int(((scene.statistics or {}).get("tiles") or {}).get("generation", 0))
+
+
+def layout_hint(scene: Scene) -> str:
+    """A sentence for a scene whose store predates the current layout, else ''."""
+    doc = ((scene.statistics or {}).get("tiles") or {}).get("spec")
+    if doc is None or TileSpec.from_dict(doc).node_order == TileSpec().node_order:
+        return ""
+    return (
+        f" Its store predates shuffled octree nodes, so views read whole levels (up to 4x the points they "
+        f"need): `siteline scene tile {scene.id} --retile` tiles it again in the current layout."
+    )
 
 
 def tile_scene(
@@ -54,19 +73,30 @@ def tile_scene(
     workers: int = 2,
     progress: Progress | None = None,
     run_id: str | None = None,
+    retile: bool = False,
 ) -> tuple[TileResult | None, str]:
-    """Tile a registered scene and index its nodes; a scene already tiled is left alone.
+    """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
+    ``retile`` (tile it again in the current layout, e.g. a store written before shuffled nodes).
 
     The store is built locally and published whole (stores.Store.publish); only then are the node
     rows, the store URI and the scene status committed in one transaction. A store without rows (a
-    crash between the publish and the commit) is replaced.
+    crash between the publish and the commit) is replaced. A re-tiling writes a new store (the next
+    generation), commits, then removes the old one: its pairs' outputs are keyed by the generation,
+    so they are processed again, and its imported label sets, aligned with the old order, are
+    refused until imported again (siteline.labelsets).
     """
     with catalog.transaction() as s:
         scene = s.get(Scene, scene_id)
         if scene is None:
             raise TileError(f"no scene with id {scene_id}.")
-        if scene.status == "tiled" and scene.tile_store_uri and stores.is_complete(scene.tile_store_uri):
-            return None, f"scene {scene_id} is already tiled at {scene.tile_store_uri}: nothing to do."
+        done = scene.status == "tiled" and scene.tile_store_uri and stores.is_complete(scene.tile_store_uri)
+        if done and not retile:
+            return None, (
+                f"scene {scene_id} is already tiled at {scene.tile_store_uri}: nothing to do."
+                + layout_hint(scene)
+            )
+        old_uri = scene.tile_store_uri if done else None
+        generation = tiling_generation(scene) + 1 if done else tiling_generation(scene)
         from siteline.catalog.models import Site
 
         site = site_spec(s.get(Site, scene.site_id))
@@ -75,7 +105,7 @@ def tile_scene(
         z_doc = (scene.statistics or {}).get("z_unit")
         z_unit = ZUnit.from_dict(z_doc) if z_doc else None
     spec = spec or TileSpec(tile_size_m=site.tile_size_m)
-    out = store_uri(settings, scene_id)
+    out = store_uri(settings, scene_id, generation)
     stores.remove(out)
     started = datetime.now(UTC)
     with settings.store.publish(out) as work:
@@ -108,7 +138,7 @@ def tile_scene(
             scene.status = "tiled"
             scene.statistics = {
                 **(scene.statistics or {}),
-                "tiles": result.summary() | {"spec": spec.to_dict()},
+                "tiles": result.summary() | {"spec": spec.to_dict(), "generation": generation},
             }
             s.add(
                 completed(
@@ -118,9 +148,11 @@ def tile_scene(
     except BaseException:
         stores.remove(out)
         raise
+    if old_uri is not None and old_uri != out:
+        stores.remove(old_uri)
     return (
         result,
-        f"scene {scene_id} tiled: {result.points:,} points in {result.tiles} tiles, {result.levels} levels, "
+        f"scene {scene_id} {'re-tiled' if old_uri else 'tiled'}: {result.points:,} points in {result.tiles} tiles, {result.levels} levels, "
         f"{result.bytes_per_point:.1f} bytes/point",
     )
 
