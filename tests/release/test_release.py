@@ -199,7 +199,7 @@ def test_preset_is_applied_and_recorded(built) -> None:
 
     settings, cat, _ = built
     p = preset_params("fast", PairParams(views=3, min_coverage=0.2))
-    assert (p.scale, p.point_size_px, p.lod_factor) == (0.125, 3, 2.0) and p.views == 3
+    assert (p.scale, p.point_size_px, p.lod_factor) == (0.125, 3, 1.41) and p.views == 3
     with pytest.raises(ReleaseError, match="unknown preset"):
         preset_params("turbo")
     info = pipeline.release(cat, settings, "demo", "presetrel", p, preset="fast")
