@@ -153,12 +153,20 @@ class SceneTiles:
         LRU cache, so a view that needs a few nodes of a tile never decodes the rest of it."""
         arr = self._handle(tile, name)
         c = int(arr.chunks[0])
-        ids = np.arange(-(-k // c)) if idx is None else np.unique(idx // c)
-        blocks = self._chunks(tile, name, arr, c, ids)
-        buf = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+        if (k if idx is None else len(idx)) == 0:
+            return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
         if idx is None:
-            return buf[:k]
-        return buf[np.searchsorted(ids, idx // c) * c + idx % c]  # every chunk but the array's last is full
+            blocks = self._chunks(tile, name, arr, c, np.arange(-(-k // c)))
+            return (blocks[0] if len(blocks) == 1 else np.concatenate(blocks))[:k]
+        q = idx // c
+        if len(q) and np.any(q[1:] < q[:-1]):
+            raise TileError("node reads must come in array order.")
+        first = np.ones(len(q), dtype=bool)
+        first[1:] = q[1:] != q[:-1]
+        blocks = self._chunks(tile, name, arr, c, q[first])
+        buf = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+        # every chunk but the array's last is full, so chunk j of the read starts at j * c in buf
+        return buf[(np.cumsum(first) - 1) * c + (idx - q * c)]
 
     def _chunks(self, tile: str, name: str, arr, c: int, ids: np.ndarray) -> list[np.ndarray]:  # noqa: ANN001
         """Inner chunks ``ids`` of ``arr`` from the cache; each run of missing ones in one zarr call."""
