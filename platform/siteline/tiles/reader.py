@@ -367,8 +367,8 @@ class SceneTiles:
         self, selection: dict[str, tuple[np.ndarray, np.ndarray]], attributes: Sequence[str]
     ) -> dict[str, np.ndarray]:
         """Read, per tile, the first ``take[k]`` points of each node ``indices[k]`` of
-        ``selection[tile] = (indices, take)`` (indices into ``node_arrays[tile]``): the tile's arrays
-        are read up to the last point wanted (cached), then the nodes' ranges taken."""
+        ``selection[tile] = (indices, take)`` (indices into ``node_arrays[tile]``, ascending): only
+        the inner chunks those ranges touch are decoded (:meth:`_values`)."""
         plan = {}
         for tile, (sel, take) in selection.items():
             starts = self.node_arrays[tile][3][sel]
@@ -393,8 +393,8 @@ class SceneTiles:
         at that level; None reads all levels). lod_factor 1 keeps coverage within a point of reading
         everything (~4 points read per pixel of a surface for 1 px points, ~0.5 for 3 px disks); larger
         reads fewer at some coverage cost (bench/tiles.py measures both). Stores written before
-        shuffled nodes read whole levels, up to 4x more. Points outside the frustum are dropped (float64 test), so at
-        full level the result is exactly the brute-force frustum selection."""
+        shuffled nodes read whole levels, up to 4x more. Points outside the frustum are dropped
+        (float64 test), so at full level the result is exactly the brute-force frustum selection."""
         if level == "auto":
             selection, planes = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)
         else:
