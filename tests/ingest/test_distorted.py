@@ -91,7 +91,12 @@ def test_a_mission_with_a_distorted_colmap_model_goes_to_a_release(tmp_path, syn
         for _, cam in stored:
             assert (cam.width, cam.height) == (pinhole.width, pinhole.height)
             assert [cam.fx, cam.fy, cam.cx, cam.cy] == [float(v) for v in pinhole.params]
-        params = PairParams(scale=0.5, point_size_px=3, views=4, seed=0, min_coverage=0.3)
+        one = {
+            "vertical_fractions": [1.0],
+            "forward_fractions": [0.0],
+            "mirror": False,
+        }  # one view per camera
+        params = PairParams(scale=0.5, point_size_px=3, views=4, seed=0, min_coverage=0.3, view_params=one)
         info = pipeline.release(cat, settings, "demo", "distorted", params)
         assert info.items > 0
         with cat.transaction() as s:

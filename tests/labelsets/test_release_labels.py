@@ -18,7 +18,9 @@ from siteline.pairs import PairParams
 from siteline.release import publish_release
 from siteline.release.manifest import read_manifest
 
-PARAMS = PairParams(scale=0.25, point_size_px=3, views=3, seed=0, min_coverage=0.2)
+# one candidate view per real camera: the test is about label sets, not the view sample
+ONE = {"vertical_fractions": [1.0], "forward_fractions": [0.0], "mirror": False}
+PARAMS = PairParams(scale=0.25, point_size_px=3, views=3, seed=0, min_coverage=0.2, view_params=ONE)
 
 
 def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, monkeypatch) -> None:
