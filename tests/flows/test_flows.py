@@ -192,6 +192,7 @@ def test_upload_event_reaches_the_api(harness, tmp_path) -> None:
 
 
 @pytest.mark.e2e
+@pytest.mark.slow  # ~55 s (a Dask cluster, S3 and PostgreSQL): `make test-all` runs it
 def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
     harness, small_site, tmp_path, monkeypatch, postgres_url, s3_store
 ) -> None:
