@@ -33,13 +33,14 @@ from siteline.errors import LabelSetError, SchemaError
 from siteline.hashing import sha256_file
 from siteline.labelsets.compare import changes_by_class, histogram, pair_counts
 from siteline.labelsets.match import match_points, point_keys
-from siteline.labelsets.store import labelset_uri, open_labelled_tiles, tile_checksum, write_tile_classes
+from siteline.labelsets.store import labelset_uri, open_labelled_tiles, write_tile_classes
 from siteline.lasio import open_las, read_labels_vlr
 from siteline.progress import Progress
 from siteline.site import SiteSpec
 from siteline.sitestream import file_crs, site_chunks, source_transformer
 from siteline.tiles.layout import parse_tile_key, quantise, tile_index, tile_key, tile_origin_local
 from siteline.tiles.reader import SceneTiles
+from siteline.tiles.scene import tile_checksum
 
 # Refuse a file when more than this fraction of its points match no stored point or match one
 # already taken: an editor that keeps points never creates either, so anything above rounding

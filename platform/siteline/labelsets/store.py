@@ -18,17 +18,13 @@ from siteline.errors import LabelSetError
 from siteline.tiles import open_scene_tiles
 from siteline.tiles.layout import TileSpec
 from siteline.tiles.reader import SceneTiles
+from siteline.tiles.scene import tile_checksum
 
 FORMAT_VERSION = 1
 
 
 def labelset_uri(settings: Settings, scene_id: int, version: int) -> str:
     return settings.store.uri("labelsets", f"scene-{scene_id}", f"v{version}.zarr")
-
-
-def tile_checksum(scene: Scene) -> str | None:
-    """The checksum of the scene's tile store (its arrays' order is what a label-set store follows)."""
-    return ((scene.statistics or {}).get("tiles") or {}).get("checksum")
 
 
 def open_labelled_tiles(session: Session, scene: Scene, version: int | None = None) -> tuple[SceneTiles, int]:

@@ -20,8 +20,8 @@ from siteline.views import SAMPLER_VERSION, ViewParams
 class PairParams:
     """Every knob of pair processing, one name each, composed of the stages' own specs:
     :meth:`render_settings` (``scale``, ``point_size_px``; DESIGN.md §6), :meth:`view_params_spec`
-    (``scale``, ``views``, ``seed``, ``min_coverage``, ``point_size_px`` and any other ViewParams field in ``view_params``;
-    §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
+    (``scale``, ``views``, ``seed``, ``min_coverage``, ``point_size_px`` and any other ViewParams
+    field in ``view_params``; §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
     min_valid: reject a rendered view whose valid fraction (pixels neither ignored nor a hole in
     either scene) is below this, and render the next view of the stratified order in its place

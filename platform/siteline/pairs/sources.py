@@ -13,8 +13,8 @@ class TilePointSource:
     """A :class:`siteline.views.PointSource` over a tiled scene for view generation, which renders
     hundreds of probes per real camera. Each probe reads only what it needs: the tiles its frustum
     meets, at the spacing its own render scale and ``point_size_px`` need (``lod_factor``:
-    ``SceneTiles.points_for_view``; the probes must render with the same point size), so a probe's cost grows with its pixels,
-    not with the scene's density; the tile reader's cache keeps the tiles a pair's probes share.
+    ``SceneTiles.points_for_view``; the probes must render with the same point size), so a probe's
+    cost grows with its pixels, not with the scene's density; the tile reader's cache keeps the tiles a pair's probes share.
     Clearance and overhead checks use a coarse copy (``coarse_m``) of the solid geometry, whose size
     grows with the site's area, not its density. Airborne snow and noise are left out of both."""
 

@@ -217,11 +217,7 @@ class SceneTiles:
 
     def level_for_resolution(self, resolution_m: float) -> int:
         """Smallest level whose spacing is at most ``resolution_m`` (the deepest if none is)."""
-        levels = sorted({n.level for n in self.nodes})
-        for level in levels:
-            if self.spec.spacing(level) <= resolution_m:
-                return level
-        return levels[-1]
+        return int(self.levels_for_resolutions(np.array([resolution_m]))[0])
 
     def prefix(self, tile: str, level: int | None = None) -> int:
         """How many of ``tile``'s points levels 0..``level`` hold (all levels when None): a read of

@@ -49,14 +49,24 @@ def store_uri(settings: Settings, scene_id: int, generation: int = 0) -> str:
     return settings.store.uri("tiles", name)
 
 
+def tiling(scene: Scene) -> dict:
+    """What tiling recorded in the scene's statistics (spec, checksum, generation, counts); {} before."""
+    return (scene.statistics or {}).get("tiles") or {}
+
+
 def tiling_generation(scene: Scene) -> int:
     """How many times the scene was tiled again (0 until ``--retile``); part of its pairs' output keys."""
-    return int(((scene.statistics or {}).get("tiles") or {}).get("generation", 0))
+    return int(tiling(scene).get("generation", 0))
+
+
+def tile_checksum(scene: Scene) -> str | None:
+    """The checksum of the scene's tile store (its arrays' order is what a label-set store follows)."""
+    return tiling(scene).get("checksum")
 
 
 def layout_hint(scene: Scene) -> str:
     """A sentence for a scene whose store predates the current layout, else ''."""
-    doc = ((scene.statistics or {}).get("tiles") or {}).get("spec")
+    doc = tiling(scene).get("spec")
     if doc is None or TileSpec.from_dict(doc).node_order == TileSpec().node_order:
         return ""
     return (
@@ -152,8 +162,8 @@ def tile_scene(
         stores.remove(old_uri)
     return (
         result,
-        f"scene {scene_id} {'re-tiled' if old_uri else 'tiled'}: {result.points:,} points in {result.tiles} tiles, {result.levels} levels, "
-        f"{result.bytes_per_point:.1f} bytes/point",
+        f"scene {scene_id} {'re-tiled' if old_uri else 'tiled'}: {result.points:,} points in "
+        f"{result.tiles} tiles, {result.levels} levels, {result.bytes_per_point:.1f} bytes/point",
     )
 
 
@@ -184,5 +194,5 @@ def open_scene_tiles(session: Session, scene: Scene) -> SceneTiles:
     """The scene's tile store, indexed by its catalog node rows."""
     if scene.status != "tiled" or not scene.tile_store_uri:
         raise TileError(f"scene {scene.id} is not tiled yet: run `siteline scene tile {scene.id}`.")
-    spec = TileSpec.from_dict(scene.statistics["tiles"]["spec"])
+    spec = TileSpec.from_dict(tiling(scene)["spec"])
     return SceneTiles(scene.tile_store_uri, scene_nodes(session, scene.id), spec)

@@ -6,7 +6,8 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from siteline.errors import ViewsError
+from siteline.errors import RenderError, ViewsError
+from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views.strategies import MIRROR_RULES
 
@@ -67,8 +68,10 @@ class ViewParams:
         for name in ("clearance_m", "overhead_radius_m", "scale", "depth_probe_scale"):
             if not getattr(self, name) > 0:
                 raise ViewsError(f"{name} must be positive.")
-        if not isinstance(self.point_size_px, int) or self.point_size_px < 1 or self.point_size_px % 2 == 0:
-            raise ViewsError(f"point_size_px {self.point_size_px!r} must be an odd positive integer.")
+        try:  # the renderer's rule for point sizes, one place
+            RenderSettings(scale=self.scale, point_size_px=self.point_size_px)
+        except RenderError as exc:
+            raise ViewsError(str(exc)) from exc
 
     @property
     def per_camera(self) -> int:
