@@ -30,7 +30,6 @@ from prefect.runtime import flow_run
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from runner import task_runner  # noqa: E402
 
-from siteline import stores  # noqa: E402
 from siteline.catalog import open_catalog  # noqa: E402
 from siteline.catalog.scenes import (  # noqa: E402
     pair_ids_of_scene,
@@ -40,6 +39,7 @@ from siteline.catalog.scenes import (  # noqa: E402
 from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import load_settings  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
+from siteline.stores import join  # noqa: E402
 
 
 def artifact_key(*parts: Any) -> str:
@@ -145,8 +145,8 @@ def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
                 "view": v["index"],
                 "strategy": v["strategy"],
                 "change_ratio": v["change_ratio"],
-                "a": stores.join(out.root, "A", v["file"]),
-                "mask": stores.join(out.root, "label", v["file"]),
+                "a": join(out.root, "A", v["file"]),
+                "mask": join(out.root, "label", v["file"]),
             }
             for v in out.views[:6]
         ],

@@ -8,23 +8,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from siteline import stores
 from siteline.config import load_settings
 from siteline.errors import StoreError
-from siteline.stores import MARKER, Store
+from siteline.stores import MARKER, FsspecStore, LocalStore, Store, join, open_store
 
 
 @pytest.fixture(params=["local", "s3"])
 def store(request: pytest.FixtureRequest, tmp_path: Path) -> Store:
     url = str(tmp_path / "stores") if request.param == "local" else request.getfixturevalue("s3_store")
-    st = Store(url, tmp_path / "staging")
+    st = open_store(url, tmp_path / "staging")
     st.ensure()
     return st
 
 
 def _listing(uri: str) -> list[str]:
     """Every file under ``uri``, relative, sorted (local or remote)."""
-    if not stores.is_remote(uri):
+    if isinstance(open_store(uri), LocalStore):
         root = Path(uri)
         return sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
     import fsspec
@@ -36,21 +35,21 @@ def _listing(uri: str) -> list[str]:
 
 def test_bytes_and_files_round_trip(store: Store, tmp_path: Path) -> None:
     uri = store.uri("blobs", "ab", "cdef")
-    assert not stores.exists(uri)
-    stores.put_bytes(b"hello", uri)
-    assert stores.exists(uri) and stores.read_bytes(uri) == b"hello"
+    assert not store.exists(uri)
+    store.put_bytes(b"hello", uri)
+    assert store.exists(uri) and store.read_bytes(uri) == b"hello"
     src = tmp_path / "src.bin"
     src.write_bytes(b"x" * 1000)
     other = store.uri("blobs", "12", "3456")
-    stores.put_file(src, other)
+    store.put_file(src, other)
     out = tmp_path / "back.bin"
-    stores.get_file(other, out)
+    store.get_file(other, out)
     assert out.read_bytes() == src.read_bytes()
-    stores.remove(uri)
-    assert not stores.exists(uri)
-    stores.remove(uri)  # removing what is gone is fine
+    store.remove(uri)
+    assert not store.exists(uri)
+    store.remove(uri)  # removing what is gone is fine
     with pytest.raises(StoreError, match="cdef"):
-        stores.read_bytes(uri)
+        store.read_bytes(uri)
 
 
 def _tree(work: Path) -> None:
@@ -68,10 +67,10 @@ def test_publish_is_whole_and_readable(store: Store) -> None:
     with store.publish(uri) as work:
         assert not work.exists()
         _tree(work)
-    assert stores.is_complete(uri)
+    assert store.is_complete(uri)
     files = _listing(uri)
     assert MARKER in files and "notes/summary.json" in files and "zarr.json" in files
-    g = stores.open_group(uri)
+    g = store.open_group(uri)
     assert g.attrs["checksum"] == "abc"
     np.testing.assert_array_equal(g["a"][:], np.arange(100))
     assert not list(store.staging.glob("publish-*"))  # staging is cleaned up
@@ -82,9 +81,9 @@ def test_failed_publish_leaves_nothing(store: Store) -> None:
     with pytest.raises(RuntimeError, match="boom"), store.publish(uri) as work:
         _tree(work)
         raise RuntimeError("boom")
-    assert not stores.is_complete(uri)
-    assert not stores.exists(stores.join(uri, "zarr.json"))
-    if not store.remote:
+    assert not store.is_complete(uri)
+    assert not store.exists(join(uri, "zarr.json"))
+    if isinstance(store, LocalStore):
         assert not [p for p in Path(store.url, "labels").iterdir()]  # no hidden partial either
     assert not list(store.staging.glob("publish-*"))
     with pytest.raises(StoreError, match="nothing was built"), store.publish(uri):
@@ -94,12 +93,12 @@ def test_failed_publish_leaves_nothing(store: Store) -> None:
 def test_unfinished_upload_is_not_complete_and_is_replaced(store: Store) -> None:
     """A writer killed mid-upload leaves files without the marker: invisible, and replaced."""
     uri = store.uri("pairs", "pair-1", "d1")
-    stores.put_bytes(b"stale", stores.join(uri, "A", "0000.png"))
-    assert not stores.is_complete(uri)
+    store.put_bytes(b"stale", join(uri, "A", "0000.png"))
+    assert not store.is_complete(uri)
     with store.publish(uri) as work:
         (work / "B").mkdir(parents=True)
         (work / "B" / "0000.png").write_bytes(b"new")
-    assert stores.is_complete(uri)
+    assert store.is_complete(uri)
     assert _listing(uri) == [MARKER, "B/0000.png"]
 
 
@@ -110,24 +109,24 @@ def test_a_complete_folder_is_kept(store: Store) -> None:
         with store.publish(uri) as work:
             work.mkdir()
             (work / "f").write_bytes(content)
-    assert stores.read_bytes(stores.join(uri, "f")) == b"first"
-    stores.remove(uri)
-    assert not stores.is_complete(uri) and not stores.exists(stores.join(uri, "f"))
+    assert store.read_bytes(join(uri, "f")) == b"first"
+    store.remove(uri)
+    assert not store.is_complete(uri) and not store.exists(join(uri, "f"))
 
 
 def test_local_file_fetches_checks_and_caches(store: Store, tmp_path: Path) -> None:
     data = b"point cloud bytes"
     sha = hashlib.sha256(data).hexdigest()
     uri = store.uri("blobs", sha[:2], sha[2:])
-    stores.put_bytes(data, uri)
+    store.put_bytes(data, uri)
     path = store.local_file(uri, sha)
     assert path.read_bytes() == data
-    if store.remote:
+    if isinstance(store, FsspecStore):
         assert store.staging in path.parents
-        stores.remove(uri)
+        store.remove(uri)
         assert store.local_file(uri, sha) == path  # served from the cache
         bad = store.uri("blobs", "00", "bad")
-        stores.put_bytes(b"damaged", bad)
+        store.put_bytes(b"damaged", bad)
         with pytest.raises(StoreError, match="does not match its checksum"):
             store.local_file(bad, "00" + "0" * 62)
     else:
@@ -136,9 +135,9 @@ def test_local_file_fetches_checks_and_caches(store: Store, tmp_path: Path) -> N
 
 def test_unknown_file_system_and_missing_bucket_are_clear(s3_endpoint: str, tmp_path: Path) -> None:
     with pytest.raises(StoreError, match="nosuchfs://bucket"):
-        stores.exists("nosuchfs://bucket/x")
+        open_store("nosuchfs://bucket/x").exists("nosuchfs://bucket/x")
     with pytest.raises(StoreError, match="needs its bucket 'no-such-bucket'"):
-        Store("s3://no-such-bucket/stores", tmp_path).ensure()
+        open_store("s3://no-such-bucket/stores", tmp_path).ensure()
 
 
 def test_store_url_setting(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -148,7 +147,7 @@ def test_store_url_setting(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.chdir(tmp_path)
     assert load_settings(env | {"SITELINE_STORE_URL": "shared"}).store.url == str(tmp_path / "shared")
     local = load_settings(env | {"SITELINE_STORE_URL": f"file://{tmp_path}/x"}).store
-    assert local.url == f"{tmp_path}/x" and not local.remote
+    assert local.url == f"{tmp_path}/x" and isinstance(local, LocalStore)
 
 
 def test_cli_init_names_the_store(capsys, home, monkeypatch, s3_store) -> None:
@@ -160,3 +159,39 @@ def test_cli_init_names_the_store(capsys, home, monkeypatch, s3_store) -> None:
     monkeypatch.setenv("SITELINE_STORE_URL", s3_store)
     rc, out, _ = run_cli(capsys, "init")
     assert rc == 0 and f"stores at {s3_store}" in out.replace("\n", "")
+
+
+def test_publish_clears_only_leftovers_of_dead_writers(tmp_path: Path) -> None:
+    """A writer killed mid-build leaves its partial folder; the next publish clears it, but never the
+    partial folder of a writer that is still running (another process, same host)."""
+    import subprocess
+    import sys
+
+    store = open_store(str(tmp_path / "stores"), tmp_path / "staging")
+    uri = store.uri("pairs", "pair-1", "d1")
+    parent = Path(uri).parent
+    script = (
+        "import sys, time\n"
+        "from siteline.stores import open_store\n"
+        "st = open_store(sys.argv[1], sys.argv[2])\n"
+        "with st.publish(sys.argv[3]) as work:\n"
+        "    work.mkdir(); (work / 'f').write_bytes(b'x'); print('ready', flush=True); time.sleep(60)\n"
+    )
+    args = [sys.executable, "-c", script, store.url, str(tmp_path / "staging"), uri]
+    dead = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+    live = subprocess.Popen(args, stdout=subprocess.PIPE, text=True)
+    try:
+        assert dead.stdout.readline().strip() == "ready" and live.stdout.readline().strip() == "ready"
+        dead.kill()
+        dead.wait()
+        partials = sorted(p.name for p in parent.iterdir() if p.name.startswith(".d1.partial-"))
+        assert len(partials) == 2
+        with store.publish(uri) as work:
+            work.mkdir()
+            (work / "f").write_bytes(b"mine")
+        left = sorted(p.name for p in parent.iterdir() if p.name.startswith(".d1.partial-"))
+        assert left == [n for n in partials if f"+{live.pid}+" in n]  # the live writer's stays
+        assert store.read_bytes(join(uri, "f")) == b"mine"
+    finally:
+        live.kill()
+        live.wait()

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from siteline.errors import ConfigError
-from siteline.stores import Store
+from siteline.stores import Store, layout, open_store
 
 CATALOG_FILENAME = "catalog.sqlite"
 TASK_RUNNERS = ("threads", "processes", "dask")
@@ -52,7 +52,7 @@ class Settings:
     @property
     def store(self) -> Store:
         """The data stores; folders for remote stores are built under ``home/staging`` first."""
-        return Store(self.store_url or str(self.home / "stores"), self.home / "staging")
+        return open_store(self.store_url or str(layout.default_store(self.home)), layout.staging(self.home))
 
     @property
     def is_sqlite(self) -> bool:

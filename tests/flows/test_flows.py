@@ -202,9 +202,9 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
     import pipeline
     from prefect_dask import DaskTaskRunner
 
-    from siteline import stores
     from siteline.catalog import open_catalog
     from siteline.ingest.mission import ingest_mission
+    from siteline.stores import open_store
 
     results = {}
     for kind in ("threads", "dask"):
@@ -240,13 +240,14 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
             flows = (pipeline.tile_scene_flow, pipeline.process_pair_flow)
         tiles = [flows[0](sid)["checksum"] for sid in (1, 2)]
         pair = flows[1](1, SMALL)
-        renders = [stores.read_bytes(s["mask"]) for s in pair["samples"]]
+        renders = [open_store(s["mask"]).read_bytes(s["mask"]) for s in pair["samples"]]
         results[kind] = (tiles, pair["labels"], pair["radius_m"], renders)
         if kind == "dask":
             assert pair["root"].startswith(s3_store + "/pairs/")
-            assert stores.is_complete(f"{s3_store}/tiles/scene-1.zarr")
+            s3 = open_store(s3_store)
+            assert s3.is_complete(f"{s3_store}/tiles/scene-1.zarr")
             um = int(round(pair["radius_m"] * 1e6))
-            assert stores.is_complete(f"{s3_store}/labels/pair-1-r{um}um.zarr")
+            assert s3.is_complete(f"{s3_store}/labels/pair-1-r{um}um.zarr")
             # nothing landed in either machine's local store; the workers fetched the LAS into their cache
             assert not (settings.home / "stores").exists() and not (worker_home / "stores").exists()
             assert list((worker_home / "staging" / "cache").rglob("*"))

@@ -11,7 +11,7 @@ import pytest
 from sitehelpers import run_cli
 
 from labelsets.edits import centre_box, export, versions
-from siteline import pipeline, stores
+from siteline import pipeline
 from siteline.errors import LabelSetError
 from siteline.labelsets import import_labels
 from siteline.pairs import PairParams
@@ -51,7 +51,7 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     roots = sorted(
         p for p in (Path(settings.store.url) / "pairs" / "pair-1").iterdir() if not p.name.startswith(".")
     )
-    assert len([r for r in roots if stores.is_complete(str(r))]) >= 2
+    assert len([r for r in roots if settings.store.is_complete(str(r))]) >= 2
 
     # the same label sets again: a minor version
     third = pipeline.release(cat, settings, "demo", "lab", PARAMS)

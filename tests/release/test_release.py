@@ -12,7 +12,7 @@ import sqlalchemy as sa
 from PIL import Image
 from sitehelpers import epoch_dirs, make_home, writable_copy
 
-from siteline import pipeline, stores
+from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Pair, Release, Render, Scene
 from siteline.catalog.sites import add_site
@@ -223,8 +223,8 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
             paths = [r.paths["image"] for r in s.execute(sa.select(Render)).scalars()]
     finally:
         cat.dispose()
-    assert uris and all(u.startswith(f"{s3_store}/tiles/") and stores.is_complete(u) for u in uris)
-    assert paths and all(p.startswith(f"{s3_store}/pairs/") and stores.exists(p) for p in paths)
+    assert uris and all(u.startswith(f"{s3_store}/tiles/") and settings.store.is_complete(u) for u in uris)
+    assert paths and all(p.startswith(f"{s3_store}/pairs/") and settings.store.exists(p) for p in paths)
     assert not (settings.home / "stores").exists()  # nothing went to the local folder
     assert verify_files(Path(pub.root)) == []
 

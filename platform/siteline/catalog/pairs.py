@@ -8,10 +8,10 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from siteline import stores
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Pair, Render, View
 from siteline.errors import NotFoundError
+from siteline.stores import join
 
 
 def pair_view_ids(session: Session, pair_id: int, digest: str) -> dict[int, int]:
@@ -69,8 +69,8 @@ def record_pair_outputs(
                     coverage=rec["coverage_a" if side == "A" else "coverage_b"],
                     change_ratio=rec["change_ratio"],
                     paths={
-                        "image": stores.join(root, side, rec["file"]),
-                        "label": stores.join(root, "label", rec["file"]),
+                        "image": join(root, side, rec["file"]),
+                        "label": join(root, "label", rec["file"]),
                     },
                 )
             )

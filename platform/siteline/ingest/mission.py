@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 import sqlalchemy as sa
 
-from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.missions import FileRow, record_mission_scene
 from siteline.catalog.models import Scene, Site
@@ -40,7 +39,8 @@ from siteline.ingest.pointcloud import LasScan, scan_las
 from siteline.photos import PhotoMeta, read_photo_meta
 from siteline.progress import Progress
 from siteline.register import AlignmentPolicy, check_alignment, register_cameras
-from siteline.stores import blob_uri, put_blob, remove_blobs
+from siteline.stores import layout
+from siteline.stores.blobs import put_blob, put_blob_bytes, remove_blobs
 
 PREFERRED_LAS = ("lidars/terra_las/cloud_merged.las", "lidars/terra_las/cloud_merged.laz")
 RAW_FOLDER = re.compile(r"^DJI_(\d{12})_\d{3}_")
@@ -176,8 +176,9 @@ def _load_sample(settings: Settings, scene: Scene) -> np.ndarray | None:
     sha = (scene.statistics or {}).get("stable_sample_sha256")
     if not sha:
         return None
-    uri = blob_uri(settings.store, sha)
-    return np.load(io.BytesIO(stores.read_bytes(uri))) if stores.exists(uri) else None
+    uri = layout.blob(settings.store, sha)
+    store = settings.store
+    return np.load(io.BytesIO(store.read_bytes(uri))) if store.exists(uri) else None
 
 
 def _sample_blob(sample: np.ndarray) -> tuple[bytes, str]:
@@ -269,9 +270,7 @@ def ingest_mission(
     new_blobs: list[str] = []
     try:
         sample_bytes, sample_sha = _sample_blob(scan.stable_sample)
-        dest = blob_uri(settings.store, sample_sha)
-        if not stores.exists(dest):
-            stores.put_bytes(sample_bytes, dest)
+        if put_blob_bytes(settings.store, sample_bytes, sample_sha):
             new_blobs.append(sample_sha)
         if opts.storage == "copy":
             rep("storing", 0, sum(e.size_bytes for e in entries))

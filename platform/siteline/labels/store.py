@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline import stores
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
+from siteline.stores import join
 from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
 
@@ -182,5 +182,5 @@ def write_labels(
 
 def attach_labels(tiles: SceneTiles, label_uri: str, side: str) -> SceneTiles:
     """Let ``tiles`` read the attribute ``change`` from a pair's label store for scene ``side``."""
-    tiles.attach("change", stores.join(str(label_uri), side))
+    tiles.attach("change", join(str(label_uri), side))
     return tiles

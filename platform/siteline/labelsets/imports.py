@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import sqlalchemy as sa
 
-from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.labelsets import add_label_set, label_sets
 from siteline.catalog.models import Site
@@ -212,7 +211,7 @@ def import_labels(
         raise LabelSetError(f"labels file {path}: {exc}") from exc
     sha = sha256_file(path)
     uri = labelset_uri(settings, scene_id, version)
-    stores.remove(uri)  # a store a crashed import published without its row
+    settings.store.remove(uri)  # a store a crashed import published without its row
     (settings.home / "tmp").mkdir(parents=True, exist_ok=True)
     spill_dir = Path(tempfile.mkdtemp(prefix=f"labels-scene-{scene_id}-", dir=settings.home / "tmp"))
     try:
@@ -292,13 +291,13 @@ def import_labels(
                 )
             )
     except sa.exc.IntegrityError as exc:
-        stores.remove(uri)
+        settings.store.remove(uri)
         raise LabelSetError(
             f"scene {scene_id}: another import recorded label-set version {version} meanwhile; import "
             f"{path} again."
         ) from exc
     except BaseException:
-        stores.remove(uri)
+        settings.store.remove(uri)
         raise
     out.seconds = time.perf_counter() - t0
     return out

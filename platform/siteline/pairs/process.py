@@ -12,7 +12,6 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.labelsets import label_set, newest_versions
 from siteline.catalog.models import Pair, Scene, Site
@@ -31,6 +30,7 @@ from siteline.pairs.render import render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress
 from siteline.render.outputs import png_bytes
+from siteline.stores import join
 from siteline.tiles.scene import tiling_generation
 from siteline.tolerances import RATIO_TOL, at_least
 from siteline.views import NamedCamera, fit_ground_plane, generate_views
@@ -108,9 +108,9 @@ def pair_output(
     t1, t2, versions, tilings = _pair_scenes(catalog, pair_id, label_sets)
     digest = output_digest(params, versions, tilings)
     root = _output_root(settings, pair_id, digest)
-    if not stores.is_complete(root):
+    if not settings.store.is_complete(root):
         return None
-    doc = json.loads(stores.read_bytes(stores.join(root, "summary.json")))
+    doc = json.loads(settings.store.read_bytes(join(root, "summary.json")))
     if not _view_ids(catalog, pair_id, digest):
         _record(
             catalog,
@@ -186,8 +186,8 @@ def process_pair(
     radius_info["expected_false_change"] = expected_false_change(radius_info["multiplier"])
     classes = "" if versions == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     label_uri = settings.store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius * 1e6))}um.zarr")
-    if stores.is_complete(label_uri):
-        labels = dict(stores.open_group(label_uri).attrs) | {"uri": label_uri}
+    if settings.store.is_complete(label_uri):
+        labels = dict(settings.store.open_group(label_uri).attrs) | {"uri": label_uri}
     else:
         if progress:
             progress("labels", 0, None)

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from siteline import __version__, stores
+from siteline import __version__
 from siteline.catalog import Catalog
 from siteline.catalog.labelsets import label_set
 from siteline.catalog.models import Mission, Pair, Release, ReleaseItem, Scene, Site
@@ -48,6 +48,7 @@ from siteline.release.manifest import (
 )
 from siteline.release.params import ReleaseParams
 from siteline.release.splits import split_pairs
+from siteline.stores import join, open_store
 
 
 @dataclass
@@ -254,7 +255,7 @@ def build_release(
                 item_id = f"{site_name}_p{pid:04d}_v{v['index']:04d}"
                 sp = split_of[pid]
                 rendered = {
-                    sub: _read_png(stores.join(out.root, sub, v["file"])) for sub in ("A", "B", "label")
+                    sub: _read_png(join(out.root, sub, v["file"])) for sub in ("A", "B", "label")
                 }
                 arrays = layout.item_images(rendered["A"], rendered["B"], rendered["label"], pad)
                 for sub, arr in arrays.items():
@@ -330,7 +331,7 @@ def build_release(
 
 def _read_png(uri: str) -> np.ndarray:
     """A pair output PNG from the store as an array (RGB (H, W, 3) or mask (H, W) uint8)."""
-    return np.asarray(Image.open(io.BytesIO(stores.read_bytes(uri))))
+    return np.asarray(Image.open(io.BytesIO(open_store(uri).read_bytes(uri))))
 
 
 def _record_draft(

@@ -10,12 +10,12 @@ import numpy as np
 from PIL import Image
 
 from siteline.render.zbuffer import RenderResult
-from siteline.stores import atomic_local_write
+from siteline.stores import write_file
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file, fsync and rename."""
-    atomic_local_write(Path(path), lambda fh: fh.write(data))
+    """Write ``data`` to ``path`` whole (siteline.stores.write_file)."""
+    write_file(Path(path), lambda fh: fh.write(data))
 
 
 def png_bytes(image: np.ndarray) -> bytes:

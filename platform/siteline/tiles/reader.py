@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline import stores
 from siteline.cameras import Camera
 from siteline.errors import TileError
+from siteline.stores import join, open_store
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
@@ -81,9 +81,10 @@ def box_distance(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
 
 def _open(uri: str, what: str, fix: str):  # noqa: ANN202
     """The Zarr group at ``uri`` (a local path or an fsspec URL), or a TileError saying it is missing."""
-    if not stores.exists(stores.join(uri, "zarr.json")):
+    store = open_store(uri)
+    if not store.exists(join(uri, "zarr.json")):
         raise TileError(f"{what} {uri} is missing: {fix}.")
-    return stores.open_group(uri, mode="r")
+    return store.open_group(uri, mode="r")
 
 
 class SceneTiles:

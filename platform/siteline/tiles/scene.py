@@ -7,7 +7,6 @@ from pathlib import Path
 
 from sqlalchemy.orm import Session
 
-from siteline import stores
 from siteline.catalog import Catalog
 from siteline.catalog.models import Mission, Scene
 from siteline.catalog.scenes import mission_file, node_rows, replace_nodes
@@ -18,7 +17,7 @@ from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
 from siteline.progress import Progress
 from siteline.site import SiteSpec
-from siteline.stores import resolve_file
+from siteline.stores.blobs import resolve_file
 from siteline.tiles.layout import TileSpec
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.writer import NodeInfo, TileResult, write_tiles
@@ -99,7 +98,7 @@ def tile_scene(
         scene = s.get(Scene, scene_id)
         if scene is None:
             raise TileError(f"no scene with id {scene_id}.")
-        done = scene.status == "tiled" and scene.tile_store_uri and stores.is_complete(scene.tile_store_uri)
+        done = scene.status == "tiled" and scene.tile_store_uri and settings.store.is_complete(scene.tile_store_uri)
         if done and not retile:
             return None, (
                 f"scene {scene_id} is already tiled at {scene.tile_store_uri}: nothing to do."
@@ -116,7 +115,7 @@ def tile_scene(
         z_unit = ZUnit.from_dict(z_doc) if z_doc else None
     spec = spec or TileSpec(tile_size_m=site.tile_size_m)
     out = store_uri(settings, scene_id, generation)
-    stores.remove(out)
+    settings.store.remove(out)
     started = datetime.now(UTC)
     with settings.store.publish(out) as work:
         result = write_tiles(
@@ -156,10 +155,10 @@ def tile_scene(
                 )
             )
     except BaseException:
-        stores.remove(out)
+        settings.store.remove(out)
         raise
     if old_uri is not None and old_uri != out:
-        stores.remove(old_uri)
+        settings.store.remove(old_uri)
     return (
         result,
         f"scene {scene_id} {'re-tiled' if old_uri else 'tiled'}: {result.points:,} points in "

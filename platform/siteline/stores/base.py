@@ -1,0 +1,119 @@
+"""The store interface: every read and write of siteline's data stores goes through a :class:`Store`.
+
+A store has a root (a local folder or an fsspec URL) and a local staging folder. Addresses are full
+paths (local) or URLs (elsewhere), as the catalog records them. Publishing a folder (a tile store, a
+label store, a pair's renders) is all-or-nothing: the folder counts as present only when its marker
+object :data:`MARKER` exists, written last and removed first.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import uuid
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from siteline.errors import StoreError
+from siteline.hashing import sha256_file
+
+if TYPE_CHECKING:
+    import zarr
+
+MARKER = ".siteline-complete"
+
+
+def join(uri: str, *parts: str) -> str:
+    """``uri`` with ``parts`` appended ('/'-separated for URLs and POSIX paths alike)."""
+    return "/".join([uri.rstrip("/"), *(p.strip("/") for p in parts)])
+
+
+class Store(ABC):
+    """A store root (``url``) and a local ``staging`` folder (folders being built for a remote store,
+    and a cache of files fetched from it). Methods take full addresses, so a store also reads
+    addresses recorded under another root of the same kind."""
+
+    def __init__(self, url: str, staging: Path) -> None:
+        self.url = url
+        self.staging = Path(staging)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.url!r})"
+
+    def uri(self, *parts: str) -> str:
+        """The address of ``parts`` under the root (what the catalog records)."""
+        return join(self.url, *parts)
+
+    @abstractmethod
+    def ensure(self) -> None:
+        """Create the root, or check that it can be reached; :class:`StoreError` says why not."""
+
+    @abstractmethod
+    def exists(self, uri: str) -> bool:
+        """Whether a file (or a folder) exists at ``uri``."""
+
+    def is_complete(self, uri: str) -> bool:
+        """Whether the folder at ``uri`` was published whole (its marker exists)."""
+        return self.exists(join(uri, MARKER))
+
+    @abstractmethod
+    def read_bytes(self, uri: str) -> bytes:
+        """The bytes of the file at ``uri``; :class:`StoreError` naming it when it cannot be read."""
+
+    @abstractmethod
+    def put_bytes(self, data: bytes, uri: str) -> None:
+        """Store ``data`` at ``uri`` whole or not at all."""
+
+    @abstractmethod
+    def put_file(self, source: Path, uri: str) -> None:
+        """Copy the local file ``source`` to ``uri`` whole or not at all."""
+
+    @abstractmethod
+    def get_file(self, uri: str, dest: Path) -> None:
+        """Copy the stored file ``uri`` to the local path ``dest``."""
+
+    @abstractmethod
+    def remove(self, uri: str) -> None:
+        """Remove the file or folder at ``uri`` (a folder's marker first); a missing one is fine."""
+
+    @abstractmethod
+    def open_group(self, uri: str, mode: str = "r") -> zarr.Group:
+        """The Zarr group at ``uri``; :class:`StoreError` when there is none."""
+
+    @abstractmethod
+    def publish(self, uri: str) -> AbstractContextManager[Path]:
+        """Build a folder for ``uri`` in the yielded local path (which does not exist yet); on a clean
+        exit it is published whole (marker last), on an error nothing is. A complete folder already
+        at ``uri`` (another writer's, made from the same inputs) is kept and the new one dropped."""
+
+    @abstractmethod
+    def local_file(self, uri: str, sha256: str | None = None) -> Path:
+        """A local path holding the bytes of ``uri``: the file itself on a local store, else a cached
+        download (checked against ``sha256`` when given)."""
+
+
+def cached_download(store: Store, uri: str, sha256: str | None) -> Path:
+    """``uri`` fetched once into ``store.staging/cache`` under its sha256 (or the hash of its address),
+    checked against ``sha256`` when given."""
+    name = sha256 or hashlib.sha256(uri.encode()).hexdigest()
+    cached = store.staging / "cache" / name[:2] / name[2:]
+    if cached.is_file():
+        return cached
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    tmp = cached.with_name(f".{cached.name}.tmp-{uuid.uuid4().hex}")
+    try:
+        store.get_file(uri, tmp)
+        if sha256 is not None and sha256_file(tmp) != sha256:
+            raise StoreError(f"{uri} does not match its checksum {sha256[:12]}: the store is damaged.")
+        os.replace(tmp, cached)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return cached
+
+
+def walk_files(root: Path) -> Iterator[Path]:
+    """Every file under the local folder ``root`` except the marker, sorted."""
+    return iter(sorted(p for p in root.rglob("*") if p.is_file() and p.name != MARKER))

@@ -1,0 +1,73 @@
+"""Where everything lives, in one place: the store's folders (addresses under a store root, what the
+catalog records) and the folders under ``SITELINE_HOME``.
+
+Store root::
+
+    blobs/<sha[:2]>/<sha[2:]>                          mission files and alignment samples by sha256
+    tiles/scene-<id>.zarr, scene-<id>-g<n>.zarr        a scene's tile store (generation n > 0: re-tiled)
+    labelsets/scene-<id>/v<version>.zarr               an imported label-set version's classes
+    labels/pair-<id>[-ls<v1>.<v2>]-r<radius um>um.zarr a pair's 3D change labels
+    pairs/pair-<id>/<output digest>/                   a pair's renders (A, B, label) and summary.json
+
+``SITELINE_HOME``::
+
+    catalog.sqlite, stores/ (the default store root), staging/ (folders built for a remote store and
+    its download cache), tmp/ (spill files of running stages), releases/<name>/<version>/ (published),
+    releases/<name>/.drafts/<version>/
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from siteline.stores.base import Store
+
+
+def blob(store: Store, sha256: str) -> str:
+    return store.uri("blobs", sha256[:2], sha256[2:])
+
+
+def tile_store(store: Store, scene_id: int, generation: int = 0) -> str:
+    """``tiles/scene-<id>.zarr``; a re-tiling (generation g > 0) writes ``scene-<id>-g<g>.zarr`` beside
+    it, so the old store stays whole until the new one is committed."""
+    name = f"scene-{scene_id}.zarr" if generation == 0 else f"scene-{scene_id}-g{generation}.zarr"
+    return store.uri("tiles", name)
+
+
+def label_set(store: Store, scene_id: int, version: int) -> str:
+    return store.uri("labelsets", f"scene-{scene_id}", f"v{version}.zarr")
+
+
+def pair_labels(store: Store, pair_id: int, versions: tuple[int, int], radius_m: float) -> str:
+    """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2)."""
+    classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
+    return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um.zarr")
+
+
+def pair_outputs(store: Store, pair_id: int, digest: str) -> str:
+    return store.uri("pairs", f"pair-{pair_id}", digest)
+
+
+def default_store(home: Path) -> Path:
+    return home / "stores"
+
+
+def staging(home: Path) -> Path:
+    return home / "staging"
+
+
+def scratch(home: Path) -> Path:
+    """Spill files of running stages (removed when they end; a killed stage's are swept later)."""
+    return home / "tmp"
+
+
+def releases(home: Path) -> Path:
+    return home / "releases"
+
+
+def release_draft(home: Path, name: str, version: str) -> Path:
+    return releases(home) / name / ".drafts" / version
+
+
+def release_published(home: Path, name: str, version: str) -> Path:
+    return releases(home) / name / version
