@@ -60,7 +60,7 @@ def child(mode: str, path: str) -> None:
         from siteline.catalog.engine import make_engine
         from siteline.catalog.sites import add_site
         from siteline.config import Settings, sqlite_url
-        from siteline.ingest.mission import ingest_mission
+        from siteline.ingest import ingest_mission
         from siteline.site import make_site_spec
 
         home = Path(tempfile.mkdtemp())

@@ -29,7 +29,8 @@ def main() -> None:
     args = ap.parse_args()
     from siteline.cameras import Camera
     from siteline.fence import load_fence_geojson
-    from siteline.labels import attach_labels, change_flags, write_labels
+    from siteline.labels import change_flags, write_labels
+    from siteline.pairs import LabelledPair, PairParams
     from siteline.pairs.render import render_pair_view
     from siteline.site import make_site_spec
     from siteline.synth import LAS_RELPATH, SynthConfig, write_site
@@ -60,15 +61,16 @@ def main() -> None:
         # the baseline: whole clouds in memory, one cKDTree per direction (float64), same definition
         pa = tiles[0].points(attributes=("class",))
         pb = tiles[1].points(attributes=("class",))
+        xa, xb = pa.xyz_m.astype(np.float32), pb.xyz_m.astype(np.float32)
+        ca, cb = pa.attributes["class"], pb.attributes["class"]
         t0 = time.perf_counter()
-        for a, b in ((pa, pb), (pb, pa)):
-            keep = ~ign[b["class"]]
-            tree = cKDTree(b["xyz_m"][keep].astype(np.float64))
-            tree.query(a["xyz_m"].astype(np.float64), k=1, distance_upper_bound=0.4)
+        for a, b, cls_b in ((pa.xyz_m, pb.xyz_m, cb), (pb.xyz_m, pa.xyz_m, ca)):
+            tree = cKDTree(b[~ign[cls_b]])
+            tree.query(a, k=1, distance_upper_bound=0.4)
         whole = time.perf_counter() - t0
         t0 = time.perf_counter()
-        for a, b in ((pa, pb), (pb, pa)):
-            change_flags(a["xyz_m"], a["class"], b["xyz_m"], b["class"], 0.4, ign)
+        for a, cls_a, b, cls_b in ((xa, ca, xb, cb), (xb, cb, xa, ca)):
+            change_flags(a, cls_a, b, cls_b, 0.4, ign)
         whole_ours = time.perf_counter() - t0
         print(f"labels, {n:,} points (both scenes, both directions):")
         print("| method | seconds | points/s |")
@@ -80,8 +82,7 @@ def main() -> None:
             f"| whole-cloud change_flags (pykdtree float32, in memory) | {whole_ours:.2f} | {n / whole_ours:,.0f} |"
         )
         print(f"| whole-cloud cKDTree float64 (query only, in memory) | {whole:.2f} | {n / whole:,.0f} |")
-        attach_labels(tiles[0], str(d / "labels.zarr"), "t1")
-        attach_labels(tiles[1], str(d / "labels.zarr"), "t2")
+        pair = LabelledPair.with_labels(tiles[0], tiles[1], str(d / "labels.zarr"))
         cams = [
             Camera.from_dict(c["camera"])
             for c in json.loads(
@@ -89,10 +90,11 @@ def main() -> None:
             )
         ][: args.views]
         for scale, ps in ((0.125, 1), (0.5, 3), (1.0, 1)):
-            render_pair_view(tiles[0], tiles[1], cams[0], scale, ps)  # warm the caches
+            params = PairParams(scale=scale, point_size_px=ps)
+            render_pair_view(pair, cams[0], params)  # warm the caches
             t0 = time.perf_counter()
             for cam in cams:
-                render_pair_view(tiles[0], tiles[1], cam, scale, ps)
+                render_pair_view(pair, cam, params)
             sec = (time.perf_counter() - t0) / len(cams)
             w, h = cams[0].scaled(scale).width, cams[0].scaled(scale).height
             print(f"seconds per view (both scenes, {w}x{h}, {ps} px): {sec:.3f}")

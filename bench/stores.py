@@ -50,9 +50,9 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     from sitehelpers import epoch_dirs, make_home
 
     from siteline.catalog import open_catalog
-    from siteline.ingest.mission import ingest_mission
+    from siteline.ingest import ingest_mission
     from siteline.pairs import PairParams, process_pair
-    from siteline.release import build_release
+    from siteline.release import ReleaseParams, build_release
     from siteline.tiles import tile_scene
 
     settings = make_home(root, site_dir=site_dir, store_url=store_url)
@@ -71,7 +71,7 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     process_pair(cat, settings, 1, params)
     t["process pair (labels, views, renders)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    build_release(cat, settings, "demo", "bench", params, pair_ids=[1])
+    build_release(cat, settings, "demo", "bench", ReleaseParams(params), pair_ids=[1])
     t["build release (copies renders out)"] = time.perf_counter() - t0
     cat.dispose()
     return t

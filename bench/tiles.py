@@ -137,7 +137,7 @@ def view_read(points: int) -> None:
             every = tiles.points_for_view(cam, 0.125, level=None)
             for size in (1, 3):
                 settings = RenderSettings(scale=0.125, point_size_px=size)
-                full = render_points(every["xyz_m"], cam, settings)
+                full = render_points(every.xyz_m.astype(np.float32), cam, settings)
                 for factor in (1.0, 1.41, 2.0, None):
                     t = time.perf_counter()
                     if factor is None:
@@ -145,8 +145,8 @@ def view_read(points: int) -> None:
                     else:
                         pts = tiles.points_for_view(cam, 0.125, lod_factor=factor, point_size_px=size)
                     sec = time.perf_counter() - t
-                    st = tiles.last_stats
-                    img = render_points(pts["xyz_m"], cam, settings)
+                    st = pts.stats
+                    img = render_points(pts.xyz_m.astype(np.float32), cam, settings)
                     covered = int(img.hit.sum())
                     print(
                         f"| {order} | {factor if factor else 'all levels'} | {size} | {st.points_read:,} | "

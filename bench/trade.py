@@ -194,10 +194,10 @@ def run_trade(
                                 pts = sc.tiles.points_for_view(
                                     v.camera, scale, ("gps_time",), lod_factor=lod, point_size_px=ps
                                 )
-                                n_read += sc.tiles.last_stats.points_read
-                                idx = pts["gps_time"].astype(np.int64)
+                                n_read += pts.stats.points_read
+                                idx = pts.attributes["gps_time"].astype(np.int64)
                                 outs[name] = render_points(
-                                    pts["xyz_m"],
+                                    pts.xyz_m.astype(np.float32),
                                     v.camera,
                                     RenderSettings(scale=scale, point_size_px=ps),
                                     {"pred": pred_flags[name][idx], "truth": truth_flag[name][idx]},

@@ -1,4 +1,4 @@
-"""Prefect flows of siteline: thin orchestration over library calls, passing ids and paths only.
+"""Prefect flows of siteline: thin orchestration over ``siteline.pipeline``, passing ids and paths only.
 
 Chain: an upload event (``siteline.mission.uploaded``, from ``siteline watch`` or POST /api/events)
 triggers ``ingest-mission``; it registers and tiles the scene and emits ``siteline.scene.registered``,
@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import re
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from prefect import flow, get_run_logger, tags, task
 from prefect.artifacts import (
@@ -30,16 +32,18 @@ from prefect.runtime import flow_run
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from runner import task_runner  # noqa: E402
 
-from siteline.catalog import open_catalog  # noqa: E402
-from siteline.catalog.scenes import (  # noqa: E402
-    pair_ids_of_scene,
-    site_name_of_pair,
-    site_name_of_scene,
-)
+from siteline import pipeline  # noqa: E402
+from siteline.catalog import Catalog, open_catalog  # noqa: E402
+from siteline.catalog.scenes import pair_ids_of_scene, site_name_of_pair, site_name_of_scene  # noqa: E402
 from siteline.catalog.stages import record_failure  # noqa: E402
-from siteline.config import load_settings  # noqa: E402
+from siteline.config import Settings, load_settings  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
+from siteline.ingest import IngestOptions  # noqa: E402
+from siteline.pairs import PairParams  # noqa: E402
+from siteline.records.runs import StageRun  # noqa: E402
 from siteline.stores import join  # noqa: E402
+
+T = TypeVar("T")
 
 
 def artifact_key(*parts: Any) -> str:
@@ -47,7 +51,7 @@ def artifact_key(*parts: Any) -> str:
     return re.sub(r"[^a-z0-9-]+", "-", "-".join(str(p) for p in parts).lower()).strip("-")[:100]
 
 
-def transient(task, task_run, state) -> bool:  # noqa: ANN001
+def transient(task: Any, task_run: Any, state: Any) -> bool:
     """Retry I/O only: store errors, OS and network errors, a lost database connection. Never bad
     input (a SitelineError says what to fix) and never a programming error (it would fail again)."""
     import sqlalchemy as sa
@@ -72,51 +76,62 @@ def _run_id() -> str | None:
     return str(rid) if rid else None
 
 
-def _stage(stage: str, subject: str, params: dict, fn, *args, **kwargs):  # noqa: ANN001, ANN202
-    """Run a library stage; on failure record it in the catalog (its own transaction) and re-raise."""
+@contextmanager
+def _catalog() -> Iterator[tuple[Catalog, Settings]]:
     settings = load_settings()
     cat = open_catalog(settings)
     try:
-        return fn(cat, settings, *args, run_id=_run_id(), **kwargs)
-    except Exception as exc:
-        with cat.transaction() as s:
-            record_failure(s, stage, subject, params, exc, run_id=_run_id())
-        raise
+        yield cat, settings
     finally:
         cat.dispose()
 
 
-@task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def ingest_task(mission_dir: str, site: str, crs: str | None, accept_misalignment: bool) -> dict:
-    from siteline.ingest.mission import IngestOptions, ingest_mission
+def _stage(
+    stage: str, subject: str, params: dict[str, Any], fn: Callable[..., T], *args: Any, **kwargs: Any
+) -> T:
+    """Run a pipeline step; on failure record it in the catalog (its own transaction) and re-raise."""
+    with _catalog() as (cat, settings):
+        try:
+            return fn(cat, settings, *args, run_id=_run_id(), **kwargs)
+        except Exception as exc:
+            with cat.transaction() as s:
+                record_failure(s, StageRun(stage, subject, params, run_id=_run_id()), exc)
+            raise
 
+
+def _read(fn: Callable[..., T], *args: Any) -> T:
+    """One catalog read function (siteline.catalog) in its own transaction."""
+    with _catalog() as (cat, _), cat.transaction() as s:
+        return fn(s, *args)
+
+
+@task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
+def ingest_task(mission_dir: str, site: str, crs: str | None, accept_misalignment: bool) -> dict[str, Any]:
     opts = IngestOptions(crs=crs, accept_misalignment=accept_misalignment)
-    res = _stage(
+    done = _stage(
         "ingest",
         f"mission:{mission_dir}",
         {"site": site, "crs": crs},
-        ingest_mission,
+        pipeline.ingest,
         Path(mission_dir),
         site,
         opts,
     )
-    return res.to_dict()
+    tiling = done.tiles.tiling if done.tiles is not None else None
+    return done.ingest.to_dict() | {"tiles": tiling.to_dict() if tiling is not None else None}
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def tile_task(scene_id: int) -> dict | None:
-    from siteline.tiles import tile_scene
-
-    result, message = _stage("tile", f"scene:{scene_id}", {}, tile_scene, scene_id)
-    get_run_logger().info(message)
-    return result.summary() if result is not None else None
+def tile_task(scene_id: int) -> dict[str, Any] | None:
+    done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id])
+    for outcome in done:
+        get_run_logger().info(outcome.message)
+    tiling = done[0].tiling if done else None
+    return tiling.to_dict() if tiling is not None else None
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
-    from siteline import pipeline
-    from siteline.pairs import PairParams
-
+def process_pair_task(pair_id: int, params: dict[str, Any] | None, site: str) -> dict[str, Any]:
     p = PairParams.from_dict(params) if params else PairParams()
     key = artifact_key("progress", site, "pair", pair_id)
     progress_id = create_progress_artifact(0.0, key=key, description=f"renders of pair {pair_id}")
@@ -142,11 +157,11 @@ def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
         "labels": out.labels.get("counts"),
         "samples": [
             {
-                "view": v["index"],
-                "strategy": v["strategy"],
-                "change_ratio": v["change_ratio"],
-                "a": join(out.root, "A", v["file"]),
-                "mask": join(out.root, "label", v["file"]),
+                "view": v.index,
+                "strategy": v.strategy,
+                "change_ratio": v.change_ratio,
+                "a": join(out.root, "A", v.file),
+                "mask": join(out.root, "label", v.file),
             }
             for v in out.views[:6]
         ],
@@ -154,36 +169,12 @@ def process_pair_task(pair_id: int, params: dict | None, site: str) -> dict:
 
 
 @task(retries=1, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def build_release_task(site: str, name: str, params: dict | None, publish: bool) -> dict:
-    from siteline import pipeline
-    from siteline.pairs import PairParams
-    from siteline.release import publish_release
-
+def build_release_task(site: str, name: str, params: dict[str, Any] | None, publish: bool) -> dict[str, Any]:
     p = PairParams.from_dict(params) if params else PairParams()
-    info = _stage("build_release", f"release:{name}", p.to_dict(), pipeline.release, site, name, p)
-    if publish:
-        info = _stage(
-            "publish_release", f"release:{name}:{info.version}", {}, publish_release, name, info.version
-        )
-    return info.__dict__
-
-
-def _read(fn, *args):  # noqa: ANN001, ANN202
-    """One catalog read function (siteline.catalog) in its own transaction."""
-    cat = open_catalog(load_settings())
-    try:
-        with cat.transaction() as s:
-            return fn(s, *args)
-    finally:
-        cat.dispose()
-
-
-def _site_of_scene(scene_id: int) -> str:
-    return _read(site_name_of_scene, scene_id)
-
-
-def _site_of_pair(pair_id: int) -> str:
-    return _read(site_name_of_pair, pair_id)
+    info = _stage(
+        "build_release", f"release:{name}", p.to_dict(), pipeline.release, site, name, p, publish=publish
+    )
+    return info.to_dict()
 
 
 def _tag_run(*extra: str) -> None:
@@ -202,6 +193,33 @@ def ingest_run_name() -> str:
     return f"ingest-{Path(flow_run.parameters['mission_dir']).name}"
 
 
+def _ingest_dashboards(site: str, mission: str, res: dict[str, Any]) -> None:
+    rows = {
+        "mission": mission, "manifest_sha256": res["manifest_sha256"], "files": res["files"],
+        "created": res["created"], "message": res["message"],
+    }  # fmt: skip
+    create_table_artifact(
+        [{"item": k, "value": str(v)} for k, v in rows.items()],
+        key=artifact_key("mission", site, mission),
+        description=f"mission inventory of {mission}",
+    )
+    scan, tiles = res.get("scan") or {}, res.get("tiles") or {}
+    if not scan:
+        return
+    stats = {
+        "points": scan.get("point_count"), "density_pts_m2": round(scan.get("density_pts_m2", 0), 2),
+        "classes": scan.get("class_histogram"), "unknown_codes": scan.get("unknown_codes"),
+        "registration": res["registration"].get("source"), "rms_m": res["registration"].get("rms_m"),
+        "alignment_m": (res["registration"].get("alignment") or {}).get("translation_m"),
+        "tiles": tiles.get("tiles"), "bytes_per_point": tiles.get("bytes_per_point"),
+    }  # fmt: skip
+    create_table_artifact(
+        [{"statistic": k, "value": str(v)} for k, v in stats.items()],
+        key=artifact_key("scene", site, res["scene_id"]),
+        description=f"scene {res['scene_id']} statistics",
+    )
+
+
 @flow(name="ingest-mission", flow_run_name=ingest_run_name, task_runner=task_runner(), log_prints=True)
 def ingest_mission_flow(
     mission_dir: str, site: str, crs: str | None = None, accept_misalignment: bool = False
@@ -211,45 +229,9 @@ def ingest_mission_flow(
     with tags(f"site:{site}"):
         # in the flow's own process: the upload folder is on this machine, not on the runner's workers
         res = ingest_task(mission_dir, site, crs, accept_misalignment)
-        mission = Path(mission_dir).name
-        scan = res.get("scan") or {}
-        create_table_artifact(
-            [
-                {"item": k, "value": str(v)}
-                for k, v in {
-                    "mission": mission,
-                    "manifest_sha256": res["manifest_sha256"],
-                    "files": res["files"],
-                    "created": res["created"],
-                    "message": res["message"],
-                }.items()
-            ],
-            key=artifact_key("mission", site, mission),
-            description=f"mission inventory of {mission}",
-        )
+        _ingest_dashboards(site, Path(mission_dir).name, res)
         if res["scene_id"] is None:
             return None
-        tiles = tile_task.submit(res["scene_id"]).result()
-        if scan:
-            rows = [
-                {"statistic": k, "value": str(v)}
-                for k, v in {
-                    "points": scan.get("point_count"),
-                    "density_pts_m2": round(scan.get("density_pts_m2", 0), 2),
-                    "classes": scan.get("class_histogram"),
-                    "unknown_codes": scan.get("unknown_codes"),
-                    "registration": res["registration"].get("source"),
-                    "rms_m": res["registration"].get("rms_m"),
-                    "alignment_m": (res["registration"].get("alignment") or {}).get("translation_m"),
-                    "tiles": (tiles or {}).get("tiles"),
-                    "bytes_per_point": (tiles or {}).get("bytes_per_point"),
-                }.items()
-            ]
-            create_table_artifact(
-                rows,
-                key=artifact_key("scene", site, res["scene_id"]),
-                description=f"scene {res['scene_id']} statistics",
-            )
         emit_event(
             "siteline.scene.registered",
             resource={"prefect.resource.id": f"siteline.scene.{res['scene_id']}", "siteline.site": site},
@@ -259,20 +241,20 @@ def ingest_mission_flow(
 
 
 @flow(name="tile-scene", flow_run_name="tile-scene-{scene_id}", task_runner=task_runner())
-def tile_scene_flow(scene_id: int) -> dict | None:
-    _tag_run(f"site:{_site_of_scene(scene_id)}")
+def tile_scene_flow(scene_id: int) -> dict[str, Any] | None:
+    _tag_run(f"site:{_read(site_name_of_scene, scene_id)}")
     return tile_task.submit(scene_id).result()
 
 
 @flow(name="process-pair", flow_run_name="process-pair-{pair_id}", task_runner=task_runner())
-def process_pair_flow(pair_id: int, params: dict | None = None) -> dict:
-    out = process_pair_task.submit(pair_id, params, _site_of_pair(pair_id)).result()
+def process_pair_flow(pair_id: int, params: dict[str, Any] | None = None) -> dict[str, Any]:
+    out = process_pair_task.submit(pair_id, params, _read(site_name_of_pair, pair_id)).result()
     _pair_dashboards(out)
     return out
 
 
-def _pair_dashboards(out: dict) -> None:
-    site = _site_of_scene(out["t2"])
+def _pair_dashboards(out: dict[str, Any]) -> None:
+    site = _read(site_name_of_scene, out["t2"])
     create_table_artifact(
         [{k: out[k] for k in ("pair", "t1", "t2", "radius_m", "views")} | {"labels": str(out["labels"])}],
         key=artifact_key("pair", site, out["pair"]),
@@ -296,7 +278,9 @@ def _pair_dashboards(out: dict) -> None:
 
 
 @flow(name="build-release", flow_run_name="build-release-{name}", task_runner=task_runner())
-def build_release_flow(site: str, name: str, params: dict | None = None, publish: bool = True) -> dict:
+def build_release_flow(
+    site: str, name: str, params: dict[str, Any] | None = None, publish: bool = True
+) -> dict[str, Any]:
     _tag_run(f"site:{site}")
     info = build_release_task(site, name, params, publish)
     stats = info.get("stats") or {}
@@ -310,11 +294,11 @@ def build_release_flow(site: str, name: str, params: dict | None = None, publish
 
 @flow(name="process-scene-pairs", flow_run_name="process-scene-{scene_id}", task_runner=task_runner())
 def process_scene_pairs_flow(
-    scene_id: int, params: dict | None = None, release_name: str | None = None
-) -> list[dict]:
+    scene_id: int, params: dict[str, Any] | None = None, release_name: str | None = None
+) -> list[dict[str, Any]]:
     """Process every pair the scene belongs to (a new scene, or a scene with a new label-set version:
     each scene's newest label set is used); then apply the release policy."""
-    site = _site_of_scene(scene_id)
+    site = _read(site_name_of_scene, scene_id)
     _tag_run(f"site:{site}")
     settings = load_settings()
     pair_ids = _read(pair_ids_of_scene, scene_id)

@@ -3,10 +3,14 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+from prefect.task_runners import TaskRunner
+
 from siteline.config import load_settings
 
 
-def task_runner():  # noqa: ANN201
+def task_runner() -> TaskRunner[Any]:
     settings = load_settings()
     kind, workers = settings.task_runner, settings.task_workers
     if kind == "threads":

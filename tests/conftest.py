@@ -149,7 +149,7 @@ def scenes(tmp_path_factory, synth_site):
     from sitehelpers import epoch_dirs, make_home
 
     from siteline.catalog import open_catalog
-    from siteline.ingest.mission import ingest_mission
+    from siteline.ingest import ingest_mission
     from siteline.tiles import tile_scene
 
     settings = make_home(tmp_path_factory.mktemp("scenes"), site_dir=synth_site)

@@ -1,5 +1,7 @@
-"""The import graph runs one way: shared primitives <- stages <- pipeline <- CLI (and flows), with no
-cycle between siteline's packages and modules."""
+"""The import graph runs one way: shared primitives <- catalog <- stages <- pipeline <- CLI (and flows),
+with no cycle between siteline's packages and modules; and the rules of a stage's anatomy hold (plan,
+execute, record: only the catalog touches ORM rows, execute never imports the catalog, no stage
+function is long, one store interface)."""
 
 from __future__ import annotations
 
@@ -11,18 +13,35 @@ PACKAGE = Path(__file__).resolve().parents[1] / "platform" / "siteline"
 PRIMITIVES = {
     "errors", "codes", "tolerances", "hashing", "config", "stores", "crs", "lasio", "sitestream",
     "photos", "dji", "cameras", "poses", "specs", "progress", "fence", "site", "taxonomy", "schemas", "metrics",
+    "records",
 }  # fmt: skip
 STAGES = {"ingest", "register", "tiles", "labels", "labelsets", "views", "render", "pairs", "release"}
 TOP = {"pipeline", "cli", "__main__"}
+MAX_STAGE_FUNCTION_LINES = 60
+
+
+def _modules() -> list[tuple[Path, ast.Module]]:
+    return [(p, ast.parse(p.read_text())) for p in sorted(PACKAGE.rglob("*.py"))]
+
+
+def _imports(tree: ast.Module) -> list[str]:
+    """Every module name ``tree`` imports (``from a.b import c`` gives ``a.b`` and ``a.b.c``)."""
+    out: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            out.append(node.module)
+            out += [f"{node.module}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+    return out
 
 
 def _graph() -> dict[str, set[str]]:
     """component -> components it imports (component: the first name below ``siteline``)."""
     edges: dict[str, set[str]] = defaultdict(set)
-    for path in PACKAGE.rglob("*.py"):
-        parts = path.relative_to(PACKAGE).with_suffix("").parts
-        src = parts[0]
-        for node in ast.walk(ast.parse(path.read_text())):
+    for path, tree in _modules():
+        src = path.relative_to(PACKAGE).with_suffix("").parts[0]
+        for node in ast.walk(tree):
             names: list[str] = []
             if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "siteline":
                 mod = node.module.split(".")
@@ -60,3 +79,116 @@ def test_primitives_import_no_stage_and_stages_no_pipeline() -> None:
             assert not targets & TOP, f"{comp} imports {sorted(targets & TOP)}"
         if comp not in TOP | {"ingest"}:
             assert "ingest" not in targets, f"{comp} imports ingest (only the CLI, flows and pipeline may)"
+
+
+def _rel(path: Path) -> str:
+    return path.relative_to(PACKAGE).as_posix()
+
+
+def test_orm_models_are_imported_only_by_the_catalog() -> None:
+    bad = [
+        _rel(p) for p, tree in _modules()
+        if not _rel(p).startswith("catalog/") and any(m.startswith("siteline.catalog.models") for m in _imports(tree))
+    ]  # fmt: skip
+    assert not bad, f"only siteline.catalog may import its ORM models: {bad}"
+
+
+def test_the_library_never_imports_prefect() -> None:
+    bad = [_rel(p) for p, tree in _modules() if any(m.split(".")[0] == "prefect" for m in _imports(tree))]
+    assert not bad, f"the library imports prefect: {bad} (flows/ orchestrate, the library never does)"
+
+
+def test_only_the_stores_tell_local_from_remote() -> None:
+    bad = [
+        _rel(p)
+        for p in PACKAGE.rglob("*.py")
+        if not _rel(p).startswith("stores/") and "is_remote" in p.read_text()
+    ]
+    assert not bad, f"is_remote outside siteline.stores: {bad} (use a Store's methods)"
+
+
+def test_execute_parts_never_import_the_catalog() -> None:
+    bad = [
+        _rel(p) for p, tree in _modules()
+        if p.name == "execute.py" and any(m.startswith("siteline.catalog") for m in _imports(tree))
+    ]  # fmt: skip
+    assert not bad, f"an execute part imports the catalog: {bad}"
+
+
+def _orm_columns() -> set[str]:
+    from siteline.catalog import Base
+
+    return {c.name for table in Base.metadata.tables.values() for c in table.columns}
+
+
+def test_no_orm_attribute_is_set_outside_the_catalog() -> None:
+    """Stages hand typed records to ``siteline.catalog`` record functions; they never set a row's
+    columns themselves (an assignment ``x.<column> = ...`` on anything but ``self``)."""
+    columns = _orm_columns()
+    bad = []
+    for path, tree in _modules():
+        if _rel(path).startswith(("catalog/", "migrations/")):
+            continue
+        for node in ast.walk(tree):
+            targets = (
+                node.targets
+                if isinstance(node, ast.Assign)
+                else [node.target]
+                if isinstance(node, ast.AugAssign | ast.AnnAssign)
+                else []
+            )
+            for t in targets:
+                if (
+                    isinstance(t, ast.Attribute) and t.attr in columns
+                    and not (isinstance(t.value, ast.Name) and t.value.id in ("self", "cls"))
+                ):  # fmt: skip
+                    bad.append(f"{_rel(path)}:{node.lineno} sets .{t.attr}")
+    assert not bad, "ORM attributes set outside siteline.catalog:\n" + "\n".join(bad)
+
+
+def _code_lines(fn: ast.FunctionDef | ast.AsyncFunctionDef, lines: list[str]) -> int:
+    body = fn.body
+    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant):
+        body = body[1:]
+    if not body:
+        return 0
+    text = lines[body[0].lineno - 1 : fn.end_lineno]
+    return sum(1 for line in text if line.strip() and not line.strip().startswith("#"))
+
+
+def test_no_stage_function_is_long() -> None:
+    """A stage function does one job: none of the stages' or the pipeline's is over ~60 lines of code
+    (its body, without the docstring, blank lines and comments)."""
+    long = []
+    for path, tree in _modules():
+        parts = path.relative_to(PACKAGE).parts
+        if parts[0] not in STAGES and parts[0] != "pipeline.py":
+            continue
+        lines = path.read_text().splitlines()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                n = _code_lines(node, lines)
+                if n > MAX_STAGE_FUNCTION_LINES:
+                    long.append(f"{_rel(path)}:{node.lineno} {node.name} ({n} lines)")
+    assert not long, "stage functions over 60 lines of code:\n" + "\n".join(long)
+
+
+def test_every_stage_has_a_plan_an_execute_and_a_record() -> None:
+    """The anatomy ARCHITECTURE.md names: each stage's plan and execute functions, and its record
+    function under siteline.catalog."""
+    import importlib
+
+    anatomy = {
+        "ingest": ("siteline.ingest.plan:plan_ingest", "siteline.ingest.execute:execute_ingest", "siteline.catalog.missions:record_ingest"),
+        "tile": ("siteline.tiles.plan:plan_tiling", "siteline.tiles.execute:execute_tiling", "siteline.catalog.scenes:record_tiling"),
+        "labels import": ("siteline.labelsets.plan:plan_label_import", "siteline.labelsets.execute:execute_label_import", "siteline.catalog.labelsets:record_label_set"),
+        "process pair": ("siteline.pairs.plan:plan_pair", "siteline.pairs.execute:execute_pair", "siteline.catalog.pairs:record_pair_outputs"),
+        "build release": ("siteline.release.plan:plan_release", "siteline.release.build:execute_build", "siteline.catalog.releases:record_draft"),
+        "publish": ("siteline.release.plan:plan_publish", "siteline.release.publish:move_into_place", "siteline.catalog.releases:record_published"),
+    }  # fmt: skip
+    doc = (PACKAGE.parents[1] / "docs" / "ARCHITECTURE.md").read_text()
+    for stage, refs in anatomy.items():
+        for ref in refs:
+            module, name = ref.split(":")
+            assert callable(getattr(importlib.import_module(module), name)), ref
+            assert name in doc, f"docs/ARCHITECTURE.md does not name {ref} ({stage})"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from siteline.errors import LabelError, ReleaseError
+from siteline.errors import LabelError, PairError
 from siteline.labels import CHANGED, IGNORED
 from siteline.pairs import PairParams, pair_mask
 
@@ -32,5 +32,5 @@ def test_mask_knobs_are_recorded_parameters() -> None:
     p = PairParams(one_side_hole="changed", all_points=True)
     assert p.to_dict()["one_side_hole"] == "changed" and p.to_dict()["all_points"] is True
     assert p.digest() != PairParams().digest()  # outputs of another rule are never reused
-    with pytest.raises(ReleaseError, match="one_side_hole"):
+    with pytest.raises(PairError, match="one_side_hole"):
         PairParams(one_side_hole="maybe")

@@ -14,16 +14,16 @@ BASE = {"scale": 0.25, "point_size_px": 3, "views": 4, "seed": 0, "min_coverage"
 def test_low_valid_views_are_replaced(scenes) -> None:
     settings, cat = scenes
     loose = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=0.0))
-    valid = sorted(v["valid"] for v in loose.views)
+    valid = sorted(v.valid for v in loose.views)
     threshold = (valid[0] + valid[1]) / 2  # the least valid view falls under it
     strict = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=threshold))
     assert strict.root != loose.root
-    assert all(v["valid"] >= threshold for v in strict.views)
-    assert [v["index"] for v in strict.views] == list(range(len(strict.views)))
+    assert all(v.valid >= threshold for v in strict.views)
+    assert [v.index for v in strict.views] == list(range(len(strict.views)))
     summary = json.loads((Path(strict.root) / "summary.json").read_text())
     assert summary["rejected"]["low_valid"] >= 1 and summary["params"]["min_valid"] == threshold
     assert len(strict.views) == BASE["views"]  # replacements came from the reserve
     for v in strict.views:
         for sub in ("A", "B", "label"):
-            assert (Path(strict.root) / sub / v["file"]).is_file()
-    assert sorted(p.name for p in (Path(strict.root) / "A").iterdir()) == [v["file"] for v in strict.views]
+            assert (Path(strict.root) / sub / v.file).is_file()
+    assert sorted(p.name for p in (Path(strict.root) / "A").iterdir()) == [v.file for v in strict.views]

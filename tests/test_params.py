@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from siteline.errors import ReleaseError, RenderError, ViewsError
+from siteline.errors import PairError, RenderError, ViewsError
 from siteline.pairs import PairParams
 from siteline.release.params import ReleaseParams
 from siteline.render import RenderSettings
@@ -34,7 +34,7 @@ def test_pair_params_are_composed_of_the_stages_specs() -> None:
     ],  # fmt: skip
 )
 def test_pair_params_refuse_what_a_component_refuses(bad) -> None:
-    with pytest.raises(ReleaseError, match="pair parameters|view_params|view parameters"):
+    with pytest.raises(PairError, match="pair parameters|view_params|view parameters"):
         PairParams(**bad)
 
 
@@ -43,9 +43,9 @@ def test_json_round_trips_and_unknown_keys_are_named() -> None:
     assert PairParams.from_dict(json.loads(json.dumps(p.to_dict()))) == p
     r = ReleaseParams(p, "fast", pad=False)
     assert ReleaseParams.from_dict(json.loads(json.dumps(r.to_dict()))) == r
-    with pytest.raises(ReleaseError, match=r"unknown parameter\(s\) \['scael'\]"):
+    with pytest.raises(PairError, match=r"unknown parameter\(s\) \['scael'\]"):
         PairParams.from_dict({"scael": 0.5})
-    with pytest.raises(ReleaseError, match="views=1.5 must be a int"):
+    with pytest.raises(PairError, match="views=1.5 must be a int"):
         PairParams.from_dict({"views": 1.5})
     with pytest.raises(ViewsError, match="unknown parameter"):
         ViewParams.from_dict({"n_views": 3})

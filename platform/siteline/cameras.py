@@ -9,16 +9,19 @@ converts to and from pycolmap.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from siteline.errors import CameraError
 from siteline.poses import Rigid
 from siteline.schemas import validate
 from siteline.tolerances import snap
+
+if TYPE_CHECKING:
+    import pycolmap
 
 ORTHONORMAL_TOL = 1e-6
 
@@ -66,7 +69,15 @@ class Camera:
     # -- construction ------------------------------------------------------------------------
     @classmethod
     def from_pose(
-        cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float, R: np.ndarray, t: np.ndarray
+        cls,
+        width: int,
+        height: int,
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        R: npt.ArrayLike,
+        t: npt.ArrayLike,
     ) -> Camera:
         """From intrinsics and ``cam_from_world`` R (3, 3), t (3,) float64."""
         R = np.asarray(R, dtype=np.float64).reshape(3, 3)
@@ -85,15 +96,15 @@ class Camera:
     @classmethod
     def look_at(
         cls,
-        center: Sequence[float],
-        target: Sequence[float],
+        center: npt.ArrayLike,
+        target: npt.ArrayLike,
         width: int,
         height: int,
         fx: float,
         fy: float | None = None,
         cx: float | None = None,
         cy: float | None = None,
-        up: Sequence[float] = (0.0, 0.0, 1.0),
+        up: npt.ArrayLike = (0.0, 0.0, 1.0),
     ) -> Camera:
         """A camera at ``center`` (site-local metres) looking at ``target``; image up follows ``up``.
 
@@ -164,7 +175,7 @@ class Camera:
     def with_pose(self, R: np.ndarray, t: np.ndarray) -> Camera:
         return Camera.from_pose(self.width, self.height, self.fx, self.fy, self.cx, self.cy, R, t)
 
-    def with_center(self, center: Sequence[float]) -> Camera:
+    def with_center(self, center: npt.ArrayLike) -> Camera:
         """Same orientation and intrinsics, centre moved to ``center`` (site-local metres)."""
         R = self.R
         return self.with_pose(R, -R @ np.asarray(center, dtype=np.float64))
@@ -231,7 +242,7 @@ class Camera:
         return np.array(planes)
 
     # -- conversions ---------------------------------------------------------------------------
-    def to_pycolmap(self):  # -> tuple[pycolmap.Camera, pycolmap.Rigid3d]
+    def to_pycolmap(self) -> tuple[pycolmap.Camera, pycolmap.Rigid3d]:
         """(pycolmap.Camera PINHOLE, pycolmap.Rigid3d cam_from_world)."""
         import pycolmap
 
@@ -242,7 +253,7 @@ class Camera:
         return cam, pose
 
     @classmethod
-    def from_pycolmap(cls, camera, cam_from_world) -> Camera:  # noqa: ANN001
+    def from_pycolmap(cls, camera: pycolmap.Camera, cam_from_world: pycolmap.Rigid3d) -> Camera:
         """From a pycolmap camera and a Rigid3d ``cam_from_world``. PINHOLE and SIMPLE_PINHOLE are taken
         as they are; any other model pycolmap knows (OPENCV, SIMPLE_RADIAL, FULL_OPENCV, ...) becomes
         its undistorted pinhole camera (:func:`undistorted_pinhole`, DESIGN.md §3), the camera COLMAP's
@@ -295,13 +306,13 @@ class Camera:
             raise CameraError(f"{source}: {exc}") from exc
 
 
-def model_name(camera) -> str:  # noqa: ANN001
+def model_name(camera: pycolmap.Camera) -> str:
     """The COLMAP model name of a pycolmap camera (``OPENCV``, ``PINHOLE``, ...)."""
     name = camera.model_name if hasattr(camera, "model_name") else str(camera.model)
     return name.split(".")[-1]
 
 
-def undistorted_pinhole(camera):  # noqa: ANN001, ANN201
+def undistorted_pinhole(camera: pycolmap.Camera) -> pycolmap.Camera:
     """The PINHOLE pycolmap camera of a pycolmap camera of any model: itself when it has no
     distortion (PINHOLE, SIMPLE_PINHOLE as PINHOLE), else ``pycolmap.undistort_camera`` with COLMAP's
     default options (the size and principal point change: 5280 x 3956 raw -> ~5645 x 4082)."""
@@ -324,7 +335,7 @@ def undistorted_pinhole(camera):  # noqa: ANN001, ANN201
     return out
 
 
-def distortion_record(camera) -> dict[str, Any] | None:  # noqa: ANN001
+def distortion_record(camera: pycolmap.Camera) -> dict[str, Any] | None:
     """What the catalog records of a distorted camera: its model, size and parameters, and the
     undistorted pinhole renders use; None for a pinhole camera."""
     name = model_name(camera)

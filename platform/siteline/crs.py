@@ -59,7 +59,7 @@ def metric_alternative(crs: pyproj.CRS) -> str:
     lon, lat = (area.west + area.east) / 2.0, (area.south + area.north) / 2.0
     aoi = AreaOfInterest(lon, lat, lon, lat)
     geodetic = crs.geodetic_crs
-    datum = geodetic.datum.name if geodetic is not None else ""
+    datum = geodetic.datum.name if geodetic is not None and geodetic.datum is not None else ""
     for name in ("NAD83" if datum.startswith("NAD83") else datum, "WGS 84"):
         found = [i for i in query_utm_crs_info(datum_name=name, area_of_interest=aoi) if not i.deprecated]
         if found:
@@ -149,6 +149,7 @@ class ToSiteCRS:
         self.src, self.dst, self.z_unit = src, dst, z_unit
         self.full_3d = src.is_compound and dst.is_compound and z_unit.source != "--z-unit"
         horizontal = _horizontal(src)
+        self._tr: pyproj.Transformer | None
         if self.full_3d:
             self._tr = transformer(src, dst)
         elif horizontal.equals(_horizontal(dst), ignore_axis_order=True):
@@ -162,7 +163,7 @@ class ToSiteCRS:
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:
         xyz = np.asarray(xyz, dtype=np.float64)
-        if self.full_3d:
+        if self.full_3d and self._tr is not None:
             x, y, z = self._tr.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2], errcheck=False)
             return np.stack([np.asarray(x), np.asarray(y), np.asarray(z)], axis=1)
         if self._tr is None:

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import shapely
 from shapely.validation import explain_validity
 
@@ -21,7 +22,7 @@ from siteline.tolerances import LENGTH_TOL_M
 MAX_FENCE_EXTENT_M = 50_000.0
 
 
-def validate_fence(vertices_m: Sequence[Sequence[float]], source: str = "fence") -> list[tuple[float, float]]:
+def validate_fence(vertices_m: npt.ArrayLike, source: str = "fence") -> list[tuple[float, float]]:
     """Check a closed ring of (x, y) site-local metres; return it without the repeated last vertex.
 
     Raises :class:`GeometryError` naming ``source`` when the ring is not closed, has fewer than three
@@ -124,7 +125,7 @@ def fence_area_m2(vertices_m: Sequence[Sequence[float]]) -> float:
 
 
 def nearest_segment(
-    point_xy: Sequence[float], vertices_m: Sequence[Sequence[float]]
+    point_xy: npt.ArrayLike, vertices_m: Sequence[Sequence[float]]
 ) -> tuple[np.ndarray, np.ndarray]:
     """The fence segment (a, b), each (2,) float64 metres, nearest to ``point_xy``."""
     ring = np.asarray(vertices_m, dtype=np.float64)

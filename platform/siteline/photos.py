@@ -129,13 +129,13 @@ def _dji_fields(xmp: bytes) -> dict[str, str]:
     except ET.ParseError:
         # stray bytes or an undeclared prefix (some legacy firmware): a tolerant scan of the
         # drone-dji: and DJI: attributes and elements
-        out = {}
+        tolerant: dict[str, str] = {}
         for m in re.finditer(rb'(?:drone-dji|DJI):(\w+)="([^"]*)"', xmp):
-            out[m.group(1).decode()] = m.group(2).decode(errors="replace")
+            tolerant[m.group(1).decode()] = m.group(2).decode(errors="replace")
         for m in re.finditer(rb"<(drone-dji|DJI):(\w+)>([^<]*)</\1:\2>", xmp):
             if m.group(3).strip():
-                out[m.group(2).decode()] = m.group(3).decode(errors="replace").strip()
-        return out
+                tolerant[m.group(2).decode()] = m.group(3).decode(errors="replace").strip()
+        return tolerant
     out: dict[str, str] = {}
     for el in root.iter():
         for key, value in el.attrib.items():
@@ -159,8 +159,8 @@ def _exif(path: Path) -> tuple[dict[str, Any], int | None, int | None]:
             size = im.size
     except (UnidentifiedImageError, OSError) as exc:
         raise PhotoError(f"photo {path} is not a readable image: {exc}") from exc
-    fields: dict[str, Any] = {ExifTags.TAGS.get(k, k): v for k, v in exif.items()}
-    fields.update({ExifTags.TAGS.get(k, k): v for k, v in exif.get_ifd(ExifTags.IFD.Exif).items()})
+    fields: dict[str, Any] = {str(ExifTags.TAGS.get(k, k)): v for k, v in exif.items()}
+    fields.update({str(ExifTags.TAGS.get(k, k)): v for k, v in exif.get_ifd(ExifTags.IFD.Exif).items()})
     gps = exif.get_ifd(ExifTags.IFD.GPSInfo)
     fields["_gps"] = {ExifTags.GPSTAGS.get(k, k): v for k, v in gps.items()}
     return fields, size[0], size[1]
@@ -221,7 +221,7 @@ def read_photo_meta(path: Path) -> PhotoMeta:
                 alt = float(gps["GPSAltitude"])
                 values["absolute_altitude_m"] = -alt if gps.get("GPSAltitudeRef") in (1, b"\x01") else alt
     meta = PhotoMeta(source=source, **{k: v for k, v in values.items() if k != "source"})
-    if not meta.has_position:
+    if not meta.has_position or meta.latitude_deg is None or meta.longitude_deg is None:
         raise PhotoError(
             f"photo {path} has no usable position: no DJI XMP GpsLatitude/GpsLongitude/"
             "AbsoluteAltitude and no EXIF GPS."

@@ -6,9 +6,12 @@ from __future__ import annotations
 import json
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from siteline.errors import SchemaError
+
+if TYPE_CHECKING:
+    from jsonschema.protocols import Validator
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
 
@@ -30,7 +33,7 @@ def load_schema(name: str) -> dict[str, Any]:
 
 
 @cache
-def _validator(name: str):  # -> jsonschema.protocols.Validator
+def _validator(name: str) -> Validator:
     import jsonschema
     from referencing import Registry, Resource
     from referencing.jsonschema import DRAFT202012

@@ -58,7 +58,7 @@ def source_crs(path: Path, crs_override: str | None, reader: laspy.LasReader | N
         raise CRSError(
             f"point cloud {path} declares {in_file.name} but --crs says {crs_override}: remove --crs or fix the file."
         )
-    src = in_file if in_file is not None else parse_source_crs(crs_override)
+    src = in_file if in_file is not None else parse_source_crs(str(crs_override))
     if not (src.is_projected or src.is_compound or src.is_geographic):
         raise CRSError(
             f"point cloud {path}: CRS {src.name} is neither projected nor geographic; it cannot be "

@@ -15,6 +15,11 @@ from siteline.schemas import SCHEMA_DIR, load_json, validate
 DEFAULT_TAXONOMY_PATH = SCHEMA_DIR / "taxonomy.default.json"
 
 
+def _rgb(values: list[int]) -> tuple[int, int, int]:
+    r, g, b = (int(v) for v in values)
+    return r, g, b
+
+
 @dataclass(frozen=True)
 class SiteClass:
     """One site class: uint8 id, name, whether change detection ignores it, display colour (RGB)."""
@@ -143,7 +148,7 @@ class Taxonomy:
             return cls(
                 name=doc["name"],
                 classes=tuple(
-                    SiteClass(int(c["id"]), c["name"], bool(c["ignore"]), tuple(int(v) for v in c["color"]))
+                    SiteClass(int(c["id"]), c["name"], bool(c["ignore"]), _rgb(c["color"]))
                     for c in doc["classes"]
                 ),
                 source_codes={

@@ -164,17 +164,22 @@ def test_pair_refuses_same_scene_twice(cat) -> None:
 
 
 def test_label_set_versions_are_unique_and_newest_is_found(cat) -> None:
-    from siteline.catalog.labelsets import add_label_set, label_set, newest_versions
+    from siteline.catalog.labelsets import label_set, newest_versions, record_label_set
     from siteline.catalog.models import LabelSet
     from siteline.errors import LabelSetError
+    from siteline.records import LabelSetImport, StageRun
+
+    def imported(scene_id: int, uri: str, file: str, sha: str, note: str | None, changed: int, changes: dict):
+        return LabelSetImport(scene_id, 2, 1, uri, file, sha, 10, 10, 0, 0, 0, changed, changes, {}, note=note)
 
     with cat.transaction() as s:
         site = _site(s)
         scene = _scene(s, site, _mission(s, site, "a" * 64), T0)
         s.add(LabelSet(scene_id=scene.id, version=1, source="las", class_histogram={"ground": 10}))
         s.flush()
-        add_label_set(s, scene.id, 2, "/x/v2.zarr", 1, "import f.laz", "b" * 64, "fix", {"ground": 9}, 1,
-                      {"changes": {"ground->building": 1}})  # fmt: skip
+        record_label_set(
+            s, imported(scene.id, "/x/v2.zarr", "f.laz", "b" * 64, "fix", 1, {"ground->building": 1}), StageRun("t", "x")
+        )
         sid = scene.id
     with cat.transaction() as s:
         assert newest_versions(s, [sid]) == {sid: 2}
@@ -184,4 +189,4 @@ def test_label_set_versions_are_unique_and_newest_is_found(cat) -> None:
         with pytest.raises(LabelSetError, match="no label-set version 3"):
             label_set(s, sid, 3)
     with pytest.raises(sa.exc.IntegrityError), cat.transaction() as s:
-        add_label_set(s, sid, 2, "/x/again.zarr", 1, "import g.laz", "c" * 64, None, {}, 0, {})
+        record_label_set(s, imported(sid, "/x/again.zarr", "g.laz", "c" * 64, None, 0, {}), StageRun("t", "x"))

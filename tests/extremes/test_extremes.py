@@ -67,8 +67,8 @@ def test_tiles_round_trip_every_las_scale_and_origin(tmp_path, origin, crs, scal
     r = write_tiles(tmp_path / "c.las", site, pyproj.CRS(crs), tmp_path / "s.zarr", workers=1)
     t = SceneTiles.open(r.uri)
     data = t.read({k: t.prefix(k, None) for k in t.by_tile}, ("gps_time",))
-    back = data["xyz_m"] + np.asarray(origin)
-    err = np.abs(back - geo[data["gps_time"].astype(int)])
+    back = data.xyz_m + np.asarray(origin)
+    err = np.abs(back - geo[data.attributes["gps_time"].astype(int)])
     assert np.isfinite(err).all() and err.max() <= 0.0005 + 1e-9
 
 
@@ -103,7 +103,7 @@ def test_one_point_and_empty_clouds_through_tiles_and_ingest(tmp_path) -> None:
     write_las(tmp_path / "one.las", np.array([[445_001.0, 5_030_002.0, 81.0]]), crs="EPSG:32618")
     r = write_tiles(tmp_path / "one.las", site, pyproj.CRS("EPSG:32618"), tmp_path / "one.zarr", workers=1)
     pts = SceneTiles.open(r.uri).points(attributes=())
-    assert pts["xyz_m"].tolist() == [[1.0, 2.0, 1.0]]
+    assert pts.xyz_m.tolist() == [[1.0, 2.0, 1.0]]
     write_las(tmp_path / "empty.las", np.zeros((0, 3)), crs="EPSG:32618")
     with pytest.raises(PointCloudError, match="no points"):
         scan_las(tmp_path / "empty.las", site)
@@ -157,3 +157,5 @@ def test_flat_scene_icp_is_finite_and_flagged() -> None:
     assert abs(np.array(res.correction)[2, 3] + 0.07) < 0.01  # the constrained direction is right
     empty = point_to_plane_icp(np.zeros((0, 3)), flat)
     assert empty.degenerate and empty.residual_m == np.inf and empty.matched == 0
+    # too few points to align: the record (what a scene's registration keeps) is still written
+    assert empty.to_dict()["correction"] == np.eye(4).tolist() and empty.to_dict()["matched"] == 0

@@ -16,7 +16,7 @@ from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
 from siteline.fence import load_fence_geojson
-from siteline.ingest.mission import ingest_mission
+from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams
 from siteline.site import make_site_spec
 from siteline.synth import SynthConfig, write_site

@@ -141,11 +141,11 @@ def test_retry_then_success_and_permanent_failure_recorded(
 ) -> None:
     import pipeline
 
-    import siteline.tiles as tiles_pkg
+    import siteline.pipeline as tiles_pkg  # the pipeline calls the tile stage
     from siteline.catalog import open_catalog
     from siteline.catalog.models import Node, Scene
     from siteline.catalog.stages import stage_runs
-    from siteline.ingest.mission import ingest_mission
+    from siteline.ingest import ingest_mission
 
     settings = _home(tmp_path, small_site, monkeypatch)
     cat = open_catalog(settings)
@@ -203,7 +203,7 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
     from prefect_dask import DaskTaskRunner
 
     from siteline.catalog import open_catalog
-    from siteline.ingest.mission import ingest_mission
+    from siteline.ingest import ingest_mission
     from siteline.stores import open_store
 
     results = {}

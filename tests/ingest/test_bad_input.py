@@ -23,7 +23,7 @@ from siteline.errors import (
     RegistrationError,
     SiteNotFoundError,
 )
-from siteline.ingest.mission import IngestOptions, ingest_mission
+from siteline.ingest import IngestOptions, ingest_mission
 from siteline.lasio import write_las
 from siteline.synth import LAS_RELPATH
 
@@ -204,12 +204,12 @@ def test_two_point_clouds_without_a_preferred_one(cat, site_settings, tmp_path) 
 
 
 def test_failure_after_copy_removes_new_blobs(cat, site_settings, synth_site, tmp_path, monkeypatch) -> None:
-    import siteline.ingest.mission as mission_mod
+    import siteline.ingest.stage as stage_mod
 
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(mission_mod, "_commit", boom)
+    monkeypatch.setattr(stage_mod, "record_ingest", boom)  # the files are stored, the catalog write fails
     from sitehelpers import epoch_dirs
 
     with pytest.raises(RuntimeError, match="disk full"):

@@ -82,7 +82,7 @@ def test_a_mission_with_a_distorted_colmap_model_goes_to_a_release(tmp_path, syn
     pinhole = undistorted_pinhole(cams[1])
     cat = open_catalog(settings)
     try:
-        scenes = [pipeline.ingest(cat, settings, m, "demo", workers=1)[0].scene_id for m in missions]
+        scenes = [pipeline.ingest(cat, settings, m, "demo", workers=1).ingest.scene_id for m in missions]
         with cat.transaction() as s:
             reg = s.get(Scene, scenes[1]).registration
             stored = scene_cameras(s, scenes[1])

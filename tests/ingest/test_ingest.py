@@ -19,7 +19,7 @@ from siteline.catalog.models import Mission, Pair, Scene
 from siteline.catalog.scenes import list_scenes, scene_cameras
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
-from siteline.ingest.mission import IngestOptions, ingest_mission
+from siteline.ingest import IngestOptions, ingest_mission
 from siteline.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 

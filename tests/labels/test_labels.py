@@ -80,11 +80,12 @@ def test_tiled_labels_equal_whole_cloud_labels(tmp_path, synth_site) -> None:
     r = 0.5
     res = write_labels(t1, t2, r, IGN, tmp_path / "labels.zarr")
     for tiles, other, side in ((t1, t2, "t1"), (t2, t1, "t2")):
-        tiles.attach("change", tmp_path / "labels.zarr" / side)
-        mine = tiles.points(attributes=("class", "change"))
+        labelled = tiles.with_attribute("change", str(tmp_path / "labels.zarr" / side))
+        mine = labelled.points(attributes=("class", "change"))
         theirs = other.points(attributes=("class",))
-        whole = change_flags(mine["xyz_m"], mine["class"], theirs["xyz_m"], theirs["class"], r, IGN)
-        assert np.array_equal(mine["change"], whole)
+        a, b = mine.xyz_m.astype(np.float32), theirs.xyz_m.astype(np.float32)  # as points() gave them before
+        whole = change_flags(a, mine.attributes["class"], b, theirs.attributes["class"], r, IGN)
+        assert np.array_equal(mine.attributes["change"], whole)
     assert res.counts["t1"]["changed"] > 0 and res.counts["t2"]["unchanged"] > 0
 
 

@@ -17,8 +17,9 @@ from sitehelpers import run_cli
 from labelsets.edits import centre_box, export, shuffled, versions
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
-from siteline.labelsets import import_labels, labelset_uri
+from siteline.labelsets import import_labels
 from siteline.lasio import read_labels_vlr
+from siteline.stores import layout
 
 GROUND, BUILDING, MATERIAL, WORKS = 1, 2, 4, 6
 SITELINE = Path(os.environ.get("VIRTUAL_ENV", ".venv")) / "bin" / "siteline"
@@ -147,7 +148,7 @@ def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
 
 
 def _store_listing(settings, scene_id: int) -> list[str]:  # noqa: ANN001
-    root = Path(labelset_uri(settings, scene_id, 1)).parent
+    root = Path(layout.label_set(settings.store, scene_id, 1)).parent
     return sorted(p.name for p in root.iterdir()) if root.exists() else []
 
 
@@ -220,8 +221,9 @@ def test_unknown_version_is_named(scenes) -> None:
 def test_a_label_set_of_another_tiling_is_refused(scenes, tmp_path) -> None:
     """A label-set store follows the order of the tile arrays it was written for; after a re-tile it
     is refused, naming the file to import again, instead of read misaligned."""
+    from siteline.catalog.labelsets import labelled_source
     from siteline.catalog.models import Scene
-    from siteline.labelsets import open_labelled_tiles
+    from siteline.labelsets import open_labelled
 
     settings, cat = scenes
     las = export(cat, 2, tmp_path / "s2.las")
@@ -236,9 +238,9 @@ def test_a_label_set_of_another_tiling_is_refused(scenes, tmp_path) -> None:
         scene.statistics = {**saved, "tiles": {**saved["tiles"], "checksum": "another tiling"}}
     try:
         with cat.transaction() as s, pytest.raises(LabelSetError, match=r"another tiling.*s2_fixed\.las"):
-            open_labelled_tiles(s, s.get(Scene, 2), res.version)
+            open_labelled(*labelled_source(s, 2, res.version))
         with cat.transaction() as s:
-            open_labelled_tiles(s, s.get(Scene, 2), 1)  # version 1 is the tile store's own classes
+            open_labelled(*labelled_source(s, 2, 1))  # version 1 is the tile store's own classes
     finally:
         with cat.transaction() as s:
             s.get(Scene, 2).statistics = saved

@@ -8,8 +8,11 @@ import itertools
 import laspy
 import numpy as np
 
-from siteline.labelsets.imports import SPILL_DTYPE, _match_tiles, _spill
+from siteline.labelsets.execute import SPILL_DTYPE, _match_tiles, _spill
+from siteline.labelsets.plan import ImportPlan
 from siteline.lasio import write_las
+from siteline.progress import no_progress
+from siteline.records import LabelSetRef, TileSource
 from siteline.site import make_site_spec
 from siteline.tiles.export import export_las
 from siteline.tiles.reader import SceneTiles
@@ -45,12 +48,11 @@ def test_points_at_tile_edges_match_once(tmp_path) -> None:
 
     spill = tmp_path / "spill"
     spill.mkdir()
-    n_file, has_time, unknown = _spill(
-        tmp_path / "edited.las", 7, site, tiles, site.taxonomy.id_lut(), spill, None
-    )
+    plan = ImportPlan(7, site, TileSource(str(store), tiles.spec, tuple(tiles.nodes)), LabelSetRef(7, 1, None, "las"), 2)
+    n_file, has_time, unknown = _spill(tmp_path / "edited.las", plan, tiles, site.taxonomy.id_lut(), spill, no_progress)
     assert n_file == n and has_time and not unknown.any()
     spilled = sum(len(np.fromfile(p, SPILL_DTYPE)) for p in spill.iterdir())
     assert spilled > n  # points near an edge went to both tiles
-    result = _match_tiles(tiles, spill, has_time, tmp_path / "labels.zarr", site, n_file, None)
-    assert result["matched"] == n and result["unmatched"] == result["duplicated"] == result["untouched"] == 0
-    assert result["changes"] == {"ground->building": n}
+    result = _match_tiles(tiles, spill, has_time, tmp_path / "labels.zarr", site, n_file, no_progress)
+    assert result.matched == n and result.unmatched == result.duplicated == result.untouched == 0
+    assert result.changes == {"ground->building": n}

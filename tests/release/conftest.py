@@ -8,7 +8,7 @@ from sitehelpers import epoch_dirs, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
-from siteline.ingest.mission import ingest_mission
+from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams
 from siteline.release import publish_release
 from siteline.tiles import tile_scene

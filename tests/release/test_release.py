@@ -15,12 +15,13 @@ from sitehelpers import epoch_dirs, make_home, writable_copy
 from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Pair, Release, Render, Scene
+from siteline.catalog.releases import query_items
 from siteline.catalog.sites import add_site
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
-from siteline.ingest.mission import ingest_mission
+from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams, pair_mask
 from siteline.release import publish_release, read_manifest, verify_files
-from siteline.release.query import diff_releases, query_items
+from siteline.release.query import diff_releases
 from siteline.schemas import validate
 from siteline.site import make_site_spec
 from siteline.tiles import tile_scene
@@ -172,24 +173,25 @@ def test_pair_mask_is_symmetric() -> None:
 def test_swapping_scenes_gives_the_same_mask(built) -> None:
     settings, cat, pub = built
     from siteline.cameras import Camera
-    from siteline.catalog.models import Scene
-    from siteline.labels import attach_labels
-    from siteline.pairs.render import render_pair_view
-    from siteline.tiles import open_scene_tiles
+    from siteline.catalog.scenes import tile_source
+    from siteline.pairs.render import LabelledPair, render_pair_view
+    from siteline.tiles import SceneTiles
 
     doc = read_manifest(pub.root)
     pair = doc["lineage"]["pairs"][0]
     label_uri = pair["labels"]["uri"]
     with cat.transaction() as s:
-        t1 = attach_labels(open_scene_tiles(s, s.get(Scene, pair["t1"])), label_uri, "t1")
-        t2 = attach_labels(open_scene_tiles(s, s.get(Scene, pair["t2"])), label_uri, "t2")
+        t1, t2 = (SceneTiles.from_source(tile_source(s, pair[side])) for side in ("t1", "t2"))
+    forward = LabelledPair.with_labels(t1, t2, label_uri)
+    swapped = LabelledPair(forward.t2, forward.t1)
     cam = Camera.look_at((-50.0, -50.0, 35.0), (0.0, 0.0, 0.0), 320, 240, fx=260.0)
-    a = render_pair_view(t1, t2, cam, 1.0, 1)
-    b = render_pair_view(t2, t1, cam, 1.0, 1)
+    full = PairParams(scale=1.0, point_size_px=1)
+    a = render_pair_view(forward, cam, full)
+    b = render_pair_view(swapped, cam, full)
     assert np.array_equal(a.mask, b.mask) and (a.mask != 255).any()
     assert np.array_equal(a.a, b.b)
-    coarse = render_pair_view(t1, t2, cam, 0.25, 1, lod_factor=2.0)
-    every = render_pair_view(t1, t2, cam, 0.25, 1, lod_factor=2.0, all_points=True)
+    coarse = render_pair_view(forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0))
+    every = render_pair_view(forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0, all_points=True))
     assert every.points_read > coarse.points_read  # --all-points: no level of detail
     assert every.coverage_a >= coarse.coverage_a
 

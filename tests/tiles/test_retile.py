@@ -13,8 +13,9 @@ import numpy as np
 
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Scene
-from siteline.pairs import PairParams, pair_output, process_pair
-from siteline.tiles import TileSpec, open_scene_tiles, tile_scene
+from siteline.catalog.scenes import tile_source
+from siteline.pairs import PairParams, find_pair_output, process_pair
+from siteline.tiles import SceneTiles, TileSpec, tile_scene
 
 EXE = Path(sys.executable).with_name("siteline")
 # one candidate per real camera: the test needs outputs, not a good view sample
@@ -30,15 +31,15 @@ def _exe(settings, *argv: str) -> subprocess.CompletedProcess:
 
 def _points(cat, scene_id: int) -> tuple[str, np.ndarray]:
     with cat.transaction() as s:
-        tiles = open_scene_tiles(s, s.get(Scene, scene_id))
+        tiles = SceneTiles.from_source(tile_source(s, scene_id))
     pts = tiles.points(attributes=("gps_time",))
-    return tiles.uri, np.sort(pts["gps_time"])
+    return tiles.uri, np.sort(pts.attributes["gps_time"])
 
 
 def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
     from sitehelpers import epoch_dirs, make_home
 
-    from siteline.ingest.mission import ingest_mission
+    from siteline.ingest import ingest_mission
 
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)
@@ -48,7 +49,7 @@ def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
     before = process_pair(cat, settings, 1, PARAMS)
     old_uri, old_points = _points(cat, ids[0])
 
-    _, hint = tile_scene(cat, settings, ids[0])
+    hint = tile_scene(cat, settings, ids[0]).message
     assert "nothing to do" in hint and f"`siteline scene tile {ids[0]} --retile`" in hint
 
     done = _exe(settings, "scene", "tile", str(ids[0]), "--retile")
@@ -60,9 +61,9 @@ def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
         stats = s.get(Scene, ids[0]).statistics["tiles"]
     assert stats["spec"]["node_order"] == "random" and stats["generation"] == 1
 
-    _, again = tile_scene(cat, settings, ids[0])
+    again = tile_scene(cat, settings, ids[0]).message
     assert "nothing to do" in again and "--retile" not in again
 
     # outputs aligned with the old order are not reused (process_pair makes new ones); they stay for old releases
-    assert pair_output(cat, settings, 1, PARAMS) is None and Path(before.root).exists()
+    assert find_pair_output(cat, settings, 1, PARAMS) is None and Path(before.root).exists()
     cat.dispose()

@@ -63,9 +63,9 @@ def test_round_trip_within_half_a_quantum(tmp_path, origin, crs, scale) -> None:
     geo = _cloud(tmp_path / "c.las", origin, crs=crs, scale=scale, extent=extent)
     site, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, crs)
     data = tiles.read({t: tiles.prefix(t, None) for t in tiles.by_tile}, ALL)
-    ids = data["gps_time"].astype(np.int64)
+    ids = data.attributes["gps_time"].astype(np.int64)
     assert np.array_equal(np.sort(ids), np.arange(len(geo)))
-    back = data["xyz_m"] + np.asarray(origin)  # float64 georeferenced
+    back = data.xyz_m + np.asarray(origin)  # float64 georeferenced
     err = np.abs(back - geo[ids]).max()
     assert err <= 0.5 * tiles.spec.quantum_m + 1e-9
 
@@ -78,9 +78,9 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
     assert sum(n.count for n in result.nodes) == result.points == 40_000
     for tile, nodes in tiles.by_tile.items():
         data = tiles.read({tile: tiles.prefix(tile, None)}, ("gps_time",))
-        assert len(np.unique(data["gps_time"])) == len(data["gps_time"])  # no duplicates
+        assert len(np.unique(data.attributes["gps_time"])) == len(data.attributes["gps_time"])  # no duplicates
         i, j = parse_tile_key(tile)
-        counts = np.rint((data["xyz_m"] - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(
+        counts = np.rint((data.xyz_m - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(
             np.int64
         )
         zmin = counts[:, 2].min()
@@ -109,7 +109,7 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
             cube = np.c_[np.clip(c[:, :2] // edge, 0, n_tile // edge - 1), c[:, 2] // edge]
             assert n.cell is not None and (cube == np.array(n.cell)).all()
             lo, hi = np.array(n.bounds_min), np.array(n.bounds_max)
-            xyz = data["xyz_m"][n.start : n.start + n.count]
+            xyz = data.xyz_m[n.start : n.start + n.count]
             assert (xyz >= lo - 1e-9).all() and (xyz <= hi + 1e-9).all()
     assert max(len(ns) for ns in tiles.by_tile.values()) > level_count(spec)  # levels split into cubes
 
@@ -123,17 +123,17 @@ def test_frustum_read_equals_brute_force(tmp_path) -> None:
     local = geo - np.asarray(origin)
     planes = cam.scaled(0.5).frustum_planes(1e-3)
     brute = np.flatnonzero(np.all(local @ planes[:, :3].T + planes[:, 3] >= 0, axis=1))
-    assert set(got["gps_time"].astype(int)) == set(brute)
-    assert got["xyz_m"].dtype == np.float32
-    assert tiles.last_stats.points_read < 30_000  # culled tiles were not read
+    assert set(got.attributes["gps_time"].astype(int)) == set(brute)
+    assert got.xyz_m.dtype == np.float64  # xyz_m is float64 site-local metres from every read
+    assert got.stats.points_read < 30_000  # culled tiles were not read
     auto = tiles.points_for_view(cam, 0.125, attributes=("gps_time",))
-    assert len(auto["xyz_m"]) < len(got["xyz_m"])
-    assert set(auto["gps_time"].astype(int)) <= set(brute)  # a coarser read is a subset
+    assert len(auto.xyz_m) < len(got.xyz_m)
+    assert set(auto.attributes["gps_time"].astype(int)) <= set(brute)  # a coarser read is a subset
     # per node: near nodes deeper than far ones, so the read is finer than one level for every tile
     chosen, _ = tiles.levels_for_view(cam, 0.125)
     lv = np.concatenate([tiles.node_arrays[t][2][sel] for t, (sel, _) in chosen.items()])
     capped = tiles.points_for_view(cam, 0.125, attributes=("gps_time",), level=int(lv.max()))
-    assert len(auto["xyz_m"]) < len(capped["xyz_m"])
+    assert len(auto.xyz_m) < len(capped.xyz_m)
 
 
 def test_points_by_bounds_and_resolution(tmp_path) -> None:
@@ -143,9 +143,9 @@ def test_points_by_bounds_and_resolution(tmp_path) -> None:
     local = geo - np.asarray(origin)
     got = tiles.points(bounds=(-10, -10, 10, 10), attributes=("gps_time",))
     inside = np.flatnonzero((np.abs(local[:, 0]) <= 10) & (np.abs(local[:, 1]) <= 10))
-    assert set(got["gps_time"].astype(int)) == set(inside)
+    assert set(got.attributes["gps_time"].astype(int)) == set(inside)
     coarse = tiles.points(resolution=2.0, attributes=())
-    assert 0 < len(coarse["xyz_m"]) < 20_000
+    assert 0 < len(coarse.xyz_m) < 20_000
     with pytest.raises(Exception, match="unknown attributes"):
         tiles.points(attributes=("colour",))
 
@@ -214,7 +214,7 @@ def _ingested_home(tmp_path, synth_dir, name):
     from sitehelpers import epoch_dirs, make_home
 
     from siteline.catalog import open_catalog
-    from siteline.ingest.mission import ingest_mission
+    from siteline.ingest import ingest_mission
 
     settings = make_home(tmp_path / name, site_dir=synth_dir)
     cat = open_catalog(settings)
@@ -254,12 +254,12 @@ def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> 
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Node.id))).scalar_one() == 0
         assert s.get(Scene, sid).status == "registered"
-    rerun, _ = tile_scene(cat, settings, sid, workers=1)
+    rerun = tile_scene(cat, settings, sid, workers=1).tiling
     assert not [p for p in tiles_dir.iterdir() if p.name.startswith(".")]  # stale partials were cleared
     cat.dispose()
     clean_settings, (sid2, _) = _ingested_home(tmp_path, synth_dir, "b")
     cat2 = open_catalog(clean_settings)
-    clean, _ = tile_scene(cat2, clean_settings, sid2, workers=1)
+    clean = tile_scene(cat2, clean_settings, sid2, workers=1).tiling
     cat2.dispose()
     assert rerun.checksum == clean.checksum and rerun.points == clean.points
 
@@ -292,8 +292,8 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
     """A store written before octree nodes indexes one node per tile level (no cube), keeps input
     order inside a node and calls its int32 counts ``xyz``: every read still works, with per-tile
     culling and whole nodes."""
+    from siteline.records import NodeInfo
     from siteline.tiles.reader import SceneTiles
-    from siteline.tiles.writer import NodeInfo
 
     origin = (445_000.0, 5_030_000.0, 80.0)
     geo = _cloud(tmp_path / "c.las", origin, n=20_000)
@@ -321,9 +321,9 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
     planes = cam.scaled(0.5).frustum_planes(1e-3)
     brute = np.flatnonzero(np.all(local @ planes[:, :3].T + planes[:, 3] >= 0, axis=1))
     got = old.points_for_view(cam, 0.5, attributes=("gps_time",), level=None)
-    assert set(got["gps_time"].astype(int)) == set(brute)
+    assert set(got.attributes["gps_time"].astype(int)) == set(brute)
     auto = old.points_for_view(cam, 0.125, attributes=("gps_time",))
-    assert 0 < len(auto["xyz_m"]) and set(auto["gps_time"].astype(int)) <= set(brute)
+    assert 0 < len(auto.xyz_m) and set(auto.attributes["gps_time"].astype(int)) <= set(brute)
     chosen, _ = old.levels_for_view(cam, 0.125)  # input order: whole nodes only, never a part
     assert all(np.array_equal(take, old.node_arrays[t][4][sel]) for t, (sel, take) in chosen.items())
 
@@ -347,21 +347,21 @@ def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
     node = max(tiles.by_tile[tile], key=lambda nd: nd.count)
     xyz = tiles.read_nodes(
         {tile: (np.array([tiles.by_tile[tile].index(node)]), np.array([node.count // 10]))}, ()
-    )["xyz_m"]
+    ).xyz_m
     span = (xyz.max(axis=0) - xyz.min(axis=0))[:2] / (np.array(node.bounds_max) - node.bounds_min)[:2]
     assert np.all(span > 0.9), span  # the first tenth spans the node, not a corner of it
     cam = Camera.look_at((0, 0, 40), (0, 0, 0), 150, 125, fx=100.0)  # 0.4 m pixels over 0.1 m data
     every = tiles.points_for_view(cam, 1.0, level=None)
     for size, most in ((1, 6.0), (3, 0.8)):
         settings = RenderSettings(scale=1.0, point_size_px=size)
-        full = render_points(every["xyz_m"], cam, settings)
+        full = render_points(every.xyz_m.astype(np.float32), cam, settings)
         pts = tiles.points_for_view(cam, 1.0, point_size_px=size)
-        img = render_points(pts["xyz_m"], cam, settings)
-        per_pixel = tiles.last_stats.points_read / img.hit.sum()
-        assert per_pixel < most and per_pixel < len(every["xyz_m"]) / full.hit.sum() / 2.5, (size, per_pixel)
+        img = render_points(pts.xyz_m.astype(np.float32), cam, settings)
+        per_pixel = pts.stats.points_read / img.hit.sum()
+        assert per_pixel < most and per_pixel < len(every.xyz_m) / full.hit.sum() / 2.5, (size, per_pixel)
         assert img.coverage >= full.coverage - 0.01, (size, img.coverage, full.coverage)
     coarse = tiles.points_for_view(cam, 1.0, point_size_px=3, lod_factor=2.0)
-    assert len(coarse["xyz_m"]) < 0.4 * len(pts["xyz_m"])  # the read follows the factor continuously
+    assert len(coarse.xyz_m) < 0.4 * len(pts.xyz_m)  # the read follows the factor continuously
 
 
 def test_reads_decode_only_the_chunks_they_touch(tmp_path) -> None:
@@ -379,9 +379,9 @@ def test_reads_decode_only_the_chunks_they_touch(tmp_path) -> None:
         fresh = SceneTiles(result.uri, tiles.nodes, tiles.spec, cache_bytes=cache)
         got = fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
         want = slice(node.start, node.start + node.count)
-        assert np.array_equal(got["gps_time"], whole["gps_time"][want])
-        assert np.array_equal(got["xyz_m"], whole["xyz_m"][want])
+        assert np.array_equal(got.attributes["gps_time"], whole.attributes["gps_time"][want])
+        assert np.array_equal(got.xyz_m, whole.xyz_m[want])
         first, end = node.start // 1024, -(-(node.start + node.count) // 1024)
-        assert fresh.last_stats.points_decoded <= 2 * (end - first) * 1024 < tiles.prefix(tile)
-        fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
-        assert (fresh.last_stats.points_decoded == 0) == (cache > 4096)
+        assert got.stats.points_decoded <= 2 * (end - first) * 1024 < tiles.prefix(tile)
+        again = fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
+        assert (again.stats.points_decoded == 0) == (cache > 4096)

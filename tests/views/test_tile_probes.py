@@ -6,11 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from siteline.catalog.models import Scene, Site
-from siteline.catalog.scenes import scene_cameras
-from siteline.catalog.sites import site_spec
+from siteline.catalog.scenes import scene_cameras, tile_source
+from siteline.catalog.sites import site_of
 from siteline.pairs.sources import TilePointSource
-from siteline.tiles import open_scene_tiles
 from siteline.tiles.reader import SceneTiles
 from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
 
@@ -20,11 +18,12 @@ SKIP = np.array([9, 10], np.uint8)
 
 def _inputs(cat):  # noqa: ANN001, ANN202
     with cat.transaction() as s:
-        tiles = open_scene_tiles(s, s.get(Scene, 2))
+        tiles = SceneTiles.from_source(tile_source(s, 2))
         cams = [NamedCamera(n, c) for n, c in scene_cameras(s, 2)[:8]]
-        site = site_spec(s.get(Site, 1))
+        site = site_of(s, 1)
     g = tiles.points(resolution=0.5, attributes=("class",))
-    plane = fit_ground_plane(g["xyz_m"][g["class"] == site.taxonomy.id_of("ground")], seed=0)
+    on_ground = g.attributes["class"] == site.taxonomy.id_of("ground")
+    plane = fit_ground_plane(g.xyz_m[on_ground].astype(np.float32), seed=0)
     return tiles, cams, site, plane
 
 
@@ -34,7 +33,7 @@ class WholeCloud(TilePointSource):
     def __init__(self, tiles: SceneTiles, skip: np.ndarray) -> None:
         super().__init__(tiles, skip)
         probe = tiles.points(resolution=0.05, attributes=("class",))
-        self._probe = probe["xyz_m"][~np.isin(probe["class"], skip)]
+        self._probe = probe.xyz_m[~np.isin(probe.attributes["class"], skip)].astype(np.float32)
 
     def points_for_view(self, camera, scale):  # noqa: ANN001, ANN201
         return self._probe

@@ -155,13 +155,13 @@ def test_views_under_geometry_and_underground_are_rejected() -> None:
     )
     from siteline.views.generate import reject
 
-    reject(cands, plane, None, source, ViewParams(mirror=False, forward_fractions=(0.0,)))
+    cands = reject(cands, plane, None, source, ViewParams(mirror=False, forward_fractions=(0.0,)))
     assert {v.rejected for v in cands} == {"under_geometry"}
     below = NamedCamera("below", Camera.look_at((0, 0, -5.0), (10, 0, -5.0), 320, 240, fx=260.0))
     cands = candidate_views(
         below, plane, None, lambda c: 30.0, ViewParams(mirror=False, forward_fractions=(0.0,))
     )
-    reject(cands, plane, None, source, ViewParams(mirror=False, forward_fractions=(0.0,)))
+    cands = reject(cands, plane, None, source, ViewParams(mirror=False, forward_fractions=(0.0,)))
     assert {v.rejected for v in cands} == {"underground"}
 
 

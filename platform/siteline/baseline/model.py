@@ -8,7 +8,7 @@ from torch import nn
 
 
 def _block(cin: int, cout: int, n: int) -> nn.Sequential:
-    layers = []
+    layers: list[nn.Module] = []
     for i in range(n):
         layers += [
             nn.Conv2d(cin if i == 0 else cout, cout, 3, padding=1),
@@ -20,7 +20,7 @@ def _block(cin: int, cout: int, n: int) -> nn.Sequential:
 
 
 def _up_block(cin: int, cmid: int, cout: int, n: int, last: bool = False) -> nn.Sequential:
-    layers = []
+    layers: list[nn.Module] = []
     for i in range(n):
         a = cin if i == 0 else cmid
         b = cout if i == n - 1 else cmid

@@ -9,7 +9,12 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import LabelSet
+from siteline.catalog.scenes import tile_source
+from siteline.catalog.stages import add_completed
 from siteline.errors import LabelSetError
+from siteline.records.labelsets import LabelSetImport, LabelSetRef
+from siteline.records.runs import StageRun
+from siteline.records.tiling import TileSource
 
 
 def label_sets(session: Session, scene_id: int) -> list[LabelSet]:
@@ -36,6 +41,20 @@ def label_set(session: Session, scene_id: int, version: int | None = None) -> La
     raise LabelSetError(f"scene {scene_id} has no label-set version {version} (it has {have}).")
 
 
+def label_set_ref(session: Session, scene_id: int, version: int | None = None) -> LabelSetRef:
+    """Version ``version`` of the scene's label set (None: the newest) as a reader needs it."""
+    row = label_set(session, scene_id, version)
+    return LabelSetRef(scene_id, row.version, row.uri, row.source, row.source_sha256)
+
+
+def labelled_source(
+    session: Session, scene_id: int, version: int | None = None
+) -> tuple[TileSource, LabelSetRef]:
+    """The scene's tiles and its label-set ``version`` (None: the newest): what
+    ``siteline.labelsets.open_labelled`` opens."""
+    return tile_source(session, scene_id), label_set_ref(session, scene_id, version)
+
+
 def newest_versions(session: Session, scene_ids: list[int]) -> dict[int, int]:
     """Scene id -> its newest label-set version."""
     rows = session.execute(
@@ -46,27 +65,17 @@ def newest_versions(session: Session, scene_ids: list[int]) -> dict[int, int]:
     return {int(sid): int(v) for sid, v in rows}
 
 
-def add_label_set(
-    session: Session,
-    scene_id: int,
-    version: int,
-    uri: str,
-    parent_version: int,
-    source: str,
-    source_sha256: str,
-    note: str | None,
-    class_histogram: dict[str, int],
-    changed_points: int,
-    details: dict[str, Any],
-) -> LabelSet:
-    """Record an imported version (its store at ``uri`` already published)."""
+def record_label_set(session: Session, result: LabelSetImport, run: StageRun) -> LabelSet:
+    """Record an imported version whose store is already published, and the stage run. The unique
+    (scene, version) constraint refuses a version another import recorded meanwhile."""
     row = LabelSet(
-        scene_id=scene_id, version=version, uri=uri, parent_version=parent_version, source=source,
-        source_sha256=source_sha256, note=note, class_histogram=class_histogram,
-        changed_points=changed_points, details=details,
+        scene_id=result.scene_id, version=result.version, uri=result.uri, parent_version=result.parent_version,
+        source=f"import {result.file}", source_sha256=result.source_sha256, note=result.note,
+        class_histogram=result.class_histogram, changed_points=result.changed, details=result.details(),
     )  # fmt: skip
     session.add(row)
     session.flush()
+    add_completed(session, run)
     return row
 
 

@@ -4,72 +4,74 @@ the pairs the scene forms. Functions take a session and never commit: the caller
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime
-from typing import Any
 
 from sqlalchemy.orm import Session
 
-from siteline.cameras import Camera
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
-from siteline.catalog.scenes import add_cameras, ensure_pair, neighbours
+from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene
+from siteline.catalog.scenes import add_cameras, ensure_pair, lock_site, mission_by_manifest, neighbours
+from siteline.catalog.stages import add_completed
+from siteline.errors import MissionError
+from siteline.records.mission import CheckedMission
+from siteline.records.runs import StageRun
+from siteline.records.scene import SceneStatistics
 
 
 @dataclass(frozen=True)
-class FileRow:
-    """One file of a mission: POSIX path inside the folder, size in bytes, sha256, kind."""
+class IngestedIds:
+    """What an ingest added: the mission, its scene, and the pairs the scene forms with its neighbours."""
 
-    path: str
-    size_bytes: int
-    sha256: str
-    kind: str
+    mission_id: int
+    scene_id: int
+    pairs: tuple[int, ...]
 
 
-def record_mission_scene(
-    session: Session,
-    site: Site,
-    *,
-    manifest_sha256: str,
-    name: str,
-    storage: str,
-    root_uri: str,
-    files: list[FileRow],
-    capture_time: datetime,
-    point_count: int,
-    bounds: dict[str, list[float]],
-    registration: dict[str, Any],
-    statistics: dict[str, Any],
-    cameras: dict[str, Camera],
-    camera_source: str,
-    label_source: str,
-    class_histogram: dict[str, int],
-) -> tuple[Mission, Scene, list[int]]:
-    """Add the mission, its files, its registered scene (cameras, label set 1) and the pairs with the
-    scenes captured just before and after; return the mission, the scene and the pair ids."""
+def record_ingest(session: Session, site_id: int, checked: CheckedMission, run: StageRun) -> IngestedIds:
+    """Record a checked mission whose files are already stored: the mission and its files, its
+    registered scene (statistics, cameras, label set 1), the pairs with the scenes captured just
+    before and after, and the stage run. The site row is locked first (one registration per site at
+    a time: pairs are formed from the scenes around this one)."""
+    site = lock_site(session, site_id)
+    manifest = checked.manifest
+    if mission_by_manifest(session, manifest.sha256) is not None:
+        raise MissionError(f"mission {manifest.root.name} was ingested concurrently; nothing new.")
     mission = Mission(
-        site_id=site.id, manifest_sha256=manifest_sha256, name=name, status="ingested", storage=storage,
-        root_uri=root_uri,
+        site_id=site.id, manifest_sha256=manifest.sha256, name=checked.name, status="ingested",
+        storage=checked.storage, root_uri=str(manifest.root),
     )  # fmt: skip
     session.add(mission)
     session.flush()
-    for f in files:
+    for f in manifest.entries:
         session.add(
             MissionFile(
                 mission_id=mission.id, path=f.path, size_bytes=f.size_bytes, sha256=f.sha256, kind=f.kind
             )
         )
+    stats = SceneStatistics(
+        scan=checked.scan, las_file=checked.scan.path, las_sha256=checked.las_sha256,
+        stable_sample_sha256=checked.sample_sha256, photos=sum(e.kind == "photo" for e in manifest.entries),
+        cameras=len(checked.cameras), capture_time_source=checked.capture_time_source,
+    )  # fmt: skip
+    scan = checked.scan
     scene = Scene(
-        site_id=site.id, mission_id=mission.id, capture_time=capture_time, point_count=point_count,
-        bounds=bounds, registration=registration, statistics=statistics, status="registered",
+        site_id=site.id, mission_id=mission.id, capture_time=checked.capture_time, point_count=scan.point_count,
+        bounds={"min": scan.bounds_min, "max": scan.bounds_max}, registration=checked.registration,
+        statistics=stats.to_json(), status="registered",
     )  # fmt: skip
     session.add(scene)
     session.flush()
-    if cameras:
-        add_cameras(session, scene.id, cameras, camera_source)
-    session.add(LabelSet(scene_id=scene.id, version=1, source=label_source, class_histogram=class_histogram))
-    before, after = neighbours(session, site, capture_time)
+    if checked.cameras:
+        add_cameras(session, scene.id, dict(checked.cameras), checked.camera_source)
+    session.add(
+        LabelSet(
+            scene_id=scene.id, version=1, source=f"las classification ({scan.path})",
+            class_histogram=scan.class_histogram,
+        )
+    )  # fmt: skip
+    before, after = neighbours(session, site, checked.capture_time)
     pairs = []
     if before is not None:
         pairs.append(ensure_pair(session, site, before, scene).id)
     if after is not None:
         pairs.append(ensure_pair(session, site, scene, after).id)
-    return mission, scene, pairs
+    add_completed(session, run)
+    return IngestedIds(mission.id, scene.id, tuple(pairs))

@@ -14,14 +14,15 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from siteline.catalog.base import Base, Float64, UTCDateTime, utcnow
-
-MISSION_STATUSES = ("received", "ingested", "failed")
-FILE_KINDS = ("las", "photo", "colmap", "trajectory", "raw", "other")
-SCENE_STATUSES = ("registered", "tiled", "failed")
-CAMERA_SOURCES = ("colmap", "xmp", "synthetic")
-RELEASE_STATUSES = ("draft", "published")
-STAGE_STATUSES = ("running", "completed", "failed")
-SPLITS = ("train", "val", "test")
+from siteline.records.enums import (
+    CAMERA_SOURCES,
+    FILE_KINDS,
+    MISSION_STATUSES,
+    RELEASE_STATUSES,
+    SCENE_STATUSES,
+    SPLITS,
+    STAGE_STATUSES,
+)
 
 
 def _in(column: str, values: tuple[str, ...]) -> str:

@@ -3,15 +3,24 @@ Functions take a session and never commit: the caller owns the transaction."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Pair, Render, View
+from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError
+from siteline.records.pairs import PairOutput
+from siteline.records.runs import StageRun
 from siteline.stores import join
+
+
+def get_pair(session: Session, pair_id: int) -> Pair:
+    """The pair row ``pair_id``; :class:`NotFoundError` when there is none."""
+    pair = session.get(Pair, pair_id)
+    if pair is None:
+        raise NotFoundError(f"no pair with id {pair_id}.")
+    return pair
 
 
 def pair_view_ids(session: Session, pair_id: int, digest: str) -> dict[int, int]:
@@ -22,55 +31,37 @@ def pair_view_ids(session: Session, pair_id: int, digest: str) -> dict[int, int]
     return dict(rows)
 
 
-def record_pair_outputs(
-    session: Session,
-    pair_id: int,
-    digest: str,
-    params: dict[str, Any],
-    radius_m: float,
-    labels: dict[str, Any],
-    views: list[dict[str, Any]],
-    root: str,
-) -> None:
-    """The rows of one pair's outputs in the store at ``root``: the pair's radius, status and
-    parameters, a view per record of ``views`` (replacing earlier rows of the same digest) and a render
-    per view and side. ``params``: the pair parameters (``scale``, ``point_size_px`` read from it)."""
-    pair = session.get(Pair, pair_id)
-    if pair is None:
-        raise NotFoundError(f"no pair with id {pair_id}.")
-    pair.radius_m = radius_m
+def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> None:
+    """The rows of one pair's outputs, published in the store at ``output.root``: the pair's radius,
+    status and parameters, a view per rendered view (replacing earlier rows of the same digest), a
+    render per view and side, and the stage run."""
+    pair = get_pair(session, output.pair_id)
+    params, digest = output.params, output.digest
+    pair.radius_m = output.radius_m
     pair.status = "processed"
-    pair.parameters = {**(pair.parameters or {}), digest: {"params": params, "labels": labels}}
-    session.execute(sa.delete(View).where(View.pair_id == pair_id, View.param_digest == digest))
+    pair.parameters = {**(pair.parameters or {}), digest: {"params": params, "labels": output.labels}}
+    session.execute(sa.delete(View).where(View.pair_id == pair.id, View.param_digest == digest))
     cams = dict(
         session.execute(
             sa.select(CameraRow.image_name, CameraRow.id).where(CameraRow.scene_id == pair.t2_scene_id)
         ).all()
     )
-    for rec in views:
+    for rec in output.views:
         view = View(
-            pair_id=pair_id,
-            param_digest=digest,
-            index=rec["index"],
-            strategy=rec["strategy"],
-            parent_camera_id=cams.get(rec["parent"]),
-            parameters=rec["params"],
-            camera=rec["camera"],
-        )
+            pair_id=pair.id, param_digest=digest, index=rec.index, strategy=rec.strategy,
+            parent_camera_id=cams.get(rec.parent), parameters=rec.params, camera=rec.camera,
+        )  # fmt: skip
         session.add(view)
         session.flush()
-        for side, sid in (("A", pair.t1_scene_id), ("B", pair.t2_scene_id)):
+        for side, sid, coverage in (
+            ("A", pair.t1_scene_id, rec.coverage_a),
+            ("B", pair.t2_scene_id, rec.coverage_b),
+        ):
             session.add(
                 Render(
-                    view_id=view.id,
-                    scene_id=sid,
-                    scale=params["scale"],
-                    point_size_px=params["point_size_px"],
-                    coverage=rec["coverage_a" if side == "A" else "coverage_b"],
-                    change_ratio=rec["change_ratio"],
-                    paths={
-                        "image": join(root, side, rec["file"]),
-                        "label": join(root, "label", rec["file"]),
-                    },
+                    view_id=view.id, scene_id=sid, scale=params["scale"], point_size_px=params["point_size_px"],
+                    coverage=coverage, change_ratio=rec.change_ratio,
+                    paths={"image": join(output.root, side, rec.file), "label": join(output.root, "label", rec.file)},
                 )
-            )
+            )  # fmt: skip
+    add_completed(session, run)

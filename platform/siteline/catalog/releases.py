@@ -3,13 +3,19 @@ the caller owns the transaction."""
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import Pair, Release, ReleaseItem, Scene
+from siteline.catalog.pairs import pair_view_ids
+from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError
+from siteline.records.release import DraftRelease
+from siteline.records.runs import StageRun
 
 
 def find_release(session: Session, name: str, version: str) -> Release | None:
@@ -44,9 +50,68 @@ def release_item_counts(session: Session, release_id: int) -> dict[str, int]:
     return {split: int(n) for split, n in rows}
 
 
-def clear_release_items(session: Session, release_id: int) -> None:
-    """Remove a (draft) release's item rows before they are written again."""
-    session.execute(sa.delete(ReleaseItem).where(ReleaseItem.release_id == release_id))
+def release_record(session: Session, rel: Release) -> dict[str, Any]:
+    items = release_item_counts(session, rel.id)
+    return {
+        "name": rel.name,
+        "version": rel.version,
+        "status": rel.status,
+        "root": rel.root_uri,
+        "manifest_sha256": rel.manifest_sha256,
+        "created_at": rel.created_at,
+        "published_at": rel.published_at,
+        "items": dict(items),
+        "preset": (rel.parameters or {}).get("preset"),
+        "pair_params": (rel.parameters or {}).get("pair_params"),
+        "pairs": (rel.parameters or {}).get("pairs"),
+    }
+
+
+def record_draft(session: Session, draft: DraftRelease, folders: tuple[str, ...], run: StageRun) -> None:
+    """Record a draft written whole at ``draft.root``: the release row (created, or rewritten for a
+    rebuilt draft) and one item row per item (``folders``: the layout's folders, for each item's
+    files), linked to the view rows of the outputs it drew on, and the stage run."""
+    rel = find_release(session, draft.name, draft.version)
+    if rel is None:
+        rel = Release(name=draft.name, version=draft.version)
+        session.add(rel)
+    rel.status = "draft"
+    rel.parameters = draft.parameters
+    rel.root_uri = draft.root
+    rel.manifest_sha256 = draft.manifest_sha256
+    session.flush()
+    session.execute(sa.delete(ReleaseItem).where(ReleaseItem.release_id == rel.id))
+    view_ids = {pid: pair_view_ids(session, pid, digest) for pid, digest in draft.digests.items()}
+    for it in draft.items:
+        session.add(
+            ReleaseItem(
+                release_id=rel.id, item_id=it.id, pair_id=it.pair, view_id=view_ids[it.pair].get(it.view),
+                split=it.split, coverage=it.coverage, change_ratio=it.change_ratio,
+                files={sub: f"{it.split}/{sub}/{it.id}.png" for sub in folders},
+            )
+        )  # fmt: skip
+    add_completed(session, run)
+
+
+def record_published(
+    session: Session, name: str, version: str, root: Path, run: StageRun
+) -> tuple[int, str | None]:
+    """Mark release ``name`` ``version`` published at ``root`` (the draft folder already renamed there)
+    and record the stage run; return its item count and manifest sha256."""
+    rel = get_release(session, name, version)
+    rel.status = "published"
+    rel.published_at = datetime.now(UTC)
+    rel.root_uri = str(root)
+    add_completed(session, run)
+    return sum(release_item_counts(session, rel.id).values()), rel.manifest_sha256
+
+
+def release_location(session: Session, name: str, version: str) -> tuple[Path, str]:
+    """Where release ``name`` ``version`` lives and its status (draft or published)."""
+    rel = get_release(session, name, version)
+    if rel.root_uri is None:
+        raise NotFoundError(f"release {name} {version} has no folder recorded; build it again.")
+    return Path(rel.root_uri), rel.status
 
 
 def query_items(

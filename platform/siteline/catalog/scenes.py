@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime
+from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.cameras import Camera
 from siteline.catalog.models import Camera as CameraRow
-from siteline.catalog.models import Mission, MissionFile, Node, Pair, Scene, Site
-from siteline.errors import NotFoundError
+from siteline.catalog.models import LabelSet, Mission, MissionFile, Node, Pair, Scene, Site
+from siteline.catalog.stages import add_completed
+from siteline.errors import NotFoundError, TileError
+from siteline.records.mission import LasLocation
+from siteline.records.runs import StageRun
+from siteline.records.scene import SceneStatistics, SceneSummary
+from siteline.records.tiling import NodeInfo, SceneTiling, TileSource
 
 
 def mission_by_manifest(session: Session, sha256: str) -> Mission | None:
@@ -135,8 +142,14 @@ def pair_ids_of_scene(session: Session, scene_id: int) -> list[int]:
 
 def site_name_of_scene(session: Session, scene_id: int) -> str:
     """The name of the site of scene ``scene_id``; :class:`NotFoundError` when there is none."""
-    scene = get_scene(session, scene_id)
-    return session.get(Site, scene.site_id).name
+    return _site_name(session, get_scene(session, scene_id).site_id)
+
+
+def _site_name(session: Session, site_id: int) -> str:
+    site = session.get(Site, site_id)
+    if site is None:
+        raise NotFoundError(f"no site with id {site_id}.")
+    return site.name
 
 
 def site_name_of_pair(session: Session, pair_id: int) -> str:
@@ -144,7 +157,7 @@ def site_name_of_pair(session: Session, pair_id: int) -> str:
     pair = session.get(Pair, pair_id)
     if pair is None:
         raise NotFoundError(f"no pair with id {pair_id}.")
-    return session.get(Site, pair.site_id).name
+    return _site_name(session, pair.site_id)
 
 
 def node_summary(session: Session, scene_id: int) -> dict[str, int]:
@@ -155,6 +168,52 @@ def node_summary(session: Session, scene_id: int) -> dict[str, int]:
         ).where(Node.scene_id == scene_id)
     ).one()
     return {"nodes": int(nodes), "tiles": int(tiles), "levels": int(top) + 1 if top is not None else 0}
+
+
+def mission_of_scene(session: Session, scene_id: int) -> Mission:
+    """The mission scene ``scene_id`` was made from."""
+    mission = session.get(Mission, get_scene(session, scene_id).mission_id)
+    if mission is None:
+        raise NotFoundError(f"scene {scene_id} has no mission.")
+    return mission
+
+
+def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
+    """Scene ``scene_id`` as plain values: statistics, registration, tiles, label sets (for the CLI)."""
+    scene = get_scene(s, scene_id)
+    nodes = node_summary(s, scene.id)
+    stats = scene_statistics(scene)
+    scan = stats.scan
+    return {
+        "id": scene.id,
+        "site_id": scene.site_id,
+        "mission_id": scene.mission_id,
+        "capture_time": scene.capture_time,
+        "status": scene.status,
+        "point_count": scene.point_count,
+        "bounds_m": scene.bounds,
+        "class_histogram": scan.class_histogram if scan else None,
+        "unknown_codes": {str(k): v for k, v in scan.unknown_codes.items()} if scan else None,
+        "density_pts_m2": scan.density_pts_m2 if scan else None,
+        "source_crs": scan.source_crs if scan else None,
+        "transformed": scan.transformed if scan else None,
+        "z_unit": scan.z_unit if scan else None,
+        "colour": scan.colour if scan else None,
+        "capture_time_source": stats.capture_time_source,
+        "registration": scene.registration,
+        "cameras": len(scene_cameras(s, scene.id)),
+        "tile_store": scene.tile_store_uri,
+        "tiles": nodes["tiles"],
+        "nodes": nodes["nodes"],
+        "levels": nodes["levels"],
+        "bytes_per_point": stats.tiling.bytes_per_point if stats.tiling else None,
+        "label_sets": [
+            v
+            for (v,) in s.execute(
+                sa.select(LabelSet.version).where(LabelSet.scene_id == scene.id).order_by(LabelSet.version)
+            )
+        ],
+    }
 
 
 def scene_of_mission(session: Session, mission_id: int) -> Scene | None:
@@ -181,39 +240,91 @@ def mission_file(session: Session, mission_id: int, path: str | None) -> Mission
     ).scalar_one_or_none()
 
 
-def node_rows(session: Session, scene_id: int) -> list:
-    """The node rows of scene ``scene_id`` by tile and level."""
-    return list(
-        session.execute(
-            sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.start)
-        ).scalars()
+def scene_nodes(session: Session, scene_id: int) -> tuple[NodeInfo, ...]:
+    """The node index of scene ``scene_id``, by tile and start."""
+    rows = session.execute(
+        sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.start)
+    ).scalars()
+    return tuple(
+        NodeInfo(
+            r.key,
+            r.tile,
+            r.level,
+            (r.min_x, r.min_y, r.min_z),
+            (r.max_x, r.max_y, r.max_z),
+            r.point_count,
+            r.start,
+            r.spacing_m,
+            None if r.cell_x is None else (r.cell_x, r.cell_y, r.cell_z),  # type: ignore[arg-type]
+        )
+        for r in rows
     )
 
 
-def clear_nodes(session: Session, scene_id: int) -> None:
-    """Remove scene ``scene_id``'s node rows (before a re-tile writes them again)."""
+def replace_nodes(session: Session, scene_id: int, nodes: Sequence[NodeInfo]) -> None:
+    """Replace scene ``scene_id``'s node rows (one bulk insert)."""
     session.execute(sa.delete(Node).where(Node.scene_id == scene_id))
-
-
-def replace_nodes(session: Session, scene_id: int, nodes: list[dict]) -> None:
-    """Replace scene ``scene_id``'s node rows (one bulk insert). Each node: key, tile, level,
-    bounds_min and bounds_max ((3,) site-local metres), count (points), start (offset in the tile's
-    arrays), spacing_m, and cell (the octree cube (x, y, z), or None)."""
-    clear_nodes(session, scene_id)
     rows = []
     for n in nodes:
-        (x0, y0, z0), (x1, y1, z1) = n["bounds_min"], n["bounds_max"]
-        cell = n.get("cell") or (None, None, None)
+        (x0, y0, z0), (x1, y1, z1) = n.bounds_min, n.bounds_max
+        cx, cy, cz = n.cell if n.cell is not None else (None, None, None)
         rows.append(
             {
-                "scene_id": scene_id, "key": n["key"], "tile": n["tile"], "level": n["level"],
+                "scene_id": scene_id, "key": n.key, "tile": n.tile, "level": n.level,
                 "min_x": x0, "min_y": y0, "min_z": z0, "max_x": x1, "max_y": y1, "max_z": z1,
-                "point_count": n["count"], "start": n["start"], "spacing_m": n["spacing_m"],
-                "cell_x": cell[0], "cell_y": cell[1], "cell_z": cell[2],
+                "point_count": n.count, "start": n.start, "spacing_m": n.spacing_m,
+                "cell_x": cx, "cell_y": cy, "cell_z": cz,
             }
         )  # fmt: skip
     if rows:
         session.execute(sa.insert(Node), rows)
+
+
+def scene_statistics(scene: Scene) -> SceneStatistics:
+    """What ingest and tiling recorded about ``scene`` (the one reader of ``scene.statistics``)."""
+    return SceneStatistics.from_json(scene.statistics)
+
+
+def scene_summaries(session: Session, site: Site) -> tuple[SceneSummary, ...]:
+    """The site's scenes in capture order, as records."""
+    return tuple(
+        SceneSummary(sc.id, sc.capture_time, sc.status, scene_statistics(sc))
+        for sc in list_scenes(session, site)
+    )
+
+
+def tile_source(session: Session, scene_id: int) -> TileSource:
+    """What a reader needs to open scene ``scene_id``'s tiles; :class:`TileError` naming the command
+    when the scene is not tiled."""
+    scene = get_scene(session, scene_id)
+    tiling = scene_statistics(scene).tiling
+    if scene.status != "tiled" or not scene.tile_store_uri or tiling is None:
+        raise TileError(f"scene {scene_id} is not tiled yet: run `siteline scene tile {scene_id}`.")
+    return TileSource(scene.tile_store_uri, tiling.spec, scene_nodes(session, scene_id), tiling.checksum)
+
+
+def las_location(session: Session, scene_id: int) -> LasLocation:
+    """Where scene ``scene_id``'s point cloud is kept; :class:`TileError` when its mission records none."""
+    scene = get_scene(session, scene_id)
+    stats = scene_statistics(scene)
+    mission = session.get(Mission, scene.mission_id)
+    row = mission_file(session, scene.mission_id, stats.las_file)
+    if mission is None or row is None:
+        raise TileError(f"scene {scene_id}: its mission records no point cloud file.")
+    return LasLocation(mission.storage, mission.root_uri, row.path, row.sha256)  # type: ignore[arg-type]
+
+
+def record_tiling(
+    session: Session, scene_id: int, tiling: SceneTiling, nodes: Sequence[NodeInfo], run: StageRun
+) -> None:
+    """Record a tile store that is published whole: its node rows, its address, the scene's status
+    and tiling statistics, and the stage run."""
+    scene = get_scene(session, scene_id)
+    replace_nodes(session, scene_id, nodes)
+    scene.tile_store_uri = tiling.uri
+    scene.status = "tiled"
+    scene.statistics = scene_statistics(scene).with_tiling(tiling).to_json()
+    add_completed(session, run)
 
 
 def scene_ids_of_pairs(session: Session, pair_ids: list[int]) -> list[int]:

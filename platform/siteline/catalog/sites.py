@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import Scene, Site
 from siteline.errors import SiteError, SiteNotFoundError
+from siteline.fence import fence_area_m2
 from siteline.site import SiteSpec
 from siteline.taxonomy import Taxonomy
 
@@ -57,6 +60,31 @@ def site_spec(site: Site) -> SiteSpec:
         taxonomy=Taxonomy.from_dict(site.taxonomy, source=f"site {site.name} taxonomy"),
         tile_size_m=site.tile_size_m,
     )
+
+
+def site_of(session: Session, site_id: int) -> SiteSpec:
+    """The spec of the site with id ``site_id``."""
+    site = session.get(Site, site_id)
+    if site is None:
+        raise SiteNotFoundError(f"no site with id {site_id}.")
+    return site_spec(site)
+
+
+def site_record(site: Site, scenes: int) -> dict[str, Any]:
+    """A site row as plain values (for the CLI): CRS, origin, fence and its area, classes, scenes."""
+    spec = site_spec(site)
+    return {
+        "name": site.name,
+        "crs": site.crs,
+        "origin": list(site.origin),
+        "fence_m": [list(v) for v in spec.fence] if spec.fence else None,
+        "fence_area_m2": fence_area_m2(spec.fence) if spec.fence else None,
+        "taxonomy": spec.taxonomy.name,
+        "classes": {c.name: c.id for c in spec.taxonomy.classes},
+        "tile_size_m": site.tile_size_m,
+        "scenes": scenes,
+        "created_at": site.created_at,
+    }
 
 
 def scene_count(session: Session, site: Site) -> int:

@@ -18,43 +18,36 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from siteline.catalog.models import StageRun
+from siteline.catalog.models import StageRun as StageRunRow
+from siteline.records.runs import StageRun
 
 
-def completed(
-    stage: str, subject: str, parameters: dict[str, Any], started: datetime, run_id: str | None
-) -> StageRun:
-    """A ``completed`` row to add in the caller's transaction."""
-    return StageRun(
-        stage=stage,
-        subject=subject,
-        status="completed",
-        parameters=parameters,
-        started_at=started,
-        finished_at=datetime.now(UTC),
-        orchestrator_run_id=run_id,
+def add_completed(session: Session, run: StageRun) -> None:
+    """Add a ``completed`` row for ``run`` to the caller's transaction (the one committing its outputs)."""
+    session.add(
+        StageRunRow(
+            stage=run.stage,
+            subject=run.subject,
+            status="completed",
+            parameters=run.parameters,
+            started_at=run.started,
+            finished_at=datetime.now(UTC),
+            orchestrator_run_id=run.run_id,
+        )
     )
 
 
-def record_failure(
-    session: Session,
-    stage: str,
-    subject: str,
-    parameters: dict[str, Any],
-    error: BaseException,
-    run_id: str | None = None,
-    started: datetime | None = None,
-) -> int:
-    """Record a failed stage run; returns its id."""
-    row = StageRun(
-        stage=stage,
-        subject=subject,
+def record_failure(session: Session, run: StageRun, error: BaseException) -> int:
+    """Record a failed run of a stage; returns its id."""
+    row = StageRunRow(
+        stage=run.stage,
+        subject=run.subject,
         status="failed",
-        parameters=parameters,
-        started_at=started or datetime.now(UTC),
+        parameters=run.parameters,
+        started_at=run.started,
         finished_at=datetime.now(UTC),
         error_text=f"{type(error).__name__}: {error}"[:4000],
-        orchestrator_run_id=run_id,
+        orchestrator_run_id=run.run_id,
     )
     session.add(row)
     session.flush()
@@ -65,11 +58,11 @@ def stage_runs(
     session: Session, subject: str | None = None, stage: str | None = None
 ) -> list[dict[str, Any]]:
     """Stage runs (optionally of one subject or stage), oldest first, as dicts."""
-    q = sa.select(StageRun).order_by(StageRun.started_at, StageRun.id)
+    q = sa.select(StageRunRow).order_by(StageRunRow.started_at, StageRunRow.id)
     if subject:
-        q = q.where(StageRun.subject == subject)
+        q = q.where(StageRunRow.subject == subject)
     if stage:
-        q = q.where(StageRun.stage == stage)
+        q = q.where(StageRunRow.stage == stage)
     return [
         {
             "id": r.id,

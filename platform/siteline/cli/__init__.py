@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import typer
 
@@ -59,13 +60,31 @@ def _print_version(value: bool) -> None:
         raise typer.Exit()
 
 
+def show_logs(verbosity: int) -> None:
+    """Show the library's log lines (``logging`` under ``siteline``) on stderr: -v what each stage read,
+    decided and wrote (INFO), -vv more (DEBUG)."""
+    if verbosity <= 0:
+        return
+    import logging
+
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S"))
+    logger = logging.getLogger("siteline")
+    logger.handlers = [handler]
+    logger.setLevel(logging.INFO if verbosity == 1 else logging.DEBUG)
+
+
 @app.callback()
 def _root(
     version: bool = typer.Option(
         False, "--version", help="Print the version and exit.", callback=_print_version, is_eager=True
     ),
+    verbose: int = typer.Option(
+        0, "--verbose", "-v", count=True, help="Show what each stage reads, decides and writes (-vv: more)."
+    ),
 ) -> None:
     """Drone surveys of construction sites turned into change-detection datasets."""
+    show_logs(verbose)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -87,8 +106,9 @@ def main(argv: list[str] | None = None) -> int:
         err_console.print("aborted")
         return 1
     except _CLICK_ERRORS as exc:  # usage errors: unknown option or command, bad value (status 2)
-        exc.show()
-        return exc.exit_code
+        usage: Any = exc
+        usage.show()
+        return int(usage.exit_code)
     return rc if isinstance(rc, int) else 0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 
 import typer
 
@@ -11,7 +12,7 @@ from siteline.cli.common import console
 app = typer.Typer(help="Measurements.", no_args_is_help=True)
 
 
-def _bench_trade():  # noqa: ANN202
+def _bench_trade() -> ModuleType:
     """``bench/trade.py`` of the source checkout: a benchmark, not part of the installed library."""
     import importlib.util
     from pathlib import Path
@@ -24,6 +25,10 @@ def _bench_trade():  # noqa: ANN202
             f"siteline bench trade runs bench/trade.py from a source checkout of siteline; {path} is missing."
         )
     spec = importlib.util.spec_from_file_location("siteline_bench_trade", path)
+    if spec is None or spec.loader is None:
+        from siteline.errors import ConfigError
+
+        raise ConfigError(f"{path} cannot be loaded as a Python module.")
     module = importlib.util.module_from_spec(spec)
     import sys
 

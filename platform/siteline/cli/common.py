@@ -16,6 +16,7 @@ from rich.table import Table
 
 from siteline.catalog import Catalog, open_catalog
 from siteline.config import Settings, load_settings
+from siteline.progress import Progress
 
 console = Console()
 err_console = Console(stderr=True)
@@ -81,7 +82,7 @@ def emit(as_json: bool, data: Any, human: Callable[[], None]) -> None:
         human()
 
 
-def bar_progress(bar: Any):  # noqa: ANN201
+def bar_progress(bar: Any) -> Progress:
     """A :class:`siteline.progress.Progress` drawing one rich bar per task on ``bar``."""
     tasks: dict[str, int] = {}
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sqlalchemy as sa
 import typer
 
 from siteline.catalog import migrate
@@ -11,7 +12,7 @@ from siteline.cli.common import JsonOption, console, emit, print_record, setting
 app = typer.Typer(help="Migrate the catalog database (Alembic).", no_args_is_help=True)
 
 
-def _engine():
+def _engine() -> sa.Engine:
     engine = make_engine(settings().database_url)
     ping(engine)
     return engine
@@ -63,7 +64,7 @@ def current(as_json: bool = JsonOption) -> None:
     """Show the catalog's revision and this siteline's newest."""
     engine = _engine()
     try:
-        record = {
+        record: dict[str, object] = {
             "url": engine.url.render_as_string(hide_password=True),
             "current": migrate.current_revision(engine),
             "head": migrate.head_revision(),

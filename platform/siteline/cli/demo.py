@@ -9,20 +9,64 @@ from pathlib import Path
 
 import typer
 
-from siteline.catalog import migrate, open_catalog
+from siteline.catalog import Catalog, migrate, open_catalog
 from siteline.catalog.engine import make_engine
-from siteline.catalog.sites import add_site, get_site, scene_count
+from siteline.catalog.releases import get_release, list_releases
+from siteline.catalog.sites import add_site, get_site, scene_count, site_record
 from siteline.cli.common import console, print_record, print_table, settings
-from siteline.cli.site import site_record
+from siteline.config import Settings
 from siteline.errors import SiteNotFoundError
 from siteline.fence import load_fence_geojson
-from siteline.release.query import get_release
 from siteline.site import make_site_spec
 
 DEMO_SITE = "demo"
 DEMO_RELEASE = "demo-cd"
 # the synthetic photos are 660 x 495 (1/8 of the L2 sensor): renders at half of that, 3 px points
 DEMO_PARAMS = {"scale": 0.5, "point_size_px": 3, "views": 24, "seed": 0, "min_coverage": 0.5}
+
+
+def _site(
+    cat: Catalog, site_name: str, synth_dir: Path, origin: tuple[float, float, float], crs: str
+) -> None:
+    with cat.transaction() as s:
+        try:
+            site = get_site(s, site_name)
+            console.print(f"site {site_name} exists: reusing it")
+        except SiteNotFoundError:
+            ring = load_fence_geojson(synth_dir / "fence.geojson", origin)
+            site = add_site(s, make_site_spec(site_name, crs, origin, [*ring, ring[0]]))
+        record = site_record(site, scene_count(s, site))
+    keep = ("name", "crs", "origin", "fence_area_m2", "taxonomy")
+    print_record(f"site {site_name}", {k: record[k] for k in keep})
+
+
+def _release(cat: Catalog, cfg: Settings, site_name: str) -> tuple[Path, str]:
+    """The demo release: the published one when there is one, else built and published now."""
+    from siteline import pipeline
+    from siteline.pairs import PairParams
+
+    with cat.transaction() as s:
+        published = [r for r in list_releases(s, DEMO_RELEASE) if r.status == "published"]
+        if published:
+            console.print(f"release {DEMO_RELEASE} {published[-1].version} already published: reusing it")
+            return Path(str(published[-1].root_uri)), published[-1].version
+    pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, PairParams.from_dict(DEMO_PARAMS), publish=True)
+    return Path(pub.root), pub.version
+
+
+def _baseline(cfg: Settings, root: Path, version: str, stats: dict, train_iters: int) -> None:
+    from siteline.baseline import evaluate, train
+
+    out = cfg.home / "baseline" / f"{DEMO_RELEASE}-{version}"
+    log = train(root, out, max_iters=train_iters, crop=128)
+    split = "test" if stats["class_balance"].get("test") else "train"
+    result = evaluate(root, out / "model.pt", out / f"results-{split}.json", split)
+    console.print(
+        f"trained {log['iterations']} iterations (loss {log['losses'][0]:.3f} -> {log['losses'][-1]:.3f}); "
+        f"{split} mIoU {result['scores']['miou']:.3f}, F1 changed {result['scores']['f1']:.3f} "
+        f"-> {out / f'results-{split}.json'}",
+        markup=False,
+    )
 
 
 def demo(
@@ -32,7 +76,6 @@ def demo(
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""
     from siteline import pipeline
-    from siteline.pairs import PairParams
     from siteline.synth import SynthConfig, write_site
 
     t_start = time.perf_counter()
@@ -42,52 +85,26 @@ def demo(
     migrate.upgrade(engine)
     engine.dispose()
     console.rule("1. catalog")
-    console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}")
+    console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}", markup=False)
     console.rule("2. synthetic site")
-    synth_dir = cfg.home / "synthetic-site"
-    synth = SynthConfig(epochs=epochs)
+    synth_dir, synth = cfg.home / "synthetic-site", SynthConfig(epochs=epochs)
     if not (synth_dir / "truth" / "site.json").exists():
-        write_site(synth_dir, synth, progress=lambda name: console.print(f"  generated epoch {name}"))
-    missions = [
-        synth_dir / e["mission_dir"]
-        for e in json.loads((synth_dir / "truth" / "site.json").read_text())["epochs"]
-    ]
+        write_site(
+            synth_dir, synth, progress=lambda name: console.print(f"  generated epoch {name}", markup=False)
+        )
+    epochs_doc = json.loads((synth_dir / "truth" / "site.json").read_text())["epochs"]
     cat = open_catalog(cfg)
     try:
-        with cat.transaction() as s:
-            try:
-                site = get_site(s, site_name)
-                console.print(f"site {site_name} exists: reusing it")
-            except SiteNotFoundError:
-                ring = load_fence_geojson(synth_dir / "fence.geojson", synth.origin)
-                site = add_site(s, make_site_spec(site_name, synth.crs, synth.origin, [*ring, ring[0]]))
-            record = site_record(site, scene_count(s, site))
-        print_record(
-            f"site {site_name}",
-            {k: record[k] for k in ("name", "crs", "origin", "fence_area_m2", "taxonomy")},
-        )
+        _site(cat, site_name, synth_dir, synth.origin, synth.crs)
         console.rule("3. ingest and tile")
-        for m in missions:
-            r, _ = pipeline.ingest(cat, cfg, m, site_name)
-            console.print(f"  {r.message}")
+        for e in epochs_doc:
+            done = pipeline.ingest(cat, cfg, synth_dir / e["mission_dir"], site_name)
+            console.print(f"  {done.ingest.message}", markup=False)
         console.rule("4. release")
-        with cat.transaction() as s:
-            existing = [
-                r
-                for r in __import__("siteline.release.query", fromlist=["list_releases"]).list_releases(
-                    s, DEMO_RELEASE
-                )
-                if r.status == "published"
-            ]
-        if existing:
-            info_root, version = Path(existing[-1].root_uri), existing[-1].version
-            console.print(f"release {DEMO_RELEASE} {version} already published: reusing it")
-        else:
-            pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, PairParams(**DEMO_PARAMS), publish=True)
-            info_root, version = Path(pub.root), pub.version
-        stats = json.loads((info_root / "stats.json").read_text())
+        root, version = _release(cat, cfg, site_name)
+        stats = json.loads((root / "stats.json").read_text())
         print_table(
-            f"release {DEMO_RELEASE} {version} at {info_root}",
+            f"release {DEMO_RELEASE} {version} at {root}",
             ["split", "images", "changed", "unchanged", "ignore"],
             [
                 [k, v["images"], v["changed"], v["unchanged"], v["ignore"]]
@@ -96,19 +113,9 @@ def demo(
         )
         with cat.transaction() as s:
             manifest_sha = get_release(s, DEMO_RELEASE, version).manifest_sha256
-        console.print(f"manifest sha256 {manifest_sha}; datasheet {info_root / 'README.md'}")
+        console.print(f"manifest sha256 {manifest_sha}; datasheet {root / 'README.md'}", markup=False)
     finally:
         cat.dispose()
     console.rule("5. baseline (FC-Siam-diff, a short run)")
-    from siteline.baseline import evaluate, train
-
-    out = cfg.home / "baseline" / f"{DEMO_RELEASE}-{version}"
-    log = train(info_root, out, max_iters=train_iters, crop=128)
-    split = "test" if stats["class_balance"].get("test") else "train"
-    result = evaluate(info_root, out / "model.pt", out / f"results-{split}.json", split)
-    console.print(
-        f"trained {log['iterations']} iterations (loss {log['losses'][0]:.3f} -> {log['losses'][-1]:.3f}); "
-        f"{split} mIoU {result['scores']['miou']:.3f}, F1 changed {result['scores']['f1']:.3f} "
-        f"-> {out / f'results-{split}.json'}"
-    )
+    _baseline(cfg, root, version, stats, train_iters)
     console.rule(f"done in {time.perf_counter() - t_start:.0f} s")

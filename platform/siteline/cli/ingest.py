@@ -3,19 +3,17 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
 from siteline import pipeline
-from siteline.catalog.labelsets import label_sets
 from siteline.catalog.scenes import (
-    get_scene,
     list_missions,
     list_pairs,
     list_scenes,
-    node_summary,
-    scene_cameras,
+    scene_record,
 )
 from siteline.catalog.sites import get_site
 from siteline.cli.common import (
@@ -28,7 +26,7 @@ from siteline.cli.common import (
     print_table,
     settings,
 )
-from siteline.ingest.mission import IngestOptions
+from siteline.ingest import IngestOptions
 from siteline.photos import read_photo_meta
 from siteline.tiles import tile_scene
 
@@ -85,11 +83,11 @@ def ingest(
         TimeRemainingColumn(),
     ]
     with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
-        result, tiled = pipeline.ingest(
-            cat, cfg, mission_dir, site, opts, workers=workers, progress=bar_progress(bar)
-        )
+        done = pipeline.ingest(cat, cfg, mission_dir, site, opts, workers=workers, progress=bar_progress(bar))
+    result = done.ingest
+    tiling = done.tiles.tiling if done.tiles is not None else None
     record = result.to_dict()
-    record["tiles"] = tiled.summary() if tiled is not None else None
+    record["tiles"] = tiling.to_dict() if tiling is not None else None
     emit(
         as_json,
         record,
@@ -109,7 +107,7 @@ def mission_list(
     """List ingested missions."""
     with catalog() as cat, cat.transaction() as s:
         rows = list_missions(s, get_site(s, site) if site else None)
-        records = [
+        records: list[dict[str, Any]] = [
             {
                 "id": m.id,
                 "site_id": m.site_id,
@@ -136,36 +134,6 @@ def mission_list(
     )
 
 
-def scene_record(s, scene) -> dict:  # noqa: ANN001
-    nodes = node_summary(s, scene.id)
-    stats = scene.statistics or {}
-    tiles = stats.get("tiles", {})
-    return {
-        "id": scene.id,
-        "site_id": scene.site_id,
-        "mission_id": scene.mission_id,
-        "capture_time": scene.capture_time,
-        "status": scene.status,
-        "point_count": scene.point_count,
-        "bounds_m": scene.bounds,
-        "class_histogram": stats.get("class_histogram"),
-        "unknown_codes": stats.get("unknown_codes"),
-        "density_pts_m2": stats.get("density_pts_m2"),
-        "source_crs": stats.get("source_crs"),
-        "transformed": stats.get("transformed"),
-        "z_unit": stats.get("z_unit"),
-        "colour": stats.get("colour"),
-        "registration": scene.registration,
-        "cameras": len(scene_cameras(s, scene.id)),
-        "tile_store": scene.tile_store_uri,
-        "tiles": nodes["tiles"],
-        "nodes": nodes["nodes"],
-        "levels": nodes["levels"],
-        "bytes_per_point": tiles.get("bytes_per_point"),
-        "label_sets": [r.version for r in label_sets(s, scene.id)],
-    }
-
-
 @scene_app.command("list")
 def scene_list(
     site: str = typer.Option(..., "--site", help="Site name."), as_json: bool = JsonOption
@@ -173,7 +141,7 @@ def scene_list(
     """List the scenes of a site in capture order, and its pairs."""
     with catalog() as cat, cat.transaction() as s:
         st = get_site(s, site)
-        records = [
+        records: list[dict[str, Any]] = [
             {
                 "id": sc.id,
                 "capture_time": sc.capture_time,
@@ -186,35 +154,26 @@ def scene_list(
             for sc in list_scenes(s, st)
         ]
         pairs = [{"id": p.id, "t1": p.t1_scene_id, "t2": p.t2_scene_id} for p in list_pairs(s, st)]
-    emit(
-        as_json,
-        {"site": site, "scenes": records, "pairs": pairs},
-        lambda: (
-            print_table(
-                f"scenes of {site}",
-                ["id", "captured", "points", "status", "cameras from", "ICP shift m"],
-                [
-                    [
-                        r["id"],
-                        r["capture_time"],
-                        f"{r['points']:,}",
-                        r["status"],
-                        r["registration"],
-                        "" if r["alignment_m"] is None else f"{r['alignment_m']:.3f}",
-                    ]
-                    for r in records
-                ],
-            ),
-            print_table("pairs", ["id", "t1", "t2"], [[p["id"], p["t1"], p["t2"]] for p in pairs]),
-        ),
-    )
+
+    def human() -> None:
+        rows = [
+            [r["id"], r["capture_time"], f"{r['points']:,}", r["status"], r["registration"],
+             "" if r["alignment_m"] is None else f"{r['alignment_m']:.3f}"]
+            for r in records
+        ]  # fmt: skip
+        print_table(
+            f"scenes of {site}", ["id", "captured", "points", "status", "cameras from", "ICP shift m"], rows
+        )
+        print_table("pairs", ["id", "t1", "t2"], [[p["id"], p["t1"], p["t2"]] for p in pairs])
+
+    emit(as_json, {"site": site, "scenes": records, "pairs": pairs}, human)
 
 
 @scene_app.command("show")
 def scene_show(scene_id: int = typer.Argument(..., help="Scene id."), as_json: bool = JsonOption) -> None:
     """Show one scene: statistics, registration, tiles."""
     with catalog() as cat, cat.transaction() as s:
-        record = scene_record(s, get_scene(s, scene_id))
+        record = scene_record(s, scene_id)
     emit(as_json, record, lambda: print_record(f"scene {scene_id}", record))
 
 
@@ -244,13 +203,11 @@ def scene_tile(
     """Tile a registered scene into its Zarr store (a scene already tiled is left alone unless --retile)."""
     cfg = settings()
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
-        result, message = tile_scene(
-            cat, cfg, scene_id, workers=workers, progress=bar_progress(bar), retile=retile
-        )
+        done = tile_scene(cat, cfg, scene_id, workers=workers, progress=bar_progress(bar), retile=retile)
     emit(
         as_json,
-        {"message": message, "tiles": result.summary() if result else None},
-        lambda: console.print(message),
+        {"message": done.message, "tiles": done.tiling.to_dict() if done.tiling else None},
+        lambda: console.print(done.message, markup=False),
     )
 
 

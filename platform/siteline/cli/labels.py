@@ -159,21 +159,21 @@ def diff_cmd(
     as_json: bool = JsonOption,
 ) -> None:
     """Points whose class differs between two versions, per (old class -> new class)."""
-    from siteline.catalog.labelsets import label_set
-    from siteline.catalog.models import Site
+    from siteline.catalog.labelsets import label_set, labelled_source
     from siteline.catalog.scenes import get_scene
-    from siteline.catalog.sites import site_spec
-    from siteline.labelsets import open_labelled_tiles
+    from siteline.catalog.sites import site_of
+    from siteline.labelsets import open_labelled
     from siteline.labelsets.compare import diff_tiles
 
     with catalog() as cat, cat.transaction() as s:
-        scene = get_scene(s, scene_id)
+        taxonomy = site_of(s, get_scene(s, scene_id).site_id).taxonomy
         newer = label_set(s, scene_id, v2)
         older = label_set(s, scene_id, v1 if v1 is not None else (newer.parent_version or newer.version))
-        a, va = open_labelled_tiles(s, scene, older.version)
-        b, vb = open_labelled_tiles(s, scene, newer.version)
-        taxonomy = site_spec(s.get(Site, scene.site_id)).taxonomy
-    record = {"scene": scene_id, "from": va, "to": vb} | diff_tiles(a, b, taxonomy)
+        (source, ref_a), (_, ref_b) = (labelled_source(s, scene_id, r.version) for r in (older, newer))
+    va, vb = ref_a.version, ref_b.version
+    record = {"scene": scene_id, "from": va, "to": vb} | diff_tiles(
+        open_labelled(source, ref_a), open_labelled(source, ref_b), taxonomy
+    )
 
     def human() -> None:
         console.print(

@@ -4,10 +4,18 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
+from typing import cast
 
 import typer
 from rich.progress import Progress
 
+from siteline.catalog.releases import (
+    get_release,
+    list_releases,
+    query_items,
+    release_location,
+    release_record,
+)
 from siteline.cli.common import (
     JsonOption,
     bar_progress,
@@ -19,8 +27,9 @@ from siteline.cli.common import (
     settings,
 )
 from siteline.errors import ReleaseError
+from siteline.records.enums import HoleRule
 from siteline.release.manifest import verify_files
-from siteline.release.query import diff_releases, get_release, list_releases, query_items, release_record
+from siteline.release.query import diff_releases
 
 app = typer.Typer(help="Versioned, immutable dataset releases.", no_args_is_help=True)
 
@@ -110,7 +119,7 @@ def build(
         seed=seed,
         min_coverage=min_coverage,
         min_valid=min_valid,
-        one_side_hole=one_side_hole,
+        one_side_hole=cast(HoleRule, one_side_hole),  # PairParams refuses any other value
         all_points=all_points,
     )
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
@@ -128,7 +137,7 @@ def build(
             pad=pad,
             label_sets=parse_label_sets(label_set or []),
         )
-    record = info.__dict__
+    record = info.to_dict()
     emit(
         as_json,
         record,
@@ -141,8 +150,6 @@ def build(
 
 def parse_label_sets(values: list[str]) -> dict[int, int] | None:
     """``SCENE=VERSION`` strings -> {scene id: version}; ReleaseError on a malformed one."""
-    from siteline.errors import ReleaseError
-
     out: dict[int, int] = {}
     for text in values:
         scene, _, version = text.partition("=")
@@ -158,11 +165,11 @@ def publish(
     name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
 ) -> None:
     """Publish a draft: verify its checksums, move it into place read-only. Never rewrites a version."""
-    from siteline.release.build import publish_release
+    from siteline.release.stage import publish_release
 
     with catalog() as cat:
         info = publish_release(cat, settings(), name, version)
-    emit(as_json, info.__dict__, lambda: console.print(f"published {name} {version} at {info.root}"))
+    emit(as_json, info.to_dict(), lambda: console.print(f"published {name} {version} at {info.root}"))
 
 
 @app.command("list")
@@ -209,10 +216,8 @@ def verify(
     name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
 ) -> None:
     """Recompute every checksum of a release; name each file that differs (exit status 1 if any)."""
-    from siteline.release.build import release_root
-
-    with catalog() as cat:
-        root, status = release_root(cat, name, version)
+    with catalog() as cat, cat.transaction() as s:
+        root, status = release_location(s, name, version)
     problems = verify_files(root)
     emit(
         as_json,
@@ -239,11 +244,10 @@ def export(
     as_json: bool = JsonOption,
 ) -> None:
     """Lay a release out as one toolbox's stock loader expects; print the setting that honours ignore."""
-    from siteline.release.build import release_root
     from siteline.release.export import export_release
 
-    with catalog() as cat:
-        root, _ = release_root(cat, name, version)
+    with catalog() as cat, cat.transaction() as s:
+        root, _ = release_location(s, name, version)
     result = export_release(root, profile, out, copy=copy)
     emit(
         as_json,
@@ -274,11 +278,10 @@ def score(
     """Score predictions against the ignore-aware truth: one confusion matrix over the split."""
     import json
 
-    from siteline.release.build import release_root
     from siteline.release.score import score_predictions
 
-    with catalog() as cat:
-        root, _ = release_root(cat, name, version)
+    with catalog() as cat, cat.transaction() as s:
+        root, _ = release_location(s, name, version)
     result = score_predictions(root, split, pred)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -340,10 +343,9 @@ def train_cmd(
 ) -> None:
     """Train FC-Siam-diff on a release (SGD 1e-3, momentum 0.9, wd 1e-4, poly 0.9, batch 4)."""
     from siteline.baseline import train
-    from siteline.release.build import release_root
 
-    with catalog() as cat:
-        root, _ = release_root(cat, name, version)
+    with catalog() as cat, cat.transaction() as s:
+        root, _ = release_location(s, name, version)
     with Progress(console=console, transient=True, disable=as_json) as bar:
         task = bar.add_task("training", total=None)
         log = train(
@@ -376,10 +378,9 @@ def evaluate_cmd(
 ) -> None:
     """Evaluate a checkpoint on a split: one confusion matrix, IoU/mIoU/F1/OA/kappa, results JSON."""
     from siteline.baseline import evaluate
-    from siteline.release.build import release_root
 
-    with catalog() as cat:
-        root, _ = release_root(cat, name, version)
+    with catalog() as cat, cat.transaction() as s:
+        root, _ = release_location(s, name, version)
     result = evaluate(root, checkpoint, out, split, device)
     emit(
         as_json,

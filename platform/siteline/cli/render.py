@@ -83,7 +83,7 @@ def render(
     paths = write_render(
         result, out, {"input": str(input), "settings": settings.to_dict(), "origin": list(origin)}
     )
-    record = {
+    record: dict[str, object] = {
         k: result.stats[k]
         for k in ("points_read", "points_in_frustum", "coverage", "seconds", "width", "height")
     }

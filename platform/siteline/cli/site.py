@@ -6,29 +6,13 @@ from pathlib import Path
 
 import typer
 
-from siteline.catalog.sites import add_site, get_site, list_sites, scene_count, site_spec
+from siteline.catalog.sites import add_site, get_site, list_sites, scene_count, site_record
 from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table
-from siteline.fence import fence_area_m2, load_fence_geojson
+from siteline.fence import load_fence_geojson
 from siteline.site import DEFAULT_TILE_SIZE_M, make_site_spec
 from siteline.taxonomy import load_taxonomy
 
 app = typer.Typer(help="Construction sites: CRS, origin, fence, taxonomy.", no_args_is_help=True)
-
-
-def site_record(site, scenes: int) -> dict:
-    spec = site_spec(site)
-    return {
-        "name": site.name,
-        "crs": site.crs,
-        "origin": list(site.origin),
-        "fence_m": [list(v) for v in spec.fence] if spec.fence else None,
-        "fence_area_m2": fence_area_m2(spec.fence) if spec.fence else None,
-        "taxonomy": spec.taxonomy.name,
-        "classes": {c.name: c.id for c in spec.taxonomy.classes},
-        "tile_size_m": site.tile_size_m,
-        "scenes": scenes,
-        "created_at": site.created_at,
-    }
 
 
 @app.command("create")

@@ -6,12 +6,14 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Sequence
 from pathlib import Path, PurePosixPath
 
 from siteline.errors import MissionError
 from siteline.hashing import sha256_file
+from siteline.progress import no_step
+from siteline.records.enums import FileKind
+from siteline.records.mission import FileEntry, MissionManifest
 
 RAW_SUFFIXES = {
     ".ldr",
@@ -42,21 +44,7 @@ COLMAP_FILES = {
 }
 
 
-@dataclass(frozen=True)
-class FileEntry:
-    """One file of a mission: POSIX path relative to the mission folder, size in bytes, sha256, kind
-    (las, photo, colmap, trajectory, raw, other)."""
-
-    path: str
-    size_bytes: int
-    sha256: str
-    kind: str
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-def file_kind(rel: PurePosixPath) -> str:
+def file_kind(rel: PurePosixPath) -> FileKind:
     name = rel.name.lower()
     suffix = rel.suffix.lower()
     if suffix in (".las", ".laz"):
@@ -138,7 +126,15 @@ def inventory(
     ]
 
 
-def manifest_sha256(entries: list[FileEntry]) -> str:
+def manifest_sha256(entries: Sequence[FileEntry]) -> str:
     """sha256 of the canonical manifest: sorted (path, size, sha256) triples as compact JSON."""
     doc = [[e.path, e.size_bytes, e.sha256] for e in sorted(entries, key=lambda e: e.path)]
     return hashlib.sha256(json.dumps(doc, separators=(",", ":")).encode()).hexdigest()
+
+
+def mission_manifest(root: Path, progress: Callable[..., None] = no_step) -> MissionManifest:
+    """The inventory of the mission folder ``root`` and its manifest hash. ``progress(amount, total)``
+    receives the byte count before hashing starts and the bytes hashed as they go."""
+    root = Path(root).resolve() if Path(root).exists() else Path(root)
+    entries = inventory(root, progress=progress, total=lambda t: progress(0, t))
+    return MissionManifest(root, tuple(entries), manifest_sha256(entries))

@@ -11,10 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import zarr
 
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
-from siteline.stores import join
+from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
 
@@ -42,8 +43,7 @@ def auto_radius(
     spacing = {}
     for name, tiles in (("t1", a), ("t2", b)):
         tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t, None))
-        pts = tiles.read({tile: tiles.prefix(tile, None)}, ())["xyz_m"]
-        spacing[name] = median_spacing(pts, max_points)
+        spacing[name] = median_spacing(tiles.read_tile(tile, ()).xyz_m, max_points)
     sparse = max(spacing.values())
     return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}
 
@@ -64,11 +64,10 @@ class _Decoded:
             return None
         hit = self._cache.get(ij)
         if hit is None:
-            tile = self.keys[ij]
-            data = self.tiles.read({tile: self.tiles.prefix(tile)}, ("class",))
-            xyz, cls = data["xyz_m"].astype(np.float32), data["class"]
+            data = self.tiles.read_tile(self.keys[ij], ("class",))
+            xyz, cls = data.xyz_m.astype(np.float32), data.attributes["class"]
             x0, y0 = ij[0] * self.size, ij[1] * self.size
-            x, y = data["xyz_m"][:, 0], data["xyz_m"][:, 1]
+            x, y = data.xyz_m[:, 0], data.xyz_m[:, 1]
             strips = {
                 "w": np.flatnonzero(x <= x0 + self.r),
                 "e": np.flatnonzero(x >= x0 + self.size - self.r),
@@ -88,6 +87,7 @@ class _Decoded:
                 if got is None:
                     continue
                 xyz, cls, strips = got
+                idx: slice | np.ndarray
                 if dx == 0 and dy == 0:
                     idx = slice(None)
                 else:
@@ -107,7 +107,7 @@ class _Decoded:
             del self._cache[ij]
 
 
-def _write_flags(group, tile: str, flags: np.ndarray, spec) -> None:  # noqa: ANN001
+def _write_flags(group: zarr.Group, tile: str, flags: np.ndarray, spec: TileSpec) -> None:
     from zarr.codecs import BloscCodec, BloscShuffle
 
     arr = group.create_group(tile).create_array(
@@ -178,9 +178,3 @@ def write_labels(
         shutil.rmtree(out, ignore_errors=True)
         raise
     return LabelResult(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)
-
-
-def attach_labels(tiles: SceneTiles, label_uri: str, side: str) -> SceneTiles:
-    """Let ``tiles`` read the attribute ``change`` from a pair's label store for scene ``side``."""
-    tiles.attach("change", join(str(label_uri), side))
-    return tiles

@@ -1,14 +1,10 @@
-"""Label-set versions of a scene's semantic classes: where they live, importing corrected labels as a
-new version, and comparing versions (DESIGN.md §1: a correction is a new version, never an overwrite)."""
+"""Label-set versions of a scene's semantic classes: reading a scene with one, importing corrected
+labels as a new version, and comparing versions (DESIGN.md §1: a correction is a new version, never
+an overwrite)."""
 
-from siteline.labelsets.imports import DEFAULT_MAX_UNMATCHED, ImportResult, import_labels, read_taxonomy_map
-from siteline.labelsets.store import labelset_uri, open_labelled_tiles
+from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED
+from siteline.labelsets.mapping import read_taxonomy_map
+from siteline.labelsets.stage import import_labels
+from siteline.labelsets.store import open_labelled
 
-__all__ = [
-    "DEFAULT_MAX_UNMATCHED",
-    "ImportResult",
-    "import_labels",
-    "labelset_uri",
-    "open_labelled_tiles",
-    "read_taxonomy_map",
-]
+__all__ = ["DEFAULT_MAX_UNMATCHED", "import_labels", "open_labelled", "read_taxonomy_map"]

@@ -3,9 +3,10 @@ read of a scene under two versions."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from siteline.labelsets.store import tile_classes
 from siteline.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
@@ -33,12 +34,13 @@ def histogram(counts: np.ndarray, taxonomy: Taxonomy) -> dict[str, int]:
     return {names.get(int(i), str(int(i))): int(per_id[i]) for i in np.nonzero(per_id)[0]}
 
 
-def diff_tiles(a: SceneTiles, b: SceneTiles, taxonomy: Taxonomy) -> dict:
+def diff_tiles(a: SceneTiles, b: SceneTiles, taxonomy: Taxonomy) -> dict[str, Any]:
     """How the classes of one scene's tiles under two label sets differ, read tile by tile: points,
     changed points, changed points per ``"old->new"`` class pair and both class histograms."""
     counts = np.zeros((256, 256), dtype=np.int64)
     for tile in sorted(a.by_tile):
-        counts += pair_counts(tile_classes(a, tile), tile_classes(b, tile))
+        old, new = (t.read_tile(tile, ("class",)).attributes["class"] for t in (a, b))
+        counts += pair_counts(old, new)
     return {
         "points": int(counts.sum()),
         "changed": int(counts.sum() - np.trace(counts)),

@@ -6,10 +6,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from siteline.catalog import Catalog
-from siteline.catalog.models import Site
+from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.scenes import get_scene
-from siteline.catalog.sites import site_spec
-from siteline.labelsets.store import open_labelled_tiles
+from siteline.catalog.sites import site_of
+from siteline.labelsets.store import open_labelled
 from siteline.tiles import export_las
 
 
@@ -25,14 +25,14 @@ def export_label_set(
     label-set ``version`` (None: the newest) as site class ids, and a siteline VLR saying what they
     mean (site, scene, version, taxonomy); return the point count and the version written."""
     with catalog.transaction() as s:
-        scene = get_scene(s, scene_id)
-        tiles, version = open_labelled_tiles(s, scene, version)
-        spec = site_spec(s.get(Site, scene.site_id))
+        site = site_of(s, get_scene(s, scene_id).site_id)
+        source, label_set = labelled_source(s, scene_id, version)
     about = {
-        "site": spec.name,
+        "site": site.name,
         "scene": scene_id,
-        "label_set_version": version,
+        "label_set_version": label_set.version,
         "classification": "site class ids",
-        "taxonomy": spec.taxonomy.to_dict(),
+        "taxonomy": site.taxonomy.to_dict(),
     }
-    return export_las(tiles, spec, out, bounds=bounds, level=level, labels=about), version
+    tiles = open_labelled(source, label_set)
+    return export_las(tiles, site, out, bounds=bounds, level=level, labels=about), label_set.version

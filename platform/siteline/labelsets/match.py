@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 KEY_DTYPE = np.dtype([("x", "<i8"), ("y", "<i8"), ("z", "<i8"), ("gps_time", "<f8"), ("return_number", "u1")])
+KEY_NAMES = ("x", "y", "z", "gps_time", "return_number")
 
 
 def point_keys(counts: np.ndarray, gps_time: np.ndarray | None, return_number: np.ndarray) -> np.ndarray:
@@ -40,12 +41,12 @@ class Match:
 
 def _group_ids(keys: np.ndarray) -> np.ndarray:
     """(N,) int64 ids, equal exactly where keys are equal."""
-    order = np.lexsort([keys[name] for name in reversed(KEY_DTYPE.names)])
+    order = np.lexsort([keys[name] for name in reversed(KEY_NAMES)])
     ks = keys[order]
     new = np.ones(len(ks), dtype=bool)
     if len(ks) > 1:
         same = np.ones(len(ks) - 1, dtype=bool)
-        for name in KEY_DTYPE.names:
+        for name in KEY_NAMES:
             same &= ks[name][1:] == ks[name][:-1]
         new[1:] = ~same
     ids = np.empty(len(ks), dtype=np.int64)

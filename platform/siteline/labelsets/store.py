@@ -1,56 +1,44 @@
-"""Where label-set versions live and how a scene's tiles are read with one of them.
+"""How a scene's tiles are read with one of its label-set versions, and how a version's classes are
+written.
 
 Version 1 is the classification the tile store was written with. Every later version is a Zarr group
-``<store>/labelsets/scene-<id>/v<version>.zarr`` holding ``tiles/<tile>/class`` (uint8 site class ids)
-for every tile, aligned point for point with the tile store's arrays (level order), so a reader
-attaches it as the ``class`` attribute and reads classes exactly as before.
+(``siteline.stores.layout.label_set``) holding ``tiles/<tile>/class`` (uint8 site class ids) for every
+tile, aligned point for point with the tile store's arrays (level order), so a reader reads it as the
+``class`` attribute and reads classes exactly as before.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from sqlalchemy.orm import Session
+import zarr
 
-from siteline.catalog.labelsets import label_set
-from siteline.catalog.models import Scene
-from siteline.config import Settings
 from siteline.errors import LabelSetError
-from siteline.tiles import open_scene_tiles
-from siteline.tiles.layout import TileSpec
+from siteline.records.labelsets import LabelSetRef
+from siteline.records.tiling import TileSource, TileSpec
 from siteline.tiles.reader import SceneTiles
-from siteline.tiles.scene import tile_checksum
 
 FORMAT_VERSION = 1
 
 
-def labelset_uri(settings: Settings, scene_id: int, version: int) -> str:
-    return settings.store.uri("labelsets", f"scene-{scene_id}", f"v{version}.zarr")
+def open_labelled(source: TileSource, label_set: LabelSetRef) -> SceneTiles:
+    """The scene's tiles reading the classes of ``label_set``. LabelSetError when that version was
+    written for another tiling of the scene (the scene was tiled again since: its points are in
+    another order)."""
+    tiles = SceneTiles.from_source(source)
+    if label_set.uri is None:
+        return tiles
+    tiles = tiles.with_attribute("class", label_set.uri)
+    made_for = tiles.attribute_record("class").get("tile_checksum")
+    if made_for is not None and made_for != source.checksum:
+        raise LabelSetError(
+            f"label set {label_set.version} of scene {label_set.scene_id} was written for another tiling of "
+            f"the scene (the scene was tiled again since): import its file again ({label_set.source}, "
+            f"sha256 {label_set.source_sha256})."
+        )
+    return tiles
 
 
-def open_labelled_tiles(session: Session, scene: Scene, version: int | None = None) -> tuple[SceneTiles, int]:
-    """The scene's tiles reading the classes of label-set ``version`` (None: the newest), and that
-    version. LabelSetError when that version was written for another tiling of the scene (the scene
-    was tiled again since: its points are in another order)."""
-    row = label_set(session, scene.id, version)
-    tiles = open_scene_tiles(session, scene)
-    if row.uri is not None:
-        tiles.attach("class", row.uri)
-        made_for = tiles.extra["class"].attrs.get("tile_checksum")
-        if made_for is not None and made_for != tile_checksum(scene):
-            raise LabelSetError(
-                f"label set {row.version} of scene {scene.id} was written for another tiling of the scene "
-                f"(the scene was tiled again since): import its file again ({row.source}, sha256 "
-                f"{row.source_sha256})."
-            )
-    return tiles, row.version
-
-
-def tile_classes(tiles: SceneTiles, tile: str) -> np.ndarray:
-    """Every point's class of ``tile`` (level order) under the attached label set."""
-    return tiles.read({tile: tiles.prefix(tile)}, ("class",))["class"]
-
-
-def write_tile_classes(group, tile: str, classes: np.ndarray, spec: TileSpec) -> None:  # noqa: ANN001
+def write_tile_classes(group: zarr.Group, tile: str, classes: np.ndarray, spec: TileSpec) -> None:
     """Write ``tiles/<tile>/class`` of a label-set store under construction (the Zarr group ``group``)."""
     from zarr.codecs import BloscCodec, BloscShuffle
 

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from alembic import context
 
-from siteline.catalog import models  # noqa: F401  (registers the tables)
-from siteline.catalog.base import Base
+from siteline.catalog import Base  # importing the catalog registers every table
 
 config = context.config
 target_metadata = Base.metadata

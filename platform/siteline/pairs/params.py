@@ -8,9 +8,9 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from siteline.errors import ReleaseError, SitelineError
+from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
-from siteline.pairs.render import HOLE_RULES
+from siteline.records.enums import HOLE_RULES, HoleRule
 from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views import SAMPLER_VERSION, ViewParams
@@ -47,29 +47,29 @@ class PairParams:
     min_coverage: float = 0.5
     min_valid: float = 0.25
     view_params: dict[str, Any] = field(default_factory=dict)
-    one_side_hole: str = "ignore"
+    one_side_hole: HoleRule = "ignore"
     all_points: bool = False
     sampler: str = SAMPLER_VERSION
 
     def __post_init__(self) -> None:
         if self.sampler != SAMPLER_VERSION:
-            raise ReleaseError(
+            raise PairError(
                 f"view sampler {self.sampler!r} is not this version's ({SAMPLER_VERSION!r}); outputs of "
                 "another sampler cannot be rebuilt: drop the 'sampler' key to use the current one."
             )
         if not 0.0 <= self.min_valid <= 1.0:
-            raise ReleaseError(f"min_valid {self.min_valid} must lie in [0, 1].")
+            raise PairError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if self.one_side_hole not in HOLE_RULES:
-            raise ReleaseError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
+            raise PairError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
         clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage", "point_size_px"})
         if clash:
-            raise ReleaseError(
+            raise PairError(
                 f"view_params {clash}: set these knobs on the pair parameters themselves (one name each)."
             )
         try:
             self.render_settings(), self.view_params_spec(), self.label_params()
         except SitelineError as exc:
-            raise ReleaseError(f"pair parameters: {exc}") from exc
+            raise PairError(f"pair parameters: {exc}") from exc
 
     def render_settings(self) -> RenderSettings:
         """The render knobs as the renderer's own spec."""
@@ -95,8 +95,8 @@ class PairParams:
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> PairParams:
-        """From the JSON form; ReleaseError names an unknown key or a wrongly typed value."""
-        return cls(**parse_spec(cls, doc, "pair parameters", ReleaseError))
+        """From the JSON form; PairError names an unknown key or a wrongly typed value."""
+        return cls(**parse_spec(cls, doc, "pair parameters", PairError))
 
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""

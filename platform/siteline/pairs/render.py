@@ -4,6 +4,7 @@ mask (DESIGN.md §4, §6)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -13,8 +14,13 @@ from siteline.codes import IGNORE as MASK_IGNORE
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED
-from siteline.render import RenderSettings, render_points
+from siteline.records.enums import HOLE_RULES
+from siteline.render import render_points
+from siteline.stores import join
 from siteline.tiles.reader import SceneTiles
+
+if TYPE_CHECKING:
+    from siteline.pairs.params import PairParams
 
 
 @dataclass
@@ -32,9 +38,6 @@ class PairRender:
     valid: float
     change_ratio: float
     points_read: int
-
-
-HOLE_RULES = ("ignore", "changed")
 
 
 def pair_mask(
@@ -62,42 +65,45 @@ def pair_mask(
     return np.where(valid, np.where(changed, MASK_CHANGED, MASK_UNCHANGED), MASK_IGNORE).astype(np.uint8)
 
 
+@dataclass(frozen=True)
+class LabelledPair:
+    """The two scenes of a pair, each read with its change labels (attribute ``change``, from the
+    pair's label store, siteline.labels.store)."""
+
+    t1: SceneTiles
+    t2: SceneTiles
+
+    @classmethod
+    def with_labels(cls, t1: SceneTiles, t2: SceneTiles, label_uri: str) -> LabelledPair:
+        """Readers of ``t1`` and ``t2`` that read ``change`` from the pair's label store at ``label_uri``."""
+        return cls(
+            *(t.with_attribute("change", join(label_uri, side)) for t, side in ((t1, "t1"), (t2, "t2")))
+        )
+
+
 def render_pair_view(
-    t1: SceneTiles,
-    t2: SceneTiles,
-    camera: Camera,
-    scale: float,
-    point_size_px: int,
-    lod_factor: float = 1.0,
-    device: str = "cpu",
-    one_side_hole: str = "ignore",
-    all_points: bool = False,
+    pair: LabelledPair, camera: Camera, params: PairParams, device: str = "cpu"
 ) -> PairRender:
-    """Render ``camera`` at ``scale`` on both scenes (their tile stores must carry the pair's
-    ``change`` labels) and build the mask (``one_side_hole``: :func:`pair_mask`). ``all_points``
-    reads every point in the frustum (no level of detail), else ``lod_factor`` sets the level."""
-    settings = RenderSettings(scale=scale, point_size_px=point_size_px)
+    """Render ``camera`` on both scenes with ``params`` (scale, point size, level of detail or
+    ``all_points``, ``one_side_hole``: :func:`pair_mask`) and build the mask."""
+    settings = params.render_settings()
     out = []
     read = 0
-    for tiles in (t1, t2):
+    for tiles in (pair.t1, pair.t2):
         pts = tiles.points_for_view(
             camera,
-            scale,
+            params.scale,
             attributes=("rgb", "change"),
-            lod_factor=lod_factor,
-            point_size_px=point_size_px,
-            level=None if all_points else "auto",
+            lod_factor=params.lod_factor,
+            point_size_px=params.point_size_px,
+            level=None if params.all_points else "auto",
         )
-        read += tiles.last_stats.points_read
-        out.append(
-            render_points(
-                pts["xyz_m"], camera, settings, {"rgb": pts["rgb"], "change": pts["change"]}, device=device
-            )
-        )
+        read += pts.stats.points_read
+        xyz = pts.xyz_m.astype(np.float32)  # site-local: float32 keeps millimetres here
+        out.append(render_points(xyz, camera, settings, pts.attributes, device=device))
     ra, rb = out
-    mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], one_side_hole)
-    valid = mask != MASK_IGNORE
-    n_valid = int(valid.sum())
+    mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole)
+    n_valid = int((mask != MASK_IGNORE).sum())
     return PairRender(
         ra.rgb,
         rb.rgb,

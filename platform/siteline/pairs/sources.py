@@ -33,16 +33,17 @@ class TilePointSource:
         self.points_read = 0
         self.reads = 0
         coarse = tiles.points(resolution=coarse_m, attributes=("class",))
-        keep = ~np.isin(coarse["class"], self.skip)
-        self._coarse = ArrayPointSource(coarse["xyz_m"][keep])
+        keep = ~np.isin(coarse.attributes["class"], self.skip)
+        self._coarse = ArrayPointSource(coarse.xyz_m[keep].astype(np.float32))
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
+        """(N, 3) float32 site-local metres: the points a probe of ``camera`` at ``scale`` draws."""
         out = self.tiles.points_for_view(
             camera, scale, attributes=("class",), lod_factor=self.lod_factor, point_size_px=self.point_size_px
         )
-        self.points_read += self.tiles.last_stats.points_read
+        self.points_read += out.stats.points_read
         self.reads += 1
-        return out["xyz_m"][~np.isin(out["class"], self.skip)]
+        return out.xyz_m[~np.isin(out.attributes["class"], self.skip)].astype(np.float32)
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         return self._coarse.nearest_distance(xyz)

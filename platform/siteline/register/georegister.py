@@ -113,7 +113,7 @@ def georegister(
             models[str(cam_id)] = record
     result = Georegistration(site_from_model, models, residuals, cameras)
     if not np.isfinite(result.rms_m) or result.rms_m > max_rms_m:
-        worst = max(residuals, key=residuals.get)
+        worst = max(residuals, key=lambda name: residuals[name])
         raise RegistrationError(
             f"COLMAP model {model_dir}: georegistration RMS {result.rms_m:.3f} m exceeds "
             f"{max_rms_m} m (worst: {worst} at {residuals[worst]:.3f} m)."

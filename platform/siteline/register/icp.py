@@ -56,6 +56,26 @@ def _normals(tree: cKDTree, pts: np.ndarray, k: int = 12) -> np.ndarray:
     return vecs[:, :, 0]
 
 
+def _step(p: np.ndarray, n: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool]:
+    """One linearised point-to-plane step for points ``p`` (M, 3) with target normals ``n`` and
+    signed residuals ``r`` (M,): (rotation vector, translation) as (6,), and whether the geometry
+    constrained every direction (unconstrained ones are left at zero)."""
+    # robust (Cauchy) weights scaled by the residuals' MAD: surfaces that really changed between
+    # the scenes stop pulling, while a genuine shift (all residuals alike) keeps full weight
+    scale = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 0.005)
+    wts = 1.0 / (1.0 + (r / (2.385 * scale)) ** 2)
+    # rotation columns scaled by the sample's radius so that all six unknowns weigh alike
+    L = max(float(np.sqrt((p**2).sum(axis=1).mean())), 1e-6)
+    A = np.c_[np.cross(p, n) / L, n]
+    H = A.T @ (A * wts[:, None])
+    w, V = np.linalg.eigh(H)
+    good = w > 1e-3 * max(w.max(), 1e-300)
+    g = A.T @ -(wts * r)
+    x = V[:, good] @ ((V[:, good].T @ g) / w[good])
+    x[:3] /= L
+    return x, bool(good.all())
+
+
 def point_to_plane_icp(
     source: np.ndarray,
     target: np.ndarray,
@@ -74,7 +94,9 @@ def point_to_plane_icp(
     src = np.asarray(source, dtype=np.float64)
     tgt = np.asarray(target, dtype=np.float64)
     if len(src) < 10 or len(tgt) < 10:
-        return AlignmentCheck(float("inf"), 0.0, 0.0, np.eye(4).tolist(), 0, True, 0)
+        return AlignmentCheck(
+            float("inf"), 0.0, 0.0, Rigid("prev", "new", np.eye(3), np.zeros(3)), 0, True, 0
+        )
     centre = tgt.mean(axis=0)
     src, tgt = src - centre, tgt - centre  # conditioning: rotations about the data, not the origin
     tree = cKDTree(tgt)
@@ -91,20 +113,8 @@ def point_to_plane_icp(
             break
         p, q, n = moved[ok], tgt[j[ok]], normals[j[ok]]
         r = ((p - q) * n).sum(axis=1)
-        # robust (Cauchy) weights scaled by the residuals' MAD: surfaces that really changed between
-        # the scenes stop pulling, while a genuine shift (all residuals alike) keeps full weight
-        scale = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 0.005)
-        wts = 1.0 / (1.0 + (r / (2.385 * scale)) ** 2)
-        # rotation columns scaled by the sample's radius so that all six unknowns weigh alike
-        L = max(float(np.sqrt((p**2).sum(axis=1).mean())), 1e-6)
-        A = np.c_[np.cross(p, n) / L, n]
-        H = A.T @ (A * wts[:, None])
-        w, V = np.linalg.eigh(H)
-        good = w > 1e-3 * max(w.max(), 1e-300)
-        degenerate = degenerate or not good.all()
-        g = A.T @ -(wts * r)
-        x = V[:, good] @ ((V[:, good].T @ g) / w[good])
-        x[:3] /= L
+        x, constrained = _step(p, n, r)
+        degenerate = degenerate or not constrained
         dT = np.eye(4)
         dT[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix()
         dT[:3, 3] = x[3:]

@@ -9,9 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from siteline.cameras import distortion_record
+from siteline.cameras import Camera, distortion_record
 from siteline.errors import RegistrationError
 from siteline.photos import PhotoMeta
+from siteline.records.enums import CameraSource
 from siteline.register.georegister import georegister
 from siteline.register.icp import point_to_plane_icp
 from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
@@ -35,7 +36,7 @@ def register_cameras(
     spec: SiteSpec,
     ransac_max_error_m: float,
     max_rms_m: float,
-) -> tuple[dict, dict[str, Any], str | None]:
+) -> tuple[dict[str, Camera], dict[str, Any], CameraSource | None]:
     """Cameras by image name (site-local), the registration record, and the camera source: a COLMAP
     model georegistered by a Sim3 to the photos' RTK positions, else the photos' XMP poses."""
     if not photos:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyproj
@@ -11,6 +12,9 @@ from siteline.cameras import Camera, undistorted_pinhole
 from siteline.dji import cam_from_world_rotation, grid_convergence_deg
 from siteline.errors import PhotoError
 from siteline.photos import PhotoMeta
+
+if TYPE_CHECKING:
+    import pycolmap
 
 
 def photo_center_crs(meta: PhotoMeta, crs: pyproj.CRS) -> np.ndarray:
@@ -26,7 +30,7 @@ def photo_center_crs(meta: PhotoMeta, crs: pyproj.CRS) -> np.ndarray:
     return out
 
 
-def dewarp_camera(meta: PhotoMeta):  # noqa: ANN201
+def dewarp_camera(meta: PhotoMeta) -> pycolmap.Camera | None:
     """The distorted pycolmap camera DJI's ``DewarpData`` describes (FULL_OPENCV: fx, fy, principal
     point = image centre + the cx, cy offsets, k1, k2, p1, p2, k3), or None when the photo has no
     DewarpData or all its distortion coefficients are zero."""
@@ -50,7 +54,7 @@ def dewarp_camera(meta: PhotoMeta):  # noqa: ANN201
     )
 
 
-def dewarp_pinhole(meta: PhotoMeta):  # noqa: ANN201
+def dewarp_pinhole(meta: PhotoMeta) -> pycolmap.Camera | None:
     """The undistorted pinhole of :func:`dewarp_camera` (the camera a COLMAP model with the same
     distortion gives), or None."""
     cam = dewarp_camera(meta)
@@ -64,8 +68,11 @@ def camera_from_photo(meta: PhotoMeta, crs: pyproj.CRS, origin: Sequence[float])
     COLMAP model), else from CalibratedFocalLength / CalibratedOpticalCenterX/Y and the image size;
     orientation from the gimbal angles, yaw corrected by the grid convergence at the photo.
     """
-    if not meta.has_orientation:
+    yaw, pitch = meta.gimbal_yaw_deg, meta.gimbal_pitch_deg
+    if not meta.has_orientation or yaw is None or pitch is None:
         raise PhotoError(f"photo {meta.file} has no gimbal angles (GimbalYawDegree, GimbalPitchDegree).")
+    if meta.longitude_deg is None or meta.latitude_deg is None:
+        raise PhotoError(f"photo {meta.file} has no position (GpsLatitude, GpsLongitude).")
     if meta.width is None or meta.height is None:
         raise PhotoError(f"photo {meta.file}: image size unknown.")
     fx = meta.calibrated_focal_length_px
@@ -87,10 +94,8 @@ def camera_from_photo(meta: PhotoMeta, crs: pyproj.CRS, origin: Sequence[float])
         w, h = int(dewarped.width), int(dewarped.height)
         fx, fy, cx, cy = (float(v) for v in dewarped.params)
         conv = grid_convergence_deg(crs, meta.longitude_deg, meta.latitude_deg)
-        R = cam_from_world_rotation(
-            meta.gimbal_yaw_deg, meta.gimbal_pitch_deg, meta.gimbal_roll_deg or 0.0, conv
-        )
+        R = cam_from_world_rotation(yaw, pitch, meta.gimbal_roll_deg or 0.0, conv)
         return Camera.from_pose(w, h, fx, fy, cx, cy, R, -R @ center)
     conv = grid_convergence_deg(crs, meta.longitude_deg, meta.latitude_deg)
-    R = cam_from_world_rotation(meta.gimbal_yaw_deg, meta.gimbal_pitch_deg, meta.gimbal_roll_deg or 0.0, conv)
+    R = cam_from_world_rotation(yaw, pitch, meta.gimbal_roll_deg or 0.0, conv)
     return Camera.from_pose(meta.width, meta.height, fx, fx, cx, cy, R, -R @ center)

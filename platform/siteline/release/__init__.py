@@ -1,5 +1,9 @@
 """Versioned, immutable dataset releases: build, publish, verify, diff, query (DESIGN.md §8).
 
+Build: ``plan.plan_release`` (catalog) -> ``build.execute_build`` (write the draft) ->
+``siteline.catalog.releases.record_draft``; publish: ``plan.plan_publish`` -> ``publish.move_into_place``
+-> ``siteline.catalog.releases.record_published``; ``stage`` runs them.
+
 Names are imported on first use (PEP 562), so ``siteline.release.query`` or the manifest reader do not
 pull in the renderer and torch.
 """
@@ -10,10 +14,10 @@ import importlib
 from typing import Any
 
 _WHERE = {
-    "ReleaseInfo": "siteline.release.build",
-    "build_release": "siteline.release.build",
-    "publish_release": "siteline.release.build",
-    "release_root": "siteline.release.build",
+    "ReleaseInfo": "siteline.records.release",
+    "ReleaseParams": "siteline.release.params",
+    "build_release": "siteline.release.stage",
+    "publish_release": "siteline.release.stage",
     "read_manifest": "siteline.release.manifest",
     "verify_files": "siteline.release.manifest",
     "split_pairs": "siteline.release.splits",

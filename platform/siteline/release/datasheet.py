@@ -29,7 +29,7 @@ def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int 
         rows.append(np.concatenate([a, b, m], axis=1))
     grid = np.concatenate(rows, axis=0) if rows else np.zeros((10, 30, 3), np.uint8)
     img = Image.fromarray(grid)
-    return img.resize((width, max(1, int(img.height * width / img.width))), Image.NEAREST)
+    return img.resize((width, max(1, int(img.height * width / img.width))), Image.Resampling.NEAREST)
 
 
 def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
@@ -75,18 +75,9 @@ def _ignore_share(stats: dict[str, Any]) -> float:
     return sum(v["ignore"] for v in s) / max(total, 1)
 
 
-def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
-    """README.md of a release: what it is, where it comes from, how it was made, how to use it."""
-    lin = doc["lineage"]
-    p = lin["parameters"]
-    lines = [
-        f"# {doc['name']} {doc['version']}",
-        "",
-        "A bi-temporal change-detection dataset rendered by siteline from drone LiDAR scenes of a construction site, "
-        "following the iVISION-2DCD method: pixel-aligned image pairs from synthetic cameras and symmetric change masks.",
-        "",
-        "![samples: t1, t2, mask (green unchanged, red changed, white ignore)](montage.png)",
-        "",
+def _layout_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
+    padding = doc["layout"]["padding"]
+    return [
         "## Layout (format 2: LEVIR-CD, with the ignore information beside it)",
         "",
         *[f"- `<split>/{k}/<id>.png`: {v}" for k, v in doc["layout"]["folders"].items()],
@@ -106,14 +97,24 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         "the ignore-aware truth.",
         *(
             [
-                f"- Images are padded (right and bottom) to sides that are multiples of {doc['layout']['padding']['multiple_px']} "
-                f"and at least {doc['layout']['padding']['min_side_px']} px: images and `label/` with 0, `ignore/` and "
+                f"- Images are padded (right and bottom) to sides that are multiples of {padding['multiple_px']} "
+                f"and at least {padding['min_side_px']} px: images and `label/` with 0, `ignore/` and "
                 "`label_ignore/` with ignore. `items[].size_px` in the manifest is the rendered size."
             ]
-            if doc["layout"]["padding"]["enabled"]
+            if padding["enabled"]
             else []
         ),
         "",
+    ]
+
+
+def _source_lines(lin: dict[str, Any]) -> list[str]:
+    p = lin["parameters"]
+    radius = (
+        f"auto ({p['radius_multiplier']} x median spacing)" if p["radius_m"] is None else f"{p['radius_m']} m"
+    )
+    lod = "none (every point rendered)" if p.get("all_points") else f"LOD factor {p['lod_factor']}"
+    return [
         "## Sources",
         "",
         f"- sites: {', '.join(s['name'] + ' (' + s['crs'] + ')' for s in lin['sites'])}",
@@ -130,16 +131,18 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         f"- preset: {lin.get('preset') or 'none'}",
         f"- render scale {p['scale']}, point size {p['point_size_px']} px, level-of-detail factor {p['lod_factor']}",
         f"- views per pair {p['views']}, seed {p['seed']}, minimum coverage {p['min_coverage']}",
-        f"- change radius: {'auto (' + str(p['radius_multiplier']) + ' x median spacing)' if p['radius_m'] is None else str(p['radius_m']) + ' m'}",
+        f"- change radius: {radius}",
         *_radius_lines(lin["pairs"]),
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
         f"**{p.get('one_side_hole', 'ignore')}**; change is the union (OR) of the two directions.",
-        f"- level of detail: {'none (every point rendered)' if p.get('all_points') else 'LOD factor ' + str(p['lod_factor'])}",
-        "",
-        "## Splits (disjoint by pair)",
+        f"- level of detail: {lod}",
         "",
     ]
+
+
+def _split_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
+    lines = ["## Splits (disjoint by pair)", ""]
     for split in ("train", "val", "test"):
         s = stats["class_balance"].get(split)
         if s:
@@ -150,15 +153,16 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
             )
         else:
             lines.append(f"- {split}: pairs {doc['splits'][split]}, no images")
-    lines += [
-        "",
-        f"Mean coverage (both renders hit) {stats['coverage']['mean']:.2%}.",
-        "",
+    return [*lines, "", f"Mean coverage (both renders hit) {stats['coverage']['mean']:.2%}.", ""]
+
+
+def _use_lines(doc: dict[str, Any]) -> list[str]:
+    return [
         "## Use",
         "",
         "```python",
         "from siteline.data import ChangeDetectionDataset",
-        f"ds = ChangeDetectionDataset('{'<this folder>'}', split='train')  # image (2, 3, H, W) float32, mask (1, H, W) int64 0/1/255",
+        "ds = ChangeDetectionDataset('<this folder>', split='train')  # image (2, 3, H, W) float32, mask (1, H, W) int64 0/1/255",
         "```",
         "",
         "Metrics, two conventions, each named where it is reported (`siteline evaluate`, `siteline release score`):",
@@ -173,4 +177,18 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
         "",
     ]
-    return "\n".join(lines)
+
+
+def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
+    """README.md of a release: what it is, where it comes from, how it was made, how to use it."""
+    head = [
+        f"# {doc['name']} {doc['version']}",
+        "",
+        "A bi-temporal change-detection dataset rendered by siteline from drone LiDAR scenes of a construction site, "
+        "following the iVISION-2DCD method: pixel-aligned image pairs from synthetic cameras and symmetric change masks.",
+        "",
+        "![samples: t1, t2, mask (green unchanged, red changed, white ignore)](montage.png)",
+        "",
+    ]
+    lines = head + _layout_lines(doc, stats) + _source_lines(doc["lineage"]) + _split_lines(doc, stats)
+    return "\n".join(lines + _use_lines(doc))

@@ -20,6 +20,7 @@ from typing import Any
 from siteline.errors import ReleaseError
 from siteline.release.layout import manifest_format
 from siteline.release.manifest import read_manifest
+from siteline.stores import publish_folder
 
 SPLITS = ("train", "val", "test")
 EXPORT_RECORD = "siteline-export.json"
@@ -128,14 +129,7 @@ def _export_name(profile: Profile, item_id: str) -> str:
     return item_id.lower() if profile.forbidden_in_path else item_id
 
 
-def export_release(root: Path, profile_name: str, out: Path, copy: bool = False) -> ExportResult:
-    """Lay out the release at ``root`` for ``profile_name`` in the new folder ``out``: relative
-    symlinks into the release (``copy``: copies), list files, and ``siteline-export.json``."""
-    if profile_name not in PROFILES:
-        raise ReleaseError(f"unknown export profile {profile_name!r}: use one of {', '.join(PROFILES)}.")
-    profile = PROFILES[profile_name]
-    root, out = Path(root).resolve(), Path(out).absolute()
-    doc = read_manifest(root)
+def _check_export(root: Path, profile: Profile, out: Path, doc: dict[str, Any]) -> None:
     if manifest_format(doc) < 2:
         raise ReleaseError(
             f"release {doc['name']} {doc['version']} is format 1 (label/ holds 0/1/255): rebuild it with this "
@@ -150,6 +144,12 @@ def export_release(root: Path, profile_name: str, out: Path, copy: bool = False)
             f"export folder {out} contains {profile.forbidden_in_path!r}: {profile.tool} replaces every "
             f"{profile.forbidden_in_path!r} in a path to find B and label; choose a path without it."
         )
+
+
+def _plan_files(
+    root: Path, profile: Profile, out: Path, doc: dict[str, Any]
+) -> tuple[list[tuple[Path, Path]], dict[str, list[str]]]:
+    """(release file, export path) for every file, and the item names per tool split."""
     split_map = dict(profile.split_map)
     names: dict[str, list[str]] = {}
     planned: list[tuple[Path, Path]] = []
@@ -159,43 +159,46 @@ def export_release(root: Path, profile_name: str, out: Path, copy: bool = False)
         names.setdefault(split, []).append(name)
         for folder, dest in profile.files(split, name):
             planned.append((root / it["split"] / folder / f"{it['id']}.png", out / dest))
-    tmp = out.with_name(f".{out.name}.partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        for src, dest in planned:
-            if not src.is_file():
-                raise ReleaseError(
-                    f"{src} is missing: the release is incomplete (`siteline release verify`)."
-                )
-            target = tmp / dest.relative_to(out)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if copy:
-                shutil.copyfile(src, target)
-            else:
-                # relative to where the link will live once the folder is renamed into place
-                os.symlink(os.path.relpath(src, dest.parent), target)
+    return planned, names
+
+
+def _write_files(planned: list[tuple[Path, Path]], out: Path, work: Path, copy: bool) -> None:
+    for src, dest in planned:
+        if not src.is_file():
+            raise ReleaseError(f"{src} is missing: the release is incomplete (`siteline release verify`).")
+        target = work / dest.relative_to(out)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if copy:
+            shutil.copyfile(src, target)
+        else:
+            # relative to where the link will live once the folder is renamed into place
+            os.symlink(os.path.relpath(src, dest.parent), target)
+
+
+def export_release(root: Path, profile_name: str, out: Path, copy: bool = False) -> ExportResult:
+    """Lay out the release at ``root`` for ``profile_name`` in the new folder ``out``: relative
+    symlinks into the release (``copy``: copies), list files, and ``siteline-export.json``; built
+    beside ``out`` and renamed into place whole."""
+    if profile_name not in PROFILES:
+        raise ReleaseError(f"unknown export profile {profile_name!r}: use one of {', '.join(PROFILES)}.")
+    profile = PROFILES[profile_name]
+    root, out = Path(root).resolve(), Path(out).absolute()
+    doc = read_manifest(root)
+    _check_export(root, profile, out, doc)
+    planned, names = _plan_files(root, profile, out, doc)
+    result = ExportResult(
+        profile.name, str(out), len(planned), {s: len(v) for s, v in sorted(names.items())},
+        dict(profile.split_map), profile.label_rule, profile.honour_ignore,
+    )  # fmt: skip
+    with publish_folder(out) as work:
+        _write_files(planned, out, work, copy)
         for rel, lines in profile.lists(names).items():
-            (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
-            (tmp / rel).write_text("".join(f"{line}\n" for line in lines))
-        result = ExportResult(
-            profile.name,
-            str(out),
-            len(planned),
-            {s: len(v) for s, v in sorted(names.items())},
-            split_map,
-            profile.label_rule,
-            profile.honour_ignore,
-        )
+            (work / rel).parent.mkdir(parents=True, exist_ok=True)
+            (work / rel).write_text("".join(f"{line}\n" for line in lines))
         record = result.to_dict() | {
             "release": {"name": doc["name"], "version": doc["version"], "root": str(root)},
             "tool": profile.tool,
             "links": "copies" if copy else "relative symlinks into the release",
         }
-        (tmp / EXPORT_RECORD).write_text(json.dumps(record, indent=1) + "\n")
-        if out.exists():
-            out.rmdir()
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        (work / EXPORT_RECORD).write_text(json.dumps(record, indent=1) + "\n")
     return result

@@ -27,6 +27,19 @@ class ReleaseParams:
         if not isinstance(self.pad, bool):
             raise ReleaseError(f"pad must be true or false, got {self.pad!r}.")
 
+    @classmethod
+    def resolve(
+        cls, pair: PairParams | None = None, preset: str | None = None, pad: bool = True
+    ) -> ReleaseParams:
+        """The release parameters of ``pair`` (the defaults when None) with the knobs of ``preset``
+        applied (siteline.presets): the one place a preset is applied."""
+        pair = pair or PairParams()
+        if preset is not None:
+            from siteline.presets import preset_params
+
+            pair = preset_params(preset, pair)
+        return cls(pair, preset, pad)
+
     def to_dict(self) -> dict[str, Any]:
         return {"pair": self.pair.to_dict(), "preset": self.preset, "pad": self.pad, "format": self.format}
 

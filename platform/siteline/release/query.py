@@ -1,40 +1,14 @@
-"""Listing, comparing and querying releases from the catalog (siteline.catalog.releases) and their
-manifests."""
+"""Comparing two versions of a release: their catalog rows and manifests."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from sqlalchemy.orm import Session
 
-from siteline.catalog.models import Release
-from siteline.catalog.releases import (  # re-exported: the release query API
-    find_release,
-    get_release,
-    list_releases,
-    query_items,
-    release_item_counts,
-)
+from siteline.catalog.releases import get_release
 from siteline.release.manifest import read_manifest
-
-__all__ = ["diff_releases", "find_release", "get_release", "list_releases", "query_items", "release_record"]
-
-
-def release_record(session: Session, rel: Release) -> dict[str, Any]:
-    items = release_item_counts(session, rel.id)
-    return {
-        "name": rel.name,
-        "version": rel.version,
-        "status": rel.status,
-        "root": rel.root_uri,
-        "manifest_sha256": rel.manifest_sha256,
-        "created_at": rel.created_at,
-        "published_at": rel.published_at,
-        "items": dict(items),
-        "preset": (rel.parameters or {}).get("preset"),
-        "pair_params": (rel.parameters or {}).get("pair_params"),
-        "pairs": (rel.parameters or {}).get("pairs"),
-    }
 
 
 def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
@@ -50,7 +24,7 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, An
     """Pairs, parameters, label sets (each scene's label-set version; each pair's change labels) and
     files that differ between two versions."""
     a, b = get_release(session, name, v1), get_release(session, name, v2)
-    ma, mb = read_manifest(a.root_uri), read_manifest(b.root_uri)
+    ma, mb = read_manifest(Path(str(a.root_uri))), read_manifest(Path(str(b.root_uri)))
     pa = {p["id"]: p for p in ma["lineage"]["pairs"]}
     pb = {p["id"]: p for p in mb["lineage"]["pairs"]}
     fa = {f["path"]: f["sha256"] for f in ma["files"]}

@@ -73,7 +73,7 @@ def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> dict[st
     matrix: the release and its manifest hash, the metric definition, the split's confusion matrix,
     the split-level scores and the paper's per-image ones (the same record for every scorer)."""
     doc = read_manifest(root)
-    cm = np.sum(per_image, axis=0, dtype=np.int64) if per_image else np.zeros((2, 2), np.int64)
+    cm = np.asarray(np.sum(per_image, axis=0, dtype=np.int64)) if per_image else np.zeros((2, 2), np.int64)
     return {
         "release": {
             "name": doc["name"],

@@ -45,7 +45,7 @@ def write_render(
     buf = io.BytesIO()
     np.save(buf, result.depth)
     atomic_write_bytes(paths["depth"], buf.getvalue())
-    stats = dict(result.stats)
+    stats: dict[str, Any] = dict(result.stats)
     stats.update(extra_stats or {})
     stats["camera"] = result.camera.to_dict()
     atomic_write_bytes(paths["stats"], (json.dumps(stats, indent=2) + "\n").encode())

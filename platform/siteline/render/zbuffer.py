@@ -81,6 +81,81 @@ def _check_inputs(xyz: np.ndarray | torch.Tensor, attributes: Mapping[str, np.nd
     return n
 
 
+def _splat(
+    pts: torch.Tensor, cam: Camera, settings: RenderSettings, dev: torch.device, zbuf: torch.Tensor
+) -> int:
+    """Project ``pts`` (N, 3) site-local through the scaled camera ``cam`` in batches and keep per
+    pixel of ``zbuf`` ((H W + 1,) int64; the last slot swallows invalid points) the minimum key
+    (float32 depth bits << 32 | point index); return how many points fell in the frustum."""
+    W, H = cam.width, cam.height
+    npix = W * H
+    dtype = torch.float64 if settings.precision == "float64" else torch.float32
+    Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
+    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
+    fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
+    offsets = disk_offsets(settings.point_size_px)
+    margin = float(settings.point_size_px // 2)
+    zero = torch.zeros((), dtype=dtype, device=dev)
+    in_frustum = 0
+    n = int(pts.shape[0])
+    for start in range(0, n, settings.chunk_points):
+        stop = min(n, start + settings.chunk_points)
+        p = pts[start:stop].to(dev, non_blocking=True).to(dtype)
+        c = torch.addmm(tt, p, Rt)  # (M, 3) camera coordinates
+        z = c[:, 2]
+        inv_z = 1.0 / z
+        u = c[:, 0] * inv_z * fx + cx
+        v = c[:, 1] * inv_z * fy + cy
+        # NaN and inf fail every comparison, so they are invalid here; nothing is cast yet.
+        valid = (z > settings.near_m) & (u >= -margin) & (u < W + margin) & (v >= -margin) & (v < H + margin)
+        in_frustum += int(valid.sum())
+        ui = torch.where(valid, u, zero).floor_().to(torch.int64)
+        vi = torch.where(valid, v, zero).floor_().to(torch.int64)
+        depth_bits = torch.where(valid, z, zero).to(torch.float32).view(torch.int32).to(torch.int64)
+        key = (depth_bits << 32) | torch.arange(start, stop, device=dev, dtype=torch.int64)
+        if len(offsets) == 1:
+            zbuf.scatter_reduce_(0, torch.where(valid, vi * W + ui, npix), key, reduce="amin")
+            continue
+        # a disk scatters every point several times: drop the invalid ones once, first
+        sel = torch.nonzero(valid).squeeze(1)
+        ui, vi, key = ui[sel], vi[sel], key[sel]
+        for du, dv in offsets:
+            uo, vo = ui + du, vi + dv
+            ok = (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
+            zbuf.scatter_reduce_(0, torch.where(ok, vo * W + uo, npix), key, reduce="amin")
+    return in_frustum
+
+
+def _decode(
+    zbuf: torch.Tensor, W: int, H: int, attributes: Mapping[str, np.ndarray | torch.Tensor]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(hit, depth, index, attributes) images of a filled z-buffer. Only hit pixels are decoded and
+    moved, assembled with torch on the CPU: index_select / index_copy_ are several times faster than
+    numpy fancy indexing for millions of pixels (at full scale most of the buffer may be empty)."""
+    npix = W * H
+    hit_pix_t = torch.nonzero(zbuf[:npix] != EMPTY_KEY).squeeze(1)
+    keys_cpu = zbuf[hit_pix_t].cpu()
+    hit_pix = hit_pix_t.cpu()
+    winners = keys_cpu & INDEX_MASK
+    hit_flat = torch.zeros(npix, dtype=torch.bool)
+    hit_flat[hit_pix] = True
+    index_flat = torch.full((npix,), -1, dtype=torch.int64).index_copy_(0, hit_pix, winners)
+    depth_vals = (keys_cpu >> 32).to(torch.int32).view(torch.float32)
+    depth_flat = torch.full((npix,), float("nan"), dtype=torch.float32).index_copy_(0, hit_pix, depth_vals)
+    out_attrs: dict[str, np.ndarray] = {}
+    for name, values in attributes.items():
+        arr = (
+            values.cpu()
+            if isinstance(values, torch.Tensor)
+            else torch.from_numpy(np.ascontiguousarray(values))
+        )
+        img = torch.zeros((npix, *tuple(arr.shape[1:])), dtype=arr.dtype)
+        img.index_copy_(0, hit_pix, arr.index_select(0, winners))
+        out_attrs[name] = img.numpy().reshape((H, W, *tuple(arr.shape[1:])))
+    hit = hit_flat.numpy().reshape(H, W)
+    return hit, depth_flat.numpy().reshape(H, W), index_flat.numpy().reshape(H, W), out_attrs
+
+
 def render_points(
     xyz: np.ndarray | torch.Tensor,
     camera: Camera,
@@ -100,83 +175,20 @@ def render_points(
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise RenderError("device 'cuda' was asked for but torch sees no CUDA device.")
     cam = camera.scaled(settings.scale)
-    W, H = cam.width, cam.height
-    npix = W * H
     t0 = time.perf_counter()
-    dtype = torch.float64 if settings.precision == "float64" else torch.float32
-    Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
-    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
-    fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
-    offsets = disk_offsets(settings.point_size_px)
-    margin = float(settings.point_size_px // 2)
-    # one extra slot (index npix) swallows every invalid point
-    zbuf = torch.full((npix + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
-    pts = _as_tensor(xyz)
-    in_frustum = 0
-    for start in range(0, n, settings.chunk_points):
-        stop = min(n, start + settings.chunk_points)
-        p = pts[start:stop].to(dev, non_blocking=True).to(dtype)
-        c = torch.addmm(tt, p, Rt)  # (M, 3) camera coordinates
-        z = c[:, 2]
-        inv_z = 1.0 / z
-        u = c[:, 0] * inv_z * fx + cx
-        v = c[:, 1] * inv_z * fy + cy
-        # NaN and inf fail every comparison, so they are invalid here; nothing is cast yet.
-        valid = (z > settings.near_m) & (u >= -margin) & (u < W + margin) & (v >= -margin) & (v < H + margin)
-        in_frustum += int(valid.sum())
-        zero = torch.zeros((), dtype=dtype, device=dev)
-        ui = torch.where(valid, u, zero).floor_().to(torch.int64)
-        vi = torch.where(valid, v, zero).floor_().to(torch.int64)
-        depth_bits = torch.where(valid, z, zero).to(torch.float32).view(torch.int32).to(torch.int64)
-        key = (depth_bits << 32) | torch.arange(start, stop, device=dev, dtype=torch.int64)
-        if len(offsets) == 1:
-            pix = torch.where(valid, vi * W + ui, npix)
-            zbuf.scatter_reduce_(0, pix, key, reduce="amin")
-        else:
-            # a disk scatters every point several times: drop the invalid ones once, first
-            sel = torch.nonzero(valid).squeeze(1)
-            ui, vi, key = ui[sel], vi[sel], key[sel]
-            for du, dv in offsets:
-                uo, vo = ui + du, vi + dv
-                ok = (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
-                pix = torch.where(ok, vo * W + uo, npix)
-                zbuf.scatter_reduce_(0, pix, key, reduce="amin")
-    # Only hit pixels are decoded and moved: at full scale most of the buffer may be empty.
-    hit_pix_t = torch.nonzero(zbuf[:npix] != EMPTY_KEY).squeeze(1)
-    keys = zbuf[hit_pix_t]
+    zbuf = torch.full((cam.width * cam.height + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
+    in_frustum = _splat(_as_tensor(xyz), cam, settings, dev, zbuf)
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
     t_splat = time.perf_counter() - t0
-    # Outputs are assembled with torch on the CPU: index_select / index_copy_ are several times
-    # faster than numpy fancy indexing for millions of pixels.
-    hit_pix = hit_pix_t.cpu()
-    keys_cpu = keys.cpu()
-    winners = keys_cpu & INDEX_MASK
-    hit_flat = torch.zeros(npix, dtype=torch.bool)
-    hit_flat[hit_pix] = True
-    index_flat = torch.full((npix,), -1, dtype=torch.int64).index_copy_(0, hit_pix, winners)
-    depth_vals = (keys_cpu >> 32).to(torch.int32).view(torch.float32)
-    depth_flat = torch.full((npix,), float("nan"), dtype=torch.float32).index_copy_(0, hit_pix, depth_vals)
-    hit = hit_flat.numpy().reshape(H, W)
-    index = index_flat.numpy().reshape(H, W)
-    depth = depth_flat.numpy().reshape(H, W)
-    out_attrs: dict[str, np.ndarray] = {}
-    for name, values in attributes.items():
-        arr = (
-            values.cpu()
-            if isinstance(values, torch.Tensor)
-            else torch.from_numpy(np.ascontiguousarray(values))
-        )
-        img = torch.zeros((npix,) + tuple(arr.shape[1:]), dtype=arr.dtype)
-        img.index_copy_(0, hit_pix, arr.index_select(0, winners))
-        out_attrs[name] = img.numpy().reshape((H, W) + tuple(arr.shape[1:]))
+    hit, depth, index, out_attrs = _decode(zbuf, cam.width, cam.height, attributes)
     stats = {
         "points_read": n,
         "points_in_frustum": in_frustum,
         "coverage": float(hit.mean()) if hit.size else 0.0,
         "seconds": time.perf_counter() - t0,
         "seconds_splat": t_splat,
-        "width": W,
-        "height": H,
+        "width": cam.width,
+        "height": cam.height,
     }
     return RenderResult(camera=cam, hit=hit, depth=depth, index=index, attributes=out_attrs, stats=stats)

@@ -46,7 +46,7 @@ def is_stale(name: str) -> bool:
 def sweep_stale(folder: Path, prefix: str) -> list[Path]:
     """Remove the entries of ``folder`` whose names start with ``prefix`` and are provably stale
     (:func:`is_stale`); return what was removed."""
-    removed = []
+    removed: list[Path] = []
     if not folder.is_dir():
         return removed
     for entry in folder.iterdir():

@@ -226,7 +226,11 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
         yield _finish(xyz, flake, rng, spec, t0, ep, None, None, False, False)
 
 
-def _finish(xyz, prim, rng, spec, t0, ep, occ, jib, changed_prev, changed_next) -> EpochChunk:  # noqa: ANN001
+def _finish(
+    xyz: np.ndarray, prim: Primitive, rng: np.random.Generator, spec: LidarSpec, t0: float, ep: m.EpochSpec,
+    occ: OcclusionBuffers | None, jib: tuple[np.ndarray, np.ndarray, float] | None, changed_prev: bool,
+    changed_next: bool,
+) -> EpochChunk:  # fmt: skip
     n = len(xyz)
     t, sensors = _times_and_sensors(xyz, spec, t0)
     ray = xyz - sensors

@@ -18,6 +18,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import laspy
 import numpy as np
@@ -31,7 +32,7 @@ from siteline.fence import fence_geojson
 from siteline.lasio import las_header
 from siteline.synth import model as m
 from siteline.synth.lidar import LidarSpec, sample_epoch
-from siteline.synth.photos import mission_poses, photo_jpeg, render_photo
+from siteline.synth.photos import PhotoPose, mission_poses, photo_jpeg, render_photo
 from siteline.synth.truth import NpyAppender
 
 RAW_EXTENSIONS = ("LDR", "IMU", "RTK", "CLC", "CLI", "RTS", "RTL", "RTB", "SIG", "LDRT", "RPT", "RPOS")
@@ -136,7 +137,7 @@ def _model_from_world(rng: np.random.Generator) -> tuple[float, np.ndarray, np.n
     return scale, R, t
 
 
-def _write_colmap(out: Path, poses, rng: np.random.Generator) -> dict:  # noqa: ANN001
+def _write_colmap(out: Path, poses: list[PhotoPose], rng: np.random.Generator) -> dict[str, Any]:
     """A sparse model of the photos, moved by a random similarity (model_from_world) so that
     georegistration has something to recover; returns that similarity."""
     rec = pycolmap.Reconstruction()

@@ -54,7 +54,7 @@ def mission_poses(
     """A DJI mapping mission: nadir lawnmower lines at ``altitude_m`` plus an oblique orbit."""
     w, h, fx = photo_size(scale)
     to_geo = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
-    plan: list[tuple[tuple[float, float, float], float, float]] = []
+    plan: list[tuple[tuple[float, float, float], float | None, float]] = []
     for k, y in enumerate((-40.0, 0.0, 40.0)):
         xs = (-60.0, -30.0, 0.0, 30.0, 60.0)
         for x in xs if k % 2 == 0 else xs[::-1]:

@@ -7,6 +7,7 @@ generator, so the same seed gives the same points whatever else the site holds.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,16 +41,22 @@ class Primitive:
         return SAMPLE[self.kind](n, rng, *self.params)
 
 
-def _quad_area(origin, u, v) -> float:  # noqa: ANN001
+Vec = Sequence[float] | np.ndarray
+Rng = np.random.Generator
+
+
+def _quad_area(origin: Vec, u: Vec, v: Vec) -> float:
     return float(np.linalg.norm(np.cross(u, v)))
 
 
-def _quad(n, rng, origin, u, v) -> np.ndarray:  # noqa: ANN001
+def _quad(n: int, rng: Rng, origin: Vec, u: Vec, v: Vec) -> np.ndarray:
     a = rng.random((n, 2))
     return np.asarray(origin) + a[:, :1] * np.asarray(u) + a[:, 1:] * np.asarray(v)
 
 
-def _box_faces(center, size, yaw, top=True):  # noqa: ANN001, ANN202
+def _box_faces(
+    center: Vec, size: Vec, yaw: float, top: bool = True
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     cx, cy, z0 = center
     sx, sy, sz = size
     c, s = math.cos(yaw), math.sin(yaw)
@@ -62,11 +69,11 @@ def _box_faces(center, size, yaw, top=True):  # noqa: ANN001, ANN202
     return faces
 
 
-def _box_area(center, size, yaw) -> float:  # noqa: ANN001
+def _box_area(center: Vec, size: Vec, yaw: float) -> float:
     return sum(_quad_area(*f) for f in _box_faces(center, size, yaw))
 
 
-def _box(n, rng, center, size, yaw) -> np.ndarray:  # noqa: ANN001
+def _box(n: int, rng: Rng, center: Vec, size: Vec, yaw: float) -> np.ndarray:
     faces = _box_faces(center, size, yaw)
     areas = np.array([_quad_area(*f) for f in faces])
     which = rng.choice(len(faces), n, p=areas / areas.sum())
@@ -77,11 +84,11 @@ def _box(n, rng, center, size, yaw) -> np.ndarray:  # noqa: ANN001
     return out
 
 
-def _cyl_area(cx, cy, z0, r, h) -> float:  # noqa: ANN001
+def _cyl_area(cx: float, cy: float, z0: float, r: float, h: float) -> float:
     return 2 * math.pi * r * h + math.pi * r * r
 
 
-def _cyl(n, rng, cx, cy, z0, r, h) -> np.ndarray:  # noqa: ANN001
+def _cyl(n: int, rng: Rng, cx: float, cy: float, z0: float, r: float, h: float) -> np.ndarray:
     side = 2 * math.pi * r * h
     top = math.pi * r * r
     on_top = rng.random(n) < top / (side + top)
@@ -91,27 +98,27 @@ def _cyl(n, rng, cx, cy, z0, r, h) -> np.ndarray:  # noqa: ANN001
     return np.c_[cx + rr * np.cos(th), cy + rr * np.sin(th), z]
 
 
-def _cone_area(cx, cy, z0, r, h) -> float:  # noqa: ANN001
+def _cone_area(cx: float, cy: float, z0: float, r: float, h: float) -> float:
     return math.pi * r * math.hypot(r, h)
 
 
-def _cone(n, rng, cx, cy, z0, r, h) -> np.ndarray:  # noqa: ANN001
+def _cone(n: int, rng: Rng, cx: float, cy: float, z0: float, r: float, h: float) -> np.ndarray:
     rr = r * np.sqrt(rng.random(n))
     th = rng.uniform(0, 2 * math.pi, n)
     return np.c_[cx + rr * np.cos(th), cy + rr * np.sin(th), z0 + h * (1 - rr / r)]
 
 
-def _sphere_area(cx, cy, cz, r) -> float:  # noqa: ANN001
+def _sphere_area(cx: float, cy: float, cz: float, r: float) -> float:
     return 4 * math.pi * r * r
 
 
-def _sphere(n, rng, cx, cy, cz, r) -> np.ndarray:  # noqa: ANN001
+def _sphere(n: int, rng: Rng, cx: float, cy: float, cz: float, r: float) -> np.ndarray:
     v = rng.normal(size=(n, 3))
     v /= np.linalg.norm(v, axis=1, keepdims=True) + 1e-300
     return np.array([cx, cy, cz]) + r * v
 
 
-def _terrain_area(x0, x1, y0, y1, *rest) -> float:  # noqa: ANN001
+def _terrain_area(x0: float, x1: float, y0: float, y1: float, *rest: object) -> float:
     return (x1 - x0) * (y1 - y0)
 
 
@@ -129,7 +136,10 @@ def terrain_height(x: np.ndarray, y: np.ndarray, slope: tuple[float, float], pit
     return z
 
 
-def _terrain(n, rng, x0, x1, y0, y1, sx, sy, pit, exclude) -> np.ndarray:  # noqa: ANN001
+def _terrain(
+    n: int, rng: Rng, x0: float, x1: float, y0: float, y1: float, sx: float, sy: float,
+    pit: tuple[float, float, float, float, float] | None, exclude: tuple[float, float, float, float] | None,
+) -> np.ndarray:  # fmt: skip
     """Terrain over a rectangle, optionally only inside (pit region) or outside (``exclude``) a box."""
     x = rng.uniform(x0, x1, n)
     y = rng.uniform(y0, y1, n)
@@ -141,7 +151,7 @@ def _terrain(n, rng, x0, x1, y0, y1, sx, sy, pit, exclude) -> np.ndarray:  # noq
     return np.c_[x, y, terrain_height(x, y, (sx, sy), pit)]
 
 
-AREA = {
+AREA: dict[str, Callable[..., float]] = {
     "quad": _quad_area,
     "box": _box_area,
     "cylinder": _cyl_area,
@@ -149,4 +159,11 @@ AREA = {
     "sphere": _sphere_area,
     "terrain": _terrain_area,
 }
-SAMPLE = {"quad": _quad, "box": _box, "cylinder": _cyl, "cone": _cone, "sphere": _sphere, "terrain": _terrain}
+SAMPLE: dict[str, Callable[..., np.ndarray]] = {
+    "quad": _quad,
+    "box": _box,
+    "cylinder": _cyl,
+    "cone": _cone,
+    "sphere": _sphere,
+    "terrain": _terrain,
+}

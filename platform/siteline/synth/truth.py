@@ -7,6 +7,7 @@ from pathlib import Path
 from types import TracebackType
 
 import numpy as np
+import numpy.typing as npt
 
 _HEADER_LEN = 128  # bytes, magic included: room for any shape a synthetic epoch reaches
 
@@ -14,7 +15,7 @@ _HEADER_LEN = 128  # bytes, magic included: room for any shape a synthetic epoch
 class NpyAppender:
     """Write a 1-D ``.npy`` array in pieces: a fixed-size header is rewritten with the final length."""
 
-    def __init__(self, path: Path, dtype: np.dtype | str) -> None:
+    def __init__(self, path: Path, dtype: npt.DTypeLike) -> None:
         self.path = Path(path)
         self.dtype = np.dtype(dtype)
         self.count = 0

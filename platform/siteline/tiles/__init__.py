@@ -1,21 +1,32 @@
-"""The Zarr v3 tile store: site-grid tiles with an additive level of detail (DESIGN.md §2, §7)."""
+"""The Zarr v3 tile store: site-grid tiles with an additive level of detail (DESIGN.md §2, §7).
 
+The tile stage: :func:`plan_tiling` (catalog) -> :func:`execute_tiling` (write and publish the
+store) -> ``siteline.catalog.scenes.record_tiling``; :func:`tile_scene` runs the three."""
+
+from siteline.records.tiling import NodeInfo, SceneTiling, TileSource, TileSpec
+from siteline.tiles.execute import execute_tiling
 from siteline.tiles.export import export_las
-from siteline.tiles.layout import TileSpec
 from siteline.tiles.lod import assign_levels
-from siteline.tiles.reader import SceneTiles
-from siteline.tiles.scene import open_scene_tiles, store_uri, tile_scene
-from siteline.tiles.writer import NodeInfo, TileResult, write_tiles
+from siteline.tiles.plan import TilingPlan, plan_tiling
+from siteline.tiles.reader import Points, ReadStats, SceneTiles
+from siteline.tiles.stage import TileOutcome, tile_scene
+from siteline.tiles.writer import TileResult, write_tiles
 
 __all__ = [
     "NodeInfo",
+    "Points",
+    "ReadStats",
     "SceneTiles",
+    "SceneTiling",
+    "TileOutcome",
     "TileResult",
+    "TileSource",
     "TileSpec",
+    "TilingPlan",
     "assign_levels",
+    "execute_tiling",
     "export_las",
-    "open_scene_tiles",
-    "store_uri",
+    "plan_tiling",
     "tile_scene",
     "write_tiles",
 ]

@@ -1,4 +1,5 @@
-"""The tile store's conventions: the site grid, node keys, quantisation and the persisted spec.
+"""The tile store's conventions: the site grid, node keys and quantisation (the persisted spec is
+:class:`siteline.records.TileSpec`).
 
 Tile (i, j) covers site-local x in [i T, (i + 1) T) and y in [j T, (j + 1) T), T = the site's tile
 size, so the same tile covers the same ground in every scene. Inside a tile, level L keeps one point
@@ -15,12 +16,11 @@ plus (i T, j T, 0)).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
-from typing import Any
 
 import numpy as np
 
 from siteline.errors import TileError
+from siteline.records.tiling import TileSpec
 
 # Stored arrays per tile. Positions are stored as ``xyz_counts`` (int32 quanta from the tile origin)
 # and come back from reads as ``xyz_m`` (site-local metres): the two never share a name. Stores
@@ -39,67 +39,6 @@ SPILL_DTYPE = np.dtype(
         ("return_number", "u1"),
     ]
 )
-
-NODE_ORDERS = ("random", "input")
-
-
-@dataclass(frozen=True)
-class TileSpec:
-    """How a scene is tiled; stored in the Zarr group's attributes and the scene's statistics.
-
-    quantum_m: coordinate quantum (1 mm). tile_size_m: the site grid. root_spacing_m: spacing of
-    level 0 (default: the largest power-of-two number of quanta within tile / 8, 4.096 m for 50 m
-    tiles, so every level's cube is a whole number of quanta and nests in the level above).
-    min_spacing_m: the last level takes every remaining point once the
-    spacing would fall below this. max_node_depth: the deepest octree depth that splits a level into
-    nodes (3: cubes of T / 8, 6.25 m for 50 m tiles; deeper levels share that grid), so a view reads
-    fine levels only where it needs them. node_order: order of the points inside a node, "random"
-    (seeded shuffle, so every prefix of a node is a uniform subsample of it and a view can read part
-    of a level) or "input" (stores written before it: only whole nodes are read).
-    chunk_points / shard_points: Zarr inner chunk and shard length. clevel: blosc-zstd level.
-    """
-
-    tile_size_m: float = 50.0
-    quantum_m: float = 0.001
-    root_spacing_m: float | None = None
-    min_spacing_m: float = 0.02
-    max_levels: int = 12
-    max_node_depth: int = 3
-    node_order: str = "random"
-    chunk_points: int = 65_536
-    shard_points: int = 1_048_576
-    clevel: int = 3
-
-    def __post_init__(self) -> None:
-        if not (self.tile_size_m > 0 and self.quantum_m > 0 and self.min_spacing_m > 0):
-            raise TileError("tile size, quantum and minimum spacing must be positive.")
-        if self.tile_size_m / self.quantum_m > 2**30:
-            raise TileError(
-                f"tile size {self.tile_size_m} m at quantum {self.quantum_m} m overflows int32 counts."
-            )
-        if not 0 <= self.max_node_depth <= 10:
-            raise TileError(f"max_node_depth {self.max_node_depth} must lie in 0..10.")
-        if self.node_order not in NODE_ORDERS:
-            raise TileError(f"node order {self.node_order!r} must be one of {NODE_ORDERS}.")
-        if self.shard_points % self.chunk_points:
-            raise TileError("shard_points must be a multiple of chunk_points.")
-
-    @property
-    def level0_spacing_m(self) -> float:
-        if self.root_spacing_m is not None:
-            return self.root_spacing_m
-        return 2.0 ** math.floor(math.log2(self.tile_size_m / 8.0 / self.quantum_m)) * self.quantum_m
-
-    def spacing(self, level: int) -> float:
-        return self.level0_spacing_m / 2.0**level
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> TileSpec:
-        """The spec a store recorded; one written before ``node_order`` existed kept input order."""
-        return cls(**{"node_order": "input", **doc})
 
 
 def tile_index(xy_local: np.ndarray, tile_size_m: float) -> np.ndarray:

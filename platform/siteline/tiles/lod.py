@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.tiles.layout import TileSpec, level_count
+from siteline.records.tiling import TileSpec
+from siteline.tiles.layout import level_count
 
 _BIG = np.iinfo(np.int64).max
 

@@ -3,37 +3,61 @@
 from __future__ import annotations
 
 from collections import OrderedDict, defaultdict
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
+import zarr
 
 from siteline.cameras import Camera
 from siteline.errors import TileError
+from siteline.records.tiling import NodeInfo, TileSource, TileSpec
 from siteline.stores import join, open_store
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
     LEGACY_COUNTS,
     METRES,
-    TileSpec,
     dequantise,
     parse_tile_key,
     tile_origin_local,
 )
-from siteline.tiles.writer import NodeInfo, node_from_dict
 
 DEFAULT_ATTRIBUTES = ("rgb", "class")
 
 
 @dataclass
 class ReadStats:
+    """What one read cost: tiles and points read, points decoded from the store (the inner chunks
+    that were not cached), points returned (after culling), and the deepest level read per tile."""
+
     tiles_read: int = 0
     points_read: int = 0
-    points_decoded: int = 0  # points in the inner chunks decoded from the store (cache misses)
+    points_decoded: int = 0
     points_returned: int = 0
     levels: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Points:
+    """Points read from a scene's tiles: ``xyz_m`` (N, 3) float64 site-local metres (render them as
+    float32: site-local float32 keeps millimetres), the requested attributes by name ((N,) or (N, C)
+    arrays in the store's dtypes), and what the read cost."""
+
+    xyz_m: np.ndarray
+    attributes: dict[str, np.ndarray]
+    stats: ReadStats
+
+    def __len__(self) -> int:
+        return len(self.xyz_m)
+
+    def select(self, keep: np.ndarray) -> Points:
+        """The points where ``keep`` (a mask or indices) holds; ``stats.points_returned`` follows."""
+        xyz = self.xyz_m[keep]
+        stats = replace(self.stats, points_returned=len(xyz))
+        return Points(xyz, {k: v[keep] for k, v in self.attributes.items()}, stats)
 
 
 def bounds_box(bounds: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -79,7 +103,7 @@ def box_distance(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     return float(np.linalg.norm(d))
 
 
-def _open(uri: str, what: str, fix: str):  # noqa: ANN202
+def _open(uri: str, what: str, fix: str) -> zarr.Group:
     """The Zarr group at ``uri`` (a local path or an fsspec URL), or a TileError saying it is missing."""
     store = open_store(uri)
     if not store.exists(join(uri, "zarr.json")):
@@ -87,17 +111,36 @@ def _open(uri: str, what: str, fix: str):  # noqa: ANN202
     return store.open_group(uri, mode="r")
 
 
+# a view's per-tile choice: (indices into the tile's nodes, points to read of each)
+Selection = dict[str, tuple[np.ndarray, np.ndarray]]
+
+
 class SceneTiles:
-    """A scene's tile store opened for reading. Coordinates come back site-local float32 metres
-    (computed in float64 from the int32 counts and the tile origins, then cast)."""
+    """A scene's tile store opened for reading, indexed by its nodes. Reads return :class:`Points`
+    (site-local float64 metres, from the int32 counts and the tile origins).
+
+    ``attributes``: name -> address of a Zarr group laid out like this store's ``tiles/<tile>/<name>``
+    and aligned point for point with it (``class`` of a label-set version, ``change`` of a pair's
+    labels), read in place of (or beside) the store's own arrays. A reader's attributes are fixed:
+    :meth:`with_attribute` returns another reader."""
 
     def __init__(
-        self, uri: str | Path, nodes: Sequence[NodeInfo], spec: TileSpec, cache_bytes: int = 256 * 2**20
+        self,
+        uri: str | Path,
+        nodes: Sequence[NodeInfo],
+        spec: TileSpec,
+        cache_bytes: int = 256 * 2**20,
+        attributes: Mapping[str, str] | None = None,
     ) -> None:
         self.uri = str(uri)
         self.root = _open(self.uri, "tile store", "re-run `siteline scene tile`")
         self.spec = spec
         self.nodes = list(nodes)
+        self.attributes = dict(attributes or {})
+        self._extra = {
+            name: _open(str(u), "attribute store", "process the pair again")
+            for name, u in self.attributes.items()
+        }
         self.by_tile: dict[str, list[NodeInfo]] = defaultdict(list)
         for n in self.nodes:
             self.by_tile[n.tile].append(n)
@@ -124,31 +167,57 @@ class SceneTiles:
             t: np.bincount(lv, weights=cnt, minlength=64).astype(np.int64)
             for t, (_, _, lv, _, cnt) in self.node_arrays.items()
         }
-        self.last_stats = ReadStats()
-        self.extra: dict[str, object] = {}
-        self._handles: dict[tuple[str, str], object] = {}
+        self._handles: dict[tuple[str, str], zarr.Array] = {}
         # many views of one pair read the same tiles: keep recent inner chunks (LRU, byte budget)
         self.cache_bytes = cache_bytes
         self._cache: OrderedDict[tuple[str, str, int], np.ndarray] = OrderedDict()
         self._cached = 0
 
-    def _handle(self, tile: str, name: str):  # noqa: ANN202
+    @classmethod
+    def from_source(cls, source: TileSource, cache_bytes: int = 256 * 2**20) -> SceneTiles:
+        """The reader of a scene's tiles as the catalog describes them (siteline.records.TileSource)."""
+        return cls(source.uri, source.nodes, source.spec, cache_bytes, source.attributes)
+
+    def attribute_record(self, name: str) -> dict[str, object]:
+        """The attributes (metadata) of the group attribute ``name`` is read from."""
+        if name not in self._extra:
+            raise TileError(f"this reader of {self.uri} reads no attribute {name!r} from another store.")
+        return dict(self._extra[name].attrs)
+
+    @classmethod
+    def open(cls, uri: str | Path) -> SceneTiles:
+        """Open from the store alone (its attributes hold the spec and the node table)."""
+        attrs = dict(_open(str(uri), "tile store", "tile the scene again").attrs)
+        if "nodes" not in attrs:
+            raise TileError(f"{uri} is not a siteline tile store.")
+        docs: list[Any] = list(attrs["nodes"])  # type: ignore[arg-type]
+        spec: dict[str, Any] = dict(attrs["spec"])  # type: ignore[arg-type]
+        return cls(uri, [NodeInfo.from_dict(n) for n in docs], TileSpec.from_dict(spec))
+
+    def with_attribute(self, name: str, uri: str) -> SceneTiles:
+        """A reader of the same store that reads attribute ``name`` from the group at ``uri`` (laid
+        out as ``tiles/<tile>/<name>``, aligned point for point with this store)."""
+        return SceneTiles(self.uri, self.nodes, self.spec, self.cache_bytes, self.attributes | {name: uri})
+
+    def _handle(self, tile: str, name: str) -> zarr.Array:
         """The Zarr array ``tiles/<tile>/<name>``, opened once (each open reads metadata: a request
         per level of the hierarchy on an object store)."""
         key = (tile, name)
         arr = self._handles.get(key)
         if arr is None:
-            src = self.extra.get(name, self.root)
+            src = self._extra.get(name, self.root)
             try:
-                arr = src[f"tiles/{tile}/{name}"]
+                found = src[f"tiles/{tile}/{name}"]
             except KeyError:
                 if name != COUNTS:
                     raise
-                arr = src[f"tiles/{tile}/{LEGACY_COUNTS}"]  # a store written before the rename
-            self._handles[key] = arr
+                found = src[f"tiles/{tile}/{LEGACY_COUNTS}"]  # a store written before the rename
+            if not isinstance(found, zarr.Array):
+                raise TileError(f"{self.uri}: tiles/{tile}/{name} is not an array: the store is damaged.")
+            arr = self._handles[key] = found
         return arr
 
-    def _values(self, tile: str, name: str, k: int, idx: np.ndarray | None) -> np.ndarray:
+    def _values(self, tile: str, name: str, k: int, idx: np.ndarray | None, stats: ReadStats) -> np.ndarray:
         """Values ``idx`` (ascending; the first ``k`` when None) of ``tiles/<tile>/<name>``, read by
         the array's inner chunks: only the chunks they touch are decoded, each kept in the reader's
         LRU cache, so a view that needs a few nodes of a tile never decodes the rest of it."""
@@ -157,33 +226,34 @@ class SceneTiles:
         if (k if idx is None else len(idx)) == 0:
             return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
         if idx is None:
-            blocks = self._chunks(tile, name, arr, c, np.arange(-(-k // c)))
+            blocks = self._chunks(tile, name, arr, c, np.arange(-(-k // c)), stats)
             return (blocks[0] if len(blocks) == 1 else np.concatenate(blocks))[:k]
         q = idx // c
         if len(q) and np.any(q[1:] < q[:-1]):
             raise TileError("node reads must come in array order.")
         first = np.ones(len(q), dtype=bool)
         first[1:] = q[1:] != q[:-1]
-        blocks = self._chunks(tile, name, arr, c, q[first])
+        blocks = self._chunks(tile, name, arr, c, q[first], stats)
         buf = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
         # every chunk but the array's last is full, so chunk j of the read starts at j * c in buf
         return buf[(np.cumsum(first) - 1) * c + (idx - q * c)]
 
-    def _chunks(self, tile: str, name: str, arr, c: int, ids: np.ndarray) -> list[np.ndarray]:  # noqa: ANN001
+    def _chunks(
+        self, tile: str, name: str, arr: zarr.Array, c: int, ids: np.ndarray, stats: ReadStats
+    ) -> list[np.ndarray]:
         """Inner chunks ``ids`` of ``arr`` from the cache; each run of missing ones in one zarr call."""
         out: list[np.ndarray | None] = [self._cache.get((tile, name, int(i))) for i in ids]
         missing = [q for q, v in enumerate(out) if v is None]
         runs = np.split(np.array(missing), np.flatnonzero(np.diff(ids[missing]) != 1) + 1) if missing else []
         for run in runs:
             first, last = int(ids[run[0]]), int(ids[run[-1]])
-            values = arr[first * c : (last + 1) * c]
-            self.last_stats.points_decoded += len(values)
+            values = np.asarray(arr[first * c : (last + 1) * c])
+            stats.points_decoded += len(values)
             for q in run:
                 lo = (int(ids[q]) - first) * c
                 block = values[lo : lo + c]
                 out[q] = block = block.copy() if len(run) > 1 else block  # evictable one by one
-                key = (tile, name, int(ids[q]))
-                self._cache[key] = block
+                self._cache[(tile, name, int(ids[q]))] = block
                 self._cached += block.nbytes
         fresh = set(missing)
         for q, i in enumerate(ids):
@@ -193,24 +263,6 @@ class SceneTiles:
             _, old = self._cache.popitem(last=False)
             self._cached -= old.nbytes
         return out  # type: ignore[return-value]
-
-    def attach(self, name: str, uri: str | Path) -> None:
-        """Read attribute ``name`` from another Zarr group laid out like this store's ``tiles/<tile>/<name>``
-        (per-point labels of a pair), aligned point for point with this scene's tiles."""
-        self.extra[name] = _open(str(uri), "attribute store", "process the pair again")
-        for key in [k for k in self._handles if k[1] == name]:
-            del self._handles[key]
-        for key in [k for k in self._cache if k[1] == name]:
-            self._cached -= self._cache.pop(key).nbytes
-
-    @classmethod
-    def open(cls, uri: str | Path) -> SceneTiles:
-        """Open from the store alone (its attributes hold the spec and the node table)."""
-        attrs = dict(_open(str(uri), "tile store", "tile the scene again").attrs)
-        if "nodes" not in attrs:
-            raise TileError(f"{uri} is not a siteline tile store.")
-        nodes = [node_from_dict(n) for n in attrs["nodes"]]
-        return cls(uri, nodes, TileSpec.from_dict(attrs["spec"]))
 
     @property
     def point_count(self) -> int:
@@ -225,44 +277,48 @@ class SceneTiles:
         that many values from the start of each array returns exactly those levels."""
         return sum(n.count for n in self.by_tile[tile] if level is None or n.level <= level)
 
-    def read(self, prefixes: dict[str, int], attributes: Sequence[str]) -> dict[str, np.ndarray]:
+    def read(self, prefixes: Mapping[str, int], attributes: Sequence[str]) -> Points:
         """Read the first ``prefixes[tile]`` points of each tile: one call per tile and attribute."""
         return self._gather({t: (k, None) for t, k in prefixes.items() if k > 0}, attributes)
 
-    def _gather(
-        self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]
-    ) -> dict[str, np.ndarray]:
+    def read_tile(self, tile: str, attributes: Sequence[str], level: int | None = None) -> Points:
+        """Every point of ``tile`` up to ``level`` (all levels when None), in the store's order."""
+        return self.read({tile: self.prefix(tile, level)}, attributes)
+
+    def _gather(self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]) -> Points:
         """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
-        cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres ``xyz_m``;
+        cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres;
         concatenate over tiles."""
-        bad = [a for a in attributes if (a not in ATTRIBUTES or a == COUNTS) and a not in self.extra]
+        bad = [a for a in attributes if (a not in ATTRIBUTES or a == COUNTS) and a not in self.attributes]
         if bad:
             raise TileError(
                 f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != COUNTS]} "
                 f"(positions always come back as {METRES!r})."
             )
+        stats = ReadStats()
         parts: dict[str, list[np.ndarray]] = {a: [] for a in (METRES, *attributes)}
-        stats = self.last_stats = ReadStats()
         for tile in sorted(plan):
             k, idx = plan[tile]
             i, j = parse_tile_key(tile)
             for a in (METRES, *attributes):
-                values = self._values(tile, COUNTS if a == METRES else a, k, idx)
+                values = self._values(tile, COUNTS if a == METRES else a, k, idx, stats)
                 if a == METRES:
-                    origin = tile_origin_local(i, j, self.spec.tile_size_m)
-                    values = dequantise(values, origin, self.spec.quantum_m)
+                    values = dequantise(
+                        values, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m
+                    )
                 parts[a].append(values)
             stats.tiles_read += 1
             stats.points_read += k if idx is None else len(idx)
-        out = {}
-        for a, chunks in parts.items():
-            if chunks:
-                out[a] = np.concatenate(chunks)
-            else:
-                shape = (0, 3) if a in (METRES, "rgb") else (0,)
-                dtype = np.float64 if a == METRES else self._handle(next(iter(self.by_tile)), a).dtype
-                out[a] = np.zeros(shape, dtype=dtype)
-        return out
+        out = {a: np.concatenate(chunks) if chunks else self._empty(a) for a, chunks in parts.items()}
+        stats.points_returned = len(out[METRES])
+        xyz = out.pop(METRES)
+        return Points(xyz, out, stats)
+
+    def _empty(self, attribute: str) -> np.ndarray:
+        if attribute == METRES:
+            return np.zeros((0, 3), np.float64)
+        arr = self._handle(next(iter(self.by_tile)), attribute)
+        return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
 
     def points(
         self,
@@ -270,12 +326,11 @@ class SceneTiles:
         level: int | None = None,
         resolution: float | None = None,
         attributes: Sequence[str] = DEFAULT_ATTRIBUTES,
-    ) -> dict[str, np.ndarray]:
+    ) -> Points:
         """Points in ``bounds`` ((xmin, ymin, xmax, ymax) or 6 values with z, site-local metres) up to
         ``level`` (or the level that reaches ``resolution`` metres; all levels when both are None).
         In a store with shuffled nodes, ``resolution`` reads the level that crosses it in part, as a
-        view does (:meth:`node_takes`), so the result has about that spacing whatever the density.
-        Returns ``xyz_m`` (N, 3) float32 site-local metres and the requested attributes."""
+        view does (:meth:`node_takes`), so the result has about that spacing whatever the density."""
         if level is not None and resolution is not None:
             raise TileError("give level or resolution, not both.")
         if resolution is not None and self.spec.node_order != "random":
@@ -286,10 +341,10 @@ class SceneTiles:
         tiles = [
             t
             for t, (tlo, thi) in self.tile_bounds.items()
-            if lo is None or not (np.any(thi < lo) or np.any(tlo > hi))
+            if lo is None or hi is None or not (np.any(thi < lo) or np.any(tlo > hi))
         ]
         if resolution is not None:
-            selection = {}
+            selection: Selection = {}
             for tile in tiles:
                 need = np.full(len(self.node_arrays[tile][2]), float(resolution))
                 sel, take = self.node_takes(tile, np.ones(len(need), bool), need)
@@ -298,17 +353,15 @@ class SceneTiles:
             out = self.read_nodes(selection, attributes)
         else:
             out = self.read({t: self.prefix(t, level) for t in tiles}, attributes)
-        if bounds is not None:
-            keep = in_bounds(out[METRES], bounds)
-            out = {k: v[keep] for k, v in out.items()}
-        out[METRES] = out[METRES].astype(np.float32)
-        self.last_stats.points_returned = len(out[METRES])
-        return out
+        return out.select(in_bounds(out.xyz_m, bounds)) if bounds is not None else out
 
-    def levels_for_view(self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3):  # noqa: ANN201
+    def levels_for_view(
+        self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3
+    ) -> tuple[Selection, np.ndarray]:
         """Per tile met by the frustum of ``camera`` at ``scale``: ``(indices, take)``, the nodes to
         read (indices into ``node_arrays``) and how many of each node's points, so that each node's
-        surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance.
+        surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance; and
+        the frustum's planes.
 
         Levels coarser than that spacing are read whole. In a store whose nodes are shuffled
         (``node_order="random"``) the level that crosses it is read in part: the first ``take`` points
@@ -320,7 +373,7 @@ class SceneTiles:
         planes = cam.frustum_planes(near_m)
         centre = cam.center
         f = min(cam.fx, cam.fy)
-        out = {}
+        out: Selection = {}
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
@@ -360,29 +413,29 @@ class SceneTiles:
         k = np.searchsorted(-self._spacing[levels], -np.asarray(resolution_m, dtype=np.float64), side="left")
         return levels[np.minimum(k, len(levels) - 1)]
 
-    def read_nodes(
-        self, selection: dict[str, tuple[np.ndarray, np.ndarray]], attributes: Sequence[str]
-    ) -> dict[str, np.ndarray]:
+    def read_nodes(self, selection: Selection, attributes: Sequence[str]) -> Points:
         """Read, per tile, the first ``take[k]`` points of each node ``indices[k]`` of
         ``selection[tile] = (indices, take)`` (indices into ``node_arrays[tile]``, ascending): only
         the inner chunks those ranges touch are decoded (:meth:`_values`)."""
-        plan = {}
+        plan: dict[str, tuple[int, np.ndarray | None]] = {}
         for tile, (sel, take) in selection.items():
             starts = self.node_arrays[tile][3][sel]
             idx = np.repeat(starts - np.r_[0, np.cumsum(take)[:-1]], take) + np.arange(int(take.sum()))
             plan[tile] = (int((starts + take).max()), idx)
-        return self._gather(plan, attributes)
+        out = self._gather(plan, attributes)
+        out.stats.levels = {t: int(self.node_arrays[t][2][sel].max()) for t, (sel, _) in selection.items()}
+        return out
 
     def points_for_view(
         self,
         camera: Camera,
         scale: float,
         attributes: Sequence[str] = DEFAULT_ATTRIBUTES,
-        level: int | str = "auto",
+        level: int | Literal["auto"] | None = "auto",
         near_m: float = 1e-3,
         lod_factor: float = 1.0,
         point_size_px: int = 1,
-    ) -> dict[str, np.ndarray]:
+    ) -> Points:
         """Points a render of ``camera`` at ``scale`` with ``point_size_px`` disks needs: nodes culled
         by the frustum, and per node the points that give a spacing of ``lod_factor`` x half a drawn
         point (``lod_factor * point_size_px / 2`` pixel footprints) at the node's nearest distance
@@ -395,24 +448,24 @@ class SceneTiles:
         if level == "auto":
             selection, planes = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)
         else:
-            cam = camera.scaled(scale)
-            planes = cam.frustum_planes(near_m)
-            selection = {}
-            for tile, (tlo, thi) in self.tile_bounds.items():
-                if not box_in_frustum(planes, tlo, thi):
-                    continue
-                lo, hi, lv, _, count = self.node_arrays[tile]
-                keep = boxes_in_frustum(planes, lo, hi) & (True if level is None else lv <= level)
-                sel = np.flatnonzero(keep)
-                if len(sel):
-                    selection[tile] = (sel, count[sel])
+            selection, planes = self._frustum_nodes(camera, scale, level, near_m)
         out = self.read_nodes(selection, attributes)
-        xyz = out[METRES]
+        xyz = out.xyz_m
         keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
-        out = {k: v[keep] for k, v in out.items()}
-        out[METRES] = out[METRES].astype(np.float32)
-        self.last_stats.points_returned = len(out[METRES])
-        self.last_stats.levels = {
-            t: int(self.node_arrays[t][2][sel].max()) for t, (sel, _) in selection.items()
-        }
-        return out
+        return out.select(keep)
+
+    def _frustum_nodes(
+        self, camera: Camera, scale: float, level: int | None, near_m: float
+    ) -> tuple[Selection, np.ndarray]:
+        """Every node in the frustum up to ``level`` (all when None), whole."""
+        planes = camera.scaled(scale).frustum_planes(near_m)
+        selection: Selection = {}
+        for tile, (tlo, thi) in self.tile_bounds.items():
+            if not box_in_frustum(planes, tlo, thi):
+                continue
+            lo, hi, lv, _, count = self.node_arrays[tile]
+            keep = boxes_in_frustum(planes, lo, hi) & (True if level is None else lv <= level)
+            sel = np.flatnonzero(keep)
+            if len(sel):
+                selection[tile] = (sel, count[sel])
+        return selection, planes

@@ -17,23 +17,25 @@ import uuid
 import zlib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyproj
+from zarr.codecs import BloscCodec, BloscShuffle
 
-from siteline.crs import ZUnit
+from siteline.crs import ToSiteCRS, ZUnit
 from siteline.errors import TileError
-from siteline.progress import Progress
+from siteline.progress import Progress, no_progress, step
+from siteline.records.tiling import NodeInfo, TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import site_chunks, source_transformer
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
     SPILL_DTYPE,
-    TileSpec,
     dequantise,
     node_cells,
     node_key,
@@ -50,69 +52,25 @@ PARALLEL_MIN_POINTS = 2_000_000
 
 
 @dataclass(frozen=True)
-class NodeInfo:
-    """One node: the points of one level in one octree cube of a tile (siteline.tiles.layout). Bounds
-    (of its points) in site-local metres; ``start``/``count`` index the tile's arrays; ``spacing_m``
-    is the level's cube edge; ``cell``: the octree cube (None: the whole tile, stores written before
-    octree nodes)."""
-
-    key: str
-    tile: str
-    level: int
-    bounds_min: tuple[float, float, float]
-    bounds_max: tuple[float, float, float]
-    count: int
-    start: int
-    spacing_m: float
-    cell: tuple[int, int, int] | None = None
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-@dataclass
 class TileResult:
+    """What :func:`write_tiles` wrote: the store (a local path), its points, tiles and levels, bytes on
+    disk, checksum (of every array of every tile, in order), the nodes, and the seconds it took."""
+
     uri: str
     points: int
     tiles: int
     levels: int
     bytes: int
     checksum: str
-    nodes: list[NodeInfo]
+    nodes: tuple[NodeInfo, ...]
     seconds: float
 
     @property
     def bytes_per_point(self) -> float:
         return self.bytes / max(self.points, 1)
 
-    def summary(self) -> dict:
-        return {
-            "uri": self.uri,
-            "points": self.points,
-            "tiles": self.tiles,
-            "levels": self.levels,
-            "bytes": self.bytes,
-            "bytes_per_point": self.bytes_per_point,
-            "checksum": self.checksum,
-            "seconds": self.seconds,
-        }
 
-
-def node_from_dict(doc: dict) -> NodeInfo:
-    """A NodeInfo from its JSON form (store attributes, worker results)."""
-    cell = doc.get("cell")
-    return NodeInfo(
-        **{
-            **doc,
-            "bounds_min": tuple(doc["bounds_min"]),
-            "bounds_max": tuple(doc["bounds_max"]),
-            "cell": tuple(cell) if cell is not None else None,
-        }
-    )
-
-
-def _codec(spec: TileSpec):  # noqa: ANN202
-    from zarr.codecs import BloscCodec, BloscShuffle
+def _codec(spec: TileSpec) -> BloscCodec:
 
     return BloscCodec(cname="zstd", clevel=spec.clevel, shuffle=BloscShuffle.shuffle)
 
@@ -120,10 +78,10 @@ def _codec(spec: TileSpec):  # noqa: ANN202
 def _spill(
     las_path: Path,
     site: SiteSpec,
-    tr: pyproj.Transformer | None,
+    tr: ToSiteCRS | None,
     spec: TileSpec,
     spill_dir: Path,
-    progress: Callable[[int], None] | None,
+    progress: Callable[[int], None],
 ) -> dict[str, int]:
     """Partition the cloud into per-tile spill files; return the point count per tile."""
     counts: dict[str, int] = {}
@@ -149,8 +107,7 @@ def _spill(
             with open(spill_dir / f"{key}.bin", "ab") as fh:
                 rec.tofile(fh)
             counts[key] = counts.get(key, 0) + len(part)
-        if progress:
-            progress(n)
+        progress(n)
     return counts
 
 
@@ -166,7 +123,7 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
     rec = np.fromfile(spill_path, dtype=SPILL_DTYPE)
     levels = assign_levels(rec[COUNTS], spec, _tile_seed(key, seed))
     cells = node_cells(rec[COUNTS], levels, spec)
-    keys = (cells[:, 2], cells[:, 1], cells[:, 0], levels)
+    keys: tuple[np.ndarray, ...] = (cells[:, 2], cells[:, 1], cells[:, 0], levels)
     if spec.node_order == "random":  # inside a node, a seeded shuffle: any prefix is a uniform subsample
         keys = (np.random.default_rng(_tile_seed(key, seed) ^ 0x5EED).permutation(len(rec)), *keys)
     order = np.lexsort(keys)
@@ -204,14 +161,15 @@ def write_tile(key: str, spill_path: str, group_path: str, spec_doc: dict, seed:
     hi = np.maximum.reduceat(local, starts, axis=0)
     nodes = []
     for k, (s, e) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
-        level, cell = int(levels[s]), tuple(int(c) for c in cells[s])
+        level = int(levels[s])
+        cell = (int(cells[s][0]), int(cells[s][1]), int(cells[s][2]))
         nodes.append(
             NodeInfo(
                 node_key(key, level, cell),
                 key,
                 level,
-                tuple(lo[k].tolist()),
-                tuple(hi[k].tolist()),
+                (float(lo[k][0]), float(lo[k][1]), float(lo[k][2])),
+                (float(hi[k][0]), float(hi[k][1]), float(hi[k][2])),
                 e - s,
                 s,
                 spec.spacing(level),
@@ -226,6 +184,25 @@ def _dir_bytes(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
 
 
+def _write_all(
+    args: list[tuple[str, str, str, dict[str, Any], int]], workers: int, total_points: int, progress: Progress
+) -> list[dict[str, Any]]:
+    """Run :func:`write_tile` for every tile, in worker processes when it pays off."""
+    results = []
+    # worker start-up (~1 s: imports) only pays off on big scenes
+    if workers > 1 and len(args) > 1 and total_points >= PARALLEL_MIN_POINTS:
+        # spawn: zarr runs an event loop thread that a forked child must not inherit
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            for res in pool.map(write_tile, *zip(*args, strict=True)):
+                results.append(res)
+                progress("writing tiles", 1, len(args))
+    else:
+        for a in args:
+            results.append(write_tile(*a))
+            progress("writing tiles", 1, len(args))
+    return results
+
+
 def write_tiles(
     las_path: Path,
     site: SiteSpec,
@@ -234,7 +211,7 @@ def write_tiles(
     spec: TileSpec | None = None,
     workers: int = 2,
     seed: int = 0,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
     z_unit: ZUnit | None = None,
 ) -> TileResult:
     """Tile ``las_path`` into the new Zarr group ``out`` (which must not exist; removed again on an
@@ -252,64 +229,27 @@ def write_tiles(
     spill_dir.mkdir(parents=True)
     try:
         tr = source_transformer(las_path, site, src_crs, z_unit)
-        counts = _spill(
-            las_path,
-            site,
-            tr,
-            spec,
-            spill_dir,
-            (lambda n: progress("partitioning", n, None)) if progress else None,
-        )
+        counts = _spill(las_path, site, tr, spec, spill_dir, step(progress, "partitioning"))
         if not counts:
             raise TileError(f"point cloud {las_path} holds no points to tile.")
         root = zarr.open_group(str(out), mode="w")
         root.create_group("tiles")
-        keys = sorted(counts)
-        results = []
-        args = [(k, str(spill_dir / f"{k}.bin"), str(out), spec.to_dict(), seed) for k in keys]
-        total_points = sum(counts.values())
-        # worker start-up (~1 s: imports) only pays off on big scenes
-        if workers > 1 and len(keys) > 1 and total_points >= PARALLEL_MIN_POINTS:
-            # spawn: zarr runs an event loop thread that a forked child must not inherit
-            with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-                for res in pool.map(write_tile, *zip(*args, strict=True)):
-                    results.append(res)
-                    if progress:
-                        progress("writing tiles", 1, len(keys))
-        else:
-            for a in args:
-                results.append(write_tile(*a))
-                if progress:
-                    progress("writing tiles", 1, len(keys))
-        nodes = [node_from_dict(n) for r in results for n in r["nodes"]]
+        args = [(k, str(spill_dir / f"{k}.bin"), str(out), spec.to_dict(), seed) for k in sorted(counts)]
+        results = _write_all(args, workers, sum(counts.values()), progress)
+        nodes = tuple(NodeInfo.from_dict(n) for r in results for n in r["nodes"])
         checksum = hashlib.sha256(
             "\n".join(f"{r['key']}:{r['checksum']}" for r in sorted(results, key=lambda r: r["key"])).encode()
         ).hexdigest()
         points = sum(r["points"] for r in results)
         root.attrs.update(
-            {
-                "siteline_tiles": FORMAT_VERSION,
-                "spec": spec.to_dict(),
-                "site_origin": list(site.origin),
-                "crs": site.crs,
-                "points": points,
-                "checksum": checksum,
-                "nodes": [n.to_dict() for n in nodes],
-            }
-        )
+            {"siteline_tiles": FORMAT_VERSION, "spec": spec.to_dict(), "site_origin": list(site.origin),
+             "crs": site.crs, "points": points, "checksum": checksum, "nodes": [n.to_dict() for n in nodes]}
+        )  # fmt: skip
         size = _dir_bytes(out)
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
     finally:
         shutil.rmtree(spill_dir, ignore_errors=True)
-    return TileResult(
-        str(out),
-        points,
-        len(keys),
-        max(n.level for n in nodes) + 1,
-        size,
-        checksum,
-        nodes,
-        time.perf_counter() - t0,
-    )
+    levels = max(n.level for n in nodes) + 1
+    return TileResult(str(out), points, len(args), levels, size, checksum, nodes, time.perf_counter() - t0)

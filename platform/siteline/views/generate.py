@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -13,6 +13,7 @@ import numpy as np
 from siteline.cameras import Camera
 from siteline.errors import ViewsError
 from siteline.fence import inside_fence
+from siteline.progress import no_step
 from siteline.render import RenderSettings, render_points
 from siteline.tolerances import (
     LENGTH_TOL_M,
@@ -35,10 +36,11 @@ class NamedCamera:
     camera: Camera
 
 
-@dataclass
+@dataclass(frozen=True)
 class SyntheticView:
     """One synthetic view: its parent real camera, the strategy key, the parameters that made it, the
-    camera (site-local), and after rejection its coverage at the render scale."""
+    camera (site-local), after rejection its coverage at the render scale (or why it was rejected),
+    and once sampled its index in the pair's sample."""
 
     parent: str
     strategy: str
@@ -176,35 +178,37 @@ def reject(
     fence_m: Sequence[Sequence[float]] | None,
     source: PointSource,
     params: ViewParams,
-) -> None:
-    """Set ``rejected`` on views underground, outside the fence after mirroring, within
-    ``clearance_m`` of a surface, under geometry, or below ``min_coverage``; set ``coverage`` on the rest.
+) -> list[SyntheticView]:
+    """``views`` with ``rejected`` set on those underground, outside the fence after mirroring, within
+    ``clearance_m`` of a surface, under geometry, or below ``min_coverage``, and ``coverage`` on the
+    rest (views rejected before keep their reason).
 
     Each threshold is compared with the tolerances of :mod:`siteline.tolerances`: a view on the fence,
     at exactly ``clearance_m`` or ``min_height_m``, or at exactly ``min_coverage`` is kept."""
     live = [v for v in views if v.rejected is None]
     if not live:
-        return
+        return list(views)
     centers = np.array([v.camera.center for v in live])
     heights = ground.height(centers)
     near = source.nearest_distance(centers)
     above = source.count_above(centers, params.overhead_radius_m)
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
     settings = RenderSettings(scale=params.scale, point_size_px=params.point_size_px)
+    judged: dict[int, SyntheticView] = {}
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
         if not at_least(h, params.min_height_m, LENGTH_TOL_M):
-            v.rejected = "underground"
+            judged[id(v)] = replace(v, rejected="underground")
         elif v.params["mirrored"] and not ins:
-            v.rejected = "outside_fence"
+            judged[id(v)] = replace(v, rejected="outside_fence")
         elif not at_least(dist, params.clearance_m, LENGTH_TOL_M):
-            v.rejected = "near_surface"
+            judged[id(v)] = replace(v, rejected="near_surface")
         elif up > 0:
-            v.rejected = "under_geometry"
+            judged[id(v)] = replace(v, rejected="under_geometry")
         else:
             r = render_points(source.points_for_view(v.camera, params.scale), v.camera, settings)
-            v.coverage = r.coverage
-            if not at_least(r.coverage, params.min_coverage, RATIO_TOL):
-                v.rejected = "low_coverage"
+            low = not at_least(r.coverage, params.min_coverage, RATIO_TOL)
+            judged[id(v)] = replace(v, coverage=r.coverage, rejected="low_coverage" if low else None)
+    return [judged.get(id(v), v) for v in views]
 
 
 # Recorded with every view set (lineage): how the sample was drawn.
@@ -264,7 +268,7 @@ def generate_views(
     fence_m: Sequence[Sequence[float]] | None,
     source: PointSource,
     params: ViewParams | None = None,
-    progress: Callable[[int], None] | None = None,
+    progress: Callable[[int], None] = no_step,
 ) -> ViewSet:
     """Synthetic views of one scene (the later scene of a pair): candidates for every real camera,
     rejection, then a seeded stratified sample of ``params.views``, indexed 0..n-1.
@@ -284,14 +288,10 @@ def generate_views(
     candidates: list[SyntheticView] = []
     for parent in cams:
         cands = candidate_views(parent, ground, fence_m, depth_of, params)
-        reject(cands, ground, fence_m, source, params)
-        candidates.extend(cands)
-        if progress is not None:
-            progress(1)
+        candidates.extend(reject(cands, ground, fence_m, source, params))
+        progress(1)
     kept = [v for v in candidates if v.rejected is None]
     order = stratified_order(kept, params.seed)
-    sample = key_sorted(order[: params.views], params.seed)
-    for i, v in enumerate(sample):
-        v.index = i
+    sample = [replace(v, index=i) for i, v in enumerate(key_sorted(order[: params.views], params.seed))]
     rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))
     return ViewSet(sample, params, ground, len(candidates), rejected, order[params.views :])

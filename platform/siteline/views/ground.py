@@ -25,7 +25,8 @@ class GroundPlane:
 
     @classmethod
     def from_dict(cls, doc: dict) -> GroundPlane:
-        return cls(tuple(float(v) for v in doc["normal"]), float(doc["d"]))
+        nx, ny, nz = (float(v) for v in doc["normal"])
+        return cls((nx, ny, nz), float(doc["d"]))
 
 
 def _plane_through(p: np.ndarray) -> tuple[np.ndarray, float] | None:

@@ -1,0 +1,102 @@
+"""Reading and checking a mission from its plan (the execute part of ingest; never touches the
+catalog): the LAS scan, photos, georegistration, capture time and the alignment against the previous
+scene, then the files stored in the content-addressed store."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from siteline.crs import parse_z_unit
+from siteline.errors import MissionError
+from siteline.ingest.mission import capture_time, choose_las, colmap_dir, mission_name, read_photos
+from siteline.ingest.options import IngestOptions
+from siteline.ingest.plan import IngestPlan
+from siteline.ingest.pointcloud import scan_las
+from siteline.progress import Progress, no_progress, step
+from siteline.records.mission import CheckedMission
+from siteline.register import AlignmentPolicy, check_alignment, register_cameras
+from siteline.stores import Store, layout
+from siteline.stores.blobs import put_blob, put_blob_bytes
+
+log = logging.getLogger(__name__)
+
+
+def sample_blob(sample: np.ndarray) -> tuple[bytes, str]:
+    """The ``.npy`` bytes of an alignment sample ((N, 3) float64 site-local) and their sha256."""
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(sample, dtype=np.float64))
+    data = buf.getvalue()
+    return data, hashlib.sha256(data).hexdigest()
+
+
+def load_sample(store: Store, sha256: str | None) -> np.ndarray | None:
+    """The alignment sample stored under ``sha256``, None when there is none."""
+    if not sha256:
+        return None
+    uri = layout.blob(store, sha256)
+    return np.load(io.BytesIO(store.read_bytes(uri))) if store.exists(uri) else None
+
+
+def execute_ingest(
+    plan: IngestPlan, opts: IngestOptions, store: Store, progress: Progress = no_progress
+) -> CheckedMission:
+    """Read and check the mission of ``plan``: nothing is stored yet. :class:`MissionError` (or the
+    error of the check that failed) names the file and the problem."""
+    root, entries = plan.manifest.root, plan.manifest.entries
+    las = choose_las(entries, root)
+    z_unit = parse_z_unit(opts.z_unit) if opts.z_unit else None
+    scan = scan_las(
+        root / las.path, plan.site, opts.crs, z_unit=z_unit, progress=step(progress, "reading points")
+    )
+    scan = scan.at(las.path)
+    photos = read_photos(entries, root)
+    cameras, registration, source = register_cameras(
+        photos, colmap_dir(entries, root), plan.site, opts.ransac_max_error_m, opts.max_georegistration_rms_m
+    )
+    when, when_source = capture_time(photos, entries, scan, root)
+    if plan.scene_at(when) is not None:
+        raise MissionError(
+            f"site {plan.site.name} already has a scene captured at {when.isoformat()}; a different "
+            "mission of the same flight? Nothing was ingested."
+        )
+    before = plan.scene_before(when)
+    sample = load_sample(store, before.statistics.stable_sample_sha256) if before is not None else None
+    if before is not None and sample is not None and scan.stable_sample is not None:
+        policy = AlignmentPolicy(opts.max_alignment_translation_m, opts.max_alignment_residual_m)
+        registration["alignment"] = check_alignment(
+            scan.stable_sample, sample, before.id, root.name, policy, opts.accept_misalignment
+        )
+    log.info(
+        "mission %s: %s points, %d cameras (%s), captured %s (%s)",
+        root.name, f"{scan.point_count:,}", len(cameras), source or "none", when.isoformat(), when_source,
+    )  # fmt: skip
+    _, sample_sha = sample_blob(scan.stable_sample if scan.stable_sample is not None else np.zeros((0, 3)))
+    return CheckedMission(
+        plan.manifest, mission_name(entries, root), scan, las.sha256, cameras, source or "xmp", registration,
+        when, when_source, sample_sha, opts.storage,
+    )  # fmt: skip
+
+
+def store_mission(
+    checked: CheckedMission, store: Store, new_blobs: list[str], progress: Progress = no_progress
+) -> None:
+    """Put the alignment sample and (``copy`` storage) every file into the content-addressed store,
+    appending to ``new_blobs`` each blob this call added (so a caller can remove them on failure)."""
+    sample = checked.scan.stable_sample
+    data, sha = sample_blob(sample if sample is not None else np.zeros((0, 3)))
+    if put_blob_bytes(store, data, sha):
+        new_blobs.append(sha)
+    if checked.storage != "copy":
+        return
+    entries = checked.manifest.entries
+    progress("storing", 0, sum(e.size_bytes for e in entries))
+    for e in entries:
+        if put_blob(store, Path(checked.manifest.root) / e.path, e.sha256):
+            new_blobs.append(e.sha256)
+        progress("storing", e.size_bytes, None)
+    log.info("mission %s: %d new blobs stored", checked.name, len(new_blobs))

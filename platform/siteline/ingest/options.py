@@ -1,0 +1,47 @@
+"""What a user may set about one ingest."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from siteline.crs import parse_z_unit
+from siteline.errors import MissionError
+from siteline.records.enums import STORAGES, Storage
+
+
+@dataclass(frozen=True)
+class IngestOptions:
+    """crs: CRS of a LAS without one (any CRS PROJ knows). z_unit: unit of the LAS z (m, ft, ftUS;
+    default: the unit its CRS implies, siteline.crs.z_unit_of). storage: ``copy`` (content-addressed
+    store) or ``reference``. Thresholds: georegistration RMS (m) and RANSAC inlier distance (m);
+    alignment against the previous scene: largest ICP correction (m) and residual (m) accepted
+    without ``accept_misalignment``. The alignment check catches gross misregistration (a wrong CRS,
+    offset or datum): construction changes between epochs (new walls next to old slabs, snow) bias
+    ICP by up to ~0.2 m on the synthetic site, so the default limit is 0.5 m; the measured
+    correction is recorded either way."""
+
+    crs: str | None = None
+    z_unit: str | None = None
+    storage: Storage = "copy"
+    accept_misalignment: bool = False
+    max_georegistration_rms_m: float = 0.1
+    ransac_max_error_m: float = 0.5
+    max_alignment_translation_m: float = 0.5
+    max_alignment_residual_m: float = 0.15
+
+    def __post_init__(self) -> None:
+        if self.z_unit is not None:
+            parse_z_unit(self.z_unit)
+        if self.storage not in STORAGES:
+            raise MissionError(f"storage must be 'copy' or 'reference', got {self.storage!r}.")
+
+    def record(self, site: str) -> dict[str, Any]:
+        """What the stage run records of these options."""
+        return {
+            "site": site,
+            "storage": self.storage,
+            "crs": self.crs,
+            "z_unit": self.z_unit,
+            "accept_misalignment": self.accept_misalignment,
+        }

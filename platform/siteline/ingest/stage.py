@@ -1,0 +1,119 @@
+"""The ingest stage: the mission folder's manifest, then plan (catalog) -> execute (read, check and
+store the mission) -> record (catalog) (DESIGN.md §1, §2, §3, §9).
+
+Order matters for "nothing half-written": everything is read and checked first, then files go into
+the content-addressed store, and only then one transaction writes the catalog rows. A failure before
+the commit removes the blobs this ingest added (and no other's)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import sqlalchemy as sa
+
+from siteline.catalog import Catalog
+from siteline.catalog.missions import record_ingest
+from siteline.catalog.scenes import blobs_in_use
+from siteline.catalog.sites import get_site
+from siteline.config import Settings
+from siteline.errors import MissionError
+from siteline.ingest.execute import execute_ingest, store_mission
+from siteline.ingest.inventory import mission_manifest
+from siteline.ingest.options import IngestOptions
+from siteline.ingest.plan import IngestPlan, plan_ingest
+from siteline.progress import Progress, no_progress, step
+from siteline.records.mission import CheckedMission
+from siteline.records.runs import StageRun
+from siteline.stores.blobs import remove_blobs
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class IngestResult:
+    """What ``ingest_mission`` did: whether it created a scene, one sentence saying so, the mission
+    and scene ids, the manifest hash and file count, the LAS scan and registration records, and the
+    pairs the new scene forms."""
+
+    created: bool
+    message: str
+    mission_id: int
+    scene_id: int | None
+    manifest_sha256: str
+    files: int = 0
+    scan: dict[str, Any] = field(default_factory=dict)
+    registration: dict[str, Any] = field(default_factory=dict)
+    pairs: list[int] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _already(plan: IngestPlan) -> IngestResult:
+    assert plan.existing is not None
+    ex, m = plan.existing, plan.manifest
+    scene = f" (scene {ex.scene_id})" if ex.scene_id is not None else ""
+    log.info("mission %s is already ingested as mission %d", m.root.name, ex.mission_id)
+    return IngestResult(
+        False, f"mission {m.root.name} is already ingested as mission {ex.mission_id}{scene}: nothing new.",
+        ex.mission_id, ex.scene_id, m.sha256, len(m.entries),
+    )  # fmt: skip
+
+
+def _store_and_record(
+    catalog: Catalog,
+    settings: Settings,
+    plan: IngestPlan,
+    checked: CheckedMission,
+    run: StageRun,
+    progress: Progress,
+) -> IngestResult:
+    new_blobs: list[str] = []
+    try:
+        store_mission(checked, settings.store, new_blobs, progress)
+        with catalog.transaction() as s:
+            ids = record_ingest(s, plan.site_id, checked, run)
+    except BaseException as exc:
+        with catalog.transaction() as s:
+            shared = blobs_in_use(s, new_blobs)
+        # content another mission committed meanwhile stays; only this ingest's own blobs go
+        remove_blobs(settings.store, [b for b in new_blobs if b not in shared])
+        if isinstance(exc, sa.exc.IntegrityError):
+            raise MissionError(
+                f"mission {checked.manifest.root.name} conflicts with one ingested at the same time "
+                f"({exc.orig}); nothing was ingested."
+            ) from exc
+        raise
+    message = f"mission {checked.name} ingested as scene {ids.scene_id} of site {plan.site.name}"
+    log.info("%s; pairs %s", message, list(ids.pairs))
+    return IngestResult(
+        True, message, ids.mission_id, ids.scene_id, checked.manifest.sha256, len(checked.manifest.entries),
+        checked.scan.to_dict(), checked.registration, list(ids.pairs),
+    )  # fmt: skip
+
+
+def ingest_mission(
+    catalog: Catalog,
+    settings: Settings,
+    mission_dir: Path,
+    site_name: str,
+    opts: IngestOptions | None = None,
+    progress: Progress = no_progress,
+    run_id: str | None = None,
+) -> IngestResult:
+    """Inventory, validate, georegister and register ``mission_dir`` as a scene of ``site_name``; a
+    mission already ingested (same manifest) is not ingested again."""
+    opts = opts or IngestOptions()
+    with catalog.transaction() as s:
+        get_site(s, site_name)  # an unknown site is refused before a byte is hashed
+    manifest = mission_manifest(Path(mission_dir), step(progress, "hashing"))
+    with catalog.transaction() as s:
+        plan = plan_ingest(s, site_name, manifest)
+    if plan.existing is not None:
+        return _already(plan)
+    run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
+    checked = execute_ingest(plan, opts, settings.store, progress)
+    return _store_and_record(catalog, settings, plan, checked, run, progress)

@@ -1,0 +1,73 @@
+"""The label-set import stage: plan (catalog) -> execute (match the file, publish the store) ->
+record (catalog)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+
+import sqlalchemy as sa
+
+from siteline.catalog import Catalog
+from siteline.catalog.labelsets import record_label_set
+from siteline.config import Settings
+from siteline.errors import LabelSetError
+from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED, execute_label_import
+from siteline.labelsets.plan import plan_label_import
+from siteline.progress import Progress, no_progress
+from siteline.records.labelsets import LabelSetImport
+from siteline.records.runs import StageRun
+from siteline.stores import layout
+
+log = logging.getLogger(__name__)
+
+
+def import_labels(
+    catalog: Catalog,
+    settings: Settings,
+    scene_id: int,
+    path: Path,
+    taxonomy_map: Mapping[int, str | int] | None = None,
+    note: str | None = None,
+    max_unmatched: float = DEFAULT_MAX_UNMATCHED,
+    progress: Progress = no_progress,
+    run_id: str | None = None,
+) -> LabelSetImport:
+    """Import the classes of ``path`` as the next label-set version of ``scene_id``.
+
+    Codes are site class ids (as ``scene export`` writes them) unless ``taxonomy_map`` maps them.
+    Points are matched by position in tile quanta, GPS time and return number; refused (nothing
+    written) when the file is of another scene, holds unknown codes, is unreadable, or when more
+    than ``max_unmatched`` of its points match nothing or match a point already taken. The store is
+    published whole before its catalog row is added."""
+    path = Path(path)
+    if not path.is_file():
+        raise LabelSetError(f"labels file {path} does not exist.")
+    if not 0.0 <= max_unmatched < 1.0:
+        raise LabelSetError(f"max_unmatched {max_unmatched}: use a fraction in [0, 1).")
+    with catalog.transaction() as s:
+        plan = plan_label_import(s, scene_id)
+    run = StageRun(
+        "import_labels", f"scene:{scene_id}", {"file": str(path), "version": plan.version}, run_id=run_id
+    )
+    store = settings.store
+    result = execute_label_import(
+        plan, path, store, layout.scratch(settings.home), taxonomy_map, note, max_unmatched, progress
+    )
+    if not result.created:
+        return result
+    try:
+        with catalog.transaction() as s:
+            record_label_set(s, result, run)
+    except sa.exc.IntegrityError as exc:
+        store.remove(result.uri)
+        raise LabelSetError(
+            f"scene {scene_id}: another import recorded label-set version {plan.version} meanwhile; import "
+            f"{path} again."
+        ) from exc
+    except BaseException:
+        store.remove(result.uri)
+        raise
+    log.info("scene %d: label set %d recorded from %s", scene_id, result.version, path.name)
+    return result

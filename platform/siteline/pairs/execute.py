@@ -1,0 +1,197 @@
+"""Processing a pair from its plan (the execute part; never touches the catalog): 3D change both ways,
+synthetic views from the later scene, and every view rendered on both scenes with its symmetric mask
+(DESIGN.md §4-§6). Outputs are published whole under the plan's address; outputs already there (same
+parameters, label sets and tilings) are found with :func:`find_outputs`."""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from siteline.errors import PairError
+from siteline.labels.params import expected_false_change
+from siteline.labels.store import auto_radius, write_labels
+from siteline.labelsets.store import open_labelled
+from siteline.pairs.plan import PairPlan
+from siteline.pairs.render import LabelledPair, render_pair_view
+from siteline.pairs.sources import TilePointSource
+from siteline.progress import Progress, no_progress
+from siteline.records.pairs import PairOutput, RenderedView
+from siteline.render.outputs import png_bytes
+from siteline.stores import Store, join, layout
+from siteline.tiles.reader import SceneTiles
+from siteline.tolerances import RATIO_TOL, at_least
+from siteline.views import NamedCamera, ViewSet, fit_ground_plane, generate_views
+from siteline.views.generate import SyntheticView, key_sorted
+
+log = logging.getLogger(__name__)
+FOLDERS = ("A", "B", "label")
+
+
+@dataclass(frozen=True)
+class PairLabels:
+    """A pair's 3D change labels: the radius (metres), the label store's address, and its record
+    (counts, checksum, radius details: median spacings, multiplier, expected false change)."""
+
+    radius_m: float
+    uri: str
+    record: dict[str, Any]
+
+
+def _output(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
+    return PairOutput(
+        plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
+        tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
+        plan.params.to_dict(),
+    )  # fmt: skip
+
+
+def find_outputs(plan: PairPlan, store: Store) -> PairOutput | None:
+    """The outputs of ``plan`` when they are published in the store, else None (a read only)."""
+    if not store.is_complete(plan.root):
+        return None
+    return _output(plan, json.loads(store.read_bytes(join(plan.root, "summary.json"))))
+
+
+def pair_labels(
+    plan: PairPlan, t1: SceneTiles, t2: SceneTiles, store: Store, progress: Progress
+) -> PairLabels:
+    """The pair's change labels at its radius (given, or ``radius_multiplier`` x the sparser scene's
+    median spacing), reused from the store when they are there, else computed and published."""
+    label_params = plan.params.label_params()
+    auto, info = auto_radius(t1, t2, label_params.radius_multiplier)
+    radius = auto
+    if label_params.radius_m is not None:
+        radius = label_params.radius_m
+        info = info | {"given": True, "multiplier": radius / (auto / label_params.radius_multiplier)}
+    # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
+    info["expected_false_change"] = expected_false_change(info["multiplier"])
+    uri = layout.pair_labels(store, plan.pair_id, plan.versions, radius)
+    if store.is_complete(uri):
+        record = dict(store.open_group(uri).attrs) | {"uri": uri}
+    else:
+        progress("labels", 0, None)
+        ignored = plan.site.taxonomy.ignored_lut()
+        with store.publish(uri) as work:
+            record = write_labels(t1, t2, radius, ignored, work).to_dict() | {"uri": uri}
+    log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
+    return PairLabels(radius, uri, record | {"radius": info})
+
+
+def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
+    """Synthetic views of the later scene (DESIGN.md §5): probes read its tiles at the pair's point
+    size; :class:`PairError` when it has no cameras or every candidate is rejected."""
+    if not plan.cameras:
+        raise PairError(
+            f"pair {plan.pair_id}: the later scene {plan.t2.id} has no cameras to derive views from "
+            "(a LiDAR-only mission); ingest photos with it."
+        )
+    params, taxonomy = plan.params, plan.site.taxonomy
+    ground = t2.points(resolution=0.5, attributes=("class",))
+    on_ground = ground.attributes["class"] == taxonomy.id_of("ground")
+    plane = fit_ground_plane(ground.xyz_m[on_ground].astype(np.float32), seed=params.seed)
+    names = {c.name for c in taxonomy.classes}
+    skip = np.array([taxonomy.id_of(c) for c in ("snow", "noise") if c in names], dtype=np.uint8)
+    source = TilePointSource(t2, skip, lod_factor=params.lod_factor, point_size_px=params.point_size_px)
+    cams = [NamedCamera(n, c) for n, c in plan.cameras]
+    views = generate_views(
+        cams,
+        plane,
+        plan.site.fence,
+        source,
+        params.view_params_spec(),
+        progress=lambda k: progress("views", k, len(cams)),
+    )
+    if not views.views:
+        raise PairError(
+            f"pair {plan.pair_id}: every synthetic view was rejected ({views.rejected}); lower "
+            "--min-coverage or check the cameras."
+        )
+    log.info(
+        "pair %d: %d views of %d candidates (%d probe reads, %s points read)",
+        plan.pair_id, len(views.views), views.candidates, source.reads, f"{source.points_read:,}",
+    )  # fmt: skip
+    return views
+
+
+def _render_all(
+    plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress
+) -> tuple[list[tuple[SyntheticView, dict[str, Any]]], dict[str, int]]:
+    """Render the sample into ``work``/A|B|label under temporary names; a view whose valid fraction
+    is under ``min_valid`` is dropped and the next view of the stratified order rendered instead."""
+    params = plan.params
+    queue, reserve = list(views.views), list(views.reserve)
+    rejected = dict(views.rejected)
+    kept: list[tuple[SyntheticView, dict[str, Any]]] = []
+    for sub in FOLDERS:
+        (work / sub).mkdir(parents=True)
+    while queue:
+        v = queue.pop(0)
+        r = render_pair_view(scenes, v.camera, params, device)
+        low = not at_least(r.valid, params.min_valid, RATIO_TOL)
+        if low:
+            rejected["low_valid"] = rejected.get("low_valid", 0) + 1
+            if reserve:
+                queue.append(reserve.pop(0))
+        # the total grows by each replacement
+        progress("renders", 1, len(kept) + len(queue) + rejected.get("low_valid", 0) + (not low))
+        if low:
+            continue
+        tmp = f"tmp-{len(kept):05d}.png"
+        for sub, image in zip(FOLDERS, (r.a, r.b, r.mask), strict=True):
+            (work / sub / tmp).write_bytes(png_bytes(image))
+        measured = {"coverage_a": r.coverage_a, "coverage_b": r.coverage_b, "valid": r.valid,
+                    "change_ratio": r.change_ratio, "points_read": r.points_read}  # fmt: skip
+        kept.append((v, {"tmp": tmp} | measured))
+    if not kept:
+        raise PairError(
+            f"pair {plan.pair_id}: every rendered view had less than {params.min_valid:.0%} valid pixels "
+            f"({rejected.get('low_valid', 0)} views); lower --min-valid or check the scenes' overlap."
+        )
+    return kept, dict(sorted(rejected.items()))
+
+
+def _index(kept: list[tuple[SyntheticView, dict[str, Any]]], work: Path, seed: int) -> list[RenderedView]:
+    """The kept views in key order, indexed 0..n-1 (an order that does not depend on the pool), their
+    files renamed to ``<index>.png``."""
+    by_view = {id(v): rec for v, rec in kept}
+    out = []
+    for i, v in enumerate(key_sorted([v for v, _ in kept], seed)):
+        rec = dict(by_view[id(v)])
+        name = f"{i:04d}.png"
+        tmp = rec.pop("tmp")
+        for sub in FOLDERS:
+            (work / sub / tmp).rename(work / sub / name)
+        out.append(RenderedView.from_dict(replace(v, index=i).to_dict() | {"file": name} | rec))
+    return out
+
+
+def execute_pair(
+    plan: PairPlan, store: Store, device: str = "cpu", progress: Progress = no_progress
+) -> PairOutput:
+    """Make the outputs of ``plan``: labels (reused when published), views and renders, published
+    whole (A/, B/, label/ PNGs and summary.json)."""
+    t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
+    labels = pair_labels(plan, t1, t2, store, progress)
+    scenes = LabelledPair.with_labels(t1, t2, labels.uri)
+    views = pair_views(plan, t2, progress)
+    with store.publish(plan.root) as work:
+        kept, rejected = _render_all(plan, scenes, views, work, device, progress)
+        records = _index(kept, work, plan.params.seed)
+        summary = {
+            "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
+            "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.record,
+            "ground_plane": views.ground.to_dict(), "candidates": views.candidates, "rejected": rejected,
+            "views": [r.to_dict() for r in records],
+        }  # fmt: skip
+        (work / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    log.info(
+        "pair %d: %d views rendered (%s rejected) into %s",
+        plan.pair_id, len(records), rejected.get("low_valid", 0), plan.root,
+    )  # fmt: skip
+    return _output(plan, summary)

@@ -1,0 +1,107 @@
+"""Planning a pair: what the catalog says about a pair and its two scenes before anything is read."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from sqlalchemy.orm import Session
+
+from siteline.cameras import Camera
+from siteline.catalog.labelsets import label_set_ref, newest_versions
+from siteline.catalog.pairs import get_pair, pair_view_ids
+from siteline.catalog.scenes import get_scene, scene_cameras, scene_statistics, tile_source
+from siteline.catalog.sites import site_of
+from siteline.errors import PairError
+from siteline.pairs.params import PairParams
+from siteline.records.labelsets import LabelSetRef
+from siteline.records.pairs import PairVersions
+from siteline.records.tiling import TileSource
+from siteline.site import SiteSpec
+from siteline.stores import Store, layout
+
+
+def output_digest(params: PairParams, versions: tuple[int, int], tilings: tuple[int, int] = (0, 0)) -> str:
+    """The key of a pair's outputs: the parameters' digest, extended by the label-set versions when
+    either is not 1 and by the scenes' tiling generations when either was re-tiled (so outputs made
+    before either was recorded keep their key, and a re-tiled scene never reuses outputs aligned
+    with its old tile order)."""
+    if tuple(versions) == (1, 1) and tuple(tilings) == (0, 0):
+        return params.digest()
+    text = f"{params.digest()}:labels:{versions[0]}:{versions[1]}"
+    if tuple(tilings) != (0, 0):
+        text += f":tiles:{tilings[0]}:{tilings[1]}"
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+@dataclass(frozen=True)
+class PairScene:
+    """One scene of a pair as the pair reads it: its id, its tiles, the label set whose classes it
+    uses, and its tiling generation (0 until re-tiled)."""
+
+    id: int
+    tiles: TileSource
+    label_set: LabelSetRef
+    generation: int
+
+
+@dataclass(frozen=True)
+class PairPlan:
+    """Everything processing a pair needs from the catalog: the pair, its site, both scenes, the later
+    scene's real cameras (views are derived from them), the parameters, where the outputs go (keyed
+    by :func:`output_digest`) and whether the catalog already records them."""
+
+    pair_id: int
+    site: SiteSpec
+    t1: PairScene
+    t2: PairScene
+    cameras: tuple[tuple[str, Camera], ...]
+    params: PairParams
+    digest: str
+    root: str
+    recorded: bool
+
+    @property
+    def versions(self) -> PairVersions:
+        return PairVersions(self.t1.label_set.version, self.t2.label_set.version)
+
+
+def _pair_scene(session: Session, pair_id: int, scene_id: int, version: int | None) -> PairScene:
+    scene = get_scene(session, scene_id)
+    if scene.status != "tiled":
+        raise PairError(
+            f"pair {pair_id}: scene {scene_id} is not tiled: run `siteline scene tile {scene_id}` "
+            "(or `siteline release build`, which tiles and processes what it needs)."
+        )
+    tiling = scene_statistics(scene).tiling
+    return PairScene(
+        scene_id, tile_source(session, scene_id), label_set_ref(session, scene_id, version),
+        tiling.generation if tiling is not None else 0,
+    )  # fmt: skip
+
+
+def plan_pair(
+    session: Session, store: Store, pair_id: int, params: PairParams, pinned: Mapping[int, int] | None = None
+) -> PairPlan:
+    """The plan of processing ``pair_id`` with ``params`` on each scene's newest label set, or the
+    version ``pinned`` (scene id -> version) names (one transaction). :class:`PairError` names what is
+    missing (an unknown pair, an untiled scene); :class:`LabelSetError` a pinned version that does not
+    exist."""
+    pair = get_pair(session, pair_id)
+    ids = (pair.t1_scene_id, pair.t2_scene_id)
+    sites = {get_scene(session, sid).site_id for sid in ids}
+    if sites != {pair.site_id}:
+        raise PairError(
+            f"pair {pair_id} joins scenes of different sites ({', '.join(map(str, sorted(sites)))})."
+        )
+    newest = newest_versions(session, list(ids))
+    chosen = {sid: (pinned or {}).get(sid, newest.get(sid, 1)) for sid in ids}
+    t1, t2 = (_pair_scene(session, pair_id, sid, chosen[sid]) for sid in ids)
+    digest = output_digest(
+        params, (t1.label_set.version, t2.label_set.version), (t1.generation, t2.generation)
+    )
+    return PairPlan(
+        pair_id, site_of(session, pair.site_id), t1, t2, tuple(scene_cameras(session, ids[1])), params, digest,
+        layout.pair_outputs(store, pair_id, digest), bool(pair_view_ids(session, pair_id, digest)),
+    )  # fmt: skip

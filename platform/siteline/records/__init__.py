@@ -1,0 +1,58 @@
+"""Typed records for everything that crosses a stage or the catalog (shared primitives: stages build
+them, ``siteline.catalog`` records and returns them, the CLI and flows report them)."""
+
+from siteline.records.enums import (
+    CameraSource,
+    FileKind,
+    HoleRule,
+    MirrorRule,
+    NodeOrder,
+    ReleasePolicy,
+    ReleaseStatus,
+    SceneStatus,
+    Split,
+    Storage,
+    TaskRunnerKind,
+)
+from siteline.records.labelsets import LabelSetImport, LabelSetRef
+from siteline.records.mission import CheckedMission, FileEntry, LasLocation, MissionManifest
+from siteline.records.pairs import PairOutput, PairVersions, RenderedView
+from siteline.records.release import DraftRelease, ReleaseInfo, ReleaseItem
+from siteline.records.runs import StageRun
+from siteline.records.scan import LasScan
+from siteline.records.scene import SceneStatistics, SceneSummary
+from siteline.records.tiling import NodeInfo, SceneTiling, TileSource, TileSpec
+
+__all__ = [
+    "CameraSource",
+    "CheckedMission",
+    "DraftRelease",
+    "FileEntry",
+    "FileKind",
+    "HoleRule",
+    "LabelSetImport",
+    "LabelSetRef",
+    "LasLocation",
+    "LasScan",
+    "MirrorRule",
+    "MissionManifest",
+    "NodeInfo",
+    "NodeOrder",
+    "PairOutput",
+    "PairVersions",
+    "ReleaseInfo",
+    "ReleaseItem",
+    "ReleasePolicy",
+    "ReleaseStatus",
+    "RenderedView",
+    "SceneStatistics",
+    "SceneStatus",
+    "SceneSummary",
+    "SceneTiling",
+    "Split",
+    "StageRun",
+    "Storage",
+    "TaskRunnerKind",
+    "TileSource",
+    "TileSpec",
+]

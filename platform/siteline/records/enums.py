@@ -1,0 +1,40 @@
+"""The enum-like strings siteline persists or accepts, as ``Literal`` types with their values.
+
+Each ``*_VALUES`` tuple is the one list a check constraint, a CLI choice or a validator uses.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+MissionStatus = Literal["received", "ingested", "failed"]
+FileKind = Literal["las", "photo", "colmap", "trajectory", "raw", "other"]
+Storage = Literal["copy", "reference"]
+SceneStatus = Literal["registered", "tiled", "failed"]
+CameraSource = Literal["colmap", "xmp", "synthetic"]
+PairStatus = Literal["new", "processed"]
+ReleaseStatus = Literal["draft", "published"]
+StageStatus = Literal["running", "completed", "failed"]
+Split = Literal["train", "val", "test"]
+NodeOrder = Literal["random", "input"]
+HoleRule = Literal["ignore", "changed"]
+MirrorRule = Literal["aim-site", "reflect"]
+Precision = Literal["float32", "float64"]
+TaskRunnerKind = Literal["threads", "processes", "dask"]
+ReleasePolicy = Literal["every-pair", "on-demand"]
+
+MISSION_STATUSES: tuple[str, ...] = get_args(MissionStatus)
+FILE_KINDS: tuple[str, ...] = get_args(FileKind)
+STORAGES: tuple[str, ...] = get_args(Storage)
+SCENE_STATUSES: tuple[str, ...] = get_args(SceneStatus)
+CAMERA_SOURCES: tuple[str, ...] = get_args(CameraSource)
+PAIR_STATUSES: tuple[str, ...] = get_args(PairStatus)
+RELEASE_STATUSES: tuple[str, ...] = get_args(ReleaseStatus)
+STAGE_STATUSES: tuple[str, ...] = get_args(StageStatus)
+SPLITS: tuple[str, ...] = get_args(Split)
+NODE_ORDERS: tuple[str, ...] = get_args(NodeOrder)
+HOLE_RULES: tuple[str, ...] = get_args(HoleRule)
+MIRROR_RULES: tuple[str, ...] = get_args(MirrorRule)
+PRECISIONS: tuple[str, ...] = get_args(Precision)
+TASK_RUNNERS: tuple[str, ...] = get_args(TaskRunnerKind)
+RELEASE_POLICIES: tuple[str, ...] = get_args(ReleasePolicy)

@@ -1,0 +1,56 @@
+"""An imported label-set version as a record."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class LabelSetImport:
+    """A label-set version imported from a corrected file: where it is, and how the file's points
+    matched the scene's. untouched: stored points the file does not hold (they keep the previous
+    version's class). changes: changed points per "old -> new" class. key: what matched a point
+    (position, GPS time, return number). created: False when no point changed class (no version is
+    made; ``version`` is then the current one)."""
+
+    scene_id: int
+    version: int
+    parent_version: int
+    uri: str
+    file: str
+    source_sha256: str
+    points_in_file: int
+    matched: int
+    unmatched: int
+    duplicated: int
+    untouched: int
+    changed: int
+    changes: dict[str, int] = field(default_factory=dict)
+    class_histogram: dict[str, int] = field(default_factory=dict)
+    key: str = ""
+    seconds: float = 0.0
+    created: bool = True
+    note: str | None = None
+    max_unmatched: float = 0.001
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def details(self) -> dict[str, Any]:
+        """What the catalog keeps of the match (``label_set.details``)."""
+        keep = ("file", "points_in_file", "matched", "unmatched", "duplicated", "untouched", "changes", "key")
+        return {k: getattr(self, k) for k in keep} | {"max_unmatched": self.max_unmatched}
+
+
+@dataclass(frozen=True)
+class LabelSetRef:
+    """One label-set version of a scene as a reader needs it: version 1 is the tile store's own
+    ``class`` (``uri`` None), later versions are stores of ``tiles/<tile>/class``; source and its
+    sha256 say where the classes came from."""
+
+    scene_id: int
+    version: int
+    uri: str | None
+    source: str
+    source_sha256: str | None = None

@@ -1,0 +1,77 @@
+"""A pair's outputs as records: the label-set versions it used, its rendered views, and where its
+outputs live (DESIGN.md §4-§6)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+from typing import Any, NamedTuple
+
+
+class PairVersions(NamedTuple):
+    """The label-set versions of a pair's earlier (t1) and later (t2) scene."""
+
+    t1: int
+    t2: int
+
+    def to_dict(self) -> dict[str, int]:
+        return {"t1": self.t1, "t2": self.t2}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, int] | None) -> PairVersions:
+        """From ``{"t1": v1, "t2": v2}``; outputs written before label sets were versioned used 1."""
+        doc = doc or {}
+        return cls(int(doc.get("t1", 1)), int(doc.get("t2", 1)))
+
+
+@dataclass(frozen=True)
+class RenderedView:
+    """One view of a pair rendered on both scenes: the synthetic camera (index in the pair's sample,
+    parent real image, strategy key, strategy parameters, probe coverage, camera as
+    ``schema/camera.schema.json``), its file name in A/, B/ and label/, and what the render found:
+    coverage of each scene, valid fraction (neither ignored nor a hole), changed / valid, points read
+    from both scenes."""
+
+    index: int
+    parent: str
+    strategy: str
+    params: dict[str, Any]
+    coverage: float | None
+    camera: dict[str, Any]
+    file: str
+    coverage_a: float
+    coverage_b: float
+    valid: float
+    change_ratio: float
+    points_read: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> RenderedView:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in doc.items() if k in names})
+
+
+@dataclass(frozen=True)
+class PairOutput:
+    """A processed pair's outputs in the store at ``root``: the scenes (t1, t2 ids), the change radius
+    (metres), the rendered views in index order, the 3D label record (store address, counts,
+    checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
+    label sets and tilings) and the pair parameters (their JSON form)."""
+
+    pair_id: int
+    t1: int
+    t2: int
+    radius_m: float
+    root: str
+    views: tuple[RenderedView, ...]
+    labels: dict[str, Any]
+    versions: PairVersions
+    digest: str
+    params: dict[str, Any]
+
+    @property
+    def view_count(self) -> int:
+        return len(self.views)

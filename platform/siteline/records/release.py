@@ -1,0 +1,63 @@
+"""A release as records: its items, a built draft, and what the CLI and flows are told."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from siteline.records.enums import ReleaseStatus, Split
+
+
+@dataclass(frozen=True)
+class ReleaseItem:
+    """One image pair of a release: its id, split, pair and view index, the view's strategy, coverage
+    (the smaller of the two renders'), change ratio and valid fraction, and its sizes in pixels
+    (width, height) as rendered and as stored (padded)."""
+
+    id: str
+    split: Split
+    pair: int
+    view: int
+    strategy: str
+    coverage: float
+    change_ratio: float
+    valid: float
+    size_px: tuple[int, int]
+    padded_px: tuple[int, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The manifest's item."""
+        return asdict(self) | {"size_px": list(self.size_px), "padded_px": list(self.padded_px)}
+
+
+@dataclass(frozen=True)
+class DraftRelease:
+    """A draft built on disk at ``root``: its items, manifest hash and statistics, the parameters the
+    catalog records (``release.parameters``), and the key (digest) of the outputs each pair drew on."""
+
+    name: str
+    version: str
+    root: str
+    manifest_sha256: str
+    items: tuple[ReleaseItem, ...]
+    stats: dict[str, Any]
+    parameters: dict[str, Any]
+    digests: Mapping[int, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ReleaseInfo:
+    """A release as commands report it: name, version, status, where it lives, item count, manifest
+    hash and statistics."""
+
+    name: str
+    version: str
+    status: ReleaseStatus
+    root: str
+    items: int
+    manifest_sha256: str | None
+    stats: dict[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)

@@ -1,0 +1,55 @@
+"""The LAS scan: what ingest's one pass over a mission's point cloud found."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LasScan:
+    """What one pass over a LAS/LAZ file found. path: the file (relative to its mission once
+    ingested). Bounds are site-local metres (float64). class_histogram: points per site class name;
+    unknown_codes: points per file code the taxonomy lacks. outside_fence: points made ``ignore`` by
+    the fence. z_unit: the unit of the file's z and its source (siteline.crs.ZUnit). stable_sample:
+    (N, 3) float64 site-local points of stable classes for the alignment check (never persisted)."""
+
+    path: str
+    source_crs: str
+    transformed: bool
+    point_count: int
+    bounds_min: list[float]
+    bounds_max: list[float]
+    class_histogram: dict[str, int]
+    unknown_codes: dict[int, int]
+    outside_fence: int
+    colour: str
+    density_pts_m2: float
+    version: str
+    point_format: int
+    scale: list[float]
+    offset: list[float]
+    gps_time_range: list[float] | None
+    z_unit: dict[str, Any]
+    creation_date: str | None
+    stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def at(self, path: str) -> LasScan:
+        """This scan with ``path`` recorded instead (the file's path inside its mission)."""
+        return replace(self, path=path)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (the stable sample is left out)."""
+        doc = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "stable_sample"}
+        doc["unknown_codes"] = {str(k): v for k, v in self.unknown_codes.items()}
+        return doc
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> LasScan:
+        names = {f.name for f in fields(cls)} - {"stable_sample"}
+        values = {k: v for k, v in doc.items() if k in names}
+        values["unknown_codes"] = {int(k): int(v) for k, v in doc.get("unknown_codes", {}).items()}
+        return cls(**values)

@@ -1,0 +1,171 @@
+"""Planning a release build and a publish: what the catalog says before anything is read or written."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy.orm import Session
+
+from siteline.catalog.labelsets import label_set_ref
+from siteline.catalog.pairs import get_pair
+from siteline.catalog.releases import find_release, list_releases
+from siteline.catalog.scenes import get_scene, list_pairs, list_scenes, mission_of_scene, scene_statistics
+from siteline.catalog.sites import get_site, site_of
+from siteline.config import Settings
+from siteline.errors import ImmutableError, NotFoundError, ReleaseError
+from siteline.pairs.plan import PairPlan, plan_pair
+from siteline.release import layout
+from siteline.release.params import ReleaseParams
+from siteline.stores import layout as paths
+
+
+def semver(version: str) -> tuple[int, int, int]:
+    """(major, minor, patch) of ``MAJOR.MINOR.PATCH``; ReleaseError otherwise."""
+    try:
+        a, b, c = (int(x) for x in version.split("."))
+    except ValueError as exc:
+        raise ReleaseError(f"version {version!r} is not semantic (MAJOR.MINOR.PATCH).") from exc
+    return a, b, c
+
+
+def next_version(session: Session, name: str, lineage_key: Mapping[str, Any]) -> str:
+    """1.0.0 first; a major bump when pairs, label sets or label/split parameters change, else a
+    minor one. A version recorded before label sets were versioned used version 1 of every scene."""
+    rows = list_releases(session, name)
+    if not rows:
+        return "1.0.0"
+    latest = max(rows, key=lambda r: semver(r.version))
+    major, minor, _ = semver(latest.version)
+    previous = dict((latest.parameters or {}).get("lineage_key") or {})
+    previous.setdefault("label_sets", dict.fromkeys(lineage_key.get("label_sets", {}), 1))
+    if previous != dict(lineage_key):
+        return f"{major + 1}.0.0"
+    return f"{major}.{minor + 1}.0"
+
+
+def choose_pairs(session: Session, site_name: str, pair_ids: Sequence[int] | None = None) -> list[int]:
+    """The pairs a release of ``site_name`` draws on: ``pair_ids`` (checked to be the site's) or every
+    pair of the site, ascending; :class:`ReleaseError` when the site cannot make a release."""
+    site = get_site(session, site_name)
+    if pair_ids:
+        for pid in pair_ids:
+            try:
+                row = get_pair(session, pid)
+            except NotFoundError as exc:
+                raise NotFoundError(f"{exc} Nothing was written.") from exc
+            if row.site_id != site.id:
+                raise ReleaseError(
+                    f"pair {pid} belongs to site {site_of(session, row.site_id).name}, not {site_name}: a "
+                    "release draws on one site's pairs. Nothing was written."
+                )
+        chosen = sorted(set(pair_ids))
+    else:
+        chosen = sorted(p.id for p in list_pairs(session, site))
+    scenes = list_scenes(session, site)
+    if len(scenes) < 2:
+        raise ReleaseError(
+            f"site {site_name} has {len(scenes)} scene(s); a release needs at least two "
+            "(ingest another mission). Nothing was written."
+        )
+    if not chosen:
+        raise ReleaseError(f"site {site_name} has no pairs. Nothing was written.")
+    return chosen
+
+
+def used_label_sets(pairs: Sequence[PairPlan]) -> dict[str, int]:
+    """Scene id (as text, a JSON key) -> the label-set version the pairs use, by scene id."""
+    used = {str(sc.id): sc.label_set.version for p in pairs for sc in (p.t1, p.t2)}
+    return dict(sorted(used.items(), key=lambda kv: int(kv[0])))
+
+
+def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[dict[str, Any]]:
+    """The lineage record of every scene the pairs join: capture time, mission, label set, registration
+    and tile checksum."""
+    out = []
+    for sid in sorted({sc.id for p in pairs for sc in (p.t1, p.t2)}):
+        scene = get_scene(session, sid)
+        version = next(sc.label_set.version for p in pairs for sc in (p.t1, p.t2) if sc.id == sid)
+        labels = label_set_ref(session, sid, version)
+        tiling = scene_statistics(scene).tiling
+        out.append(
+            {
+                "id": scene.id, "capture_time": scene.capture_time.isoformat(),
+                "mission_manifest_sha256": mission_of_scene(session, sid).manifest_sha256,
+                "label_set_version": labels.version, "label_set_source": labels.source,
+                "label_set_sha256": labels.source_sha256, "registration": scene.registration,
+                "tile_checksum": tiling.checksum if tiling is not None else None,
+            }
+        )  # fmt: skip
+    return out
+
+
+@dataclass(frozen=True)
+class ReleasePlan:
+    """What building a draft release needs from the catalog: the site and its record for the lineage,
+    the release's name and version (and the key that chose it), its parameters, each pair's plan
+    (where its outputs are), the scenes' lineage, and the draft's folder."""
+
+    site_name: str
+    site_lineage: dict[str, Any]
+    name: str
+    version: str
+    params: ReleaseParams
+    pairs: tuple[PairPlan, ...]
+    scenes: tuple[dict[str, Any], ...]
+    lineage_key: dict[str, Any]
+    draft: Path
+
+
+def plan_release(
+    session: Session, settings: Settings, site_name: str, name: str, params: ReleaseParams,
+    pair_ids: Sequence[int] | None = None, version: str | None = None, pinned: Mapping[int, int] | None = None,
+) -> ReleasePlan:  # fmt: skip
+    """The plan of building draft ``name`` of ``site_name`` (one transaction). The version is the next
+    one (:func:`next_version`) unless given; a published version is refused."""
+    chosen = choose_pairs(session, site_name, pair_ids)
+    pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
+    key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
+           "label_sets": used_label_sets(pairs)}  # fmt: skip
+    version = version if version is not None else next_version(session, name, key)
+    existing = find_release(session, name, version)
+    if existing is not None and existing.status == "published":
+        raise ImmutableError(
+            f"release {name} {version} is already published and is never rewritten: build another "
+            "version. Nothing was written."
+        )
+    semver(version)
+    site = get_site(session, site_name)
+    record = {"name": site.name, "crs": site.crs, "origin": list(site.origin), "fence_m": site.fence}
+    return ReleasePlan(
+        site_name, record, name, version, params, pairs, tuple(scene_lineage(session, pairs)), key,
+        paths.release_draft(settings.home, name, version),
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PublishPlan:
+    """Publishing a draft: its name and version, the draft's folder and the published one."""
+
+    name: str
+    version: str
+    draft: Path
+    final: Path
+
+
+def plan_publish(session: Session, settings: Settings, name: str, version: str) -> PublishPlan:
+    """The plan of publishing draft ``name`` ``version``; refused when there is no such release or it
+    is already published."""
+    rel = find_release(session, name, version)
+    if rel is None:
+        raise NotFoundError(f"no release {name} {version}; build it first (`siteline release build`).")
+    if rel.status == "published":
+        raise ImmutableError(
+            f"release {name} {version} is already published: a published version is never rewritten."
+        )
+    return PublishPlan(
+        name, version, paths.release_draft(settings.home, name, version),
+        paths.release_published(settings.home, name, version),
+    )  # fmt: skip

@@ -1,0 +1,86 @@
+"""The release stages. Build: plan (catalog) -> execute (the pairs' outputs found, the draft written) ->
+record (catalog). Publish: plan -> execute (verify, move into place) -> record -> read-only."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+
+from siteline.catalog import Catalog
+from siteline.catalog.releases import record_draft, record_published
+from siteline.config import Settings
+from siteline.errors import ReleaseError
+from siteline.pairs.execute import find_outputs
+from siteline.records.pairs import PairOutput
+from siteline.records.release import ReleaseInfo
+from siteline.records.runs import StageRun
+from siteline.release import layout
+from siteline.release.build import execute_build
+from siteline.release.manifest import read_manifest
+from siteline.release.params import ReleaseParams
+from siteline.release.plan import plan_publish, plan_release
+from siteline.release.publish import make_read_only, move_back, move_into_place
+
+log = logging.getLogger(__name__)
+
+
+def build_release(
+    catalog: Catalog,
+    settings: Settings,
+    site_name: str,
+    name: str,
+    params: ReleaseParams | None = None,
+    pair_ids: Sequence[int] | None = None,
+    version: str | None = None,
+    run_id: str | None = None,
+    label_sets: Mapping[int, int] | None = None,
+) -> ReleaseInfo:
+    """Assemble a draft release ``name`` from the site's processed pairs (or ``pair_ids``) in format 2
+    (siteline.release.layout) with ``params`` (pair parameters after the preset, preset name,
+    padding). Every pair must already be processed with these parameters and label sets:
+    :class:`ReleaseError` names the command otherwise (``siteline.pipeline.release`` processes what is
+    missing first). Each scene's newest label set is used unless ``label_sets`` (scene id ->
+    version) pins one; a change of any of them from the previous version of ``name`` bumps the major
+    version."""
+    params = params or ReleaseParams()
+    with catalog.transaction() as s:
+        plan = plan_release(s, settings, site_name, name, params, pair_ids, version, label_sets)
+    run = StageRun(
+        "build_release", f"release:{name}:{plan.version}",
+        {"pair_params": params.pair.to_dict(), "preset": params.preset, "pairs": [p.pair_id for p in plan.pairs]},
+        run_id=run_id,
+    )  # fmt: skip
+    found = {p.pair_id: find_outputs(p, settings.store) for p in plan.pairs}
+    missing = [pid for pid, out in found.items() if out is None]
+    if missing:
+        raise ReleaseError(
+            f"pair {missing[0]} is not processed with these parameters and label sets ({len(missing)} of "
+            f"{len(found)} pairs): run `siteline release build`, which processes pairs first. Nothing was written."
+        )
+    outputs: dict[int, PairOutput] = {pid: out for pid, out in found.items() if out is not None}
+    draft = execute_build(plan, outputs)
+    with catalog.transaction() as s:
+        record_draft(s, draft, tuple(layout.FOLDERS), run)
+    return ReleaseInfo(
+        name, plan.version, "draft", draft.root, len(draft.items), draft.manifest_sha256, draft.stats
+    )
+
+
+def publish_release(
+    catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None = None
+) -> ReleaseInfo:
+    """Verify the draft's checksums, move it into place, mark it published, make it read-only."""
+    with catalog.transaction() as s:
+        plan = plan_publish(s, settings, name, version)
+    run = StageRun("publish_release", f"release:{name}:{version}", {}, run_id=run_id)
+    move_into_place(plan)
+    try:
+        with catalog.transaction() as s:
+            items, sha = record_published(s, name, version, plan.final, run)
+    except BaseException:
+        move_back(plan)
+        raise
+    make_read_only(plan.final)
+    log.info("release %s %s published at %s (%d items)", name, version, plan.final, items)
+    stats = read_manifest(plan.final).get("stats", {})
+    return ReleaseInfo(name, version, "published", str(plan.final), items, sha, stats)

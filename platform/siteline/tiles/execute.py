@@ -1,0 +1,72 @@
+"""Writing a scene's tile store from its plan: the point cloud found (or fetched from the store),
+tiled, and published whole under the store's layout. Never touches the catalog."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from siteline.crs import ZUnit, parse_source_crs
+from siteline.errors import TileError
+from siteline.progress import Progress, no_progress
+from siteline.records.tiling import NodeInfo, SceneTiling, TileSpec
+from siteline.stores import Store, layout
+from siteline.stores.blobs import resolve_file
+from siteline.tiles.plan import TilingPlan
+from siteline.tiles.writer import write_tiles
+
+log = logging.getLogger(__name__)
+
+
+def scene_las(store: Store, plan: TilingPlan) -> Path:
+    """A local path holding the scene's LAS/LAZ bytes (the store's blob, or the referenced original)."""
+    las = plan.las
+    path = resolve_file(store, las.storage, las.root_uri, las.path, las.sha256)
+    if not path.is_file():
+        where = (
+            "the store"
+            if las.storage == "copy"
+            else "its mission folder (a referenced mission must stay on a path every worker sees)"
+        )
+        raise TileError(f"scene {plan.scene_id}: point cloud {path} is missing from {where}.")
+    return path
+
+
+def execute_tiling(
+    plan: TilingPlan,
+    store: Store,
+    spec: TileSpec,
+    generation: int,
+    workers: int = 2,
+    progress: Progress = no_progress,
+) -> tuple[SceneTiling, tuple[NodeInfo, ...]]:
+    """Tile the scene of ``plan`` into the store at its ``generation``'s address, published whole (a
+    store left there without its marker is replaced); return the tiling and its nodes."""
+    las = scene_las(store, plan)
+    src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
+    z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
+    uri = layout.tile_store(store, plan.scene_id, generation)
+    store.remove(uri)
+    log.info("tiling scene %d from %s into %s (generation %d)", plan.scene_id, las.name, uri, generation)
+    with store.publish(uri) as work:
+        written = write_tiles(
+            las,
+            plan.site,
+            src,
+            work,
+            spec,
+            workers=workers,
+            seed=plan.scene_id,
+            progress=progress,
+            z_unit=z_unit,
+        )
+    tiling = SceneTiling(
+        uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,
+        written.bytes, written.seconds,
+    )  # fmt: skip
+    log.info(
+        "tiled scene %d: %s points in %d tiles, %d levels, %d nodes, %.1f bytes/point, %.1f s",
+        plan.scene_id, f"{tiling.points:,}", tiling.tiles, tiling.levels, len(written.nodes),
+        tiling.bytes_per_point, tiling.seconds,
+    )  # fmt: skip
+    return tiling, written.nodes

@@ -1,0 +1,63 @@
+"""Planning a tiling: what the catalog says about a scene before its tiles are written."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy.orm import Session
+
+from siteline.catalog.scenes import get_scene, las_location, scene_statistics
+from siteline.catalog.sites import site_of
+from siteline.errors import TileError
+from siteline.records.mission import LasLocation
+from siteline.records.tiling import SceneTiling
+from siteline.site import SiteSpec
+
+
+@dataclass(frozen=True)
+class TilingPlan:
+    """Everything tiling a scene needs from the catalog: the scene and its site, where its point
+    cloud is kept, the source CRS and z unit ingest recorded, whether the scene is tiled, and the
+    tiling last recorded, if any."""
+
+    scene_id: int
+    site: SiteSpec
+    las: LasLocation
+    source_crs: str | None
+    z_unit: dict[str, Any] | None
+    tiled: bool
+    current: SceneTiling | None
+
+    def generation(self, retile: bool) -> int:
+        """The generation a tiling written now gets: the next one for a re-tiling (the old store stays
+        until the new one is recorded), else the recorded one (0 for a scene never tiled)."""
+        return (self.current.generation if self.current is not None else 0) + int(retile)
+
+    def already_tiled(self) -> str:
+        """The sentence for a scene that is tiled and complete."""
+        assert self.current is not None
+        hint = ""
+        if self.current.spec.node_order != "random":
+            hint = (
+                " Its store predates shuffled octree nodes, so views read whole levels (up to 4x the points "
+                f"they need): `siteline scene tile {self.scene_id} --retile` tiles it again in the current layout."
+            )
+        return f"scene {self.scene_id} is already tiled at {self.current.uri}: nothing to do.{hint}"
+
+
+def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
+    """The plan of tiling scene ``scene_id`` (one transaction, no I/O beyond it)."""
+    scene = get_scene(session, scene_id)
+    stats = scene_statistics(scene)
+    if stats.scan is None:
+        raise TileError(f"scene {scene_id} records no point cloud scan: ingest its mission again.")
+    return TilingPlan(
+        scene_id=scene_id,
+        site=site_of(session, scene.site_id),
+        las=las_location(session, scene_id),
+        source_crs=stats.scan.source_crs or None,
+        z_unit=stats.scan.z_unit or None,
+        tiled=scene.status == "tiled",
+        current=stats.tiling,
+    )

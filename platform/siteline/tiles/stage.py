@@ -1,0 +1,71 @@
+"""The tile stage: plan (catalog) -> execute (write the store) -> record (catalog)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from siteline.catalog import Catalog
+from siteline.catalog.scenes import record_tiling
+from siteline.config import Settings
+from siteline.progress import Progress, no_progress
+from siteline.records.runs import StageRun
+from siteline.records.tiling import SceneTiling, TileSpec
+from siteline.tiles.execute import execute_tiling
+from siteline.tiles.plan import plan_tiling
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TileOutcome:
+    """What ``tile_scene`` did: the tiling it recorded (None when there was nothing to do) and one
+    sentence saying so."""
+
+    tiling: SceneTiling | None
+    message: str
+
+
+def tile_scene(
+    catalog: Catalog,
+    settings: Settings,
+    scene_id: int,
+    spec: TileSpec | None = None,
+    workers: int = 2,
+    progress: Progress = no_progress,
+    run_id: str | None = None,
+    retile: bool = False,
+) -> TileOutcome:
+    """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
+    ``retile`` (tile it again in the current layout, e.g. a store written before shuffled nodes).
+
+    The store is published whole before the node rows, its address and the scene's status are
+    committed; a store without rows (a crash between the two) is replaced. A re-tiling writes the
+    next generation beside the old store, commits, then removes the old one: the scene's pairs'
+    outputs are keyed by the generation, and its imported label sets, aligned with the old order,
+    are refused until imported again (siteline.labelsets)."""
+    with catalog.transaction() as s:
+        plan = plan_tiling(s, scene_id)
+    store = settings.store
+    done = plan.tiled and plan.current is not None and store.is_complete(plan.current.uri)
+    if done and not retile:
+        log.info("scene %d is already tiled", scene_id)
+        return TileOutcome(None, plan.already_tiled())
+    spec = spec or TileSpec(tile_size_m=plan.site.tile_size_m)
+    run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
+    tiling, nodes = execute_tiling(plan, store, spec, plan.generation(done), workers, progress)
+    try:
+        with catalog.transaction() as s:
+            record_tiling(s, scene_id, tiling, nodes, run)
+    except BaseException:
+        store.remove(tiling.uri)
+        raise
+    old = plan.current.uri if done and plan.current is not None else None
+    if old is not None and old != tiling.uri:
+        store.remove(old)
+    verb = "re-tiled" if old else "tiled"
+    return TileOutcome(
+        tiling,
+        f"scene {scene_id} {verb}: {tiling.points:,} points in {tiling.tiles} tiles, {tiling.levels} levels, "
+        f"{tiling.bytes_per_point:.1f} bytes/point",
+    )
