@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed
 DEMO_HOME ?= $(CURDIR)/demo-home
 PYTEST_ARGS ?=
 
-.PHONY: install demo test test-all lint bench bench-scale clean serve
+.PHONY: install demo test test-all lint typecheck bench bench-scale clean serve
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -29,6 +29,10 @@ test-all: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+
+# mypy over platform/siteline ([tool.mypy] in pyproject.toml)
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy
 
 bench: $(STAMP)
 	for b in bench/*.py; do [ $$b = bench/paper_scale.py ] || $(PY) $$b || exit 1; done
