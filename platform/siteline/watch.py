@@ -14,6 +14,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from siteline.stores import write_file
+
 STATE_FILE = ".siteline-watch.json"
 MARKER = ".upload-complete"
 
@@ -48,9 +50,8 @@ class UploadWatcher:
             self._reported = set(json.loads(state.read_text()).get("reported", []))
 
     def _save(self) -> None:
-        tmp = self.root / f"{STATE_FILE}.tmp"
-        tmp.write_text(json.dumps({"reported": sorted(self._reported)}))
-        tmp.replace(self.root / STATE_FILE)
+        data = json.dumps({"reported": sorted(self._reported)}).encode()
+        write_file(self.root / STATE_FILE, lambda fh: fh.write(data))
 
     def poll(self, now: float | None = None) -> list[Path]:
         """Uploads that became complete since the last poll (each reported once)."""

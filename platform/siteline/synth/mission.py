@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -30,6 +29,7 @@ from siteline.crs import parse_crs, parse_origin
 from siteline.errors import SynthError
 from siteline.fence import fence_geojson
 from siteline.lasio import las_header
+from siteline.stores import publish_folder
 from siteline.synth import model as m
 from siteline.synth.lidar import LidarSpec, sample_epoch
 from siteline.synth.photos import PhotoPose, mission_poses, photo_jpeg, render_photo
@@ -166,18 +166,14 @@ def _write_colmap(out: Path, poses: list[PhotoPose], rng: np.random.Generator) -
     }
 
 
-def write_epoch(
-    out: Path, site: m.SiteModel, e: int, cfg: SynthConfig, spec: LidarSpec, crs: pyproj.CRS
-) -> EpochSummary:
-    """Write epoch ``e``'s mission folder and truth; the mission appears only when complete."""
+def _write_mission(
+    tmp: Path, site: m.SiteModel, e: int, cfg: SynthConfig, spec: LidarSpec, crs: pyproj.CRS, truth: Path
+) -> tuple[int, list[PhotoPose], dict[str, Any] | None]:
+    """Epoch ``e``'s mission folder (LAS, raw files, photos, COLMAP model) built in ``tmp``; returns the
+    point count, the photo poses and the COLMAP model's similarity to the site."""
     ep = site.epochs[e]
-    final = out / "missions" / ep.name
-    tmp = out / "missions" / f".{ep.name}.partial"
-    truth = out / "truth" / ep.name
-    shutil.rmtree(tmp, ignore_errors=True)
-    shutil.rmtree(truth, ignore_errors=True)
-    truth.mkdir(parents=True)
     rng = np.random.default_rng([cfg.seed, e, 17])
+    tmp.mkdir(parents=True)
     las_path = tmp / LAS_RELPATH
     las_path.parent.mkdir(parents=True)
     n, pxyz, prgb = _write_las(las_path, site, e, spec, cfg, truth, rng)
@@ -192,6 +188,20 @@ def write_epoch(
         img = render_photo(pxyz, prgb, p.camera, spacing)
         (raw / p.name).write_bytes(photo_jpeg(img, p, crs, cfg.origin))
     sim3 = _write_colmap(tmp / "colmap" / "sparse" / "0", poses, rng) if (poses and cfg.colmap) else None
+    return n, poses, sim3
+
+
+def write_epoch(
+    out: Path, site: m.SiteModel, e: int, cfg: SynthConfig, spec: LidarSpec, crs: pyproj.CRS
+) -> EpochSummary:
+    """Write epoch ``e``'s mission folder and truth; the mission appears only when complete."""
+    ep = site.epochs[e]
+    final = out / "missions" / ep.name
+    truth = out / "truth" / ep.name
+    shutil.rmtree(truth, ignore_errors=True)
+    truth.mkdir(parents=True)
+    with publish_folder(final) as tmp:
+        n, poses, sim3 = _write_mission(tmp, site, e, cfg, spec, crs, truth)
     cameras = [
         {
             "name": p.name,
@@ -233,8 +243,6 @@ def write_epoch(
         )
         + "\n"
     )
-    shutil.rmtree(final, ignore_errors=True)
-    os.replace(tmp, final)
     return EpochSummary(ep.name, ep.time.isoformat(), n, len(poses), str(final))
 
 
