@@ -22,33 +22,27 @@ from siteline.catalog.models import StageRun as StageRunRow
 from siteline.records.runs import StageRun
 
 
+def _row(run: StageRun, status: str, error: BaseException | None = None) -> StageRunRow:
+    return StageRunRow(
+        stage=run.stage,
+        subject=run.subject,
+        status=status,
+        parameters=run.parameters,
+        started_at=run.started,
+        finished_at=datetime.now(UTC),
+        error_text=None if error is None else f"{type(error).__name__}: {error}"[:4000],
+        orchestrator_run_id=run.run_id,
+    )
+
+
 def add_completed(session: Session, run: StageRun) -> None:
     """Add a ``completed`` row for ``run`` to the caller's transaction (the one committing its outputs)."""
-    session.add(
-        StageRunRow(
-            stage=run.stage,
-            subject=run.subject,
-            status="completed",
-            parameters=run.parameters,
-            started_at=run.started,
-            finished_at=datetime.now(UTC),
-            orchestrator_run_id=run.run_id,
-        )
-    )
+    session.add(_row(run, "completed"))
 
 
 def record_failure(session: Session, run: StageRun, error: BaseException) -> int:
     """Record a failed run of a stage; returns its id."""
-    row = StageRunRow(
-        stage=run.stage,
-        subject=run.subject,
-        status="failed",
-        parameters=run.parameters,
-        started_at=run.started,
-        finished_at=datetime.now(UTC),
-        error_text=f"{type(error).__name__}: {error}"[:4000],
-        orchestrator_run_id=run.run_id,
-    )
+    row = _row(run, "failed", error)
     session.add(row)
     session.flush()
     return row.id
