@@ -83,13 +83,19 @@ def load_fence_geojson(path: Path, origin: Sequence[float]) -> list[tuple[float,
         raise GeometryError(
             f"fence file {path}: expected a GeoJSON Polygon, found {getattr(geom, 'get', lambda _: None)('type')!r}."
         )
-    rings = geom.get("coordinates") or []
+    rings = geom.get("coordinates")
+    if not isinstance(rings, list):
+        raise GeometryError(
+            f"fence file {path}: the Polygon's coordinates must be a list of rings of [x, y] pairs, got {rings!r}."
+        )
     if len(rings) != 1:
         raise GeometryError(
             f"fence file {path}: the fence must be one ring without holes, found {len(rings)} rings."
         )
+    if not isinstance(rings[0], list) or not rings[0]:
+        raise GeometryError(f"fence file {path}: the fence ring has no vertices.")
     try:
-        ring = np.asarray([[float(c[0]), float(c[1])] for c in rings[0]], dtype=np.float64)
+        ring = np.asarray([[float(c[0]), float(c[1])] for c in rings[0]], dtype=np.float64).reshape(-1, 2)
     except (TypeError, ValueError, IndexError) as exc:
         raise GeometryError(f"fence file {path}: a coordinate is not a number pair.") from exc
     local = ring - np.asarray(origin[:2], dtype=np.float64)

@@ -17,6 +17,10 @@ import numpy as np
 from siteline.errors import PointCloudError
 
 DEFAULT_CHUNK_POINTS = 1_000_000
+# LAS coordinate scales siteline accepts (metres per count): finer collapses a cloud into a few
+# millimetres of int32 range, coarser than a metre is not a survey
+MIN_SCALE = 1e-7
+MAX_SCALE = 1.0
 # Beyond this, float32 site-local coordinates lose millimetres: the origin is wrong or missing.
 MAX_SITE_LOCAL_M = 20_000.0
 
@@ -50,9 +54,41 @@ def open_las(path: Path) -> laspy.LasReader:
     if not path.is_file():
         raise PointCloudError(f"point cloud {path} does not exist.")
     try:
-        return laspy.open(path)
+        reader = laspy.open(path)
     except (laspy.LaspyException, OSError, ValueError) as exc:
         raise PointCloudError(f"point cloud {path} is not a readable LAS/LAZ file: {exc}") from exc
+    try:
+        check_header(reader.header, path)
+    except BaseException:
+        reader.close()
+        raise
+    return reader
+
+
+def check_header(header: laspy.LasHeader, path: Path) -> None:
+    """Refuse a header that would silently lose or move points: a scale that is not positive or
+    outside [MIN_SCALE, MAX_SCALE] per axis, a non-finite offset, or (uncompressed files) a point count
+    other than what the file's point data holds."""
+    scale = [float(v) for v in header.scales]
+    offset = [float(v) for v in header.offsets]
+    if not all(np.isfinite(scale)) or not all(np.isfinite(offset)):
+        raise PointCloudError(f"point cloud {path}: header scale {scale} / offset {offset} is not finite.")
+    bad = [v for v in scale if not MIN_SCALE <= v <= MAX_SCALE]
+    if bad:
+        raise PointCloudError(
+            f"point cloud {path}: header scale {scale} is out of range (each axis from {MIN_SCALE:g} to "
+            f"{MAX_SCALE:g} m per count, positive): {bad[0]:g} would collapse, mirror or coarsen the cloud."
+        )
+    if header.are_points_compressed:
+        return
+    size = Path(path).stat().st_size
+    end = int(getattr(header, "start_of_first_evlr", 0) or 0) or size
+    holds = (end - int(header.offset_to_point_data)) // int(header.point_format.size)
+    if holds > header.point_count:
+        raise PointCloudError(
+            f"point cloud {path}: its header counts {header.point_count:,} points but the file holds {holds:,}: "
+            "the header is wrong (the rest would be dropped silently); rewrite the file with a LAS tool."
+        )
 
 
 def iter_chunks(

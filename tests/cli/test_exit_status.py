@@ -90,3 +90,18 @@ def test_init_with_an_unknown_database_driver_exits_2(tmp_path) -> None:
 def test_version_exits_0(tmp_path) -> None:
     proc = run_exe(tmp_path / "home", "--version")
     assert proc.returncode == 0 and proc.stdout.strip()
+
+
+def test_catalog_commands_start_light(exe_home) -> None:
+    """Only rendering commands import torch: listing scenes loads neither torch nor the pipeline, so
+    `siteline scene list` and `siteline ingest --help` start in about a second."""
+    code = (
+        "import sys\nfrom siteline.cli import main\n"
+        "rc = main(['scene', 'list', '--site', 'nosuch'])\n"
+        "print(rc, sorted(m for m in ('torch', 'siteline.pipeline', 'siteline.render.zbuffer') if m in sys.modules))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")} | {"SITELINE_HOME": str(exe_home)}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.stdout.strip().splitlines()[-1] == "2 []", proc.stdout + proc.stderr
+    help_ = run_exe(exe_home, "ingest", "--help")
+    assert help_.returncode == 0 and "--captured-at" in help_.stdout

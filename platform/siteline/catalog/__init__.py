@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 
 import sqlalchemy as sa
@@ -29,6 +29,12 @@ class Catalog:
         """A session committed at the end of the block, rolled back on error."""
         with transaction(self.sessions) as session:
             yield session
+
+    def lock(self, name: str, timeout_s: float | None = None) -> AbstractContextManager[None]:
+        """Hold the named lock for the block, across processes and machines (siteline.catalog.locks)."""
+        from siteline.catalog.locks import exclusive
+
+        return exclusive(self.engine, name, timeout_s)
 
     def dispose(self) -> None:
         self.engine.dispose()

@@ -8,7 +8,15 @@ from dataclasses import dataclass
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene
-from siteline.catalog.scenes import add_cameras, ensure_pair, lock_site, mission_by_manifest, neighbours
+from siteline.catalog.scenes import (
+    add_cameras,
+    ensure_pair,
+    lock_site,
+    mission_by_manifest,
+    neighbours,
+    scene_at,
+    supersede_pair,
+)
 from siteline.catalog.stages import add_completed
 from siteline.errors import MissionError
 from siteline.records.mission import CheckedMission
@@ -34,6 +42,11 @@ def record_ingest(session: Session, site_id: int, checked: CheckedMission, run: 
     manifest = checked.manifest
     if mission_by_manifest(session, manifest.sha256) is not None:
         raise MissionError(f"mission {manifest.root.name} was ingested concurrently; nothing new.")
+    if scene_at(session, site, checked.capture_time) is not None:
+        raise MissionError(
+            f"site {site.name} already has a scene captured at {checked.capture_time.isoformat()}; a different "
+            "mission of the same flight? Nothing was ingested."
+        )
     mission = Mission(
         site_id=site.id, manifest_sha256=manifest.sha256, name=checked.name, status="ingested",
         storage=checked.storage, root_uri=str(manifest.root),
@@ -73,5 +86,8 @@ def record_ingest(session: Session, site_id: int, checked: CheckedMission, run: 
         pairs.append(ensure_pair(session, site, before, scene).id)
     if after is not None:
         pairs.append(ensure_pair(session, site, scene, after).id)
+    if before is not None and after is not None:
+        # a scene that lands between two: pairs follow capture order whatever the arrival order
+        supersede_pair(session, before.id, after.id)
     add_completed(session, run)
     return IngestedIds(mission.id, scene.id, tuple(pairs))

@@ -38,7 +38,8 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
     pair = get_pair(session, output.pair_id)
     params, digest = output.params, output.digest
     pair.radius_m = output.radius_m
-    pair.status = "processed"
+    if pair.status != "superseded":  # a superseded pair stays out of new releases
+        pair.status = "processed"
     pair.parameters = {**(pair.parameters or {}), digest: {"params": params, "labels": output.labels}}
     session.execute(sa.delete(View).where(View.pair_id == pair.id, View.param_digest == digest))
     cams = dict(

@@ -118,14 +118,25 @@ def ensure_pair(session: Session, site: Site, t1: Scene, t2: Scene) -> Pair:
 
 
 def list_pairs(session: Session, site: Site) -> list[Pair]:
+    """The site's pairs of consecutive scenes, in capture order (superseded pairs left out)."""
     t1 = sa.orm.aliased(Scene)
     return list(
         session.execute(
             sa.select(Pair)
             .join(t1, Pair.t1_scene_id == t1.id)
-            .where(Pair.site_id == site.id)
+            .where(Pair.site_id == site.id, Pair.status != "superseded")
             .order_by(t1.capture_time)
         ).scalars()
+    )
+
+
+def supersede_pair(session: Session, t1_id: int, t2_id: int) -> None:
+    """Mark the pair (t1, t2) superseded: a scene captured between them arrived later. Its outputs and
+    the releases that used it stay; new releases draw on the consecutive pairs."""
+    session.execute(
+        sa.update(Pair)
+        .where(Pair.t1_scene_id == t1_id, Pair.t2_scene_id == t2_id)
+        .values(status="superseded")
     )
 
 
@@ -134,7 +145,9 @@ def pair_ids_of_scene(session: Session, scene_id: int) -> list[int]:
     return list(
         session.execute(
             sa.select(Pair.id)
-            .where((Pair.t1_scene_id == scene_id) | (Pair.t2_scene_id == scene_id))
+            .where(
+                (Pair.t1_scene_id == scene_id) | (Pair.t2_scene_id == scene_id), Pair.status != "superseded"
+            )
             .order_by(Pair.id)
         ).scalars()
     )

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
-from siteline import pipeline
 from siteline.catalog.scenes import (
     list_missions,
     list_pairs,
@@ -26,9 +26,20 @@ from siteline.cli.common import (
     print_table,
     settings,
 )
-from siteline.ingest import IngestOptions
+from siteline.errors import MissionError
 from siteline.photos import read_photo_meta
-from siteline.tiles import tile_scene
+
+
+def parse_time(text: str, option: str) -> datetime:
+    """An ISO 8601 time with a zone (``Z`` for UTC); MissionError naming ``option`` otherwise."""
+    try:
+        when = datetime.fromisoformat(text.strip())
+    except ValueError as exc:
+        raise MissionError(f"{option} {text!r} is not an ISO 8601 time (e.g. 2024-11-27T16:31:00Z).") from exc
+    if when.tzinfo is None:
+        raise MissionError(f"{option} {text!r} has no time zone: add one (Z for UTC, or +01:00).")
+    return when
+
 
 mission_app = typer.Typer(help="Ingested missions.", no_args_is_help=True)
 scene_app = typer.Typer(help="Scenes (epochs) of a site.", no_args_is_help=True)
@@ -65,10 +76,20 @@ def ingest(
         0.1, "--max-georegistration-rms-m", help="Largest accepted georegistration RMS, metres."
     ),
     workers: int = typer.Option(2, "--workers", help="Processes writing tiles (each owns whole tiles)."),
+    captured_at: str | None = typer.Option(
+        None,
+        "--captured-at",
+        help="Capture time, ISO 8601 with a zone (2024-11-27T16:31:00Z), for a mission that cannot tell it "
+        "(a LiDAR-only LAS without a creation date); overrides the photos' time. Recorded as given.",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Ingest a mission folder as a new scene of a site and tile it (a re-run of the same content does nothing)."""
+    from siteline import pipeline
+    from siteline.ingest import IngestOptions
+
     opts = IngestOptions(
+        captured_at=parse_time(captured_at, "--captured-at") if captured_at else None,
         crs=crs,
         z_unit=z_unit,
         storage="copy" if copy else "reference",
@@ -201,6 +222,8 @@ def scene_tile(
     as_json: bool = JsonOption,
 ) -> None:
     """Tile a registered scene into its Zarr store (a scene already tiled is left alone unless --retile)."""
+    from siteline.tiles import tile_scene
+
     cfg = settings()
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
         done = tile_scene(cat, cfg, scene_id, workers=workers, progress=bar_progress(bar), retile=retile)

@@ -58,7 +58,7 @@ def execute_ingest(
     cameras, registration, source = register_cameras(
         photos, colmap_dir(entries, root), plan.site, opts.ransac_max_error_m, opts.max_georegistration_rms_m
     )
-    when, when_source = capture_time(photos, entries, scan, root)
+    when, when_source = capture_time(photos, entries, scan, root, opts.captured_at)
     if plan.scene_at(when) is not None:
         raise MissionError(
             f"site {plan.site.name} already has a scene captured at {when.isoformat()}; a different "

@@ -3,9 +3,11 @@ manifest hash that identifies the mission (DESIGN.md §1, §9.1)."""
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
+import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path, PurePosixPath
 
@@ -14,7 +16,11 @@ from siteline.hashing import sha256_file
 from siteline.progress import no_step
 from siteline.records.enums import FileKind
 from siteline.records.mission import FileEntry, MissionManifest
+from siteline.watch import MARKER, STATE_FILE
 
+# files an upload leaves in a mission folder that are not the mission's: the upload-complete marker and
+# the watcher's state; the same mission with or without them is the same mission
+NOT_MISSION_CONTENT = frozenset({MARKER, STATE_FILE})
 RAW_SUFFIXES = {
     ".ldr",
     ".clc",
@@ -70,6 +76,46 @@ def check_relative(rel: str, root: Path) -> PurePosixPath:
     return p
 
 
+def _resolve(full: Path, rel: str, root: Path) -> Path:
+    """Where the symlink ``full`` leads; :class:`MissionError` for a loop or a dangling link."""
+    try:
+        return full.resolve(strict=True)
+    except RuntimeError as exc:  # "Symlink loop" (Python 3.11)
+        raise MissionError(f"mission {root}: {rel} is a symlink loop ({exc}): remove it.") from exc
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise MissionError(f"mission {root}: {rel} is a symlink loop: remove it.") from exc
+        raise MissionError(f"mission {root}: {rel} is a broken symlink.") from exc
+
+
+def _check_dir_link(full: Path, root: Path, root_real: Path) -> None:
+    if full.is_symlink():
+        rel = full.relative_to(root).as_posix()
+        if not _resolve(full, rel, root).is_relative_to(root_real):
+            raise MissionError(
+                f"mission {root}: {rel} is a symlink to {os.readlink(full)}, outside the mission folder."
+            )
+
+
+def _check_file(full: Path, rel: PurePosixPath, root: Path, root_real: Path) -> None:
+    """A regular file inside the mission, or :class:`MissionError` naming what it is instead."""
+    if full.is_symlink():
+        link = os.readlink(full)
+        target = _resolve(full, str(rel), root)
+        where = "the absolute path " if os.path.isabs(link) else ""
+        if not target.is_relative_to(root_real):
+            raise MissionError(
+                f"mission {root}: {rel} is a symlink to {where}{link}, outside the mission folder."
+            )
+    mode = full.stat().st_mode
+    if not stat.S_ISREG(mode):
+        kind = (
+            "FIFO" if stat.S_ISFIFO(mode) else "socket" if stat.S_ISSOCK(mode)
+            else "device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "special file"
+        )  # fmt: skip
+        raise MissionError(f"mission {root}: {rel} is a {kind}, not a file: remove it (nothing was read).")
+
+
 def _walk(root: Path) -> list[tuple[PurePosixPath, Path]]:
     out = []
     root_real = root.resolve()
@@ -77,31 +123,13 @@ def _walk(root: Path) -> list[tuple[PurePosixPath, Path]]:
         dirnames.sort()
         here = Path(dirpath)
         for d in list(dirnames):
-            full = here / d
-            if full.is_symlink():
-                target = full.resolve()
-                if not target.is_relative_to(root_real):
-                    raise MissionError(
-                        f"mission {root}: {full.relative_to(root)} is a symlink to {os.readlink(full)}, "
-                        "outside the mission folder."
-                    )
+            _check_dir_link(here / d, root, root_real)
         for name in sorted(filenames):
+            if here == root and name in NOT_MISSION_CONTENT:
+                continue
             full = here / name
             rel = check_relative(full.relative_to(root).as_posix(), root)
-            if full.is_symlink():
-                link = os.readlink(full)
-                target = full.resolve()
-                if os.path.isabs(link) and not target.is_relative_to(root_real):
-                    raise MissionError(
-                        f"mission {root}: {rel} is a symlink to the absolute path {link}, outside the "
-                        "mission folder."
-                    )
-                if not target.is_relative_to(root_real):
-                    raise MissionError(
-                        f"mission {root}: {rel} is a symlink to {link}, outside the mission folder."
-                    )
-                if not target.is_file():
-                    raise MissionError(f"mission {root}: {rel} is a broken symlink.")
+            _check_file(full, rel, root, root_real)
             out.append((rel, full))
     return out
 

@@ -62,10 +62,14 @@ def colmap_dir(entries: Sequence[FileEntry], root: Path) -> Path | None:
 
 
 def capture_time(
-    photos: dict[str, PhotoMeta], entries: Sequence[FileEntry], scan: LasScan, root: Path
-) -> tuple[datetime, str]:
-    """(UTC capture time, where it came from): the earliest photo time; else the raw folder's
-    DJI_YYYYMMDDHHMM; else the LAS creation date and GPS time."""
+    photos: dict[str, PhotoMeta], entries: Sequence[FileEntry], scan: LasScan, root: Path,
+    given: datetime | None = None,
+) -> tuple[datetime, str]:  # fmt: skip
+    """(UTC capture time, where it came from): ``given`` (``--captured-at``) when given; else the
+    earliest photo time; else the raw folder's DJI_YYYYMMDDHHMM; else the LAS creation date and GPS
+    time."""
+    if given is not None:
+        return given.astimezone(UTC), "given (--captured-at)"
     times = [m.capture_time for m in photos.values() if m.capture_time is not None]
     if times:
         return min(times), "photos"
@@ -76,8 +80,9 @@ def capture_time(
     day = date.fromisoformat(scan.creation_date) if scan.creation_date else None
     if day is None:
         raise MissionError(
-            f"mission {root}: no photo time, no DJI raw folder name and no LAS creation date: the "
-            "capture time is unknown."
+            f"mission {root}: no photo time, no DJI raw folder name (DJI_YYYYMMDDHHMM_...) and no creation date "
+            f"in the header of {root / scan.path}: the capture time is unknown; give it with "
+            "--captured-at (ISO 8601, e.g. 2024-11-27T16:31:00Z)."
         )
     t = datetime(day.year, day.month, day.day, tzinfo=UTC)
     if scan.gps_time_range is not None:

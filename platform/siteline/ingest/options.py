@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 from siteline.crs import parse_z_unit
@@ -19,7 +20,9 @@ class IngestOptions:
     without ``accept_misalignment``. The alignment check catches gross misregistration (a wrong CRS,
     offset or datum): construction changes between epochs (new walls next to old slabs, snow) bias
     ICP by up to ~0.2 m on the synthetic site, so the default limit is 0.5 m; the measured
-    correction is recorded either way."""
+    correction is recorded either way. captured_at: the capture time (UTC) when the mission cannot
+    tell it (a LiDAR-only mission whose LAS has no creation date) or tells it wrong; it overrides the
+    photos, the raw folder name and the LAS header, and is recorded as given."""
 
     crs: str | None = None
     z_unit: str | None = None
@@ -29,10 +32,15 @@ class IngestOptions:
     ransac_max_error_m: float = 0.5
     max_alignment_translation_m: float = 0.5
     max_alignment_residual_m: float = 0.15
+    captured_at: datetime | None = None
 
     def __post_init__(self) -> None:
         if self.z_unit is not None:
             parse_z_unit(self.z_unit)
+        if self.captured_at is not None and self.captured_at.tzinfo is None:
+            raise MissionError(
+                f"captured_at {self.captured_at.isoformat()} has no time zone: give one (Z for UTC)."
+            )
         if self.storage not in STORAGES:
             raise MissionError(f"storage must be 'copy' or 'reference', got {self.storage!r}.")
 
@@ -44,4 +52,5 @@ class IngestOptions:
             "crs": self.crs,
             "z_unit": self.z_unit,
             "accept_misalignment": self.accept_misalignment,
+            "captured_at": self.captured_at.isoformat() if self.captured_at else None,
         }

@@ -72,15 +72,6 @@ class _Totals:
         self.samples.append(local[stable])
 
 
-def _check_header(reader: laspy.LasReader, path: Path) -> None:
-    scale = [float(v) for v in reader.header.scales]
-    offset = [float(v) for v in reader.header.offsets]
-    if not (np.isfinite(scale).all() and np.isfinite(offset).all()) or min(abs(s) for s in scale) == 0:
-        raise PointCloudError(
-            f"point cloud {path}: header scale {scale} / offset {offset} is not finite and non-zero."
-        )
-
-
 def _scan(
     reader: laspy.LasReader,
     path: Path,
@@ -95,7 +86,6 @@ def _scan(
     header = reader.header
     n_total = int(header.point_count)
     progress(0, n_total)
-    _check_header(reader, path)
     src = source_crs(path, crs_override, reader)
     tr = source_transformer(path, site, src, z_unit)
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)

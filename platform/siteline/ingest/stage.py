@@ -74,7 +74,8 @@ def _store_and_record(
     new_blobs: list[str] = []
     try:
         store_mission(checked, settings.store, new_blobs, progress)
-        with catalog.transaction() as s:
+        # one registration per site at a time: pairs are formed from the scenes around this one
+        with catalog.lock(f"site:{plan.site_id}:scenes"), catalog.transaction() as s:
             ids = record_ingest(s, plan.site_id, checked, run)
     except BaseException as exc:
         with catalog.transaction() as s:
@@ -110,10 +111,12 @@ def ingest_mission(
     with catalog.transaction() as s:
         get_site(s, site_name)  # an unknown site is refused before a byte is hashed
     manifest = mission_manifest(Path(mission_dir), step(progress, "hashing"))
-    with catalog.transaction() as s:
-        plan = plan_ingest(s, site_name, manifest)
-    if plan.existing is not None:
-        return _already(plan)
-    run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
-    checked = execute_ingest(plan, opts, settings.store, progress)
-    return _store_and_record(catalog, settings, plan, checked, run, progress)
+    # one ingest of a mission's content at a time: a copy dropped twice at once is ingested once
+    with catalog.lock(f"mission:{manifest.sha256}"):
+        with catalog.transaction() as s:
+            plan = plan_ingest(s, site_name, manifest)
+        if plan.existing is not None:
+            return _already(plan)
+        run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
+        checked = execute_ingest(plan, opts, settings.store, progress)
+        return _store_and_record(catalog, settings, plan, checked, run, progress)

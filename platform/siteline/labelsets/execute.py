@@ -251,7 +251,7 @@ def execute_label_import(
     store.remove(uri)  # a store a crashed import published without its row
     tiles = open_labelled(plan.tiles, plan.parent)
     scratch.mkdir(parents=True, exist_ok=True)
-    sweep_stale(scratch, SPILL_PREFIX)
+    sweep_stale(scratch, f"{SPILL_PREFIX}*")
     spill_dir = Path(tempfile.mkdtemp(prefix=f"{SPILL_PREFIX}{plan.scene_id}-{owner_tag()}-", dir=scratch))
     m = MatchCounts()
     try:

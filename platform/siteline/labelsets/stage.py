@@ -14,7 +14,7 @@ from siteline.catalog.labelsets import record_label_set
 from siteline.config import Settings
 from siteline.errors import LabelSetError
 from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED, execute_label_import
-from siteline.labelsets.plan import plan_label_import
+from siteline.labelsets.plan import ImportPlan, plan_label_import
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.records.runs import StageRun
@@ -46,8 +46,17 @@ def import_labels(
         raise LabelSetError(f"labels file {path} does not exist.")
     if not 0.0 <= max_unmatched < 1.0:
         raise LabelSetError(f"max_unmatched {max_unmatched}: use a fraction in [0, 1).")
-    with catalog.transaction() as s:
-        plan = plan_label_import(s, scene_id)
+    with catalog.lock(f"scene:{scene_id}:labels"):  # one import per scene at a time: versions 2, 3, ...
+        with catalog.transaction() as s:
+            plan = plan_label_import(s, scene_id)
+        return _import(catalog, settings, plan, path, taxonomy_map, note, max_unmatched, progress, run_id)
+
+
+def _import(
+    catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, taxonomy_map: Mapping[int, str | int] | None,
+    note: str | None, max_unmatched: float, progress: Progress, run_id: str | None,
+) -> LabelSetImport:  # fmt: skip
+    scene_id = plan.scene_id
     run = StageRun(
         "import_labels", f"scene:{scene_id}", {"file": str(path), "version": plan.version}, run_id=run_id
     )
@@ -61,7 +70,7 @@ def import_labels(
         with catalog.transaction() as s:
             record_label_set(s, result, run)
     except sa.exc.IntegrityError as exc:
-        store.remove(result.uri)
+        # a writer outside this lock recorded this version: its store is at the same address, keep it
         raise LabelSetError(
             f"scene {scene_id}: another import recorded label-set version {plan.version} meanwhile; import "
             f"{path} again."

@@ -32,24 +32,28 @@ def process_pair(
     """Labels, views and renders of ``pair_id`` with ``params`` and the classes of ``label_sets``
     (scene id -> label-set version; each scene's newest by default), reused when already made. Their
     catalog rows are written once the outputs are published (also for outputs published by a run that
-    died before its commit).
+    died before its commit). One process writes a pair's outputs at a time; another waits, then
+    finds them made.
 
     Both scenes must be tiled (:class:`PairError` names the command otherwise); tiling them is the
     pipeline's job (``siteline.pipeline.process_pairs``), not this stage's."""
     params = params or PairParams()
-    with catalog.transaction() as s:
-        plan = plan_pair(s, settings.store, pair_id, params, label_sets)
-    started = StageRun("process_pair", f"pair:{pair_id}", params.to_dict(), run_id=run_id).started
-    found = find_outputs(plan, settings.store)
-    if found is not None:
-        log.info("pair %d: outputs %s are already made (%d views)", pair_id, plan.digest, found.view_count)
-    output = found or execute_pair(plan, settings.store, device, progress)
-    if found is None or not plan.recorded:
-        parameters = params.to_dict() | {"radius_m": output.radius_m}
+    started = StageRun("process_pair", f"pair:{pair_id}", run_id=run_id).started
+    with catalog.lock(f"pair:{pair_id}:outputs"):  # one writer of a pair's outputs at a time
         with catalog.transaction() as s:
-            record_pair_outputs(
-                s, output, StageRun("process_pair", f"pair:{pair_id}", parameters, started, run_id)
+            plan = plan_pair(s, settings.store, pair_id, params, label_sets)
+        found = find_outputs(plan, settings.store)
+        if found is not None:
+            log.info(
+                "pair %d: outputs %s are already made (%d views)", pair_id, plan.digest, found.view_count
             )
+        output = found or execute_pair(plan, settings.store, device, progress)
+        if found is None or not plan.recorded:
+            parameters = params.to_dict() | {"radius_m": output.radius_m}
+            with catalog.transaction() as s:
+                record_pair_outputs(
+                    s, output, StageRun("process_pair", f"pair:{pair_id}", parameters, started, run_id)
+                )
     return output
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -36,6 +38,19 @@ class LasScan:
     z_unit: dict[str, Any]
     creation_date: str | None
     stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def content_seed(self) -> int:
+        """A seed that depends on the cloud's content only (point count, GPS times, classes, bounds to
+        the centimetre in the site frame): the same mission gives the same level-of-detail draw and
+        node shuffle whatever its scene id, arrival order or the origin's magnitude."""
+        doc = {
+            "points": self.point_count,
+            "gps": [round(v, 6) for v in self.gps_time_range] if self.gps_time_range else None,
+            "classes": dict(sorted(self.class_histogram.items())),
+            "bounds": [round(v, 2) for v in (*self.bounds_min, *self.bounds_max)],
+        }
+        digest = hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).digest()
+        return int.from_bytes(digest[:4], "big")
 
     def at(self, path: str) -> LasScan:
         """This scan with ``path`` recorded instead (the file's path inside its mission)."""

@@ -43,6 +43,14 @@ def build_release(
     version) pins one; a change of any of them from the previous version of ``name`` bumps the major
     version."""
     params = params or ReleaseParams()
+    with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time
+        return _build(catalog, settings, site_name, name, params, pair_ids, version, run_id, label_sets)
+
+
+def _build(
+    catalog: Catalog, settings: Settings, site_name: str, name: str, params: ReleaseParams,
+    pair_ids: Sequence[int] | None, version: str | None, run_id: str | None, label_sets: Mapping[int, int] | None,
+) -> ReleaseInfo:  # fmt: skip
     with catalog.transaction() as s:
         plan = plan_release(s, settings, site_name, name, params, pair_ids, version, label_sets)
     run = StageRun(
@@ -70,6 +78,13 @@ def publish_release(
     catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None = None
 ) -> ReleaseInfo:
     """Verify the draft's checksums, move it into place, mark it published, make it read-only."""
+    with catalog.lock(f"release:{name}"):
+        return _publish(catalog, settings, name, version, run_id)
+
+
+def _publish(
+    catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None
+) -> ReleaseInfo:
     with catalog.transaction() as s:
         plan = plan_publish(s, settings, name, version)
     run = StageRun("publish_release", f"release:{name}:{version}", {}, run_id=run_id)

@@ -1,16 +1,28 @@
-"""Point-cloud rendering: z-buffer splatting in torch (CPU or CUDA) of site-local points."""
+"""Point-cloud rendering: z-buffer splatting in torch (CPU or CUDA) of site-local points.
 
-from siteline.render.georef import render_georeferenced, to_site_local_f32
-from siteline.render.outputs import write_render
-from siteline.render.settings import RenderSettings
-from siteline.render.zbuffer import RenderResult, disk_offsets, render_points
+Names are imported on first use (PEP 562): ``siteline.render.settings`` (the persisted knobs) and the
+commands that only read the catalog do not pull in torch.
+"""
 
-__all__ = [
-    "RenderResult",
-    "RenderSettings",
-    "disk_offsets",
-    "render_georeferenced",
-    "render_points",
-    "to_site_local_f32",
-    "write_render",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_WHERE = {
+    "RenderResult": "siteline.render.zbuffer",
+    "RenderSettings": "siteline.render.settings",
+    "disk_offsets": "siteline.render.zbuffer",
+    "render_georeferenced": "siteline.render.georef",
+    "render_points": "siteline.render.zbuffer",
+    "to_site_local_f32": "siteline.render.georef",
+    "write_render": "siteline.render.outputs",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module 'siteline.render' has no attribute {name!r}")
+    return getattr(importlib.import_module(_WHERE[name]), name)

@@ -30,7 +30,7 @@ def atomic_file(dest: Path) -> Iterator[Path]:
     the old file or the whole new one; on an error it is removed."""
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    sweep_stale(dest.parent, f".{dest.name}.tmp-")
+    sweep_stale(dest.parent, ".*.tmp-*")  # any writer's in this folder that died
     tmp = dest.with_name(f".{dest.name}.tmp-{owner_tag()}{dest.suffix}")
     try:
         yield tmp
@@ -60,7 +60,7 @@ def publish_folder(dest: Path, keep_existing: Callable[[Path], bool] | None = No
     new one is dropped). Leftovers of writers that died are cleared; live writers' are not."""
     dest = Path(dest)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    sweep_stale(dest.parent, f".{dest.name}.partial-")
+    sweep_stale(dest.parent, ".*.partial-*")
     container = dest.with_name(f".{dest.name}.partial-{owner_tag()}")
     container.mkdir()
     work = container / dest.name

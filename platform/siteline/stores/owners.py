@@ -4,6 +4,7 @@ on this host by a process that is gone), never another live writer's work."""
 
 from __future__ import annotations
 
+import fnmatch
 import os
 import re
 import shutil
@@ -43,14 +44,14 @@ def is_stale(name: str) -> bool:
     return pid != os.getpid() and not _alive(pid)
 
 
-def sweep_stale(folder: Path, prefix: str) -> list[Path]:
-    """Remove the entries of ``folder`` whose names start with ``prefix`` and are provably stale
+def sweep_stale(folder: Path, pattern: str) -> list[Path]:
+    """Remove the entries of ``folder`` whose names match the glob ``pattern`` and are provably stale
     (:func:`is_stale`); return what was removed."""
     removed: list[Path] = []
     if not folder.is_dir():
         return removed
     for entry in folder.iterdir():
-        if entry.name.startswith(prefix) and is_stale(entry.name):
+        if fnmatch.fnmatchcase(entry.name, pattern) and is_stale(entry.name):
             if entry.is_dir() and not entry.is_symlink():
                 shutil.rmtree(entry, ignore_errors=True)
             else:

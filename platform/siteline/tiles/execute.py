@@ -56,7 +56,7 @@ def execute_tiling(
             work,
             spec,
             workers=workers,
-            seed=plan.scene_id,
+            seed=plan.seed,
             progress=progress,
             z_unit=z_unit,
         )

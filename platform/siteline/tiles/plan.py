@@ -18,8 +18,8 @@ from siteline.site import SiteSpec
 @dataclass(frozen=True)
 class TilingPlan:
     """Everything tiling a scene needs from the catalog: the scene and its site, where its point
-    cloud is kept, the source CRS and z unit ingest recorded, whether the scene is tiled, and the
-    tiling last recorded, if any."""
+    cloud is kept, the source CRS and z unit ingest recorded, whether the scene is tiled, the tiling
+    last recorded, if any, and the seed of the level-of-detail draw (from the cloud's content)."""
 
     scene_id: int
     site: SiteSpec
@@ -28,6 +28,7 @@ class TilingPlan:
     z_unit: dict[str, Any] | None
     tiled: bool
     current: SceneTiling | None
+    seed: int
 
     def generation(self, retile: bool) -> int:
         """The generation a tiling written now gets: the next one for a re-tiling (the old store stays
@@ -60,4 +61,5 @@ def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
         z_unit=stats.scan.z_unit or None,
         tiled=scene.status == "tiled",
         current=stats.tiling,
+        seed=stats.scan.content_seed(),
     )

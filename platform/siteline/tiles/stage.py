@@ -43,7 +43,16 @@ def tile_scene(
     committed; a store without rows (a crash between the two) is replaced. A re-tiling writes the
     next generation beside the old store, commits, then removes the old one: the scene's pairs'
     outputs are keyed by the generation, and its imported label sets, aligned with the old order,
-    are refused until imported again (siteline.labelsets)."""
+    are refused until imported again (siteline.labelsets). One tiling of a scene runs at a time (a
+    second caller waits, then finds the scene tiled)."""
+    with catalog.lock(f"scene:{scene_id}:tiles"):
+        return _tile(catalog, settings, scene_id, spec, workers, progress, run_id, retile)
+
+
+def _tile(
+    catalog: Catalog, settings: Settings, scene_id: int, spec: TileSpec | None, workers: int,
+    progress: Progress, run_id: str | None, retile: bool,
+) -> TileOutcome:  # fmt: skip
     with catalog.transaction() as s:
         plan = plan_tiling(s, scene_id)
     store = settings.store

@@ -13,7 +13,6 @@ import hashlib
 import os
 import shutil
 import time
-import uuid
 import zlib
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -32,6 +31,7 @@ from siteline.progress import Progress, no_progress, step
 from siteline.records.tiling import NodeInfo, TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import site_chunks, source_transformer
+from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
@@ -225,7 +225,8 @@ def write_tiles(
     if out.exists():
         raise TileError(f"tile store {out} already exists; remove it or tile into another path.")
     out.parent.mkdir(parents=True, exist_ok=True)
-    spill_dir = out.with_name(f".{out.name}.spill-{uuid.uuid4().hex[:12]}")
+    sweep_stale(out.parent, ".*.spill-*")
+    spill_dir = out.with_name(f".{out.name}.spill-{owner_tag()}")
     spill_dir.mkdir(parents=True)
     try:
         tr = source_transformer(las_path, site, src_crs, z_unit)
