@@ -18,7 +18,7 @@ from siteline.pairs import PairOutput, PairParams, process_pair
 from siteline.progress import Progress, no_progress
 from siteline.records.release import ReleaseInfo
 from siteline.release.params import ReleaseParams
-from siteline.release.plan import choose_pairs
+from siteline.release.plan import check_release_name, choose_pairs, semver
 from siteline.release.stage import build_release, publish_release
 from siteline.tiles import TileOutcome, tile_scene
 
@@ -113,6 +113,9 @@ def release(
     with ``params`` (after ``preset``, applied here once) on each scene's newest label set (or the
     version ``label_sets`` pins), a draft built from exactly those outputs, published when
     ``publish``."""
+    check_release_name(name)  # refused before any pair is processed
+    if version is not None:
+        semver(version)
     resolved = ReleaseParams.resolve(params, preset, pad)
     with catalog.transaction() as s:
         chosen = choose_pairs(s, site, pair_ids)

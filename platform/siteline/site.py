@@ -15,7 +15,7 @@ from siteline.fence import validate_fence
 from siteline.schemas import validate
 from siteline.taxonomy import Taxonomy, default_taxonomy
 
-NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")  # used with fullmatch: no trailing newline
 DEFAULT_TILE_SIZE_M = 50.0
 
 
@@ -77,7 +77,7 @@ def make_site_spec(
 
     fence_m: closed ring (last vertex repeats the first) in site-local metres, or None.
     """
-    if not isinstance(name, str) or not NAME_PATTERN.match(name):
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         raise SiteError(
             f"site name {name!r} is not allowed: use 1-64 letters, digits, '_', '.', '-', starting with a letter or digit."
         )

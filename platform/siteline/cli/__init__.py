@@ -6,10 +6,11 @@ import sys
 from typing import Any
 
 import typer
+from rich.text import Text
 
 from siteline import __version__
 from siteline.cli import bench, db, demo, ingest, labels, release, render, site, synth, watch
-from siteline.cli.common import err_console
+from siteline.cli.common import err_console, plain
 from siteline.errors import SitelineError
 
 
@@ -98,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rc = app(args=argv, standalone_mode=False)
     except SitelineError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
         return 2
     except typer.Exit as exc:
         return exc.exit_code

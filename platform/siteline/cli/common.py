@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -18,8 +19,28 @@ from siteline.catalog import Catalog, open_catalog
 from siteline.config import Settings, load_settings
 from siteline.progress import Progress
 
-console = Console()
-err_console = Console(stderr=True)
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def plain(value: object) -> str:
+    """``value`` as text safe to print: control characters (terminal escape sequences from a note or
+    a file name) shown as ``\\x1b`` instead of acted on."""
+    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], str(value))
+
+
+class TextConsole(Console):
+    """A rich console that prints strings as plain text: text from users and files (paths, notes,
+    errors) is never read as markup, and its control characters are escaped."""
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(markup=False, highlight=False, emoji=False, **kw)
+
+    def print(self, *objects: Any, **kw: Any) -> None:
+        super().print(*(plain(o) if isinstance(o, str) else o for o in objects), **kw)
+
+
+console = TextConsole()
+err_console = TextConsole(stderr=True)
 
 JsonOption = typer.Option(False, "--json", help="Print machine-readable JSON instead of a table.")
 
@@ -58,7 +79,7 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]
     for col in columns:
         table.add_column(col)
     for row in rows:
-        table.add_row(*("" if v is None else str(v) for v in row))
+        table.add_row(*("" if v is None else plain(v) for v in row))
     console.print(table)
 
 
@@ -71,7 +92,7 @@ def print_record(title: str, record: dict[str, Any]) -> None:
             value = json.dumps(value, default=_default)
             if len(value) > 200:
                 value = value[:197] + "..."
-        table.add_row(key, "" if value is None else str(value))
+        table.add_row(plain(key), "" if value is None else plain(value))
     console.print(table)
 
 

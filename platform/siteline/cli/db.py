@@ -30,7 +30,7 @@ def init() -> None:
     finally:
         engine.dispose()
     console.print(
-        f"siteline home [bold]{cfg.home}[/], catalog {engine.url.render_as_string(hide_password=True)} at revision {rev}, "
+        f"siteline home {cfg.home}, catalog {engine.url.render_as_string(hide_password=True)} at revision {rev}, "
         f"stores at {cfg.store.url}"
     )
 

@@ -65,7 +65,6 @@ def _baseline(cfg: Settings, root: Path, version: str, stats: dict, train_iters:
         f"trained {log['iterations']} iterations (loss {log['losses'][0]:.3f} -> {log['losses'][-1]:.3f}); "
         f"{split} mIoU {result['scores']['miou']:.3f}, F1 changed {result['scores']['f1']:.3f} "
         f"-> {out / f'results-{split}.json'}",
-        markup=False,
     )
 
 
@@ -85,13 +84,11 @@ def demo(
     migrate.upgrade(engine)
     engine.dispose()
     console.rule("1. catalog")
-    console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}", markup=False)
+    console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}")
     console.rule("2. synthetic site")
     synth_dir, synth = cfg.home / "synthetic-site", SynthConfig(epochs=epochs)
     if not (synth_dir / "truth" / "site.json").exists():
-        write_site(
-            synth_dir, synth, progress=lambda name: console.print(f"  generated epoch {name}", markup=False)
-        )
+        write_site(synth_dir, synth, progress=lambda name: console.print(f"  generated epoch {name}"))
     epochs_doc = json.loads((synth_dir / "truth" / "site.json").read_text())["epochs"]
     cat = open_catalog(cfg)
     try:
@@ -99,7 +96,7 @@ def demo(
         console.rule("3. ingest and tile")
         for e in epochs_doc:
             done = pipeline.ingest(cat, cfg, synth_dir / e["mission_dir"], site_name)
-            console.print(f"  {done.ingest.message}", markup=False)
+            console.print(f"  {done.ingest.message}")
         console.rule("4. release")
         root, version = _release(cat, cfg, site_name)
         stats = json.loads((root / "stats.json").read_text())
@@ -113,7 +110,7 @@ def demo(
         )
         with cat.transaction() as s:
             manifest_sha = get_release(s, DEMO_RELEASE, version).manifest_sha256
-        console.print(f"manifest sha256 {manifest_sha}; datasheet {root / 'README.md'}", markup=False)
+        console.print(f"manifest sha256 {manifest_sha}; datasheet {root / 'README.md'}")
     finally:
         cat.dispose()
     console.rule("5. baseline (FC-Siam-diff, a short run)")

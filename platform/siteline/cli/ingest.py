@@ -230,7 +230,7 @@ def scene_tile(
     emit(
         as_json,
         {"message": done.message, "tiles": done.tiling.to_dict() if done.tiling else None},
-        lambda: console.print(done.message, markup=False),
+        lambda: console.print(done.message),
     )
 
 

@@ -42,7 +42,7 @@ def create(
     emit(
         as_json,
         record,
-        lambda: console.print(f"created site [bold]{name}[/] ({spec.crs}, origin {spec.origin})"),
+        lambda: console.print(f"created site {name} ({spec.crs}, origin {spec.origin})"),
     )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,14 +22,29 @@ from siteline.release import layout
 from siteline.release.params import ReleaseParams
 from siteline.stores import layout as paths
 
+RELEASE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}")
+SEMVER = re.compile(r"(0|[1-9][0-9]*)\.(0|[1-9][0-9]*)\.(0|[1-9][0-9]*)")
+
+
+def check_release_name(name: str) -> str:
+    """``name`` when it is a release name (letters, digits, '_', '.', '-'; no path, no newline)."""
+    if not isinstance(name, str) or not RELEASE_NAME.fullmatch(name) or name in (".", ".."):
+        raise ReleaseError(
+            f"release name {name!r} must be letters, digits, '_', '.' and '-' (up to 128, starting with a letter "
+            "or digit). Nothing was written."
+        )
+    return name
+
 
 def semver(version: str) -> tuple[int, int, int]:
-    """(major, minor, patch) of ``MAJOR.MINOR.PATCH``; ReleaseError otherwise."""
-    try:
-        a, b, c = (int(x) for x in version.split("."))
-    except ValueError as exc:
-        raise ReleaseError(f"version {version!r} is not semantic (MAJOR.MINOR.PATCH).") from exc
-    return a, b, c
+    """(major, minor, patch) of ``MAJOR.MINOR.PATCH`` (no leading zeros, nothing around it);
+    ReleaseError otherwise."""
+    m = SEMVER.fullmatch(version) if isinstance(version, str) else None
+    if m is None:
+        raise ReleaseError(
+            f"version {version!r} is not semantic: MAJOR.MINOR.PATCH, numbers without leading zeros (e.g. 1.0.0)."
+        )
+    return int(m.group(1)), int(m.group(2)), int(m.group(3))
 
 
 def next_version(session: Session, name: str, lineage_key: Mapping[str, Any]) -> str:
@@ -125,6 +141,9 @@ def plan_release(
 ) -> ReleasePlan:  # fmt: skip
     """The plan of building draft ``name`` of ``site_name`` (one transaction). The version is the next
     one (:func:`next_version`) unless given; a published version is refused."""
+    check_release_name(name)
+    if version is not None:
+        semver(version)
     chosen = choose_pairs(session, site_name, pair_ids)
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
     key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
@@ -158,6 +177,8 @@ class PublishPlan:
 def plan_publish(session: Session, settings: Settings, name: str, version: str) -> PublishPlan:
     """The plan of publishing draft ``name`` ``version``; refused when there is no such release or it
     is already published."""
+    check_release_name(name)
+    semver(version)
     rel = find_release(session, name, version)
     if rel is None:
         raise NotFoundError(f"no release {name} {version}; build it first (`siteline release build`).")

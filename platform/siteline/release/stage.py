@@ -18,7 +18,7 @@ from siteline.release import layout
 from siteline.release.build import execute_build
 from siteline.release.manifest import read_manifest
 from siteline.release.params import ReleaseParams
-from siteline.release.plan import plan_publish, plan_release
+from siteline.release.plan import check_release_name, plan_publish, plan_release, semver
 from siteline.release.publish import make_read_only, move_back, move_into_place
 
 log = logging.getLogger(__name__)
@@ -43,6 +43,9 @@ def build_release(
     version) pins one; a change of any of them from the previous version of ``name`` bumps the major
     version."""
     params = params or ReleaseParams()
+    check_release_name(name)  # before anything: a name is a folder name
+    if version is not None:
+        semver(version)
     with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time
         return _build(catalog, settings, site_name, name, params, pair_ids, version, run_id, label_sets)
 
