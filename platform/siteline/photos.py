@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -20,8 +20,8 @@ from siteline.errors import PhotoError
 
 # compared without a trailing slash: legacy cameras write both "http://www.dji.com" and ".../"
 DJI_NAMESPACES = ("http://www.dji.com/drone-dji/1.0", "http://www.dji.com")
-_XMP_START = b"<x:xmpmeta"
-_XMP_END = b"</x:xmpmeta>"
+# the packet's root element: x:xmpmeta, or x:xapmeta in files written by older XMP toolkits
+_XMP_ROOTS = (b"xmpmeta", b"xapmeta")
 # scan at most this much of a file for the XMP packet (DJI writes it in the first APP1 segments)
 MAX_SCAN_BYTES = 4 * 2**20
 
@@ -50,7 +50,9 @@ _ALIASES = {
 class PhotoMeta:
     """What a DJI photo says about itself. Angles in degrees (DJI NED conventions), altitudes in
     metres (absolute: ellipsoidal with RTK), standard deviations in metres, intrinsics in pixels.
-    ``source`` is ``xmp`` or ``exif``."""
+    ``source`` is where the position came from (``xmp`` or ``exif``); ``sources`` names, per field
+    read, how: ``exif``, ``xmp``, ``xmp (repaired: ...)`` for a packet mended before parsing, or
+    ``xmp (tolerant scan)`` for one no XML parser reads."""
 
     file: str
     source: str
@@ -77,6 +79,7 @@ class PhotoMeta:
     height: int | None = None
     make: str | None = None
     model: str | None = None
+    sources: dict[str, str] = field(default_factory=dict)
 
     @property
     def has_position(self) -> bool:
@@ -112,30 +115,72 @@ def _number(text: str, what: str, path: Path) -> float:
 
 
 def find_xmp(data: bytes) -> bytes | None:
-    """The raw ``<x:xmpmeta>...</x:xmpmeta>`` packet in a file's bytes, or None."""
-    start = data.find(_XMP_START)
-    if start < 0:
-        return None
-    end = data.find(_XMP_END, start)
-    if end < 0:
-        return None
-    return data[start : end + len(_XMP_END)]
+    """The raw ``<x:xmpmeta>...</x:xmpmeta>`` (or ``x:xapmeta``) packet in a file's bytes, or None."""
+    for root in _XMP_ROOTS:
+        start = data.find(b"<x:" + root)
+        if start >= 0:
+            end = data.find(b"</x:" + root + b">", start)
+            if end >= 0:
+                return data[start : end + len(root) + 5]
+    return None
 
 
-def _dji_fields(xmp: bytes) -> dict[str, str]:
-    """Every DJI-namespace value in the packet, attributes and elements alike, by local name."""
+_TAG = re.compile(rb"<[A-Za-z][^<>]*>")
+_ATTR = re.compile(rb"""([A-Za-z_][\w.:-]*)\s*=\s*("[^"]*"|'[^']*')""")
+
+
+def repair_xmp(xmp: bytes) -> tuple[bytes, list[str]]:
+    """The packet with what firmware gets wrong mended, and what was mended: an attribute (a namespace
+    declaration, as XT S firmware V190918 writes ``xmlns:DJI`` twice) repeated in one tag is kept once;
+    a ``drone-dji:`` or ``DJI:`` prefix used but never declared is declared on the root."""
+    fixes: list[str] = []
+
+    def dedupe(m: re.Match[bytes]) -> bytes:
+        tag, seen, keep, at = m.group(0), set(), [], 0
+        for a in _ATTR.finditer(tag):
+            name = a.group(1)
+            if name in seen:  # the later one goes, whitespace before it too
+                keep.append(tag[at : a.start()].rstrip())
+                at = a.end()
+                fixes.append(f"repeated {name.decode(errors='replace')}")
+            seen.add(name)
+        return b"".join(keep) + tag[at:]
+
+    fixed = _TAG.sub(dedupe, xmp)
+    for prefix, ns in (
+        (b"drone-dji", b"http://www.dji.com/drone-dji/1.0/"),
+        (b"DJI", b"http://www.dji.com/"),
+    ):
+        if re.search(rb"[<\s]" + prefix + rb":\w", fixed) and b"xmlns:" + prefix + b"=" not in fixed:
+            fixed = re.sub(
+                rb"<x:(xmpmeta|xapmeta)", rb"<x:\1 xmlns:" + prefix + b'="' + ns + b'"', fixed, count=1
+            )
+            fixes.append(f"undeclared {prefix.decode()}:")
+    return fixed, fixes
+
+
+def _tolerant_fields(xmp: bytes) -> dict[str, str]:
+    """DJI values scanned from a packet no XML parser reads: attributes (either quote, spaces around
+    '=') and elements (with or without attributes) of the ``drone-dji:`` and ``DJI:`` prefixes."""
+    found: dict[str, str] = {}
+    for m in re.finditer(rb"""(?:drone-dji|DJI):(\w+)\s*=\s*(?:"([^"]*)"|'([^']*)')""", xmp):
+        found[m.group(1).decode()] = (m.group(2) if m.group(2) is not None else m.group(3)).decode(
+            errors="replace"
+        )
+    for m in re.finditer(rb"<(drone-dji|DJI):(\w+)(?:\s[^>]*)?>([^<]*)</\1:\2>", xmp):
+        if m.group(3).strip():
+            found[m.group(2).decode()] = m.group(3).decode(errors="replace").strip()
+    return found
+
+
+def _dji_fields(xmp: bytes) -> tuple[dict[str, str], str]:
+    """Every DJI-namespace value in the packet, attributes and elements alike, by local name, and how
+    it was read: ``xmp``, ``xmp (repaired: ...)`` or ``xmp (tolerant scan)``."""
+    fixed, fixes = repair_xmp(xmp)
     try:
-        root = ET.fromstring(xmp)
+        root = ET.fromstring(fixed)
     except ET.ParseError:
-        # stray bytes or an undeclared prefix (some legacy firmware): a tolerant scan of the
-        # drone-dji: and DJI: attributes and elements
-        tolerant: dict[str, str] = {}
-        for m in re.finditer(rb'(?:drone-dji|DJI):(\w+)="([^"]*)"', xmp):
-            tolerant[m.group(1).decode()] = m.group(2).decode(errors="replace")
-        for m in re.finditer(rb"<(drone-dji|DJI):(\w+)>([^<]*)</\1:\2>", xmp):
-            if m.group(3).strip():
-                tolerant[m.group(2).decode()] = m.group(3).decode(errors="replace").strip()
-        return tolerant
+        return _tolerant_fields(xmp), "xmp (tolerant scan)"
     out: dict[str, str] = {}
     for el in root.iter():
         for key, value in el.attrib.items():
@@ -147,7 +192,7 @@ def _dji_fields(xmp: bytes) -> dict[str, str]:
             ns, local = el.tag[1:].split("}", 1)
             if ns.rstrip("/") in DJI_NAMESPACES and el.text and el.text.strip():
                 out[local] = el.text.strip()
-    return out
+    return out, f"xmp (repaired: {', '.join(sorted(set(fixes)))})" if fixes else "xmp"
 
 
 def _exif(path: Path) -> tuple[dict[str, Any], int | None, int | None]:
@@ -200,27 +245,32 @@ def read_photo_meta(path: Path) -> PhotoMeta:
         "model": exif.get("Model"),
         "capture_time": _exif_time(exif.get("DateTimeOriginal") or exif.get("DateTime")),
     }
+    sources = {k: "exif" for k, v in values.items() if v is not None and k != "file"}
     xmp = find_xmp(head)
-    fields = _dji_fields(xmp) if xmp else {}
+    fields, how = _dji_fields(xmp) if xmp else ({}, "")
     for name, aliases in _ALIASES.items():
         for alias in aliases:
             if alias in fields and fields[alias].strip() != "":
                 v = _number(fields[alias], alias, path)
-                values[name] = int(v) if name == "rtk_flag" else v
+                values[name], sources[name] = (int(v) if name == "rtk_flag" else v), how
                 break
     if "DewarpData" in fields and ";" in fields["DewarpData"]:
         parts = fields["DewarpData"].split(";", 1)[1].split(",")
-        values["dewarp"] = tuple(_number(p, "DewarpData", path) for p in parts)
-    source = "xmp" if "latitude_deg" in values else "exif"
-    if source == "exif":
-        gps = exif.get("_gps", {})
-        if {"GPSLatitude", "GPSLatitudeRef", "GPSLongitude", "GPSLongitudeRef"} <= gps.keys():
-            values["latitude_deg"] = _dms(gps["GPSLatitude"], gps["GPSLatitudeRef"], "N")
-            values["longitude_deg"] = _dms(gps["GPSLongitude"], gps["GPSLongitudeRef"], "E")
-            if "GPSAltitude" in gps:
-                alt = float(gps["GPSAltitude"])
-                values["absolute_altitude_m"] = -alt if gps.get("GPSAltitudeRef") in (1, b"\x01") else alt
-    meta = PhotoMeta(source=source, **{k: v for k, v in values.items() if k != "source"})
+        values["dewarp"], sources["dewarp"] = tuple(_number(p, "DewarpData", path) for p in parts), how
+    gps = exif.get("_gps", {})
+    if (
+        "latitude_deg" not in values
+        and {"GPSLatitude", "GPSLatitudeRef", "GPSLongitude", "GPSLongitudeRef"} <= gps.keys()
+    ):
+        values["latitude_deg"] = _dms(gps["GPSLatitude"], gps["GPSLatitudeRef"], "N")
+        values["longitude_deg"] = _dms(gps["GPSLongitude"], gps["GPSLongitudeRef"], "E")
+        sources["latitude_deg"] = sources["longitude_deg"] = "exif"
+    if "absolute_altitude_m" not in values and "GPSAltitude" in gps:
+        alt = float(gps["GPSAltitude"])
+        values["absolute_altitude_m"] = -alt if gps.get("GPSAltitudeRef") in (1, b"\x01") else alt
+        sources["absolute_altitude_m"] = "exif"
+    source = "xmp" if sources.get("latitude_deg", "exif") != "exif" else "exif"
+    meta = PhotoMeta(source=source, sources=sources, **values)
     if not meta.has_position or meta.latitude_deg is None or meta.longitude_deg is None:
         raise PhotoError(
             f"photo {path} has no usable position: no DJI XMP GpsLatitude/GpsLongitude/"

@@ -23,20 +23,29 @@ VALUES = {
 }
 
 
-def legacy_xmp(form: str, namespace: str = "http://www.dji.com/", declare: bool = True) -> bytes:
-    """An XMP packet with VALUES in the legacy ``DJI:`` namespace; ``form``: elements or attributes."""
-    ns = f' xmlns:DJI="{namespace}"' if declare else ""
+def legacy_xmp(
+    form: str,
+    namespace: str = "http://www.dji.com/",
+    declare: bool = True,
+    twice: bool = False,
+    quote: str = '"',
+    root: str = "xmpmeta",
+) -> bytes:
+    """An XMP packet with VALUES in the legacy ``DJI:`` namespace; ``form``: elements or attributes.
+    ``twice`` declares ``xmlns:DJI`` twice on the description, as XT S firmware V190918 does (not
+    well-formed XML); ``quote`` is the attribute quote; ``root`` is ``xmpmeta`` or ``xapmeta``."""
+    ns = f" xmlns:DJI={quote}{namespace}{quote}" * (2 if twice else 1) if declare else ""
     if form == "elements":
         body = "".join(f"    <DJI:{k}>{v}</DJI:{k}>\n" for k, v in VALUES.items())
         desc = f'  <rdf:Description rdf:about=""{ns}>\n{body}  </rdf:Description>\n'
     elif form == "attributes":
-        attrs = "".join(f'\n    DJI:{k}="{v}"' for k, v in VALUES.items())
+        attrs = "".join(f"\n    DJI:{k}={quote}{v}{quote}" for k, v in VALUES.items())
         desc = f'  <rdf:Description rdf:about=""{ns}{attrs}/>\n'
     else:
         raise ValueError(form)
     return (
-        '<x:xmpmeta xmlns:x="adobe:ns:meta/">\n <rdf:RDF xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#">\n'
-        f"{desc} </rdf:RDF>\n</x:xmpmeta>"
+        f'<x:{root} xmlns:x="adobe:ns:meta/">\n <rdf:RDF xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#">\n'
+        f"{desc} </rdf:RDF>\n</x:{root}>"
     ).encode()
 
 

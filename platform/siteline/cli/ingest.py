@@ -205,7 +205,13 @@ def photo_inspect(
     """Print the DJI XMP (or EXIF) metadata siteline reads from a photo."""
     meta = read_photo_meta(file)
     record = meta.to_dict()
-    emit(as_json, record, lambda: print_record(f"photo {file.name}", record))
+    sources = record.pop("sources")
+    rows = [(k, v, sources.get(k, "")) for k, v in record.items() if v is not None]
+    emit(
+        as_json,
+        {**record, "sources": sources},
+        lambda: print_table(f"photo {file.name}", ["field", "value", "read from"], rows),
+    )
 
 
 @scene_app.command("tile")
