@@ -14,8 +14,10 @@ from siteline.catalog import Catalog
 from siteline.catalog.scenes import get_scene, scene_ids_of_pairs
 from siteline.config import Settings
 from siteline.ingest import IngestOptions, IngestResult, ingest_mission
-from siteline.pairs import PairOutput, PairParams, process_pair
+from siteline.pairs.params import PairParams
+from siteline.pairs.stage import process_pair
 from siteline.progress import Progress, no_progress
+from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
 from siteline.release.params import ReleaseParams
 from siteline.release.plan import check_release_name, choose_pairs, semver

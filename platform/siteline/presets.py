@@ -8,7 +8,7 @@ Scale is relative to the cameras' image size (the paper's 1/8 of a 5645 x 4082 u
 from __future__ import annotations
 
 from siteline.errors import ReleaseError
-from siteline.pairs import PairParams
+from siteline.pairs.params import PairParams
 
 PRESETS: dict[str, dict] = {
     # on the front at the cheap end (1000 points/m2): 3 px points at LOD factor 1.41 read 11k points

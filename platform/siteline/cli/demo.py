@@ -43,7 +43,7 @@ def _site(
 def _release(cat: Catalog, cfg: Settings, site_name: str) -> tuple[Path, str]:
     """The demo release: the published one when there is one, else built and published now."""
     from siteline import pipeline
-    from siteline.pairs import PairParams
+    from siteline.pairs.params import PairParams
 
     with cat.transaction() as s:
         published = [r for r in list_releases(s, DEMO_RELEASE) if r.status == "published"]

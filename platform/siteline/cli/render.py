@@ -18,7 +18,7 @@ from siteline.schemas import load_json
 from siteline.taxonomy import default_taxonomy, load_taxonomy
 
 if TYPE_CHECKING:
-    from siteline.views import NamedCamera
+    from siteline.views.generate import NamedCamera
 
 views_app = typer.Typer(
     help="Synthetic viewpoints (vertical, mirror, forward sampling).", no_args_is_help=True
@@ -32,7 +32,7 @@ OriginOption = typer.Option(
 
 
 def _camera_file(path: Path) -> list[NamedCamera]:
-    from siteline.views import NamedCamera
+    from siteline.views.generate import NamedCamera
 
     doc = load_json(path, "camera")
     items = doc.get("cameras", doc) if isinstance(doc, dict) else doc
@@ -73,7 +73,9 @@ def render(
 ) -> None:
     """Render a point cloud through a camera into RGB, hit mask and depth."""
     from siteline.lasio import read_site_local
-    from siteline.render import RenderSettings, render_points, write_render
+    from siteline.render.outputs import write_render
+    from siteline.render.settings import RenderSettings
+    from siteline.render.zbuffer import render_points
 
     settings = RenderSettings(scale=scale, point_size_px=point_size, precision=precision)
     cam = _camera_file(camera)[0].camera
@@ -124,7 +126,10 @@ def views_generate(
 ) -> None:
     """Generate synthetic views: 32 candidates per real camera, rejection, stratified sample of N."""
     from siteline.lasio import read_site_local
-    from siteline.views import ArrayPointSource, ViewParams, fit_ground_plane, generate_views
+    from siteline.views.generate import generate_views
+    from siteline.views.ground import fit_ground_plane
+    from siteline.views.params import ViewParams
+    from siteline.views.sources import ArrayPointSource
 
     params = ViewParams(views=n, seed=seed, scale=scale, min_coverage=min_coverage, point_size_px=point_size)
     real = _camera_file(cameras)

@@ -1,27 +1,36 @@
 """Pairs of scenes: 3D change labels, synthetic views, rendered image pairs with change masks.
 
 The pair stage: :func:`plan_pair` (catalog) -> :func:`execute_pair` (labels, views, renders) ->
-``siteline.catalog.pairs.record_pair_outputs``; :func:`process_pair` runs them."""
+``siteline.catalog.pairs.record_pair_outputs``; :func:`process_pair` runs them. Names are imported on
+first use (PEP 562), so reading made outputs (``siteline.pairs.outputs``) or the parameters does not
+pull in the renderer and torch.
+"""
 
-from siteline.pairs.execute import execute_pair
-from siteline.pairs.params import PairParams
-from siteline.pairs.plan import PairPlan, output_digest, plan_pair
-from siteline.pairs.render import LabelledPair, PairRender, pair_mask, render_pair_view
-from siteline.pairs.stage import find_pair_output, process_pair
-from siteline.records.pairs import PairOutput, PairVersions
+from __future__ import annotations
 
-__all__ = [
-    "LabelledPair",
-    "PairOutput",
-    "PairParams",
-    "PairPlan",
-    "PairRender",
-    "PairVersions",
-    "execute_pair",
-    "find_pair_output",
-    "output_digest",
-    "pair_mask",
-    "plan_pair",
-    "process_pair",
-    "render_pair_view",
-]
+import importlib
+from typing import Any
+
+_WHERE = {
+    "LabelledPair": "siteline.pairs.render",
+    "PairOutput": "siteline.records.pairs",
+    "PairParams": "siteline.pairs.params",
+    "PairPlan": "siteline.pairs.plan",
+    "PairRender": "siteline.pairs.render",
+    "PairVersions": "siteline.records.pairs",
+    "execute_pair": "siteline.pairs.execute",
+    "find_pair_output": "siteline.pairs.stage",
+    "output_digest": "siteline.pairs.plan",
+    "pair_mask": "siteline.pairs.render",
+    "plan_pair": "siteline.pairs.plan",
+    "process_pair": "siteline.pairs.stage",
+    "render_pair_view": "siteline.pairs.render",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module 'siteline.pairs' has no attribute {name!r}")
+    return getattr(importlib.import_module(_WHERE[name]), name)

@@ -1,7 +1,7 @@
 """Processing a pair from its plan (the execute part; never touches the catalog): 3D change both ways,
 synthetic views from the later scene, and every view rendered on both scenes with its symmetric mask
 (DESIGN.md §4-§6). Outputs are published whole under the plan's address; outputs already there (same
-parameters, label sets and tilings) are found with :func:`find_outputs`."""
+parameters, label sets and tilings) are found with ``siteline.pairs.outputs.find_outputs``."""
 
 from __future__ import annotations
 
@@ -17,17 +17,18 @@ from siteline.errors import PairError
 from siteline.labels.params import expected_false_change
 from siteline.labels.store import auto_radius, write_labels
 from siteline.labelsets.store import open_labelled
+from siteline.pairs.outputs import output_of
 from siteline.pairs.plan import PairPlan
 from siteline.pairs.render import LabelledPair, render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput, RenderedView
 from siteline.render.outputs import png_bytes
-from siteline.stores import Store, join, layout
+from siteline.stores import Store, layout
 from siteline.tiles.reader import SceneTiles
 from siteline.tolerances import RATIO_TOL, at_least
-from siteline.views import NamedCamera, ViewSet, fit_ground_plane, generate_views
-from siteline.views.generate import SyntheticView, key_sorted
+from siteline.views.generate import NamedCamera, SyntheticView, ViewSet, generate_views, key_sorted
+from siteline.views.ground import fit_ground_plane
 
 log = logging.getLogger(__name__)
 FOLDERS = ("A", "B", "label")
@@ -41,21 +42,6 @@ class PairLabels:
     radius_m: float
     uri: str
     record: dict[str, Any]
-
-
-def _output(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
-    return PairOutput(
-        plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
-        tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
-        plan.params.to_dict(),
-    )  # fmt: skip
-
-
-def find_outputs(plan: PairPlan, store: Store) -> PairOutput | None:
-    """The outputs of ``plan`` when they are published in the store, else None (a read only)."""
-    if not store.is_complete(plan.root):
-        return None
-    return _output(plan, json.loads(store.read_bytes(join(plan.root, "summary.json"))))
 
 
 def pair_labels(
@@ -194,4 +180,4 @@ def execute_pair(
         "pair %d: %d views rendered (%s rejected) into %s",
         plan.pair_id, len(records), rejected.get("low_valid", 0), plan.root,
     )  # fmt: skip
-    return _output(plan, summary)
+    return output_of(plan, summary)

@@ -13,7 +13,7 @@ from siteline.labels.params import LabelParams
 from siteline.records.enums import HOLE_RULES, HoleRule
 from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
-from siteline.views import SAMPLER_VERSION, ViewParams
+from siteline.views.params import SAMPLER_VERSION, ViewParams
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.records.enums import HOLE_RULES
-from siteline.render import render_points
+from siteline.render.zbuffer import render_points
 from siteline.stores import join
 from siteline.tiles.reader import SceneTiles
 

@@ -9,7 +9,8 @@ from collections.abc import Mapping
 from siteline.catalog import Catalog
 from siteline.catalog.pairs import record_pair_outputs
 from siteline.config import Settings
-from siteline.pairs.execute import execute_pair, find_outputs
+from siteline.pairs.execute import execute_pair
+from siteline.pairs.outputs import find_outputs
 from siteline.pairs.params import PairParams
 from siteline.pairs.plan import plan_pair
 from siteline.progress import Progress, no_progress

@@ -15,7 +15,8 @@ from scipy.ndimage import distance_transform_edt
 from siteline.cameras import Camera
 from siteline.dji import cam_from_world_rotation, grid_convergence_deg
 from siteline.photos import dji_xmp, signed
-from siteline.render import RenderSettings, render_points
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
 
 # Zenmuse L2 RGB sensor, full size; photos are written at a fraction of it
 SENSOR_W, SENSOR_H = 5280, 3956

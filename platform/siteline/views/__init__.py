@@ -1,37 +1,38 @@
-"""Synthetic views: ground plane, vertical / mirror / forward strategies, rejection, sampling (DESIGN.md §5)."""
+"""Synthetic views: ground plane, vertical / mirror / forward strategies, rejection, sampling (DESIGN.md §5).
 
-from siteline.views.generate import (
-    SAMPLER_VERSION,
-    NamedCamera,
-    SyntheticView,
-    ViewSet,
-    candidate_key,
-    candidate_views,
-    generate_views,
-    strategy_key,
-    stratified_sample,
-)
-from siteline.views.ground import GroundPlane, fit_ground_plane
-from siteline.views.params import ViewParams
-from siteline.views.sources import ArrayPointSource, PointSource
-from siteline.views.strategies import forward, mirror, vertical
+Names are imported on first use (PEP 562): the persisted parameters (``siteline.views.params``) do not
+pull in the renderer and torch.
+"""
 
-__all__ = [
-    "SAMPLER_VERSION",
-    "ArrayPointSource",
-    "GroundPlane",
-    "NamedCamera",
-    "PointSource",
-    "SyntheticView",
-    "ViewParams",
-    "ViewSet",
-    "candidate_key",
-    "candidate_views",
-    "fit_ground_plane",
-    "forward",
-    "generate_views",
-    "mirror",
-    "stratified_sample",
-    "strategy_key",
-    "vertical",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_WHERE = {
+    "SAMPLER_VERSION": "siteline.views.params",
+    "ArrayPointSource": "siteline.views.sources",
+    "GroundPlane": "siteline.views.ground",
+    "NamedCamera": "siteline.views.generate",
+    "PointSource": "siteline.views.sources",
+    "SyntheticView": "siteline.views.generate",
+    "ViewParams": "siteline.views.params",
+    "ViewSet": "siteline.views.generate",
+    "candidate_key": "siteline.views.generate",
+    "candidate_views": "siteline.views.generate",
+    "fit_ground_plane": "siteline.views.ground",
+    "forward": "siteline.views.strategies",
+    "generate_views": "siteline.views.generate",
+    "mirror": "siteline.views.strategies",
+    "stratified_sample": "siteline.views.generate",
+    "strategy_key": "siteline.views.generate",
+    "vertical": "siteline.views.strategies",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module 'siteline.views' has no attribute {name!r}")
+    return getattr(importlib.import_module(_WHERE[name]), name)

@@ -14,7 +14,8 @@ from siteline.cameras import Camera
 from siteline.errors import ViewsError
 from siteline.fence import inside_fence
 from siteline.progress import no_step
-from siteline.render import RenderSettings, render_points
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
 from siteline.tolerances import (
     LENGTH_TOL_M,
     POSE_CENTER_QUANTUM_M,
@@ -24,7 +25,7 @@ from siteline.tolerances import (
 )
 from siteline.views import strategies
 from siteline.views.ground import GroundPlane
-from siteline.views.params import ViewParams
+from siteline.views.params import SAMPLER_VERSION, ViewParams
 from siteline.views.sources import PointSource
 
 
@@ -209,10 +210,6 @@ def reject(
             low = not at_least(r.coverage, params.min_coverage, RATIO_TOL)
             judged[id(v)] = replace(v, coverage=r.coverage, rejected="low_coverage" if low else None)
     return [judged.get(id(v), v) for v in views]
-
-
-# Recorded with every view set (lineage): how the sample was drawn.
-SAMPLER_VERSION = "keyed-sha256-1"
 
 
 def _key(*parts: object) -> int:

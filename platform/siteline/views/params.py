@@ -11,6 +11,9 @@ from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views.strategies import MIRROR_RULES
 
+# Recorded with every view set (lineage): how the sample was drawn.
+SAMPLER_VERSION = "keyed-sha256-1"
+
 
 @dataclass(frozen=True)
 class ViewParams:

@@ -1,0 +1,25 @@
+"""A pair's outputs once made: read back from the store (no rendering, no torch)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from siteline.pairs.plan import PairPlan
+from siteline.records.pairs import PairOutput, RenderedView
+from siteline.stores import Store, join
+
+
+def output_of(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
+    return PairOutput(
+        plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
+        tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
+        plan.params.to_dict(),
+    )  # fmt: skip
+
+
+def find_outputs(plan: PairPlan, store: Store) -> PairOutput | None:
+    """The outputs of ``plan`` when they are published in the store, else None (a read only)."""
+    if not store.is_complete(plan.root):
+        return None
+    return output_of(plan, json.loads(store.read_bytes(join(plan.root, "summary.json"))))
