@@ -176,3 +176,23 @@ def test_demo_runs_and_is_rerunnable(home, capsys) -> None:
     assert "demo" in out and "10800" in out and "mIoU" in out
     code, out, err = run(capsys, "demo", "--epochs", "2", "--train-iters", "2")
     assert code == 0 and "reusing" in out
+
+
+@pytest.mark.parametrize(
+    ("coordinates", "message"),
+    [
+        ([[]], "has no vertices"),  # an empty ring
+        ([], "one ring without holes"),  # no ring at all
+        (5, "must be a list of rings"),  # coordinates that are a number
+        ([[5, 6, 7, 5]], "not a number pair"),  # a ring of numbers, not pairs
+        ([[["a", "b"], [1, 0], [1, 1], ["a", "b"]]], "not a number pair"),
+    ],
+)
+def test_malformed_fence_is_one_line_not_a_traceback(initialised, capsys, tmp_path, coordinates, message) -> None:
+    fence = tmp_path / "fence.geojson"
+    fence.write_text(json.dumps({"type": "Polygon", "coordinates": coordinates}))
+    code, _, err = run(
+        capsys, "site", "create", "x", "--crs", "EPSG:32618", "--origin", "0", "0", "0", "--fence", str(fence)
+    )
+    assert code == 2 and message in err and "fence.geojson" in err and "Traceback" not in err
+    assert _site_count(initialised) == 0

@@ -8,17 +8,11 @@ object :data:`MARKER` exists, written last and removed first.
 
 from __future__ import annotations
 
-import hashlib
-import os
-import uuid
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import TYPE_CHECKING
-
-from siteline.errors import StoreError
-from siteline.hashing import sha256_file
 
 if TYPE_CHECKING:
     import zarr
@@ -93,25 +87,6 @@ class Store(ABC):
     def local_file(self, uri: str, sha256: str | None = None) -> Path:
         """A local path holding the bytes of ``uri``: the file itself on a local store, else a cached
         download (checked against ``sha256`` when given)."""
-
-
-def cached_download(store: Store, uri: str, sha256: str | None) -> Path:
-    """``uri`` fetched once into ``store.staging/cache`` under its sha256 (or the hash of its address),
-    checked against ``sha256`` when given."""
-    name = sha256 or hashlib.sha256(uri.encode()).hexdigest()
-    cached = store.staging / "cache" / name[:2] / name[2:]
-    if cached.is_file():
-        return cached
-    cached.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cached.with_name(f".{cached.name}.tmp-{uuid.uuid4().hex}")
-    try:
-        store.get_file(uri, tmp)
-        if sha256 is not None and sha256_file(tmp) != sha256:
-            raise StoreError(f"{uri} does not match its checksum {sha256[:12]}: the store is damaged.")
-        os.replace(tmp, cached)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return cached
 
 
 def walk_files(root: Path) -> Iterator[Path]:

@@ -5,6 +5,7 @@ uploaded, and then marked complete; its endpoint and credentials come from fsspe
 
 from __future__ import annotations
 
+import hashlib
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -13,7 +14,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from siteline.errors import StoreError
-from siteline.stores.base import MARKER, Store, cached_download, join, walk_files
+from siteline.hashing import sha256_file
+from siteline.stores.base import MARKER, Store, join, walk_files
+from siteline.stores.local import atomic_file
 from siteline.stores.owners import owner_tag
 
 if TYPE_CHECKING:
@@ -31,6 +34,20 @@ def file_system(uri: str) -> tuple[Any, str]:
             f"cannot open the store {uri}: {exc}. Install the file system's package (s3fs for s3://, "
             "gcsfs for gs://) or fix the URL."
         ) from exc
+
+
+def cached_download(store: Store, uri: str, sha256: str | None) -> Path:
+    """``uri`` fetched once into ``store.staging/cache`` under its sha256 (or the hash of its address),
+    checked against ``sha256`` when given; written whole (:func:`atomic_file`)."""
+    name = sha256 or hashlib.sha256(uri.encode()).hexdigest()
+    cached = store.staging / "cache" / name[:2] / name[2:]
+    if cached.is_file():
+        return cached
+    with atomic_file(cached) as tmp:
+        store.get_file(uri, tmp)
+        if sha256 is not None and sha256_file(tmp) != sha256:
+            raise StoreError(f"{uri} does not match its checksum {sha256[:12]}: the store is damaged.")
+    return cached
 
 
 class FsspecStore(Store):
