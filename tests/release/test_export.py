@@ -68,15 +68,11 @@ def _torchgeo_levircdplus(out: Path, split: str):  # LEVIRCDPlus._load_files: tr
     ]
 
 
-def _changemamba(out: Path, split: str):  # ChangeDetectionDatset: T1/T2/GT + name list, label / 255
+def _changemamba(out: Path, split: str):  # ChangeDetectionDataset: T1/T2/GT + name list, imageio float32 / 255
     names = [line.strip() for line in (out / f"{split}_list.txt").read_text().splitlines()]
     base = out / split
     return [
-        (
-            base / "T1" / n,
-            base / "T2" / n,
-            (np.asarray(_png(base / "GT" / n), np.float32) / 255).astype(np.int64),
-        )
+        (base / "T1" / n, base / "T2" / n, (np.array(_png(base / "GT" / n), np.float32) / 255).astype(np.int64))
         for n in names
     ]
 
@@ -89,9 +85,13 @@ def _changeformer(out: Path, split: str):  # CDDataset: list/<split>.txt, label_
     ]
 
 
-def _torchange(out: Path, split: str):  # LEVIRCD(dataset_dir): A/*.png, replace('A', 'B' / 'label'); > 0
+def _torchange(out: Path, split: str):  # LEVIRCD: A/*.png; B by '/A/' -> '/B/', label by '/A' -> '/label'; > 0
     a = sorted(glob.glob(os.path.join(out, split, "A", "*.png")))
-    return [(p, p.replace("A", "B"), (_png(p.replace("A", "label")) > 0).astype(int)) for p in a]
+    return [(p, p.replace("/A/", "/B/"), (_png(p.replace("/A", "/label")) > 0).astype(int)) for p in a]
+
+
+# tools whose stock loader reads ignore as their loss's ignore index (255), not as unchanged
+IGNORE_AWARE = {"changemamba"}
 
 
 LOADERS = {
@@ -129,7 +129,8 @@ def test_export_is_read_right_by_the_tools_own_rules(built, tmp_path, profile) -
             assert np.array_equal(_png(b), _png(root / it["split"] / "B" / f"{it['id']}.png"))
             valid = truth != 255
             assert np.array_equal(label[valid], truth[valid])  # the truth on valid pixels
-            assert not label[~valid].any()  # ignored pixels read as unchanged, never as changed
+            # ignored pixels never read as changed: as unchanged, or as the tool's own ignore index
+            assert np.all(label[~valid] == (255 if profile in IGNORE_AWARE else 0))
     record = json.loads((out / "siteline-export.json").read_text())
     assert record["profile"] == profile and record["honour_ignore"]
     assert not verify_files(root)  # the release is untouched
@@ -155,11 +156,30 @@ def test_export_prints_the_setting_and_refuses_a_used_folder(built, tmp_path, ca
         capsys, "release", "export", "rel", pub.version, "--profile", "nosuch", "--out", str(tmp_path / "x")
     )
     assert code == 2 and "unknown export profile" in err
+    a_file = tmp_path / "taken.txt"
+    a_file.write_text("mine")
+    code, _, err = run_cli(
+        capsys, "release", "export", "rel", pub.version, "--profile", "opencd", "--out", str(a_file)
+    )
+    assert code == 2 and "is a file" in err and "Traceback" not in err and a_file.read_text() == "mine"
+    theirs = tmp_path / ".ocd2.partial"  # a user's folder that happens to carry the old temporary name
+    theirs.mkdir()
+    (theirs / "keep.txt").write_text("mine")
+    code, _, err = run_cli(
+        capsys, "release", "export", "rel", pub.version, "--profile", "opencd", "--out", str(tmp_path / "ocd2")
+    )
+    assert code == 0, err
+    assert (theirs / "keep.txt").read_text() == "mine"
     bad = tmp_path / "Alice"
     code, _, err = run_cli(
         capsys, "release", "export", "rel", pub.version, "--profile", "torchange", "--out", str(bad)
     )
-    assert code == 2 and "replaces every 'A'" in err and not bad.exists()
+    assert code == 2 and "torchange rewrites '/A'" in err and not bad.exists()
+    fine = tmp_path / "DATA" / "tc"  # a capital A elsewhere in a name is fine for torchange
+    code, stdout, err = run_cli(
+        capsys, "release", "export", "rel", pub.version, "--profile", "torchange", "--out", str(fine)
+    )
+    assert code == 0, err
 
 
 def test_format_2_folders_agree_and_the_loader_reads_0_1_255(built) -> None:

@@ -106,6 +106,12 @@ def record_published(
     return sum(release_item_counts(session, rel.id).values()), rel.manifest_sha256
 
 
+def remove_draft(session: Session, name: str, version: str) -> None:
+    """Delete the draft release ``name`` ``version`` and its items (a published one is refused by
+    the flush guards)."""
+    session.delete(get_release(session, name, version))
+
+
 def release_location(session: Session, name: str, version: str) -> tuple[Path, str]:
     """Where release ``name`` ``version`` lives and its status (draft or published)."""
     rel = get_release(session, name, version)

@@ -33,7 +33,7 @@ class TextConsole(Console):
     errors) is never read as markup, and its control characters are escaped."""
 
     def __init__(self, **kw: Any) -> None:
-        super().__init__(markup=False, highlight=False, emoji=False, **kw)
+        super().__init__(markup=False, highlight=False, emoji=False, soft_wrap=True, **kw)
 
     def print(self, *objects: Any, **kw: Any) -> None:
         super().print(*(plain(o) if isinstance(o, str) else o for o in objects), **kw)

@@ -109,7 +109,7 @@ def build(
 ) -> None:
     """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
     from siteline import pipeline
-    from siteline.pairs import PairParams
+    from siteline.pairs.params import PairParams
 
     params = PairParams(
         scale=scale,
@@ -215,19 +215,50 @@ def diff(
 def verify(
     name: str = typer.Argument(...), version: str = typer.Argument(...), as_json: bool = JsonOption
 ) -> None:
-    """Recompute every checksum of a release; name each file that differs (exit status 1 if any)."""
+    """Recompute every checksum of a release and check its manifest against the catalog's record;
+    name each file that differs and any state a killed build or publish left (exit status 1 if any)."""
+    from siteline.release.repair import inspect_release
+
     with catalog() as cat, cat.transaction() as s:
-        root, status = release_location(s, name, version)
-    problems = verify_files(root)
+        root, _ = release_location(s, name, version)
+        recorded = get_release(s, name, version).manifest_sha256
+        findings = inspect_release(s, settings(), name, version)
+    problems = [
+        f.message + (f" Mend it with `siteline release repair {name} {version}`." if f.mendable else "")
+        for f in findings
+    ]
+    if (root / "manifest.json").is_file():
+        problems += verify_files(root, recorded)
     emit(
         as_json,
         {"name": name, "version": version, "root": str(root), "ok": not problems, "problems": problems},
         lambda: console.print(
-            "\n".join(problems) if problems else f"{name} {version}: every checksum matches"
+            "\n".join(problems)
+            if problems
+            else f"{name} {version}: every checksum matches the catalog's manifest"
         ),
     )
     if problems:
         raise typer.Exit(1)
+
+
+@app.command("repair")
+def repair(
+    name: str = typer.Argument(..., help="Release name."),
+    version: str | None = typer.Argument(None, help="Version (default: every version of the name)."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Mend what a killed build or publish left: finish a publish that moved the folder but was not
+    recorded, make a published version read-only, remove a draft the catalog does not record."""
+    from siteline.release.repair import repair_release
+
+    with catalog() as cat:
+        done = repair_release(cat, settings(), name, version)
+    emit(
+        as_json,
+        {"name": name, "version": version, "repaired": done},
+        lambda: console.print("\n".join(done) if done else f"release {name}: nothing to repair"),
+    )
 
 
 @app.command("export")
@@ -248,7 +279,9 @@ def export(
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
-    result = export_release(root, profile, out, copy=copy)
+    from siteline.stores import layout
+
+    result = export_release(root, profile, out, copy=copy, protected=layout.releases(settings().home))
     emit(
         as_json,
         result.to_dict(),
@@ -261,7 +294,8 @@ def export(
                 else ""
             )
             + f"\nlabel/ is LEVIR-CD 0/255; the tool reads it as: {result.label_rule}."
-            + f"\nignore pixels read as unchanged there; {result.honour_ignore}."
+            + f"\n{result.honour_ignore}."
+            + (f"\nnote: {result.note}." if result.note else "")
         ),
     )
 
@@ -271,7 +305,14 @@ def score(
     name: str = typer.Argument(...),
     version: str = typer.Argument(...),
     split: str = typer.Option("test", "--split"),
-    pred: Path = typer.Option(..., "--pred", help="Folder of <id>.png predictions, 0/255 or 0/1."),
+    pred: Path = typer.Option(
+        ..., "--pred", help="Folder of predictions, 0/255 or 0/1, named <id>.png or as an export named them."
+    ),
+    pred_size: str | None = typer.Option(
+        None,
+        "--pred-size",
+        help="WxH of the predictions when the tool resized the images (ChangeFormer: 256x256).",
+    ),
     out: Path | None = typer.Option(None, "--out", help="Also write the results JSON here."),
     as_json: bool = JsonOption,
 ) -> None:
@@ -282,7 +323,9 @@ def score(
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
-    result = score_predictions(root, split, pred)
+    from siteline.release.score import parse_size
+
+    result = score_predictions(root, split, pred, parse_size(pred_size) if pred_size else None)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(result, indent=1) + "\n")

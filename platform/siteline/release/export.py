@@ -13,13 +13,16 @@ import json
 import os
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from PIL import Image
+
 from siteline.errors import ReleaseError
 from siteline.release.layout import manifest_format
-from siteline.release.manifest import read_manifest
+from siteline.release.manifest import SAFE_ITEM_ID, read_manifest
 from siteline.stores import publish_folder
 
 SPLITS = ("train", "val", "test")
@@ -29,23 +32,64 @@ EXPORT_RECORD = "siteline-export.json"
 @dataclass(frozen=True)
 class Profile:
     """name: the ``--profile`` value. tool: the loader it targets. label_rule: what that loader does to
-    label pixel values. honour_ignore: the one setting that makes the tool honour ignore. split_map:
-    release split -> the tool's split. files: (split, item id) -> [(release folder, export path)].
-    lists: the list files, path -> lines, from {tool split: [item ids]}."""
+    label pixel values. honour_ignore: the one setting that makes the tool honour ignore (or why none
+    is needed). stem: (tool split, item id) -> the file name stem the tool sees (predictions saved
+    under it are scored too). files: (tool split, stem) -> [(source, export path)], where a source is
+    a release folder linked (or copied) or a derived label (:data:`DERIVED`) written anew. lists: the
+    list files, path -> lines, from {tool split: [stems]}. split_map: release split -> the tool's
+    split. check_paths: refuses an export folder the tool's path rewriting would break. note: what
+    else the user must know (printed at export)."""
 
     name: str
     tool: str
     label_rule: str
     honour_ignore: str
     files: Callable[[str, str], list[tuple[str, str]]]
+    stem: Callable[[str, str], str] = lambda split, item: item
     lists: Callable[[dict[str, list[str]]], dict[str, list[str]]] = lambda _: {}
     split_map: tuple[tuple[str, str], ...] = (("train", "train"), ("val", "val"), ("test", "test"))
-    forbidden_in_path: str = ""
+    check_paths: Callable[[Path, list[Path]], None] = lambda out, a_paths: None
+    note: str = ""
 
 
 def _per_split(folders: dict[str, str]) -> Callable[[str, str], list[tuple[str, str]]]:
-    return lambda split, item: [(src, f"{split}/{dst}/{item}.png") for src, dst in folders.items()]
+    return lambda split, stem: [(src, f"{split}/{dst}/{stem}.png") for src, dst in folders.items()]
 
+
+def _changemamba_gt(label_ignore: np.ndarray) -> np.ndarray:
+    """ChangeMamba's GT as a 16-bit PNG: 0 unchanged, 255 changed, 65025 ignore, so that its stock
+    ``label / 255`` gives 0 / 1 / 255 and its loss and evaluator (ignore_index 255) skip ignore."""
+    out = np.zeros(label_ignore.shape, np.uint16)
+    out[label_ignore == 1] = 255
+    out[label_ignore == 255] = 255 * 255
+    return out
+
+
+# sources an export writes anew from the release's ignore-aware label (the release is never touched)
+DERIVED: dict[str, Callable[[np.ndarray], np.ndarray]] = {"changemamba-gt": _changemamba_gt}
+
+
+def _torchange_paths(out: Path, a_paths: list[Path]) -> None:
+    """torchange's LEVIRCD finds B and label by ``path.replace('/A/', '/B/')`` and
+    ``path.replace('/A', '/label')`` over the whole path (torchange/data/levircd.py): refuse an export
+    folder where that lands anywhere but the A folder itself."""
+    for a in a_paths:
+        text, want_b, want_label = (
+            str(a),
+            str(a.parent.parent / "B" / a.name),
+            str(a.parent.parent / "label" / a.name),
+        )
+        if text.replace("/A/", "/B/") != want_b or text.replace("/A", "/label") != want_label:
+            raise ReleaseError(
+                f"export folder {out}: torchange rewrites '/A' in the whole path {text} to find its label, and "
+                "this path holds '/A' elsewhere (a folder whose name starts with A). Choose a path without one."
+            )
+
+
+TORCHGEO_TASK = (
+    "siteline.data.ChangeDetectionDataset(RELEASE, split, image_range=255.0) (mask 0/1/255) with "
+    "ChangeDetectionTask(task='multiclass', num_classes=2, ignore_index=255, loss='ce')"
+)
 
 PROFILES: dict[str, Profile] = {
     p.name: p
@@ -64,27 +108,27 @@ PROFILES: dict[str, Profile] = {
             "TorchGeo LEVIRCD(root, split): root/A|B|label/<split>*.png, matched in sorted order",
             "clamp(0, 1) then long",
             "TorchGeo's loader clamps labels to {0, 1} and cannot carry ignore: to honour it, train on "
-            "siteline.data.ChangeDetectionDataset(RELEASE, split, image_range=255.0) (mask 0/1/255) with "
-            "ChangeDetectionTask(task='multiclass', num_classes=2, ignore_index=255)",
-            lambda split, item: [(f, f"{f}/{split}_{item}.png") for f in ("A", "B", "label")],
+            + TORCHGEO_TASK
+            + " (the default loss='bce' cannot take a multiclass ignore_index: its targets do not fit)",
+            lambda split, stem: [(f, f"{f}/{stem}.png") for f in ("A", "B", "label")],
+            stem=lambda split, item: f"{split}_{item}",
         ),
         Profile(
             "torchgeo-levircdplus",
             "TorchGeo LEVIRCDPlus(root, split): root/LEVIR-CD+/{train,test}/A|B|label/<name>.png",
             "clamp(0, 1) then long",
             "TorchGeo's loader clamps labels to {0, 1} and cannot carry ignore: to honour it, train on "
-            "siteline.data.ChangeDetectionDataset(RELEASE, split, image_range=255.0) (mask 0/1/255) with "
-            "ChangeDetectionTask(task='multiclass', num_classes=2, ignore_index=255)",
-            lambda split, item: [(f, f"LEVIR-CD+/{split}/{f}/{item}.png") for f in ("A", "B", "label")],
+            + TORCHGEO_TASK,
+            lambda split, stem: [(f, f"LEVIR-CD+/{split}/{f}/{stem}.png") for f in ("A", "B", "label")],
             split_map=(("train", "train"), ("val", "train"), ("test", "test")),
         ),
         Profile(
             "changemamba",
-            "ChangeMamba ChangeDetectionDatset(<out>/<split>, names from <out>/<split>_list.txt): T1|T2|GT/<name>",
-            "label / 255 (GT 255 -> 1), then long",
-            "to honour ignore: read GT_ignore/ (0/1/255) instead of GT/ and drop the division by 255 "
-            "(`label = label / 255` in make_data_loader.py), with ignore_index=255 in the loss",
-            _per_split({"A": "T1", "B": "T2", "label": "GT", "label_ignore": "GT_ignore"}),
+            "ChangeMamba ChangeDetectionDataset(<out>/<split>, names from <out>/<split>_list.txt): T1|T2|GT/<name>",
+            "label / 255 then long: GT holds 0 / 255 / 65025 (16-bit), read as 0 unchanged, 1 changed, 255 ignore",
+            "ignore is honoured with stock settings, nothing to change: its cross-entropy and Lovasz losses "
+            "(changedetection/tasks/bcd.py) and its evaluator skip 255",
+            _per_split({"A": "T1", "B": "T2", "changemamba-gt": "GT"}),
             lists=lambda names: {f"{s}_list.txt": [f"{i}.png" for i in ids] for s, ids in names.items()},
         ),
         Profile(
@@ -93,21 +137,37 @@ PROFILES: dict[str, Profile] = {
             "label_transform='norm': label // 255",
             "to honour ignore: label_transform=None with ANNOT_FOLDER_NAME='label_ignore' (0/1/255) in "
             "datasets/CD_dataset.py; its cross-entropy already ignores 255",
-            lambda split, item: [(f, f"{f}/{item}.png") for f in ("A", "B", "label", "label_ignore")],
+            lambda split, stem: [(f, f"{f}/{stem}.png") for f in ("A", "B", "label", "label_ignore")],
             lists=lambda names: {f"list/{s}.txt": [f"{i}.png" for i in ids] for s, ids in names.items()},
+            note="ChangeFormer resizes every pair to img_size x img_size (256 by default), squashing these "
+            "non-square images; score its predictions at that size with `siteline release score ... "
+            "--pred-size 256x256` (img_size=None does not help: it resizes labels to width x width)",
         ),
         Profile(
             "torchange",
-            "torchange LEVIRCD(dataset_dir=<out>/<split>): A/*.png, with 'A' replaced by 'B' and 'label' "
-            "in each path",
+            "torchange LEVIRCD(dataset_dir=<out>/<split>): A/*.png, B and label found by rewriting '/A/' and "
+            "'/A' in each path",
             "the evaluator binarises label > 0",
             "to honour ignore: mask the evaluator's pixels with ignore/<name>.png (255 = ignore) or score "
             "predictions with `siteline release score`",
             _per_split({"A": "A", "B": "B", "label": "label", "ignore": "ignore"}),
-            forbidden_in_path="A",
+            # lower case, so no file name starts with 'A' (one site per release: no collision)
+            stem=lambda split, item: item.lower(),
+            check_paths=_torchange_paths,
         ),
     )
 }
+
+
+def prediction_names(split: str, item_id: str) -> list[str]:
+    """Every file name a prediction of item ``item_id`` in ``split`` may carry: its id, or the name any
+    export profile gives it (``release score`` accepts each)."""
+    names = [f"{item_id}.png"]
+    for profile in PROFILES.values():
+        name = f"{profile.stem(dict(profile.split_map)[split], item_id)}.png"
+        if name not in names:
+            names.append(name)
+    return names
 
 
 @dataclass
@@ -119,17 +179,33 @@ class ExportResult:
     split_map: dict[str, str]
     label_rule: str
     honour_ignore: str
+    note: str = ""
+    names: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
 
 
-def _export_name(profile: Profile, item_id: str) -> str:
-    # torchange replaces every 'A' of a path: ids are lower-cased (one site per release: no collision)
-    return item_id.lower() if profile.forbidden_in_path else item_id
-
-
-def _check_export(root: Path, profile: Profile, out: Path, doc: dict[str, Any]) -> None:
+def _check_export(
+    root: Path, profile: Profile, out: Path, doc: dict[str, Any], protected: Path | None
+) -> None:
+    """Refuse an export that could not be read or would write where it must not: inside a release
+    (resolved, so a symlink or '..' cannot hide it), over a file or a non-empty folder."""
+    real = Path(os.path.realpath(out))
+    for inside in (root, protected):
+        if inside is not None and real.is_relative_to(os.path.realpath(inside)):
+            raise ReleaseError(
+                f"export folder {out} is inside {inside}: a release is never written into; choose a folder "
+                "outside the releases."
+            )
+    if out.exists() and not out.is_dir():
+        raise ReleaseError(f"export folder {out} is a file: choose a new folder.")
+    bad = [it["id"] for it in doc["items"] if not SAFE_ITEM_ID.fullmatch(str(it["id"]))]
+    if bad:
+        raise ReleaseError(
+            f"release {doc['name']} {doc['version']}: item id {bad[0]!r} is not a file name; the manifest was "
+            "edited (`siteline release verify`). Nothing was written."
+        )
     if manifest_format(doc) < 2:
         raise ReleaseError(
             f"release {doc['name']} {doc['version']} is format 1 (label/ holds 0/1/255): rebuild it with this "
@@ -139,56 +215,62 @@ def _check_export(root: Path, profile: Profile, out: Path, doc: dict[str, Any]) 
         raise ReleaseError(
             f"export folder {out} is not empty: choose a new folder (an export never overwrites)."
         )
-    if profile.forbidden_in_path and profile.forbidden_in_path in str(out):
-        raise ReleaseError(
-            f"export folder {out} contains {profile.forbidden_in_path!r}: {profile.tool} replaces every "
-            f"{profile.forbidden_in_path!r} in a path to find B and label; choose a path without it."
-        )
 
 
 def _plan_files(
     root: Path, profile: Profile, out: Path, doc: dict[str, Any]
-) -> tuple[list[tuple[Path, Path]], dict[str, list[str]]]:
-    """(release file, export path) for every file, and the item names per tool split."""
+) -> tuple[list[tuple[str, Path, Path]], dict[str, list[str]], dict[str, str]]:
+    """(source, release file, export path) for every file, the stems per tool split, and stem -> item id."""
     split_map = dict(profile.split_map)
     names: dict[str, list[str]] = {}
-    planned: list[tuple[Path, Path]] = []
+    ids: dict[str, str] = {}
+    planned: list[tuple[str, Path, Path]] = []
     for it in sorted(doc["items"], key=lambda it: it["id"]):
         split = split_map[it["split"]]
-        name = _export_name(profile, it["id"])
-        names.setdefault(split, []).append(name)
-        for folder, dest in profile.files(split, name):
-            planned.append((root / it["split"] / folder / f"{it['id']}.png", out / dest))
-    return planned, names
+        stem = profile.stem(split, it["id"])
+        names.setdefault(split, []).append(stem)
+        ids[stem] = it["id"]
+        for source, dest in profile.files(split, stem):
+            folder = "label_ignore" if source in DERIVED else source
+            planned.append((source, root / it["split"] / folder / f"{it['id']}.png", out / dest))
+    return planned, names, ids
 
 
-def _write_files(planned: list[tuple[Path, Path]], out: Path, work: Path, copy: bool) -> None:
-    for src, dest in planned:
+def _write_files(planned: list[tuple[str, Path, Path]], out: Path, work: Path, copy: bool) -> None:
+    for source, src, dest in planned:
         if not src.is_file():
             raise ReleaseError(f"{src} is missing: the release is incomplete (`siteline release verify`).")
         target = work / dest.relative_to(out)
         target.parent.mkdir(parents=True, exist_ok=True)
-        if copy:
+        if source in DERIVED:
+            with Image.open(src) as im:
+                Image.fromarray(DERIVED[source](np.asarray(im))).save(target, format="PNG")
+        elif copy:
             shutil.copyfile(src, target)
         else:
             # relative to where the link will live once the folder is renamed into place
             os.symlink(os.path.relpath(src, dest.parent), target)
 
 
-def export_release(root: Path, profile_name: str, out: Path, copy: bool = False) -> ExportResult:
+def export_release(
+    root: Path, profile_name: str, out: Path, copy: bool = False, protected: Path | None = None
+) -> ExportResult:
     """Lay out the release at ``root`` for ``profile_name`` in the new folder ``out``: relative
-    symlinks into the release (``copy``: copies), list files, and ``siteline-export.json``; built
-    beside ``out`` and renamed into place whole."""
+    symlinks into the release (``copy``: copies; derived labels are written anew), list files, and
+    ``siteline-export.json`` (with the file names given, stem -> item id); built beside ``out`` and
+    renamed into place whole. ``out`` may not resolve inside the release or inside ``protected``
+    (the folder of every release)."""
     if profile_name not in PROFILES:
         raise ReleaseError(f"unknown export profile {profile_name!r}: use one of {', '.join(PROFILES)}.")
     profile = PROFILES[profile_name]
     root, out = Path(root).resolve(), Path(out).absolute()
     doc = read_manifest(root)
-    _check_export(root, profile, out, doc)
-    planned, names = _plan_files(root, profile, out, doc)
+    _check_export(root, profile, out, doc, protected)
+    planned, names, ids = _plan_files(root, profile, out, doc)
+    profile.check_paths(out, [dest for source, _, dest in planned if source == "A"])
     result = ExportResult(
         profile.name, str(out), len(planned), {s: len(v) for s, v in sorted(names.items())},
-        dict(profile.split_map), profile.label_rule, profile.honour_ignore,
+        dict(profile.split_map), profile.label_rule, profile.honour_ignore, profile.note, ids,
     )  # fmt: skip
     with publish_folder(out) as work:
         _write_files(planned, out, work, copy)

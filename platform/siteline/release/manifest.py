@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -60,23 +61,62 @@ def read_manifest(root: Path) -> dict[str, Any]:
         raise ReleaseError(f"{path} is not valid JSON: {exc}") from exc
 
 
-def verify_files(root: Path) -> list[str]:
-    """Problems found by recomputing every checksum of the manifest: one line per file."""
-    doc = read_manifest(root)
+SAFE_ITEM_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,200}")
+
+
+def safe_relative(path: str) -> bool:
+    """Whether a manifest path stays inside the release: relative, POSIX, no '..' and no empty part."""
+    parts = path.split("/")
+    return (
+        bool(path)
+        and not path.startswith("/")
+        and "\\" not in path
+        and all(p not in ("", ".", "..") for p in parts)
+    )
+
+
+def verify_files(root: Path, manifest_sha256: str | None = None) -> list[str]:
+    """Problems found by recomputing every checksum of the manifest, one line each: a file missing,
+    resized, changed, replaced by a symlink or not listed; a listed path or item id that leaves the
+    release; and, given the catalog's ``manifest_sha256``, a manifest that is not the one recorded
+    (edited fields, a forged file whose entry was updated to match)."""
+    root = Path(root)
     problems = []
+    if manifest_sha256 is not None:
+        actual = (
+            hashlib.sha256((root / MANIFEST).read_bytes()).hexdigest()
+            if (root / MANIFEST).is_file()
+            else None
+        )
+        if actual != manifest_sha256:
+            problems.append(
+                f"{MANIFEST}: sha256 differs from the catalog's record ({manifest_sha256[:12]}...)"
+            )
+    doc = read_manifest(root)
     listed = set()
     for f in doc["files"]:
-        listed.add(f["path"])
-        p = Path(root) / f["path"]
-        if not p.is_file():
-            problems.append(f"{f['path']}: missing")
+        rel = f["path"]
+        listed.add(rel)
+        if not safe_relative(rel):
+            problems.append(f"{rel}: a manifest path that leaves the release")
             continue
-        if p.stat().st_size != f["size"]:
-            problems.append(f"{f['path']}: size {p.stat().st_size} != {f['size']}")
-            continue
-        if sha256_file(p) != f["sha256"]:
-            problems.append(f"{f['path']}: sha256 differs from the manifest")
-    for p in sorted(Path(root).rglob("*")):
-        if p.is_file() and p.name != MANIFEST and p.relative_to(root).as_posix() not in listed:
+        p = root / rel
+        if p.is_symlink():
+            problems.append(f"{rel}: a symlink, not the file the manifest lists")
+        elif not p.is_file():
+            problems.append(f"{rel}: missing")
+        elif p.stat().st_size != f["size"]:
+            problems.append(f"{rel}: size {p.stat().st_size} != {f['size']}")
+        elif sha256_file(p) != f["sha256"]:
+            problems.append(f"{rel}: sha256 differs from the manifest")
+    for item in doc.get("items", []):
+        if not SAFE_ITEM_ID.fullmatch(str(item.get("id", ""))):
+            problems.append(f"item id {item.get('id')!r}: not a file name (letters, digits, '_', '.', '-')")
+    for p in sorted(root.rglob("*")):
+        if (
+            (p.is_file() or p.is_symlink())
+            and p.name != MANIFEST
+            and p.relative_to(root).as_posix() not in listed
+        ):
             problems.append(f"{p.relative_to(root).as_posix()}: not in the manifest")
     return problems

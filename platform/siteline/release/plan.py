@@ -172,6 +172,7 @@ class PublishPlan:
     version: str
     draft: Path
     final: Path
+    manifest_sha256: str | None
 
 
 def plan_publish(session: Session, settings: Settings, name: str, version: str) -> PublishPlan:
@@ -188,5 +189,5 @@ def plan_publish(session: Session, settings: Settings, name: str, version: str) 
         )
     return PublishPlan(
         name, version, paths.release_draft(settings.home, name, version),
-        paths.release_published(settings.home, name, version),
+        paths.release_published(settings.home, name, version), rel.manifest_sha256,
     )  # fmt: skip

@@ -16,8 +16,9 @@ log = logging.getLogger(__name__)
 
 
 def move_into_place(plan: PublishPlan) -> None:
-    """Verify the draft against its manifest and rename it to the published folder."""
-    problems = verify_files(plan.draft)
+    """Verify the draft against its manifest and the catalog's record of it, and rename it to the
+    published folder."""
+    problems = verify_files(plan.draft, plan.manifest_sha256)
     if problems:
         raise ReleaseError(
             f"draft {plan.name} {plan.version} does not match its manifest ({len(problems)} problems, e.g. "
@@ -34,8 +35,18 @@ def move_back(plan: PublishPlan) -> None:
     os.replace(plan.final, plan.draft)
 
 
+WRITE = stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH
+
+
 def make_read_only(root: Path) -> None:
-    """Remove every write permission under ``root`` (a published release is never rewritten)."""
-    for p in root.rglob("*"):
-        mode = p.stat().st_mode
-        p.chmod(mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+    """Remove every write permission from ``root`` and everything under it (a published release is
+    never rewritten); folders last, so a crash midway leaves them writable to finish the job."""
+    entries = sorted(root.rglob("*"), key=lambda p: p.is_dir())
+    for p in [*entries, root]:
+        if not p.is_symlink():
+            p.chmod(p.stat().st_mode & ~WRITE)
+
+
+def writable(root: Path) -> list[Path]:
+    """What under ``root`` (itself included) still has a write permission."""
+    return [p for p in [root, *root.rglob("*")] if not p.is_symlink() and p.stat().st_mode & WRITE]

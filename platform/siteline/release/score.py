@@ -11,6 +11,7 @@ from PIL import Image
 
 from siteline.errors import ReleaseError
 from siteline.metrics import confusion, per_image_scores, scores
+from siteline.release.export import prediction_names
 from siteline.release.layout import ignore_aware_folder
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
 
@@ -32,12 +33,43 @@ def read_prediction(path: Path) -> np.ndarray:
     )
 
 
-def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
-    """Scores of the PNGs ``pred_dir/<id>.png`` against ``split`` of the release at ``root``.
+def find_predictions(pred_dir: Path, split: str, items: list[dict[str, Any]]) -> dict[str, Path]:
+    """Item id -> its prediction file: ``<id>.png`` or the name any export profile gave the item
+    (``test_<id>.png`` for TorchGeo, the lower-cased id for torchange). ReleaseError names the
+    missing ones."""
+    present = {p.name: p for p in pred_dir.iterdir() if p.is_file()}
+    found, missing = {}, []
+    for it in items:
+        name = next((n for n in prediction_names(split, it["id"]) if n in present), None)
+        if name is None:
+            missing.append(it["id"])
+        else:
+            found[it["id"]] = present[name]
+    if missing:
+        raise ReleaseError(
+            f"prediction folder {pred_dir} lacks {len(missing)} of {len(items)} {split} images. Each is found "
+            f"by its id or the name an export gave it; e.g. {missing[0]} as {' or '.join(prediction_names(split, missing[0]))}."
+        )
+    return found
 
-    Every item of the split needs a prediction of the stored (padded) size; the truth's 255 pixels
-    (ignore, padding) are excluded. Raises :class:`ReleaseError` naming missing or mis-sized files.
-    """
+
+def parse_size(text: str) -> tuple[int, int]:
+    """(width, height) of ``WxH`` pixels."""
+    w, sep, h = text.lower().partition("x")
+    if not sep or not w.isdigit() or not h.isdigit() or int(w) < 1 or int(h) < 1:
+        raise ReleaseError(f"size {text!r}: write WIDTHxHEIGHT in pixels, e.g. 256x256.")
+    return int(w), int(h)
+
+
+def score_predictions(
+    root: Path, split: str, pred_dir: Path, pred_size: tuple[int, int] | None = None
+) -> dict[str, Any]:
+    """Scores of the prediction PNGs in ``pred_dir`` against ``split`` of the release at ``root``.
+
+    Every item of the split needs a prediction (:func:`find_predictions`) of the stored (padded)
+    size, or of ``pred_size`` (width, height) when the tool resized the images (ChangeFormer: 256 x
+    256), then brought back to the stored size by nearest neighbour; the truth's 255 pixels (ignore,
+    padding) are excluded. Raises :class:`ReleaseError` naming missing or mis-sized files."""
     root, pred_dir = Path(root), Path(pred_dir)
     doc = read_manifest(root)
     if split not in ("train", "val", "test"):
@@ -47,25 +79,33 @@ def score_predictions(root: Path, split: str, pred_dir: Path) -> dict[str, Any]:
     items = sorted((it for it in doc["items"] if it["split"] == split), key=lambda it: it["id"])
     if not items:
         raise ReleaseError(f"release {doc['name']} {doc['version']} has no {split} images.")
-    missing = [it["id"] for it in items if not (pred_dir / f"{it['id']}.png").is_file()]
-    if missing:
-        raise ReleaseError(
-            f"prediction folder {pred_dir} lacks {len(missing)} of {len(items)} {split} images, e.g. "
-            f"{', '.join(m + '.png' for m in missing[:3])}."
-        )
+    paths = find_predictions(pred_dir, split, items)
     folder = ignore_aware_folder(doc)
     per_image = []
     for it in items:
         truth = np.asarray(Image.open(root / split / folder / f"{it['id']}.png"), dtype=np.int64)
-        pred_path = pred_dir / f"{it['id']}.png"
-        pred = read_prediction(pred_path)
-        if pred.shape != truth.shape:
-            raise ReleaseError(
-                f"prediction {pred_path} is {pred.shape[1]} x {pred.shape[0]} px; the release image is "
-                f"{truth.shape[1]} x {truth.shape[0]} px."
-            )
+        pred = _sized(read_prediction(paths[it["id"]]), paths[it["id"]], truth.shape, pred_size)
         per_image.append(confusion(pred, truth))
-    return score_record(root, split, per_image) | {"predictions": str(pred_dir)}
+    return score_record(root, split, per_image) | {"predictions": str(pred_dir), "pred_size": pred_size}
+
+
+def _sized(
+    pred: np.ndarray, path: Path, shape: tuple[int, ...], pred_size: tuple[int, int] | None
+) -> np.ndarray:
+    want = (shape[1], shape[0]) if pred_size is None else pred_size
+    if (pred.shape[1], pred.shape[0]) != want:
+        raise ReleaseError(
+            f"prediction {path} is {pred.shape[1]} x {pred.shape[0]} px; expected {want[0]} x {want[1]} px"
+            + (
+                " (the release image; give --pred-size WxH if your tool resized it)."
+                if pred_size is None
+                else "."
+            )
+        )
+    if pred_size is None:
+        return pred
+    back = Image.fromarray(pred.astype(np.uint8)).resize((shape[1], shape[0]), Image.Resampling.NEAREST)
+    return np.asarray(back, dtype=np.int64)
 
 
 def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> dict[str, Any]:

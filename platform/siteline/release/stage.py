@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 
 from siteline.catalog import Catalog
-from siteline.catalog.releases import record_draft, record_published
+from siteline.catalog.releases import get_release, record_draft, record_published, release_item_counts
 from siteline.config import Settings
 from siteline.errors import ReleaseError
-from siteline.pairs.execute import find_outputs
+from siteline.pairs.outputs import find_outputs
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
 from siteline.records.runs import StageRun
@@ -20,6 +21,7 @@ from siteline.release.manifest import read_manifest
 from siteline.release.params import ReleaseParams
 from siteline.release.plan import check_release_name, plan_publish, plan_release, semver
 from siteline.release.publish import make_read_only, move_back, move_into_place
+from siteline.release.repair import inspect_release, mend
 
 log = logging.getLogger(__name__)
 
@@ -90,15 +92,31 @@ def _publish(
 ) -> ReleaseInfo:
     with catalog.transaction() as s:
         plan = plan_publish(s, settings, name, version)
+        unfinished = [
+            f for f in inspect_release(s, settings, name, version) if f.kind == "moved-not-recorded"
+        ]
+    if unfinished:  # an earlier publish moved it into place and died: finish that one
+        log.info("%s", unfinished[0].message)
+        mend(catalog, settings, unfinished[0], run_id)
+        return _published_info(catalog, plan.final, name, version)
     run = StageRun("publish_release", f"release:{name}:{version}", {}, run_id=run_id)
     move_into_place(plan)
     try:
         with catalog.transaction() as s:
-            items, sha = record_published(s, name, version, plan.final, run)
+            record_published(s, name, version, plan.final, run)
     except BaseException:
         move_back(plan)
         raise
     make_read_only(plan.final)
-    log.info("release %s %s published at %s (%d items)", name, version, plan.final, items)
-    stats = read_manifest(plan.final).get("stats", {})
-    return ReleaseInfo(name, version, "published", str(plan.final), items, sha, stats)
+    log.info("release %s %s published at %s", name, version, plan.final)
+    return _published_info(catalog, plan.final, name, version)
+
+
+def _published_info(catalog: Catalog, root: Path, name: str, version: str) -> ReleaseInfo:
+    with catalog.transaction() as s:
+        rel = get_release(s, name, version)
+        items = sum(release_item_counts(s, rel.id).values())
+        sha = rel.manifest_sha256
+    return ReleaseInfo(
+        name, version, "published", str(root), items, sha, read_manifest(root).get("stats", {})
+    )
