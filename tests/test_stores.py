@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 import numpy as np
@@ -195,3 +196,24 @@ def test_publish_clears_only_leftovers_of_dead_writers(tmp_path: Path) -> None:
     finally:
         live.kill()
         live.wait()
+
+
+def test_a_file_write_sweeps_dead_writers_temporaries_only(tmp_path: Path) -> None:
+    """Blobs, cached downloads and every other file go through atomic_file: a killed writer's
+    ``.<name>.tmp-<owner>`` is removed by the next write in that folder, a live writer's is kept."""
+    import subprocess
+    import sys
+
+    from siteline.stores import write_file
+    from siteline.stores.owners import owner_tag
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    tag = owner_tag()
+    dead = tmp_path / f".ab12.tmp-{tag.replace(f'+{os.getpid()}+', f'+{gone.pid}+')}"
+    live = tmp_path / f".cd34.tmp-{tag.replace(f'+{os.getpid()}+', '+1+')}"  # pid 1 always runs
+    dead.write_bytes(b"half")
+    live.write_bytes(b"busy")
+    write_file(tmp_path / "ef56", lambda fh: fh.write(b"whole"))
+    assert not dead.exists() and live.read_bytes() == b"busy"
+    assert (tmp_path / "ef56").read_bytes() == b"whole"

@@ -162,14 +162,6 @@ def test_export_prints_the_setting_and_refuses_a_used_folder(built, tmp_path, ca
         capsys, "release", "export", "rel", pub.version, "--profile", "opencd", "--out", str(a_file)
     )
     assert code == 2 and "is a file" in err and "Traceback" not in err and a_file.read_text() == "mine"
-    theirs = tmp_path / ".ocd2.partial"  # a user's folder that happens to carry the old temporary name
-    theirs.mkdir()
-    (theirs / "keep.txt").write_text("mine")
-    code, _, err = run_cli(
-        capsys, "release", "export", "rel", pub.version, "--profile", "opencd", "--out", str(tmp_path / "ocd2")
-    )
-    assert code == 0, err
-    assert (theirs / "keep.txt").read_text() == "mine"
     bad = tmp_path / "Alice"
     code, _, err = run_cli(
         capsys, "release", "export", "rel", pub.version, "--profile", "torchange", "--out", str(bad)
