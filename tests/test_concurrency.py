@@ -78,7 +78,7 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
 
     # two releases of a pair nobody processed yet: the pair is processed once, whole
     build = ["release", "build", "--site", "demo", "--scale", "0.125", "--point-size", "3", "--views", "2",
-             "--min-coverage", "0.1", "--min-valid", "0", "--json"]  # fmt: skip
+             "--min-coverage", "0.1", "--min-valid", "0", "--min-image-px", "64", "--json"]  # fmt: skip
     outs = _ok(_race(settings, [*build, "--name", "a"], [*build, "--name", "b"]))
     roots = {json.loads(o)["root"] for o in outs}
     for name in ("a", "b"):

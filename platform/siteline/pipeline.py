@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from siteline.catalog import Catalog
-from siteline.catalog.scenes import get_scene, scene_ids_of_pairs
+from siteline.catalog.pairs import unprocessed_pairs
+from siteline.catalog.scenes import get_scene, pair_ids_of_scene, scene_ids_of_pairs
 from siteline.config import Settings
 from siteline.ingest import IngestOptions, IngestResult, ingest_mission
 from siteline.pairs.params import PairParams
@@ -19,9 +20,10 @@ from siteline.pairs.stage import process_pair
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
+from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
-from siteline.release.plan import check_release_name, choose_pairs, semver
-from siteline.release.stage import build_release, publish_release
+from siteline.release.plan import check_release_name, choose_pairs, release_params, semver
+from siteline.release.stage import build_release
 from siteline.tiles import TileOutcome, tile_scene
 
 log = logging.getLogger(__name__)
@@ -95,40 +97,52 @@ def process_pairs(
     }
 
 
+def pending_pairs(catalog: Catalog, scene_id: int) -> list[int]:
+    """The pairs of ``scene_id`` nobody processed yet (no outputs under any parameters): whether a
+    mission ingested again still has work to announce."""
+    with catalog.transaction() as s:
+        return unprocessed_pairs(s, pair_ids_of_scene(s, scene_id))
+
+
+def release_parameters(catalog: Catalog, site: str, knobs: ReleaseKnobs | None = None) -> ReleaseParams:
+    """What a release of ``site`` built now would use: its release settings with ``knobs`` over them,
+    auto knobs worked out (refused when its images would be too small)."""
+    with catalog.transaction() as s:
+        return release_params(s, site, knobs, f"a release of site {site}")
+
+
 def release(
     catalog: Catalog,
     settings: Settings,
     site: str,
     name: str,
-    params: PairParams | None = None,
+    knobs: ReleaseKnobs | None = None,
     pair_ids: Sequence[int] | None = None,
     version: str | None = None,
-    preset: str | None = None,
     publish: bool = False,
     progress: Progress = no_progress,
     device: str = "cpu",
-    pad: bool = True,
     run_id: str | None = None,
     label_sets: Mapping[int, int] | None = None,
 ) -> ReleaseInfo:
-    """Everything a release of ``site`` needs, in order: the pairs (``pair_ids`` or all) processed
-    with ``params`` (after ``preset``, applied here once) on each scene's newest label set (or the
+    """Everything a release of ``site`` needs, in order: its parameters (the site's release settings
+    with ``knobs`` over them, siteline.release.knobs: refused before any work when its images would be
+    too small), the pairs (``pair_ids`` or all) processed on each scene's newest label set (or the
     version ``label_sets`` pins), a draft built from exactly those outputs, published when
-    ``publish``."""
+    ``publish``; or the latest version when it already has these inputs (``up_to_date``)."""
     check_release_name(name)  # refused before any pair is processed
     if version is not None:
         semver(version)
-    resolved = ReleaseParams.resolve(params, preset, pad)
     with catalog.transaction() as s:
+        params = release_params(s, site, knobs, f"release {name}")
         chosen = choose_pairs(s, site, pair_ids)
-    outputs = process_pairs(catalog, settings, chosen, resolved.pair, progress, device, run_id, label_sets)
+    log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
+             params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
+    outputs = process_pairs(catalog, settings, chosen, params.pair, progress, device, run_id, label_sets)
     # build on the label sets the outputs used, even if a newer one was imported meanwhile
     used = {
         sid: v
         for out in outputs.values()
         for sid, v in ((out.t1, out.versions.t1), (out.t2, out.versions.t2))
     }
-    info = build_release(catalog, settings, site, name, resolved, chosen, version, run_id, used)
-    if publish:
-        info = publish_release(catalog, settings, name, info.version, run_id=run_id)
-    return info
+    return build_release(catalog, settings, site, name, params, chosen, version, run_id, used, publish, progress)

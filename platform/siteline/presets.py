@@ -1,4 +1,4 @@
-"""Named speed/accuracy presets for `siteline release build --preset`, chosen from the Pareto front
+"""Named speed/accuracy presets for `--preset` (applied by siteline.release.knobs), chosen from the Pareto front
 that `siteline bench trade` measured (docs/performance.md has the table and the plots).
 
 Scale is relative to the cameras' image size (the paper's 1/8 of a 5645 x 4082 undistorted image is
@@ -6,9 +6,6 @@ Scale is relative to the cameras' image size (the paper's 1/8 of a 5645 x 4082 u
 """
 
 from __future__ import annotations
-
-from siteline.errors import ReleaseError
-from siteline.pairs.params import PairParams
 
 PRESETS: dict[str, dict] = {
     # on the front at the cheap end (1000 points/m2): 3 px points at LOD factor 1.41 read 11k points
@@ -20,11 +17,3 @@ PRESETS: dict[str, dict] = {
     # four times the resolution of fast: the finest masks (F1 0.964 at 10 points/m2)
     "exact": {"scale": 0.5, "point_size_px": 3, "lod_factor": 1.0, "radius_multiplier": 2.5},
 }
-
-
-def preset_params(name: str, base: PairParams | None = None) -> PairParams:
-    """``base`` (or the defaults) with the preset's knobs."""
-    if name not in PRESETS:
-        raise ReleaseError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}.")
-    doc = (base or PairParams()).to_dict() | PRESETS[name]
-    return PairParams.from_dict(doc)

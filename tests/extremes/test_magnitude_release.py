@@ -18,12 +18,14 @@ from siteline.config import Settings, sqlite_url
 from siteline.fence import load_fence_geojson
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams
+from siteline.release.knobs import ReleaseKnobs
 from siteline.site import make_site_spec
 from siteline.synth import SynthConfig, write_site
 from siteline.tiles import tile_scene
 
 ORIGINS = {"small": (1000.0, 2000.0, 80.0), "large": (-8_400_000.0, 5_600_000.0, 80.0)}
 PARAMS = PairParams(scale=0.125, views=12, seed=0, min_coverage=0.3)
+KNOBS = ReleaseKnobs.exactly(PARAMS, min_image_px=64)
 
 
 def _release(root: Path, origin: tuple[float, float, float]) -> Path:
@@ -43,7 +45,7 @@ def _release(root: Path, origin: tuple[float, float, float]) -> Path:
     for e in truth["epochs"]:
         r = ingest_mission(cat, settings, site_dir / e["mission_dir"], "mag")
         tile_scene(cat, settings, r.scene_id, workers=1)
-    info = pipeline.release(cat, settings, "mag", "rel", PARAMS)
+    info = pipeline.release(cat, settings, "mag", "rel", KNOBS)
     cat.dispose()
     return Path(info.root)
 

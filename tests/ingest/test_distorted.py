@@ -96,8 +96,10 @@ def test_a_mission_with_a_distorted_colmap_model_goes_to_a_release(tmp_path, syn
             "forward_fractions": [0.0],
             "mirror": False,
         }  # one view per camera
+        from siteline.release.knobs import ReleaseKnobs
+
         params = PairParams(scale=0.5, point_size_px=3, views=4, seed=0, min_coverage=0.3, view_params=one)
-        info = pipeline.release(cat, settings, "demo", "distorted", params)
+        info = pipeline.release(cat, settings, "demo", "distorted", ReleaseKnobs.exactly(params))
         assert info.items > 0
         with cat.transaction() as s:
             sizes = {(v.camera["width"], v.camera["height"]) for v in s.execute(sa.select(View)).scalars()}

@@ -12,21 +12,23 @@ from sitehelpers import run_cli
 
 from labelsets.edits import centre_box, export, versions
 from siteline import pipeline
-from siteline.errors import LabelSetError
+from siteline.errors import ImmutableError, LabelSetError
 from siteline.labelsets import import_labels
 from siteline.pairs import PairParams
 from siteline.release import publish_release
+from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import read_manifest
 
 # one candidate view per real camera: the test is about label sets, not the view sample
 ONE = {"vertical_fractions": [1.0], "forward_fractions": [0.0], "mirror": False}
 PARAMS = PairParams(scale=0.25, point_size_px=3, views=3, seed=0, min_coverage=0.2, view_params=ONE)
+KNOBS = ReleaseKnobs.exactly(PARAMS, min_image_px=64)
 
 
 def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, monkeypatch) -> None:
     settings, cat = scenes
     pinned = {1: versions(cat, 1)[-1], 2: versions(cat, 2)[-1]}
-    first = pipeline.release(cat, settings, "demo", "lab", PARAMS, label_sets=pinned, publish=True)
+    first = pipeline.release(cat, settings, "demo", "lab", KNOBS, label_sets=pinned, publish=True)
     assert first.version == "1.0.0"
 
     las = export(cat, 1, tmp_path / "s1.las")
@@ -38,7 +40,7 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     new = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las", note="vehicles")
     assert new.created
 
-    second = pipeline.release(cat, settings, "demo", "lab", PARAMS, publish=True)
+    second = pipeline.release(cat, settings, "demo", "lab", KNOBS, publish=True)
     assert second.version == "2.0.0"  # a label set changed: major bump
     lineage = read_manifest(second.root)["lineage"]
     scenes_ = {sc["id"]: sc for sc in lineage["scenes"]}
@@ -53,9 +55,12 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     )
     assert len([r for r in roots if settings.store.is_complete(str(r))]) >= 2
 
-    # the same label sets again: a minor version
-    third = pipeline.release(cat, settings, "demo", "lab", PARAMS)
-    assert third.version == "2.1.0"
+    assert second.reason == f"scene 1 label set v{pinned[1]} -> v{new.version}"
+    # the same inputs again: nothing is built or published, the latest version is up to date
+    before = sorted((settings.home / "releases").rglob("*"))
+    third = pipeline.release(cat, settings, "demo", "lab", KNOBS, publish=True)
+    assert (third.version, third.status, third.up_to_date) == ("2.0.0", "published", True)
+    assert sorted((settings.home / "releases").rglob("*")) == before
 
     monkeypatch.setenv("SITELINE_HOME", str(settings.home))
     monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
@@ -68,8 +73,9 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     assert any(p.startswith("train/label/") or "/label/" in p for p in diff["files"]["changed"])
     code, out, _ = run_cli(capsys, "release", "verify", "lab", "1.0.0")
     assert code == 0
-    publish_release(cat, settings, "lab", "2.1.0")
+    with pytest.raises(ImmutableError):
+        publish_release(cat, settings, "lab", "2.0.0")
 
     # pinning a version that does not exist is refused before anything is built
     with pytest.raises(LabelSetError, match="no label-set version 42"):
-        pipeline.release(cat, settings, "demo", "lab", PARAMS, label_sets={1: 42})
+        pipeline.release(cat, settings, "demo", "lab", KNOBS, label_sets={1: 42})

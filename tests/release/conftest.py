@@ -11,9 +11,11 @@ from siteline.catalog import open_catalog
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams
 from siteline.release import publish_release
+from siteline.release.knobs import ReleaseKnobs
 from siteline.tiles import tile_scene
 
 PARAMS = PairParams(scale=0.5, point_size_px=3, views=6, seed=0, min_coverage=0.3)
+KNOBS = ReleaseKnobs.exactly(PARAMS)
 
 
 @pytest.fixture(scope="session")
@@ -23,7 +25,7 @@ def built(tmp_path_factory, synth_site):
     for m in epoch_dirs(synth_site):
         r = ingest_mission(cat, settings, m, "demo")
         tile_scene(cat, settings, r.scene_id, workers=1)
-    info = pipeline.release(cat, settings, "demo", "rel", PARAMS)
+    info = pipeline.release(cat, settings, "demo", "rel", KNOBS)
     pub = publish_release(cat, settings, "rel", info.version)
     yield settings, cat, pub
     cat.dispose()

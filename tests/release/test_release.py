@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +22,15 @@ from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams, pair_mask
 from siteline.release import publish_release, read_manifest, verify_files
+from siteline.release.knobs import ReleaseKnobs
+from siteline.release.params import ReleaseParams
 from siteline.release.query import diff_releases
+from siteline.release.stage import build_release
 from siteline.schemas import validate
 from siteline.site import make_site_spec
 from siteline.tiles import tile_scene
 
-from .conftest import PARAMS
+from .conftest import KNOBS, PARAMS
 
 
 def test_layout_manifest_and_datasheet(built) -> None:
@@ -104,8 +108,10 @@ def test_published_release_is_read_only_and_never_republished(built) -> None:
     assert not (some.stat().st_mode & 0o222)
     with pytest.raises(ImmutableError, match="already published"):
         publish_release(cat, settings, "rel", "1.0.0")
-    with pytest.raises(ImmutableError, match="already published"):
-        pipeline.release(cat, settings, "demo", "rel", PARAMS, version="1.0.0")
+    same = pipeline.release(cat, settings, "demo", "rel", KNOBS, version="1.0.0")
+    assert same.up_to_date and same.status == "published" and same.manifest_sha256 == pub.manifest_sha256
+    with pytest.raises(ImmutableError, match="already published"):  # other inputs under that version
+        build_release(cat, settings, "demo", "rel", ReleaseParams(replace(PARAMS, seed=9)), version="1.0.0")
     with pytest.raises(ImmutableError), cat.transaction() as s:
         rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
         rel.parameters = {}
@@ -117,11 +123,11 @@ def test_bad_requests_write_nothing(built) -> None:
         add_site(s, make_site_spec("lonely", "EPSG:32618", (0.0, 0.0, 0.0)))
     before = {p for p in (settings.home / "releases").rglob("*")}
     with pytest.raises(ReleaseError, match="0 scene"):
-        pipeline.release(cat, settings, "lonely", "x", PARAMS)
+        pipeline.release(cat, settings, "lonely", "x", KNOBS)
     with cat.transaction() as s:
         pid = s.query(Pair).first().id
     with pytest.raises(ReleaseError, match="belongs to site demo"):
-        pipeline.release(cat, settings, "lonely2" if False else "lonely", "x", PARAMS, pair_ids=[pid])
+        pipeline.release(cat, settings, "lonely2" if False else "lonely", "x", KNOBS, pair_ids=[pid])
     with pytest.raises(NotFoundError):
         publish_release(cat, settings, "nope", "1.0.0")
     assert {p for p in (settings.home / "releases").rglob("*")} == before
@@ -136,7 +142,7 @@ def test_new_parameters_bump_the_major_version_and_diff(built) -> None:
         settings,
         "demo",
         "rel",
-        PairParams(scale=0.5, point_size_px=3, views=4, seed=1, min_coverage=0.3),
+        ReleaseKnobs.exactly(PairParams(scale=0.5, point_size_px=3, views=4, seed=1, min_coverage=0.3)),
     )
     assert info.version == "2.0.0" and info.status == "draft"
     publish_release(cat, settings, "rel", "2.0.0")
@@ -197,16 +203,21 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
 
 
 def test_preset_is_applied_and_recorded(built) -> None:
-    from siteline.presets import PRESETS, preset_params
+    from siteline.presets import PRESETS
 
     settings, cat, _ = built
-    p = preset_params("fast", PairParams(views=3, min_coverage=0.2))
-    assert (p.scale, p.point_size_px, p.lod_factor) == (0.125, 3, 1.41) and p.views == 3
     with pytest.raises(ReleaseError, match="unknown preset"):
-        preset_params("turbo")
-    info = pipeline.release(cat, settings, "demo", "presetrel", p, preset="fast")
+        ReleaseKnobs(preset="turbo")
+    # fast's scale (0.125, for ~5645 px photos) gives 83 x 62 px renders of these 660 px cameras: refused
+    before = sorted((settings.home / "releases").rglob("*"))
+    with pytest.raises(ReleaseError, match=r"83 x 62 px .* under the 256 px floor: use --scale 0.39"):
+        pipeline.release(cat, settings, "demo", "presetrel", ReleaseKnobs(preset="fast", pair={"views": 3}))
+    assert sorted((settings.home / "releases").rglob("*")) == before
+    knobs = ReleaseKnobs(preset="fast", pair={"scale": 0.5, "views": 3, "min_coverage": 0.2})
+    info = pipeline.release(cat, settings, "demo", "presetrel", knobs)
     lin = read_manifest(info.root)["lineage"]
     assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
+    assert (lin["parameters"]["scale"], lin["parameters"]["point_size_px"]) == (0.5, 3)  # a knob beats its preset
 
 
 def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_store) -> None:
@@ -218,7 +229,7 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
         for m in epoch_dirs(synth_site)[:2]:
             r = ingest_mission(cat, settings, m, "demo")
             tile_scene(cat, settings, r.scene_id, workers=1)
-        info = pipeline.release(cat, settings, "demo", "rel", PARAMS)
+        info = pipeline.release(cat, settings, "demo", "rel", KNOBS)
         pub = publish_release(cat, settings, "rel", info.version)
         with cat.transaction() as s:
             uris = [sc.tile_store_uri for sc in s.execute(sa.select(Scene)).scalars()]

@@ -19,7 +19,7 @@ from siteline import pipeline
 from siteline.errors import ReleaseError
 from siteline.release.export import export_release
 
-from .conftest import PARAMS
+from .conftest import KNOBS
 
 EXE = Path(sys.executable).with_name("siteline")
 
@@ -145,7 +145,7 @@ def _killed(settings, target: str, *argv: str) -> None:
 def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     settings, cat, _ = built
     for name in ("crash-a", "crash-b"):
-        pipeline.release(cat, settings, "demo", name, PARAMS)
+        pipeline.release(cat, settings, "demo", name, KNOBS)
     # killed after the move, before the catalog recorded it: the next publish finishes it
     _killed(settings, "record_published", "release", "publish", "crash-a", "1.0.0")
     final = settings.home / "releases" / "crash-a" / "1.0.0"
@@ -165,7 +165,7 @@ def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     assert _exe(settings, "release", "verify", "crash-b", "1.0.0").returncode == 0
     # a draft rebuilt with fewer items (one pair of two), killed before its rows: publish refuses,
     # repair removes it
-    pipeline.release(cat, settings, "demo", "crash-c", PARAMS)
+    pipeline.release(cat, settings, "demo", "crash-c", KNOBS)
     fewer = ["release", "build", "--site", "demo", "--name", "crash-c", "--version", "1.0.0", "--scale", "0.5",
              "--point-size", "3", "--views", "6", "--min-coverage", "0.3", "--pairs", "1"]  # fmt: skip
     _killed(settings, "record_draft", *fewer)

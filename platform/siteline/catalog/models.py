@@ -41,6 +41,8 @@ class Site(Base):
     fence: Mapped[list[list[float]] | None] = mapped_column(sa.JSON, nullable=True)
     taxonomy: Mapped[dict[str, Any]] = mapped_column(sa.JSON)
     tile_size_m: Mapped[float] = mapped_column(Float64)
+    # siteline.release.knobs.ReleaseKnobs.to_dict(): preset and knobs; {} means auto from the cameras
+    release_settings: Mapped[dict[str, Any]] = mapped_column(sa.JSON, default=dict, server_default="{}")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
     @property

@@ -31,6 +31,12 @@ def pair_view_ids(session: Session, pair_id: int, digest: str) -> dict[int, int]
     return dict(rows)
 
 
+def unprocessed_pairs(session: Session, pair_ids: list[int]) -> list[int]:
+    """Those of ``pair_ids`` with no recorded outputs under any parameters: work nobody did yet."""
+    done = set(session.execute(sa.select(View.pair_id).where(View.pair_id.in_(pair_ids)).distinct()).scalars())
+    return [pid for pid in pair_ids if pid not in done]
+
+
 def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> None:
     """The rows of one pair's outputs, published in the store at ``output.root``: the pair's radius,
     status and parameters, a view per rendered view (replacing earlier rows of the same digest), a

@@ -15,6 +15,7 @@ from siteline.catalog.models import LabelSet, Mission, MissionFile, Node, Pair, 
 from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, TileError
 from siteline.records.mission import LasLocation
+from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneSummary
 from siteline.records.tiling import NodeInfo, SceneTiling, TileSource
@@ -85,6 +86,24 @@ def scene_cameras(session: Session, scene_id: int) -> list[tuple[str, Camera]]:
         (r.image_name, Camera.from_pose(r.width, r.height, r.fx, r.fy, r.cx, r.cy, r.rotation, r.translation))
         for r in rows
     ]
+
+
+def site_survey(session: Session, site: Site) -> SiteSurvey:
+    """The site's registered cameras (size, focal length, height above their scene's lowest point)
+    and its sparsest scene's density: what auto release settings are derived from."""
+    cameras: list[CameraView] = []
+    densities: list[float] = []
+    for scene in list_scenes(session, site):
+        scan = scene_statistics(scene).scan
+        if scan is None:
+            continue
+        densities.append(scan.density_pts_m2)
+        ground_z = scan.bounds_min[2]
+        cameras += [
+            CameraView(scene.id, cam.width, cam.height, cam.fx, float(cam.center[2]) - ground_z)
+            for _, cam in scene_cameras(session, scene.id)
+        ]
+    return SiteSurvey(tuple(cameras), min(densities) if densities else None)
 
 
 def add_cameras(session: Session, scene_id: int, cameras: dict[str, Camera], source: str) -> None:

@@ -14,8 +14,9 @@ from siteline.site import SiteSpec
 from siteline.taxonomy import Taxonomy
 
 
-def add_site(session: Session, spec: SiteSpec) -> Site:
-    """Insert a validated site; :class:`SiteError` if the name is taken."""
+def add_site(session: Session, spec: SiteSpec, release_settings: dict[str, Any] | None = None) -> Site:
+    """Insert a validated site (with its release settings, siteline.release.knobs, validated by the
+    caller); :class:`SiteError` if the name is taken."""
     if session.execute(sa.select(Site.id).where(Site.name == spec.name)).first() is not None:
         raise SiteError(f"site {spec.name!r} already exists: choose another name (see `siteline site list`).")
     fence = None if spec.fence is None else [list(v) for v in spec.fence]
@@ -28,6 +29,7 @@ def add_site(session: Session, spec: SiteSpec) -> Site:
         fence=fence,
         taxonomy=spec.taxonomy.to_dict(),
         tile_size_m=spec.tile_size_m,
+        release_settings=dict(release_settings or {}),
     )
     session.add(row)
     session.flush()
@@ -42,6 +44,14 @@ def get_site(session: Session, name: str) -> Site:
             f" Known sites: {', '.join(names)}." if names else " No site exists yet: `siteline site create`."
         )
         raise SiteNotFoundError(f"unknown site {name!r}.{hint}")
+    return site
+
+
+def set_release_settings(session: Session, name: str, release_settings: dict[str, Any]) -> Site:
+    """Store the site's release settings (validated by the caller: siteline.release.knobs)."""
+    site = get_site(session, name)
+    site.release_settings = dict(release_settings)
+    session.flush()
     return site
 
 
@@ -82,6 +92,7 @@ def site_record(site: Site, scenes: int) -> dict[str, Any]:
         "taxonomy": spec.taxonomy.name,
         "classes": {c.name: c.id for c in spec.taxonomy.classes},
         "tile_size_m": site.tile_size_m,
+        "release_settings": dict(site.release_settings or {}),
         "scenes": scenes,
         "created_at": site.created_at,
     }

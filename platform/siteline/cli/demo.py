@@ -21,8 +21,9 @@ from siteline.site import make_site_spec
 
 DEMO_SITE = "demo"
 DEMO_RELEASE = "demo-cd"
-# the synthetic photos are 660 x 495 (1/8 of the L2 sensor): renders at half of that, 3 px points
-DEMO_PARAMS = {"scale": 0.5, "point_size_px": 3, "views": 24, "seed": 0, "min_coverage": 0.5}
+# the demo site's release settings: 24 views a pair; scale and point size stay auto (the synthetic
+# photos are 660 x 495, 1/8 of the L2 sensor: renders of a 512 px long side, points sized to the density)
+DEMO_SETTINGS = {"pair": {"views": 24, "seed": 0}}
 
 
 def _site(
@@ -34,23 +35,23 @@ def _site(
             console.print(f"site {site_name} exists: reusing it")
         except SiteNotFoundError:
             ring = load_fence_geojson(synth_dir / "fence.geojson", origin)
-            site = add_site(s, make_site_spec(site_name, crs, origin, [*ring, ring[0]]))
+            site = add_site(s, make_site_spec(site_name, crs, origin, [*ring, ring[0]]), DEMO_SETTINGS)
         record = site_record(site, scene_count(s, site))
-    keep = ("name", "crs", "origin", "fence_area_m2", "taxonomy")
+    keep = ("name", "crs", "origin", "fence_area_m2", "taxonomy", "release_settings")
     print_record(f"site {site_name}", {k: record[k] for k in keep})
 
 
 def _release(cat: Catalog, cfg: Settings, site_name: str) -> tuple[Path, str]:
     """The demo release: the published one when there is one, else built and published now."""
     from siteline import pipeline
-    from siteline.pairs.params import PairParams
 
     with cat.transaction() as s:
         published = [r for r in list_releases(s, DEMO_RELEASE) if r.status == "published"]
         if published:
             console.print(f"release {DEMO_RELEASE} {published[-1].version} already published: reusing it")
             return Path(str(published[-1].root_uri)), published[-1].version
-    pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, PairParams.from_dict(DEMO_PARAMS), publish=True)
+    pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, publish=True)
+    console.print(f"release {DEMO_RELEASE} {pub.version}: {pub.reason}")
     return Path(pub.root), pub.version
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
-from typing import cast
 
 import typer
 from rich.progress import Progress
@@ -26,8 +25,10 @@ from siteline.cli.common import (
     print_table,
     settings,
 )
+from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
-from siteline.records.enums import HoleRule
+from siteline.records.release import ReleaseInfo
+from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import verify_files
 from siteline.release.query import diff_releases
 
@@ -44,108 +45,59 @@ def _both_metrics(result: dict) -> dict:
     }
 
 
-def parse_radius(text: str) -> float | None:
-    if text == "auto":
-        return None
-    try:
-        return float(text)
-    except ValueError as exc:
-        raise ReleaseError(f"--radius {text!r} must be 'auto' or a number of metres.") from exc
-
-
 @app.command("build")
+@with_knob_options
 def build(
     site: str = typer.Option(..., "--site", help="Site whose pairs the release draws on."),
     name: str = typer.Option(..., "--name", help="Release name."),
     pairs: list[int] | None = typer.Option(
         None, "--pairs", help="Pair ids (repeatable; default: every pair of the site)."
     ),
-    scale: float = typer.Option(
-        0.125, "--scale", help="Render scale of the cameras' image size (1, 0.5, 0.25, 0.125)."
-    ),
-    point_size: int = typer.Option(1, "--point-size", help="Point size in pixels (1 or 3)."),
-    views: int = typer.Option(300, "--views", help="Views per pair."),
-    radius: str = typer.Option(
-        "auto", "--radius", help="Change radius in metres, or 'auto' (2.5 x median spacing)."
-    ),
-    seed: int = typer.Option(0, "--seed", help="Seed of view sampling and splits."),
-    min_coverage: float = typer.Option(
-        0.5, "--min-coverage", help="Reject views covering less of the image."
-    ),
-    min_valid: float = typer.Option(
-        0.25,
-        "--min-valid",
-        help="Reject rendered views with a smaller fraction of valid (not ignored) pixels; the next "
-        "view of the stratified order replaces each.",
-    ),
     version: str | None = typer.Option(
-        None, "--version", help="Version (default: next, major bump when labels or pairs change)."
+        None, "--version", help="Version (default: next, major bump when labels, pairs or knobs change)."
     ),
     device: str = typer.Option("cpu", "--device", help="torch device for rendering."),
-    one_side_hole: str = typer.Option(
-        "ignore",
-        "--one-side-hole",
-        help="A pixel changed in one render and a hole in the other: 'ignore' (default) or 'changed'.",
-    ),
-    all_points: bool = typer.Option(
-        False, "--all-points", help="Render every point in the frustum (no level of detail; slower)."
-    ),
-    pad: bool = typer.Option(
-        True,
-        "--pad/--no-pad",
-        help="Pad images (right, bottom) to sides that are multiples of 32 and at least 256 px.",
-    ),
-    preset: str | None = typer.Option(
-        None,
-        "--preset",
-        help="fast, balanced or exact (docs/performance.md): sets scale, point size, LOD and radius.",
-    ),
     label_set: list[str] | None = typer.Option(
         None,
         "--label-set",
         help="SCENE=VERSION: use that label-set version of a scene (repeatable; default: each scene's newest).",
     ),
+    publish: bool = typer.Option(False, "--publish", help="Publish the draft once built."),
     as_json: bool = JsonOption,
+    *,
+    knobs: ReleaseKnobs,
 ) -> None:
-    """Build a draft release: labels, views and renders of every pair, splits, manifest, datasheet."""
+    """Build a draft release with the site's release settings (`siteline site show`; the options
+    below override them for this build): labels, views and renders of every pair, splits, manifest,
+    datasheet. Nothing is built when the latest version already has these inputs."""
     from siteline import pipeline
-    from siteline.pairs.params import PairParams
 
-    params = PairParams(
-        scale=scale,
-        point_size_px=point_size,
-        views=views,
-        radius_m=parse_radius(radius),
-        seed=seed,
-        min_coverage=min_coverage,
-        min_valid=min_valid,
-        one_side_hole=cast(HoleRule, one_side_hole),  # PairParams refuses any other value
-        all_points=all_points,
-    )
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
         info = pipeline.release(
             cat,
             settings(),
             site,
             name,
-            params,
+            knobs,
             pairs or None,
             version,
-            preset=preset,
+            publish=publish,
             progress=bar_progress(bar),
             device=device,
-            pad=pad,
             label_sets=parse_label_sets(label_set or []),
         )
-    record = info.to_dict()
-    emit(
-        as_json,
-        record,
-        lambda: console.print(
-            f"draft {info.name} {info.version}: {info.items} items at {info.root}; "
-            f"publish with `siteline release publish {info.name} {info.version}`"
-        ),
-    )
+    emit(as_json, info.to_dict(), lambda: console.print(build_message(info)))
+
+
+def build_message(info: ReleaseInfo) -> str:
+    """What `release build` says about the release it built, or found up to date."""
+    if info.up_to_date:
+        return (
+            f"release {info.name} is up to date: {info.version} ({info.status}) has the same pairs, outputs, "
+            f"label sets and parameters; nothing was built ({info.root})"
+        )
+    then = "" if info.status == "published" else f"; publish with `siteline release publish {info.name} {info.version}`"
+    return f"{info.status} {info.name} {info.version} ({info.reason}): {info.items} items at {info.root}{then}"
 
 
 def parse_label_sets(values: list[str]) -> dict[int, int] | None:

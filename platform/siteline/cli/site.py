@@ -3,12 +3,24 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
+from sqlalchemy.orm import Session
 
-from siteline.catalog.sites import add_site, get_site, list_sites, scene_count, site_record
+from siteline.catalog.sites import (
+    add_site,
+    get_site,
+    list_sites,
+    scene_count,
+    set_release_settings,
+    site_record,
+)
 from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table
+from siteline.cli.knobs import with_knob_options
+from siteline.errors import ReleaseError
 from siteline.fence import load_fence_geojson
+from siteline.release.knobs import ReleaseKnobs
 from siteline.site import DEFAULT_TILE_SIZE_M, make_site_spec
 from siteline.taxonomy import load_taxonomy
 
@@ -16,6 +28,7 @@ app = typer.Typer(help="Construction sites: CRS, origin, fence, taxonomy.", no_a
 
 
 @app.command("create")
+@with_knob_options
 def create(
     name: str = typer.Argument(..., help="Site name (letters, digits, '_', '.', '-')."),
     crs: str = typer.Option(..., "--crs", help="Projected CRS in metres, e.g. EPSG:32618."),
@@ -28,8 +41,12 @@ def create(
     ),
     tile_size_m: float = typer.Option(DEFAULT_TILE_SIZE_M, "--tile-size-m", help="Tile grid edge, metres."),
     as_json: bool = JsonOption,
+    *,
+    knobs: ReleaseKnobs,
 ) -> None:
-    """Register a new site; every input is validated before anything is written."""
+    """Register a new site with its release settings (the options below; unset knobs stay auto or at
+    their defaults: docs in README 'Release settings'); every input is validated before anything is
+    written."""
     fence_m = None
     if fence is not None:
         fence_m = load_fence_geojson(fence, origin)
@@ -37,7 +54,7 @@ def create(
     tax = load_taxonomy(taxonomy) if taxonomy is not None else None
     spec = make_site_spec(name, crs, origin, fence_m, tax, tile_size_m)
     with catalog() as cat, cat.transaction() as session:
-        row = add_site(session, spec)
+        row = add_site(session, spec, knobs.to_dict())
         record = site_record(row, 0)
     emit(
         as_json,
@@ -73,8 +90,48 @@ def list_(as_json: bool = JsonOption) -> None:
 
 @app.command("show")
 def show(name: str = typer.Argument(..., help="Site name."), as_json: bool = JsonOption) -> None:
-    """Show one site."""
+    """Show one site, its stored release settings and what a release built now would use."""
     with catalog() as cat, cat.transaction() as session:
         site = get_site(session, name)
-        record = site_record(site, scene_count(session, site))
+        record = site_record(site, scene_count(session, site)) | {"release_now": _release_now(session, name)}
     emit(as_json, record, lambda: print_record(f"site {name}", record))
+
+
+@app.command("update")
+@with_knob_options
+def update(
+    name: str = typer.Argument(..., help="Site name."),
+    unset: list[str] | None = typer.Option(
+        None, "--unset", help="A release setting to drop (back to auto or its default), e.g. scale (repeatable)."
+    ),
+    as_json: bool = JsonOption,
+    *,
+    knobs: ReleaseKnobs,
+) -> None:
+    """Change a site's release settings: the options given are written over the stored ones; the next
+    release build uses them (a changed knob makes a new major version)."""
+    with catalog() as cat, cat.transaction() as session:
+        site = get_site(session, name)
+        stored = ReleaseKnobs.from_dict(site.release_settings, f"site {name} release settings")
+        new = stored.updated(knobs, unset or ())
+        site = set_release_settings(session, name, new.to_dict())
+        record = site_record(site, scene_count(session, site)) | {"release_now": _release_now(session, name)}
+    emit(
+        as_json,
+        record,
+        lambda: console.print(f"site {name} release settings: {new.to_dict() or 'all defaults (auto)'}"),
+    )
+
+
+def _release_now(session: Session, name: str) -> dict[str, Any] | str:
+    """The knobs a release of the site built now would use (auto ones worked out), or why none can."""
+    from siteline.release.plan import release_params
+
+    try:
+        params = release_params(session, name, None, f"a release of site {name}")
+    except ReleaseError as exc:
+        return str(exc)
+    keep = ("scale", "point_size_px", "views", "min_valid", "min_coverage", "lod_factor", "radius_m")
+    return {k: params.pair.to_dict()[k] for k in keep} | {
+        "preset": params.preset, "pad": params.pad, "min_image_px": params.min_image_px, "derived": dict(params.derived),
+    }  # fmt: skip

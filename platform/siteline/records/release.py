@@ -49,7 +49,8 @@ class DraftRelease:
 @dataclass(frozen=True)
 class ReleaseInfo:
     """A release as commands report it: name, version, status, where it lives, item count, manifest
-    hash and statistics."""
+    hash and statistics; why this version (its bump reason), and whether the build found the latest
+    version up to date (same inputs: nothing was built)."""
 
     name: str
     version: str
@@ -58,6 +59,28 @@ class ReleaseInfo:
     items: int
     manifest_sha256: str | None
     stats: dict[str, Any]
+    reason: str = ""
+    up_to_date: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """What auto settings need of one real camera: its image size (pixels), focal length in x
+    (pixels) and its height above the scene's ground (metres)."""
+
+    scene_id: int
+    width: int
+    height: int
+    fx: float
+    height_above_ground_m: float
+
+
+@dataclass(frozen=True)
+class SiteSurvey:
+    """The site's registered cameras and the density of its sparsest scene (points/m2, or None)."""
+
+    cameras: tuple[CameraView, ...]
+    min_density_pts_m2: float | None

@@ -18,6 +18,7 @@ from PIL import Image
 
 from siteline import __version__
 from siteline.errors import ReleaseError
+from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.release import DraftRelease, ReleaseItem
 from siteline.release import datasheet, layout
@@ -35,11 +36,13 @@ def read_png(uri: str) -> np.ndarray:
 
 
 def _write_items(
-    plan: ReleasePlan, outputs: Mapping[int, PairOutput], split_of: Mapping[int, str], work: Path
-) -> list[ReleaseItem]:
+    plan: ReleasePlan, outputs: Mapping[int, PairOutput], split_of: Mapping[int, str], work: Path,
+    progress: Progress,
+) -> list[ReleaseItem]:  # fmt: skip
     """Every view of every pair as a release item: its five images in ``work/<split>/<folder>/``."""
     items = []
     pad = plan.params.pad
+    total = sum(len(o.views) for o in outputs.values())
     for pid in sorted(outputs):
         out = outputs[pid]
         for v in out.views:
@@ -59,6 +62,7 @@ def _write_items(
                     v.change_ratio, v.valid, (int(w), int(h)), (int(pw), int(ph)),
                 )
             )  # fmt: skip
+            progress("release images", 1, total)
     return items
 
 
@@ -77,6 +81,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
         "preset": params.preset,
         "release_params": params.to_dict(),
         "seeds": {"views": params.pair.seed, "splits": params.pair.seed},
+        "version_reason": plan.reason,
     }
 
 
@@ -90,10 +95,14 @@ def catalog_parameters(plan: ReleasePlan, pairs: list[int]) -> dict[str, Any]:
         "lineage_key": plan.lineage_key,
         "pairs": pairs,
         "label_sets": plan.lineage_key["label_sets"],
+        "output_digests": plan.output_digests,
+        "version_reason": plan.reason,
     }
 
 
-def execute_build(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> DraftRelease:
+def execute_build(
+    plan: ReleasePlan, outputs: Mapping[int, PairOutput], progress: Progress = no_progress
+) -> DraftRelease:
     """Write the draft of ``plan`` from the pairs' ``outputs`` (pair id -> its outputs, every pair of the
     plan), replacing an earlier draft of the same version."""
     missing = [p.pair_id for p in plan.pairs if p.pair_id not in outputs]
@@ -102,7 +111,7 @@ def execute_build(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> Draft
     splits = split_pairs(sorted(outputs), plan.params.pair.seed)
     split_of = {pid: sp for sp, ids in splits.items() for pid in ids}
     with publish_folder(plan.draft) as work:
-        items = _write_items(plan, outputs, split_of, work)
+        items = _write_items(plan, outputs, split_of, work, progress)
         rows = [it.to_dict() for it in items]
         stats = datasheet.statistics(work, rows)
         (work / "stats.json").write_text(json.dumps(stats, indent=1) + "\n")

@@ -19,17 +19,28 @@ def colour_mask(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int = 1200) -> Image.Image:
-    """Rows of (t1, t2, mask) for ``count`` sample items, ``width`` pixels wide."""
-    rows = []
-    for it in items[:count]:
-        a = np.asarray(Image.open(root / it["split"] / "A" / f"{it['id']}.png").convert("RGB"))
-        b = np.asarray(Image.open(root / it["split"] / "B" / f"{it['id']}.png").convert("RGB"))
-        m = colour_mask(np.asarray(Image.open(root / it["split"] / "label_ignore" / f"{it['id']}.png")))
-        rows.append(np.concatenate([a, b, m], axis=1))
+def triplet_grid(triplets: list[tuple[np.ndarray, np.ndarray, np.ndarray]], width: int) -> Image.Image:
+    """Rows of (t1 | t2 | coloured mask), one per triplet of (RGB, RGB, 0/1/255 mask), scaled to
+    ``width`` pixels wide (nearest neighbour: pixels stay pixels)."""
+    rows = [np.concatenate([a, b, colour_mask(m)], axis=1) for a, b, m in triplets]
     grid = np.concatenate(rows, axis=0) if rows else np.zeros((10, 30, 3), np.uint8)
     img = Image.fromarray(grid)
     return img.resize((width, max(1, int(img.height * width / img.width))), Image.Resampling.NEAREST)
+
+
+def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int = 1200) -> Image.Image:
+    """Rows of (t1, t2, mask) for ``count`` sample items of the release at ``root``."""
+
+    def rgb(sub: str, it: dict[str, Any]) -> np.ndarray:
+        return np.asarray(Image.open(root / it["split"] / sub / f"{it['id']}.png").convert("RGB"))
+
+    return triplet_grid(
+        [
+            (rgb("A", it), rgb("B", it), np.asarray(Image.open(root / it["split"] / "label_ignore" / f"{it['id']}.png")))
+            for it in items[:count]
+        ],
+        width,
+    )
 
 
 def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -14,12 +15,16 @@ from siteline.release.layout import FORMAT
 @dataclass(frozen=True)
 class ReleaseParams:
     """pair: the pair-processing parameters (after the preset). preset: its name, or None. pad: images
-    padded to multiples of 32 and at least 256 px. format: the release layout (2)."""
+    padded to multiples of 32 and at least 256 px. format: the release layout (2). min_image_px: the
+    smallest long side a release image may have (a build under it is refused). derived: knob ->
+    how an ``auto`` knob was worked out (siteline.release.knobs), recorded in the lineage."""
 
     pair: PairParams = field(default_factory=PairParams)
     preset: str | None = None
     pad: bool = True
     format: int = FORMAT
+    min_image_px: int = 256
+    derived: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:
@@ -27,25 +32,15 @@ class ReleaseParams:
         if not isinstance(self.pad, bool):
             raise ReleaseError(f"pad must be true or false, got {self.pad!r}.")
 
-    @classmethod
-    def resolve(
-        cls, pair: PairParams | None = None, preset: str | None = None, pad: bool = True
-    ) -> ReleaseParams:
-        """The release parameters of ``pair`` (the defaults when None) with the knobs of ``preset``
-        applied (siteline.presets): the one place a preset is applied."""
-        pair = pair or PairParams()
-        if preset is not None:
-            from siteline.presets import preset_params
-
-            pair = preset_params(preset, pair)
-        return cls(pair, preset, pad)
-
     def to_dict(self) -> dict[str, Any]:
-        return {"pair": self.pair.to_dict(), "preset": self.preset, "pad": self.pad, "format": self.format}
+        return {
+            "pair": self.pair.to_dict(), "preset": self.preset, "pad": self.pad, "format": self.format,
+            "min_image_px": self.min_image_px, "derived": dict(self.derived),
+        }  # fmt: skip
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> ReleaseParams:
-        unknown = sorted(set(doc) - {"pair", "preset", "pad", "format"})
+        unknown = sorted(set(doc) - {"pair", "preset", "pad", "format", "min_image_px", "derived"})
         if unknown:
             raise ReleaseError(f"release parameters: unknown key(s) {unknown}.")
         return cls(
@@ -53,4 +48,6 @@ class ReleaseParams:
             doc.get("preset"),
             doc.get("pad", True),
             doc.get("format", FORMAT),
+            doc.get("min_image_px", 256),
+            dict(doc.get("derived") or {}),
         )

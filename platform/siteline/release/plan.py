@@ -13,12 +13,20 @@ from sqlalchemy.orm import Session
 from siteline.catalog.labelsets import label_set_ref
 from siteline.catalog.pairs import get_pair
 from siteline.catalog.releases import find_release, list_releases
-from siteline.catalog.scenes import get_scene, list_pairs, list_scenes, mission_of_scene, scene_statistics
+from siteline.catalog.scenes import (
+    get_scene,
+    list_pairs,
+    list_scenes,
+    mission_of_scene,
+    scene_statistics,
+    site_survey,
+)
 from siteline.catalog.sites import get_site, site_of
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.pairs.plan import PairPlan, plan_pair
 from siteline.release import layout
+from siteline.release.knobs import ReleaseKnobs, check_image_size, resolve
 from siteline.release.params import ReleaseParams
 from siteline.stores import layout as paths
 
@@ -47,19 +55,49 @@ def semver(version: str) -> tuple[int, int, int]:
     return int(m.group(1)), int(m.group(2)), int(m.group(3))
 
 
-def next_version(session: Session, name: str, lineage_key: Mapping[str, Any]) -> str:
-    """1.0.0 first; a major bump when pairs, label sets or label/split parameters change, else a
-    minor one. A version recorded before label sets were versioned used version 1 of every scene."""
+def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
+    """What differs between two lineage keys, in words."""
+    out = []
+    added = sorted(set(key["pairs"]) - set(previous.get("pairs", [])))
+    dropped = sorted(set(previous.get("pairs", [])) - set(key["pairs"]))
+    out += [f"pairs added: {', '.join(map(str, added))}"] if added else []
+    out += [f"pairs dropped: {', '.join(map(str, dropped))}"] if dropped else []
+    before = previous.get("label_sets", {})
+    out += [
+        f"scene {sid} label set v{before.get(sid, 1)} -> v{v}"
+        for sid, v in key["label_sets"].items()
+        if sid in before and before[sid] != v
+    ]
+    old_params = previous.get("params", {})
+    out += [
+        f"{k} {old_params.get(k)!r} -> {v!r}" for k, v in key["params"].items() if k in old_params and old_params[k] != v
+    ]
+    out += [f"{k} {previous.get(k)!r} -> {key[k]!r}" for k in ("format", "pad") if k in previous and previous[k] != key[k]]
+    return out or ["lineage changed"]
+
+
+def next_version(
+    session: Session, name: str, lineage_key: Mapping[str, Any], digests: Mapping[str, str]
+) -> tuple[str, str, str | None]:
+    """(version, why, up to date with) for a build of ``name``: 1.0.0 first; a major bump when pairs,
+    label sets or parameters change; a minor one when only the pairs' outputs were remade (a re-tiled
+    scene); and the latest version itself (third item) when its inputs (lineage key and the pairs'
+    output digests) are these: nothing new to build. A version recorded before label sets were
+    versioned used version 1 of every scene."""
     rows = list_releases(session, name)
     if not rows:
-        return "1.0.0"
+        return "1.0.0", "first version", None
     latest = max(rows, key=lambda r: semver(r.version))
     major, minor, _ = semver(latest.version)
-    previous = dict((latest.parameters or {}).get("lineage_key") or {})
+    recorded = latest.parameters or {}
+    previous = dict(recorded.get("lineage_key") or {})
     previous.setdefault("label_sets", dict.fromkeys(lineage_key.get("label_sets", {}), 1))
     if previous != dict(lineage_key):
-        return f"{major + 1}.0.0"
-    return f"{major}.{minor + 1}.0"
+        return f"{major + 1}.0.0", "; ".join(_changes(previous, lineage_key)), None
+    if recorded.get("output_digests") == dict(digests):
+        return latest.version, "up to date", latest.version
+    remade = sorted(int(p) for p, d in digests.items() if (recorded.get("output_digests") or {}).get(p) != d)
+    return f"{major}.{minor + 1}.0", f"outputs remade for pairs {', '.join(map(str, remade))} (a scene re-tiled)", None
 
 
 def choose_pairs(session: Session, site_name: str, pair_ids: Sequence[int] | None = None) -> list[int]:
@@ -95,6 +133,11 @@ def used_label_sets(pairs: Sequence[PairPlan]) -> dict[str, int]:
     """Scene id (as text, a JSON key) -> the label-set version the pairs use, by scene id."""
     used = {str(sc.id): sc.label_set.version for p in pairs for sc in (p.t1, p.t2)}
     return dict(sorted(used.items(), key=lambda kv: int(kv[0])))
+
+
+def output_digests(pairs: Sequence[PairPlan]) -> dict[str, str]:
+    """Pair id (as text, a JSON key) -> the digest of the outputs a release draws on."""
+    return {str(p.pair_id): p.digest for p in pairs}
 
 
 def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[dict[str, Any]]:
@@ -133,6 +176,12 @@ class ReleasePlan:
     scenes: tuple[dict[str, Any], ...]
     lineage_key: dict[str, Any]
     draft: Path
+    reason: str
+    up_to_date: str | None
+
+    @property
+    def output_digests(self) -> dict[str, str]:
+        return output_digests(self.pairs)
 
 
 def plan_release(
@@ -140,7 +189,8 @@ def plan_release(
     pair_ids: Sequence[int] | None = None, version: str | None = None, pinned: Mapping[int, int] | None = None,
 ) -> ReleasePlan:  # fmt: skip
     """The plan of building draft ``name`` of ``site_name`` (one transaction). The version is the next
-    one (:func:`next_version`) unless given; a published version is refused."""
+    one (:func:`next_version`; ``up_to_date`` names the latest version when its inputs are these)
+    unless given; a published version is refused, and so are images under the size floor."""
     check_release_name(name)
     if version is not None:
         semver(version)
@@ -148,9 +198,15 @@ def plan_release(
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
     key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
            "label_sets": used_label_sets(pairs)}  # fmt: skip
-    version = version if version is not None else next_version(session, name, key)
+    digests = output_digests(pairs)
+    auto, reason, up_to_date = next_version(session, name, key, digests)
+    if version is not None and version != up_to_date:  # a given version is built as asked
+        up_to_date, reason = None, reason if reason != "up to date" else f"version {version} given"
+    version = version or auto
+    if up_to_date is None:
+        check_image_size(params, site_survey(session, get_site(session, site_name)), f"release {name} {version}")
     existing = find_release(session, name, version)
-    if existing is not None and existing.status == "published":
+    if up_to_date is None and existing is not None and existing.status == "published":
         raise ImmutableError(
             f"release {name} {version} is already published and is never rewritten: build another "
             "version. Nothing was written."
@@ -160,8 +216,20 @@ def plan_release(
     record = {"name": site.name, "crs": site.crs, "origin": list(site.origin), "fence_m": site.fence}
     return ReleasePlan(
         site_name, record, name, version, params, pairs, tuple(scene_lineage(session, pairs)), key,
-        paths.release_draft(settings.home, name, version),
+        paths.release_draft(settings.home, name, version), reason, up_to_date,
     )  # fmt: skip
+
+
+def release_params(session: Session, site_name: str, knobs: ReleaseKnobs | None, what: str) -> ReleaseParams:
+    """The parameters of a build of ``site_name``: the site's release settings with ``knobs`` (a
+    command's) over them, auto knobs worked out from the site's cameras and density; refused when its
+    images would be under the size floor."""
+    site = get_site(session, site_name)
+    stored = ReleaseKnobs.from_dict(site.release_settings, f"site {site_name} release settings")
+    survey = site_survey(session, site)
+    params = resolve([stored, knobs or ReleaseKnobs()], survey)
+    check_image_size(params, survey, what)
+    return params
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from siteline.catalog import Catalog
@@ -12,6 +13,7 @@ from siteline.catalog.releases import get_release, record_draft, record_publishe
 from siteline.config import Settings
 from siteline.errors import ReleaseError
 from siteline.pairs.outputs import find_outputs
+from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
 from siteline.records.runs import StageRun
@@ -19,7 +21,7 @@ from siteline.release import layout
 from siteline.release.build import execute_build
 from siteline.release.manifest import read_manifest
 from siteline.release.params import ReleaseParams
-from siteline.release.plan import check_release_name, plan_publish, plan_release, semver
+from siteline.release.plan import ReleasePlan, check_release_name, plan_publish, plan_release, semver
 from siteline.release.publish import make_read_only, move_back, move_into_place
 from siteline.release.repair import inspect_release, mend
 
@@ -36,30 +38,51 @@ def build_release(
     version: str | None = None,
     run_id: str | None = None,
     label_sets: Mapping[int, int] | None = None,
+    publish: bool = False,
+    progress: Progress = no_progress,
 ) -> ReleaseInfo:
     """Assemble a draft release ``name`` from the site's processed pairs (or ``pair_ids``) in format 2
-    (siteline.release.layout) with ``params`` (pair parameters after the preset, preset name,
-    padding). Every pair must already be processed with these parameters and label sets:
-    :class:`ReleaseError` names the command otherwise (``siteline.pipeline.release`` processes what is
-    missing first). Each scene's newest label set is used unless ``label_sets`` (scene id ->
-    version) pins one; a change of any of them from the previous version of ``name`` bumps the major
-    version."""
+    (siteline.release.layout) with ``params`` (resolved: siteline.release.knobs), and publish it when
+    ``publish``, holding the release name's lock throughout. Every pair must already be processed
+    with these parameters and label sets: :class:`ReleaseError` names the command otherwise
+    (``siteline.pipeline.release`` processes what is missing first). Each scene's newest label set is
+    used unless ``label_sets`` (scene id -> version) pins one. When the latest version's inputs are
+    these (pairs, their outputs, label sets, parameters), nothing is built: that version is returned
+    with ``up_to_date`` (published now if it is a draft and ``publish``)."""
     params = params or ReleaseParams()
     check_release_name(name)  # before anything: a name is a folder name
     if version is not None:
         semver(version)
     with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time
-        return _build(catalog, settings, site_name, name, params, pair_ids, version, run_id, label_sets)
+        with catalog.transaction() as s:
+            plan = plan_release(s, settings, site_name, name, params, pair_ids, version, label_sets)
+        if plan.up_to_date is not None:
+            info = _release_info(catalog, name, plan.up_to_date)
+            log.info("release %s is up to date: %s %s has these inputs", name, name, info.version)
+        else:
+            info = _build(catalog, settings, plan, run_id, progress)
+        if publish and info.status == "draft":
+            info = _publish(catalog, settings, name, info.version, run_id)
+        return replace(info, reason=plan.reason if plan.up_to_date is None else info.reason,
+                       up_to_date=plan.up_to_date is not None)  # fmt: skip
+
+
+def _release_info(catalog: Catalog, name: str, version: str) -> ReleaseInfo:
+    """A recorded release version as commands report it (its statistics from its manifest)."""
+    with catalog.transaction() as s:
+        rel = get_release(s, name, version)
+        items = sum(release_item_counts(s, rel.id).values())
+        status, root, sha = rel.status, str(rel.root_uri), rel.manifest_sha256
+        reason = (rel.parameters or {}).get("version_reason", "")
+    return ReleaseInfo(name, version, status, root, items, sha, read_manifest(Path(root)).get("stats", {}), reason)  # type: ignore[arg-type]
 
 
 def _build(
-    catalog: Catalog, settings: Settings, site_name: str, name: str, params: ReleaseParams,
-    pair_ids: Sequence[int] | None, version: str | None, run_id: str | None, label_sets: Mapping[int, int] | None,
-) -> ReleaseInfo:  # fmt: skip
-    with catalog.transaction() as s:
-        plan = plan_release(s, settings, site_name, name, params, pair_ids, version, label_sets)
+    catalog: Catalog, settings: Settings, plan: ReleasePlan, run_id: str | None, progress: Progress
+) -> ReleaseInfo:
+    params = plan.params
     run = StageRun(
-        "build_release", f"release:{name}:{plan.version}",
+        "build_release", f"release:{plan.name}:{plan.version}",
         {"pair_params": params.pair.to_dict(), "preset": params.preset, "pairs": [p.pair_id for p in plan.pairs]},
         run_id=run_id,
     )  # fmt: skip
@@ -71,12 +94,13 @@ def _build(
             f"{len(found)} pairs): run `siteline release build`, which processes pairs first. Nothing was written."
         )
     outputs: dict[int, PairOutput] = {pid: out for pid, out in found.items() if out is not None}
-    draft = execute_build(plan, outputs)
+    draft = execute_build(plan, outputs, progress)
     with catalog.transaction() as s:
         record_draft(s, draft, tuple(layout.FOLDERS), run)
     return ReleaseInfo(
-        name, plan.version, "draft", draft.root, len(draft.items), draft.manifest_sha256, draft.stats
-    )
+        plan.name, plan.version, "draft", draft.root, len(draft.items), draft.manifest_sha256, draft.stats,
+        plan.reason,
+    )  # fmt: skip
 
 
 def publish_release(
@@ -98,7 +122,7 @@ def _publish(
     if unfinished:  # an earlier publish moved it into place and died: finish that one
         log.info("%s", unfinished[0].message)
         mend(catalog, settings, unfinished[0], run_id)
-        return _published_info(catalog, plan.final, name, version)
+        return _release_info(catalog, name, version)
     run = StageRun("publish_release", f"release:{name}:{version}", {}, run_id=run_id)
     move_into_place(plan)
     try:
@@ -109,14 +133,4 @@ def _publish(
         raise
     make_read_only(plan.final)
     log.info("release %s %s published at %s", name, version, plan.final)
-    return _published_info(catalog, plan.final, name, version)
-
-
-def _published_info(catalog: Catalog, root: Path, name: str, version: str) -> ReleaseInfo:
-    with catalog.transaction() as s:
-        rel = get_release(s, name, version)
-        items = sum(release_item_counts(s, rel.id).values())
-        sha = rel.manifest_sha256
-    return ReleaseInfo(
-        name, version, "published", str(root), items, sha, read_manifest(root).get("stats", {})
-    )
+    return _release_info(catalog, name, version)

@@ -1,0 +1,77 @@
+"""The release knobs as command-line options, declared once: ``site create``, ``site update`` and
+``release build`` take the same options and get a :class:`ReleaseKnobs` layer of what was given."""
+
+from __future__ import annotations
+
+import functools
+import inspect
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import typer
+
+from siteline.errors import ReleaseError
+from siteline.release.knobs import AUTO, ReleaseKnobs
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _number(text: str, option: str, kind: type) -> Any:
+    if text == AUTO:
+        return AUTO
+    try:
+        return kind(text)
+    except ValueError as exc:
+        raise ReleaseError(f"{option} {text!r}: give a number or 'auto'.") from exc
+
+
+_OPTIONS: dict[str, tuple[Any, Any]] = {
+    # name: (annotation, typer option)
+    "preset": (str | None, typer.Option(None, "--preset", help="fast, balanced or exact (docs/performance.md).")),
+    "scale": (str | None, typer.Option(None, "--scale", help="Render scale of the cameras' image size, or 'auto' (512 px long side).")),
+    "point_size": (str | None, typer.Option(None, "--point-size", help="Point size in pixels (odd, 1-15), or 'auto' (from density).")),
+    "views": (int | None, typer.Option(None, "--views", help="Views per pair (default 300).")),
+    "radius": (str | None, typer.Option(None, "--radius", help="Change radius in metres, or 'auto' (2.5 x median spacing).")),
+    "seed": (int | None, typer.Option(None, "--seed", help="Seed of view sampling and splits.")),
+    "min_coverage": (float | None, typer.Option(None, "--min-coverage", help="Reject views covering less of the image (default 0.5).")),
+    "min_valid": (float | None, typer.Option(None, "--min-valid", help="Replace rendered views with fewer valid pixels (default 0.25).")),
+    "one_side_hole": (str | None, typer.Option(None, "--one-side-hole", help="Changed on one side, a hole on the other: ignore or changed.")),
+    "all_points": (bool | None, typer.Option(None, "--all-points/--lod", help="Render every point (no level of detail; slower).")),
+    "lod_factor": (float | None, typer.Option(None, "--lod-factor", help="Level of detail read per view (1 = half a drawn point).")),
+    "pad": (bool | None, typer.Option(None, "--pad/--no-pad", help="Pad images to multiples of 32 and at least 256 px.")),
+    "min_image_px": (int | None, typer.Option(None, "--min-image-px", help="Refuse a build whose images' long side is under this (default 256).")),
+}  # fmt: skip
+
+
+def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
+    """The layer of the options that were given (None: not given)."""
+    pair: dict[str, Any] = {}
+    if values.get("scale") is not None:
+        pair["scale"] = _number(values["scale"], "--scale", float)
+    if values.get("point_size") is not None:
+        pair["point_size_px"] = _number(values["point_size"], "--point-size", int)
+    if values.get("radius") is not None:
+        radius = _number(values["radius"], "--radius", float)
+        pair["radius_m"] = None if radius == AUTO else radius
+    for name in ("views", "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor"):
+        if values.get(name) is not None:
+            pair[name] = values[name]
+    return ReleaseKnobs(values.get("preset"), pair, values.get("pad"), values.get("min_image_px"))
+
+
+def with_knob_options(fn: F) -> F:
+    """Give command ``fn`` the knob options; it receives them as one ``knobs: ReleaseKnobs``."""
+    sig = inspect.signature(fn)
+    params = [p for p in sig.parameters.values() if p.name != "knobs"]
+    extra = [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=annotation)
+        for name, (annotation, option) in _OPTIONS.items()
+    ]
+
+    @functools.wraps(fn)
+    def command(*args: Any, **kwargs: Any) -> Any:
+        values = {name: kwargs.pop(name) for name in _OPTIONS}
+        return fn(*args, knobs=knobs_of(values), **kwargs)
+
+    command.__signature__ = sig.replace(parameters=[*params, *extra])  # type: ignore[attr-defined]
+    return command  # type: ignore[return-value]

@@ -1,0 +1,184 @@
+"""Release settings as a site stores them and a command overrides them, and their resolution into the
+:class:`ReleaseParams` a build uses: the one place a preset is applied and ``auto`` is worked out.
+
+Layers apply in order (defaults, then the site's settings, then the command's), each its preset first
+and then its own knobs, so a knob set later wins. ``scale`` and ``point_size_px`` are ``auto`` unless a
+layer sets them: the scale that gives the site's smallest camera a long side of
+:data:`TARGET_LONG_SIDE_PX` (the paper's 706 x 510 regime), and the smallest odd point size whose disk
+covers the gap between neighbouring points at the sparsest scene's density, seen from the cameras.
+A build whose images would have a long side under ``min_image_px`` (256 by default) is refused.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from siteline.errors import ReleaseError, SitelineError
+from siteline.pairs.params import PairParams
+from siteline.presets import PRESETS
+from siteline.records.release import SiteSurvey
+from siteline.release.params import ReleaseParams
+
+AUTO = "auto"
+AUTO_KNOBS = ("scale", "point_size_px")
+TARGET_LONG_SIDE_PX = 512
+MIN_IMAGE_PX = 256
+_PAIR_KNOBS = tuple(f.name for f in fields(PairParams) if f.name != "sampler")
+
+
+@dataclass(frozen=True)
+class ReleaseKnobs:
+    """One layer of release settings: a preset, any subset of the pair knobs (PairParams fields;
+    ``scale`` and ``point_size_px`` may be ``"auto"``), padding, and the smallest long side in pixels a
+    release image may have. ``None`` and absent knobs leave the layer below in force."""
+
+    preset: str | None = None
+    pair: Mapping[str, Any] = field(default_factory=dict)
+    pad: bool | None = None
+    min_image_px: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.preset is not None and self.preset not in PRESETS:
+            raise ReleaseError(f"unknown preset {self.preset!r}; choose one of {sorted(PRESETS)}.")
+        unknown = sorted(set(self.pair) - set(_PAIR_KNOBS))
+        if unknown:
+            raise ReleaseError(f"release settings: unknown knob(s) {unknown}; known: {sorted(_PAIR_KNOBS)}.")
+        bad_auto = sorted(k for k, v in self.pair.items() if v == AUTO and k not in AUTO_KNOBS)
+        if bad_auto:
+            raise ReleaseError(f"release settings: only {', '.join(AUTO_KNOBS)} may be 'auto', not {bad_auto}.")
+        try:  # each value checked by the spec that owns it
+            PairParams.from_dict({k: v for k, v in self.pair.items() if v != AUTO})
+        except SitelineError as exc:
+            raise ReleaseError(f"release settings: {exc}") from exc
+        if self.pad is not None and not isinstance(self.pad, bool):
+            raise ReleaseError(f"release settings: pad must be true or false, got {self.pad!r}.")
+        if self.min_image_px is not None and (
+            isinstance(self.min_image_px, bool) or not isinstance(self.min_image_px, int) or self.min_image_px < 1
+        ):
+            raise ReleaseError(f"release settings: min_image_px {self.min_image_px!r} must be a positive integer.")
+
+    @classmethod
+    def exactly(cls, params: PairParams, **kw: Any) -> ReleaseKnobs:
+        """A layer that sets every pair knob to ``params``'s value (nothing auto, nothing inherited)."""
+        return cls(pair={k: v for k, v in params.to_dict().items() if k != "sampler"}, **kw)
+
+    def updated(self, other: ReleaseKnobs, unset: Sequence[str] = ()) -> ReleaseKnobs:
+        """This layer with ``other``'s set fields written over it, then the knobs named in ``unset``
+        (pair knobs, ``preset``, ``pad``, ``min_image_px``) removed: what ``site update`` stores."""
+        doc = self.to_dict()
+        new = other.to_dict()
+        doc["pair"] = {**doc.get("pair", {}), **new.pop("pair", {})}
+        doc |= new
+        for name in unset:
+            if name in doc["pair"]:
+                del doc["pair"][name]
+            elif name in ("preset", "pad", "min_image_px"):
+                doc.pop(name, None)
+            elif name not in _PAIR_KNOBS:
+                raise ReleaseError(f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, preset, pad, min_image_px.")
+        return ReleaseKnobs.from_dict(doc)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Only what is set (the site's JSON)."""
+        doc: dict[str, Any] = {"pair": dict(self.pair)} if self.pair else {}
+        for name in ("preset", "pad", "min_image_px"):
+            if getattr(self, name) is not None:
+                doc[name] = getattr(self, name)
+        return doc
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any] | None, source: str = "release settings") -> ReleaseKnobs:
+        doc = dict(doc or {})
+        unknown = sorted(set(doc) - {"preset", "pair", "pad", "min_image_px"})
+        if unknown:
+            raise ReleaseError(f"{source}: unknown key(s) {unknown}.")
+        if not isinstance(doc.get("pair", {}), Mapping):
+            raise ReleaseError(f"{source}: 'pair' must be an object of knobs.")
+        return cls(doc.get("preset"), dict(doc.get("pair", {})), doc.get("pad"), doc.get("min_image_px"))
+
+
+def auto_scale(survey: SiteSurvey) -> tuple[float, str]:
+    """The render scale (rounded up to 0.01) at which the site's smallest camera has a long side of
+    at least :data:`TARGET_LONG_SIDE_PX`, and how it was chosen."""
+    if not survey.cameras:
+        raise ReleaseError(
+            "scale is auto, but the site has no registered camera to derive it from: set it "
+            "(`siteline site update SITE --scale 0.5`)."
+        )
+    smallest = min(survey.cameras, key=lambda c: max(c.width, c.height))
+    long_side = max(smallest.width, smallest.height)
+    scale = min(4.0, math.ceil(100 * TARGET_LONG_SIDE_PX / long_side - 1e-9) / 100)
+    return scale, (
+        f"auto: {TARGET_LONG_SIDE_PX} px long side from the smallest camera ({smallest.width} x "
+        f"{smallest.height} px, scene {smallest.scene_id})"
+    )
+
+
+def auto_point_size(survey: SiteSurvey, scale: float) -> tuple[int, str]:
+    """The smallest odd point size (1-15 px) whose disk covers the gap between neighbouring points:
+    diameter >= sqrt(2) x the point spacing in pixels (spacing 1/sqrt(density) of the sparsest scene,
+    seen by the median camera at ``scale`` from its height above the ground)."""
+    if not survey.cameras or not survey.min_density_pts_m2:
+        return 1, "auto: 1 px (no camera or density to derive it from)"
+    spacing_m = 1.0 / math.sqrt(survey.min_density_pts_m2)
+    per_camera = sorted(
+        spacing_m * c.fx * scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras
+    )
+    spacing_px = per_camera[len(per_camera) // 2]
+    size = max(1, math.ceil(math.sqrt(2.0) * spacing_px - 1e-9))
+    size = min(15, size if size % 2 else size + 1)
+    return size, (
+        f"auto: {size} px covers a {spacing_px:.2f} px point spacing ({spacing_m:.3f} m at "
+        f"{survey.min_density_pts_m2:.4g} points/m2, median camera)"
+    )
+
+
+def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams:
+    """The release parameters of ``layers`` (site, then command) over the defaults, with ``auto``
+    worked out from ``survey``; the explanation of each derived knob is in ``derived``."""
+    doc = PairParams().to_dict()
+    auto, preset, pad, min_px = set(AUTO_KNOBS), None, True, MIN_IMAGE_PX
+    for layer in layers:
+        if layer.preset is not None:
+            doc |= PRESETS[layer.preset]
+            auto -= set(PRESETS[layer.preset])
+            preset = layer.preset
+        for name, value in layer.pair.items():
+            if value == AUTO:
+                auto.add(name)
+            else:
+                doc[name] = value
+                auto.discard(name)
+        pad = pad if layer.pad is None else layer.pad
+        min_px = min_px if layer.min_image_px is None else layer.min_image_px
+    derived: dict[str, str] = {}
+    if "scale" in auto:
+        doc["scale"], derived["scale"] = auto_scale(survey)
+    if "point_size_px" in auto:
+        doc["point_size_px"], derived["point_size_px"] = auto_point_size(survey, doc["scale"])
+    try:
+        pair = PairParams.from_dict(doc)
+    except SitelineError as exc:
+        raise ReleaseError(f"release settings: {exc}") from exc
+    return ReleaseParams(pair, preset, pad, min_image_px=min_px, derived=derived)
+
+
+def check_image_size(params: ReleaseParams, survey: SiteSurvey, what: str) -> None:
+    """Refuse ``what`` (a release) when a camera's images would have a long side under
+    ``params.min_image_px`` at ``params.pair.scale``, naming the sizes and the scale that would do."""
+    if not survey.cameras:
+        return
+    floor = params.min_image_px
+    cam = min(survey.cameras, key=lambda c: max(c.width, c.height))
+    w, h = (max(1, math.floor(v * params.pair.scale + 0.5)) for v in (cam.width, cam.height))
+    if max(w, h) < floor:
+        need = math.ceil(100 * floor / max(cam.width, cam.height) - 1e-9) / 100
+        hint = f" (preset {params.preset} is tuned for ~5645 px photos)" if params.preset else ""
+        raise ReleaseError(
+            f"{what}: images would be {w} x {h} px (scale {params.pair.scale:g} of scene {cam.scene_id}'s "
+            f"{cam.width} x {cam.height} px cameras){hint}, under the {floor} px floor: use --scale {need:g} or "
+            "more, or lower --min-image-px knowingly. Nothing was written."
+        )
