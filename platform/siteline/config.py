@@ -14,6 +14,8 @@ Environment variables (read here and nowhere else):
   scheduler (``tcp://host:8786``; default: a LocalCluster on 127.0.0.1).
 - ``SITELINE_RELEASE_POLICY``: ``on-demand`` (default) or ``every-pair`` (the flows build a release
   after every processed pair); ``SITELINE_RELEASE_NAME`` that release's name (default ``<site>-cd``).
+- ``SITELINE_PREVIEW_URL``: where ``siteline previews serve`` answers (default
+  ``http://127.0.0.1:4201``); the flows' image artifacts point there.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ from siteline.stores import Store, layout, open_store
 CATALOG_FILENAME = "catalog.sqlite"
 TASK_RUNNERS = ("threads", "processes", "dask")
 RELEASE_POLICIES = ("every-pair", "on-demand")
+# where `siteline previews serve` (started by `make serve`) answers: the Prefect UI loads images from it
+DEFAULT_PREVIEW_URL = "http://127.0.0.1:4201"
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,7 @@ class Settings:
     dask_address: str = ""
     release_policy: str = "on-demand"
     release_name: str = ""
+    preview_url: str = DEFAULT_PREVIEW_URL
 
     @property
     def store(self) -> Store:
@@ -102,4 +107,5 @@ def load_settings(environ: dict[str, str] | None = None) -> Settings:
         dask_address=env.get("SITELINE_DASK_ADDRESS", "").strip(),
         release_policy=policy,
         release_name=env.get("SITELINE_RELEASE_NAME", "").strip(),
+        preview_url=(env.get("SITELINE_PREVIEW_URL", "").strip() or DEFAULT_PREVIEW_URL).rstrip("/"),
     )

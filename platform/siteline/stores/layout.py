@@ -13,7 +13,8 @@ Store root::
 
     catalog.sqlite, stores/ (the default store root), staging/ (folders built for a remote store and
     its download cache), tmp/ (spill files of running stages), releases/<name>/<version>/ (published),
-    releases/<name>/.drafts/<version>/
+    releases/<name>/.drafts/<version>/, previews/pairs/pair-<id>/<output digest>/ (A | B | mask
+    images the flows show in the Prefect UI)
 """
 
 from __future__ import annotations
@@ -71,3 +72,12 @@ def release_draft(home: Path, name: str, version: str) -> Path:
 
 def release_published(home: Path, name: str, version: str) -> Path:
     return releases(home) / name / version
+
+
+def previews(home: Path) -> Path:
+    """Preview images for the UI (``siteline previews serve`` serves this folder and the releases)."""
+    return home / "previews"
+
+
+def pair_previews(home: Path, pair_id: int, digest: str) -> Path:
+    return previews(home) / "pairs" / f"pair-{pair_id}" / digest

@@ -1,0 +1,80 @@
+"""The preview route the UI loads images from is read-only and shows pair previews and published
+releases only; release and pair artifacts say what a person watching the service needs."""
+
+from __future__ import annotations
+
+import threading
+
+import httpx
+import pytest
+
+from siteline.config import Settings
+from siteline.previews.images import url_of
+from siteline.previews.markdown import release_markdown
+from siteline.previews.server import make_server
+from siteline.records.release import ReleaseInfo
+
+PNG = b"\x89PNG\r\n\x1a\n" + b"0" * 32
+
+
+@pytest.fixture
+def served(tmp_path):
+    home = tmp_path / "home"
+    (home / "previews" / "pairs" / "pair-1" / "abc").mkdir(parents=True)
+    (home / "previews" / "pairs" / "pair-1" / "abc" / "samples.png").write_bytes(PNG)
+    (home / "releases" / "r" / "1.0.0").mkdir(parents=True)
+    (home / "releases" / "r" / "1.0.0" / "montage.png").write_bytes(PNG)
+    (home / "releases" / "r" / ".drafts" / "2.0.0").mkdir(parents=True)
+    (home / "releases" / "r" / ".drafts" / "2.0.0" / "montage.png").write_bytes(PNG)
+    (home / "catalog.sqlite").write_bytes(b"secret")
+    (tmp_path / "outside.png").write_bytes(PNG)
+    (home / "previews" / "escape.png").symlink_to(tmp_path / "outside.png")
+    server = make_server(home, "127.0.0.1", 0)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{server.server_address[1]}", home
+    server.shutdown()
+    server.server_close()
+
+
+def test_previews_and_published_releases_are_served_read_only(served) -> None:
+    base, _ = served
+    ok = httpx.get(f"{base}/previews/pairs/pair-1/abc/samples.png")
+    assert ok.status_code == 200 and ok.content == PNG and ok.headers["content-type"] == "image/png"
+    assert httpx.get(f"{base}/releases/r/1.0.0/montage.png").status_code == 200
+    listing = httpx.get(f"{base}/releases/r/").text
+    assert "1.0.0" in listing and ".drafts" not in listing
+    for path in ("/releases/r/.drafts/2.0.0/montage.png", "/catalog.sqlite", "/releases/../catalog.sqlite",
+                 "/releases/%2e%2e/catalog.sqlite", "/previews/escape.png", "/stores/", "/releases/r/9.9.9/x.png"):  # fmt: skip
+        assert httpx.get(base + path).status_code == 404, path
+    for method in ("PUT", "POST", "DELETE"):
+        assert httpx.request(method, f"{base}/releases/r/1.0.0/montage.png").status_code == 501
+
+
+def test_urls_point_at_the_preview_route(tmp_path) -> None:
+    settings = Settings(home=tmp_path, database_url="sqlite://", preview_url="http://host:4201")
+    assert url_of(settings, tmp_path / "releases" / "a b" / "1.0.0" / "montage.png") == (
+        "http://host:4201/releases/a%20b/1.0.0/montage.png"
+    )
+
+
+def test_the_release_artifact_says_why_where_and_how_big() -> None:
+    item = {"split": "train", "pair": 1, "coverage": 0.9, "valid": 0.6, "change_ratio": 0.1,
+            "size_px": [515, 386], "padded_px": [544, 416]}  # fmt: skip
+    doc = {
+        "items": [item, item | {"split": "test", "valid": 0.3}],
+        "lineage": {
+            "parameters": {"scale": 0.78, "point_size_px": 3, "views": 24, "min_coverage": 0.5, "min_valid": 0.25},
+            "release_params": {"derived": {"scale": "auto: 512 px long side from the smallest camera"}},
+            "pairs": [{"id": 1, "t1": 1, "t2": 2, "radius_m": 0.38, "label_sets": {"t1": 2, "t2": 1}}],
+            "scenes": [{"id": 1, "capture_time": "2024-11-27", "label_set_version": 2, "label_set_source": "import x.las"}],
+        },
+        "stats": {"class_balance": {"train": {"changed": 10, "unchanged": 20, "ignore": 5}}},
+    }
+    info = ReleaseInfo("r", "2.0.0", "published", "/h/releases/r/2.0.0", 2, "ab" * 32, {}, "scene 1 label set v1 -> v2")
+    md = release_markdown(info, doc, "http://h:4201/releases/r/2.0.0/montage.png")
+    assert "![montage of r 2.0.0" in md and "(http://h:4201/releases/r/2.0.0/montage.png)" in md
+    assert "| why this version | scene 1 label set v1 -> v2 |" in md
+    assert "515 x 386 px (stored padded to 544 x 416)" in md and "0.78 (auto: 512 px" in md
+    assert "| valid fraction | mean 0.45 (min 0.30, max 0.60) |" in md
+    assert "| 1 | 1 -> 2 | v2, v1 | 2 | 0.380 |" in md and "| 1 | 2024-11-27 | v2 | import x.las |" in md
