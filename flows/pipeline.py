@@ -1,17 +1,24 @@
 """Prefect flows of siteline: thin orchestration over ``siteline.pipeline``, passing ids and paths only.
 
 Chain: an upload event (``siteline.mission.uploaded``, from ``siteline watch`` or POST /api/events)
-triggers ``ingest-mission``; it registers and tiles the scene and emits ``siteline.scene.registered``,
-which triggers ``process-scene-pairs``; with ``SITELINE_RELEASE_POLICY=every-pair`` that flow then builds
-and publishes a release (``on-demand``: run ``build-release`` yourself). ``siteline labels import``
+triggers ``ingest-mission``; it registers and tiles the scene and, when the mission brought work (a new
+scene with pairs, or pairs nobody processed), emits ``siteline.scene.registered``, which triggers
+``process-scene-pairs``; with ``SITELINE_RELEASE_POLICY=every-pair`` that flow then builds and
+publishes a release with the site's release settings (``on-demand``: run ``build-release`` yourself).
+A release whose inputs equal the latest version's is not published again. ``siteline labels import``
 posts ``siteline.labels.imported`` once a corrected label set is recorded; it triggers
-``process-scene-pairs`` for that scene too, which processes its pairs with the newest label sets (new
-outputs beside the old) and applies the same release policy.
+``process-scene-pairs`` for that scene too.
+
+Concurrency: pair processing holds a slot of the global concurrency limit ``siteline-pairs``, release
+building one of ``siteline-release`` (`make serve` creates both); the catalog's locks keep one writer
+per pair output and release name whatever runs them. Crashes: ``deploy/service.py`` makes the
+automations that mark runs whose heartbeats stopped as crashed and reschedule crashed runs; a
+rescheduled run reuses every finished output, and marks the task runs its killed attempt left running.
 """
 
 from __future__ import annotations
 
-import re
+import logging
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -19,18 +26,14 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from prefect import flow, get_run_logger, tags, task
-from prefect.artifacts import (
-    create_markdown_artifact,
-    create_progress_artifact,
-    create_table_artifact,
-    update_progress_artifact,
-)
 from prefect.cache_policies import NO_CACHE
+from prefect.concurrency.sync import concurrency
 from prefect.events import emit_event
 from prefect.runtime import flow_run
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from runner import task_runner  # noqa: E402
+from ui import RunProgress, ingest_dashboards, note, pair_dashboards, release_dashboards, slug, tag_run  # noqa: E402
 
 from siteline import pipeline  # noqa: E402
 from siteline.catalog import Catalog, open_catalog  # noqa: E402
@@ -39,16 +42,20 @@ from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import Settings, load_settings  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
 from siteline.ingest import IngestOptions  # noqa: E402
-from siteline.pairs import PairParams  # noqa: E402
+from siteline.pairs.params import PairParams  # noqa: E402
+from siteline.records.pairs import PairOutput  # noqa: E402
+from siteline.records.release import ReleaseInfo  # noqa: E402
 from siteline.records.runs import StageRun  # noqa: E402
+from siteline.release.knobs import ReleaseKnobs  # noqa: E402
 from siteline.stores import join  # noqa: E402
 
+# the library's INFO lines (views, renders, releases) reach the run logs: PREFECT_LOGGING_EXTRA_LOGGERS=siteline
+# gives the logger Prefect's handlers, this its level
+logging.getLogger("siteline").setLevel(logging.INFO)
 T = TypeVar("T")
-
-
-def artifact_key(*parts: Any) -> str:
-    """Artifact keys: lowercase letters, digits and dashes."""
-    return re.sub(r"[^a-z0-9-]+", "-", "-".join(str(p) for p in parts).lower()).strip("-")[:100]
+PAIR_SLOTS = "siteline-pairs"
+RELEASE_SLOTS = "siteline-release"
+SLOT_LEASE_S = 600  # a killed holder's slot is freed after this
 
 
 def transient(task: Any, task_run: Any, state: Any) -> bool:
@@ -105,208 +112,250 @@ def _read(fn: Callable[..., T], *args: Any) -> T:
         return fn(s, *args)
 
 
-@task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def ingest_task(mission_dir: str, site: str, crs: str | None, accept_misalignment: bool) -> dict[str, Any]:
-    opts = IngestOptions(crs=crs, accept_misalignment=accept_misalignment)
-    done = _stage(
-        "ingest",
-        f"mission:{mission_dir}",
-        {"site": site, "crs": crs},
-        pipeline.ingest,
-        Path(mission_dir),
-        site,
-        opts,
+def _call(fn: Callable[..., T], *args: Any) -> T:
+    """A pipeline function that takes (catalog, ...) and reads only."""
+    with _catalog() as (cat, _):
+        return fn(cat, *args)
+
+
+def _knobs(release_settings: dict[str, Any] | None) -> ReleaseKnobs | None:
+    """The flow parameter ``release_settings`` (siteline.release.knobs JSON: a preset, pair knobs,
+    pad, min_image_px) as a layer over the site's settings."""
+    return ReleaseKnobs.from_dict(release_settings, "flow parameter release_settings") if release_settings else None
+
+
+def _close_stale_runs() -> None:
+    """On a rescheduled run (run count > 1): the task runs and sub-flow runs its killed attempt left
+    Running or Pending are marked Crashed, so the UI shows only this attempt's work as running."""
+    if not flow_run.id or (flow_run.run_count or 1) <= 1:
+        return
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import (
+        FlowRunFilter,
+        FlowRunFilterId,
+        FlowRunFilterParentFlowRunId,
+        FlowRunFilterState,
+        FlowRunFilterStateType,
+        TaskRunFilter,
+        TaskRunFilterState,
+        TaskRunFilterStateType,
     )
+    from prefect.client.schemas.objects import StateType
+    from prefect.states import Crashed
+
+    live = [StateType.RUNNING, StateType.PENDING]
+    message = f"left by attempt {flow_run.run_count - 1} of flow run {flow_run.name}, which was killed"
+    with get_client(sync_client=True) as client:
+        stale_tasks = client.read_task_runs(
+            flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[flow_run.id])),
+            task_run_filter=TaskRunFilter(state=TaskRunFilterState(type=TaskRunFilterStateType(any_=live))),
+        )
+        for tr in stale_tasks:
+            client.set_task_run_state(tr.id, Crashed(message=message), force=True)
+        children = client.read_flow_runs(
+            flow_run_filter=FlowRunFilter(
+                parent_flow_run_id=FlowRunFilterParentFlowRunId(any_=[flow_run.id]),
+                state=FlowRunFilterState(type=FlowRunFilterStateType(any_=live)),
+            )
+        )
+        for fr in children:
+            client.set_flow_run_state(fr.id, Crashed(message=message), force=True)
+    if stale_tasks or children:
+        get_run_logger().info(
+            "attempt %d: marked %d task runs and %d sub-flow runs of the killed attempt crashed; finished "
+            "outputs are reused", flow_run.run_count, len(stale_tasks), len(children),
+        )  # fmt: skip
+
+
+# --- tasks -------------------------------------------------------------------------------------
+
+
+@task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
+def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> dict[str, Any]:
+    progress = RunProgress(slug("ingest", site, Path(mission_dir).name), f"ingest of {Path(mission_dir).name}",
+                           {"hashing": 1.0, "reading points": 1.0, "storing": 1.0, "partitioning": 2.0, "writing tiles": 2.0})  # fmt: skip
+    done = _stage(
+        "ingest", f"mission:{mission_dir}", {"site": site, "crs": opts.crs}, pipeline.ingest,
+        Path(mission_dir), site, opts, progress=progress,
+    )  # fmt: skip
+    progress.finish(done.ingest.message)
     tiling = done.tiles.tiling if done.tiles is not None else None
     return done.ingest.to_dict() | {"tiles": tiling.to_dict() if tiling is not None else None}
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def tile_task(scene_id: int) -> dict[str, Any] | None:
-    done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id])
+    progress = RunProgress(slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0})
+    done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id], progress=progress)
     for outcome in done:
         get_run_logger().info(outcome.message)
+    progress.finish(done[0].message if done else f"scene {scene_id} was tiled already")
     tiling = done[0].tiling if done else None
     return tiling.to_dict() if tiling is not None else None
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def process_pair_task(pair_id: int, params: dict[str, Any] | None, site: str) -> dict[str, Any]:
-    p = PairParams.from_dict(params) if params else PairParams()
-    key = artifact_key("progress", site, "pair", pair_id)
-    progress_id = create_progress_artifact(0.0, key=key, description=f"renders of pair {pair_id}")
-    done = {"n": 0}
-
-    def report(task_name: str, n: int, total: int | None) -> None:
-        if task_name == "renders" and total:
-            done["n"] += n
-            update_progress_artifact(progress_id, 100.0 * done["n"] / total)
-
-    outs = _stage(
-        "process_pair", f"pair:{pair_id}", p.to_dict(), pipeline.process_pairs, [pair_id], p, progress=report
-    )
+def process_pair_task(pair_id: int, pair_params: dict[str, Any]) -> PairOutput:
+    p = PairParams.from_dict(pair_params)
+    with concurrency(PAIR_SLOTS, occupy=1, lease_duration=SLOT_LEASE_S):
+        progress = RunProgress(slug("pair", pair_id), f"pair {pair_id}", {"labels": 1.0, "views": 1.0, "renders": 4.0})
+        outs = _stage(
+            "process_pair", f"pair:{pair_id}", p.to_dict(), pipeline.process_pairs, [pair_id], p, progress=progress
+        )
     out = outs[pair_id]
-    update_progress_artifact(progress_id, 100.0)
-    return {
-        "pair": out.pair_id,
-        "t1": out.t1,
-        "t2": out.t2,
-        "radius_m": out.radius_m,
-        "views": out.view_count,
-        "root": out.root,
-        "labels": out.labels.get("counts"),
-        "samples": [
-            {
-                "view": v.index,
-                "strategy": v.strategy,
-                "change_ratio": v.change_ratio,
-                "a": join(out.root, "A", v.file),
-                "mask": join(out.root, "label", v.file),
-            }
-            for v in out.views[:6]
-        ],
-    }
+    progress.finish(f"{len(out.views)} views at {out.root}")
+    return out
 
 
 @task(retries=1, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def build_release_task(site: str, name: str, params: dict[str, Any] | None, publish: bool) -> dict[str, Any]:
-    p = PairParams.from_dict(params) if params else PairParams()
-    info = _stage(
-        "build_release", f"release:{name}", p.to_dict(), pipeline.release, site, name, p, publish=publish
-    )
-    return info.to_dict()
+def build_release_task(site: str, name: str, release_settings: dict[str, Any] | None, publish: bool) -> ReleaseInfo:
+    with concurrency(RELEASE_SLOTS, occupy=1, lease_duration=SLOT_LEASE_S):
+        progress = RunProgress(slug("release", name), f"release {name}",
+                               {"labels": 1.0, "views": 1.0, "renders": 4.0, "release images": 2.0})  # fmt: skip
+        info = _stage(
+            "build_release", f"release:{name}", release_settings or {}, pipeline.release, site, name,
+            _knobs(release_settings), publish=publish, progress=progress,
+        )  # fmt: skip
+    progress.finish(f"{info.version} up to date" if info.up_to_date else f"{info.version} {info.status}")
+    return info
 
 
-def _tag_run(*extra: str) -> None:
-    """Tag the running flow run (tags given at run creation are fixed; these come from parameters)."""
-    from prefect.client.orchestration import get_client
-
-    rid = flow_run.id
-    if not rid:
-        return
-    with get_client(sync_client=True) as client:
-        run = client.read_flow_run(rid)
-        client.update_flow_run(rid, tags=sorted(set(run.tags) | set(extra)))
+# --- flows -------------------------------------------------------------------------------------
 
 
-def ingest_run_name() -> str:
-    return f"ingest-{Path(flow_run.parameters['mission_dir']).name}"
+def _ingest_name() -> str:
+    p = flow_run.parameters
+    return slug("ingest", p["site"], Path(p["mission_dir"]).name)
 
 
-def _ingest_dashboards(site: str, mission: str, res: dict[str, Any]) -> None:
-    rows = {
-        "mission": mission, "manifest_sha256": res["manifest_sha256"], "files": res["files"],
-        "created": res["created"], "message": res["message"],
-    }  # fmt: skip
-    create_table_artifact(
-        [{"item": k, "value": str(v)} for k, v in rows.items()],
-        key=artifact_key("mission", site, mission),
-        description=f"mission inventory of {mission}",
-    )
-    scan, tiles = res.get("scan") or {}, res.get("tiles") or {}
-    if not scan:
-        return
-    stats = {
-        "points": scan.get("point_count"), "density_pts_m2": round(scan.get("density_pts_m2", 0), 2),
-        "classes": scan.get("class_histogram"), "unknown_codes": scan.get("unknown_codes"),
-        "registration": res["registration"].get("source"), "rms_m": res["registration"].get("rms_m"),
-        "alignment_m": (res["registration"].get("alignment") or {}).get("translation_m"),
-        "tiles": tiles.get("tiles"), "bytes_per_point": tiles.get("bytes_per_point"),
-    }  # fmt: skip
-    create_table_artifact(
-        [{"statistic": k, "value": str(v)} for k, v in stats.items()],
-        key=artifact_key("scene", site, res["scene_id"]),
-        description=f"scene {res['scene_id']} statistics",
-    )
-
-
-@flow(name="ingest-mission", flow_run_name=ingest_run_name, task_runner=task_runner(), log_prints=True)
+@flow(name="ingest-mission", flow_run_name=_ingest_name, task_runner=task_runner(), log_prints=True)
 def ingest_mission_flow(
-    mission_dir: str, site: str, crs: str | None = None, accept_misalignment: bool = False
-) -> int | None:
-    """Ingest an uploaded mission, tile its scene, publish dashboards, announce the scene."""
-    _tag_run(f"site:{site}")
+    mission_dir: str, site: str, crs: str | None = None, accept_misalignment: bool = False,
+    captured_at: str | None = None, reason: str = "manual run",
+) -> int | None:  # fmt: skip
+    """Ingest an uploaded mission and tile its scene; announce the scene when it brought work."""
+    from datetime import datetime
+
+    _close_stale_runs()
+    mission = Path(mission_dir).name
+    tag_run(f"site:{site}", f"mission:{mission}")
+    get_run_logger().info("ingest of %s into site %s (%s)", mission, site, reason)
+    opts = IngestOptions(crs=crs, accept_misalignment=accept_misalignment,
+                         captured_at=datetime.fromisoformat(captured_at) if captured_at else None)  # fmt: skip
     with tags(f"site:{site}"):
         # in the flow's own process: the upload folder is on this machine, not on the runner's workers
-        res = ingest_task(mission_dir, site, crs, accept_misalignment)
-        _ingest_dashboards(site, Path(mission_dir).name, res)
-        if res["scene_id"] is None:
-            return None
-        emit_event(
-            "siteline.scene.registered",
-            resource={"prefect.resource.id": f"siteline.scene.{res['scene_id']}", "siteline.site": site},
-            payload={"scene_id": res["scene_id"], "site": site, "pairs": res["pairs"]},
-        )
-        return res["scene_id"]
+        res = ingest_task.with_options(task_run_name=slug("ingest", mission))(mission_dir, site, opts)
+    ingest_dashboards(site, mission, res)
+    sid = res["scene_id"]
+    if sid is None:
+        return None
+    tag_run(f"scene:{sid}")
+    pairs = res["pairs"] if res["created"] else _call(pipeline.pending_pairs, sid)
+    if not pairs:
+        why = (f"scene {sid} is the site's first scene (or its neighbours are not ingested): it has no pair yet"
+               if res["created"] else f"mission {mission} is already scene {sid}, and its pairs are processed")  # fmt: skip
+        note(site, f"scene {sid}", f"{why}: nothing to announce, no pair is processed.")
+        return sid
+    emit_event(
+        "siteline.scene.registered",
+        resource={"prefect.resource.id": f"siteline.scene.{sid}", "siteline.site": site},
+        payload={"scene_id": sid, "site": site, "pairs": pairs},
+    )
+    get_run_logger().info("scene %d announced: pairs %s to process", sid, pairs)
+    return sid
+
+
+def _scene_name() -> str:
+    p = flow_run.parameters
+    return slug("scene", p["scene_id"], p.get("reason") or "manual")
+
+
+@flow(name="process-scene-pairs", flow_run_name=_scene_name, task_runner=task_runner())
+def process_scene_pairs_flow(
+    scene_id: int, release_settings: dict[str, Any] | None = None, release_name: str | None = None,
+    reason: str = "manual run",
+) -> list[dict[str, Any]]:  # fmt: skip
+    """Process every pair the scene belongs to (a new scene, or a scene with a new label-set version:
+    each scene's newest label set is used) with the site's release settings, then apply the release
+    policy."""
+    _close_stale_runs()
+    site = _read(site_name_of_scene, scene_id)
+    tag_run(f"site:{site}", f"scene:{scene_id}")
+    pair_ids = _read(pair_ids_of_scene, scene_id)
+    if not pair_ids:
+        note(site, f"scene {scene_id}", f"scene {scene_id} has no pair yet (ingest its neighbours): nothing to process.")
+        return []
+    params = _call(pipeline.release_parameters, site, _knobs(release_settings))
+    get_run_logger().info(
+        "scene %d (%s): pairs %s at scale %g, %d px points, %d views", scene_id, reason, pair_ids,
+        params.pair.scale, params.pair.point_size_px, params.pair.views,
+    )  # fmt: skip
+    with tags(f"site:{site}", f"scene:{scene_id}"):
+        futures = [
+            process_pair_task.with_options(task_run_name=f"pair-{pid}", tags=[f"pair:{pid}"]).submit(
+                pid, params.pair.to_dict()
+            )
+            for pid in pair_ids
+        ]
+        outs = [f.result() for f in futures]
+    settings = load_settings()
+    for out in outs:
+        pair_dashboards(settings, site, out)
+    if settings.release_policy == "every-pair":
+        name = release_name or settings.release_name or f"{site}-cd"
+        build_release_flow(site, name, release_settings, True, reason=f"scene {scene_id}: {reason}")
+    return [_summary(o) for o in outs]
+
+
+def _release_name() -> str:
+    p = flow_run.parameters
+    return slug("release", p["name"], p.get("reason") or "manual")
+
+
+@flow(name="build-release", flow_run_name=_release_name, task_runner=task_runner())
+def build_release_flow(
+    site: str, name: str, release_settings: dict[str, Any] | None = None, publish: bool = True,
+    reason: str = "manual run",
+) -> dict[str, Any]:  # fmt: skip
+    """Build (and publish) release ``name`` of ``site`` with its release settings; nothing when the
+    latest version already has these inputs."""
+    _close_stale_runs()
+    tag_run(f"site:{site}", f"release:{name}")
+    info = build_release_task.with_options(task_run_name=slug("release", name))(site, name, release_settings, publish)
+    tag_run(f"release:{name}:{info.version}")
+    if info.up_to_date:  # its artifacts are there already
+        note(site, f"release {name}", f"release {name} is up to date: {info.version} ({info.status}) has these "
+             "pairs, outputs, label sets and parameters, so nothing was built or published.")  # fmt: skip
+    else:
+        get_run_logger().info("release %s %s %s (%s) at %s", name, info.version, info.status, info.reason, info.root)
+        release_dashboards(load_settings(), site, info)
+    return info.to_dict()
 
 
 @flow(name="tile-scene", flow_run_name="tile-scene-{scene_id}", task_runner=task_runner())
 def tile_scene_flow(scene_id: int) -> dict[str, Any] | None:
-    _tag_run(f"site:{_read(site_name_of_scene, scene_id)}")
-    return tile_task.submit(scene_id).result()
+    """Tile a scene that is not tiled yet (ingest tiles new scenes itself)."""
+    _close_stale_runs()
+    tag_run(f"site:{_read(site_name_of_scene, scene_id)}", f"scene:{scene_id}")
+    return tile_task.with_options(task_run_name=f"tile-scene-{scene_id}").submit(scene_id).result()
 
 
 @flow(name="process-pair", flow_run_name="process-pair-{pair_id}", task_runner=task_runner())
-def process_pair_flow(pair_id: int, params: dict[str, Any] | None = None) -> dict[str, Any]:
-    out = process_pair_task.submit(pair_id, params, _read(site_name_of_pair, pair_id)).result()
-    _pair_dashboards(out)
-    return out
+def process_pair_flow(pair_id: int, release_settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Process one pair with its site's release settings (and ``release_settings`` over them)."""
+    _close_stale_runs()
+    site = _read(site_name_of_pair, pair_id)
+    tag_run(f"site:{site}", f"pair:{pair_id}")
+    params = _call(pipeline.release_parameters, site, _knobs(release_settings))
+    out = process_pair_task.with_options(task_run_name=f"pair-{pair_id}").submit(pair_id, params.pair.to_dict()).result()
+    pair_dashboards(load_settings(), site, out)
+    return _summary(out)
 
 
-def _pair_dashboards(out: dict[str, Any]) -> None:
-    site = _read(site_name_of_scene, out["t2"])
-    create_table_artifact(
-        [{k: out[k] for k in ("pair", "t1", "t2", "radius_m", "views")} | {"labels": str(out["labels"])}],
-        key=artifact_key("pair", site, out["pair"]),
-        description=f"pair {out['pair']} summary",
-    )
-    lines = [
-        f"# Pair {out['pair']} (scenes {out['t1']} -> {out['t2']})",
-        "",
-        "| view | strategy | change ratio | t1 | mask |",
-        "|---|---|---|---|---|",
-    ]
-    lines += [
-        f"| {s['view']} | {s['strategy']} | {s['change_ratio']:.3f} | `{s['a']}` | `{s['mask']}` |"
-        for s in out["samples"]
-    ]
-    create_markdown_artifact(
-        "\n".join(lines),
-        key=artifact_key("renders", site, out["pair"]),
-        description=f"sample renders of pair {out['pair']}",
-    )
-
-
-@flow(name="build-release", flow_run_name="build-release-{name}", task_runner=task_runner())
-def build_release_flow(
-    site: str, name: str, params: dict[str, Any] | None = None, publish: bool = True
-) -> dict[str, Any]:
-    _tag_run(f"site:{site}")
-    info = build_release_task(site, name, params, publish)
-    stats = info.get("stats") or {}
-    create_table_artifact(
-        [{"split": k, **v} for k, v in (stats.get("class_balance") or {}).items()],
-        key=artifact_key("release", site, name, info["version"]),
-        description=f"release {name} {info['version']} ({info['status']}) at {info['root']}",
-    )
-    return info
-
-
-@flow(name="process-scene-pairs", flow_run_name="process-scene-{scene_id}", task_runner=task_runner())
-def process_scene_pairs_flow(
-    scene_id: int, params: dict[str, Any] | None = None, release_name: str | None = None
-) -> list[dict[str, Any]]:
-    """Process every pair the scene belongs to (a new scene, or a scene with a new label-set version:
-    each scene's newest label set is used); then apply the release policy."""
-    site = _read(site_name_of_scene, scene_id)
-    _tag_run(f"site:{site}")
-    settings = load_settings()
-    pair_ids = _read(pair_ids_of_scene, scene_id)
-    with tags(f"site:{site}"):
-        futures = [process_pair_task.submit(pid, params, site) for pid in pair_ids]
-        outs = [f.result() for f in futures]
-    for out in outs:
-        _pair_dashboards(out)
-    if outs and settings.release_policy == "every-pair":
-        build_release_flow(site, release_name or settings.release_name or f"{site}-cd", params, True)
-    return outs
+def _summary(out: PairOutput) -> dict[str, Any]:
+    """A pair's outputs as a flow returns them: ids, views, radius, 3D label counts, where they are."""
+    return {
+        "pair": out.pair_id, "t1": out.t1, "t2": out.t2, "views": len(out.views), "root": out.root,
+        "radius_m": out.radius_m, "labels": out.labels.get("counts"),
+        "masks": [join(out.root, "label", v.file) for v in out.views],
+    }  # fmt: skip

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import sys
 from pathlib import Path
 
@@ -51,13 +52,17 @@ def _missions(site_dir):
     ]
 
 
-# one candidate view per real camera (no heights, steps or mirrors): the flows need views, not a good sample
+# one candidate view per real camera (no heights, steps or mirrors) at small renders (under the 256 px
+# floor, lowered knowingly): the flows need views, not a good sample
 SMALL = {
-    "scale": 0.25,
-    "point_size_px": 3,
-    "views": 3,
-    "min_coverage": 0.2,
-    "view_params": {"vertical_fractions": [1.0], "forward_fractions": [0.0], "mirror": False},
+    "pair": {
+        "scale": 0.25,
+        "point_size_px": 3,
+        "views": 3,
+        "min_coverage": 0.2,
+        "view_params": {"vertical_fractions": [1.0], "forward_fractions": [0.0], "mirror": False},
+    },
+    "min_image_px": 64,
 }
 
 
@@ -71,24 +76,40 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     settings = _home(tmp_path, small_site, monkeypatch)
     monkeypatch.setenv("SITELINE_RELEASE_POLICY", "every-pair")
     monkeypatch.setenv("SITELINE_RELEASE_NAME", "flowrel")
+    announced = []
+    real_emit = pipeline.emit_event
+    monkeypatch.setattr(pipeline, "emit_event", lambda *a, **k: announced.append(k["payload"]) or real_emit(*a, **k))
     scenes = [pipeline.ingest_mission_flow(str(m), "demo") for m in _missions(small_site)]
     assert scenes == [1, 2]
+    assert announced == [{"scene_id": 2, "site": "demo", "pairs": [1]}]  # the first scene has no pair yet
     outs = pipeline.process_scene_pairs_flow(scenes[1], SMALL)
     assert len(outs) == 1 and outs[0]["views"] > 0
     rel = settings.home / "releases" / "flowrel" / "1.0.0" / "manifest.json"
     assert rel.is_file()
 
+    # exactly once: the same mission dropped again under another folder name announces nothing, and
+    # the scene processed again finds the release up to date (no 1.1.0)
+    again = tmp_path / "re-drop" / "renamed-mission"
+    shutil.copytree(_missions(small_site)[1], again)
+    assert pipeline.ingest_mission_flow(str(again), "demo") == 2 and len(announced) == 1
+    pipeline.process_scene_pairs_flow(scenes[1], SMALL)
+    assert sorted(p.name for p in (settings.home / "releases" / "flowrel").iterdir() if not p.name.startswith(".")) == ["1.0.0"]
+
     async def artifacts():
         async with get_client() as client:
-            return {a.key for a in await client.read_artifacts() if a.key}
+            return {a.key: a for a in await client.read_artifacts() if a.key}
 
-    keys = asyncio.run(artifacts())
-    assert {"mission-demo-" + _missions(small_site)[0].name.lower().replace("_", "-")} & keys or any(
-        k.startswith("mission-demo-") for k in keys
-    )
-    assert any(k.startswith("scene-demo-") for k in keys)
-    assert "pair-demo-1" in keys and "renders-demo-1" in keys and "progress-demo-pair-1" in keys
-    assert "release-demo-flowrel-1-0-0" in keys
+    found = asyncio.run(artifacts())
+    keys = set(found)
+    assert any(k.startswith("mission-demo-") for k in keys) and any(k.startswith("scene-demo-") for k in keys)
+    assert {"pair-demo-1", "samples-demo-pair-1", "release-demo-flowrel", "montage-demo-flowrel"} <= keys
+    assert any(k.startswith("progress-pair-1-") for k in keys) and any(k.startswith("progress-release-flowrel-") for k in keys)
+    assert any(k.startswith("note-demo-release-flowrel") for k in keys)  # "up to date", said in the UI
+    # the images the UI loads are served by `siteline previews serve` at SITELINE_PREVIEW_URL
+    assert found["samples-demo-pair-1"].data.startswith("http://127.0.0.1:4201/previews/pairs/pair-1/")
+    release_md = found["release-demo-flowrel"].data
+    assert "![montage of flowrel 1.0.0" in release_md and "http://127.0.0.1:4201/releases/flowrel/1.0.0/montage.png" in release_md
+    assert "why this version | first version" in release_md and "valid fraction | mean" in release_md
     from siteline.catalog import open_catalog
     from siteline.catalog.stages import stage_runs
 
@@ -240,7 +261,7 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
             flows = (pipeline.tile_scene_flow, pipeline.process_pair_flow)
         tiles = [flows[0](sid)["checksum"] for sid in (1, 2)]
         pair = flows[1](1, SMALL)
-        renders = [open_store(s["mask"]).read_bytes(s["mask"]) for s in pair["samples"]]
+        renders = [open_store(m).read_bytes(m) for m in pair["masks"]]
         results[kind] = (tiles, pair["labels"], pair["radius_m"], renders)
         if kind == "dask":
             assert pair["root"].startswith(s3_store + "/pairs/")

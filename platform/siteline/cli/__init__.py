@@ -9,7 +9,7 @@ import typer
 from rich.text import Text
 
 from siteline import __version__
-from siteline.cli import bench, db, demo, ingest, labels, release, render, site, synth, watch
+from siteline.cli import bench, db, demo, ingest, labels, previews, release, render, site, synth, watch
 from siteline.cli.common import err_console, plain
 from siteline.errors import SitelineError
 
@@ -52,6 +52,7 @@ app.add_typer(release.app, name="release")
 app.command("train")(release.train_cmd)
 app.command("evaluate")(release.evaluate_cmd)
 app.command("watch")(watch.watch)
+app.add_typer(previews.app, name="previews")
 app.add_typer(bench.app, name="bench")
 
 

@@ -22,14 +22,16 @@ from siteline.watch import MARKER, UploadWatcher
 UPLOADED = "siteline.mission.uploaded"
 
 
-def upload_event(mission_dir: Path, site: str) -> dict:
-    """The event announcing a completed upload (Prefect's event schema)."""
+def upload_event(mission_dir: Path, site: str, fingerprint: str = "") -> dict:
+    """The event announcing a completed upload (Prefect's event schema); its id is derived from the
+    folder and its content's fingerprint, so announcing the same content twice sends the same event."""
+    key = f"{mission_dir.resolve()}:{fingerprint}"
     return {
-        "id": str(uuid.uuid4()),
+        "id": str(uuid.uuid5(uuid.NAMESPACE_URL, key)) if fingerprint else str(uuid.uuid4()),
         "occurred": datetime.now(UTC).isoformat(),
         "event": UPLOADED,
         "resource": {"prefect.resource.id": f"siteline.mission.{mission_dir.name}", "siteline.site": site},
-        "payload": {"mission_dir": str(mission_dir.resolve()), "site": site},
+        "payload": {"mission_dir": str(mission_dir.resolve()), "site": site, "fingerprint": fingerprint},
         "related": [],
     }
 
@@ -66,7 +68,12 @@ def watch(
     )
     while True:
         for mission in watcher.poll():
-            post_events(url, [upload_event(mission, site)])
+            try:
+                post_events(url, [upload_event(mission, site, watcher.pending_fingerprint(mission))])
+            except ConfigError as exc:  # the API is down: announce it on a later poll
+                console.print(f"upload complete: {mission.name}, not announced yet: {exc}")
+                continue
+            watcher.confirm(mission)
             console.print(f"upload complete: {mission.name} -> {UPLOADED}")
         if once:
             return
