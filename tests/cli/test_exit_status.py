@@ -105,3 +105,11 @@ def test_catalog_commands_start_light(exe_home) -> None:
     assert proc.stdout.strip().splitlines()[-1] == "2 []", proc.stdout + proc.stderr
     help_ = run_exe(exe_home, "ingest", "--help")
     assert help_.returncode == 0 and "--captured-at" in help_.stdout
+    # a command's help loads none of the heavy libraries (issue 25: `ingest --help` under 1.5 s)
+    code = (
+        "import sys\nfrom siteline.cli import main\n"
+        "try:\n    main(['ingest', '--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('torch', 'zarr', 'alembic', 'siteline.pipeline') if m in sys.modules))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.stdout.strip().splitlines()[-1] == "[]", proc.stdout + proc.stderr

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 import sqlalchemy as sa
 from sqlalchemy.orm import Session, sessionmaker
 
-from siteline.catalog import migrate
 from siteline.catalog.base import Base
 from siteline.catalog.engine import make_engine, ping, transaction
 from siteline.config import Settings
@@ -46,5 +45,7 @@ def open_catalog(url_or_settings: str | Settings, *, check: bool = True) -> Cata
     engine = make_engine(url)
     ping(engine)
     if check:
+        from siteline.catalog import migrate  # alembic: only when a catalog is opened
+
         migrate.check_revision(engine)
     return Catalog(engine=engine, sessions=sessionmaker(engine, expire_on_commit=False))

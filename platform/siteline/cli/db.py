@@ -5,7 +5,6 @@ from __future__ import annotations
 import sqlalchemy as sa
 import typer
 
-from siteline.catalog import migrate
 from siteline.catalog.engine import make_engine, ping
 from siteline.cli.common import JsonOption, console, emit, print_record, settings
 
@@ -20,6 +19,8 @@ def _engine() -> sa.Engine:
 
 def init() -> None:
     """Create SITELINE_HOME and its stores, and migrate the catalog to the newest revision."""
+    from siteline.catalog import migrate  # alembic: only for commands that migrate
+
     cfg = settings()
     cfg.home.mkdir(parents=True, exist_ok=True)
     cfg.store.ensure()
@@ -38,6 +39,8 @@ def init() -> None:
 @app.command("upgrade")
 def upgrade(revision: str = typer.Argument("head", help="Target revision.")) -> None:
     """Migrate the catalog up to REVISION (default: the newest)."""
+    from siteline.catalog import migrate  # alembic: only for commands that migrate
+
     engine = _engine()
     try:
         migrate.upgrade(engine, revision)
@@ -51,6 +54,8 @@ def downgrade(
     revision: str = typer.Argument(..., help="Target revision, or 'base' to drop every table."),
 ) -> None:
     """Migrate the catalog down to REVISION."""
+    from siteline.catalog import migrate  # alembic: only for commands that migrate
+
     engine = _engine()
     try:
         migrate.downgrade(engine, revision)
@@ -62,6 +67,8 @@ def downgrade(
 @app.command("current")
 def current(as_json: bool = JsonOption) -> None:
     """Show the catalog's revision and this siteline's newest."""
+    from siteline.catalog import migrate  # alembic: only for commands that migrate
+
     engine = _engine()
     try:
         record: dict[str, object] = {

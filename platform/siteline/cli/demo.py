@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from siteline.catalog import Catalog, migrate, open_catalog
+from siteline.catalog import Catalog, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.releases import get_release, list_releases
 from siteline.catalog.sites import add_site, get_site, scene_count, site_record
@@ -76,6 +76,7 @@ def demo(
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""
     from siteline import pipeline
+    from siteline.catalog import migrate  # alembic: only for commands that migrate
     from siteline.synth import SynthConfig, write_site
 
     t_start = time.perf_counter()

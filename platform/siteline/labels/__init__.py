@@ -1,15 +1,29 @@
-"""3D change labels of a pair (DESIGN.md §4), both directions, tile by tile."""
+"""3D change labels of a pair (DESIGN.md §4), both directions, tile by tile.
 
-from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
-from siteline.labels.store import LabelResult, auto_radius, write_labels
+Names are imported on first use (PEP 562), so the label parameters (``siteline.labels.params``, read
+by every command that takes release knobs) do not pull in the tile store and zarr.
+"""
 
-__all__ = [
-    "CHANGED",
-    "IGNORED",
-    "UNCHANGED",
-    "LabelResult",
-    "auto_radius",
-    "change_flags",
-    "median_spacing",
-    "write_labels",
-]
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_WHERE = {
+    "CHANGED": "siteline.labels.change",
+    "IGNORED": "siteline.labels.change",
+    "UNCHANGED": "siteline.labels.change",
+    "LabelResult": "siteline.labels.store",
+    "auto_radius": "siteline.labels.store",
+    "change_flags": "siteline.labels.change",
+    "median_spacing": "siteline.labels.change",
+    "write_labels": "siteline.labels.store",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _WHERE:
+        raise AttributeError(f"module 'siteline.labels' has no attribute {name!r}")
+    return getattr(importlib.import_module(_WHERE[name]), name)
