@@ -96,15 +96,18 @@ def iter_chunks(
     chunk_points: int = DEFAULT_CHUNK_POINTS,
     eight_bit: bool | None = None,
     reader: laspy.LasReader | None = None,
+    start: int = 0,
+    stop: int | None = None,
 ) -> Iterator[PointChunk]:
     """Stream a LAS/LAZ file as :class:`PointChunk` s. ``eight_bit`` (colour stored as 0-255 in 16-bit
     fields) is detected from the first chunk when None. ``reader``: the file already opened (by
-    :func:`open_las`), so a caller that read its header does not open it twice."""
+    :func:`open_las`), so a caller that read its header does not open it twice. ``start``/``stop``:
+    the points [start, stop) only (a seek: LAZ decodes from the compressed chunk that holds start)."""
     with contextlib.nullcontext(reader) if reader is not None else open_las(path) as reader:
         has_rgb = "red" in reader.header.point_format.dimension_names
         has_time = "gps_time" in reader.header.point_format.dimension_names
         try:
-            for pts in reader.chunk_iterator(chunk_points):
+            for pts in _point_records(reader, chunk_points, start, stop):
                 xyz = np.stack(
                     [
                         np.asarray(pts.x, dtype=np.float64),
@@ -132,6 +135,36 @@ def iter_chunks(
                 )
         except (laspy.LaspyException, OSError, ValueError, RuntimeError) as exc:
             raise PointCloudError(f"point cloud {path} is truncated or corrupt: {exc}") from exc
+
+
+def _point_records(
+    reader: laspy.LasReader, chunk_points: int, start: int, stop: int | None
+) -> Iterator[laspy.ScaleAwarePointRecord]:
+    """The reader's points [start, stop) in records of at most ``chunk_points``."""
+    if start == 0 and stop is None:
+        yield from reader.chunk_iterator(chunk_points)
+        return
+    end = int(reader.header.point_count) if stop is None else min(stop, int(reader.header.point_count))
+    if start:
+        reader.seek(start)
+    pos = start
+    while pos < end:
+        pts = reader.read_points(min(chunk_points, end - pos))
+        if len(pts) == 0:
+            raise PointCloudError(f"the file ends at point {pos:,} of {end:,}")
+        pos += len(pts)
+        yield pts
+
+
+def detect_eight_bit(reader: laspy.LasReader, chunk_points: int = DEFAULT_CHUNK_POINTS) -> bool | None:
+    """Whether the file's colour holds 0-255 in 16-bit fields, judged as :func:`iter_chunks` does (its
+    first ``chunk_points`` points); None when it has no colour. Leaves the reader at point 0."""
+    if "red" not in reader.header.point_format.dimension_names:
+        return None
+    pts = reader.read_points(min(chunk_points, int(reader.header.point_count)))
+    reader.seek(0)
+    rgb = [np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)]
+    return bool(max((int(c.max(initial=0)) for c in rgb), default=0) <= 255)
 
 
 @dataclass

@@ -94,15 +94,19 @@ def site_chunks(
     chunk_points: int = DEFAULT_CHUNK_POINTS,
     reader: laspy.LasReader | None = None,
     class_lut: tuple[np.ndarray, np.ndarray] | None = None,
+    start: int = 0,
+    stop: int | None = None,
+    eight_bit: bool | None = None,
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
     origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
     ``reader``: the file already opened. ``class_lut``: (256,) uint8 site class id per file code and
-    (256,) bool of the codes it maps; None: the taxonomy's LAS source codes."""
+    (256,) bool of the codes it maps; None: the taxonomy's LAS source codes. ``start``/``stop``,
+    ``eight_bit``: as :func:`siteline.lasio.iter_chunks`."""
     tax = site.taxonomy
     lut, known = class_lut if class_lut is not None else tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
-    for chunk in iter_chunks(path, chunk_points, reader=reader):
+    for chunk in iter_chunks(path, chunk_points, eight_bit, reader=reader, start=start, stop=stop):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)

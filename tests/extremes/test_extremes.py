@@ -66,7 +66,7 @@ def test_tiles_round_trip_every_las_scale_and_origin(tmp_path, origin, crs, scal
     site = make_site_spec("x", crs, origin)
     r = write_tiles(tmp_path / "c.las", site, pyproj.CRS(crs), tmp_path / "s.zarr", workers=1)
     t = SceneTiles.open(r.uri)
-    data = t.read({k: t.prefix(k, None) for k in t.by_tile}, ("gps_time",))
+    data = t.read({k: t.prefix(k) for k in t.by_tile}, ("gps_time",))
     back = data.xyz_m + np.asarray(origin)
     err = np.abs(back - geo[data.attributes["gps_time"].astype(int)])
     assert np.isfinite(err).all() and err.max() <= 0.0005 + 1e-9

@@ -48,7 +48,7 @@ def test_points_at_tile_edges_match_once(tmp_path) -> None:
 
     spill = tmp_path / "spill"
     spill.mkdir()
-    plan = ImportPlan(7, site, TileSource(str(store), tiles.spec, tuple(tiles.nodes)), LabelSetRef(7, 1, None, "las"), 2)
+    plan = ImportPlan(7, site, TileSource(str(store), tiles.spec), LabelSetRef(7, 1, None, "las"), 2)
     n_file, has_time, unknown = _spill(tmp_path / "edited.las", plan, tiles, site.taxonomy.id_lut(), spill, no_progress)
     assert n_file == n and has_time and not unknown.any()
     spilled = sum(len(np.fromfile(p, SPILL_DTYPE)) for p in spill.iterdir())

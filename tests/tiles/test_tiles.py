@@ -3,7 +3,6 @@ crash safety, concurrency, interop and export."""
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import subprocess
 import sys
@@ -62,7 +61,7 @@ def test_round_trip_within_half_a_quantum(tmp_path, origin, crs, scale) -> None:
     extent = 100.0 if scale == 1e-7 else 120.0
     geo = _cloud(tmp_path / "c.las", origin, crs=crs, scale=scale, extent=extent)
     site, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, crs)
-    data = tiles.read({t: tiles.prefix(t, None) for t in tiles.by_tile}, ALL)
+    data = tiles.read({t: tiles.prefix(t) for t in tiles.by_tile}, ALL)
     ids = data.attributes["gps_time"].astype(np.int64)
     assert np.array_equal(np.sort(ids), np.arange(len(geo)))
     back = data.xyz_m + np.asarray(origin)  # float64 georeferenced
@@ -73,45 +72,70 @@ def test_round_trip_within_half_a_quantum(tmp_path, origin, crs, scale) -> None:
 def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
     origin = (445_000.0, 5_030_000.0, 80.0)
     _cloud(tmp_path / "c.las", origin, n=40_000)
-    spec = TileSpec(tile_size_m=50.0)
+    spec = TileSpec(tile_size_m=50.0, node_points=256)  # small nodes: bands cut into cubes at this size
     _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)
-    assert sum(n.count for n in result.nodes) == result.points == 40_000
+    assert result.nodes.points == result.points == 40_000 and tiles.point_count == 40_000
+    last_level = level_count(spec) - 1
     for tile, nodes in tiles.by_tile.items():
-        data = tiles.read({tile: tiles.prefix(tile, None)}, ("gps_time",))
+        data = tiles.read({tile: tiles.prefix(tile)}, ("gps_time",))
         assert len(np.unique(data.attributes["gps_time"])) == len(data.attributes["gps_time"])  # no duplicates
         i, j = parse_tile_key(tile)
         counts = np.rint((data.xyz_m - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(
             np.int64
         )
         zmin = counts[:, 2].min()
-        levels = sorted({n.level for n in nodes})
-        ends = {lv: max(n.start + n.count for n in nodes if n.level == lv) for lv in levels}
-        for lv in levels:
-            # levels 0..lv are a prefix of the tile's arrays
-            assert ends[lv] == sum(m.count for m in nodes if m.level <= lv)
-            if lv == level_count(spec) - 1:
-                continue
+        # nodes: contiguous, disjoint ranges covering the tile, each inside its bounds
+        assert nodes.start[0] == 0 and nodes.start[-1] + nodes.count[-1] == len(counts)
+        assert np.array_equal(nodes.start[1:], (nodes.start + nodes.count)[:-1])
+        for k in range(len(nodes)):
+            xyz = data.xyz_m[nodes.start[k] : nodes.start[k] + nodes.count[k]]
+            assert (xyz >= nodes.lo[k] - 1e-9).all() and (xyz <= nodes.hi[k] + 1e-9).all()
+        for lv in range(last_level):
+            # the points of levels <= lv, read node by node, hold a point in every occupied cube of
+            # this level's spacing (each level is a uniform subsample)
+            upto = tiles.read_tile(tile, ("gps_time",), level=lv)
+            assert len(upto) == int(nodes.up_to(lv).sum())
             cell = int(round(spec.spacing(lv) / spec.quantum_m))
+            c = np.rint((upto.xyz_m - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(np.int64)
 
             def key(c: np.ndarray, cell: int = cell, zmin: int = zmin) -> set:
                 return set(map(tuple, np.c_[c[:, 0] // cell, c[:, 1] // cell, (c[:, 2] - zmin) // cell]))
 
-            # every cube of this level's spacing that holds a point holds one of levels <= this one
-            assert key(counts[: ends[lv]]) == key(counts)
-        # octree nodes: contiguous, disjoint ranges covering the tile, each inside its cube
-        ranges = sorted((n.start, n.start + n.count) for n in nodes)
-        assert ranges[0][0] == 0 and ranges[-1][1] == len(counts)
-        assert all(a[1] == b[0] for a, b in zip(ranges, ranges[1:], strict=False))
-        n_tile = int(round(spec.tile_size_m / spec.quantum_m))
-        for n in nodes:
-            edge = n_tile >> min(n.level, spec.max_node_depth)
-            c = counts[n.start : n.start + n.count]
-            cube = np.c_[np.clip(c[:, :2] // edge, 0, n_tile // edge - 1), c[:, 2] // edge]
-            assert n.cell is not None and (cube == np.array(n.cell)).all()
-            lo, hi = np.array(n.bounds_min), np.array(n.bounds_max)
-            xyz = data.xyz_m[n.start : n.start + n.count]
-            assert (xyz >= lo - 1e-9).all() and (xyz <= hi + 1e-9).all()
-    assert max(len(ns) for ns in tiles.by_tile.values()) > level_count(spec)  # levels split into cubes
+            assert key(c) == key(counts)
+            # a node's points of levels <= lv are its first ones (levels sorted inside a node)
+            first = np.concatenate([np.arange(s0, s0 + k) for s0, k in zip(nodes.start, nodes.up_to(lv), strict=True)])
+            assert set(upto.attributes["gps_time"]) == set(data.attributes["gps_time"][first])
+    # every node but a tile's sparse remainder holds node_points; bands cut into cubes where dense
+    rows = tiles.nodes
+    assert len(rows) <= result.points / 200
+    assert int((rows.depth > 0).sum()) > 0 and int((rows.level > rows.first_level).sum()) > 0
+
+
+def test_node_index_grows_with_points_not_levels(tmp_path) -> None:
+    """At the default node size, a scene's node rows are at most points / 2,000, the index lives in
+    the store (no JSON node list in its attributes), and a view reads no more points than with small
+    nodes."""
+    import json
+
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    rng = np.random.default_rng(1)
+    n = 400_000  # 400 points/m2 over 40 x 25 m: a dense surface
+    local = np.c_[rng.uniform(-20, 20, n), rng.uniform(-12.5, 12.5, n), rng.normal(0, 0.05, n)]
+    write_las(tmp_path / "d.las", local + np.asarray(origin), crs="EPSG:32618", classification=np.full(n, 2, np.uint8))
+    _, result, tiles = _tile(tmp_path, tmp_path / "d.las", origin)
+    assert len(result.nodes) <= n / 2000, len(result.nodes)
+    attrs = json.loads((Path(result.uri) / "zarr.json").read_text())["attributes"]
+    assert "nodes" not in attrs and attrs["siteline_tiles"] == 2
+    small = tmp_path / "small"
+    small.mkdir()
+    _, r2, fine = _tile(small, tmp_path / "d.las", origin, spec=TileSpec(node_points=64))
+    assert len(r2.nodes) > 4 * len(result.nodes)
+    cam = Camera.look_at((0, -15, 12), (0, 0, 0), 200, 150, fx=150.0)
+    big_read = tiles.points_for_view(cam, 1.0, attributes=())
+    small_read = fine.points_for_view(cam, 1.0, attributes=())
+    # coarser culling reads more candidates, but not more than twice: fine levels stay in cubes
+    assert big_read.stats.points_read <= 2 * small_read.stats.points_read
+    assert abs(len(big_read) - len(small_read)) <= 0.25 * len(small_read)
 
 
 def test_frustum_read_equals_brute_force(tmp_path) -> None:
@@ -131,8 +155,8 @@ def test_frustum_read_equals_brute_force(tmp_path) -> None:
     assert set(auto.attributes["gps_time"].astype(int)) <= set(brute)  # a coarser read is a subset
     # per node: near nodes deeper than far ones, so the read is finer than one level for every tile
     chosen, _ = tiles.levels_for_view(cam, 0.125)
-    lv = np.concatenate([tiles.node_arrays[t][2][sel] for t, (sel, _) in chosen.items()])
-    capped = tiles.points_for_view(cam, 0.125, attributes=("gps_time",), level=int(lv.max()))
+    deepest = max(tiles.read_nodes(chosen, ()).stats.levels.values())
+    capped = tiles.points_for_view(cam, 0.125, attributes=("gps_time",), level=deepest)
     assert len(auto.xyz_m) < len(capped.xyz_m)
 
 
@@ -237,10 +261,8 @@ def _env(settings):
 
 
 def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> None:
-    import sqlalchemy as sa
-
     from siteline.catalog import open_catalog
-    from siteline.catalog.models import Node, Scene
+    from siteline.catalog.models import Scene
     from siteline.tiles import tile_scene
 
     settings, (sid, _) = _ingested_home(tmp_path, synth_dir, "a")
@@ -252,8 +274,7 @@ def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> 
     assert not (tiles_dir / f"scene-{sid}.zarr").exists()
     cat = open_catalog(settings)
     with cat.transaction() as s:
-        assert s.execute(sa.select(sa.func.count(Node.id))).scalar_one() == 0
-        assert s.get(Scene, sid).status == "registered"
+        assert s.get(Scene, sid).status == "registered" and s.get(Scene, sid).tile_store_uri is None
     rerun = tile_scene(cat, settings, sid, workers=1).tiling
     assert not [p for p in tiles_dir.iterdir() if p.name.startswith(".")]  # stale partials were cleared
     cat.dispose()
@@ -265,10 +286,9 @@ def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> 
 
 
 def test_two_processes_tile_two_scenes_at_once(tmp_path, synth_dir) -> None:
-    import sqlalchemy as sa
-
     from siteline.catalog import open_catalog
-    from siteline.catalog.models import Node, Scene
+    from siteline.catalog.models import Scene
+    from siteline.catalog.scenes import scene_statistics
 
     settings, ids = _ingested_home(tmp_path, synth_dir, "c")
     code = (
@@ -282,40 +302,45 @@ def test_two_processes_tile_two_scenes_at_once(tmp_path, synth_dir) -> None:
         for i in ids:
             scene = s.get(Scene, i)
             assert scene.status == "tiled"
-            total = s.execute(sa.select(sa.func.sum(Node.point_count)).where(Node.scene_id == i)).scalar_one()
-            assert total == scene.point_count
-            assert SceneTiles.open(scene.tile_store_uri).point_count == scene.point_count
+            tiling = scene_statistics(scene).tiling
+            opened = SceneTiles.open(scene.tile_store_uri)
+            assert opened.point_count == scene.point_count == tiling.points
+            assert len(opened.nodes) == tiling.nodes > 0
     cat.dispose()
 
 
 def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
-    """A store written before octree nodes indexes one node per tile level (no cube), keeps input
-    order inside a node and calls its int32 counts ``xyz``: every read still works, with per-tile
-    culling and whole nodes."""
-    from siteline.records import NodeInfo
-    from siteline.tiles.reader import SceneTiles
+    """A store of format 1 keeps its node list as JSON in its attributes, one node per tile level
+    (no cube), input order inside a node, and calls its int32 counts ``xyz``: every read still works,
+    with per-tile culling and whole nodes."""
+    import json
+
+    import zarr
 
     origin = (445_000.0, 5_030_000.0, 80.0)
     geo = _cloud(tmp_path / "c.las", origin, n=20_000)
-    _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin)
+    spec = TileSpec(node_points=1)  # one level per band (as format 1), cut into cubes
+    _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)
     for tile in tiles.by_tile:
         os.rename(Path(result.uri, "tiles", tile, "xyz_counts"), Path(result.uri, "tiles", tile, "xyz"))
-    merged = []
+    docs = []
     for tile, nodes in tiles.by_tile.items():
-        for lv in sorted({n.level for n in nodes}):
-            ns = [n for n in nodes if n.level == lv]
-            merged.append(
-                NodeInfo(
-                    f"{tile}/{lv}", tile, lv,
-                    tuple(np.min([n.bounds_min for n in ns], axis=0)), tuple(np.max([n.bounds_max for n in ns], axis=0)),
-                    sum(n.count for n in ns), min(n.start for n in ns), ns[0].spacing_m,
-                )
+        for lv in np.unique(nodes.level):
+            ns = np.flatnonzero(nodes.level == lv)
+            docs.append(
+                {"key": f"{tile}/{lv}", "tile": tile, "level": int(lv), "bounds_min": nodes.lo[ns].min(axis=0).tolist(),
+                 "bounds_max": nodes.hi[ns].max(axis=0).tolist(), "count": int(nodes.count[ns].sum()),
+                 "start": int(nodes.start[ns].min()), "spacing_m": spec.spacing(int(lv)), "cell": None}
             )  # fmt: skip
-    assert (
-        TileSpec.from_dict({k: v for k, v in tiles.spec.to_dict().items() if k != "node_order"}).node_order
-        == "input"
-    )
-    old = SceneTiles(tiles.uri, merged, dataclasses.replace(tiles.spec, node_order="input"))
+    root = zarr.open_group(result.uri, mode="a")
+    del root["nodes"]
+    old_spec = {k: v for k, v in spec.to_dict().items() if k not in ("node_order", "node_points")}
+    root.attrs.update({"siteline_tiles": 1, "nodes": docs, "spec": old_spec})
+    assert TileSpec.from_dict(old_spec).node_order == "input"
+    old = SceneTiles.open(result.uri)
+    assert old.spec.node_order == "input" and len(old.nodes) == len(docs) and "nodes" in json.loads(
+        (Path(result.uri) / "zarr.json").read_text()
+    )["attributes"]
     cam = Camera.look_at((-40, -50, 30), (5, 5, 0), 320, 240, fx=200.0)
     local = geo - np.asarray(origin)
     planes = cam.scaled(0.5).frustum_planes(1e-3)
@@ -325,7 +350,7 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
     auto = old.points_for_view(cam, 0.125, attributes=("gps_time",))
     assert 0 < len(auto.xyz_m) and set(auto.attributes["gps_time"].astype(int)) <= set(brute)
     chosen, _ = old.levels_for_view(cam, 0.125)  # input order: whole nodes only, never a part
-    assert all(np.array_equal(take, old.node_arrays[t][4][sel]) for t, (sel, take) in chosen.items())
+    assert all(np.array_equal(take, old.by_tile[t].count[sel]) for t, (sel, take) in chosen.items())
 
 
 def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
@@ -344,12 +369,13 @@ def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
     _, _, tiles = _tile(tmp_path, tmp_path / "p.las", origin)
     assert tiles.spec.node_order == "random"
     tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t))
-    node = max(tiles.by_tile[tile], key=lambda nd: nd.count)
-    xyz = tiles.read_nodes(
-        {tile: (np.array([tiles.by_tile[tile].index(node)]), np.array([node.count // 10]))}, ()
-    ).xyz_m
-    span = (xyz.max(axis=0) - xyz.min(axis=0))[:2] / (np.array(node.bounds_max) - node.bounds_min)[:2]
-    assert np.all(span > 0.9), span  # the first tenth spans the node, not a corner of it
+    nodes = tiles.by_tile[tile]
+    k = int(np.argmax(np.diff(nodes.below, axis=1)[np.arange(len(nodes)), nodes.level]))  # largest last level
+    head = int(nodes.up_to(int(nodes.level[k]) - 1)[k])  # its coarser levels come first
+    part = (int(nodes.count[k]) - head) // 10
+    xyz = tiles.read_nodes({tile: (np.array([k]), np.array([head + part]))}, ()).xyz_m[head:]
+    span = (xyz.max(axis=0) - xyz.min(axis=0))[:2] / (nodes.hi[k] - nodes.lo[k])[:2]
+    assert np.all(span > 0.9), span  # the first tenth of a level spans the node, not a corner of it
     cam = Camera.look_at((0, 0, 40), (0, 0, 0), 150, 125, fx=100.0)  # 0.4 m pixels over 0.1 m data
     every = tiles.points_for_view(cam, 1.0, level=None)
     for size, most in ((1, 6.0), (3, 0.8)):
@@ -369,19 +395,20 @@ def test_reads_decode_only_the_chunks_they_touch(tmp_path) -> None:
     from the cache; a cache too small for the read still returns the right values."""
     origin = (445_000.0, 5_030_000.0, 80.0)
     _cloud(tmp_path / "c.las", origin, n=40_000, extent=40.0)
-    spec = TileSpec(chunk_points=1024, shard_points=8192)
+    spec = TileSpec(chunk_points=1024, shard_points=8192, node_points=512)
     _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)
     tile = max(tiles.by_tile, key=tiles.prefix)
     whole = tiles.read({tile: tiles.prefix(tile)}, ("gps_time",))
-    last = len(tiles.by_tile[tile]) - 1  # the deepest node: at the end of the arrays
-    node = tiles.by_tile[tile][last]
+    nodes = tiles.by_tile[tile]
+    last = len(nodes) - 1  # the last node: at the end of the arrays
+    start, count = int(nodes.start[last]), int(nodes.count[last])
     for cache in (256 * 2**20, 4096):
         fresh = SceneTiles(result.uri, tiles.nodes, tiles.spec, cache_bytes=cache)
-        got = fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
-        want = slice(node.start, node.start + node.count)
+        got = fresh.read_nodes({tile: (np.array([last]), np.array([count]))}, ("gps_time",))
+        want = slice(start, start + count)
         assert np.array_equal(got.attributes["gps_time"], whole.attributes["gps_time"][want])
         assert np.array_equal(got.xyz_m, whole.xyz_m[want])
-        first, end = node.start // 1024, -(-(node.start + node.count) // 1024)
+        first, end = start // 1024, -(-(start + count) // 1024)
         assert got.stats.points_decoded <= 2 * (end - first) * 1024 < tiles.prefix(tile)
-        again = fresh.read_nodes({tile: (np.array([last]), np.array([node.count]))}, ("gps_time",))
+        again = fresh.read_nodes({tile: (np.array([last]), np.array([count]))}, ("gps_time",))
         assert (again.stats.points_decoded == 0) == (cache > 4096)

@@ -1,5 +1,5 @@
 """Catalog tables (DESIGN.md §1, §8): sites, missions and their files, scenes, cameras, label sets,
-tile nodes, pairs, views, renders, releases and their items, and stage runs.
+pairs, views, renders, releases and their items, and stage runs.
 
 Coordinates and bounds are float64 in the site-local frame unless a name says otherwise; the site
 origin is float64 in the site CRS. Poses are COLMAP ``cam_from_world`` (row-major R, t).
@@ -156,37 +156,6 @@ class LabelSet(Base):
     changed_points: Mapped[int | None] = mapped_column(sa.BigInteger, nullable=True)
     # matching statistics and the changed points per (old class, new class)
     details: Mapped[dict[str, Any] | None] = mapped_column(sa.JSON, nullable=True)
-
-
-class Node(Base):
-    """One level-of-detail node of a scene's tile store (a level of one octree cube of a tile, one
-    contiguous range of the tile's arrays); bounds in site-local metres."""
-
-    __tablename__ = "node"
-    __table_args__ = (
-        sa.UniqueConstraint("scene_id", "key"),
-        sa.Index("ix_node_scene_level", "scene_id", "level"),
-        sa.CheckConstraint("point_count >= 0 AND start >= 0", name="counts"),
-    )
-
-    id: Mapped[int] = mapped_column(primary_key=True)
-    scene_id: Mapped[int] = mapped_column(sa.ForeignKey("scene.id", ondelete="CASCADE"))
-    key: Mapped[str] = mapped_column(sa.String(64))
-    tile: Mapped[str] = mapped_column(sa.String(32))
-    level: Mapped[int] = mapped_column(sa.Integer)
-    min_x: Mapped[float] = mapped_column(Float64)
-    min_y: Mapped[float] = mapped_column(Float64)
-    min_z: Mapped[float] = mapped_column(Float64)
-    max_x: Mapped[float] = mapped_column(Float64)
-    max_y: Mapped[float] = mapped_column(Float64)
-    max_z: Mapped[float] = mapped_column(Float64)
-    point_count: Mapped[int] = mapped_column(sa.BigInteger)
-    start: Mapped[int] = mapped_column(sa.BigInteger)
-    spacing_m: Mapped[float] = mapped_column(Float64)
-    # the node's octree cube in the tile (NULL: a whole-tile level, a store written before octree nodes)
-    cell_x: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
-    cell_y: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
-    cell_z: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
 
 
 class Pair(Base):

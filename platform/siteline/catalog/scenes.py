@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from datetime import datetime
 from typing import Any
 
@@ -11,14 +10,14 @@ from sqlalchemy.orm import Session
 
 from siteline.cameras import Camera
 from siteline.catalog.models import Camera as CameraRow
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Node, Pair, Scene, Site
+from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Scene, Site
 from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, TileError
 from siteline.records.mission import LasLocation
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneSummary
-from siteline.records.tiling import NodeInfo, SceneTiling, TileSource
+from siteline.records.tiling import SceneTiling, TileSource
 
 
 def mission_by_manifest(session: Session, sha256: str) -> Mission | None:
@@ -192,14 +191,12 @@ def site_name_of_pair(session: Session, pair_id: int) -> str:
     return _site_name(session, pair.site_id)
 
 
-def node_summary(session: Session, scene_id: int) -> dict[str, int]:
-    """How scene ``scene_id`` is tiled: node rows, distinct tiles, and levels (0 when untiled)."""
-    nodes, tiles, top = session.execute(
-        sa.select(
-            sa.func.count(Node.id), sa.func.count(sa.distinct(Node.tile)), sa.func.max(Node.level)
-        ).where(Node.scene_id == scene_id)
-    ).one()
-    return {"nodes": int(nodes), "tiles": int(tiles), "levels": int(top) + 1 if top is not None else 0}
+def node_summary(scene: Scene) -> dict[str, int]:
+    """How ``scene`` is tiled: node index rows, tiles and levels its tiling recorded (0 when untiled)."""
+    tiling = scene_statistics(scene).tiling
+    if tiling is None or scene.status != "tiled":
+        return {"nodes": 0, "tiles": 0, "levels": 0}
+    return {"nodes": tiling.nodes, "tiles": tiling.tiles, "levels": tiling.levels}
 
 
 def mission_of_scene(session: Session, scene_id: int) -> Mission:
@@ -213,7 +210,7 @@ def mission_of_scene(session: Session, scene_id: int) -> Mission:
 def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
     """Scene ``scene_id`` as plain values: statistics, registration, tiles, label sets (for the CLI)."""
     scene = get_scene(s, scene_id)
-    nodes = node_summary(s, scene.id)
+    nodes = node_summary(scene)
     stats = scene_statistics(scene)
     scan = stats.scan
     return {
@@ -272,46 +269,6 @@ def mission_file(session: Session, mission_id: int, path: str | None) -> Mission
     ).scalar_one_or_none()
 
 
-def scene_nodes(session: Session, scene_id: int) -> tuple[NodeInfo, ...]:
-    """The node index of scene ``scene_id``, by tile and start."""
-    rows = session.execute(
-        sa.select(Node).where(Node.scene_id == scene_id).order_by(Node.tile, Node.start)
-    ).scalars()
-    return tuple(
-        NodeInfo(
-            r.key,
-            r.tile,
-            r.level,
-            (r.min_x, r.min_y, r.min_z),
-            (r.max_x, r.max_y, r.max_z),
-            r.point_count,
-            r.start,
-            r.spacing_m,
-            None if r.cell_x is None else (r.cell_x, r.cell_y, r.cell_z),  # type: ignore[arg-type]
-        )
-        for r in rows
-    )
-
-
-def replace_nodes(session: Session, scene_id: int, nodes: Sequence[NodeInfo]) -> None:
-    """Replace scene ``scene_id``'s node rows (one bulk insert)."""
-    session.execute(sa.delete(Node).where(Node.scene_id == scene_id))
-    rows = []
-    for n in nodes:
-        (x0, y0, z0), (x1, y1, z1) = n.bounds_min, n.bounds_max
-        cx, cy, cz = n.cell if n.cell is not None else (None, None, None)
-        rows.append(
-            {
-                "scene_id": scene_id, "key": n.key, "tile": n.tile, "level": n.level,
-                "min_x": x0, "min_y": y0, "min_z": z0, "max_x": x1, "max_y": y1, "max_z": z1,
-                "point_count": n.count, "start": n.start, "spacing_m": n.spacing_m,
-                "cell_x": cx, "cell_y": cy, "cell_z": cz,
-            }
-        )  # fmt: skip
-    if rows:
-        session.execute(sa.insert(Node), rows)
-
-
 def scene_statistics(scene: Scene) -> SceneStatistics:
     """What ingest and tiling recorded about ``scene`` (the one reader of ``scene.statistics``)."""
     return SceneStatistics.from_json(scene.statistics)
@@ -332,7 +289,7 @@ def tile_source(session: Session, scene_id: int) -> TileSource:
     tiling = scene_statistics(scene).tiling
     if scene.status != "tiled" or not scene.tile_store_uri or tiling is None:
         raise TileError(f"scene {scene_id} is not tiled yet: run `siteline scene tile {scene_id}`.")
-    return TileSource(scene.tile_store_uri, tiling.spec, scene_nodes(session, scene_id), tiling.checksum)
+    return TileSource(scene.tile_store_uri, tiling.spec, tiling.checksum)
 
 
 def las_location(session: Session, scene_id: int) -> LasLocation:
@@ -346,13 +303,10 @@ def las_location(session: Session, scene_id: int) -> LasLocation:
     return LasLocation(mission.storage, mission.root_uri, row.path, row.sha256)  # type: ignore[arg-type]
 
 
-def record_tiling(
-    session: Session, scene_id: int, tiling: SceneTiling, nodes: Sequence[NodeInfo], run: StageRun
-) -> None:
-    """Record a tile store that is published whole: its node rows, its address, the scene's status
-    and tiling statistics, and the stage run."""
+def record_tiling(session: Session, scene_id: int, tiling: SceneTiling, run: StageRun) -> None:
+    """Record a tile store that is published whole (its node index inside it): its address, the
+    scene's status and tiling statistics, and the stage run."""
     scene = get_scene(session, scene_id)
-    replace_nodes(session, scene_id, nodes)
     scene.tile_store_uri = tiling.uri
     scene.status = "tiled"
     scene.statistics = scene_statistics(scene).with_tiling(tiling).to_json()

@@ -42,7 +42,7 @@ def auto_radius(
     measured on the full-density points of each scene's most populated tile."""
     spacing = {}
     for name, tiles in (("t1", a), ("t2", b)):
-        tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t, None))
+        tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t))
         spacing[name] = median_spacing(tiles.read_tile(tile, ()).xyz_m, max_points)
     sparse = max(spacing.values())
     return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}

@@ -21,7 +21,7 @@ from siteline.records.release import DraftRelease, ReleaseInfo, ReleaseItem
 from siteline.records.runs import StageRun
 from siteline.records.scan import LasScan
 from siteline.records.scene import SceneStatistics, SceneSummary
-from siteline.records.tiling import NodeInfo, SceneTiling, TileSource, TileSpec
+from siteline.records.tiling import NodeTable, SceneTiling, TileSource, TileSpec
 
 __all__ = [
     "CameraSource",
@@ -36,7 +36,7 @@ __all__ = [
     "LasScan",
     "MirrorRule",
     "MissionManifest",
-    "NodeInfo",
+    "NodeTable",
     "NodeOrder",
     "PairOutput",
     "PairVersions",

@@ -3,7 +3,7 @@
 The tile stage: :func:`plan_tiling` (catalog) -> :func:`execute_tiling` (write and publish the
 store) -> ``siteline.catalog.scenes.record_tiling``; :func:`tile_scene` runs the three."""
 
-from siteline.records.tiling import NodeInfo, SceneTiling, TileSource, TileSpec
+from siteline.records.tiling import NodeTable, SceneTiling, TileSource, TileSpec
 from siteline.tiles.execute import execute_tiling
 from siteline.tiles.export import export_las
 from siteline.tiles.lod import assign_levels
@@ -13,7 +13,7 @@ from siteline.tiles.stage import TileOutcome, tile_scene
 from siteline.tiles.writer import TileResult, write_tiles
 
 __all__ = [
-    "NodeInfo",
+    "NodeTable",
     "Points",
     "ReadStats",
     "SceneTiles",

@@ -9,7 +9,7 @@ from pathlib import Path
 from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
 from siteline.progress import Progress, no_progress
-from siteline.records.tiling import NodeInfo, SceneTiling, TileSpec
+from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import Store, layout
 from siteline.stores.blobs import resolve_file
 from siteline.tiles.plan import TilingPlan
@@ -39,9 +39,9 @@ def execute_tiling(
     generation: int,
     workers: int = 2,
     progress: Progress = no_progress,
-) -> tuple[SceneTiling, tuple[NodeInfo, ...]]:
+) -> SceneTiling:
     """Tile the scene of ``plan`` into the store at its ``generation``'s address, published whole (a
-    store left there without its marker is replaced); return the tiling and its nodes."""
+    store left there without its marker is replaced), its node index inside; return the tiling."""
     las = scene_las(store, plan)
     src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
     z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
@@ -59,14 +59,16 @@ def execute_tiling(
             seed=plan.seed,
             progress=progress,
             z_unit=z_unit,
+            eight_bit=plan.eight_bit,
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,
-        written.bytes, written.seconds,
+        written.bytes, written.seconds, len(written.nodes), las.stat().st_size,
     )  # fmt: skip
     log.info(
-        "tiled scene %d: %s points in %d tiles, %d levels, %d nodes, %.1f bytes/point, %.1f s",
-        plan.scene_id, f"{tiling.points:,}", tiling.tiles, tiling.levels, len(written.nodes),
-        tiling.bytes_per_point, tiling.seconds,
+        "tiled scene %d: %s points in %d tiles, %d levels, %d nodes, %.1f bytes/point (source %.1f), "
+        "%.1f s (%.1f s partitioning)",
+        plan.scene_id, f"{tiling.points:,}", tiling.tiles, tiling.levels, tiling.nodes,
+        tiling.bytes_per_point, tiling.source_bytes_per_point, tiling.seconds, written.partition_seconds,
     )  # fmt: skip
-    return tiling, written.nodes
+    return tiling

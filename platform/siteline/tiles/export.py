@@ -31,7 +31,7 @@ def export_las(
     scale = the tile quantum, offset near the data, the site CRS (WKT). ``labels``: what the classes
     mean (site, scene, label-set version, taxonomy), written as a siteline VLR. Tiles are read and
     written one at a time; returns the point count."""
-    lo = np.min([n.bounds_min for n in tiles.nodes], axis=0) + np.asarray(site.origin)
+    lo = tiles.nodes.lo.min(axis=0) + np.asarray(site.origin)
     header = las_header(site.crs, lo, scale=tiles.spec.quantum_m, point_format=7, version="1.4")
     if labels is not None:
         header.vlrs.append(labels_vlr(labels))

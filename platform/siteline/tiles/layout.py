@@ -4,11 +4,11 @@
 Tile (i, j) covers site-local x in [i T, (i + 1) T) and y in [j T, (j + 1) T), T = the site's tile
 size, so the same tile covers the same ground in every scene. Inside a tile, level L keeps one point
 per occupied cube of edge ``root_spacing_m / 2**L`` among the points no earlier level kept (an
-additive level of detail). A node is the points of one level inside one cube of the tile's octree at
-depth d = min(L, ``max_node_depth``) (edge T / 2**d, from the tile origin; COPC/EPT-like): the tile's
-arrays are sorted by (level, cube), so every node is one contiguous range and levels 0..L are still
-a prefix; inside a node the points are shuffled (seeded), so a node's first k points are a uniform
-subsample of it and a view can read a level in part (a continuous level of detail).
+additive level of detail). A node is a band of levels inside one cube of the tile's octree, sized to
+hold thousands of points (siteline.tiles.nodes): the tile's arrays are sorted by (band, cube, level),
+so every node is one contiguous range whose coarser levels come first; inside a level the points are
+shuffled (seeded), so a view can read a level in part (a continuous level of detail). The node index
+is stored beside the tiles (siteline.tiles.index).
 Coordinates are int32 counts of ``quantum_m`` relative to the tile's float64 origin (the site origin
 plus (i T, j T, 0)).
 """
@@ -53,24 +53,6 @@ def tile_key(i: int, j: int) -> str:
 def parse_tile_key(key: str) -> tuple[int, int]:
     i, j = key[1:].split("_")
     return int(i), int(j)
-
-
-def node_key(tile: str, level: int, cell: tuple[int, int, int] | None = None) -> str:
-    """``t<i>_<j>/<level>/<x>_<y>_<z>`` (the octree cube); ``t<i>_<j>/<level>`` for a whole-tile level
-    (stores written before octree nodes)."""
-    return f"{tile}/{level}" if cell is None else f"{tile}/{level}/{cell[0]}_{cell[1]}_{cell[2]}"
-
-
-def node_cells(counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
-    """(N, 3) int64 octree cube of each point's node: its position in int32 counts relative to the
-    tile origin, floored by the cube edge at depth min(level, max_node_depth); x and y clamped into
-    the tile (a point rounded onto the far edge stays in the last cube)."""
-    n_tile = int(round(spec.tile_size_m / spec.quantum_m))
-    depth = np.minimum(levels.astype(np.int64), spec.max_node_depth)
-    edge = np.maximum(n_tile >> depth, 1)[:, None]
-    cells = np.floor_divide(counts.astype(np.int64), edge)
-    cells[:, :2] = np.clip(cells[:, :2], 0, (1 << depth)[:, None] - 1)
-    return cells
 
 
 def tile_origin_local(i: int, j: int, tile_size_m: float) -> np.ndarray:

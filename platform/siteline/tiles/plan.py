@@ -14,12 +14,17 @@ from siteline.records.mission import LasLocation
 from siteline.records.tiling import SceneTiling
 from siteline.site import SiteSpec
 
+# what ingest's scan recorded about colour -> whether it is 0-255 in 16-bit fields
+EIGHT_BIT = {"rgb 8-bit stored in 16-bit fields": True, "rgb 16-bit": False}
+
 
 @dataclass(frozen=True)
 class TilingPlan:
     """Everything tiling a scene needs from the catalog: the scene and its site, where its point
     cloud is kept, the source CRS and z unit ingest recorded, whether the scene is tiled, the tiling
-    last recorded, if any, and the seed of the level-of-detail draw (from the cloud's content)."""
+    last recorded, if any, the seed of the level-of-detail draw (from the cloud's content), and
+    whether its colour is 0-255 in 16-bit fields as ingest judged it (None: no colour, or not
+    recorded)."""
 
     scene_id: int
     site: SiteSpec
@@ -29,6 +34,7 @@ class TilingPlan:
     tiled: bool
     current: SceneTiling | None
     seed: int
+    eight_bit: bool | None = None
 
     def generation(self, retile: bool) -> int:
         """The generation a tiling written now gets: the next one for a re-tiling (the old store stays
@@ -62,4 +68,5 @@ def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
         tiled=scene.status == "tiled",
         current=stats.tiling,
         seed=stats.scan.content_seed(),
+        eight_bit=EIGHT_BIT.get(stats.scan.colour),
     )

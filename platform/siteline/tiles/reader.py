@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
-from collections import OrderedDict, defaultdict
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import zarr
 
 from siteline.cameras import Camera
 from siteline.errors import TileError
-from siteline.records.tiling import NodeInfo, TileSource, TileSpec
+from siteline.records.tiling import NodeTable, TileSource, TileSpec
 from siteline.stores import join, open_store
+from siteline.tiles.index import read_index
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
@@ -115,8 +116,39 @@ def _open(uri: str, what: str, fix: str) -> zarr.Group:
 Selection = dict[str, tuple[np.ndarray, np.ndarray]]
 
 
+@dataclass(frozen=True)
+class TileNodes:
+    """One tile's nodes as arrays, in array order: bounds ``lo``/``hi`` (N, 3) site-local metres,
+    ``first_level``/``level`` (the band), ``start``/``count``, and ``below[:, L]`` (N, levels + 1):
+    a node's points at levels under L (its first ``below[:, L]`` points are exactly those levels)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    first_level: np.ndarray
+    level: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+    below: np.ndarray
+
+    @classmethod
+    def of(cls, table: NodeTable) -> TileNodes:
+        o = np.argsort(table.start, kind="stable")
+        t = table.rows(o)
+        below = np.zeros((len(t), t.level_counts.shape[1] + 1), np.int64)
+        np.cumsum(t.level_counts, axis=1, out=below[:, 1:])
+        return cls(t.lo, t.hi, t.first_level.astype(np.int64), t.level.astype(np.int64), t.start, t.count, below)
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    def up_to(self, level: np.ndarray | int) -> np.ndarray:
+        """Per node, its points at levels up to ``level`` (per node or one for all)."""
+        cap = np.clip(np.asarray(level, dtype=np.int64) + 1, 0, self.below.shape[1] - 1)
+        return self.below[np.arange(len(self)), np.broadcast_to(cap, (len(self),))]
+
+
 class SceneTiles:
-    """A scene's tile store opened for reading, indexed by its nodes. Reads return :class:`Points`
+    """A scene's tile store opened for reading, indexed by its node table. Reads return :class:`Points`
     (site-local float64 metres, from the int32 counts and the tile origins).
 
     ``attributes``: name -> address of a Zarr group laid out like this store's ``tiles/<tile>/<name>``
@@ -127,46 +159,41 @@ class SceneTiles:
     def __init__(
         self,
         uri: str | Path,
-        nodes: Sequence[NodeInfo],
-        spec: TileSpec,
+        nodes: NodeTable | None = None,
+        spec: TileSpec | None = None,
         cache_bytes: int = 256 * 2**20,
         attributes: Mapping[str, str] | None = None,
     ) -> None:
+        """``nodes``/``spec``: the store's index and spec when the caller has them (None: read from
+        the store)."""
         self.uri = str(uri)
         self.root = _open(self.uri, "tile store", "re-run `siteline scene tile`")
+        if nodes is None or spec is None:
+            attrs = dict(self.root.attrs)
+            if "spec" not in attrs:
+                raise TileError(f"{uri} is not a siteline tile store.")
+            spec = spec or TileSpec.from_dict(dict(attrs["spec"]))  # type: ignore[arg-type]
+            nodes = nodes if nodes is not None else read_index(self.root, attrs, spec, self.uri)
         self.spec = spec
-        self.nodes = list(nodes)
+        self.nodes = nodes
         self.attributes = dict(attributes or {})
         self._extra = {
             name: _open(str(u), "attribute store", "process the pair again")
             for name, u in self.attributes.items()
         }
-        self.by_tile: dict[str, list[NodeInfo]] = defaultdict(list)
-        for n in self.nodes:
-            self.by_tile[n.tile].append(n)
-        for v in self.by_tile.values():
-            v.sort(key=lambda n: n.start)
-        self.tile_bounds = {
-            t: (np.min([n.bounds_min for n in ns], axis=0), np.max([n.bounds_max for n in ns], axis=0))
-            for t, ns in self.by_tile.items()
+        # per tile, its nodes as arrays in array order
+        self.by_tile: dict[str, TileNodes] = {
+            key: TileNodes.of(nodes.rows(nodes.tile == k)) for k, key in enumerate(nodes.tiles)
         }
-        # per tile, its nodes as arrays (in array order): bounds, level, start, count
-        self.node_arrays = {
-            t: (
-                np.array([n.bounds_min for n in ns], dtype=np.float64),
-                np.array([n.bounds_max for n in ns], dtype=np.float64),
-                np.array([n.level for n in ns], dtype=np.int64),
-                np.array([n.start for n in ns], dtype=np.int64),
-                np.array([n.count for n in ns], dtype=np.int64),
-            )
-            for t, ns in self.by_tile.items()
-        }
-        # per tile, its points per level (index = level), for partial reads of a level
+        self.by_tile = {k: v for k, v in self.by_tile.items() if len(v)}
+        self.tile_bounds = {t: (v.lo.min(axis=0), v.hi.max(axis=0)) for t, v in self.by_tile.items()}
         self._spacing = np.array([spec.spacing(v) for v in range(64)])
+        # per tile, its points per level (index = level), for partial reads of a level
         self.level_totals = {
-            t: np.bincount(lv, weights=cnt, minlength=64).astype(np.int64)
-            for t, (_, _, lv, _, cnt) in self.node_arrays.items()
+            t: np.pad(np.diff(v.below, axis=1).sum(axis=0), (0, 64))[:64] for t, v in self.by_tile.items()
         }
+        held = np.flatnonzero(nodes.level_counts.sum(axis=0)) if len(nodes) else np.zeros(1, np.int64)
+        self._levels = held.astype(np.int64) if len(held) else np.zeros(1, np.int64)
         self._handles: dict[tuple[str, str], zarr.Array] = {}
         # many views of one pair read the same tiles: keep recent inner chunks (LRU, byte budget)
         self.cache_bytes = cache_bytes
@@ -176,7 +203,7 @@ class SceneTiles:
     @classmethod
     def from_source(cls, source: TileSource, cache_bytes: int = 256 * 2**20) -> SceneTiles:
         """The reader of a scene's tiles as the catalog describes them (siteline.records.TileSource)."""
-        return cls(source.uri, source.nodes, source.spec, cache_bytes, source.attributes)
+        return cls(source.uri, None, source.spec, cache_bytes, source.attributes)
 
     def attribute_record(self, name: str) -> dict[str, object]:
         """The attributes (metadata) of the group attribute ``name`` is read from."""
@@ -186,13 +213,8 @@ class SceneTiles:
 
     @classmethod
     def open(cls, uri: str | Path) -> SceneTiles:
-        """Open from the store alone (its attributes hold the spec and the node table)."""
-        attrs = dict(_open(str(uri), "tile store", "tile the scene again").attrs)
-        if "nodes" not in attrs:
-            raise TileError(f"{uri} is not a siteline tile store.")
-        docs: list[Any] = list(attrs["nodes"])  # type: ignore[arg-type]
-        spec: dict[str, Any] = dict(attrs["spec"])  # type: ignore[arg-type]
-        return cls(uri, [NodeInfo.from_dict(n) for n in docs], TileSpec.from_dict(spec))
+        """Open from the store alone (it holds the spec and the node index)."""
+        return cls(uri)
 
     def with_attribute(self, name: str, uri: str) -> SceneTiles:
         """A reader of the same store that reads attribute ``name`` from the group at ``uri`` (laid
@@ -266,24 +288,31 @@ class SceneTiles:
 
     @property
     def point_count(self) -> int:
-        return sum(n.count for n in self.nodes)
+        return self.nodes.points
 
     def level_for_resolution(self, resolution_m: float) -> int:
         """Smallest level whose spacing is at most ``resolution_m`` (the deepest if none is)."""
         return int(self.levels_for_resolutions(np.array([resolution_m]))[0])
 
-    def prefix(self, tile: str, level: int | None = None) -> int:
-        """How many of ``tile``'s points levels 0..``level`` hold (all levels when None): a read of
-        that many values from the start of each array returns exactly those levels."""
-        return sum(n.count for n in self.by_tile[tile] if level is None or n.level <= level)
+    def prefix(self, tile: str) -> int:
+        """How many points ``tile`` holds."""
+        return int(self.by_tile[tile].count.sum())
 
     def read(self, prefixes: Mapping[str, int], attributes: Sequence[str]) -> Points:
-        """Read the first ``prefixes[tile]`` points of each tile: one call per tile and attribute."""
+        """Read the first ``prefixes[tile]`` points of each tile's arrays: one call per tile and attribute."""
         return self._gather({t: (k, None) for t, k in prefixes.items() if k > 0}, attributes)
 
     def read_tile(self, tile: str, attributes: Sequence[str], level: int | None = None) -> Points:
         """Every point of ``tile`` up to ``level`` (all levels when None), in the store's order."""
-        return self.read({tile: self.prefix(tile, level)}, attributes)
+        if level is None:
+            return self.read({tile: self.prefix(tile)}, attributes)
+        return self.read_nodes(self._up_to(tile, level), attributes)
+
+    def _up_to(self, tile: str, level: int) -> Selection:
+        """The selection of every point of ``tile`` at levels up to ``level``."""
+        take = self.by_tile[tile].up_to(level)
+        sel = np.flatnonzero(take)
+        return {tile: (sel, take[sel])} if len(sel) else {}
 
     def _gather(self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]) -> Points:
         """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
@@ -346,20 +375,22 @@ class SceneTiles:
         if resolution is not None:
             selection: Selection = {}
             for tile in tiles:
-                need = np.full(len(self.node_arrays[tile][2]), float(resolution))
+                need = np.full(len(self.by_tile[tile]), float(resolution))
                 sel, take = self.node_takes(tile, np.ones(len(need), bool), need)
                 if len(sel):
                     selection[tile] = (sel, take)
             out = self.read_nodes(selection, attributes)
+        elif level is not None:
+            out = self.read_nodes({k: v for t in tiles for k, v in self._up_to(t, level).items()}, attributes)
         else:
-            out = self.read({t: self.prefix(t, level) for t in tiles}, attributes)
+            out = self.read({t: self.prefix(t) for t in tiles}, attributes)
         return out.select(in_bounds(out.xyz_m, bounds)) if bounds is not None else out
 
     def levels_for_view(
         self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3
     ) -> tuple[Selection, np.ndarray]:
         """Per tile met by the frustum of ``camera`` at ``scale``: ``(indices, take)``, the nodes to
-        read (indices into ``node_arrays``) and how many of each node's points, so that each node's
+        read (indices into ``by_tile[tile]``) and how many of each node's points, so that each node's
         surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance; and
         the frustum's planes.
 
@@ -377,7 +408,8 @@ class SceneTiles:
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
-            lo, hi, _, _, _ = self.node_arrays[tile]
+            nodes = self.by_tile[tile]
+            lo, hi = nodes.lo, nodes.hi
             inside = boxes_in_frustum(planes, lo, hi)
             dist = np.linalg.norm(np.maximum(np.maximum(lo - centre, 0.0), centre - hi), axis=1)
             need = spacing_px * np.maximum(dist, near_m) / f
@@ -389,42 +421,53 @@ class SceneTiles:
     def node_takes(
         self, tile: str, candidates: np.ndarray, need_m: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Which of ``tile``'s nodes (a mask over ``node_arrays[tile]``) to read, and how many points
-        of each, for a spacing of ``need_m`` metres per node: the levels coarser than it whole and,
-        in a store with shuffled nodes, the level that crosses it in part (see :meth:`levels_for_view`);
-        in one with input order that level whole."""
-        _, _, level, _, count = self.node_arrays[tile]
+        """Which of ``tile``'s nodes (a mask over ``by_tile[tile]``) to read, and how many points of
+        each, for a spacing of ``need_m`` metres per node: the levels coarser than it whole and, in a
+        store with shuffled nodes, the level that crosses it in part (see :meth:`levels_for_view`); in
+        one with input order that level whole. A node holds a band of levels sorted by level, so its
+        coarse levels are a prefix of it and the part of the crossing level follows them."""
+        nodes = self.by_tile[tile]
         allowed = self.levels_for_resolutions(need_m)
-        sel = np.flatnonzero(candidates & (level <= allowed))
-        take = count[sel].copy()
-        if self.spec.node_order == "random" and len(sel):
-            edge = np.flatnonzero((level[sel] == allowed[sel]) & (level[sel] > 0))
-            a = level[sel[edge]]
+        rows = np.arange(len(nodes))
+        cap = np.minimum(allowed, nodes.below.shape[1] - 2)
+        whole = nodes.below[rows, cap]  # levels under the crossing one
+        at = nodes.below[rows, cap + 1] - whole  # the crossing level's points in the node
+        part = at.copy()
+        if self.spec.node_order == "random":
+            edge = (allowed > 0) & (at > 0)
+            a = allowed[edge]
             totals = self.level_totals[tile]
             below = np.cumsum(totals)[a - 1]
-            r = (self._spacing[a - 1] / need_m[sel[edge]]) ** 2
+            r = (self._spacing[a - 1] / need_m[edge]) ** 2
             frac = np.clip((r - 1.0) * below / np.maximum(totals[a], 1), 0.0, 1.0)
-            take[edge] = np.maximum(np.ceil(frac * take[edge]).astype(np.int64), 1)
-        return sel, take
+            part[edge] = np.maximum(np.ceil(frac * at[edge]).astype(np.int64), 1)
+        take = np.where(allowed > nodes.level, nodes.count, whole + part)
+        sel = np.flatnonzero(candidates & (take > 0))
+        return sel, take[sel]
 
     def levels_for_resolutions(self, resolution_m: np.ndarray) -> np.ndarray:
         """Vectorised :meth:`level_for_resolution`."""
-        levels = np.array(sorted({n.level for n in self.nodes}), dtype=np.int64)
+        levels = self._levels
         k = np.searchsorted(-self._spacing[levels], -np.asarray(resolution_m, dtype=np.float64), side="left")
         return levels[np.minimum(k, len(levels) - 1)]
 
     def read_nodes(self, selection: Selection, attributes: Sequence[str]) -> Points:
         """Read, per tile, the first ``take[k]`` points of each node ``indices[k]`` of
-        ``selection[tile] = (indices, take)`` (indices into ``node_arrays[tile]``, ascending): only
+        ``selection[tile] = (indices, take)`` (indices into ``by_tile[tile]``, ascending): only
         the inner chunks those ranges touch are decoded (:meth:`_values`)."""
         plan: dict[str, tuple[int, np.ndarray | None]] = {}
         for tile, (sel, take) in selection.items():
-            starts = self.node_arrays[tile][3][sel]
+            starts = self.by_tile[tile].start[sel]
             idx = np.repeat(starts - np.r_[0, np.cumsum(take)[:-1]], take) + np.arange(int(take.sum()))
             plan[tile] = (int((starts + take).max()), idx)
         out = self._gather(plan, attributes)
-        out.stats.levels = {t: int(self.node_arrays[t][2][sel].max()) for t, (sel, _) in selection.items()}
+        out.stats.levels = {t: self._deepest(t, sel, take) for t, (sel, take) in selection.items()}
         return out
+
+    def _deepest(self, tile: str, sel: np.ndarray, take: np.ndarray) -> int:
+        """The deepest level a read of the first ``take`` points of nodes ``sel`` reaches."""
+        below = self.by_tile[tile].below[sel]
+        return int((np.sum(below[:, 1:] < take[:, None], axis=1)).max(initial=0))
 
     def points_for_view(
         self,
@@ -463,9 +506,9 @@ class SceneTiles:
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
-            lo, hi, lv, _, count = self.node_arrays[tile]
-            keep = boxes_in_frustum(planes, lo, hi) & (True if level is None else lv <= level)
-            sel = np.flatnonzero(keep)
+            nodes = self.by_tile[tile]
+            take = nodes.count if level is None else nodes.up_to(level)
+            sel = np.flatnonzero(boxes_in_frustum(planes, nodes.lo, nodes.hi) & (take > 0))
             if len(sel):
-                selection[tile] = (sel, count[sel])
+                selection[tile] = (sel, take[sel])
         return selection, planes

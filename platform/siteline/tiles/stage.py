@@ -39,8 +39,8 @@ def tile_scene(
     """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
     ``retile`` (tile it again in the current layout, e.g. a store written before shuffled nodes).
 
-    The store is published whole before the node rows, its address and the scene's status are
-    committed; a store without rows (a crash between the two) is replaced. A re-tiling writes the
+    The store (its node index inside) is published whole before its address and the scene's status
+    are committed; a store without rows (a crash between the two) is replaced. A re-tiling writes the
     next generation beside the old store, commits, then removes the old one: the scene's pairs'
     outputs are keyed by the generation, and its imported label sets, aligned with the old order,
     are refused until imported again (siteline.labelsets). One tiling of a scene runs at a time (a
@@ -62,10 +62,10 @@ def _tile(
         return TileOutcome(None, plan.already_tiled())
     spec = spec or TileSpec(tile_size_m=plan.site.tile_size_m)
     run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
-    tiling, nodes = execute_tiling(plan, store, spec, plan.generation(done), workers, progress)
+    tiling = execute_tiling(plan, store, spec, plan.generation(done), workers, progress)
     try:
         with catalog.transaction() as s:
-            record_tiling(s, scene_id, tiling, nodes, run)
+            record_tiling(s, scene_id, tiling, run)
     except BaseException:
         store.remove(tiling.uri)
         raise
@@ -76,5 +76,6 @@ def _tile(
     return TileOutcome(
         tiling,
         f"scene {scene_id} {verb}: {tiling.points:,} points in {tiling.tiles} tiles, {tiling.levels} levels, "
-        f"{tiling.bytes_per_point:.1f} bytes/point",
+        f"{tiling.nodes:,} nodes, {tiling.bytes_per_point:.1f} bytes/point "
+        f"(the source file: {tiling.source_bytes_per_point:.1f})",
     )
