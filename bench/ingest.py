@@ -1,15 +1,20 @@
-"""Ingest benchmark: points/s of `siteline ingest` on a LAS and a LAZ file beside a plain laspy
-chunked read of the same file in the same run, and peak memory at two sizes.
+"""Ingest benchmark: `siteline ingest` (ingest + tile) of LAS and LAZ files of the same 100 m x 100 m
+site at two densities, against a plain laspy read and a lazrs decode of the same file in the same run.
 
-    python bench/ingest.py [--points 20000000] [--small 5000000]
+    python bench/ingest.py [--small 4000000] [--large 40000000] [--workers 2]
 
-Each measurement runs in its own subprocess so its peak resident memory (ru_maxrss) is its own.
+Per file: M points/s of ingest + tile and of the tile stage alone, per core, as a ratio of the plain
+read (LAS) and of the lazrs decode (LAZ, laspy's parallel lazrs backend); peak resident memory; bytes
+per point of the tile store against the LAZ file; node index rows and points per node. Each
+measurement runs in its own subprocess so its peak memory (ru_maxrss) is its own; the last lines are
+the growth from the small to the large density (memory should stay flat, nodes grow with points).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -21,37 +26,46 @@ import laspy
 import numpy as np
 
 ORIGIN = np.array([445_000.0, 5_030_000.0, 80.0])
+HALF_M = 50.0  # the site: 100 m x 100 m, i.e. 4 tiles of 50 m
 
 
-def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.5) -> None:
-    """A flat-ish site of n points over 300 m x 300 m written in chunks (memory stays bounded);
-    z_noise_m spreads them vertically (0.5: a slab of clutter; 0.02: a surface)."""
+def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.05, half_m: float = HALF_M) -> None:
+    """n points over a (2 half_m)^2 site, written in chunks (memory stays bounded), in flight-line
+    order (sorted by GPS time along y strips, as a scanner writes them); z_noise_m spreads them
+    vertically about a gentle surface."""
     from siteline.lasio import fill_record, las_header
 
     rng = np.random.default_rng(seed)
-    header = las_header("EPSG:32618", ORIGIN - [200, 200, 10], 0.001)
+    header = las_header("EPSG:32618", ORIGIN - [half_m + 10, half_m + 10, 10], 0.001)
+    step = 2_000_000
     with laspy.open(path, mode="w", header=header) as w:
-        for start in range(0, n, 2_000_000):
-            k = min(2_000_000, n - start)
-            xyz = np.c_[rng.uniform(-150, 150, (k, 2)), rng.normal(0, z_noise_m, k)] + ORIGIN
+        for start in range(0, n, step):
+            k = min(step, n - start)
+            # a strip of the site per chunk: the scanner sweeps it in time order
+            y0 = -half_m + 2 * half_m * start / n
+            y1 = -half_m + 2 * half_m * (start + k) / n
+            xy = np.c_[rng.uniform(-half_m, half_m, k), np.sort(rng.uniform(y0, y1, k))]
+            z = 0.02 * xy[:, 0] + 0.5 * np.sin(xy[:, 1] / 7.0) + rng.normal(0, z_noise_m, k)
             rec = laspy.ScaleAwarePointRecord.zeros(k, header=header)
             fill_record(
                 rec,
-                xyz,
+                np.c_[xy, z] + ORIGIN,
                 rgb=rng.integers(0, 256, (k, 3), dtype=np.uint8),
                 classification=rng.choice(np.array([2, 6, 19], np.uint8), k),
                 intensity=rng.integers(0, 255, k),
-                gps_time=rng.uniform(0, 1000, k),
+                gps_time=400_000.0 + (start + np.arange(k)) * 2e-6,
                 return_number=np.ones(k, np.uint8),
             )
             w.write_points(rec)
 
 
-def child(mode: str, path: str) -> None:
+def child(mode: str, path: str, workers: int) -> None:
     t = time.perf_counter()
-    if mode == "read":
+    out: dict = {}
+    if mode == "read":  # plain laspy: LAS read, or LAZ decode with the parallel lazrs backend
         n = 0
-        with laspy.open(path) as r:
+        backend = laspy.LazBackend.LazrsParallel
+        with laspy.open(path, laz_backend=backend) as r:
             for pts in r.chunk_iterator(1_000_000):
                 np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z)
                 n += len(pts)
@@ -62,6 +76,7 @@ def child(mode: str, path: str) -> None:
         from siteline.config import Settings, sqlite_url
         from siteline.ingest import ingest_mission
         from siteline.site import make_site_spec
+        from siteline.tiles import tile_scene
 
         home = Path(tempfile.mkdtemp())
         settings = Settings(home, sqlite_url(home / "c.sqlite"))
@@ -69,71 +84,87 @@ def child(mode: str, path: str) -> None:
         migrate.upgrade(e)
         e.dispose()
         cat = open_catalog(settings)
+        h = HALF_M + 5
         with cat.transaction() as s:
-            add_site(
-                s,
-                make_site_spec(
-                    "b",
-                    "EPSG:32618",
-                    ORIGIN,
-                    [(-120, -120), (120, -120), (120, 120), (-120, 120), (-120, -120)],
-                ),
-            )
+            add_site(s, make_site_spec("b", "EPSG:32618", ORIGIN, [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)]))
         t = time.perf_counter()
         r = ingest_mission(cat, settings, Path(path).parent, "b")
-        n = r.scan["point_count"]
+        t_ingest = time.perf_counter() - t
+        tiling = tile_scene(cat, settings, r.scene_id, workers=workers).tiling
+        assert tiling is not None
+        n = tiling.points
+        out = {
+            "ingest_s": t_ingest,
+            "tile_s": tiling.seconds,
+            "bytes_per_point": tiling.bytes_per_point,
+            "nodes": tiling.nodes,
+            "tiles": tiling.tiles,
+        }
     sec = time.perf_counter() - t
-    print(
-        json.dumps(
-            {
-                "points": n,
-                "seconds": sec,
-                "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            }
-        )
-    )
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # the largest worker
+    print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))
 
 
-def run(mode: str, path: Path) -> dict:
+def run(mode: str, path: Path, workers: int) -> dict:
     out = subprocess.run(
-        [sys.executable, __file__, "--child", mode, str(path)], capture_output=True, text=True, check=True
+        [sys.executable, __file__, "--child", mode, str(path), str(workers)], capture_output=True, text=True
     )
+    if out.returncode:
+        raise SystemExit(f"{mode} of {path} failed:\n{out.stderr[-3000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--points", type=int, default=20_000_000)
-    ap.add_argument("--small", type=int, default=5_000_000)
-    ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
+    ap.add_argument("--small", type=int, default=4_000_000)
+    ap.add_argument("--large", type=int, default=40_000_000)
+    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        child(*args.child)
+        child(args.child[0], args.child[1], int(args.child[2]))
         return
+    cores = args.workers
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for n in (args.small, args.points):
-            for ext in ("las", "laz"):
+        for n in (args.small, args.large):
+            laz_bpp = 0.0
+            for ext in ("laz", "las"):
                 d = Path(tmp) / f"{n}-{ext}"
                 d.mkdir()
                 path = d / f"cloud.{ext}"
                 make_las(path, n)
-                plain = run("read", path)
-                ours = run("ingest", path)
-                rows.append((n, ext, plain, ours))
+                if ext == "laz":
+                    laz_bpp = path.stat().st_size / n
+                plain = run("read", path, cores)
+                ours = run("ingest", path, cores)
+                rows.append((n, ext, plain, ours, laz_bpp))
                 path.unlink()
-    print("| points | format | laspy read M pts/s | ingest M pts/s | ingest / read | ingest peak MiB |")
-    print("|---|---|---|---|---|---|")
-    for n, ext, plain, ours in rows:
-        pr, ir = plain["points"] / plain["seconds"], ours["points"] / ours["seconds"]
+    print(f"site 100 m x 100 m; {cores} worker processes on {os.cpu_count()} cores")
+    print(
+        "| points | pts/m2 | format | baseline M pts/s | ingest+tile M pts/s (per core) | tile only M pts/s (per core) "
+        "| x baseline | peak MiB (main / worker) | store B/pt | LAZ B/pt | nodes | pts/node |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for n, ext, plain, ours, laz_bpp in rows:
+        base = plain["points"] / plain["seconds"]
+        total = ours["points"] / (ours["ingest_s"] + ours["tile_s"])
+        tile = ours["points"] / ours["tile_s"]
+        label = "LAS (laspy read)" if ext == "las" else "LAZ (lazrs decode)"
         print(
-            f"| {n / 1e6:.0f}M | {ext.upper()} | {pr / 1e6:.2f} | {ir / 1e6:.2f} | {ir / pr:.2f} | {ours['peak_mib']:.0f} |"
+            f"| {n / 1e6:.0f}M | {n / (2 * HALF_M) ** 2:,.0f} | {label} | {base / 1e6:.2f} | "
+            f"{total / 1e6:.2f} ({total / cores / 1e6:.2f}) | {tile / 1e6:.2f} ({tile / cores / 1e6:.2f}) | "
+            f"{total / base:.2f} | {ours['peak_mib']:.0f} / {ours['worker_peak_mib']:.0f} | "
+            f"{ours['bytes_per_point']:.1f} | {laz_bpp:.1f} | {ours['nodes']:,} | {n / max(ours['nodes'], 1):,.0f} |"
         )
-    peaks = {(n, ext): ours["peak_mib"] for n, ext, _, ours in rows}
     for ext in ("las", "laz"):
+        small = next(o for n, e, _, o, _ in rows if n == args.small and e == ext)
+        large = next(o for n, e, _, o, _ in rows if n == args.large and e == ext)
+        peak = max(large["peak_mib"], large["worker_peak_mib"]) / max(small["peak_mib"], small["worker_peak_mib"])
         print(
-            f"peak memory {ext.upper()}: {args.points / 1e6:.0f}M / {args.small / 1e6:.0f}M = "
-            f"{peaks[(args.points, ext)] / peaks[(args.small, ext)]:.2f}x"
+            f"{ext.upper()} {args.large / args.small:.0f}x the density: peak memory {peak:.2f}x, "
+            f"nodes {large['nodes'] / small['nodes']:.2f}x"
         )
 
 

@@ -111,7 +111,7 @@ def view_read(points: int) -> None:
 
     with tempfile.TemporaryDirectory() as d:
         las = Path(d) / "c.las"
-        make_las(las, points, z_noise_m=0.02)  # a surface, as LiDAR samples it
+        make_las(las, points, z_noise_m=0.02, half_m=150.0)  # a 300 m surface, as LiDAR samples it
         stores = {}
         for order in ("random", "input"):
             r = write_tiles(
