@@ -6,11 +6,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from siteline.pairs import PairParams, process_pair
 
 BASE = {"scale": 0.25, "point_size_px": 3, "views": 4, "seed": 0, "min_coverage": 0.3}
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_low_valid_views_are_replaced(scenes) -> None:
     settings, cat = scenes
     loose = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=0.0))

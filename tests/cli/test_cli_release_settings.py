@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from sitehelpers import SYNTH, epoch_dirs, make_home, run_cli
 
 from siteline.catalog import open_catalog
@@ -46,6 +47,7 @@ def test_site_settings_are_stored_shown_updated_and_checked(home, capsys) -> Non
     assert json.loads(run_cli(capsys, "site", "show", "s", "--json")[1])["release_settings"]["preset"] == "fast"
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_release_build_uses_the_site_settings_and_is_up_to_date_once_built(tmp_path, synth_site) -> None:
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)

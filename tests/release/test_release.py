@@ -135,6 +135,7 @@ def test_bad_requests_write_nothing(built) -> None:
         assert s.query(Release).filter_by(name="x").count() == 0
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_new_parameters_bump_the_major_version_and_diff(built) -> None:
     settings, cat, pub = built
     info = pipeline.release(
@@ -202,6 +203,7 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     assert every.coverage_a >= coarse.coverage_a
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_preset_is_applied_and_recorded(built) -> None:
     from siteline.presets import PRESETS
 
@@ -220,6 +222,7 @@ def test_preset_is_applied_and_recorded(built) -> None:
     assert (lin["parameters"]["scale"], lin["parameters"]["point_size_px"]) == (0.5, 3)  # a knob beats its preset
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_store) -> None:
     """The first pair released from an S3 store: the same images, masks and lineage as the local one."""
     _, _, local = built

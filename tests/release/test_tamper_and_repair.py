@@ -142,6 +142,7 @@ def _killed(settings, target: str, *argv: str) -> None:
     assert proc.returncode == -signal.SIGKILL, proc.stderr[-2000:]
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     settings, cat, _ = built
     for name in ("crash-a", "crash-b"):

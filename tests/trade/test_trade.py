@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 
+import pytest
+
 from siteline.cli import main
 from siteline.cli.bench import _bench_trade
 
@@ -16,6 +18,7 @@ def test_pareto_front() -> None:
     assert pareto(costs, values) == [0, 1, 4]
 
 
+@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_bench_trade_quick_run(tmp_path, capsys) -> None:
     code = main(
         ["bench", "trade", "--quick", "--views", "2", "--site-density", "2", "--out", str(tmp_path / "t")]
