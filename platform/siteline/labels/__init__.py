@@ -6,8 +6,7 @@ by every command that takes release knobs) do not pull in the tile store and zar
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from siteline.lazy import lazy_names
 
 _WHERE = {
     "CHANGED": "siteline.labels.change",
@@ -23,7 +22,4 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _WHERE:
-        raise AttributeError(f"module 'siteline.labels' has no attribute {name!r}")
-    return getattr(importlib.import_module(_WHERE[name]), name)
+__getattr__ = lazy_names(__name__, _WHERE)

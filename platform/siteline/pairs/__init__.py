@@ -8,8 +8,7 @@ pull in the renderer and torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from siteline.lazy import lazy_names
 
 _WHERE = {
     "LabelledPair": "siteline.pairs.render",
@@ -30,7 +29,4 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _WHERE:
-        raise AttributeError(f"module 'siteline.pairs' has no attribute {name!r}")
-    return getattr(importlib.import_module(_WHERE[name]), name)
+__getattr__ = lazy_names(__name__, _WHERE)

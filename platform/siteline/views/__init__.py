@@ -6,8 +6,7 @@ pull in the renderer and torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from siteline.lazy import lazy_names
 
 _WHERE = {
     "SAMPLER_VERSION": "siteline.views.params",
@@ -32,7 +31,4 @@ _WHERE = {
 __all__ = sorted(_WHERE)
 
 
-def __getattr__(name: str) -> Any:
-    if name not in _WHERE:
-        raise AttributeError(f"module 'siteline.views' has no attribute {name!r}")
-    return getattr(importlib.import_module(_WHERE[name]), name)
+__getattr__ = lazy_names(__name__, _WHERE)
