@@ -3,7 +3,8 @@ site at two densities, against a plain laspy read and a lazrs decode of the same
 
     python bench/ingest.py [--small 4000000] [--large 40000000] [--workers 2]
 
-Per file: M points/s of ingest + tile and of the tile stage alone, per core, as a ratio of the plain
+Per file: M points/s of ingest + tile and of the tile stage alone (which takes the partition into
+tile runs that ingest's scan kept, siteline.partition), per core, as a ratio of the plain
 read (LAS) and of the lazrs decode (LAZ, laspy's parallel lazrs backend); peak resident memory; bytes
 per point of the tile store against the LAZ file; node index rows and points per node. Each
 measurement runs in its own subprocess so its peak memory (ru_maxrss) is its own; the last lines are
@@ -101,6 +102,9 @@ def child(mode: str, path: str, workers: int) -> None:
             "tiles": tiling.tiles,
         }
     sec = time.perf_counter() - t
+    from siteline.workers import shutdown_pools
+
+    shutdown_pools(wait=True)  # the workers' peak memory counts once they have exited
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # the largest worker
     print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))

@@ -156,13 +156,16 @@ def _point_records(
         yield pts
 
 
-def detect_eight_bit(reader: laspy.LasReader, chunk_points: int = DEFAULT_CHUNK_POINTS) -> bool | None:
-    """Whether the file's colour holds 0-255 in 16-bit fields, judged as :func:`iter_chunks` does (its
-    first ``chunk_points`` points); None when it has no colour. Leaves the reader at point 0."""
+def detect_eight_bit(reader: laspy.LasReader, path: Path, chunk_points: int = DEFAULT_CHUNK_POINTS) -> bool | None:
+    """Whether the file ``path``'s colour holds 0-255 in 16-bit fields, judged as :func:`iter_chunks`
+    does (its first ``chunk_points`` points); None when it has no colour. Leaves the reader at point 0."""
     if "red" not in reader.header.point_format.dimension_names:
         return None
-    pts = reader.read_points(min(chunk_points, int(reader.header.point_count)))
-    reader.seek(0)
+    try:
+        pts = reader.read_points(min(chunk_points, int(reader.header.point_count)))
+        reader.seek(0)
+    except (laspy.LaspyException, OSError, ValueError, RuntimeError) as exc:
+        raise PointCloudError(f"point cloud {path} is truncated or corrupt: {exc}") from exc
     rgb = [np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)]
     return bool(max((int(c.max(initial=0)) for c in rgb), default=0) <= 255)
 

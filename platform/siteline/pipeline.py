@@ -49,7 +49,9 @@ def ingest(
 ) -> Ingested:
     """Ingest ``mission_dir`` as a scene of ``site`` and tile it. A mission already ingested is not
     ingested again; its scene is tiled if it is not yet."""
-    result = ingest_mission(catalog, settings, Path(mission_dir), site, opts, progress, run_id=run_id)
+    result = ingest_mission(
+        catalog, settings, Path(mission_dir), site, opts, progress, run_id=run_id, workers=workers
+    )
     if result.scene_id is None:
         return Ingested(result, None)
     tiled = tile_scene(catalog, settings, result.scene_id, workers=workers, progress=progress, run_id=run_id)
@@ -145,4 +147,6 @@ def release(
         for out in outputs.values()
         for sid, v in ((out.t1, out.versions.t1), (out.t2, out.versions.t2))
     }
-    return build_release(catalog, settings, site, name, params, chosen, version, run_id, used, publish, progress)
+    return build_release(
+        catalog, settings, site, name, params, chosen, version, run_id, used, publish, progress
+    )

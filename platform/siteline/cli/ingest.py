@@ -75,7 +75,9 @@ def ingest(
     max_rms_m: float = typer.Option(
         0.1, "--max-georegistration-rms-m", help="Largest accepted georegistration RMS, metres."
     ),
-    workers: int = typer.Option(2, "--workers", help="Processes writing tiles (each owns whole tiles)."),
+    workers: int = typer.Option(
+        2, "--workers", help="Processes reading the point cloud (in point ranges) and writing tiles (each owns whole tiles)."
+    ),
     captured_at: str | None = typer.Option(
         None,
         "--captured-at",

@@ -7,7 +7,17 @@ and ``siteline.pipeline`` import this package; the primitives it builds on (``si
 ``siteline.sitestream``, ``siteline.hashing``, ``siteline.stores``) live below it.
 """
 
-from siteline.ingest.options import IngestOptions
-from siteline.ingest.stage import IngestResult, ingest_mission
+from __future__ import annotations
 
-__all__ = ["IngestOptions", "IngestResult", "ingest_mission"]
+from siteline.lazy import lazy_names
+
+# imported on first use: a worker process that reads a point cloud needs none of the stage's catalog
+_WHERE = {
+    "IngestOptions": "siteline.ingest.options",
+    "IngestResult": "siteline.ingest.stage",
+    "ingest_mission": "siteline.ingest.stage",
+}
+__all__ = sorted(_WHERE)
+
+
+__getattr__ = lazy_names(__name__, _WHERE)

@@ -43,16 +43,24 @@ def load_sample(store: Store, sha256: str | None) -> np.ndarray | None:
 
 
 def execute_ingest(
-    plan: IngestPlan, opts: IngestOptions, store: Store, progress: Progress = no_progress
+    plan: IngestPlan,
+    opts: IngestOptions,
+    store: Store,
+    progress: Progress = no_progress,
+    workers: int = 1,
+    runs_into: Path | None = None,
 ) -> CheckedMission:
-    """Read and check the mission of ``plan``: nothing is stored yet. :class:`MissionError` (or the
-    error of the check that failed) names the file and the problem."""
+    """Read and check the mission of ``plan`` (its point cloud over ``workers`` processes): nothing is
+    stored yet; the point cloud's tile runs go into the empty folder ``runs_into`` when given
+    (siteline.partition). :class:`MissionError` (or the error of the check that failed) names
+    the file and the problem."""
     root, entries = plan.manifest.root, plan.manifest.entries
     las = choose_las(entries, root)
     z_unit = parse_z_unit(opts.z_unit) if opts.z_unit else None
     scan = scan_las(
-        root / las.path, plan.site, opts.crs, z_unit=z_unit, progress=step(progress, "reading points")
-    )
+        root / las.path, plan.site, opts.crs, z_unit=z_unit, progress=step(progress, "reading points"),
+        workers=workers, runs_into=runs_into,
+    )  # fmt: skip
     scan = scan.at(las.path)
     photos = read_photos(entries, root)
     cameras, registration, source = register_cameras(

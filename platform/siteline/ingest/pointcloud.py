@@ -1,5 +1,6 @@
-"""The one validating pass of ingest over a mission's LAS/LAZ (through :mod:`siteline.sitestream`):
-statistics, unknown codes, and a sample of stable-class points for the alignment check."""
+"""The one validating pass of ingest over a mission's LAS/LAZ (through :mod:`siteline.partition`, in
+parallel point ranges): statistics, unknown codes, and a sample of stable-class points for the
+alignment check; the same pass cuts the points into tile runs that the tile stage takes over."""
 
 from __future__ import annotations
 
@@ -8,14 +9,23 @@ from pathlib import Path
 
 import laspy
 import numpy as np
+import pyproj
 
 from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import PointCloudError
-from siteline.lasio import DEFAULT_CHUNK_POINTS, open_las
+from siteline.lasio import detect_eight_bit, open_las
+from siteline.partition import (
+    Partition,
+    PassSource,
+    RunWriter,
+    point_ranges,
+    read_file,
+)
 from siteline.progress import no_step
-from siteline.records.scan import LasScan
+from siteline.records.scan import COLOUR_NAMES, LasScan
+from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
-from siteline.sitestream import SiteChunk, site_chunks, source_crs, source_transformer
+from siteline.sitestream import SiteChunk, source_crs, source_transformer
 
 STABLE_CLASSES = ("ground", "building")
 
@@ -27,33 +37,68 @@ def scan_las(
     *,
     z_unit: ZUnit | None = None,
     sample_max: int = 200_000,
-    chunk_points: int = DEFAULT_CHUNK_POINTS,
     progress: Callable[..., None] = no_step,
     seed: int = 0,
+    workers: int = 1,
+    runs_into: Path | None = None,
 ) -> LasScan:
-    """Read ``path`` once in chunks (one open of the file): bring coordinates into the site CRS in
-    float64, refuse non-finite or absurd ones, map classes through the site taxonomy, and gather
-    statistics. z is converted to metres from ``z_unit`` (``--z-unit``) or the unit the file's CRS
-    implies (recorded in the scan). ``progress(amount, total)`` receives the header's point count
+    """Read ``path`` once, in parallel point ranges over ``workers`` processes: bring coordinates into
+    the site CRS in float64, refuse non-finite or absurd ones, map classes through the site taxonomy,
+    and gather statistics. z is converted to metres from ``z_unit`` (``--z-unit``) or the unit the
+    file's CRS implies (recorded in the scan). ``runs_into``: an empty folder where the same pass
+    cuts the points into tile runs on the site's default grid, for the tile stage
+    (siteline.partition; the caller keeps or removes it). ``progress(amount, total)`` receives the header's point count
     before reading and the points read as they go."""
     path = Path(path)
     with open_las(path) as reader:
-        return _scan(reader, path, site, crs_override, z_unit, sample_max, chunk_points, progress, seed)
+        header = reader.header
+        n_total = int(header.point_count)
+        src = source_crs(path, crs_override, reader)
+        eight_bit = detect_eight_bit(reader, path) if n_total else None
+    progress(0, n_total)
+    tr = source_transformer(path, site, src, z_unit)
+    source = PassSource(str(path), site, crs_text(src), z_unit_of(src, z_unit).to_dict(), eight_bit)
+    stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
+    keep_p = min(1.0, sample_max / max(n_total, 1))
+    ranges = point_ranges(n_total, workers)
+    spec = TileSpec(tile_size_m=site.tile_size_m)
+    folder = runs_into
+    visitors = [
+        (_Totals(stable_ids, keep_p, (seed, k), eight_bit),)
+        + ((RunWriter(str(folder), f"run-{k:05d}.bin", spec.to_dict()),) if folder else ())
+        for k in range(len(ranges))
+    ]
+    t = _Totals(stable_ids, keep_p, (seed, 0), eight_bit)
+    runs = []
+    for done in read_file(source, n_total, visitors, workers, lambda _l, n, _t: progress(n)):
+        t.merge(done[0])
+        runs += [v.run() for v in done[1:]]
+    if t.count != n_total:
+        raise PointCloudError(
+            f"point cloud {path}: header says {n_total} points but {t.count} were read (truncated?)."
+        )
+    if folder is not None:
+        Partition(folder, tuple(runs)).save()
+    if t.count == 0:
+        raise PointCloudError(f"point cloud {path} holds no points.")
+    return _scan(path, header, site, src, tr, z_unit, t)
 
 
 class _Totals:
     """What the scan accumulates chunk by chunk."""
 
-    def __init__(self, stable_ids: np.ndarray, keep_p: float, seed: int) -> None:
+    def __init__(
+        self, stable_ids: np.ndarray, keep_p: float, seed: tuple[int, int], eight_bit: bool | None
+    ) -> None:
         self.stable_ids, self.keep_p = stable_ids, keep_p
-        self.rng = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(list(seed))
         self.hist = np.zeros(256, np.int64)
         self.unknown = np.zeros(256, np.int64)
         self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)
         self.count = self.outside = 0
         self.tmin, self.tmax = np.inf, -np.inf
         self.samples: list[np.ndarray] = []
-        self.colour = "none"
+        self.colour = "none" if eight_bit is None else COLOUR_NAMES[eight_bit]
 
     def add(self, sc: SiteChunk) -> None:
         local, chunk, cls = sc.local, sc.chunk, sc.classes
@@ -66,39 +111,29 @@ class _Totals:
         if chunk.gps_time is not None and len(chunk.gps_time):
             self.tmin = min(self.tmin, float(chunk.gps_time.min()))
             self.tmax = max(self.tmax, float(chunk.gps_time.max()))
-        if chunk.rgb is not None:
-            self.colour = "rgb 8-bit stored in 16-bit fields" if chunk.colour_8bit else "rgb 16-bit"
         stable = np.isin(cls, self.stable_ids) & (self.rng.random(len(cls)) < self.keep_p)
         self.samples.append(local[stable])
 
+    def merge(self, other: _Totals) -> None:
+        """Add the totals of another range."""
+        self.unknown += other.unknown
+        self.outside += other.outside
+        self.hist += other.hist
+        self.lo, self.hi = np.minimum(self.lo, other.lo), np.maximum(self.hi, other.hi)
+        self.count += other.count
+        self.tmin, self.tmax = min(self.tmin, other.tmin), max(self.tmax, other.tmax)
+        self.samples += other.samples
+
 
 def _scan(
-    reader: laspy.LasReader,
     path: Path,
+    header: laspy.LasHeader,
     site: SiteSpec,
-    crs_override: str | None,
+    src: pyproj.CRS,
+    tr: object,
     z_unit: ZUnit | None,
-    sample_max: int,
-    chunk_points: int,
-    progress: Callable[..., None],
-    seed: int,
+    t: _Totals,
 ) -> LasScan:
-    header = reader.header
-    n_total = int(header.point_count)
-    progress(0, n_total)
-    src = source_crs(path, crs_override, reader)
-    tr = source_transformer(path, site, src, z_unit)
-    stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
-    t = _Totals(stable_ids, min(1.0, sample_max / max(n_total, 1)), seed)
-    for sc in site_chunks(path, site, tr, chunk_points, reader=reader):
-        t.add(sc)
-        progress(len(sc.local))
-    if t.count == 0:
-        raise PointCloudError(f"point cloud {path} holds no points.")
-    if t.count != n_total:
-        raise PointCloudError(
-            f"point cloud {path}: header says {n_total} points but {t.count} were read (truncated?)."
-        )
     area = max(float((t.hi[0] - t.lo[0]) * (t.hi[1] - t.lo[1])), 1e-6)
     names = {c.id: c.name for c in site.taxonomy.classes}
     day = header.creation_date

@@ -8,6 +8,7 @@ the commit removes the blobs this ingest added (and no other's)."""
 from __future__ import annotations
 
 import logging
+import shutil
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,9 +25,13 @@ from siteline.ingest.execute import execute_ingest, store_mission
 from siteline.ingest.inventory import mission_manifest
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
+from siteline.partition import keep_partition, new_partition_folder, partition_key
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
 from siteline.records.runs import StageRun
+from siteline.records.scan import EIGHT_BIT
+from siteline.records.tiling import TileSpec
+from siteline.stores import layout
 from siteline.stores.blobs import remove_blobs
 
 log = logging.getLogger(__name__)
@@ -104,9 +109,11 @@ def ingest_mission(
     opts: IngestOptions | None = None,
     progress: Progress = no_progress,
     run_id: str | None = None,
+    workers: int = 2,
 ) -> IngestResult:
     """Inventory, validate, georegister and register ``mission_dir`` as a scene of ``site_name``; a
-    mission already ingested (same manifest) is not ingested again."""
+    mission already ingested (same manifest) is not ingested again. The point cloud is read over
+    ``workers`` processes, and its partition into tile runs is kept for the tile stage."""
     opts = opts or IngestOptions()
     with catalog.transaction() as s:
         get_site(s, site_name)  # an unknown site is refused before a byte is hashed
@@ -118,5 +125,20 @@ def ingest_mission(
         if plan.existing is not None:
             return _already(plan)
         run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
-        checked = execute_ingest(plan, opts, settings.store, progress)
-        return _store_and_record(catalog, settings, plan, checked, run, progress)
+        home = layout.partitions(settings.home)
+        runs = new_partition_folder(home)
+        try:
+            checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
+            result = _store_and_record(catalog, settings, plan, checked, run, progress)
+            keep_partition(runs, home, _partition_key(checked, plan))
+            return result
+        finally:
+            shutil.rmtree(runs, ignore_errors=True)
+
+
+def _partition_key(checked: CheckedMission, plan: IngestPlan) -> str:
+    """The name the tile stage looks for the scene's partition under (siteline.partition)."""
+    scan, site = checked.scan, plan.site
+    spec = TileSpec(tile_size_m=site.tile_size_m)
+    eight_bit = EIGHT_BIT.get(scan.colour)
+    return partition_key(checked.las_sha256, site, scan.source_crs, scan.z_unit, eight_bit, spec)

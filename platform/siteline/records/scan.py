@@ -10,6 +10,10 @@ from typing import Any
 
 import numpy as np
 
+# how a scan names a file's colour, and whether it is 0-255 in 16-bit fields
+COLOUR_NAMES = {True: "rgb 8-bit stored in 16-bit fields", False: "rgb 16-bit"}
+EIGHT_BIT = {name: eight for eight, name in COLOUR_NAMES.items()}
+
 
 @dataclass(frozen=True)
 class LasScan:

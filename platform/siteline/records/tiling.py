@@ -25,8 +25,10 @@ class TileSpec:
     spacing would fall below this. node_points: the points a node holds at least where the tile has
     them (levels are banded and bands cut into cubes to reach it, siteline.tiles.nodes): the index
     grows with points / node_points; smaller nodes cull views more finely at the cost of more rows.
-    max_node_depth: the deepest octree depth that splits a band into nodes (3: cubes of T / 8, 6.25 m
-    for 50 m tiles), so a view reads fine levels only where it needs them. node_order: order of the points inside a node, "random"
+    max_node_depth: the deepest octree depth that splits a band into nodes (6: cubes of T / 64,
+    0.78 m for 50 m tiles; a band takes the deepest depth whose cubes still average node_points, so
+    nodes stay near node_points up to tens of thousands of points/m2), so a view reads fine levels
+    only where it needs them. node_order: order of the points inside a node, "random"
     (seeded shuffle, so every prefix of a node is a uniform subsample of it and a view can read part
     of a level) or "input" (stores written before it: only whole nodes are read).
     chunk_points / shard_points: Zarr inner chunk and shard length. clevel: blosc-zstd level.
@@ -37,7 +39,7 @@ class TileSpec:
     root_spacing_m: float | None = None
     min_spacing_m: float = 0.02
     max_levels: int = 12
-    max_node_depth: int = 3
+    max_node_depth: int = 6
     node_points: int = 4096
     node_order: NodeOrder = "random"
     chunk_points: int = 65_536

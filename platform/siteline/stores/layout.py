@@ -62,6 +62,12 @@ def scratch(home: Path) -> Path:
     return home / "tmp"
 
 
+def partitions(home: Path) -> Path:
+    """Partitions of point clouds into tile runs that ingest keeps for the tile stage
+    (siteline.partition; claimed by tiling, or swept after a week)."""
+    return home / "partitions"
+
+
 def releases(home: Path) -> Path:
     return home / "releases"
 

@@ -3,30 +3,30 @@
 The tile stage: :func:`plan_tiling` (catalog) -> :func:`execute_tiling` (write and publish the
 store) -> ``siteline.catalog.scenes.record_tiling``; :func:`tile_scene` runs the three."""
 
-from siteline.records.tiling import NodeTable, SceneTiling, TileSource, TileSpec
-from siteline.tiles.execute import execute_tiling
-from siteline.tiles.export import export_las
-from siteline.tiles.lod import assign_levels
-from siteline.tiles.plan import TilingPlan, plan_tiling
-from siteline.tiles.reader import Points, ReadStats, SceneTiles
-from siteline.tiles.stage import TileOutcome, tile_scene
-from siteline.tiles.writer import TileResult, write_tiles
+from __future__ import annotations
 
-__all__ = [
-    "NodeTable",
-    "Points",
-    "ReadStats",
-    "SceneTiles",
-    "SceneTiling",
-    "TileOutcome",
-    "TileResult",
-    "TileSource",
-    "TileSpec",
-    "TilingPlan",
-    "assign_levels",
-    "execute_tiling",
-    "export_las",
-    "plan_tiling",
-    "tile_scene",
-    "write_tiles",
-]
+from siteline.lazy import lazy_names
+
+# imported on first use: a worker process that writes tiles needs none of the stage's catalog
+_WHERE = {
+    "NodeTable": "siteline.records.tiling",
+    "SceneTiling": "siteline.records.tiling",
+    "TileSource": "siteline.records.tiling",
+    "TileSpec": "siteline.records.tiling",
+    "execute_tiling": "siteline.tiles.execute",
+    "export_las": "siteline.tiles.export",
+    "assign_levels": "siteline.tiles.lod",
+    "TilingPlan": "siteline.tiles.plan",
+    "plan_tiling": "siteline.tiles.plan",
+    "Points": "siteline.tiles.reader",
+    "ReadStats": "siteline.tiles.reader",
+    "SceneTiles": "siteline.tiles.reader",
+    "TileOutcome": "siteline.tiles.stage",
+    "tile_scene": "siteline.tiles.stage",
+    "TileResult": "siteline.tiles.writer",
+    "write_tiles": "siteline.tiles.writer",
+}
+__all__ = sorted(_WHERE)
+
+
+__getattr__ = lazy_names(__name__, _WHERE)

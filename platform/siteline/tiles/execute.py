@@ -39,9 +39,11 @@ def execute_tiling(
     generation: int,
     workers: int = 2,
     progress: Progress = no_progress,
+    partitions: Path | None = None,
 ) -> SceneTiling:
     """Tile the scene of ``plan`` into the store at its ``generation``'s address, published whole (a
-    store left there without its marker is replaced), its node index inside; return the tiling."""
+    store left there without its marker is replaced), its node index inside; return the tiling. A
+    partition of the point cloud that ingest kept in ``partitions`` is used when it matches."""
     las = scene_las(store, plan)
     src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
     z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
@@ -60,6 +62,7 @@ def execute_tiling(
             progress=progress,
             z_unit=z_unit,
             eight_bit=plan.eight_bit,
+            kept=(partitions, plan.las.sha256) if partitions is not None else None,
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,

@@ -20,25 +20,16 @@ import math
 import numpy as np
 
 from siteline.errors import TileError
+from siteline.partition import COUNTS as COUNTS  # the name tiles store their positions under
+from siteline.partition import RECORD
 from siteline.records.tiling import TileSpec
 
 # Stored arrays per tile. Positions are stored as ``xyz_counts`` (int32 quanta from the tile origin)
 # and come back from reads as ``xyz_m`` (site-local metres): the two never share a name. Stores
 # written before the rename call the counts ``xyz`` (LEGACY_COUNTS); reads fall back to it.
-COUNTS = "xyz_counts"
 LEGACY_COUNTS = "xyz"
 METRES = "xyz_m"
-ATTRIBUTES = (COUNTS, "rgb", "intensity", "class", "gps_time", "return_number")
-SPILL_DTYPE = np.dtype(
-    [
-        (COUNTS, "<i4", (3,)),
-        ("rgb", "u1", (3,)),
-        ("intensity", "<u2"),
-        ("class", "u1"),
-        ("gps_time", "<f8"),
-        ("return_number", "u1"),
-    ]
-)
+ATTRIBUTES: tuple[str, ...] = RECORD.names or ()
 
 
 def tile_index(xy_local: np.ndarray, tile_size_m: float) -> np.ndarray:

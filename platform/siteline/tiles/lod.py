@@ -6,6 +6,7 @@ import numpy as np
 
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import level_count
+from siteline.tiles.sorting import sort_by_key
 
 _BIG = np.iinfo(np.int64).max
 
@@ -34,9 +35,9 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, seed: int) -> np.ndarray:
     subsample and levels partition the points.
 
     When the cubes nest (each level's edge is half the previous one, in whole quanta: the default
-    spec), the points are sorted once in Morton order, where every cube of every level is a
-    contiguous run, and each level is a segmented minimum over those runs; otherwise each level sorts
-    its own cube keys.
+    spec), the points are sorted once by (Morton code, rank), where every cube of every level is a
+    contiguous run, and each level looks only at the next point of each finest cube
+    (:func:`_assign_nested`); otherwise each level sorts its own cube keys.
     """
     n = len(counts)
     levels = np.full(n, 255, dtype=np.uint8)
@@ -45,31 +46,57 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, seed: int) -> np.ndarray:
     last = level_count(spec) - 1
     order = np.random.default_rng(seed).permutation(n)
     pts = counts.astype(np.int64)
-    pts = pts - np.array([0, 0, pts[:, 2].min()])
+    pts[:, 2] -= pts[:, 2].min()
     cells = _cell_counts(spec, last)
     fine = cells[-1] if cells else 1
     nested = all(cells[i] == cells[i + 1] * 2 for i in range(len(cells) - 1))
-    k = np.floor_divide(pts, fine) if cells else pts
     if last == 0:
         levels[:] = 0
         return levels
-    if not nested or k.min() < 0 or k.max() >= 2**21:
+    if not nested or pts.min() < 0:
         return _assign_by_sorting(pts, order, cells, last, levels)
+    return _assign_nested(_nested_key(pts, fine, last - 1), order, last, levels)
+
+
+def _nested_key(pts: np.ndarray, fine: int, depth: int) -> np.ndarray:
+    """(N,) int64 key of each point's finest cube (edge ``fine`` quanta) in which the cube of every
+    coarser level is a contiguous run: the level-0 cube (edge ``fine * 2**depth``) in row-major order,
+    then the octree path below it, 3 bits a level (a Morton code of the low ``depth`` bits)."""
+    k = pts >> (fine.bit_length() - 1) if fine & (fine - 1) == 0 else np.floor_divide(pts, fine)
+    top = k >> depth
+    span = top.max(axis=0) + 1
+    lut = _spread3(np.arange(1 << depth)).astype(np.int64)
+    low = k & ((1 << depth) - 1)
+    path = lut[low[:, 0]] | lut[low[:, 1]] << 1 | lut[low[:, 2]] << 2
+    return ((top[:, 2] * span[1] + top[:, 1]) * span[0] + top[:, 0]) << (3 * depth) | path
+
+
+def _assign_nested(cube_key: np.ndarray, order: np.ndarray, last: int, levels: np.ndarray) -> np.ndarray:
+    """Levels by nested cubes (``cube_key``: :func:`_nested_key`): points sorted by (finest cube,
+    random rank), so a cube of every level is
+    a contiguous run of finest cubes and each finest cube's points are in rank order. A level's
+    winner in a cube is the lowest-ranked remaining point, always at the head of one of its finest
+    cubes, so each level works on one head per finest cube, not on every point."""
+    n = len(cube_key)
     rank = np.empty(n, np.int64)
     rank[order] = np.arange(n)
-    morton = _spread3(k[:, 0]) | (_spread3(k[:, 1]) << np.uint64(1)) | (_spread3(k[:, 2]) << np.uint64(2))
-    srt = np.argsort(morton, kind="stable")
-    m_sorted = morton[srt]
-    masked = rank[srt]
+    m_sorted, s_rank = sort_by_key(cube_key, rank)
+    point = order[s_rank]  # the point at each sorted position (order: rank -> point)
+    new = np.ones(n, dtype=bool)
+    new[1:] = m_sorted[1:] != m_sorted[:-1]
+    head = np.flatnonzero(new)  # each finest cube's next remaining point
+    end = np.r_[head[1:], n]
+    cube_fine = m_sorted[head]
     for level in range(last):
-        key = m_sorted >> np.uint64(3 * (last - 1 - level))
+        key = cube_fine >> (3 * (last - 1 - level))
         starts = np.r_[0, np.flatnonzero(key[1:] != key[:-1]) + 1]
-        seg_min = np.minimum.reduceat(masked, starts)
-        seg_of = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, n]))
-        win = (masked == seg_min[seg_of]) & (masked != _BIG)
-        levels[srt[win]] = level
-        masked = np.where(win, _BIG, masked)
-    levels[srt[masked != _BIG]] = last
+        alive = head < end
+        head_rank = np.where(alive, s_rank[np.minimum(head, n - 1)], _BIG)
+        seg_min = np.minimum.reduceat(head_rank, starts)
+        win = (head_rank == np.repeat(seg_min, np.diff(np.r_[starts, len(key)]))) & alive
+        levels[point[head[win]]] = level
+        head[win] += 1
+    levels[levels == 255] = last
     return levels
 
 

@@ -21,12 +21,10 @@ import numpy as np
 
 from siteline.errors import TileError
 from siteline.records.tiling import NodeTable, TileSpec
+from siteline.tiles.sorting import sort_by_key
 
-_RAND_BITS = 20
 _LEVEL_BITS = 4
 _CUBE_BITS = 30
-_CUBE_SHIFT = _RAND_BITS + _LEVEL_BITS
-_BAND_SHIFT = _CUBE_SHIFT + _CUBE_BITS
 
 
 @dataclass(frozen=True)
@@ -98,9 +96,8 @@ def _depths(cubes: np.ndarray, band_of_point: np.ndarray, totals: np.ndarray, sp
 
 def order_tile(counts: np.ndarray, levels: np.ndarray, spec: TileSpec, n_levels: int, seed: int) -> TileOrder:
     """The node order of one tile's points. counts: (N, 3) int32 quanta from the tile origin; levels:
-    (N,) uint8 (siteline.tiles.lod); n_levels: the spec's level count. One sort of one int64 key
-    (band, cube, level, then seeded random bits; none for ``node_order="input"``, which keeps the
-    input order inside a node)."""
+    (N,) uint8 (siteline.tiles.lod); n_levels: the spec's level count. One sort by (band, cube,
+    level), ties broken by a seeded permutation (``node_order="input"``: by input order)."""
     n = len(levels)
     per_level = np.bincount(levels, minlength=n_levels)
     spans = bands(per_level, spec.node_points)
@@ -118,27 +115,34 @@ def order_tile(counts: np.ndarray, levels: np.ndarray, spec: TileSpec, n_levels:
     cube = (z - z0) << (2 * d) | (cubes[:, 1] >> shift) << d | (cubes[:, 0] >> shift)
     if n and int(cube.max()) >= 1 << _CUBE_BITS:
         raise TileError("a tile's points span too many cubes in z to index: is the z unit right?")
-    rand = (
-        np.random.default_rng(seed).integers(0, 1 << _RAND_BITS, n, dtype=np.int64)
-        if spec.node_order == "random"
-        else np.zeros(n, np.int64)
-    )
-    key = band << _BAND_SHIFT | cube << _CUBE_SHIFT | levels.astype(np.int64) << _RAND_BITS | rand
-    order = np.argsort(key, kind="stable")
-    node_key = key[order] >> _CUBE_SHIFT
+    if spec.node_order == "random":  # a seeded shuffle inside each level of a node
+        point_of = np.random.default_rng(seed).permutation(n)
+        tie = np.empty(n, np.int64)
+        tie[point_of] = np.arange(n)
+    else:  # input order
+        point_of, tie = None, np.arange(n)
+    cube_bits = max(int(cube.max(initial=0)).bit_length(), 1)
+    key = (band << cube_bits | cube) << _LEVEL_BITS | levels.astype(np.int64)
+    key_sorted, tie_sorted = sort_by_key(key, tie)
+    order = point_of[tie_sorted] if point_of is not None else tie_sorted
+    band_cube = key_sorted >> _LEVEL_BITS
     new = np.ones(n, dtype=bool)
-    new[1:] = node_key[1:] != node_key[:-1]
+    new[1:] = band_cube[1:] != band_cube[:-1]
     start = np.flatnonzero(new)
     count = np.diff(np.r_[start, n])
     node = np.cumsum(new) - 1
     width = len(band_of_level)
-    lc = np.bincount(node * width + levels[order], minlength=len(start) * width).reshape(len(start), width)
-    nb = node_key[start] >> _CUBE_BITS
+    lc = np.bincount(
+        node * width + (key_sorted & ((1 << _LEVEL_BITS) - 1)), minlength=len(start) * width
+    ).reshape(len(start), width)
+    nb = band_cube[start] >> cube_bits
     nd = depth_of_band[nb]
-    nc = node_key[start] & ((1 << _CUBE_BITS) - 1)
+    nc = band_cube[start] & ((1 << cube_bits) - 1)
     cell = np.stack([nc & ((1 << nd) - 1), (nc >> nd) & ((1 << nd) - 1), (nc >> (2 * nd)) + z0], axis=1)
     span = np.array(spans, np.uint8).reshape(-1, 2)[nb]
-    return TileOrder(order, span[:, 0], span[:, 1], nd.astype(np.int8), cell.astype(np.int32), start, count, lc)
+    return TileOrder(
+        order, span[:, 0], span[:, 1], nd.astype(np.int8), cell.astype(np.int32), start, count, lc
+    )
 
 
 def tile_table(tile: str, ordered: TileOrder, local_sorted: np.ndarray) -> NodeTable:

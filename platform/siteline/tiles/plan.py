@@ -11,11 +11,9 @@ from siteline.catalog.scenes import get_scene, las_location, scene_statistics
 from siteline.catalog.sites import site_of
 from siteline.errors import TileError
 from siteline.records.mission import LasLocation
+from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import SceneTiling
 from siteline.site import SiteSpec
-
-# what ingest's scan recorded about colour -> whether it is 0-255 in 16-bit fields
-EIGHT_BIT = {"rgb 8-bit stored in 16-bit fields": True, "rgb 16-bit": False}
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from siteline.config import Settings
 from siteline.progress import Progress, no_progress
 from siteline.records.runs import StageRun
 from siteline.records.tiling import SceneTiling, TileSpec
+from siteline.stores import layout
 from siteline.tiles.execute import execute_tiling
 from siteline.tiles.plan import plan_tiling
 
@@ -62,7 +63,8 @@ def _tile(
         return TileOutcome(None, plan.already_tiled())
     spec = spec or TileSpec(tile_size_m=plan.site.tile_size_m)
     run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
-    tiling = execute_tiling(plan, store, spec, plan.generation(done), workers, progress)
+    kept = layout.partitions(settings.home)
+    tiling = execute_tiling(plan, store, spec, plan.generation(done), workers, progress, kept)
     try:
         with catalog.transaction() as s:
             record_tiling(s, scene_id, tiling, run)

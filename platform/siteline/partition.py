@@ -1,0 +1,299 @@
+"""One pass over a LAS/LAZ file in the site frame, in parallel point ranges, that cuts its points
+into tile runs: records (:data:`RECORD`) sorted by site-grid tile within each chunk, one run file per
+range with a (tile, offset, count) row per chunk and tile. Ingest's scan rides the same pass (its
+statistics are another visitor of each chunk), so a file is decoded once for ingest and tiling; the
+tile writer gathers each tile's slices of the runs (siteline.tiles.writer).
+
+A finished partition is kept under ``home/partitions/<key>``, the key a digest of everything that
+decides its records (the file's content, the site frame, the source CRS and z unit, the colour
+depth, the tile grid and quantum), until the tile stage claims it (an atomic rename) or it is swept.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from siteline.crs import ZUnit, parse_source_crs
+from siteline.errors import TileError
+from siteline.progress import Progress, no_progress
+from siteline.records.tiling import TileSpec
+from siteline.site import SiteSpec
+from siteline.sitestream import SiteChunk, site_chunks, source_transformer
+from siteline.stores.owners import owner_tag, sweep_stale
+from siteline.workers import pool_map, process_pool
+
+# the stored arrays of a tile, as one record: int32 quanta from the tile origin, then the attributes
+COUNTS = "xyz_counts"
+RECORD = np.dtype(
+    [
+        (COUNTS, "<i4", (3,)),
+        ("rgb", "u1", (3,)),
+        ("intensity", "<u2"),
+        ("class", "u1"),
+        ("gps_time", "<f8"),
+        ("return_number", "u1"),
+    ]
+)
+# below this many points one process does everything (a pool costs about half a second to start)
+PARALLEL_MIN_POINTS = 2_000_000
+# points per range: small enough to report progress and balance the workers
+RANGE_POINTS = 4_000_000
+# a kept partition nobody claimed within this many seconds is removed by the next pass
+KEEP_S = 7 * 24 * 3600.0
+_TILE_OFFSET = 1 << 20
+_INDEX = "runs.npz"
+
+
+@dataclass(frozen=True)
+class PassSource:
+    """What a worker needs to read the file into the site frame (picklable): the file, the site, the
+    source CRS text, the z unit (dict) and whether colour is 0-255 in 16-bit fields."""
+
+    path: str
+    site: SiteSpec
+    crs: str
+    z_unit: dict[str, Any] | None
+    eight_bit: bool | None
+
+    def key(self, content_sha256: str, spec: TileSpec) -> str:
+        """The name of a partition of this file's content cut on ``spec``'s grid."""
+        return partition_key(content_sha256, self.site, self.crs, self.z_unit, self.eight_bit, spec)
+
+
+def partition_key(
+    content_sha256: str,
+    site: SiteSpec,
+    crs: str,
+    z_unit: dict[str, Any] | None,
+    eight_bit: bool | None,
+    spec: TileSpec,
+) -> str:
+    """A digest of everything that decides a partition's records: the file's content, the site
+    frame, the source CRS and z unit (resolved), the colour depth and the tile grid and quantum."""
+    doc = {
+        "sha256": content_sha256, "site": site.to_dict(), "crs": crs, "z_unit": z_unit,
+        "eight_bit": bool(eight_bit), "tile_size_m": spec.tile_size_m, "quantum_m": spec.quantum_m,
+        "record": RECORD.descr,
+    }  # fmt: skip
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+class ChunkVisitor(Protocol):
+    """What a pass hands every chunk of its range to (picklable: it travels to a worker and back)."""
+
+    def add(self, sc: SiteChunk) -> None: ...
+
+
+@dataclass(frozen=True)
+class Run:
+    """One range's run file (a name inside the partition folder): records sorted by tile within each
+    chunk, and per (chunk, tile) a row of ``tile_id``, ``offset`` (records) and ``count``."""
+
+    name: str
+    tile_id: np.ndarray
+    offset: np.ndarray
+    count: np.ndarray
+
+
+def tile_ids(ij: np.ndarray) -> np.ndarray:
+    """(N,) int64 ids of site-grid tiles (N, 2)."""
+    return (ij[:, 0] + _TILE_OFFSET) << 21 | (ij[:, 1] + _TILE_OFFSET)
+
+
+def tile_of(tile_id: int) -> tuple[int, int]:
+    """The (i, j) of a tile id."""
+    return (tile_id >> 21) - _TILE_OFFSET, (tile_id & ((1 << 21) - 1)) - _TILE_OFFSET
+
+
+def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A chunk's records sorted by tile (a radix sort of compact tile codes), the ids of the tiles it
+    touches and where each one's records start."""
+    n = len(sc.local)
+    ij = np.floor(sc.local[:, :2] * (1.0 / spec.tile_size_m)).astype(np.int64)
+    lo = ij.min(axis=0) if n else np.zeros(2, np.int64)
+    span = ij.max(axis=0) - lo + 1 if n else np.ones(2, np.int64)
+    code = (ij[:, 0] - lo[0]) * span[1] + (ij[:, 1] - lo[1])
+    order = np.argsort(code.astype(np.int16 if span.prod() < 2**15 else np.int64), kind="stable")
+    code = code[order]
+    first = np.r_[0, np.flatnonzero(code[1:] != code[:-1]) + 1] if n else np.zeros(0, np.int64)
+    tij = np.c_[code[first] // span[1] + lo[0], code[first] % span[1] + lo[1]]
+    # int32 quanta from each point's tile origin: x, y less the tile corner, z from 0
+    q = sc.local.copy()
+    q[:, :2] -= ij * spec.tile_size_m
+    q *= 1.0 / spec.quantum_m
+    np.rint(q, out=q)
+    if n and np.abs(q).max() >= 2**31 - 1:
+        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
+    rec = np.empty(n, RECORD)
+    rec[COUNTS] = q.astype(np.int32)[order]
+    ch = sc.chunk
+    rec["rgb"] = ch.rgb[order] if ch.rgb is not None else 0
+    rec["intensity"] = ch.intensity[order]
+    rec["class"] = sc.classes[order]
+    rec["gps_time"] = ch.gps_time[order] if ch.gps_time is not None else 0.0
+    rec["return_number"] = ch.return_number[order]
+    return rec, tile_ids(tij), first
+
+
+@dataclass
+class RunWriter:
+    """A visitor that appends each chunk's records, sorted by tile, to the run file ``folder/name``."""
+
+    folder: str
+    name: str
+    spec: dict[str, Any]
+    rows: list[np.ndarray] = field(default_factory=list)
+    written: int = 0
+
+    def add(self, sc: SiteChunk) -> None:
+        rec, ids, first = chunk_records(sc, TileSpec.from_dict(self.spec))
+        with open(os.path.join(self.folder, self.name), "ab") as fh:
+            rec.tofile(fh)
+        self.rows.append(np.c_[ids, self.written + first, np.diff(np.r_[first, len(rec)])])
+        self.written += len(rec)
+
+    def run(self) -> Run:
+        table = np.concatenate(self.rows) if self.rows else np.zeros((0, 3), np.int64)
+        return Run(self.name, table[:, 0], table[:, 1], table[:, 2])
+
+
+def read_range(source: PassSource, start: int, stop: int, visitors: tuple[Any, ...]) -> tuple[Any, ...]:
+    """Hand every chunk of points [start, stop) of the file, in the site frame, to each visitor (runs
+    in a worker process); return the visitors."""
+    path = Path(source.path)
+    z_unit = ZUnit.from_dict(source.z_unit) if source.z_unit else None
+    tr = source_transformer(path, source.site, parse_source_crs(source.crs), z_unit)
+    for sc in site_chunks(path, source.site, tr, start=start, stop=stop, eight_bit=source.eight_bit):
+        for v in visitors:
+            v.add(sc)
+    return visitors
+
+
+def point_ranges(total: int, workers: int) -> list[tuple[int, int]]:
+    """Point ranges of a file: about ``RANGE_POINTS`` each, at least one per worker when it is big
+    enough for a pool, cut at whole LAZ chunks (laszip's default 50,000 points)."""
+    if total <= 0:
+        return [(0, 0)]
+    pieces = max(workers if total >= PARALLEL_MIN_POINTS else 1, -(-total // RANGE_POINTS), 1)
+    size = -(-total // pieces)
+    size = -(-size // 50_000) * 50_000
+    return [(a, min(a + size, total)) for a in range(0, total, size)]
+
+
+def read_file(
+    source: PassSource,
+    total: int,
+    visitors: Sequence[tuple[Any, ...]],
+    workers: int,
+    progress: Progress = no_progress,
+    label: str = "reading points",
+) -> Iterator[tuple[Any, ...]]:
+    """One pass over the file's ``point_ranges(total, workers)``: range k's chunks go to
+    ``visitors[k]``; yields each range's visitors in order (from worker processes when the file is
+    big enough and ``workers`` > 1)."""
+    ranges = point_ranges(total, workers)
+    if len(visitors) != len(ranges):
+        raise ValueError(f"{len(ranges)} ranges but {len(visitors)} visitor sets")
+    pool = process_pool(workers) if workers > 1 and total >= PARALLEL_MIN_POINTS else None
+    starts, stops = (list(v) for v in zip(*ranges, strict=True))
+    for (a, b), done in zip(
+        ranges, pool_map(pool, read_range, [source] * len(ranges), starts, stops, visitors), strict=True
+    ):
+        progress(label, b - a, total)
+        yield done
+
+
+@dataclass(frozen=True)
+class Partition:
+    """A file's runs in ``folder`` (a local path)."""
+
+    folder: Path
+    runs: tuple[Run, ...]
+
+    def parts_by_tile(self) -> dict[tuple[int, int], list[tuple[str, int, int]]]:
+        """Per tile (i, j), its slices (run file path, offset, count) in run order."""
+        runs = self.runs
+        ids = np.concatenate([r.tile_id for r in runs])
+        offsets = np.concatenate([r.offset for r in runs])
+        counts = np.concatenate([r.count for r in runs])
+        which = np.concatenate([np.full(len(r.tile_id), k) for k, r in enumerate(runs)])
+        order = np.argsort(ids, kind="stable")
+        out: dict[tuple[int, int], list[tuple[str, int, int]]] = {}
+        rows = zip(
+            ids[order].tolist(),
+            which[order].tolist(),
+            offsets[order].tolist(),
+            counts[order].tolist(),
+            strict=True,
+        )
+        for tid, k, off, c in rows:
+            out.setdefault(tile_of(tid), []).append((str(self.folder / runs[k].name), off, c))
+        return out
+
+    def save(self) -> None:
+        """Write the index of the runs beside them."""
+        np.savez(
+            self.folder / _INDEX,
+            names=np.array([r.name for r in self.runs]),
+            lengths=np.array([len(r.tile_id) for r in self.runs], np.int64),
+            table=np.concatenate(
+                [np.c_[r.tile_id, r.offset, r.count] for r in self.runs] or [np.zeros((0, 3), np.int64)]
+            ),
+        )
+
+    @classmethod
+    def load(cls, folder: Path) -> Partition:
+        with np.load(folder / _INDEX) as doc:
+            names, lengths, table = doc["names"].tolist(), doc["lengths"], doc["table"]
+        at = np.r_[0, np.cumsum(lengths)]
+        runs = tuple(
+            Run(name, table[a:b, 0], table[a:b, 1], table[a:b, 2])
+            for name, a, b in zip(names, at[:-1], at[1:], strict=True)
+        )
+        return cls(folder, runs)
+
+
+def new_partition_folder(home: Path) -> Path:
+    """A fresh folder for a partition being written (owner-tagged; provably stale ones are swept,
+    and kept ones older than ``KEEP_S``)."""
+    home.mkdir(parents=True, exist_ok=True)
+    sweep_stale(home, ".new-*")
+    now = time.time()
+    for kept in home.iterdir():
+        if not kept.name.startswith(".") and now - kept.stat().st_mtime > KEEP_S:
+            shutil.rmtree(kept, ignore_errors=True)
+    folder = home / f".new-{owner_tag()}"
+    folder.mkdir()
+    return folder
+
+
+def keep_partition(folder: Path, home: Path, key: str) -> None:
+    """Move the saved partition ``folder`` to ``home/key`` for the tile stage (replacing one there)."""
+    dest = home / key
+    shutil.rmtree(dest, ignore_errors=True)
+    os.replace(folder, dest)
+
+
+def claim_partition(home: Path, key: str, into: Path) -> Partition | None:
+    """Take the kept partition ``home/key`` (moved to ``into``, so no other caller gets it), None when
+    there is none or it cannot be read."""
+    src = home / key
+    try:
+        os.replace(src, into)
+    except OSError:
+        return None
+    try:
+        return Partition.load(into)
+    except (OSError, ValueError, KeyError):
+        shutil.rmtree(into, ignore_errors=True)
+        return None

@@ -1,0 +1,84 @@
+"""Worker processes for the passes over a whole point cloud (ingest's scan and partition, tile
+writing): one spawned pool per worker count, started on first use and kept for the life of the
+process, so ingest and tiling in one process pay the start-up (about half a second a worker) once.
+
+spawn, not fork: zarr, lazrs and a Prefect worker run threads that a forked child must not inherit.
+Each worker keeps freed memory for reuse (glibc ``mallopt``): the passes allocate arrays of hundreds
+of MB in turn, and on virtual machines where the first touch of a page is slow, returning them to
+the system and faulting them in again doubled the time of levelling a tile."""
+
+from __future__ import annotations
+
+import atexit
+import ctypes
+import ctypes.util
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from multiprocessing import get_context
+from typing import Any
+
+_M_TRIM_THRESHOLD = -1
+_M_MMAP_MAX = -4
+_POOLS: dict[int, ProcessPoolExecutor] = {}
+_LOCK = threading.Lock()
+
+
+def keep_freed_memory() -> None:
+    """Make this process's allocator reuse freed memory instead of returning it (glibc; elsewhere
+    nothing). For worker processes only: their peak memory stays theirs until they exit."""
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name) if name else None
+        mallopt = getattr(libc, "mallopt", None)
+    except OSError:
+        mallopt = None
+    if mallopt is not None:
+        mallopt(_M_MMAP_MAX, 0)  # large arrays from the heap, which keeps them for reuse
+        mallopt(_M_TRIM_THRESHOLD, 2**30)
+
+
+def process_pool(workers: int) -> ProcessPoolExecutor:
+    """The process's pool of ``workers`` spawned processes (started now if it is not running)."""
+    with _LOCK:
+        pool = _POOLS.get(workers)
+        if pool is None:
+            pool = ProcessPoolExecutor(
+                max_workers=workers, mp_context=get_context("spawn"), initializer=keep_freed_memory
+            )
+            _POOLS[workers] = pool
+        return pool
+
+
+def discard_pool(workers: int) -> None:
+    """Shut down the pool of ``workers`` (after a worker died, say); the next call starts a new one."""
+    with _LOCK:
+        pool = _POOLS.pop(workers, None)
+    if pool is not None:
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+def pool_map(pool: Executor | None, fn: Callable[..., Any], *iterables: Iterable[Any]) -> Iterator[Any]:
+    """``fn`` over ``iterables`` in ``pool`` (results in order), or in this process when None. A pool
+    whose worker died is discarded so the next pass starts a fresh one."""
+    if pool is None:
+        yield from map(fn, *iterables)
+        return
+    try:
+        yield from pool.map(fn, *iterables)
+    except BrokenProcessPool:
+        for workers, known in list(_POOLS.items()):
+            if known is pool:
+                discard_pool(workers)
+        raise
+
+
+@atexit.register
+def shutdown_pools(wait: bool = False) -> None:
+    """Shut down every pool of the process (``wait``: until its workers have exited)."""
+    with _LOCK:
+        pools = list(_POOLS.values())
+        _POOLS.clear()
+    for pool in pools:
+        pool.shutdown(wait=wait, cancel_futures=True)

@@ -1,0 +1,77 @@
+"""Ingest reads a point cloud once for ingest and tiling: its scan, in parallel point ranges, cuts the
+points into tile runs that the tile stage takes over (siteline.partition)."""
+
+from __future__ import annotations
+
+import laspy
+import numpy as np
+import pytest
+from sitehelpers import copy_mission, epoch_dirs
+
+from siteline import partition
+from siteline.errors import RegistrationError
+from siteline.ingest import ingest_mission
+from siteline.ingest.pointcloud import scan_las
+from siteline.site import make_site_spec
+from siteline.stores import layout
+from siteline.synth import LAS_RELPATH
+from siteline.tiles import tile_scene
+
+
+def _kept(settings) -> list[str]:
+    home = layout.partitions(settings.home)
+    return sorted(p.name for p in home.iterdir()) if home.is_dir() else []
+
+
+def test_tiling_takes_the_partition_ingest_kept_and_writes_the_same_store(
+    cat, site_settings, synth_site
+) -> None:
+    r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    kept = _kept(site_settings)
+    assert len(kept) == 1 and not kept[0].startswith(".")
+    first = tile_scene(cat, site_settings, r.scene_id, workers=1).tiling
+    assert first is not None and _kept(site_settings) == []  # claimed and removed
+    # a re-tiling finds no partition, cuts the file itself, and writes the very same arrays
+    again = tile_scene(cat, site_settings, r.scene_id, workers=1, retile=True).tiling
+    assert again is not None and again.generation == first.generation + 1
+    assert again.checksum == first.checksum and again.points == first.points
+
+
+def test_a_failed_ingest_keeps_no_partition(cat, site_settings, synth_site, tmp_path) -> None:
+    ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    kept = _kept(site_settings)
+    mission = copy_mission(synth_site, 1, tmp_path)
+    las = laspy.read(mission / LAS_RELPATH)
+    las.z = np.asarray(las.z) - 1.0  # refused as misaligned, after the scan
+    las.write(mission / LAS_RELPATH)
+    with pytest.raises(RegistrationError):
+        ingest_mission(cat, site_settings, mission, "demo")
+    assert _kept(site_settings) == kept
+
+
+def test_parallel_ranges_scan_and_partition_as_one_process_does(synth_site, tmp_path, monkeypatch) -> None:
+    las = epoch_dirs(synth_site)[0] / LAS_RELPATH
+    with laspy.open(las) as r:
+        origin = (float(r.header.mins[0]) + 20, float(r.header.mins[1]) + 20, float(r.header.mins[2]))
+        crs = r.header.parse_crs()
+    site = make_site_spec("s", crs.to_string(), origin, None)
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    one = scan_las(las, site, workers=1, runs_into=tmp_path / "one")
+    monkeypatch.setattr(partition, "PARALLEL_MIN_POINTS", 1)
+    monkeypatch.setattr(partition, "RANGE_POINTS", 50_000)  # several ranges over two processes
+    two = scan_las(las, site, workers=2, runs_into=tmp_path / "two")
+    for field in ("point_count", "bounds_min", "bounds_max", "class_histogram", "unknown_codes", "outside_fence",
+                  "colour", "gps_time_range"):  # fmt: skip
+        assert getattr(one, field) == getattr(two, field), field
+    a, b = partition.Partition.load(tmp_path / "one"), partition.Partition.load(tmp_path / "two")
+    assert len(b.runs) > len(a.runs) == 1
+    pa, pb = a.parts_by_tile(), b.parts_by_tile()
+    assert pa.keys() == pb.keys()
+
+    def records(parts: list[tuple[str, int, int]]) -> np.ndarray:
+        return np.concatenate([np.fromfile(p, partition.RECORD, count=c, offset=o * partition.RECORD.itemsize)
+                               for p, o, c in parts])  # fmt: skip
+
+    for tile in pa:  # the same records per tile, in the same order
+        assert records(pa[tile]).tobytes() == records(pb[tile]).tobytes()
