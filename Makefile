@@ -24,7 +24,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/pytest $(PYTEST_ARGS)
 
+# the service test looks at the Prefect UI in headless Chromium: install Debian's when it is missing
 test-all: $(STAMP)
+	command -v chromium >/dev/null || ! command -v apt-get >/dev/null || apt-get install -y -q chromium || true
 	$(VENV)/bin/pytest -m "" $(PYTEST_ARGS)
 
 lint: $(STAMP)
