@@ -15,6 +15,7 @@ from siteline.cameras import Camera
 from siteline.errors import TileError
 from siteline.records.tiling import NodeTable, TileSource, TileSpec
 from siteline.stores import join, open_store
+from siteline.tiles import codecs as _codecs  # noqa: F401  (quiets zarr's warning on the codecs it reads)
 from siteline.tiles.index import read_index
 from siteline.tiles.layout import (
     ATTRIBUTES,

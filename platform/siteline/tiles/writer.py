@@ -116,7 +116,7 @@ async def _write_arrays(group_path: str, key: str, columns: dict[str, np.ndarray
             chunks=(spec.chunk_points, *values.shape[1:]),
             shards=(spec.shard_points, *values.shape[1:]),
             fill_value=0,
-            **array_codecs(name, values.dtype, spec),
+            **array_codecs(name, values, spec),
         )
         await arr.setitem(slice(None), values)
 
