@@ -1,6 +1,8 @@
 """One pass over a LAS/LAZ file in the site frame, in parallel point ranges, that cuts its points
-into tile runs: records (:data:`RECORD`) sorted by site-grid tile within each chunk, one run file per
-range with a (tile, offset, count) row per chunk and tile. Ingest's scan rides the same pass (its
+into tile runs: records (:data:`RECORD`) sorted by site-grid tile and block within each chunk, one
+run file per range with a (tile and block, offset, count) row per chunk, tile and block. A block is
+a column of a tile's level-0 cubes (:func:`block_edge`), so a tile's level of detail can be built a
+few blocks at a time (siteline.tiles.batches). Ingest's scan rides the same pass (its
 statistics are another visitor of each chunk), so a file is decoded once for ingest and tiling; the
 tile writer gathers each tile's slices of the runs (siteline.tiles.writer).
 
@@ -29,6 +31,7 @@ from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import SiteChunk, site_chunks, source_transformer
+from siteline.sorting import sort_by_key
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.workers import pool_map, process_pool
 
@@ -51,6 +54,7 @@ RANGE_POINTS = 4_000_000
 # a kept partition nobody claimed within this many seconds is removed by the next pass
 KEEP_S = 7 * 24 * 3600.0
 _TILE_OFFSET = 1 << 20
+_BLOCK_BITS = 16  # blocks a tile side: at most 256
 _INDEX = "runs.npz"
 
 
@@ -83,7 +87,7 @@ def partition_key(
     doc = {
         "sha256": content_sha256, "site": site.to_dict(), "crs": crs, "z_unit": z_unit,
         "eight_bit": bool(eight_bit), "tile_size_m": spec.tile_size_m, "quantum_m": spec.quantum_m,
-        "record": RECORD.descr,
+        "block": block_edge(spec), "record": RECORD.descr, "format": 2,
     }  # fmt: skip
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
@@ -96,37 +100,52 @@ class ChunkVisitor(Protocol):
 
 @dataclass(frozen=True)
 class Run:
-    """One range's run file (a name inside the partition folder): records sorted by tile within each
-    chunk, and per (chunk, tile) a row of ``tile_id``, ``offset`` (records) and ``count``."""
+    """One range's run file (a name inside the partition folder): records sorted by tile and block
+    within each chunk, and per (chunk, tile, block) a row of ``cell`` (:func:`cell_ids`), ``offset``
+    (records), ``count`` and ``zmin`` (the lowest z count)."""
 
     name: str
-    tile_id: np.ndarray
+    cell: np.ndarray
     offset: np.ndarray
     count: np.ndarray
+    zmin: np.ndarray
 
 
-def tile_ids(ij: np.ndarray) -> np.ndarray:
-    """(N,) int64 ids of site-grid tiles (N, 2)."""
-    return (ij[:, 0] + _TILE_OFFSET) << 21 | (ij[:, 1] + _TILE_OFFSET)
+def block_edge(spec: TileSpec) -> int:
+    """The edge of a tile's blocks in quanta: a level-0 cube's (the tile when a level-0 cube is
+    larger, or when a tile would need more than 256 blocks a side)."""
+    tile_q = int(round(spec.tile_size_m / spec.quantum_m))
+    edge = max(int(round(spec.level0_spacing_m / spec.quantum_m)), 1)
+    return tile_q if edge >= tile_q or -(-tile_q // edge) > 1 << (_BLOCK_BITS // 2) else edge
 
 
-def tile_of(tile_id: int) -> tuple[int, int]:
-    """The (i, j) of a tile id."""
+def blocks_per_side(spec: TileSpec) -> int:
+    tile_q = int(round(spec.tile_size_m / spec.quantum_m))
+    return -(-tile_q // block_edge(spec))
+
+
+def cell_ids(ij: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """(N,) int64 ids of (site-grid tile (N, 2), block in the tile (N,)), ordered by tile then block."""
+    return ((ij[:, 0] + _TILE_OFFSET) << 21 | (ij[:, 1] + _TILE_OFFSET)) << _BLOCK_BITS | block
+
+
+def tile_of(cell: int) -> tuple[int, int]:
+    """The (i, j) of a cell id."""
+    tile_id = cell >> _BLOCK_BITS
     return (tile_id >> 21) - _TILE_OFFSET, (tile_id & ((1 << 21) - 1)) - _TILE_OFFSET
 
 
-def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A chunk's records sorted by tile (a radix sort of compact tile codes), the ids of the tiles it
-    touches and where each one's records start."""
+def block_of(cell: int) -> int:
+    return cell & ((1 << _BLOCK_BITS) - 1)
+
+
+def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray]:
+    """A chunk's records sorted by tile and block (one value sort of packed codes) and a row per
+    cell (:func:`cell_ids`) it touches: (cell, first record, records, lowest z count). A block is row-major
+    ``by * blocks_per_side + bx`` of the tile's counts floored by :func:`block_edge` (a point rounded
+    onto the tile's far edge stays in the last block)."""
     n = len(sc.local)
     ij = np.floor(sc.local[:, :2] * (1.0 / spec.tile_size_m)).astype(np.int64)
-    lo = ij.min(axis=0) if n else np.zeros(2, np.int64)
-    span = ij.max(axis=0) - lo + 1 if n else np.ones(2, np.int64)
-    code = (ij[:, 0] - lo[0]) * span[1] + (ij[:, 1] - lo[1])
-    order = np.argsort(code.astype(np.int16 if span.prod() < 2**15 else np.int64), kind="stable")
-    code = code[order]
-    first = np.r_[0, np.flatnonzero(code[1:] != code[:-1]) + 1] if n else np.zeros(0, np.int64)
-    tij = np.c_[code[first] // span[1] + lo[0], code[first] % span[1] + lo[1]]
     # int32 quanta from each point's tile origin: x, y less the tile corner, z from 0
     q = sc.local.copy()
     q[:, :2] -= ij * spec.tile_size_m
@@ -134,20 +153,33 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
     np.rint(q, out=q)
     if n and np.abs(q).max() >= 2**31 - 1:
         raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
+    counts = q.astype(np.int32)
+    side = blocks_per_side(spec)
+    bxy = np.clip(counts[:, :2] // np.int32(block_edge(spec)), 0, side - 1).astype(np.int64)
+    lo = ij.min(axis=0) if n else np.zeros(2, np.int64)
+    span = ij.max(axis=0) - lo + 1 if n else np.ones(2, np.int64)
+    code = ((ij[:, 0] - lo[0]) * span[1] + (ij[:, 1] - lo[1])) * (side * side) + bxy[:, 1] * side + bxy[:, 0]
+    code, order = sort_by_key(code, np.arange(n))
+    first = np.r_[0, np.flatnonzero(code[1:] != code[:-1]) + 1] if n else np.zeros(0, np.int64)
+    c = code[first]
+    tile, block = c // (side * side), c % (side * side)
+    tij = np.c_[tile // span[1] + lo[0], tile % span[1] + lo[1]]
     rec = np.empty(n, RECORD)
-    rec[COUNTS] = q.astype(np.int32)[order]
+    rec[COUNTS] = counts[order]
+    zmin = np.minimum.reduceat(rec[COUNTS][:, 2], first) if n else np.zeros(0, np.int32)
     ch = sc.chunk
     rec["rgb"] = ch.rgb[order] if ch.rgb is not None else 0
     rec["intensity"] = ch.intensity[order]
     rec["class"] = sc.classes[order]
     rec["gps_time"] = ch.gps_time[order] if ch.gps_time is not None else 0.0
     rec["return_number"] = ch.return_number[order]
-    return rec, tile_ids(tij), first
+    return rec, np.c_[cell_ids(tij, block), first, np.diff(np.r_[first, n]), zmin]
 
 
 @dataclass
 class RunWriter:
-    """A visitor that appends each chunk's records, sorted by tile, to the run file ``folder/name``."""
+    """A visitor that appends each chunk's records, sorted by tile and block, to the run file
+    ``folder/name``."""
 
     folder: str
     name: str
@@ -156,15 +188,16 @@ class RunWriter:
     written: int = 0
 
     def add(self, sc: SiteChunk) -> None:
-        rec, ids, first = chunk_records(sc, TileSpec.from_dict(self.spec))
+        rec, rows = chunk_records(sc, TileSpec.from_dict(self.spec))
         with open(os.path.join(self.folder, self.name), "ab") as fh:
             rec.tofile(fh)
-        self.rows.append(np.c_[ids, self.written + first, np.diff(np.r_[first, len(rec)])])
+        rows[:, 1] += self.written
+        self.rows.append(rows)
         self.written += len(rec)
 
     def run(self) -> Run:
-        table = np.concatenate(self.rows) if self.rows else np.zeros((0, 3), np.int64)
-        return Run(self.name, table[:, 0], table[:, 1], table[:, 2])
+        table = np.concatenate(self.rows) if self.rows else np.zeros((0, 4), np.int64)
+        return Run(self.name, *table.T)
 
 
 def read_range(source: PassSource, start: int, stop: int, visitors: tuple[Any, ...]) -> tuple[Any, ...]:
@@ -220,24 +253,19 @@ class Partition:
     folder: Path
     runs: tuple[Run, ...]
 
-    def parts_by_tile(self) -> dict[tuple[int, int], list[tuple[str, int, int]]]:
-        """Per tile (i, j), its slices (run file path, offset, count) in run order."""
+    def parts_by_tile(self) -> dict[tuple[int, int], list[tuple[int, str, int, int, int]]]:
+        """Per tile (i, j), its slices (block, run file path, offset, count, lowest z count) by
+        block, then in run order."""
         runs = self.runs
-        ids = np.concatenate([r.tile_id for r in runs])
-        offsets = np.concatenate([r.offset for r in runs])
-        counts = np.concatenate([r.count for r in runs])
-        which = np.concatenate([np.full(len(r.tile_id), k) for k, r in enumerate(runs)])
-        order = np.argsort(ids, kind="stable")
-        out: dict[tuple[int, int], list[tuple[str, int, int]]] = {}
-        rows = zip(
-            ids[order].tolist(),
-            which[order].tolist(),
-            offsets[order].tolist(),
-            counts[order].tolist(),
-            strict=True,
-        )
-        for tid, k, off, c in rows:
-            out.setdefault(tile_of(tid), []).append((str(self.folder / runs[k].name), off, c))
+        cols = [np.concatenate([getattr(r, c) for r in runs]) for c in ("cell", "offset", "count", "zmin")]
+        which = np.concatenate([np.full(len(r.cell), k) for k, r in enumerate(runs)])
+        order = np.argsort(cols[0], kind="stable")
+        out: dict[tuple[int, int], list[tuple[int, str, int, int, int]]] = {}
+        rows = zip(*(c[order].tolist() for c in (cols[0], which, *cols[1:])), strict=True)
+        for cell, k, off, c, z in rows:
+            out.setdefault(tile_of(cell), []).append(
+                (block_of(cell), str(self.folder / runs[k].name), off, c, z)
+            )
         return out
 
     def save(self) -> None:
@@ -245,9 +273,9 @@ class Partition:
         np.savez(
             self.folder / _INDEX,
             names=np.array([r.name for r in self.runs]),
-            lengths=np.array([len(r.tile_id) for r in self.runs], np.int64),
+            lengths=np.array([len(r.cell) for r in self.runs], np.int64),
             table=np.concatenate(
-                [np.c_[r.tile_id, r.offset, r.count] for r in self.runs] or [np.zeros((0, 3), np.int64)]
+                [np.c_[r.cell, r.offset, r.count, r.zmin] for r in self.runs] or [np.zeros((0, 4), np.int64)]
             ),
         )
 
@@ -256,10 +284,7 @@ class Partition:
         with np.load(folder / _INDEX) as doc:
             names, lengths, table = doc["names"].tolist(), doc["lengths"], doc["table"]
         at = np.r_[0, np.cumsum(lengths)]
-        runs = tuple(
-            Run(name, table[a:b, 0], table[a:b, 1], table[a:b, 2])
-            for name, a, b in zip(names, at[:-1], at[1:], strict=True)
-        )
+        runs = tuple(Run(name, *table[a:b].T) for name, a, b in zip(names, at[:-1], at[1:], strict=True))
         return cls(folder, runs)
 
 
@@ -294,6 +319,6 @@ def claim_partition(home: Path, key: str, into: Path) -> Partition | None:
         return None
     try:
         return Partition.load(into)
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, IndexError, TypeError):
         shutil.rmtree(into, ignore_errors=True)
         return None

@@ -69,9 +69,9 @@ def test_parallel_ranges_scan_and_partition_as_one_process_does(synth_site, tmp_
     pa, pb = a.parts_by_tile(), b.parts_by_tile()
     assert pa.keys() == pb.keys()
 
-    def records(parts: list[tuple[str, int, int]]) -> np.ndarray:
+    def records(parts: list[tuple[int, str, int, int, int]]) -> np.ndarray:
         return np.concatenate([np.fromfile(p, partition.RECORD, count=c, offset=o * partition.RECORD.itemsize)
-                               for p, o, c in parts])  # fmt: skip
+                               for _, p, o, c, _ in parts])  # fmt: skip
 
     for tile in pa:  # the same records per tile, in the same order
         assert records(pa[tile]).tobytes() == records(pb[tile]).tobytes()

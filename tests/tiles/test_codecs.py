@@ -13,7 +13,8 @@ from siteline.tiles.codecs import array_codecs, time_scale
 def _stored(tmp_path, name: str, values: np.ndarray) -> tuple[np.ndarray, int, list]:
     arr = zarr.create_array(
         str(tmp_path / name), shape=values.shape, dtype=values.dtype, chunks=(4096, *values.shape[1:]),
-        fill_value=0, **array_codecs(name, values, TileSpec()),
+        fill_value=0,
+        **array_codecs(name, values.dtype, values.ndim, TileSpec(), time_scale(values)),
     )  # fmt: skip
     arr[...] = values
     back = zarr.open_array(str(tmp_path / name), mode="r")

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from siteline.records.tiling import TileSpec
+from siteline.sorting import sort_by_key
 from siteline.tiles import lod
 from siteline.tiles.layout import level_count
-from siteline.tiles.sorting import sort_by_key
 
 
 @pytest.mark.parametrize("n", [1, 2, 17, 5_000, 60_000])
@@ -22,11 +22,11 @@ def test_nested_levels_equal_the_level_by_level_definition(n: int) -> None:
     xy = np.r_[rng.uniform(0, 3_000, (n // 2, 2)), rng.uniform(0, 50_000, (n - n // 2, 2))]
     z = rng.normal(0, 200, n) + (rng.random(n) < 0.01) * 40_000
     counts = np.c_[xy, z].astype(np.int32)
-    got = lod.assign_levels(counts, spec, seed=3)
+    order = np.random.default_rng(3).permutation(n)
+    got = lod.assign_levels(counts, spec, order)
     last = level_count(spec) - 1
     pts = counts.astype(np.int64)
     pts[:, 2] -= pts[:, 2].min()
-    order = np.random.default_rng(3).permutation(n)
     want = lod._assign_by_sorting(pts, order, lod._cell_counts(spec, last), last, np.full(n, 255, np.uint8))
     assert np.array_equal(got, want)
     assert (got <= last).all()

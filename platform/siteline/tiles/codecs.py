@@ -34,39 +34,39 @@ TIME_SCALES = tuple(10.0**k for k in range(10))  # seconds to ns
 _PROBE = 4096
 
 
-def time_scale(values: np.ndarray) -> float | None:
-    """The coarsest of :data:`TIME_SCALES` at which every float64 of ``values`` survives the fixed
-    scale/offset codec (offset 0) bit for bit; None when none does (or a value is not finite)."""
+def round_trips(values: np.ndarray, scale: float) -> bool:
+    """Whether every float64 of ``values`` survives the fixed scale/offset codec at ``scale``."""
     from numcodecs import FixedScaleOffset
 
     values = np.ascontiguousarray(values, dtype=np.float64).ravel()
-    if not len(values):
-        return 1.0
+    if not np.isfinite(values).all() or float(np.abs(values).max(initial=0.0)) * scale >= 2.0**62:
+        return False
+    codec = FixedScaleOffset(offset=0, scale=scale, dtype="<f8", astype="<i8")
+    return bool(np.array_equal(codec.decode(codec.encode(values)), values))
+
+
+def time_scale(values: np.ndarray) -> float | None:
+    """The coarsest of :data:`TIME_SCALES` at which every float64 of ``values`` survives the fixed
+    scale/offset codec (offset 0) bit for bit; None when none does (or a value is not finite)."""
+    values = np.ascontiguousarray(values, dtype=np.float64).ravel()
     if not np.isfinite(values).all():
         return None
-    top = float(np.abs(values).max())
     probe = values[:: max(1, len(values) // _PROBE)]
-    for scale in (s for s in TIME_SCALES if top * s < 2.0**62):
-        codec = FixedScaleOffset(offset=0, scale=scale, dtype="<f8", astype="<i8")
-        if np.array_equal(codec.decode(codec.encode(probe)), probe) and np.array_equal(
-            codec.decode(codec.encode(values)), values
-        ):
-            return scale
-    return None
+    return next((s for s in TIME_SCALES if round_trips(probe, s) and round_trips(values, s)), None)
 
 
-def array_codecs(name: str, values: np.ndarray, spec: TileSpec) -> dict[str, Any]:
-    """``create_array`` keyword arguments (filters, compressors) for tile array ``name`` holding
-    ``values``."""
+def array_codecs(
+    name: str, dtype: np.dtype, ndim: int, spec: TileSpec, scale: float | None
+) -> dict[str, Any]:
+    """``create_array`` keyword arguments (filters, compressors) for tile array ``name`` of ``dtype``
+    and ``ndim`` dimensions; ``scale``: the gps_time scale (:func:`time_scale` of all its values)."""
     from zarr.codecs.numcodecs import FixedScaleOffset
 
     out: dict[str, Any] = {
         "compressors": BloscCodec(cname="zstd", clevel=spec.clevel, shuffle=BloscShuffle.bitshuffle)
     }
-    if values.ndim == 2:
+    if ndim == 2:
         out["filters"] = [TransposeCodec(order=(1, 0))]
-    elif name == "gps_time" and values.dtype == np.float64:
-        scale = time_scale(values)
-        if scale is not None:
-            out["filters"] = [FixedScaleOffset(offset=0, scale=scale, dtype="<f8", astype="<i8")]
+    elif name == "gps_time" and dtype == np.float64 and scale is not None:
+        out["filters"] = [FixedScaleOffset(offset=0, scale=scale, dtype="<f8", astype="<i8")]
     return out

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from siteline.records.tiling import TileSpec
+from siteline.sorting import sort_by_key
 from siteline.tiles.layout import level_count
-from siteline.tiles.sorting import sort_by_key
 
 _BIG = np.iinfo(np.int64).max
 
@@ -26,16 +26,33 @@ def _cell_counts(spec: TileSpec, levels: int) -> list[int]:
     return [max(1, int(round(spec.spacing(level) / spec.quantum_m))) for level in range(levels)]
 
 
-def assign_levels(counts: np.ndarray, spec: TileSpec, seed: int) -> np.ndarray:
-    """(N,) uint8 level of each point of one tile.
+def block_ranks(sizes: np.ndarray, seeds: list[list[int]]) -> np.ndarray:
+    """The seeded rank order of points that come block after block (``sizes[k]`` points of block k,
+    seeded ``seeds[k]``): (N,) the point at each rank, a permutation inside each block. A point's rank
+    thus depends only on its block, so a tile levelled a few blocks at a time gets the same levels."""
+    at = np.r_[0, np.cumsum(sizes)]
+    return np.concatenate(
+        [
+            a + np.random.default_rng(s).permutation(int(n))
+            for a, n, s in zip(at[:-1], sizes, seeds, strict=True)
+        ]
+        or [np.zeros(0, np.int64)]
+    )
 
-    counts: (N, 3) int32 quantised coordinates relative to the tile origin. In a seeded random order,
-    level L keeps the first point of every occupied cube of edge ``spec.spacing(L)`` among points not
-    kept by a lower level; the last level keeps all the rest. Every level is thus a spatially uniform
-    subsample and levels partition the points.
+
+def assign_levels(counts: np.ndarray, spec: TileSpec, order: np.ndarray, z0: int | None = None) -> np.ndarray:
+    """(N,) uint8 level of each point of one tile (or of whole level-0 cubes of it).
+
+    counts: (N, 3) int32 quantised coordinates relative to the tile origin; order: the points in
+    their seeded rank order (:func:`block_ranks`); z0: the tile's lowest z count (None: these
+    points'). In rank order, level L keeps the first point of every occupied cube of edge
+    ``spec.spacing(L)`` among points not kept by a lower level; the last level keeps all the rest.
+    Cubes lie on a grid from the tile origin, z from z0 (a surface rests on the bottom of its cubes,
+    not across two), so any set of whole level-0 cubes is levelled alike alone or with the rest of
+    its tile. Every level is thus a spatially uniform subsample and levels partition the points.
 
     When the cubes nest (each level's edge is half the previous one, in whole quanta: the default
-    spec), the points are sorted once by (Morton code, rank), where every cube of every level is a
+    spec), the points are sorted once by (cube path, rank), where every cube of every level is a
     contiguous run, and each level looks only at the next point of each finest cube
     (:func:`_assign_nested`); otherwise each level sorts its own cube keys.
     """
@@ -44,18 +61,17 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, seed: int) -> np.ndarray:
     if n == 0:
         return levels
     last = level_count(spec) - 1
-    order = np.random.default_rng(seed).permutation(n)
-    pts = counts.astype(np.int64)
-    pts[:, 2] -= pts[:, 2].min()
-    cells = _cell_counts(spec, last)
-    fine = cells[-1] if cells else 1
-    nested = all(cells[i] == cells[i + 1] * 2 for i in range(len(cells) - 1))
     if last == 0:
         levels[:] = 0
         return levels
-    if not nested or pts.min() < 0:
+    cells = _cell_counts(spec, last)
+    pts = counts.astype(np.int64)
+    pts[:, 2] -= pts[:, 2].min() if z0 is None else z0
+    pts -= np.floor_divide(pts.min(axis=0), cells[0]) * cells[0]  # non-negative, on the same grid
+    nested = all(cells[i] == cells[i + 1] * 2 for i in range(len(cells) - 1))
+    if not nested:
         return _assign_by_sorting(pts, order, cells, last, levels)
-    return _assign_nested(_nested_key(pts, fine, last - 1), order, last, levels)
+    return _assign_nested(_nested_key(pts, cells[-1], last - 1), order, last, levels)
 
 
 def _nested_key(pts: np.ndarray, fine: int, depth: int) -> np.ndarray:

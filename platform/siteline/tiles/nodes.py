@@ -1,6 +1,11 @@
 """A tile's nodes: bands of levels cut into octree cubes so that every node holds thousands of points
 (pure functions over one tile's arrays; the index they make is :class:`siteline.records.NodeTable`).
 
+A tile's node plan is made from its points counted per (level, finest node cube) (:func:`cube_counts`,
+which adds up over batches of points), and each point is then placed by its group (band, cube,
+level) and a seeded permutation of the group's slots (:meth:`NodePlan.place`): so a tile too big
+for memory is placed batch after batch, and gets the same arrays whatever its batches.
+
 Levels are grouped, coarse first, into bands of at least ``spec.node_points`` points of the tile (a
 short tail joins the band before it); a band is cut into the cubes of the deepest octree depth (at
 most ``spec.max_node_depth``) at which its occupied cubes still hold ``spec.node_points`` on average.
@@ -21,25 +26,10 @@ import numpy as np
 
 from siteline.errors import TileError
 from siteline.records.tiling import NodeTable, TileSpec
-from siteline.tiles.sorting import sort_by_key
+from siteline.sorting import sort_by_key
 
 _LEVEL_BITS = 4
 _CUBE_BITS = 30
-
-
-@dataclass(frozen=True)
-class TileOrder:
-    """A tile's point order and nodes: ``order`` (N,) indices that sort its points into nodes, and per
-    node (in array order) its band, depth, cube, start, count and points per level."""
-
-    order: np.ndarray
-    first_level: np.ndarray
-    level: np.ndarray
-    depth: np.ndarray
-    cell: np.ndarray
-    start: np.ndarray
-    count: np.ndarray
-    level_counts: np.ndarray
 
 
 def bands(per_level: np.ndarray, target: int) -> list[tuple[int, int]]:
@@ -70,95 +60,206 @@ def fine_cubes(counts: np.ndarray, spec: TileSpec) -> np.ndarray:
     return cubes
 
 
-def _depths(cubes: np.ndarray, band_of_point: np.ndarray, totals: np.ndarray, spec: TileSpec) -> np.ndarray:
-    """Per band, the deepest depth whose occupied cubes average ``spec.node_points`` (0 when none)."""
+_Z_OFFSET = 1 << 20
+_CUBE_KEY_BITS = 48
+
+
+def cube_counts(counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
+    """(M, 2) int64 rows of (level and finest cube, points) of one batch of a tile's points, sorted:
+    counts (N, 3) int32 quanta from the tile origin, levels (N,) uint8. :func:`add_cube_counts` adds
+    the rows of several batches."""
+    d = spec.max_node_depth
+    cubes = fine_cubes(counts, spec)
+    if len(cubes) and (np.abs(cubes[:, 2]).max() >= _Z_OFFSET):
+        raise TileError("a tile's points span too many cubes in z to index: is the z unit right?")
+    key = np.sort(
+        levels.astype(np.int64) << _CUBE_KEY_BITS
+        | (cubes[:, 2] + _Z_OFFSET) << (2 * d)
+        | cubes[:, 1] << d
+        | cubes[:, 0]
+    )
+    return _runs(key, np.ones(len(key), np.int64))
+
+
+def add_cube_counts(parts: list[np.ndarray]) -> np.ndarray:
+    """The rows of :func:`cube_counts` of several batches of one tile, added up."""
+    rows = np.concatenate(parts) if parts else np.zeros((0, 2), np.int64)
+    order = np.argsort(rows[:, 0], kind="stable")
+    return _runs(rows[order, 0], rows[order, 1])
+
+
+def _runs(sorted_key: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """(M, 2) rows of each distinct key of ``sorted_key`` and its summed ``weight``."""
+    if not len(sorted_key):
+        return np.zeros((0, 2), np.int64)
+    start = np.r_[0, np.flatnonzero(sorted_key[1:] != sorted_key[:-1]) + 1]
+    return np.c_[sorted_key[start], np.add.reduceat(weight, start)]
+
+
+def _depths(band: np.ndarray, fine: np.ndarray, totals: np.ndarray, spec: TileSpec) -> np.ndarray:
+    """Per band, the deepest depth whose occupied cubes average ``spec.node_points`` (0 when none).
+    band, fine: (M,) each occupied (band, finest cube (x, y, z) packed as in :func:`cube_counts`)."""
     top = spec.max_node_depth
-    nb = len(totals)
-    zmin = int(cubes[:, 2].min())
-    ids = (cubes[:, 2] - zmin) << (2 * top) | cubes[:, 1] << top | cubes[:, 0]
-    m = int(ids.max()) + 1
-    if nb * m > 2**26:  # a cloud thousands of cubes tall: judge the depth by columns
-        ids = cubes[:, 1] << top | cubes[:, 0]
-        m = 1 << (2 * top)
-    occupied = np.bincount(band_of_point * m + ids, minlength=nb * m).reshape(nb, m) > 0
-    out = np.zeros(nb, np.int64)
-    for b in range(nb):
-        fine = np.flatnonzero(occupied[b])
-        x, y, z = fine & ((1 << top) - 1), (fine >> top) & ((1 << top) - 1), fine >> (2 * top)
+    out = np.zeros(len(totals), np.int64)
+    x, y, z = fine & ((1 << top) - 1), (fine >> top) & ((1 << top) - 1), fine >> (2 * top)
+    for b in range(len(totals)):
+        mine = band == b
         for d in range(top, 0, -1):
             s = top - d
-            held = len(np.unique((z >> s) << (2 * d) | (y >> s) << d | (x >> s)))
+            held = len(np.unique((z[mine] >> s) << (2 * d) | (y[mine] >> s) << d | (x[mine] >> s)))
             if totals[b] >= spec.node_points * held:
                 out[b] = d
                 break
     return out
 
 
-def order_tile(counts: np.ndarray, levels: np.ndarray, spec: TileSpec, n_levels: int, seed: int) -> TileOrder:
-    """The node order of one tile's points. counts: (N, 3) int32 quanta from the tile origin; levels:
-    (N,) uint8 (siteline.tiles.lod); n_levels: the spec's level count. One sort by (band, cube,
-    level), ties broken by a seeded permutation (``node_order="input"``: by input order)."""
-    n = len(levels)
-    per_level = np.bincount(levels, minlength=n_levels)
+@dataclass(frozen=True)
+class NodePlan:
+    """Where a tile's points go: its groups (one band of one cube at one level) in array order, by
+    ``key`` (band, cube, level packed), each group's ``start`` and ``count`` in the tile's arrays; and
+    the nodes (a band in a cube: its groups) with their band, depth, cube, start, count and points
+    per level. ``seed`` seeds each group's slot permutation."""
+
+    key: np.ndarray
+    start: np.ndarray
+    count: np.ndarray
+    band_of_level: np.ndarray
+    depth_of_band: np.ndarray
+    z0: int
+    cube_bits: int
+    seed: int
+    random: bool
+    first_level: np.ndarray
+    level: np.ndarray
+    depth: np.ndarray
+    cell: np.ndarray
+    node_start: np.ndarray
+    node_count: np.ndarray
+    level_counts: np.ndarray
+
+    @property
+    def points(self) -> int:
+        return int(self.count.sum())
+
+    def keys_of(self, counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
+        """(N,) group key of each point (counts (N, 3) int32 quanta from the tile origin)."""
+        cubes = fine_cubes(counts, spec)
+        band = self.band_of_level[levels]
+        return _group_key(band, self.depth_of_band[band], cubes, levels, spec, self.z0, self.cube_bits)
+
+    def place(self, keys: np.ndarray, seen: np.ndarray) -> np.ndarray:
+        """(N,) array position of each of a batch of points (their group ``keys``, in the tile's
+        order): group g's points take its slots in a seeded permutation, batch after batch (``seen``:
+        per group, the points earlier batches placed; updated)."""
+        n = len(keys)
+        sorted_key, point = sort_by_key(keys, np.arange(n))
+        head = np.r_[0, np.flatnonzero(sorted_key[1:] != sorted_key[:-1]) + 1] if n else np.zeros(0, np.int64)
+        group = np.searchsorted(self.key, sorted_key[head])
+        if n and not np.array_equal(self.key[np.minimum(group, len(self.key) - 1)], sorted_key[head]):
+            raise TileError("a tile's points changed between its node plan and their placement.")
+        size = np.diff(np.r_[head, n])
+        slots = []
+        for g, k in zip(group.tolist(), size.tolist(), strict=True):
+            a = int(seen[g])
+            if self.random:
+                perm = np.random.default_rng([self.seed, g]).permutation(int(self.count[g]))
+                slots.append(perm[a : a + k])
+            else:  # input order
+                slots.append(np.arange(a, a + k))
+            seen[g] += k
+        where = np.empty(n, np.int64)
+        if n:
+            where[point] = np.repeat(self.start[group], size) + np.concatenate(slots)
+        return where
+
+    def table(self, tile: str, lo: np.ndarray, hi: np.ndarray) -> NodeTable:
+        """The node rows of the tile with its nodes' bounds (site-local metres)."""
+        return NodeTable(
+            (tile,),
+            tile=np.zeros(len(self.node_start), np.int32),
+            first_level=self.first_level,
+            level=self.level,
+            depth=self.depth,
+            cell=self.cell,
+            start=self.node_start,
+            count=self.node_count,
+            lo=lo,
+            hi=hi,
+            level_counts=self.level_counts,
+        )
+
+
+def _cube(d: np.ndarray, cubes: np.ndarray, spec: TileSpec, z0: int) -> np.ndarray:
+    """Each finest cube's cube at depth ``d``: z, y, x row-major at that depth, z counted from z0."""
+    shift = spec.max_node_depth - d
+    return ((cubes[:, 2] >> shift) - z0) << (2 * d) | (cubes[:, 1] >> shift) << d | (cubes[:, 0] >> shift)
+
+
+def _group_key(
+    band: np.ndarray,
+    d: np.ndarray,
+    cubes: np.ndarray,
+    levels: np.ndarray,
+    spec: TileSpec,
+    z0: int,
+    cube_bits: int,
+) -> np.ndarray:
+    """Packed (band, cube at depth ``d``, level): the order of a tile's arrays."""
+    return (band << cube_bits | _cube(d, cubes, spec, z0)) << _LEVEL_BITS | levels.astype(np.int64)
+
+
+def plan_nodes(rows: np.ndarray, spec: TileSpec, n_levels: int, seed: int) -> NodePlan:
+    """The node plan of a tile from its (level, finest cube) point counts (:func:`cube_counts`)."""
+    top = spec.max_node_depth
+    level = rows[:, 0] >> _CUBE_KEY_BITS
+    fine = rows[:, 0] & ((1 << _CUBE_KEY_BITS) - 1)
+    cubes = np.c_[fine & ((1 << top) - 1), (fine >> top) & ((1 << top) - 1), (fine >> (2 * top)) - _Z_OFFSET]
+    per_level = np.bincount(level, weights=rows[:, 1], minlength=n_levels).astype(np.int64)
     spans = bands(per_level, spec.node_points)
-    band_of_level = np.zeros(max(n_levels, int(levels.max(initial=0)) + 1), np.int64)
+    band_of_level = np.zeros(max(n_levels, len(per_level)), np.int64)
     for b, (f, last) in enumerate(spans):
         band_of_level[f : last + 1] = b
-    band = band_of_level[levels]
-    cubes = fine_cubes(counts, spec)
+    band = band_of_level[level]
     totals = np.array([per_level[f : last + 1].sum() for f, last in spans])
-    depth_of_band = _depths(cubes, band, totals, spec)
-    shift = spec.max_node_depth - depth_of_band[band]
+    packed = (cubes[:, 2] - cubes[:, 2].min(initial=0)) << (2 * top) | cubes[:, 1] << top | cubes[:, 0]
+    depth_of_band = _depths(band, packed, totals, spec)
     d = depth_of_band[band]
-    z = cubes[:, 2] >> shift
-    z0 = z.min(initial=0)
-    cube = (z - z0) << (2 * d) | (cubes[:, 1] >> shift) << d | (cubes[:, 0] >> shift)
-    if n and int(cube.max()) >= 1 << _CUBE_BITS:
+    z0 = int((cubes[:, 2] >> (top - d)).min(initial=0))
+    cube_max = int(_cube(d, cubes, spec, z0).max(initial=0))
+    if cube_max >= 1 << _CUBE_BITS:
         raise TileError("a tile's points span too many cubes in z to index: is the z unit right?")
-    if spec.node_order == "random":  # a seeded shuffle inside each level of a node
-        point_of = np.random.default_rng(seed).permutation(n)
-        tie = np.empty(n, np.int64)
-        tie[point_of] = np.arange(n)
-    else:  # input order
-        point_of, tie = None, np.arange(n)
-    cube_bits = max(int(cube.max(initial=0)).bit_length(), 1)
-    key = (band << cube_bits | cube) << _LEVEL_BITS | levels.astype(np.int64)
-    key_sorted, tie_sorted = sort_by_key(key, tie)
-    order = point_of[tie_sorted] if point_of is not None else tie_sorted
-    band_cube = key_sorted >> _LEVEL_BITS
-    new = np.ones(n, dtype=bool)
-    new[1:] = band_cube[1:] != band_cube[:-1]
-    start = np.flatnonzero(new)
-    count = np.diff(np.r_[start, n])
+    cube_bits = max(cube_max.bit_length(), 1)
+    key = _group_key(band, d, cubes, level, spec, z0, cube_bits)
+    order = np.argsort(key, kind="stable")
+    groups = _runs(key[order], rows[order, 1])
+    return _with_nodes(
+        groups, spans, depth_of_band, band_of_level, z0, cube_bits, seed, spec, len(band_of_level)
+    )
+
+
+def _with_nodes(
+    groups: np.ndarray, spans: list[tuple[int, int]], depth_of_band: np.ndarray, band_of_level: np.ndarray,
+    z0: int, cube_bits: int, seed: int, spec: TileSpec, width: int,
+) -> NodePlan:  # fmt: skip
+    """The plan of the groups (key, count) in array order, with their nodes."""
+    key, count = groups[:, 0], groups[:, 1]
+    start = np.r_[0, np.cumsum(count)[:-1]].astype(np.int64) if len(count) else np.zeros(0, np.int64)
+    band_cube = key >> _LEVEL_BITS
+    head = (
+        np.r_[0, np.flatnonzero(band_cube[1:] != band_cube[:-1]) + 1] if len(key) else np.zeros(0, np.int64)
+    )
+    new = np.zeros(len(key), bool)
+    new[head] = True
     node = np.cumsum(new) - 1
-    width = len(band_of_level)
-    lc = np.bincount(
-        node * width + (key_sorted & ((1 << _LEVEL_BITS) - 1)), minlength=len(start) * width
-    ).reshape(len(start), width)
-    nb = band_cube[start] >> cube_bits
+    lc = np.zeros((len(head), width), np.int64)
+    np.add.at(lc, (node, key & ((1 << _LEVEL_BITS) - 1)), count)
+    nb = band_cube[head] >> cube_bits
     nd = depth_of_band[nb]
-    nc = band_cube[start] & ((1 << cube_bits) - 1)
+    nc = band_cube[head] & ((1 << cube_bits) - 1)
     cell = np.stack([nc & ((1 << nd) - 1), (nc >> nd) & ((1 << nd) - 1), (nc >> (2 * nd)) + z0], axis=1)
     span = np.array(spans, np.uint8).reshape(-1, 2)[nb]
-    return TileOrder(
-        order, span[:, 0], span[:, 1], nd.astype(np.int8), cell.astype(np.int32), start, count, lc
-    )
-
-
-def tile_table(tile: str, ordered: TileOrder, local_sorted: np.ndarray) -> NodeTable:
-    """The node rows of one tile from its order and its points' site-local float64 positions (sorted)."""
-    lo = np.minimum.reduceat(local_sorted, ordered.start, axis=0)
-    hi = np.maximum.reduceat(local_sorted, ordered.start, axis=0)
-    return NodeTable(
-        (tile,),
-        tile=np.zeros(len(ordered.start), np.int32),
-        first_level=ordered.first_level,
-        level=ordered.level,
-        depth=ordered.depth,
-        cell=ordered.cell,
-        start=ordered.start.astype(np.int64),
-        count=ordered.count.astype(np.int64),
-        lo=lo,
-        hi=hi,
-        level_counts=ordered.level_counts.astype(np.int64),
-    )
+    return NodePlan(
+        key, start, count, band_of_level, depth_of_band, z0, cube_bits, seed, spec.node_order == "random",
+        span[:, 0], span[:, 1], nd.astype(np.int8), cell.astype(np.int32).reshape(-1, 3), start[head],
+        lc.sum(axis=1), lc,
+    )  # fmt: skip

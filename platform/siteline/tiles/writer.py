@@ -6,8 +6,9 @@ Two phases, both spread over worker processes (``workers``):
    keeps the partition its scan made (the same pass), so tiling right after ingest skips this phase;
    otherwise it runs here.
 2. **Write**: each tile gathers its slices of every run, is levelled (siteline.tiles.lod), ordered
-   into nodes (siteline.tiles.nodes) and written as whole arrays with their shards by one worker
-   (concurrent partial-shard writes lose data, zarr-python issue 3682).
+   into nodes (siteline.tiles.nodes) and written shard by shard by one worker, a batch of its
+   blocks at a time when it is large (siteline.tiles.batches; concurrent partial-shard writes lose
+   data, zarr-python issue 3682).
 
 The node index goes into the group as one set of compact arrays (siteline.tiles.index). The store is
 written in place: callers that need all-or-nothing publish it through ``siteline.stores.Store.publish``
@@ -20,12 +21,10 @@ import hashlib
 import logging
 import shutil
 import time
-import zlib
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pyproj
 
 from siteline.crs import ZUnit, crs_text, z_unit_of
@@ -33,7 +32,6 @@ from siteline.errors import TileError
 from siteline.lasio import detect_eight_bit, open_las
 from siteline.partition import (
     PARALLEL_MIN_POINTS,
-    RECORD,
     Partition,
     PassSource,
     RunWriter,
@@ -46,18 +44,9 @@ from siteline.records.tiling import NodeTable, TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import source_transformer
 from siteline.stores.owners import owner_tag, sweep_stale
-from siteline.tiles.codecs import array_codecs
+from siteline.tiles.batches import BATCH_POINTS, Part, write_tile
 from siteline.tiles.index import FORMAT_VERSION, write_index
-from siteline.tiles.layout import (
-    ATTRIBUTES,
-    COUNTS,
-    dequantise,
-    level_count,
-    tile_key,
-    tile_origin_local,
-)
-from siteline.tiles.lod import assign_levels
-from siteline.tiles.nodes import order_tile, tile_table
+from siteline.tiles.layout import tile_key
 from siteline.workers import pool_map, process_pool
 
 log = logging.getLogger(__name__)
@@ -84,70 +73,6 @@ class TileResult:
         return self.bytes / max(self.points, 1)
 
 
-def _tile_seed(key: str, seed: int) -> int:
-    return zlib.crc32(key.encode()) ^ (seed * 2654435761 & 0xFFFFFFFF)
-
-
-def _gather(parts: list[tuple[str, int, int]]) -> np.ndarray:
-    """A tile's records from its slices (run file, offset, count) of the runs."""
-    size = RECORD.itemsize
-    out = np.empty(sum(c for _, _, c in parts), RECORD)
-    at = 0
-    for path, offset, count in parts:
-        out[at : at + count] = np.fromfile(path, dtype=RECORD, count=count, offset=offset * size)
-        at += count
-    return out
-
-
-async def _write_arrays(group_path: str, key: str, columns: dict[str, np.ndarray], spec: TileSpec) -> None:
-    """Create and fill the tile's arrays concurrently (one event loop turn, not one per array)."""
-    import asyncio
-
-    from zarr.api.asynchronous import open_group
-
-    root = await open_group(store=group_path, mode="a")
-    group = await (await root.require_group("tiles")).create_group(key)
-
-    async def one(name: str, values: np.ndarray) -> None:
-        arr = await group.create_array(
-            name,
-            shape=values.shape,
-            dtype=values.dtype,
-            chunks=(spec.chunk_points, *values.shape[1:]),
-            shards=(spec.shard_points, *values.shape[1:]),
-            fill_value=0,
-            **array_codecs(name, values, spec),
-        )
-        await arr.setitem(slice(None), values)
-
-    await asyncio.gather(*(one(name, values) for name, values in columns.items()))
-
-
-def write_tile(
-    key: str, parts: list[tuple[str, int, int]], group_path: str, spec_doc: dict, seed: int
-) -> tuple[str, int, str, NodeTable]:
-    """Level, order and write one tile's arrays (runs in a worker process); return its key, points,
-    checksum and node rows."""
-    from zarr.core.sync import sync
-
-    spec = TileSpec.from_dict(spec_doc)
-    rec = _gather(parts)
-    counts = rec[COUNTS]
-    levels = assign_levels(counts, spec, _tile_seed(key, seed))
-    ordered = order_tile(counts, levels, spec, level_count(spec), _tile_seed(key, seed) ^ 0x5EED)
-    # one field at a time: a gather of whole records is slower
-    columns = {name: rec[name][ordered.order] for name in ATTRIBUTES}
-    del rec
-    sync(_write_arrays(group_path, key, columns, spec))
-    digest = hashlib.sha256()
-    for name, values in columns.items():
-        digest.update(name.encode())
-        digest.update(values.tobytes())
-    i, j = (int(v) for v in key[1:].split("_"))
-    local = dequantise(columns[COUNTS], tile_origin_local(i, j, spec.tile_size_m), spec.quantum_m)
-    return key, len(levels), digest.hexdigest(), tile_table(key, ordered, local)
-
-
 def _dir_bytes(path: Path) -> int:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
 
@@ -166,10 +91,12 @@ def _partition(
 
 def _write_all(
     pool: Executor | None,
-    parts: dict[str, list[tuple[str, int, int]]],
+    parts: dict[str, list[Part]],
     out: Path,
     spec: TileSpec,
     seed: int,
+    scratch: Path,
+    batch_points: int,
     progress: Progress,
 ) -> list[tuple[str, int, str, NodeTable]]:
     """Write every tile of ``parts`` into the group ``out`` (in parallel with a pool), in key order."""
@@ -177,8 +104,9 @@ def _write_all(
     n = len(keys)
     results = []
     for res in pool_map(
-        pool, write_tile, keys, [parts[k] for k in keys], [str(out)] * n, [spec.to_dict()] * n, [seed] * n
-    ):
+        pool, write_tile, keys, [parts[k] for k in keys], [str(out)] * n, [spec.to_dict()] * n, [seed] * n,
+        [str(scratch)] * n, [batch_points] * n,
+    ):  # fmt: skip
         results.append(res)
         progress("writing tiles", 1, n)
     return results
@@ -196,12 +124,15 @@ def write_tiles(
     z_unit: ZUnit | None = None,
     eight_bit: bool | None = None,
     kept: tuple[Path, str] | None = None,
+    batch_points: int = BATCH_POINTS,
 ) -> TileResult:
     """Tile ``las_path`` into the new Zarr group ``out`` (which must not exist; removed again on an
     error); return its node index. ``z_unit``: the unit of the file's z recorded at ingest (None: the
     unit its CRS implies). ``eight_bit``: whether its colour is 0-255 in 16-bit fields, as ingest
     recorded it (None: judged from its first chunk). ``kept``: (partitions folder, the file's sha256)
-    where ingest may have kept this file's partition (siteline.partition); used when it matches."""
+    where ingest may have kept this file's partition (siteline.partition); used when it matches.
+    ``batch_points``: a tile of more points is levelled and ordered in batches of its blocks, so a
+    worker's memory stays about 200 bytes x ``batch_points`` whatever the density (the same store)."""
     import zarr
 
     t0 = time.perf_counter()
@@ -236,7 +167,7 @@ def write_tiles(
         root = zarr.open_group(str(out), mode="w")
         root.create_group("tiles")
         pool = process_pool(workers) if workers > 1 and total >= PARALLEL_MIN_POINTS else None
-        results = _write_all(pool, parts, out, spec, seed, progress)
+        results = _write_all(pool, parts, out, spec, seed, spill_dir, batch_points, progress)
         nodes = NodeTable.concat([r[3] for r in results])
         checksum = hashlib.sha256("\n".join(f"{k}:{c}" for k, _, c, _ in results).encode()).hexdigest()
         points = sum(r[1] for r in results)

@@ -1,0 +1,211 @@
+"""One tile levelled, ordered into nodes and written a few blocks at a time (runs in a worker process).
+
+A tile's points come from the partition as slices of its blocks (columns of its level-0 cubes,
+siteline.partition). Levels are decided inside level-0 cubes with ranks seeded per block
+(:func:`siteline.tiles.lod.block_ranks`), and the node plan adds up per-cube counts
+(:func:`siteline.tiles.nodes.cube_counts`), so a tile of more than ``batch_points`` points is handled
+in batches of whole blocks:
+
+1. per batch: gather its records, level them, count them per (level, node cube); the levels go to
+   a scratch file;
+2. the tile's node plan from the counts;
+3. per batch again: gather, place each point (its group's seeded slot), scatter the records into a
+   scratch file of the tile in array order;
+4. the scratch file is written to the Zarr arrays shard by shard.
+
+A tile that fits one batch does the same in memory. Memory is thus set by ``batch_points``, not by
+density, and the arrays are the same whatever the batches (a tested property).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from siteline.partition import RECORD
+from siteline.records.tiling import NodeTable, TileSpec
+from siteline.tiles.codecs import array_codecs, round_trips, time_scale
+from siteline.tiles.layout import (
+    ATTRIBUTES,
+    COUNTS,
+    dequantise,
+    level_count,
+    parse_tile_key,
+    tile_origin_local,
+)
+from siteline.tiles.lod import assign_levels, block_ranks
+from siteline.tiles.nodes import NodePlan, add_cube_counts, cube_counts, plan_nodes
+
+# a tile of more points than this is levelled and ordered a batch of blocks at a time (about 200
+# bytes a point at the peak: 4M points, ~0.8 GB a worker)
+BATCH_POINTS = 4_000_000
+
+# a slice of the partition: (block, run file, offset, count, lowest z count)
+Part = tuple[int, str, int, int, int]
+Columns = Callable[[int, int], dict[str, np.ndarray]]
+
+
+def tile_seed(key: str, seed: int) -> int:
+    return zlib.crc32(key.encode()) ^ (seed * 2654435761 & 0xFFFFFFFF)
+
+
+def batches(parts: list[Part], budget: int) -> list[list[Part]]:
+    """Consecutive whole blocks of ``parts`` (sorted by block), each batch at most ``budget`` points
+    unless one block alone holds more."""
+    out: list[list[Part]] = []
+    size = 0
+    for k, part in enumerate(parts):
+        new_block = k == 0 or part[0] != parts[k - 1][0]
+        block_size = sum(p[3] for p in parts[k:] if p[0] == part[0]) if new_block else 0
+        if new_block and (not out or size + block_size > budget):
+            out.append([])
+            size = 0
+        out[-1].append(part)
+        size += part[3]
+    return out
+
+
+def _gather(parts: list[Part]) -> np.ndarray:
+    """A batch's records from its slices of the runs, in order."""
+    size = RECORD.itemsize
+    out = np.empty(sum(p[3] for p in parts), RECORD)
+    at = 0
+    for _, path, offset, count, _ in parts:
+        out[at : at + count] = np.fromfile(path, dtype=RECORD, count=count, offset=offset * size)
+        at += count
+    return out
+
+
+def _levels(rec: np.ndarray, parts: list[Part], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
+    """The levels of a batch's records (ranks seeded per block; z0: the tile's lowest z count)."""
+    blocks = np.array([p[0] for p in parts])
+    counts = np.array([p[3] for p in parts])
+    head = np.r_[0, np.flatnonzero(blocks[1:] != blocks[:-1]) + 1]
+    sizes = np.add.reduceat(counts, head) if len(parts) else counts
+    order = block_ranks(sizes, [[seed, int(b)] for b in blocks[head]] if len(parts) else [])
+    return assign_levels(rec[COUNTS], spec, order, z0)
+
+
+def _scale(values: list[float | None]) -> float | None:
+    """One gps_time scale for batches that each round-trip at theirs: the finest (pass 2 checks that
+    every batch round-trips at it); None when one batch has none."""
+    return None if any(v is None for v in values) else max((v for v in values if v is not None), default=1.0)
+
+
+def _in_memory(
+    parts: list[Part], spec: TileSpec, seed: int, z0: int
+) -> tuple[NodePlan, Columns, float | None]:
+    rec = _gather(parts)
+    levels = _levels(rec, parts, spec, seed, z0)
+    plan = plan_nodes(cube_counts(rec[COUNTS], levels, spec), spec, level_count(spec), seed ^ 0x5EED)
+    where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), np.zeros(len(plan.key), np.int64))
+    inverse = np.empty_like(where)
+    inverse[where] = np.arange(len(where))
+    # one field at a time: a gather of whole records is slower
+    columns = {name: rec[name][inverse] for name in ATTRIBUTES}
+    scale = time_scale(columns["gps_time"])
+    return plan, lambda a, b: {k: v[a:b] for k, v in columns.items()}, scale
+
+
+def _out_of_core(
+    key: str, groups: list[list[Part]], spec: TileSpec, seed: int, z0: int, scratch: Path
+) -> tuple[NodePlan, Columns, float | None]:
+    rows, scales = [], []
+    for k, parts in enumerate(groups):  # pass 1: levels and counts
+        rec = _gather(parts)
+        levels = _levels(rec, parts, spec, seed, z0)
+        np.save(scratch / f"{key}.levels-{k}.npy", levels)
+        rows.append(cube_counts(rec[COUNTS], levels, spec))
+        scales.append(time_scale(rec["gps_time"]))
+    plan = plan_nodes(add_cube_counts(rows), spec, level_count(spec), seed ^ 0x5EED)
+    scale = _scale(scales)
+    sorted_path = scratch / f"{key}.sorted"
+    with open(sorted_path, "wb") as fh:
+        fh.truncate(plan.points * RECORD.itemsize)
+    seen = np.zeros(len(plan.key), np.int64)
+    for k, parts in enumerate(groups):  # pass 2: each point to its place
+        rec = _gather(parts)
+        levels = np.load(scratch / f"{key}.levels-{k}.npy")
+        where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), seen)
+        if scale is not None and not round_trips(rec["gps_time"], scale):
+            scale = None
+        out = np.memmap(sorted_path, dtype=RECORD, mode="r+", shape=(plan.points,))
+        out[where] = rec
+        out.flush()
+        del out  # unmapped: its pages leave this process
+        os.unlink(scratch / f"{key}.levels-{k}.npy")
+
+    def columns(a: int, b: int) -> dict[str, np.ndarray]:
+        rec = np.fromfile(sorted_path, dtype=RECORD, count=b - a, offset=a * RECORD.itemsize)
+        return {name: np.ascontiguousarray(rec[name]) for name in ATTRIBUTES}
+
+    return plan, columns, scale
+
+
+async def _write(
+    group_path: str, key: str, plan: NodePlan, columns: Columns, spec: TileSpec, scale: float | None
+) -> tuple[str, np.ndarray, np.ndarray]:
+    """Write the tile's arrays shard by shard (each write covers whole shards); return the tile's
+    checksum (of each array in order) and its nodes' bounds (site-local metres)."""
+    import asyncio
+
+    from zarr.api.asynchronous import open_group
+
+    n, starts = plan.points, plan.node_start
+    root = await open_group(store=group_path, mode="a")
+    group = await (await root.require_group("tiles")).create_group(key)
+    first = columns(0, min(n, 1))
+    arrays = await asyncio.gather(
+        *(
+            group.create_array(
+                name, shape=(n, *v.shape[1:]), dtype=v.dtype, chunks=(spec.chunk_points, *v.shape[1:]),
+                shards=(spec.shard_points, *v.shape[1:]), fill_value=0,
+                **array_codecs(name, v.dtype, v.ndim, spec, scale),
+            )
+            for name, v in first.items()
+        )
+    )  # fmt: skip
+    digests = {name: hashlib.sha256() for name in first}
+    lo, hi = np.full((len(starts), 3), np.inf), np.full((len(starts), 3), -np.inf)
+    origin = tile_origin_local(*parse_tile_key(key), spec.tile_size_m)
+    for a in range(0, n, spec.shard_points):
+        b = min(a + spec.shard_points, n)
+        values = columns(a, b)
+        await asyncio.gather(*(arr.setitem(slice(a, b), values[arr.basename]) for arr in arrays))
+        for name, v in values.items():
+            digests[name].update(v.tobytes())
+        local = dequantise(values[COUNTS], origin, spec.quantum_m)
+        cut = np.union1d([a], starts[(starts > a) & (starts < b)])
+        node = np.searchsorted(starts, cut, side="right") - 1
+        lo[node] = np.minimum(lo[node], np.minimum.reduceat(local, cut - a))
+        hi[node] = np.maximum(hi[node], np.maximum.reduceat(local, cut - a))
+    checksum = hashlib.sha256()
+    for name, d in digests.items():
+        checksum.update(name.encode() + d.digest())
+    return checksum.hexdigest(), lo, hi
+
+
+def write_tile(
+    key: str, parts: list[Part], group_path: str, spec_doc: dict, seed: int, scratch: str, batch_points: int
+) -> tuple[str, int, str, NodeTable]:
+    """Level, order and write one tile's arrays (``parts``: its slices of the partition, by block) into
+    the store ``group_path``; a tile of more than ``batch_points`` points goes in batches through
+    ``scratch`` (a folder). Returns its key, points, checksum and node rows."""
+    from zarr.core.sync import sync
+
+    spec = TileSpec.from_dict(spec_doc)
+    seed = tile_seed(key, seed)
+    groups = batches(parts, batch_points)
+    z0 = min(p[4] for p in parts)
+    if len(groups) == 1:
+        plan, columns, scale = _in_memory(parts, spec, seed, z0)
+    else:
+        plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(scratch))
+    checksum, lo, hi = sync(_write(group_path, key, plan, columns, spec, scale))
+    (Path(scratch) / f"{key}.sorted").unlink(missing_ok=True)
+    return key, plan.points, checksum, plan.table(key, lo, hi)
