@@ -1,7 +1,7 @@
 """Ingest benchmark: `siteline ingest` (ingest + tile) of LAS and LAZ files of the same 100 m x 100 m
 site at two densities, against a plain laspy read and a lazrs decode of the same file in the same run.
 
-    python bench/ingest.py [--small 4000000] [--large 40000000] [--workers 2]
+    python bench/ingest.py [--small 4000000] [--large 40000000] [--workers 2] [--batch-points N]
 
 Per file: M points/s of ingest + tile and of the tile stage alone (which takes the partition into
 tile runs that ingest's scan kept, siteline.partition), per core, as a ratio of the plain
@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -25,6 +24,8 @@ from pathlib import Path
 
 import laspy
 import numpy as np
+
+from siteline.config import DEFAULT_TILE_BATCH_POINTS
 
 ORIGIN = np.array([445_000.0, 5_030_000.0, 80.0])
 HALF_M = 50.0  # the site: 100 m x 100 m, i.e. 4 tiles of 50 m
@@ -60,7 +61,12 @@ def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.05, half_m:
             w.write_points(rec)
 
 
-def child(mode: str, path: str, workers: int) -> None:
+def _vm_hwm_mib(pid: int | str) -> float:
+    with open(f"/proc/{pid}/status") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM")) / 1024
+
+
+def child(mode: str, path: str, workers: int, batch_points: int) -> None:
     t = time.perf_counter()
     out: dict = {}
     if mode == "read":  # plain laspy: LAS read, or LAZ decode with the parallel lazrs backend
@@ -80,14 +86,16 @@ def child(mode: str, path: str, workers: int) -> None:
         from siteline.tiles import tile_scene
 
         home = Path(tempfile.mkdtemp())
-        settings = Settings(home, sqlite_url(home / "c.sqlite"))
+        settings = Settings(home, sqlite_url(home / "c.sqlite"), tile_batch_points=batch_points)
         e = make_engine(settings.database_url)
         migrate.upgrade(e)
         e.dispose()
         cat = open_catalog(settings)
         h = HALF_M + 5
         with cat.transaction() as s:
-            add_site(s, make_site_spec("b", "EPSG:32618", ORIGIN, [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)]))
+            add_site(
+                s, make_site_spec("b", "EPSG:32618", ORIGIN, [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)])
+            )
         t = time.perf_counter()
         r = ingest_mission(cat, settings, Path(path).parent, "b")
         t_ingest = time.perf_counter() - t
@@ -102,17 +110,20 @@ def child(mode: str, path: str, workers: int) -> None:
             "tiles": tiling.tiles,
         }
     sec = time.perf_counter() - t
-    from siteline.workers import shutdown_pools
+    from siteline.workers import _POOLS, shutdown_pools
 
-    shutdown_pools(wait=True)  # the workers' peak memory counts once they have exited
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024  # the largest worker
+    # each process's own peak (VmHWM): ru_maxrss would count the parent's size at the fork
+    kids = max((_vm_hwm_mib(pid) for pool in _POOLS.values() for pid in pool._processes), default=0.0)
+    shutdown_pools(wait=True)
+    peak = _vm_hwm_mib("self")
     print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))
 
 
-def run(mode: str, path: Path, workers: int) -> dict:
+def run(mode: str, path: Path, workers: int, batch_points: int) -> dict:
     out = subprocess.run(
-        [sys.executable, __file__, "--child", mode, str(path), str(workers)], capture_output=True, text=True
+        [sys.executable, __file__, "--child", mode, str(path), str(workers), str(batch_points)],
+        capture_output=True,
+        text=True,
     )
     if out.returncode:
         raise SystemExit(f"{mode} of {path} failed:\n{out.stderr[-3000:]}")
@@ -124,10 +135,13 @@ def main() -> None:
     ap.add_argument("--small", type=int, default=4_000_000)
     ap.add_argument("--large", type=int, default=40_000_000)
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
-    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--batch-points", type=int, default=DEFAULT_TILE_BATCH_POINTS, help="SITELINE_TILE_BATCH_POINTS"
+    )
+    ap.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        child(args.child[0], args.child[1], int(args.child[2]))
+        child(args.child[0], args.child[1], int(args.child[2]), int(args.child[3]))
         return
     cores = args.workers
     rows = []
@@ -141,11 +155,14 @@ def main() -> None:
                 make_las(path, n)
                 if ext == "laz":
                     laz_bpp = path.stat().st_size / n
-                plain = run("read", path, cores)
-                ours = run("ingest", path, cores)
+                plain = run("read", path, cores, args.batch_points)
+                ours = run("ingest", path, cores, args.batch_points)
                 rows.append((n, ext, plain, ours, laz_bpp))
                 path.unlink()
-    print(f"site 100 m x 100 m; {cores} worker processes on {os.cpu_count()} cores")
+    print(
+        f"site 100 m x 100 m; {cores} worker processes on {os.cpu_count()} cores; "
+        f"tiles over {args.batch_points:,} points written in batches"
+    )
     print(
         "| points | pts/m2 | format | baseline M pts/s | ingest+tile M pts/s (per core) | tile only M pts/s (per core) "
         "| x baseline | peak MiB (main / worker) | store B/pt | LAZ B/pt | nodes | pts/node |"
@@ -165,7 +182,9 @@ def main() -> None:
     for ext in ("las", "laz"):
         small = next(o for n, e, _, o, _ in rows if n == args.small and e == ext)
         large = next(o for n, e, _, o, _ in rows if n == args.large and e == ext)
-        peak = max(large["peak_mib"], large["worker_peak_mib"]) / max(small["peak_mib"], small["worker_peak_mib"])
+        peak = max(large["peak_mib"], large["worker_peak_mib"]) / max(
+            small["peak_mib"], small["worker_peak_mib"]
+        )
         print(
             f"{ext.upper()} {args.large / args.small:.0f}x the density: peak memory {peak:.2f}x, "
             f"nodes {large['nodes'] / small['nodes']:.2f}x"

@@ -14,6 +14,10 @@ Environment variables (read here and nowhere else):
   scheduler (``tcp://host:8786``; default: a LocalCluster on 127.0.0.1).
 - ``SITELINE_RELEASE_POLICY``: ``on-demand`` (default) or ``every-pair`` (the flows build a release
   after every processed pair); ``SITELINE_RELEASE_NAME`` that release's name (default ``<site>-cd``).
+- ``SITELINE_TILE_BATCH_POINTS``: a tile of more points is levelled and written a batch of its
+  blocks at a time, so a tiling worker holds about 200 bytes x this many points whatever the
+  density (default 4,000,000: ~0.8 GB a worker); the store is the same at any value, smaller ones
+  cost a second read of each batch and a scratch copy of the tile (siteline.tiles.batches).
 - ``SITELINE_PREVIEW_URL``: where ``siteline previews serve`` answers (default
   ``http://127.0.0.1:4201``); the flows' image artifacts point there.
 """
@@ -28,6 +32,7 @@ from siteline.errors import ConfigError
 from siteline.stores import Store, layout, open_store
 
 CATALOG_FILENAME = "catalog.sqlite"
+DEFAULT_TILE_BATCH_POINTS = 4_000_000
 TASK_RUNNERS = ("threads", "processes", "dask")
 RELEASE_POLICIES = ("every-pair", "on-demand")
 # where `siteline previews serve` (started by `make serve`) answers: the Prefect UI loads images from it
@@ -53,6 +58,7 @@ class Settings:
     release_policy: str = "on-demand"
     release_name: str = ""
     preview_url: str = DEFAULT_PREVIEW_URL
+    tile_batch_points: int = DEFAULT_TILE_BATCH_POINTS
 
     @property
     def store(self) -> Store:
@@ -95,6 +101,13 @@ def load_settings(environ: dict[str, str] | None = None) -> Settings:
     raw_workers = env.get("SITELINE_TASK_WORKERS", "2").strip() or "2"
     if not raw_workers.isdigit() or int(raw_workers) < 1:
         raise ConfigError(f"SITELINE_TASK_WORKERS={raw_workers!r} must be a positive whole number.")
+    raw_batch = env.get("SITELINE_TILE_BATCH_POINTS", "").strip().replace("_", "") or str(
+        DEFAULT_TILE_BATCH_POINTS
+    )
+    if not raw_batch.isdigit() or int(raw_batch) < 1:
+        raise ConfigError(
+            f"SITELINE_TILE_BATCH_POINTS={raw_batch!r} must be a positive whole number of points."
+        )
     policy = env.get("SITELINE_RELEASE_POLICY", "on-demand").strip() or "on-demand"
     if policy not in RELEASE_POLICIES:
         raise ConfigError(f"SITELINE_RELEASE_POLICY={policy!r}: use one of {', '.join(RELEASE_POLICIES)}.")
@@ -108,4 +121,5 @@ def load_settings(environ: dict[str, str] | None = None) -> Settings:
         release_policy=policy,
         release_name=env.get("SITELINE_RELEASE_NAME", "").strip(),
         preview_url=(env.get("SITELINE_PREVIEW_URL", "").strip() or DEFAULT_PREVIEW_URL).rstrip("/"),
+        tile_batch_points=int(raw_batch),
     )

@@ -75,3 +75,24 @@ def test_parallel_ranges_scan_and_partition_as_one_process_does(synth_site, tmp_
 
     for tile in pa:  # the same records per tile, in the same order
         assert records(pa[tile]).tobytes() == records(pb[tile]).tobytes()
+
+
+def test_the_batch_setting_reaches_the_tile_stage(cat, site_settings, synth_site) -> None:
+    from dataclasses import replace
+
+    import pytest
+    from sitehelpers import epoch_dirs
+
+    from siteline.config import load_settings
+    from siteline.errors import ConfigError
+    from siteline.ingest import ingest_mission
+    from siteline.tiles import tile_scene
+
+    assert load_settings({"SITELINE_TILE_BATCH_POINTS": "1_000"}).tile_batch_points == 1000
+    with pytest.raises(ConfigError, match="SITELINE_TILE_BATCH_POINTS"):
+        load_settings({"SITELINE_TILE_BATCH_POINTS": "lots"})
+    r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    first = tile_scene(cat, site_settings, r.scene_id, workers=1).tiling
+    small = replace(site_settings, tile_batch_points=2_000)  # every tile in batches
+    again = tile_scene(cat, small, r.scene_id, workers=1, retile=True).tiling
+    assert first is not None and again is not None and again.checksum == first.checksum

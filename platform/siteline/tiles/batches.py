@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.partition import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
@@ -42,8 +43,8 @@ from siteline.tiles.lod import assign_levels, block_ranks
 from siteline.tiles.nodes import NodePlan, add_cube_counts, cube_counts, plan_nodes
 
 # a tile of more points than this is levelled and ordered a batch of blocks at a time (about 200
-# bytes a point at the peak: 4M points, ~0.8 GB a worker)
-BATCH_POINTS = 4_000_000
+# bytes a point at the peak: 4M points, ~0.8 GB a worker; SITELINE_TILE_BATCH_POINTS)
+BATCH_POINTS = DEFAULT_TILE_BATCH_POINTS
 
 # a slice of the partition: (block, run file, offset, count, lowest z count)
 Part = tuple[int, str, int, int, int]

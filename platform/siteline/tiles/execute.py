@@ -12,6 +12,7 @@ from siteline.progress import Progress, no_progress
 from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import Store, layout
 from siteline.stores.blobs import resolve_file
+from siteline.tiles.batches import BATCH_POINTS
 from siteline.tiles.plan import TilingPlan
 from siteline.tiles.writer import write_tiles
 
@@ -40,10 +41,12 @@ def execute_tiling(
     workers: int = 2,
     progress: Progress = no_progress,
     partitions: Path | None = None,
+    batch_points: int = BATCH_POINTS,
 ) -> SceneTiling:
     """Tile the scene of ``plan`` into the store at its ``generation``'s address, published whole (a
     store left there without its marker is replaced), its node index inside; return the tiling. A
-    partition of the point cloud that ingest kept in ``partitions`` is used when it matches."""
+    partition of the point cloud that ingest kept in ``partitions`` is used when it matches;
+    ``batch_points``: see :func:`siteline.tiles.writer.write_tiles`."""
     las = scene_las(store, plan)
     src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
     z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
@@ -63,6 +66,7 @@ def execute_tiling(
             z_unit=z_unit,
             eight_bit=plan.eight_bit,
             kept=(partitions, plan.las.sha256) if partitions is not None else None,
+            batch_points=batch_points,
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,

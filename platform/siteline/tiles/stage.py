@@ -64,7 +64,9 @@ def _tile(
     spec = spec or TileSpec(tile_size_m=plan.site.tile_size_m)
     run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
     kept = layout.partitions(settings.home)
-    tiling = execute_tiling(plan, store, spec, plan.generation(done), workers, progress, kept)
+    tiling = execute_tiling(
+        plan, store, spec, plan.generation(done), workers, progress, kept, settings.tile_batch_points
+    )
     try:
         with catalog.transaction() as s:
             record_tiling(s, scene_id, tiling, run)
