@@ -2,6 +2,7 @@
 site at two densities, against a plain laspy read and a lazrs decode of the same file in the same run.
 
     python bench/ingest.py [--small 4000000] [--large 40000000] [--workers 2] [--batch-points N]
+    python bench/ingest.py --scene 200000000 [--scene-area-m2 32300] --formats las   # one paper scene
 
 Per file: M points/s of ingest + tile and of the tile stage alone (which takes the partition into
 tile runs that ingest's scan kept, siteline.partition), per core, as a ratio of the plain
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -66,7 +68,7 @@ def _vm_hwm_mib(pid: int | str) -> float:
         return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM")) / 1024
 
 
-def child(mode: str, path: str, workers: int, batch_points: int) -> None:
+def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) -> None:
     t = time.perf_counter()
     out: dict = {}
     if mode == "read":  # plain laspy: LAS read, or LAZ decode with the parallel lazrs backend
@@ -91,7 +93,7 @@ def child(mode: str, path: str, workers: int, batch_points: int) -> None:
         migrate.upgrade(e)
         e.dispose()
         cat = open_catalog(settings)
-        h = HALF_M + 5
+        h = half_m + 5
         with cat.transaction() as s:
             add_site(
                 s, make_site_spec("b", "EPSG:32618", ORIGIN, [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)])
@@ -109,6 +111,8 @@ def child(mode: str, path: str, workers: int, batch_points: int) -> None:
             "nodes": tiling.nodes,
             "tiles": tiling.tiles,
         }
+        cat.dispose()
+        shutil.rmtree(home, ignore_errors=True)  # the stored copy, tiles and catalog of the run
     sec = time.perf_counter() - t
     from siteline.workers import _POOLS, shutdown_pools
 
@@ -119,9 +123,9 @@ def child(mode: str, path: str, workers: int, batch_points: int) -> None:
     print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))
 
 
-def run(mode: str, path: Path, workers: int, batch_points: int) -> dict:
+def run(mode: str, path: Path, workers: int, batch_points: int, half_m: float) -> dict:
     out = subprocess.run(
-        [sys.executable, __file__, "--child", mode, str(path), str(workers), str(batch_points)],
+        [sys.executable, __file__, "--child", mode, str(path), str(workers), str(batch_points), str(half_m)],
         capture_output=True,
         text=True,
     )
@@ -138,29 +142,37 @@ def main() -> None:
     ap.add_argument(
         "--batch-points", type=int, default=DEFAULT_TILE_BATCH_POINTS, help="SITELINE_TILE_BATCH_POINTS"
     )
-    ap.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
+    ap.add_argument("--scene", type=int, default=0, help="one scene of this many points instead")
+    ap.add_argument("--scene-area-m2", type=float, default=32_300.0)
+    ap.add_argument("--formats", default="laz,las")
+    ap.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        child(args.child[0], args.child[1], int(args.child[2]), int(args.child[3]))
+        child(args.child[0], args.child[1], int(args.child[2]), int(args.child[3]), float(args.child[4]))
         return
     cores = args.workers
     rows = []
+    cases = (
+        [(args.scene, args.scene_area_m2**0.5 / 2)]
+        if args.scene
+        else [(args.small, HALF_M), (args.large, HALF_M)]
+    )
     with tempfile.TemporaryDirectory() as tmp:
-        for n in (args.small, args.large):
+        for n, half_m in cases:
             laz_bpp = 0.0
-            for ext in ("laz", "las"):
+            for ext in args.formats.split(","):
                 d = Path(tmp) / f"{n}-{ext}"
                 d.mkdir()
                 path = d / f"cloud.{ext}"
-                make_las(path, n)
+                make_las(path, n, half_m=half_m)
                 if ext == "laz":
                     laz_bpp = path.stat().st_size / n
-                plain = run("read", path, cores, args.batch_points)
-                ours = run("ingest", path, cores, args.batch_points)
-                rows.append((n, ext, plain, ours, laz_bpp))
+                plain = run("read", path, cores, args.batch_points, half_m)
+                ours = run("ingest", path, cores, args.batch_points, half_m)
+                rows.append((n, half_m, ext, plain, ours, laz_bpp))
                 path.unlink()
     print(
-        f"site 100 m x 100 m; {cores} worker processes on {os.cpu_count()} cores; "
+        f"site {2 * cases[0][1]:.0f} m square; {cores} worker processes on {os.cpu_count()} cores; "
         f"tiles over {args.batch_points:,} points written in batches"
     )
     print(
@@ -168,20 +180,22 @@ def main() -> None:
         "| x baseline | peak MiB (main / worker) | store B/pt | LAZ B/pt | nodes | pts/node |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for n, ext, plain, ours, laz_bpp in rows:
+    for n, half_m, ext, plain, ours, laz_bpp in rows:
         base = plain["points"] / plain["seconds"]
         total = ours["points"] / (ours["ingest_s"] + ours["tile_s"])
         tile = ours["points"] / ours["tile_s"]
         label = "LAS (laspy read)" if ext == "las" else "LAZ (lazrs decode)"
         print(
-            f"| {n / 1e6:.0f}M | {n / (2 * HALF_M) ** 2:,.0f} | {label} | {base / 1e6:.2f} | "
+            f"| {n / 1e6:.0f}M | {n / (2 * half_m) ** 2:,.0f} | {label} | {base / 1e6:.2f} | "
             f"{total / 1e6:.2f} ({total / cores / 1e6:.2f}) | {tile / 1e6:.2f} ({tile / cores / 1e6:.2f}) | "
             f"{total / base:.2f} | {ours['peak_mib']:.0f} / {ours['worker_peak_mib']:.0f} | "
-            f"{ours['bytes_per_point']:.1f} | {laz_bpp:.1f} | {ours['nodes']:,} | {n / max(ours['nodes'], 1):,.0f} |"
+            f"{ours['bytes_per_point']:.1f} | {laz_bpp or float('nan'):.1f} | {ours['nodes']:,} | "
+            f"{n / max(ours['nodes'], 1):,.0f} |"
         )
-    for ext in ("las", "laz"):
-        small = next(o for n, e, _, o, _ in rows if n == args.small and e == ext)
-        large = next(o for n, e, _, o, _ in rows if n == args.large and e == ext)
+        print(f"  ingest {ours['ingest_s']:.1f} s, tile {ours['tile_s']:.1f} s")
+    for ext in args.formats.split(",") if not args.scene else ():
+        small = next(o for n, _, e, _, o, _ in rows if n == args.small and e == ext)
+        large = next(o for n, _, e, _, o, _ in rows if n == args.large and e == ext)
         peak = max(large["peak_mib"], large["worker_peak_mib"]) / max(
             small["peak_mib"], small["worker_peak_mib"]
         )

@@ -32,7 +32,7 @@ from prefect.events import emit_event
 from prefect.runtime import flow_run
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from runner import task_runner  # noqa: E402
+from runner import cluster_executor, task_runner  # noqa: E402
 from ui import RunProgress, ingest_dashboards, note, pair_dashboards, release_dashboards, slug, tag_run  # noqa: E402
 
 from siteline import pipeline  # noqa: E402
@@ -186,7 +186,9 @@ def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> dict[str, A
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def tile_task(scene_id: int) -> dict[str, Any] | None:
     progress = RunProgress(slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0})
-    done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id], progress=progress)
+    with cluster_executor() as executor:  # on a Dask runner, the cluster's workers write the tiles
+        done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id], progress=progress,
+                      executor=executor)  # fmt: skip
     for outcome in done:
         get_run_logger().info(outcome.message)
     progress.finish(done[0].message if done else f"scene {scene_id} was tiled already")

@@ -3,6 +3,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from concurrent.futures import Executor
+from contextlib import contextmanager
 from typing import Any
 
 from prefect.task_runners import TaskRunner
@@ -33,3 +36,19 @@ def task_runner() -> TaskRunner[Any]:
             "dashboard_address": None,
         }
     )
+
+
+@contextmanager
+def cluster_executor() -> Iterator[Executor | None]:
+    """In a task running on a Dask worker: an executor over the whole cluster, so the task's work
+    (a scene's tiles) is spread over every worker; the task secedes from its worker's thread while
+    it waits, so its own slot takes work too. None anywhere else (the library's own process pool)."""
+    try:
+        from distributed import get_worker, worker_client
+
+        get_worker()
+    except (ImportError, ValueError):  # not on a Dask worker
+        yield None
+        return
+    with worker_client() as client:
+        yield client.get_executor()

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,14 +68,26 @@ def tile_scenes(
     workers: int = 2,
     progress: Progress = no_progress,
     run_id: str | None = None,
+    executor: Executor | None = None,
 ) -> list[TileOutcome]:
-    """Tile every scene of ``scene_ids`` that is not tiled yet."""
+    """Tile every scene of ``scene_ids`` that is not tiled yet (its tiles written by ``executor``, a
+    Dask cluster's say, when given)."""
     done = []
     for sid in scene_ids:
         with catalog.transaction() as s:
             tiled = get_scene(s, sid).status == "tiled"
         if not tiled:
-            done.append(tile_scene(catalog, settings, sid, workers=workers, progress=progress, run_id=run_id))
+            done.append(
+                tile_scene(
+                    catalog,
+                    settings,
+                    sid,
+                    workers=workers,
+                    progress=progress,
+                    run_id=run_id,
+                    executor=executor,
+                )
+            )
     return done
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
-from contextlib import AbstractContextManager
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -83,10 +83,23 @@ class Store(ABC):
         exit it is published whole (marker last), on an error nothing is. A complete folder already
         at ``uri`` (another writer's, made from the same inputs) is kept and the new one dropped."""
 
+    def publish_shared(self, uri: str) -> AbstractContextManager[str]:
+        """As :meth:`publish`, but yields the address to build into where processes on other machines
+        can write too (a cluster's workers): the local work folder on a local store; ``uri`` itself
+        on a remote one (what is there is removed first; the marker is written last; on an error
+        nothing is left)."""
+        return _as_text(self.publish(uri))
+
     @abstractmethod
     def local_file(self, uri: str, sha256: str | None = None) -> Path:
         """A local path holding the bytes of ``uri``: the file itself on a local store, else a cached
         download (checked against ``sha256`` when given)."""
+
+
+@contextmanager
+def _as_text(folder: AbstractContextManager[Path]) -> Iterator[str]:
+    with folder as work:
+        yield str(work)
 
 
 def walk_files(root: Path) -> Iterator[Path]:

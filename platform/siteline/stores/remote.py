@@ -142,5 +142,23 @@ class FsspecStore(Store):
         finally:
             fs.invalidate_cache()
 
+    @contextmanager
+    def publish_shared(self, uri: str) -> Iterator[str]:
+        fs, path = file_system(uri)
+        if fs.exists(join(path, MARKER)):
+            raise StoreError(f"{uri} is already complete in the store; remove it first.")
+        self.remove(uri)  # an earlier build that never finished
+        try:
+            yield uri
+            fs.invalidate_cache()
+            if not fs.exists(join(path, "zarr.json")) and not fs.ls(path):
+                raise StoreError(f"nothing was built to publish at {uri}.")
+            fs.pipe_file(join(path, MARKER), b"")
+        except BaseException:
+            self.remove(uri)
+            raise
+        finally:
+            fs.invalidate_cache()
+
     def local_file(self, uri: str, sha256: str | None = None) -> Path:
         return cached_download(self, uri, sha256)

@@ -72,14 +72,34 @@ def batches(parts: list[Part], budget: int) -> list[list[Part]]:
 
 
 def _gather(parts: list[Part]) -> np.ndarray:
-    """A batch's records from its slices of the runs, in order."""
-    size = RECORD.itemsize
-    out = np.empty(sum(p[3] for p in parts), RECORD)
-    at = 0
-    for _, path, offset, count, _ in parts:
-        out[at : at + count] = np.fromfile(path, dtype=RECORD, count=count, offset=offset * size)
-        at += count
+    """A batch's records from its slices of the runs, in order. Slices that lie end to end in a run
+    file (a chunk's next blocks) are read as one range: one read, or one ranged GET of an fsspec URL."""
+    dest = np.r_[0, np.cumsum([p[3] for p in parts])]
+    out = np.empty(int(dest[-1]), RECORD)
+    ranges: list[tuple[str, int, int, list[int]]] = []
+    for k in sorted(range(len(parts)), key=lambda k: (parts[k][1], parts[k][2])):
+        _, path, offset, count, _ = parts[k]
+        if ranges and ranges[-1][0] == path and ranges[-1][2] == offset:
+            ranges[-1] = (path, ranges[-1][1], offset + count, [*ranges[-1][3], k])
+        else:
+            ranges.append((path, offset, offset + count, [k]))
+    for path, start, end, members in ranges:
+        records = _read(path, start, end)
+        for k in members:
+            at = parts[k][2] - start
+            out[dest[k] : dest[k + 1]] = records[at : at + parts[k][3]]
     return out
+
+
+def _read(path: str, start: int, end: int) -> np.ndarray:
+    """Records [start, end) of a run file (a local path or an fsspec URL)."""
+    size = RECORD.itemsize
+    if "://" not in path:
+        return np.fromfile(path, dtype=RECORD, count=end - start, offset=start * size)
+    import fsspec
+
+    fs, where = fsspec.core.url_to_fs(path)
+    return np.frombuffer(fs.cat_file(where, start=start * size, end=end * size), dtype=RECORD)
 
 
 def _levels(rec: np.ndarray, parts: list[Part], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
@@ -107,8 +127,8 @@ def _in_memory(
     where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), np.zeros(len(plan.key), np.int64))
     inverse = np.empty_like(where)
     inverse[where] = np.arange(len(where))
-    # one field at a time: a gather of whole records is slower
-    columns = {name: rec[name][inverse] for name in ATTRIBUTES}
+    # one field at a time (np.take: about twice a fancy index's speed here)
+    columns = {name: np.take(rec[name], inverse, axis=0) for name in ATTRIBUTES}
     scale = time_scale(columns["gps_time"])
     return plan, lambda a, b: {k: v[a:b] for k, v in columns.items()}, scale
 
@@ -192,21 +212,30 @@ async def _write(
 
 
 def write_tile(
-    key: str, parts: list[Part], group_path: str, spec_doc: dict, seed: int, scratch: str, batch_points: int
+    key: str,
+    parts: list[Part],
+    group_path: str,
+    spec_doc: dict,
+    seed: int,
+    scratch: str | None,
+    batch_points: int,
 ) -> tuple[str, int, str, NodeTable]:
     """Level, order and write one tile's arrays (``parts``: its slices of the partition, by block) into
-    the store ``group_path``; a tile of more than ``batch_points`` points goes in batches through
-    ``scratch`` (a folder). Returns its key, points, checksum and node rows."""
+    the store ``group_path`` (a local path or an fsspec URL); a tile of more than ``batch_points``
+    points goes in batches through ``scratch`` (a local folder; None: a temporary one). Returns its
+    key, points, checksum and node rows."""
+    import tempfile
+
     from zarr.core.sync import sync
 
     spec = TileSpec.from_dict(spec_doc)
     seed = tile_seed(key, seed)
     groups = batches(parts, batch_points)
     z0 = min(p[4] for p in parts)
-    if len(groups) == 1:
-        plan, columns, scale = _in_memory(parts, spec, seed, z0)
-    else:
-        plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(scratch))
-    checksum, lo, hi = sync(_write(group_path, key, plan, columns, spec, scale))
-    (Path(scratch) / f"{key}.sorted").unlink(missing_ok=True)
+    with tempfile.TemporaryDirectory(prefix="siteline-tile-", dir=scratch) as work:
+        if len(groups) == 1:
+            plan, columns, scale = _in_memory(parts, spec, seed, z0)
+        else:
+            plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(work))
+        checksum, lo, hi = sync(_write(group_path, key, plan, columns, spec, scale))
     return key, plan.points, checksum, plan.table(key, lo, hi)

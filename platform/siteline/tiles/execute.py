@@ -4,6 +4,7 @@ tiled, and published whole under the store's layout. Never touches the catalog."
 from __future__ import annotations
 
 import logging
+from concurrent.futures import Executor
 from pathlib import Path
 
 from siteline.crs import ZUnit, parse_source_crs
@@ -42,18 +43,21 @@ def execute_tiling(
     progress: Progress = no_progress,
     partitions: Path | None = None,
     batch_points: int = BATCH_POINTS,
+    executor: Executor | None = None,
 ) -> SceneTiling:
     """Tile the scene of ``plan`` into the store at its ``generation``'s address, published whole (a
     store left there without its marker is replaced), its node index inside; return the tiling. A
     partition of the point cloud that ingest kept in ``partitions`` is used when it matches;
-    ``batch_points``: see :func:`siteline.tiles.writer.write_tiles`."""
+    ``batch_points``: see :func:`siteline.tiles.writer.write_tiles`. ``executor``: where the tiles
+    are written (a Dask cluster's executor): straight into the store, which its workers share."""
     las = scene_las(store, plan)
     src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
     z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
     uri = layout.tile_store(store, plan.scene_id, generation)
     store.remove(uri)
     log.info("tiling scene %d from %s into %s (generation %d)", plan.scene_id, las.name, uri, generation)
-    with store.publish(uri) as work:
+    building = store.publish_shared(uri) if executor is not None else store.publish(uri)
+    with building as work:
         written = write_tiles(
             las,
             plan.site,
@@ -67,6 +71,8 @@ def execute_tiling(
             eight_bit=plan.eight_bit,
             kept=(partitions, plan.las.sha256) if partitions is not None else None,
             batch_points=batch_points,
+            executor=executor,
+            scratch=store.staging if executor is not None else None,
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 from siteline.catalog import Catalog
@@ -36,6 +37,7 @@ def tile_scene(
     progress: Progress = no_progress,
     run_id: str | None = None,
     retile: bool = False,
+    executor: Executor | None = None,
 ) -> TileOutcome:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
     ``retile`` (tile it again in the current layout, e.g. a store written before shuffled nodes).
@@ -45,14 +47,15 @@ def tile_scene(
     next generation beside the old store, commits, then removes the old one: the scene's pairs'
     outputs are keyed by the generation, and its imported label sets, aligned with the old order,
     are refused until imported again (siteline.labelsets). One tiling of a scene runs at a time (a
-    second caller waits, then finds the scene tiled)."""
+    second caller waits, then finds the scene tiled). ``executor``: write the tiles there (a Dask
+    cluster's executor, whose workers share the store) instead of ``workers`` local processes."""
     with catalog.lock(f"scene:{scene_id}:tiles"):
-        return _tile(catalog, settings, scene_id, spec, workers, progress, run_id, retile)
+        return _tile(catalog, settings, scene_id, spec, workers, progress, run_id, retile, executor)
 
 
 def _tile(
     catalog: Catalog, settings: Settings, scene_id: int, spec: TileSpec | None, workers: int,
-    progress: Progress, run_id: str | None, retile: bool,
+    progress: Progress, run_id: str | None, retile: bool, executor: Executor | None = None,
 ) -> TileOutcome:  # fmt: skip
     with catalog.transaction() as s:
         plan = plan_tiling(s, scene_id)
@@ -65,7 +68,15 @@ def _tile(
     run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
     kept = layout.partitions(settings.home)
     tiling = execute_tiling(
-        plan, store, spec, plan.generation(done), workers, progress, kept, settings.tile_batch_points
+        plan,
+        store,
+        spec,
+        plan.generation(done),
+        workers,
+        progress,
+        kept,
+        settings.tile_batch_points,
+        executor,
     )
     try:
         with catalog.transaction() as s:

@@ -20,10 +20,12 @@ from __future__ import annotations
 import hashlib
 import logging
 import shutil
+import tempfile
 import time
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pyproj
 
@@ -73,8 +75,32 @@ class TileResult:
         return self.bytes / max(self.points, 1)
 
 
-def _dir_bytes(path: Path) -> int:
-    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+def _fs(uri: str) -> tuple[Any, str]:
+    """(fsspec file system, path) of a local path or URL."""
+    import fsspec
+
+    return fsspec.core.url_to_fs(uri)
+
+
+def _dir_bytes(uri: str) -> int:
+    fs, path = _fs(uri)
+    fs.invalidate_cache()
+    return int(fs.du(path))
+
+
+def _remove(uri: str) -> None:
+    fs, path = _fs(uri)
+    if fs.exists(path):
+        fs.rm(path, recursive=True)
+
+
+def _share_runs(parts: dict[str, list[Part]], folder: Path, uri: str) -> dict[str, list[Part]]:
+    """Copy the partition's run files to ``uri`` (where a cluster's workers read them); the same
+    slices of the copies."""
+    fs, path = _fs(uri)
+    names = sorted({Path(p[1]).name for slices in parts.values() for p in slices})
+    fs.put([str(folder / n) for n in names], [f"{path}/{n}" for n in names])
+    return {k: [(b, f"{uri}/{Path(f).name}", o, c, z) for b, f, o, c, z in v] for k, v in parts.items()}
 
 
 def _partition(
@@ -92,20 +118,21 @@ def _partition(
 def _write_all(
     pool: Executor | None,
     parts: dict[str, list[Part]],
-    out: Path,
+    out: str,
     spec: TileSpec,
     seed: int,
-    scratch: Path,
+    scratch: str | None,
     batch_points: int,
     progress: Progress,
 ) -> list[tuple[str, int, str, NodeTable]]:
-    """Write every tile of ``parts`` into the group ``out`` (in parallel with a pool), in key order."""
+    """Write every tile of ``parts`` into the group ``out`` (in parallel with a pool), in key order;
+    ``scratch``: the workers' folder for large tiles (None: each makes its own)."""
     keys = sorted(parts)
     n = len(keys)
     results = []
     for res in pool_map(
         pool, write_tile, keys, [parts[k] for k in keys], [str(out)] * n, [spec.to_dict()] * n, [seed] * n,
-        [str(scratch)] * n, [batch_points] * n,
+        [scratch] * n, [batch_points] * n,
     ):  # fmt: skip
         results.append(res)
         progress("writing tiles", 1, n)
@@ -116,7 +143,7 @@ def write_tiles(
     las_path: Path,
     site: SiteSpec,
     src_crs: pyproj.CRS,
-    out: Path,
+    out: Path | str,
     spec: TileSpec | None = None,
     workers: int = 2,
     seed: int = 0,
@@ -125,31 +152,30 @@ def write_tiles(
     eight_bit: bool | None = None,
     kept: tuple[Path, str] | None = None,
     batch_points: int = BATCH_POINTS,
+    executor: Executor | None = None,
+    scratch: Path | None = None,
 ) -> TileResult:
-    """Tile ``las_path`` into the new Zarr group ``out`` (which must not exist; removed again on an
-    error); return its node index. ``z_unit``: the unit of the file's z recorded at ingest (None: the
-    unit its CRS implies). ``eight_bit``: whether its colour is 0-255 in 16-bit fields, as ingest
-    recorded it (None: judged from its first chunk). ``kept``: (partitions folder, the file's sha256)
-    where ingest may have kept this file's partition (siteline.partition); used when it matches.
-    ``batch_points``: a tile of more points is levelled and ordered in batches of its blocks, so a
-    worker's memory stays about 200 bytes x ``batch_points`` whatever the density (the same store)."""
+    """Tile ``las_path`` into the new Zarr group ``out`` (a local path or an fsspec URL; it must not
+    exist; removed again on an error); return its node index. ``z_unit``: the unit of the file's z
+    recorded at ingest (None: the unit its CRS implies). ``eight_bit``: whether its colour is 0-255 in
+    16-bit fields, as ingest recorded it (None: judged from its first chunk). ``kept``: (partitions
+    folder, the file's sha256) where ingest may have kept this file's partition
+    (siteline.partition); used when it matches. ``batch_points``: a tile of more points is levelled
+    and ordered in batches of its blocks, so a worker's memory stays about 200 bytes x
+    ``batch_points`` whatever the density (the same store). ``executor``: where the tiles are
+    written (a Dask cluster's ``Client.get_executor()``, say) instead of this machine's process
+    pool; with a URL ``out`` the partition's runs are copied beside it for the executor's workers.
+    ``scratch``: a local folder for the partition (default: beside a local ``out``, else the
+    system's temporary folder)."""
     import zarr
 
     t0 = time.perf_counter()
     spec = spec or TileSpec(tile_size_m=site.tile_size_m)
-    out = Path(out)
-    if out.exists():
-        raise TileError(f"tile store {out} already exists; remove it or tile into another path.")
-    source_transformer(las_path, site, src_crs, z_unit)  # refuse an impossible transformation up front
-    with open_las(las_path) as reader:
-        total = int(reader.header.point_count)
-        if eight_bit is None:
-            eight_bit = detect_eight_bit(reader, las_path)
-    if total == 0:
-        raise TileError(f"point cloud {las_path} holds no points to tile.")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    sweep_stale(out.parent, ".*.spill-*")
-    spill_dir = out.with_name(f".{out.name}.spill-{owner_tag()}")
+    target = str(out)
+    total, eight_bit = _check_source(las_path, site, src_crs, z_unit, eight_bit, target)
+    spill_dir = _spill_dir(target, scratch)
+    remote = "://" in target
+    runs_uri = f"{target.rstrip('/')}.runs-{owner_tag()}" if remote and executor is not None else None
     source = PassSource(
         str(las_path), site, crs_text(src_crs), z_unit_of(src_crs, z_unit).to_dict(), eight_bit
     )
@@ -162,30 +188,91 @@ def write_tiles(
             log.info("tiling %s from the partition its ingest kept", las_path.name)
         t_part = time.perf_counter() - t0
         parts = {tile_key(*ij): p for ij, p in partition.parts_by_tile().items()}
-        if not parts:
-            raise TileError(f"point cloud {las_path} holds no points to tile.")
-        root = zarr.open_group(str(out), mode="w")
+        if runs_uri is not None:
+            parts = _share_runs(parts, spill_dir, runs_uri)
+        root = zarr.open_group(target, mode="w")
         root.create_group("tiles")
-        pool = process_pool(workers) if workers > 1 and total >= PARALLEL_MIN_POINTS else None
-        results = _write_all(pool, parts, out, spec, seed, spill_dir, batch_points, progress)
-        nodes = NodeTable.concat([r[3] for r in results])
-        checksum = hashlib.sha256("\n".join(f"{k}:{c}" for k, _, c, _ in results).encode()).hexdigest()
-        points = sum(r[1] for r in results)
-        if points != total:
-            raise TileError(
-                f"point cloud {las_path}: its header counts {total:,} points but {points:,} were tiled."
-            )
-        write_index(root, nodes)
-        root.attrs.update(
-            {"siteline_tiles": FORMAT_VERSION, "spec": spec.to_dict(), "site_origin": list(site.origin),
-             "crs": site.crs, "points": points, "checksum": checksum}
-        )  # fmt: skip
-        size = _dir_bytes(out)
+        if executor is None and workers > 1 and total >= PARALLEL_MIN_POINTS:
+            executor = process_pool(workers)
+        how = type(executor).__name__ if executor is not None else "this process"
+        log.info("writing %d tiles of %s with %s", len(parts), las_path.name, how)
+        worker_scratch = None if remote and executor is not None else str(spill_dir)
+        results = _write_all(executor, parts, target, spec, seed, worker_scratch, batch_points, progress)
+        nodes, checksum = _index(root, results, total, las_path, site, spec)
+        size = _dir_bytes(target)
     except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
+        _remove(target)
         raise
     finally:
         shutil.rmtree(spill_dir, ignore_errors=True)
+        if runs_uri is not None:
+            _remove(runs_uri)
     return TileResult(
-        str(out), points, len(results), nodes.levels, size, checksum, nodes, time.perf_counter() - t0, t_part
+        target,
+        nodes.points,
+        len(results),
+        nodes.levels,
+        size,
+        checksum,
+        nodes,
+        time.perf_counter() - t0,
+        t_part,
     )
+
+
+def _check_source(
+    las_path: Path,
+    site: SiteSpec,
+    src_crs: pyproj.CRS,
+    z_unit: ZUnit | None,
+    eight_bit: bool | None,
+    target: str,
+) -> tuple[int, bool | None]:
+    """The file's point count and colour depth, after refusing an existing ``target``, an impossible
+    transformation or an empty file."""
+    fs, path = _fs(target)
+    if fs.exists(path):
+        raise TileError(f"tile store {target} already exists; remove it or tile into another path.")
+    source_transformer(las_path, site, src_crs, z_unit)
+    with open_las(las_path) as reader:
+        total = int(reader.header.point_count)
+        if eight_bit is None:
+            eight_bit = detect_eight_bit(reader, las_path)
+    if total == 0:
+        raise TileError(f"point cloud {las_path} holds no points to tile.")
+    return total, eight_bit
+
+
+def _spill_dir(target: str, scratch: Path | None) -> Path:
+    """A fresh name for the partition of a tiling of ``target``, in ``scratch`` (default: beside a
+    local target, else the system's temporary folder); stale ones there are swept."""
+    remote = "://" in target
+    folder = (
+        Path(scratch)
+        if scratch is not None
+        else Path(tempfile.gettempdir())
+        if remote
+        else Path(target).parent
+    )
+    folder.mkdir(parents=True, exist_ok=True)
+    sweep_stale(folder, ".*.spill-*")
+    return folder / f".{target.rstrip('/').rsplit('/', 1)[-1]}.spill-{owner_tag()}"
+
+
+def _index(
+    root: Any, results: list[tuple[str, int, str, NodeTable]], total: int, las_path: Path, site: SiteSpec,
+    spec: TileSpec,
+) -> tuple[NodeTable, str]:  # fmt: skip
+    """Write the store's node index and attributes; return the index and the store's checksum."""
+    nodes = NodeTable.concat([r[3] for r in results])
+    checksum = hashlib.sha256("\n".join(f"{k}:{c}" for k, _, c, _ in results).encode()).hexdigest()
+    if nodes.points != total or sum(r[1] for r in results) != total:
+        raise TileError(
+            f"point cloud {las_path}: its header counts {total:,} points but {nodes.points:,} were tiled."
+        )
+    write_index(root, nodes)
+    root.attrs.update(
+        {"siteline_tiles": FORMAT_VERSION, "spec": spec.to_dict(), "site_origin": list(site.origin),
+         "crs": site.crs, "points": total, "checksum": checksum}
+    )  # fmt: skip
+    return nodes, checksum
