@@ -76,6 +76,22 @@ def test_inside_fence_and_nearest_segment() -> None:
     assert {tuple(a), tuple(b)} == {(100.0, 80.0), (0.0, 80.0)}
 
 
+def test_inside_fence_shortcut_for_covered_chunks_agrees_with_the_point_test() -> None:
+    """An L-shaped fence: a chunk whose bounding box it covers is inside whole; one across the notch
+    is tested point by point; both as shapely says (on the fence counts as inside)."""
+    import shapely
+
+    ring = validate_fence([(0, 0), (100, 0), (100, 40), (40, 40), (40, 100), (0, 100), (0, 0)])
+    rng = np.random.default_rng(0)
+    covered = rng.uniform([1, 1], [99, 39], (5_000, 2))
+    across = rng.uniform([0, 0], [100, 100], (5_000, 2))
+    assert inside_fence(covered, ring).all()
+    want = shapely.intersects_xy(shapely.Polygon(ring), across[:, 0], across[:, 1])
+    got = inside_fence(across, ring, tol_m=0.0)
+    assert np.array_equal(got, want) and 0 < got.sum() < len(got)
+    assert inside_fence(np.array([[100.0, 40.0], [40.0, 100.0]]), ring).all()  # on the fence
+
+
 def test_taxonomy_failing_schema_names_file(tmp_path) -> None:
     bad = default_taxonomy().to_dict()
     bad["classes"][0]["id"] = 300

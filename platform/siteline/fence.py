@@ -114,9 +114,11 @@ def inside_fence(
 ) -> np.ndarray:
     """Which points lie inside the fence, or within ``tol_m`` of it (on the fence counts as inside,
     at every coordinate magnitude: siteline.tolerances). xy_m: (N, 2+) site-local metres.
-    Returns (N,) bool."""
+    Returns (N,) bool. Points whose bounding box the fence covers are inside without a test each."""
     poly = shapely.Polygon(vertices_m)
     xy = np.asarray(xy_m, dtype=np.float64)
+    if len(xy) and shapely.covers(poly, shapely.box(*xy[:, :2].min(axis=0), *xy[:, :2].max(axis=0))):
+        return np.ones(len(xy), dtype=bool)
     inside = shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
     out = ~inside
     if tol_m > 0 and out.any():

@@ -61,7 +61,7 @@ def scan_las(
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
     keep_p = min(1.0, sample_max / max(n_total, 1))
     ranges = point_ranges(n_total, workers)
-    spec = TileSpec(tile_size_m=site.tile_size_m)
+    spec = TileSpec.for_site(site)
     folder = runs_into
     visitors = [
         (_Totals(stable_ids, keep_p, (seed, k), eight_bit),)

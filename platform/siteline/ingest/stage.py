@@ -139,6 +139,6 @@ def ingest_mission(
 def _partition_key(checked: CheckedMission, plan: IngestPlan) -> str:
     """The name the tile stage looks for the scene's partition under (siteline.partition)."""
     scan, site = checked.scan, plan.site
-    spec = TileSpec(tile_size_m=site.tile_size_m)
+    spec = TileSpec.for_site(site)
     eight_bit = EIGHT_BIT.get(scan.colour)
     return partition_key(checked.las_sha256, site, scan.source_crs, scan.z_unit, eight_bit, spec)

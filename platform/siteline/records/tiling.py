@@ -6,12 +6,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from siteline.errors import TileError
 from siteline.records.enums import NODE_ORDERS, NodeOrder
+
+if TYPE_CHECKING:
+    from siteline.site import SiteSpec
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,12 @@ class TileSpec:
             raise TileError(f"node order {self.node_order!r} must be one of {NODE_ORDERS}.")
         if self.shard_points % self.chunk_points:
             raise TileError("shard_points must be a multiple of chunk_points.")
+
+    @classmethod
+    def for_site(cls, site: SiteSpec) -> TileSpec:
+        """The default spec of a site: its tile grid, every other field at its default (what ingest
+        partitions for and the tile stage writes unless told otherwise)."""
+        return cls(tile_size_m=site.tile_size_m)
 
     @property
     def level0_spacing_m(self) -> float:

@@ -64,7 +64,7 @@ def _tile(
     if done and not retile:
         log.info("scene %d is already tiled", scene_id)
         return TileOutcome(None, plan.already_tiled())
-    spec = spec or TileSpec(tile_size_m=plan.site.tile_size_m)
+    spec = spec or TileSpec.for_site(plan.site)
     run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
     kept = layout.partitions(settings.home)
     tiling = execute_tiling(

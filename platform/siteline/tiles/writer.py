@@ -170,7 +170,7 @@ def write_tiles(
     import zarr
 
     t0 = time.perf_counter()
-    spec = spec or TileSpec(tile_size_m=site.tile_size_m)
+    spec = spec or TileSpec.for_site(site)
     target = str(out)
     total, eight_bit = _check_source(las_path, site, src_crs, z_unit, eight_bit, target)
     spill_dir = _spill_dir(target, scratch)
