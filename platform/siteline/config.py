@@ -15,9 +15,10 @@ Environment variables (read here and nowhere else):
 - ``SITELINE_RELEASE_POLICY``: ``on-demand`` (default) or ``every-pair`` (the flows build a release
   after every processed pair); ``SITELINE_RELEASE_NAME`` that release's name (default ``<site>-cd``).
 - ``SITELINE_TILE_BATCH_POINTS``: a tile of more points is levelled and written a batch of its
-  blocks at a time, so a tiling worker holds about 200 bytes x this many points whatever the
-  density (default 4,000,000: ~0.8 GB a worker); the store is the same at any value, smaller ones
-  cost a second read of each batch and a scratch copy of the tile (siteline.tiles.batches).
+  blocks at a time (through a scratch copy of the tile), so a tiling worker holds about 200 bytes x
+  this many points whatever the density (default 1,000,000: a worker peaks near 0.5 GB, most of
+  it the read pass; 4,000,000: ~1 GB, and no faster on the bench). The store is the same at any
+  value (siteline.tiles.batches; docs/performance.md).
 - ``SITELINE_PREVIEW_URL``: where ``siteline previews serve`` answers (default
   ``http://127.0.0.1:4201``); the flows' image artifacts point there.
 """
@@ -32,7 +33,7 @@ from siteline.errors import ConfigError
 from siteline.stores import Store, layout, open_store
 
 CATALOG_FILENAME = "catalog.sqlite"
-DEFAULT_TILE_BATCH_POINTS = 4_000_000
+DEFAULT_TILE_BATCH_POINTS = 1_000_000
 TASK_RUNNERS = ("threads", "processes", "dask")
 RELEASE_POLICIES = ("every-pair", "on-demand")
 # where `siteline previews serve` (started by `make serve`) answers: the Prefect UI loads images from it

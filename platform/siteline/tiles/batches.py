@@ -43,7 +43,7 @@ from siteline.tiles.lod import assign_levels, block_ranks
 from siteline.tiles.nodes import NodePlan, add_cube_counts, cube_counts, plan_nodes
 
 # a tile of more points than this is levelled and ordered a batch of blocks at a time (about 200
-# bytes a point at the peak: 4M points, ~0.8 GB a worker; SITELINE_TILE_BATCH_POINTS)
+# bytes a point at the peak; SITELINE_TILE_BATCH_POINTS, docs/performance.md)
 BATCH_POINTS = DEFAULT_TILE_BATCH_POINTS
 
 # a slice of the partition: (block, run file, offset, count, lowest z count)
