@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
+from siteline.errors import TileError
 from siteline.partition import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
@@ -58,12 +59,13 @@ def tile_seed(key: str, seed: int) -> int:
 def batches(parts: list[Part], budget: int) -> list[list[Part]]:
     """Consecutive whole blocks of ``parts`` (sorted by block), each batch at most ``budget`` points
     unless one block alone holds more."""
+    per_block: dict[int, int] = {}
+    for p in parts:
+        per_block[p[0]] = per_block.get(p[0], 0) + p[3]
     out: list[list[Part]] = []
     size = 0
     for k, part in enumerate(parts):
-        new_block = k == 0 or part[0] != parts[k - 1][0]
-        block_size = sum(p[3] for p in parts[k:] if p[0] == part[0]) if new_block else 0
-        if new_block and (not out or size + block_size > budget):
+        if (k == 0 or part[0] != parts[k - 1][0]) and (not out or size + per_block[part[0]] > budget):
             out.append([])
             size = 0
         out[-1].append(part)
@@ -119,12 +121,14 @@ def _scale(values: list[float | None]) -> float | None:
 
 
 def _in_memory(
-    parts: list[Part], spec: TileSpec, seed: int, z0: int
+    key: str, parts: list[Part], spec: TileSpec, seed: int, z0: int
 ) -> tuple[NodePlan, Columns, float | None]:
     rec = _gather(parts)
     levels = _levels(rec, parts, spec, seed, z0)
     plan = plan_nodes(cube_counts(rec[COUNTS], levels, spec), spec, level_count(spec), seed ^ 0x5EED)
-    where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), np.zeros(len(plan.key), np.int64))
+    seen = np.zeros(len(plan.key), np.int64)
+    where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), seen)
+    _check_placed(key, plan, seen)
     inverse = np.empty_like(where)
     inverse[where] = np.arange(len(where))
     # one field at a time (np.take: about twice a fancy index's speed here)
@@ -161,11 +165,21 @@ def _out_of_core(
         del out  # unmapped: its pages leave this process
         os.unlink(scratch / f"{key}.levels-{k}.npy")
 
+    _check_placed(key, plan, seen)
+
     def columns(a: int, b: int) -> dict[str, np.ndarray]:
         rec = np.fromfile(sorted_path, dtype=RECORD, count=b - a, offset=a * RECORD.itemsize)
         return {name: np.ascontiguousarray(rec[name]) for name in ATTRIBUTES}
 
     return plan, columns, scale
+
+
+def _check_placed(key: str, plan: NodePlan, seen: np.ndarray) -> None:
+    """Refuse a tile whose points did not fill every slot of its plan (its runs changed under it)."""
+    if not np.array_equal(seen, plan.count):
+        raise TileError(
+            f"tile {key}: its points do not fill its node plan; the partition changed while tiling."
+        )
 
 
 async def _write(
@@ -234,7 +248,7 @@ def write_tile(
     z0 = min(p[4] for p in parts)
     with tempfile.TemporaryDirectory(prefix="siteline-tile-", dir=scratch) as work:
         if len(groups) == 1:
-            plan, columns, scale = _in_memory(parts, spec, seed, z0)
+            plan, columns, scale = _in_memory(key, parts, spec, seed, z0)
         else:
             plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(work))
         checksum, lo, hi = sync(_write(group_path, key, plan, columns, spec, scale))
