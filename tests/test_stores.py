@@ -217,3 +217,26 @@ def test_a_file_write_sweeps_dead_writers_temporaries_only(tmp_path: Path) -> No
     write_file(tmp_path / "ef56", lambda fh: fh.write(b"whole"))
     assert not dead.exists() and live.read_bytes() == b"busy"
     assert (tmp_path / "ef56").read_bytes() == b"whole"
+
+
+def test_publish_shared_is_all_or_nothing(store: Store) -> None:
+    """What workers build straight into the store counts only once its marker is written; an error
+    leaves nothing, and an empty build is refused."""
+    import fsspec
+
+    uri = store.uri("shared", "x.zarr")
+
+    def put(target: str) -> None:
+        fs, path = fsspec.core.url_to_fs(target)
+        fs.makedirs(path, exist_ok=True)
+        fs.pipe_file(f"{path}/zarr.json", b"{}")
+
+    with pytest.raises(RuntimeError), store.publish_shared(uri) as target:
+        put(target)
+        raise RuntimeError("a worker died")
+    assert not store.exists(uri) and not store.is_complete(uri)
+    with store.publish_shared(uri) as target:
+        put(target)
+    assert store.is_complete(uri)
+    with pytest.raises(StoreError), store.publish_shared(store.uri("shared", "empty.zarr")):
+        pass

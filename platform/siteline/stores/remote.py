@@ -151,7 +151,7 @@ class FsspecStore(Store):
         try:
             yield uri
             fs.invalidate_cache()
-            if not fs.exists(join(path, "zarr.json")) and not fs.ls(path):
+            if not fs.exists(path):
                 raise StoreError(f"nothing was built to publish at {uri}.")
             fs.pipe_file(join(path, MARKER), b"")
         except BaseException:
