@@ -3,8 +3,11 @@ they share (the S3 test server), and the store is the one this machine writes.""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import pyproj
+import pytest
 
 from siteline.lasio import write_las
 from siteline.site import make_site_spec
@@ -14,8 +17,24 @@ from siteline.tiles import SceneTiles, TileSpec, write_tiles
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
 
 
-def test_a_dask_cluster_writes_the_tiles_into_the_shared_store(tmp_path, s3_store) -> None:
-    from distributed import Client, LocalCluster, get_task_stream
+@pytest.fixture(scope="module")
+def client(s3_endpoint) -> Iterator:
+    """A local Dask cluster of two worker processes, shared by this module's tests (started after the S3
+    server, so its workers inherit its configuration)."""
+    from distributed import Client, LocalCluster
+
+    with (
+        LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None) as cluster,
+        Client(cluster) as c,
+    ):
+        yield c
+
+
+@pytest.mark.parametrize("where", ["s3", "local"])
+def test_a_dask_cluster_writes_the_tiles_into_the_shared_store(tmp_path, request, client, where) -> None:
+    from distributed import get_task_stream
+
+    from siteline.stores.remote import file_system
 
     rng = np.random.default_rng(5)
     n = 60_000
@@ -26,17 +45,15 @@ def test_a_dask_cluster_writes_the_tiles_into_the_shared_store(tmp_path, s3_stor
     crs = pyproj.CRS("EPSG:32618")
     spec = TileSpec(node_points=1024)
     here = write_tiles(tmp_path / "c.las", site, crs, tmp_path / "here.zarr", spec, workers=1)
-    store = open_store(s3_store, tmp_path / "staging")
+    url = request.getfixturevalue("s3_store") if where == "s3" else str(tmp_path / "stores")
+    store = open_store(url, tmp_path / "staging")
+    store.ensure()
     uri = store.uri("tiles", "scene-1.zarr")
-    with (
-        LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None) as cluster,
-        Client(cluster) as client,
-        get_task_stream(client) as stream,
-        store.publish_shared(uri) as target,
-    ):
+    with get_task_stream(client) as stream, store.publish_shared(uri) as target:
         there = write_tiles(
-            tmp_path / "c.las", site, crs, target, spec, executor=client.get_executor(), batch_points=5_000
-        )
+            tmp_path / "c.las", site, crs, target, spec, executor=client.get_executor(), batch_points=5_000,
+            scratch=store.staging,
+        )  # fmt: skip
     assert there.checksum == here.checksum and there.points == n and there.tiles == here.tiles == 4
     wrote = [t for t in stream.data if "write_tile" in str(t["key"])]
     assert len(wrote) == there.tiles and len({t["worker"] for t in wrote}) == 2  # both workers wrote
@@ -44,9 +61,7 @@ def test_a_dask_cluster_writes_the_tiles_into_the_shared_store(tmp_path, s3_stor
     a, b = SceneTiles.open(here.uri), SceneTiles.open(uri)
     for tile in a.by_tile:
         assert np.array_equal(a.read_tile(tile, ("gps_time",)).xyz_m, b.read_tile(tile, ("gps_time",)).xyz_m)
-    import fsspec
-
-    fs = fsspec.filesystem("s3")
+    fs, tiles = file_system(store.uri("tiles"))
     fs.invalidate_cache()
-    assert [p.rsplit("/", 1)[-1] for p in fs.ls(store.uri("tiles")[5:])] == ["scene-1.zarr"]  # runs removed
+    assert [p.rstrip("/").rsplit("/", 1)[-1] for p in fs.ls(tiles)] == ["scene-1.zarr"]  # runs removed
     assert not list((tmp_path / "staging").glob(".*spill*"))

@@ -31,6 +31,7 @@ from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.errors import TileError
 from siteline.partition import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
+from siteline.stores.remote import file_system
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
 from siteline.tiles.layout import (
     ATTRIBUTES,
@@ -94,13 +95,9 @@ def _gather(parts: list[Part]) -> np.ndarray:
 
 
 def _read(path: str, start: int, end: int) -> np.ndarray:
-    """Records [start, end) of a run file (a local path or an fsspec URL)."""
+    """Records [start, end) of a run file (a local path or an fsspec URL: one ranged read)."""
     size = RECORD.itemsize
-    if "://" not in path:
-        return np.fromfile(path, dtype=RECORD, count=end - start, offset=start * size)
-    import fsspec
-
-    fs, where = fsspec.core.url_to_fs(path)
+    fs, where = file_system(path)
     return np.frombuffer(fs.cat_file(where, start=start * size, end=end * size), dtype=RECORD)
 
 

@@ -72,7 +72,7 @@ def execute_tiling(
             kept=(partitions, plan.las.sha256) if partitions is not None else None,
             batch_points=batch_points,
             executor=executor,
-            scratch=store.staging if executor is not None else None,
+            scratch=store.staging,
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,

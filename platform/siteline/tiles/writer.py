@@ -46,6 +46,7 @@ from siteline.records.tiling import NodeTable, TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import source_transformer
 from siteline.stores.owners import owner_tag, sweep_stale
+from siteline.stores.remote import file_system
 from siteline.tiles.batches import BATCH_POINTS, Part, write_tile
 from siteline.tiles.index import FORMAT_VERSION, write_index
 from siteline.tiles.layout import tile_key
@@ -56,7 +57,7 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class TileResult:
-    """What :func:`write_tiles` wrote: the store (a local path), its points, tiles and levels, bytes on
+    """What :func:`write_tiles` wrote: the store (a local path or an fsspec URL), its points, tiles and levels, bytes on
     disk, checksum (of every array of every tile, in order), the node index, and the seconds it took
     (partitioning and writing apart)."""
 
@@ -75,21 +76,14 @@ class TileResult:
         return self.bytes / max(self.points, 1)
 
 
-def _fs(uri: str) -> tuple[Any, str]:
-    """(fsspec file system, path) of a local path or URL."""
-    import fsspec
-
-    return fsspec.core.url_to_fs(uri)
-
-
 def _dir_bytes(uri: str) -> int:
-    fs, path = _fs(uri)
+    fs, path = file_system(uri)
     fs.invalidate_cache()
     return int(fs.du(path))
 
 
 def _remove(uri: str) -> None:
-    fs, path = _fs(uri)
+    fs, path = file_system(uri)
     if fs.exists(path):
         fs.rm(path, recursive=True)
 
@@ -97,8 +91,9 @@ def _remove(uri: str) -> None:
 def _share_runs(parts: dict[str, list[Part]], folder: Path, uri: str) -> dict[str, list[Part]]:
     """Copy the partition's run files to ``uri`` (where a cluster's workers read them); the same
     slices of the copies."""
-    fs, path = _fs(uri)
+    fs, path = file_system(uri)
     names = sorted({Path(p[1]).name for slices in parts.values() for p in slices})
+    fs.makedirs(path, exist_ok=True)
     fs.put([str(folder / n) for n in names], [f"{path}/{n}" for n in names])
     return {k: [(b, f"{uri}/{Path(f).name}", o, c, z) for b, f, o, c, z in v] for k, v in parts.items()}
 
@@ -164,9 +159,9 @@ def write_tiles(
     and ordered in batches of its blocks, so a worker's memory stays about 200 bytes x
     ``batch_points`` whatever the density (the same store). ``executor``: where the tiles are
     written (a Dask cluster's ``Client.get_executor()``, say) instead of this machine's process
-    pool; with a URL ``out`` the partition's runs are copied beside it for the executor's workers.
-    ``scratch``: a local folder for the partition (default: beside a local ``out``, else the
-    system's temporary folder)."""
+    pool; the partition's runs are then copied beside ``out``, where its workers read them.
+    ``scratch``: a local folder for the partition, on the file system of ``kept`` for it to be
+    taken over (default: the system's temporary folder)."""
     import zarr
 
     t0 = time.perf_counter()
@@ -174,8 +169,8 @@ def write_tiles(
     target = str(out)
     total, eight_bit = _check_source(las_path, site, src_crs, z_unit, eight_bit, target)
     spill_dir = _spill_dir(target, scratch)
-    remote = "://" in target
-    runs_uri = f"{target.rstrip('/')}.runs-{owner_tag()}" if remote and executor is not None else None
+    # the caller's executor (a cluster's) reads the runs beside the store; this machine's pool, here
+    runs_uri = f"{target.rstrip('/')}.runs-{owner_tag()}" if executor is not None else None
     source = PassSource(
         str(las_path), site, crs_text(src_crs), z_unit_of(src_crs, z_unit).to_dict(), eight_bit
     )
@@ -196,7 +191,7 @@ def write_tiles(
             executor = process_pool(workers)
         how = type(executor).__name__ if executor is not None else "this process"
         log.info("writing %d tiles of %s with %s", len(parts), las_path.name, how)
-        worker_scratch = None if remote and executor is not None else str(spill_dir)
+        worker_scratch = None if runs_uri is not None else str(spill_dir)
         results = _write_all(executor, parts, target, spec, seed, worker_scratch, batch_points, progress)
         nodes, checksum = _index(root, results, total, las_path, site, spec)
         size = _dir_bytes(target)
@@ -230,7 +225,7 @@ def _check_source(
 ) -> tuple[int, bool | None]:
     """The file's point count and colour depth, after refusing an existing ``target``, an impossible
     transformation or an empty file."""
-    fs, path = _fs(target)
+    fs, path = file_system(target)
     if fs.exists(path):
         raise TileError(f"tile store {target} already exists; remove it or tile into another path.")
     source_transformer(las_path, site, src_crs, z_unit)
@@ -244,16 +239,9 @@ def _check_source(
 
 
 def _spill_dir(target: str, scratch: Path | None) -> Path:
-    """A fresh name for the partition of a tiling of ``target``, in ``scratch`` (default: beside a
-    local target, else the system's temporary folder); stale ones there are swept."""
-    remote = "://" in target
-    folder = (
-        Path(scratch)
-        if scratch is not None
-        else Path(tempfile.gettempdir())
-        if remote
-        else Path(target).parent
-    )
+    """A fresh name for the partition of a tiling of ``target``, in the local folder ``scratch``
+    (default: the system's temporary folder); stale ones there are swept."""
+    folder = Path(scratch) if scratch is not None else Path(tempfile.gettempdir())
     folder.mkdir(parents=True, exist_ok=True)
     sweep_stale(folder, ".*.spill-*")
     return folder / f".{target.rstrip('/').rsplit('/', 1)[-1]}.spill-{owner_tag()}"
