@@ -27,11 +27,11 @@ import numpy as np
 
 from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
+from siteline.kernels import cut, radix
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import SiteChunk, site_chunks, source_transformer
-from siteline.sorting import sort_by_key
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.workers import pool_map, process_pool
 
@@ -140,40 +140,38 @@ def block_of(cell: int) -> int:
 
 
 def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray]:
-    """A chunk's records sorted by tile and block (one value sort of packed codes) and a row per
+    """A chunk's records sorted by tile and block (a stable radix sort of their codes) and a row per
     cell (:func:`cell_ids`) it touches: (cell, first record, records, lowest z count). A block is row-major
     ``by * blocks_per_side + bx`` of the tile's counts floored by :func:`block_edge` (a point rounded
     onto the tile's far edge stays in the last block)."""
     n = len(sc.local)
-    ij = np.floor(sc.local[:, :2] * (1.0 / spec.tile_size_m)).astype(np.int64)
-    # int32 quanta from each point's tile origin: x, y less the tile corner, z from 0
-    q = sc.local.copy()
-    q[:, :2] -= ij * spec.tile_size_m
-    q *= 1.0 / spec.quantum_m
-    np.rint(q, out=q)
-    if n and np.abs(q).max() >= 2**31 - 1:
-        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
-    counts = q.astype(np.int32)
     side = blocks_per_side(spec)
-    bxy = np.clip(counts[:, :2] // np.int32(block_edge(spec)), 0, side - 1).astype(np.int64)
-    lo = ij.min(axis=0) if n else np.zeros(2, np.int64)
-    span = ij.max(axis=0) - lo + 1 if n else np.ones(2, np.int64)
-    code = ((ij[:, 0] - lo[0]) * span[1] + (ij[:, 1] - lo[1])) * (side * side) + bxy[:, 1] * side + bxy[:, 0]
-    code, order = sort_by_key(code, np.arange(n))
-    first = np.r_[0, np.flatnonzero(code[1:] != code[:-1]) + 1] if n else np.zeros(0, np.int64)
-    c = code[first]
-    tile, block = c // (side * side), c % (side * side)
-    tij = np.c_[tile // span[1] + lo[0], tile % span[1] + lo[1]]
-    rec = np.empty(n, RECORD)
-    rec[COUNTS] = counts[order]
-    zmin = np.minimum.reduceat(rec[COUNTS][:, 2], first) if n else np.zeros(0, np.int32)
+    counts = np.empty((n, 3), np.int32)
+    code = np.empty(n, np.int64)
+    local = np.ascontiguousarray(sc.local, dtype=np.float64)
+    lo_i, lo_j, span_j, far = cut.tile_codes(
+        local, spec.tile_size_m, spec.quantum_m, block_edge(spec), side, counts, code
+    )
+    if far >= 2**31 - 1:
+        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
+    order = radix.radix_order(code)
+    code = code[order]
     ch = sc.chunk
-    rec["rgb"] = ch.rgb[order] if ch.rgb is not None else 0
-    rec["intensity"] = ch.intensity[order]
-    rec["class"] = sc.classes[order]
-    rec["gps_time"] = ch.gps_time[order] if ch.gps_time is not None else 0.0
-    rec["return_number"] = ch.return_number[order]
-    return rec, np.c_[cell_ids(tij, block), first, np.diff(np.r_[first, n]), zmin]
+    fields = {
+        COUNTS: counts,
+        "rgb": ch.rgb,
+        "intensity": ch.intensity,
+        "class": sc.classes,
+        "gps_time": ch.gps_time,
+        "return_number": ch.return_number,
+    }
+    rec = np.empty(n, RECORD)
+    for name, values in fields.items():  # a gather then a strided copy: 3x numpy's fancy index
+        rec[name] = np.take(values, order, axis=0) if values is not None else 0
+    c, first, zmin = cut.runs(code, rec[COUNTS][:, 2])
+    tile, block = c // (side * side), c % (side * side)
+    tij = np.c_[tile // span_j + lo_i, tile % span_j + lo_j]
+    return rec, np.c_[cell_ids(tij, block), first, np.diff(np.r_[first, n]), zmin.astype(np.int64)]
 
 
 @dataclass

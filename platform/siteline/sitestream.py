@@ -15,6 +15,7 @@ import pyproj
 from siteline.crs import ToSiteCRS, ZUnit, parse_source_crs, z_unit_of
 from siteline.errors import CRSError, PointCloudError
 from siteline.fence import inside_fence
+from siteline.kernels import cut
 from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
 from siteline.site import SiteSpec
 
@@ -23,13 +24,15 @@ from siteline.site import SiteSpec
 class SiteChunk:
     """A chunk in the site frame: local (N, 3) float64 site-local metres, the raw chunk, site classes
     (N,) uint8 after the taxonomy and the fence, which raw codes the taxonomy knows, which points lie
-    outside the fence."""
+    outside the fence, and the (3,) lowest and highest site-local coordinates."""
 
     local: np.ndarray
     chunk: PointChunk
     classes: np.ndarray
     known_code: np.ndarray
     outside: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
 
 
 def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
@@ -111,12 +114,12 @@ def site_chunks(
         if tr is not None:
             xyz = tr(xyz)
         local = xyz - origin
-        if not np.isfinite(local).all():
-            bad = int((~np.isfinite(local).all(axis=1)).sum())
+        lo, hi, bad = cut.bounds(local)
+        if bad:
             raise PointCloudError(
                 f"point cloud {path}: {bad} points have non-finite coordinates (NaN or inf)."
             )
-        far = float(np.abs(local).max(initial=0.0))
+        far = float(np.abs(np.r_[lo, hi]).max(initial=0.0)) if len(local) else 0.0
         if far > MAX_SITE_LOCAL_M:
             raise PointCloudError(
                 f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(origin)} (limit "
@@ -128,4 +131,4 @@ def site_chunks(
         if site.fence is not None:
             outside = ~inside_fence(local[:, :2], site.fence)
             cls = np.where(outside, tax.ignore_id, cls)
-        yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside)
+        yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside, lo, hi)

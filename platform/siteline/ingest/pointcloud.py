@@ -90,7 +90,9 @@ class _Totals:
     def __init__(
         self, stable_ids: np.ndarray, keep_p: float, seed: tuple[int, int], eight_bit: bool | None
     ) -> None:
-        self.stable_ids, self.keep_p = stable_ids, keep_p
+        self.stable_lut = np.zeros(256, bool)
+        self.stable_lut[stable_ids] = True
+        self.keep_p = keep_p
         self.rng = np.random.default_rng(list(seed))
         self.hist = np.zeros(256, np.int64)
         self.unknown = np.zeros(256, np.int64)
@@ -105,14 +107,14 @@ class _Totals:
         self.unknown += np.bincount(chunk.classification[~sc.known_code], minlength=256)
         self.outside += int(sc.outside.sum())
         self.hist += np.bincount(cls, minlength=256)
-        self.lo = np.minimum(self.lo, local.min(axis=0))
-        self.hi = np.maximum(self.hi, local.max(axis=0))
+        self.lo = np.minimum(self.lo, sc.lo)
+        self.hi = np.maximum(self.hi, sc.hi)
         self.count += len(local)
         if chunk.gps_time is not None and len(chunk.gps_time):
             self.tmin = min(self.tmin, float(chunk.gps_time.min()))
             self.tmax = max(self.tmax, float(chunk.gps_time.max()))
-        stable = np.isin(cls, self.stable_ids) & (self.rng.random(len(cls)) < self.keep_p)
-        self.samples.append(local[stable])
+        stable = np.flatnonzero(self.stable_lut[cls])
+        self.samples.append(local[stable[self.rng.random(len(stable)) < self.keep_p]])
 
     def merge(self, other: _Totals) -> None:
         """Add the totals of another range."""

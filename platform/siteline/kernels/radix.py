@@ -1,0 +1,41 @@
+"""A stable radix sort of integer keys (the order of (key, index) in O(N) a digit)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from siteline.kernels import kernel
+
+_DIGIT_BITS = 16
+
+
+@kernel
+def radix_order(key: np.ndarray) -> np.ndarray:
+    """(N,) int64 positions that sort (N,) int64 ``key`` stably: the order of (key, index), by least
+    significant 16-bit digits of ``key - key.min()``, one counting pass per digit its span needs."""
+    n = key.shape[0]
+    order = np.arange(n)
+    if n == 0:
+        return order
+    lo, hi = key.min(), key.max()
+    span = np.uint64(hi - lo)
+    radix = 1 << _DIGIT_BITS
+    mask = np.uint64(radix - 1)
+    tmp = np.empty(n, np.int64)
+    shift = np.uint64(0)
+    while shift == 0 or (span >> shift) > 0:
+        count = np.zeros(radix + 1, np.int64)
+        for k in range(n):
+            count[((np.uint64(key[order[k]] - lo) >> shift) & mask) + 1] += 1
+        for d in range(radix):
+            count[d + 1] += count[d]
+        for k in range(n):
+            p = order[k]
+            digit = (np.uint64(key[p] - lo) >> shift) & mask
+            tmp[count[digit]] = p
+            count[digit] += 1
+        order, tmp = tmp, order
+        shift += np.uint64(_DIGIT_BITS)
+        if shift >= 64:
+            break
+    return order
