@@ -62,3 +62,55 @@ def test_runs_cut_sorted_codes() -> None:
     z = np.array([4, -2, 7, 1, 0, 3], np.int32)
     codes, first, zmin = runs(code, z)
     assert codes.tolist() == [3, 5, 9] and first.tolist() == [0, 2, 3] and zmin.tolist() == [-2, 7, 0]
+
+
+def test_cube_rows_count_points_per_level_and_cube() -> None:
+    from siteline.kernels.nodes import LEVEL_SHIFT, Z_OFFSET, cube_rows
+
+    rng = np.random.default_rng(3)
+    counts = np.c_[rng.integers(-5, 50_000, (20_000, 2)), rng.integers(-3_000, 9_000, 20_000)].astype(
+        np.int32
+    )
+    levels = rng.integers(0, 8, 20_000).astype(np.uint8)
+    edge, depth = 781, 6
+    cubes = np.floor_divide(counts, edge).astype(np.int64)
+    cubes[:, :2] = np.clip(cubes[:, :2], 0, (1 << depth) - 1)
+    key = (
+        levels.astype(np.int64) << LEVEL_SHIFT
+        | (cubes[:, 2] + Z_OFFSET) << 2 * depth
+        | cubes[:, 1] << depth
+        | cubes[:, 0]
+    )
+    want_key, want_count = np.unique(key, return_counts=True)
+    rows = cube_rows(counts, levels, edge, depth)
+    assert np.array_equal(rows[:, 0], want_key) and np.array_equal(rows[:, 1], want_count)
+    far = counts.copy()
+    far[0, 2] = 2**31 - 1
+    assert cube_rows(far, levels, 1, depth).shape == (0, 2)  # z beyond the key's reach: refused
+
+
+@pytest.mark.parametrize("shuffle", [True, False])
+def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
+    """One group of 1,000 slots starting at 7: placed in one batch or in uneven batches, its points
+    take the same slots, each once (the seeded permutation, or in order)."""
+    from siteline.kernels.nodes import place_points
+
+    n = 1_000
+    counts, levels = np.zeros((n, 3), np.int32), np.zeros(n, np.uint8)
+    plan = (np.zeros(8, np.int64), np.zeros(1, np.int64), 0, 1, np.array([0]), np.array([7]), np.array([n]))
+
+    def place(cuts: list[int]) -> np.ndarray:
+        seen = np.zeros(1, np.int64)
+        out = [
+            place_points(counts[a:b], levels[a:b], 781, 6, *plan, seen, 42, shuffle)
+            for a, b in zip(cuts[:-1], cuts[1:], strict=True)
+        ]
+        assert seen[0] == n
+        return np.concatenate(out)
+
+    whole = place([0, n])
+    assert np.array_equal(place([0, 1, 300, 301, 999, n]), whole)
+    assert np.array_equal(np.sort(whole), np.arange(7, 7 + n))
+    assert (whole[:-1] < whole[1:]).all() != shuffle
+    seen = np.array([n - 1])  # one slot left for two points: no group to place them in
+    assert (place_points(counts[:2], levels[:2], 781, 6, *plan, seen, 42, shuffle) == -1).all()

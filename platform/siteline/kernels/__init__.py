@@ -29,12 +29,18 @@ class _Lazy:
 
 
 def _bind(namespace: MutableMapping[str, Any]) -> MutableMapping[str, Any]:
-    """Replace every lazy kernel of a module by its numba dispatcher (so kernels can call each other)."""
+    """Replace every lazy kernel a module holds by its numba dispatcher, a kernel imported from
+    another module by that module's (so kernels can call each other)."""
     import numba
 
     for name, value in list(namespace.items()):
-        if isinstance(value, _Lazy):
+        if not isinstance(value, _Lazy):
+            continue
+        home = value.fn.__globals__
+        if home is namespace:
             namespace[name] = numba.njit(cache=True, nogil=True, error_model="numpy")(value.fn)
+        else:
+            namespace[name] = _bind(home)[value.fn.__name__]
     return namespace
 
 

@@ -124,7 +124,7 @@ def _in_memory(
     levels = _levels(rec, parts, spec, seed, z0)
     plan = plan_nodes(cube_counts(rec[COUNTS], levels, spec), spec, level_count(spec), seed ^ 0x5EED)
     seen = np.zeros(len(plan.key), np.int64)
-    where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), seen)
+    where = plan.place(rec[COUNTS], levels, spec, seen)
     _check_placed(key, plan, seen)
     inverse = np.empty_like(where)
     inverse[where] = np.arange(len(where))
@@ -153,7 +153,7 @@ def _out_of_core(
     for k, parts in enumerate(groups):  # pass 2: each point to its place
         rec = _gather(parts)
         levels = np.load(scratch / f"{key}.levels-{k}.npy")
-        where = plan.place(plan.keys_of(rec[COUNTS], levels, spec), seen)
+        where = plan.place(rec[COUNTS], levels, spec, seen)
         if scale is not None and not round_trips(rec["gps_time"], scale):
             scale = None
         out = np.memmap(sorted_path, dtype=RECORD, mode="r+", shape=(plan.points,))
@@ -203,23 +203,28 @@ async def _write(
         )
     )  # fmt: skip
     digests = {name: hashlib.sha256() for name in first}
-    lo, hi = np.full((len(starts), 3), np.inf), np.full((len(starts), 3), -np.inf)
-    origin = tile_origin_local(*parse_tile_key(key), spec.tile_size_m)
+    big = np.iinfo(np.int64).max
+    lo, hi = np.full((len(starts), 3), big), np.full((len(starts), 3), -big)
     for a in range(0, n, spec.shard_points):
         b = min(a + spec.shard_points, n)
         values = columns(a, b)
         await asyncio.gather(*(arr.setitem(slice(a, b), values[arr.basename]) for arr in arrays))
         for name, v in values.items():
             digests[name].update(v.tobytes())
-        local = dequantise(values[COUNTS], origin, spec.quantum_m)
+        counts = values[COUNTS]  # bounds in counts: dequantising is monotonic, so only theirs
         cut = np.union1d([a], starts[(starts > a) & (starts < b)])
         node = np.searchsorted(starts, cut, side="right") - 1
-        lo[node] = np.minimum(lo[node], np.minimum.reduceat(local, cut - a))
-        hi[node] = np.maximum(hi[node], np.maximum.reduceat(local, cut - a))
+        lo[node] = np.minimum(lo[node], np.minimum.reduceat(counts, cut - a))
+        hi[node] = np.maximum(hi[node], np.maximum.reduceat(counts, cut - a))
     checksum = hashlib.sha256()
     for name, d in digests.items():
         checksum.update(name.encode() + d.digest())
-    return checksum.hexdigest(), lo, hi
+    origin = tile_origin_local(*parse_tile_key(key), spec.tile_size_m)
+    return (
+        checksum.hexdigest(),
+        dequantise(lo, origin, spec.quantum_m),
+        dequantise(hi, origin, spec.quantum_m),
+    )
 
 
 def write_tile(

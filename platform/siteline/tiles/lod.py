@@ -4,22 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from siteline.kernels import levels as levels_kernels
+from siteline.kernels import radix
 from siteline.records.tiling import TileSpec
-from siteline.sorting import sort_by_key
 from siteline.tiles.layout import level_count
-
-_BIG = np.iinfo(np.int64).max
-
-
-def _spread3(v: np.ndarray) -> np.ndarray:
-    """Spread the low 21 bits of v so that two zero bits separate each (Morton interleaving)."""
-    v = v.astype(np.uint64) & np.uint64(0x1FFFFF)
-    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return v
 
 
 def _cell_counts(spec: TileSpec, levels: int) -> list[int]:
@@ -54,7 +42,7 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, order: np.ndarray, z0: int
     When the cubes nest (each level's edge is half the previous one, in whole quanta: the default
     spec), the points are sorted once by (cube path, rank), where every cube of every level is a
     contiguous run, and each level looks only at the next point of each finest cube
-    (:func:`_assign_nested`); otherwise each level sorts its own cube keys.
+    (siteline.kernels.levels); otherwise each level sorts its own cube keys.
     """
     n = len(counts)
     levels = np.full(n, 255, dtype=np.uint8)
@@ -65,54 +53,17 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, order: np.ndarray, z0: int
         levels[:] = 0
         return levels
     cells = _cell_counts(spec, last)
-    pts = counts.astype(np.int64)
-    pts[:, 2] -= pts[:, 2].min() if z0 is None else z0
-    pts -= np.floor_divide(pts.min(axis=0), cells[0]) * cells[0]  # non-negative, on the same grid
+    z0 = int(counts[:, 2].min()) if z0 is None else z0
     nested = all(cells[i] == cells[i + 1] * 2 for i in range(len(cells) - 1))
     if not nested:
+        pts = counts.astype(np.int64)
+        pts[:, 2] -= z0
+        pts -= np.floor_divide(pts.min(axis=0), cells[0]) * cells[0]  # non-negative, on the same grid
         return _assign_by_sorting(pts, order, cells, last, levels)
-    return _assign_nested(_nested_key(pts, cells[-1], last - 1), order, last, levels)
-
-
-def _nested_key(pts: np.ndarray, fine: int, depth: int) -> np.ndarray:
-    """(N,) int64 key of each point's finest cube (edge ``fine`` quanta) in which the cube of every
-    coarser level is a contiguous run: the level-0 cube (edge ``fine * 2**depth``) in row-major order,
-    then the octree path below it, 3 bits a level (a Morton code of the low ``depth`` bits)."""
-    k = pts >> (fine.bit_length() - 1) if fine & (fine - 1) == 0 else np.floor_divide(pts, fine)
-    top = k >> depth
-    span = top.max(axis=0) + 1
-    lut = _spread3(np.arange(1 << depth)).astype(np.int64)
-    low = k & ((1 << depth) - 1)
-    path = lut[low[:, 0]] | lut[low[:, 1]] << 1 | lut[low[:, 2]] << 2
-    return ((top[:, 2] * span[1] + top[:, 1]) * span[0] + top[:, 0]) << (3 * depth) | path
-
-
-def _assign_nested(cube_key: np.ndarray, order: np.ndarray, last: int, levels: np.ndarray) -> np.ndarray:
-    """Levels by nested cubes (``cube_key``: :func:`_nested_key`): points sorted by (finest cube,
-    random rank), so a cube of every level is
-    a contiguous run of finest cubes and each finest cube's points are in rank order. A level's
-    winner in a cube is the lowest-ranked remaining point, always at the head of one of its finest
-    cubes, so each level works on one head per finest cube, not on every point."""
-    n = len(cube_key)
-    rank = np.empty(n, np.int64)
-    rank[order] = np.arange(n)
-    m_sorted, s_rank = sort_by_key(cube_key, rank)
-    point = order[s_rank]  # the point at each sorted position (order: rank -> point)
-    new = np.ones(n, dtype=bool)
-    new[1:] = m_sorted[1:] != m_sorted[:-1]
-    head = np.flatnonzero(new)  # each finest cube's next remaining point
-    end = np.r_[head[1:], n]
-    cube_fine = m_sorted[head]
-    for level in range(last):
-        key = cube_fine >> (3 * (last - 1 - level))
-        starts = np.r_[0, np.flatnonzero(key[1:] != key[:-1]) + 1]
-        alive = head < end
-        head_rank = np.where(alive, s_rank[np.minimum(head, n - 1)], _BIG)
-        seg_min = np.minimum.reduceat(head_rank, starts)
-        win = (head_rank == np.repeat(seg_min, np.diff(np.r_[starts, len(key)]))) & alive
-        levels[point[head[win]]] = level
-        head[win] += 1
-    levels[levels == 255] = last
+    # finest-cube keys in rank order, sorted stably: by (finest cube, rank)
+    key = levels_kernels.nested_keys(np.ascontiguousarray(counts), z0, cells[0], cells[-1], last - 1, order)
+    rank = radix.radix_order(key)
+    levels_kernels.head_levels(key[rank], rank, order[rank], last, levels)
     return levels
 
 

@@ -25,10 +25,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from siteline.errors import TileError
+from siteline.kernels import nodes as node_kernels
+from siteline.kernels.nodes import LEVEL_BITS as _LEVEL_BITS
+from siteline.kernels.nodes import LEVEL_SHIFT as _CUBE_KEY_BITS
+from siteline.kernels.nodes import Z_OFFSET as _Z_OFFSET
 from siteline.records.tiling import NodeTable, TileSpec
-from siteline.sorting import sort_by_key
 
-_LEVEL_BITS = 4
 _CUBE_BITS = 30
 
 
@@ -49,36 +51,21 @@ def bands(per_level: np.ndarray, target: int) -> list[tuple[int, int]]:
     return out
 
 
-def fine_cubes(counts: np.ndarray, spec: TileSpec) -> np.ndarray:
-    """(N, 3) int64 cube of each point at depth ``spec.max_node_depth``: int32 counts from the tile
-    origin floored by the cube edge, x and y clamped into the tile (a point rounded onto the far edge
-    stays in the last cube)."""
-    depth = spec.max_node_depth
-    edge = max(int(round(spec.tile_size_m / spec.quantum_m)) >> depth, 1)
-    cubes = np.floor_divide(counts, np.int32(edge)).astype(np.int64)
-    np.clip(cubes[:, :2], 0, (1 << depth) - 1, out=cubes[:, :2])
-    return cubes
-
-
-_Z_OFFSET = 1 << 20
-_CUBE_KEY_BITS = 48
+def _fine_edge(spec: TileSpec) -> int:
+    """The edge in quanta of the cubes at depth ``spec.max_node_depth``: depth d splits the tile into
+    2**d x 2**d columns from its origin, z cut with the same edge from z = 0 (x and y clamped into
+    the tile, so a point rounded onto its far edge stays in the last cube)."""
+    return max(int(round(spec.tile_size_m / spec.quantum_m)) >> spec.max_node_depth, 1)
 
 
 def cube_counts(counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
     """(M, 2) int64 rows of (level and finest cube, points) of one batch of a tile's points, sorted:
     counts (N, 3) int32 quanta from the tile origin, levels (N,) uint8. :func:`add_cube_counts` adds
     the rows of several batches."""
-    d = spec.max_node_depth
-    cubes = fine_cubes(counts, spec)
-    if len(cubes) and (np.abs(cubes[:, 2]).max() >= _Z_OFFSET):
+    rows = node_kernels.cube_rows(np.ascontiguousarray(counts), levels, _fine_edge(spec), spec.max_node_depth)
+    if len(counts) and not len(rows):
         raise TileError("a tile's points span too many cubes in z to index: is the z unit right?")
-    key = np.sort(
-        levels.astype(np.int64) << _CUBE_KEY_BITS
-        | (cubes[:, 2] + _Z_OFFSET) << (2 * d)
-        | cubes[:, 1] << d
-        | cubes[:, 0]
-    )
-    return _runs(key, np.ones(len(key), np.int64))
+    return rows
 
 
 def add_cube_counts(parts: list[np.ndarray]) -> np.ndarray:
@@ -141,35 +128,18 @@ class NodePlan:
     def points(self) -> int:
         return int(self.count.sum())
 
-    def keys_of(self, counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
-        """(N,) group key of each point (counts (N, 3) int32 quanta from the tile origin)."""
-        cubes = fine_cubes(counts, spec)
-        band = self.band_of_level[levels]
-        return _group_key(band, self.depth_of_band[band], cubes, levels, spec, self.z0, self.cube_bits)
-
-    def place(self, keys: np.ndarray, seen: np.ndarray) -> np.ndarray:
-        """(N,) array position of each of a batch of points (their group ``keys``, in the tile's
-        order): group g's points take its slots in a seeded permutation, batch after batch (``seen``:
-        per group, the points earlier batches placed; updated)."""
-        n = len(keys)
-        sorted_key, point = sort_by_key(keys, np.arange(n))
-        head = np.r_[0, np.flatnonzero(sorted_key[1:] != sorted_key[:-1]) + 1] if n else np.zeros(0, np.int64)
-        group = np.searchsorted(self.key, sorted_key[head])
-        if n and not np.array_equal(self.key[np.minimum(group, len(self.key) - 1)], sorted_key[head]):
+    def place(self, counts: np.ndarray, levels: np.ndarray, spec: TileSpec, seen: np.ndarray) -> np.ndarray:
+        """(N,) array position of each of a batch of points (counts (N, 3) int32 quanta from the tile
+        origin, levels (N,) uint8, in the tile's order): group g's points take its slots in a seeded
+        permutation, batch after batch (``seen``: per group, the points earlier batches placed;
+        updated)."""
+        where = node_kernels.place_points(
+            np.ascontiguousarray(counts), levels, _fine_edge(spec), spec.max_node_depth, self.band_of_level,
+            self.depth_of_band, self.z0, self.cube_bits, self.key, self.start, self.count, seen, self.seed,
+            self.random,
+        )  # fmt: skip
+        if len(where) and where[0] < 0:
             raise TileError("a tile's points changed between its node plan and their placement.")
-        size = np.diff(np.r_[head, n])
-        slots = []
-        for g, k in zip(group.tolist(), size.tolist(), strict=True):
-            a = int(seen[g])
-            if self.random:
-                perm = np.random.default_rng([self.seed, g]).permutation(int(self.count[g]))
-                slots.append(perm[a : a + k])
-            else:  # input order
-                slots.append(np.arange(a, a + k))
-            seen[g] += k
-        where = np.empty(n, np.int64)
-        if n:
-            where[point] = np.repeat(self.start[group], size) + np.concatenate(slots)
         return where
 
     def table(self, tile: str, lo: np.ndarray, hi: np.ndarray) -> NodeTable:

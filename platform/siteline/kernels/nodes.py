@@ -1,0 +1,134 @@
+"""Kernels of a tile's node plan: counting points per (level, finest cube) and placing each point
+in its group's seeded slot (siteline.tiles.nodes)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from siteline.kernels import kernel
+from siteline.kernels.radix import radix_order
+
+LEVEL_SHIFT = 48  # a level's place in a cube-count key
+Z_OFFSET = 1 << 20  # added to a cube's z in a cube-count key
+LEVEL_BITS = 4  # a level's bits at the bottom of a group key
+
+
+@kernel
+def fine_cube(counts: np.ndarray, p: int, edge: int, depth: int) -> tuple[int, int, int]:
+    """Point p's cube at depth ``depth`` (edge ``edge`` quanta): x and y clamped into the tile."""
+    top = (1 << depth) - 1
+    cx, cy, cz = counts[p, 0] // edge, counts[p, 1] // edge, counts[p, 2] // edge
+    return min(max(cx, 0), top), min(max(cy, 0), top), cz
+
+
+@kernel
+def cube_rows(counts: np.ndarray, levels: np.ndarray, edge: int, depth: int) -> np.ndarray:
+    """(M, 2) int64 rows (key, points) of each occupied (level, finest cube), by key: key = level << 48
+    | (cube z + 2**20) << 2 depth | cube y << depth | cube x. An empty (0, 2) when a cube's z lies
+    2**20 cubes or more from 0 (the caller refuses it)."""
+    n = counts.shape[0]
+    zlo, zhi = np.int64(1) << 62, -(np.int64(1) << 62)
+    for p in range(n):
+        cz = counts[p, 2] // edge
+        zlo, zhi = min(zlo, cz), max(zhi, cz)
+    if n and (zlo <= -Z_OFFSET or zhi >= Z_OFFSET):
+        return np.zeros((0, 2), np.int64)
+    zspan = zhi - zlo + 1
+    compact = np.empty(n, np.int64)  # (level, z, y, x) in the key's order, from 0
+    for p in range(n):
+        cx, cy, cz = fine_cube(counts, p, edge, depth)
+        compact[p] = ((levels[p] * zspan + cz - zlo) << (2 * depth)) | cy << depth | cx
+    order = radix_order(compact)
+    m = 0
+    for k in range(n):
+        if k == 0 or compact[order[k]] != compact[order[k - 1]]:
+            m += 1
+    rows = np.zeros((m, 2), np.int64)
+    r = -1
+    for k in range(n):
+        p = order[k]
+        if k == 0 or compact[p] != compact[order[k - 1]]:
+            r += 1
+            cx, cy, cz = fine_cube(counts, p, edge, depth)
+            rows[r, 0] = (
+                np.int64(levels[p]) << LEVEL_SHIFT | (cz + Z_OFFSET) << (2 * depth) | cy << depth | cx
+            )
+        rows[r, 1] += 1
+    return rows
+
+
+@kernel
+def _mix(x: np.uint64) -> np.uint64:
+    """splitmix64's output function: a well-mixed 64-bit value of ``x``."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+@kernel
+def place_points(
+    counts: np.ndarray,
+    levels: np.ndarray,
+    edge: int,
+    depth: int,
+    band_of_level: np.ndarray,
+    depth_of_band: np.ndarray,
+    z0: int,
+    cube_bits: int,
+    key: np.ndarray,
+    start: np.ndarray,
+    size: np.ndarray,
+    seen: np.ndarray,
+    seed: int,
+    shuffle: bool,
+) -> np.ndarray:
+    """(N,) array position of each of a batch of a tile's points, in the tile's order: its group
+    (band, cube at the band's depth, level; ``key`` sorted, ``start`` and ``size`` in the arrays) and
+    the next of the group's slots, in a permutation seeded by (seed, group) when ``shuffle`` (the
+    Fisher-Yates shuffle of a splitmix64 stream), in order otherwise; ``seen`` (per group, slots
+    earlier batches took) is updated. -1 everywhere when a point has no group."""
+    n, groups = counts.shape[0], key.shape[0]
+    group = np.empty(n, np.int64)
+    taken = np.zeros(groups, np.int64)
+    for p in range(n):
+        lv = levels[p]
+        band = band_of_level[lv]
+        d = depth_of_band[band]
+        cx, cy, cz = fine_cube(counts, p, edge, depth)
+        s = depth - d
+        cube = ((cz >> s) - z0) << (2 * d) | (cy >> s) << d | (cx >> s)
+        k = ((band << cube_bits) | cube) << LEVEL_BITS | lv
+        g = np.searchsorted(key, k)
+        if g >= groups or key[g] != k or seen[g] + taken[g] >= size[g]:
+            return np.full(n, -1, np.int64)
+        group[p] = g
+        taken[g] += 1
+    first = np.zeros(groups + 1, np.int64)  # each group's slots in ``slots``
+    for g in range(groups):
+        first[g + 1] = first[g] + taken[g]
+    slots = np.empty(n, np.int64)
+    perm = np.empty(size.max() if groups else 0, np.int64)
+    for g in range(groups):
+        if taken[g] == 0:
+            continue
+        a, m = seen[g], size[g]
+        if shuffle:
+            for i in range(m):
+                perm[i] = i
+            state = _mix(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(g))
+            for i in range(a + taken[g]):
+                state += np.uint64(0x9E3779B97F4A7C15)
+                j = i + np.int64(_mix(state) % np.uint64(m - i))
+                perm[i], perm[j] = perm[j], perm[i]
+            for i in range(taken[g]):
+                slots[first[g] + i] = start[g] + perm[a + i]
+        else:
+            for i in range(taken[g]):
+                slots[first[g] + i] = start[g] + a + i
+        seen[g] += taken[g]
+    where = np.empty(n, np.int64)
+    for p in range(n):
+        g = group[p]
+        where[p] = slots[first[g]]
+        first[g] += 1
+    return where
