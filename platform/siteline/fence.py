@@ -110,14 +110,20 @@ def fence_geojson(vertices_m: Sequence[Sequence[float]], origin: Sequence[float]
 
 
 def inside_fence(
-    xy_m: np.ndarray, vertices_m: Sequence[Sequence[float]], tol_m: float = LENGTH_TOL_M
+    xy_m: np.ndarray,
+    vertices_m: Sequence[Sequence[float]],
+    tol_m: float = LENGTH_TOL_M,
+    box: Sequence[float] | None = None,
 ) -> np.ndarray:
     """Which points lie inside the fence, or within ``tol_m`` of it (on the fence counts as inside,
     at every coordinate magnitude: siteline.tolerances). xy_m: (N, 2+) site-local metres.
-    Returns (N,) bool. Points whose bounding box the fence covers are inside without a test each."""
+    Returns (N,) bool. Points whose bounding box (``box``: (xmin, ymin, xmax, ymax) when the caller
+    knows it) the fence covers are inside without a test each."""
     poly = shapely.Polygon(vertices_m)
     xy = np.asarray(xy_m, dtype=np.float64)
-    if len(xy) and shapely.covers(poly, shapely.box(*xy[:, :2].min(axis=0), *xy[:, :2].max(axis=0))):
+    if len(xy) and box is None:
+        box = (*xy[:, :2].min(axis=0), *xy[:, :2].max(axis=0))
+    if len(xy) and shapely.covers(poly, shapely.box(*box)):
         return np.ones(len(xy), dtype=bool)
     inside = shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
     out = ~inside

