@@ -121,10 +121,10 @@ def inside_fence(
     knows it) the fence covers are inside without a test each."""
     poly = shapely.Polygon(vertices_m)
     xy = np.asarray(xy_m, dtype=np.float64)
-    if len(xy) and box is None:
-        box = (*xy[:, :2].min(axis=0), *xy[:, :2].max(axis=0))
-    if len(xy) and shapely.covers(poly, shapely.box(*box)):
-        return np.ones(len(xy), dtype=bool)
+    if len(xy):
+        lo, hi = (box[:2], box[2:]) if box is not None else (xy[:, :2].min(axis=0), xy[:, :2].max(axis=0))
+        if shapely.covers(poly, shapely.box(*lo, *hi)):
+            return np.ones(len(xy), dtype=bool)
     inside = shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
     out = ~inside
     if tol_m > 0 and out.any():

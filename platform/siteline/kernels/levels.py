@@ -30,9 +30,8 @@ def nested_keys(
     for p in range(n):
         for a in range(3):
             span[a] = max(span[a], (((np.int64(counts[p, a]) - base[a]) // fine) >> depth) + 1)
-    key = np.empty(n, np.int64)
-    for r in range(n):
-        p = order[r]
+    by_point = np.empty(n, np.int64)
+    for p in range(n):  # in point order (sequential reads), then gathered into rank order
         kx = (np.int64(counts[p, 0]) - base[0]) // fine
         ky = (np.int64(counts[p, 1]) - base[1]) // fine
         kz = (np.int64(counts[p, 2]) - base[2]) // fine
@@ -42,7 +41,10 @@ def nested_keys(
                 ((kx >> b) & 1) << (3 * b) | ((ky >> b) & 1) << (3 * b + 1) | ((kz >> b) & 1) << (3 * b + 2)
             )
         top = ((kz >> depth) * span[1] + (ky >> depth)) * span[0] + (kx >> depth)
-        key[r] = top << (3 * depth) | path
+        by_point[p] = top << (3 * depth) | path
+    key = np.empty(n, np.int64)
+    for r in range(n):
+        key[r] = by_point[order[r]]
     return key
 
 
