@@ -1,5 +1,4 @@
-"""Level assignment and the packed sort behind it: the fast paths give exactly what the plain
-definitions give."""
+"""Level assignment: the fast path gives exactly what the plain definition gives."""
 
 from __future__ import annotations
 
@@ -7,7 +6,6 @@ import numpy as np
 import pytest
 
 from siteline.records.tiling import TileSpec
-from siteline.sorting import sort_by_key
 from siteline.tiles import lod
 from siteline.tiles.layout import level_count
 
@@ -30,13 +28,3 @@ def test_nested_levels_equal_the_level_by_level_definition(n: int) -> None:
     want = lod._assign_by_sorting(pts, order, lod._cell_counts(spec, last), last, np.full(n, 255, np.uint8))
     assert np.array_equal(got, want)
     assert (got <= last).all()
-
-
-def test_packed_sort_equals_a_lexicographic_sort_and_falls_back_when_keys_are_wide() -> None:
-    rng = np.random.default_rng(0)
-    tie = rng.permutation(10_000)
-    for high in (2**8, 2**40, 2**62):  # packed, packed, too wide to pack
-        key = rng.integers(0, high, 10_000)
-        k, t = sort_by_key(key, tie)
-        order = np.lexsort((tie, key))
-        assert np.array_equal(k, key[order]) and np.array_equal(t, tie[order])
