@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from siteline.kernels.cut import bounds, runs, tile_codes
-from siteline.kernels.radix import radix_order
+from siteline.kernels.cut import bounds, tile_codes
+from siteline.kernels.radix import radix_order, run_starts
 
 
 @pytest.mark.parametrize("bits", [0, 4, 16, 17, 33, 62])
@@ -57,11 +57,10 @@ def test_tile_codes_report_an_overflow() -> None:
     assert far >= 2**31 - 1
 
 
-def test_runs_cut_sorted_codes() -> None:
+def test_run_starts_cut_sorted_codes() -> None:
     code = np.array([3, 3, 5, 9, 9, 9])
-    z = np.array([4, -2, 7, 1, 0, 3], np.int32)
-    codes, first, zmin = runs(code, z)
-    assert codes.tolist() == [3, 5, 9] and first.tolist() == [0, 2, 3] and zmin.tolist() == [-2, 7, 0]
+    assert run_starts(code).tolist() == [0, 2, 3]
+    assert run_starts(np.zeros(0, np.int64)).shape == (0,)
 
 
 def test_cube_rows_count_points_per_level_and_cube() -> None:

@@ -168,8 +168,9 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
     rec = np.empty(n, RECORD)
     for name, values in fields.items():  # a gather then a strided copy: 3x numpy's fancy index
         rec[name] = np.take(values, order, axis=0) if values is not None else 0
-    c, first, zmin = cut.runs(code, rec[COUNTS][:, 2])
-    tile, block = c // (side * side), c % (side * side)
+    first = radix.run_starts(code)
+    zmin = np.minimum.reduceat(rec[COUNTS][:, 2], first) if n else np.zeros(0, np.int32)
+    tile, block = code[first] // (side * side), code[first] % (side * side)
     tij = np.c_[tile // span_j + lo_i, tile % span_j + lo_j]
     return rec, np.c_[cell_ids(tij, block), first, np.diff(np.r_[first, n]), zmin.astype(np.int64)]
 

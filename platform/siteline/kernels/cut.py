@@ -68,25 +68,3 @@ def tile_codes(
         by = 0 if by < 0 else side - 1 if by >= side else by
         code[p] = ((i - lo_i) * span_j + (j - lo_j)) * (side * side) + by * side + bx
     return lo_i, lo_j, span_j, far
-
-
-@kernel
-def runs(code: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The runs of equal ``code`` ((N,) int64, sorted) and the lowest of each run's ``z`` ((N,) int32):
-    per run its code, first index and lowest z."""
-    n = code.shape[0]
-    count = 0
-    for k in range(n):
-        if k == 0 or code[k] != code[k - 1]:
-            count += 1
-    codes = np.empty(count, np.int64)
-    first = np.empty(count, np.int64)
-    zmin = np.empty(count, np.int32)
-    r = -1
-    for k in range(n):
-        if k == 0 or code[k] != code[k - 1]:
-            r += 1
-            codes[r], first[r], zmin[r] = code[k], k, z[k]
-        else:
-            zmin[r] = min(zmin[r], z[k])
-    return codes, first, zmin

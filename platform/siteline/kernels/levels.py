@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from siteline.kernels import kernel
+from siteline.kernels.radix import run_starts
 
 
 @kernel
@@ -56,19 +57,13 @@ def head_levels(key: np.ndarray, rank: np.ndarray, point: np.ndarray, last: int,
     coarser level kept takes level L; it is always at the head of one of the cube's finest cubes,
     so each level looks at one head per finest cube."""
     n = key.shape[0]
-    fine = 0
-    for k in range(n):
-        if k == 0 or key[k] != key[k - 1]:
-            fine += 1
-    head = np.empty(fine, np.int64)
+    head = run_starts(key)  # each finest cube's next remaining point
+    fine = head.shape[0]
     end = np.empty(fine, np.int64)
-    cube = np.empty(fine, np.int64)
-    f = -1
-    for k in range(n):
-        if k == 0 or key[k] != key[k - 1]:
-            f += 1
-            head[f], cube[f] = k, key[k]
-        end[f] = k + 1
+    end[: fine - 1] = head[1:]
+    if fine:
+        end[fine - 1] = n
+    cube = key[head]
     for p in range(n):
         levels[p] = last
     for level in range(last):

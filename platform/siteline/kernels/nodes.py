@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from siteline.kernels import kernel
-from siteline.kernels.radix import radix_order
+from siteline.kernels.radix import radix_order, run_starts
 
 LEVEL_SHIFT = 48  # a level's place in a cube-count key
 Z_OFFSET = 1 << 20  # added to a cube's z in a cube-count key
@@ -39,21 +39,14 @@ def cube_rows(counts: np.ndarray, levels: np.ndarray, edge: int, depth: int) -> 
         cx, cy, cz = fine_cube(counts, p, edge, depth)
         compact[p] = ((levels[p] * zspan + cz - zlo) << (2 * depth)) | cy << depth | cx
     order = radix_order(compact)
-    m = 0
-    for k in range(n):
-        if k == 0 or compact[order[k]] != compact[order[k - 1]]:
-            m += 1
-    rows = np.zeros((m, 2), np.int64)
-    r = -1
-    for k in range(n):
-        p = order[k]
-        if k == 0 or compact[p] != compact[order[k - 1]]:
-            r += 1
-            cx, cy, cz = fine_cube(counts, p, edge, depth)
-            rows[r, 0] = (
-                np.int64(levels[p]) << LEVEL_SHIFT | (cz + Z_OFFSET) << (2 * depth) | cy << depth | cx
-            )
-        rows[r, 1] += 1
+    first = run_starts(compact[order])
+    m = first.shape[0]
+    rows = np.empty((m, 2), np.int64)
+    for r in range(m):
+        p = order[first[r]]
+        cx, cy, cz = fine_cube(counts, p, edge, depth)
+        rows[r, 0] = np.int64(levels[p]) << LEVEL_SHIFT | (cz + Z_OFFSET) << (2 * depth) | cy << depth | cx
+        rows[r, 1] = (first[r + 1] if r + 1 < m else n) - first[r]
     return rows
 
 

@@ -1,4 +1,5 @@
-"""A stable radix sort of integer keys (the order of (key, index) in O(N) a digit)."""
+"""Sorting integer keys: a stable radix sort (the order of (key, index) in O(N) a digit) and the
+runs of equal keys a sort leaves."""
 
 from __future__ import annotations
 
@@ -39,3 +40,21 @@ def radix_order(key: np.ndarray) -> np.ndarray:
         if shift >= 64:
             break
     return order
+
+
+@kernel
+def run_starts(key: np.ndarray) -> np.ndarray:
+    """(M,) int64 index of the first of each run of equal values of (N,) ``key`` (sorted, or any
+    order that keeps equal values together)."""
+    n = key.shape[0]
+    count = 0
+    for k in range(n):
+        if k == 0 or key[k] != key[k - 1]:
+            count += 1
+    starts = np.empty(count, np.int64)
+    count = 0
+    for k in range(n):
+        if k == 0 or key[k] != key[k - 1]:
+            starts[count] = k
+            count += 1
+    return starts
