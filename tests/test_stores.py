@@ -240,3 +240,20 @@ def test_publish_shared_is_all_or_nothing(store: Store) -> None:
     assert store.is_complete(uri)
     with pytest.raises(StoreError), store.publish_shared(store.uri("shared", "empty.zarr")):
         pass
+
+
+def test_a_staged_file_appears_only_on_commit(store: Store, tmp_path: Path) -> None:
+    """stage_file does the copy first (beside other work) and the file appears whole only on
+    commit; a discarded one leaves nothing, temporary files included."""
+    source = tmp_path / "cloud.las"
+    source.write_bytes(b"points" * 1000)
+    uri = store.uri("blobs", "ab", "cdef")
+    staged = store.stage_file(source, uri)
+    assert not store.exists(uri)
+    staged.commit()
+    assert store.read_bytes(uri) == source.read_bytes()
+    other = store.uri("blobs", "ab", "0123")
+    store.stage_file(source, other).discard()
+    assert not store.exists(other)
+    if "://" not in store.url:
+        assert sorted(p.name for p in (Path(store.url) / "blobs" / "ab").iterdir()) == ["cdef"]

@@ -3,6 +3,8 @@ writing): one spawned pool per worker count, started on first use and kept for t
 process, so ingest and tiling in one process pay the start-up (about half a second a worker) once.
 
 spawn, not fork: zarr, lazrs and a Prefect worker run threads that a forked child must not inherit.
+A worker loads the compiled kernels as it starts (siteline.kernels), and :func:`start_pool` starts
+the workers ahead of the pass, so that this start-up runs beside other work (ingest's hashing).
 Each worker keeps freed memory for reuse (glibc ``mallopt``): the passes allocate arrays of hundreds
 of MB in turn, and on virtual machines where the first touch of a page is slow, returning them to
 the system and faulting them in again doubled the time of levelling a tile."""
@@ -39,13 +41,31 @@ def keep_freed_memory() -> None:
         mallopt(_M_TRIM_THRESHOLD, 2**30)
 
 
+def _start_worker() -> None:
+    from siteline.kernels import load
+
+    keep_freed_memory()
+    load()
+
+
+def _ready() -> None:
+    """A task that returns once its worker has started."""
+
+
+def start_pool(workers: int) -> None:
+    """Start the workers of :func:`process_pool` ``(workers)`` now, without waiting for them."""
+    pool = process_pool(workers)
+    for _ in range(workers):
+        pool.submit(_ready)
+
+
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """The process's pool of ``workers`` spawned processes (started now if it is not running)."""
     with _LOCK:
         pool = _POOLS.get(workers)
         if pool is None:
             pool = ProcessPoolExecutor(
-                max_workers=workers, mp_context=get_context("spawn"), initializer=keep_freed_memory
+                max_workers=workers, mp_context=get_context("spawn"), initializer=_start_worker
             )
             _POOLS[workers] = pool
         return pool

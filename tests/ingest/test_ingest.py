@@ -62,6 +62,37 @@ def test_georegistration_recovers_true_poses(cat, site_settings, synth_site) -> 
         assert np.abs(cam.R - truth[name].R).max() < 1e-6
 
 
+def test_files_are_copied_beside_the_scan_and_appear_only_after_the_checks(
+    cat, site_settings, synth_site, monkeypatch
+) -> None:
+    """The mission's files are copied while its point cloud is read (the copy overlaps the scan),
+    under temporary names: no blob appears before every check passed, and none is left over."""
+    import time
+
+    import siteline.ingest.stage as stage_mod
+
+    mission = epoch_dirs(synth_site)[0]
+    n_files = sum(1 for p in mission.rglob("*") if p.is_file())
+    blobs = Path(site_settings.store.url) / "blobs"
+    during: list[list[str]] = []
+    scan = stage_mod.execute_ingest
+
+    def watched(*args, **kwargs):
+        deadline = time.monotonic() + 60
+        names: list[str] = []
+        while time.monotonic() < deadline and len(names) < n_files:
+            names = [p.name for p in blobs.rglob("*") if p.is_file()] if blobs.exists() else []
+            time.sleep(0.01)
+        during.append(names)
+        return scan(*args, **kwargs)
+
+    monkeypatch.setattr(stage_mod, "execute_ingest", watched)
+    ingest_mission(cat, site_settings, mission, "demo")
+    assert len(during[0]) == n_files and all(".tmp-" in name for name in during[0])
+    after = [p.name for p in blobs.rglob("*") if p.is_file()]
+    assert len(after) == n_files + 1 and not [name for name in after if ".tmp-" in name]
+
+
 def test_copy_store_holds_every_file_and_reference_keeps_paths(
     cat, site_settings, synth_site, tmp_path
 ) -> None:

@@ -12,6 +12,7 @@ from siteline import partition
 from siteline.errors import RegistrationError
 from siteline.ingest import ingest_mission
 from siteline.ingest.pointcloud import scan_las
+from siteline.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.stores import layout
 from siteline.synth import LAS_RELPATH
@@ -96,3 +97,34 @@ def test_the_batch_setting_reaches_the_tile_stage(cat, site_settings, synth_site
     small = replace(site_settings, tile_batch_points=2_000)  # every tile in batches
     again = tile_scene(cat, small, r.scene_id, workers=1, retile=True).tiling
     assert first is not None and again is not None and again.checksum == first.checksum
+
+
+def test_readers_start_ahead_only_for_a_point_cloud_read_in_parallel(tmp_path, monkeypatch) -> None:
+    """start_readers starts the worker pool (ahead of the hashing) when the mission holds a point
+    cloud big enough to be read in parallel, and not for a small one or one worker."""
+    import siteline.ingest.pointcloud as pc
+
+    started: list[int] = []
+    monkeypatch.setattr(pc, "start_pool", started.append)
+    rng = np.random.default_rng(0)
+    (tmp_path / "lidars").mkdir()
+    xyz = rng.uniform(0, 10, (5_000, 3)) + [445_000, 5_030_000, 80]
+    write_las(tmp_path / "lidars" / "cloud.las", xyz, crs="EPSG:32618")
+    (tmp_path / "broken.laz").write_bytes(b"not a point cloud")
+    pc.start_readers(tmp_path, 2)
+    assert started == []
+    monkeypatch.setattr(pc, "PARALLEL_MIN_POINTS", 5_000)
+    pc.start_readers(tmp_path, 1)
+    assert started == []
+    pc.start_readers(tmp_path, 2)
+    assert started == [2]
+
+
+def test_started_workers_load_the_kernels_as_they_start() -> None:
+    """The pool's workers import numba and load a kernel in their initializer, before any task."""
+    from siteline.workers import process_pool, start_pool
+
+    start_pool(2)
+    pool = process_pool(2)
+    loaded = [pool.submit(eval, "'numba' in __import__('sys').modules") for _ in range(4)]
+    assert all(f.result(timeout=120) for f in loaded)

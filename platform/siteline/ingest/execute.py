@@ -18,10 +18,10 @@ from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
 from siteline.progress import Progress, no_progress, step
-from siteline.records.mission import CheckedMission
+from siteline.records.mission import CheckedMission, MissionManifest
 from siteline.register import AlignmentPolicy, check_alignment, register_cameras
 from siteline.stores import Store, layout
-from siteline.stores.blobs import put_blob, put_blob_bytes
+from siteline.stores.blobs import BlobStaging, put_blob_bytes
 
 log = logging.getLogger(__name__)
 
@@ -90,21 +90,32 @@ def execute_ingest(
     )  # fmt: skip
 
 
+def stage_mission(manifest: MissionManifest, storage: str, store: Store) -> BlobStaging | None:
+    """Start copying the mission's files into the content-addressed store (``copy`` storage), beside
+    the reading of the mission; None for ``reference`` storage."""
+    if storage != "copy":
+        return None
+    return BlobStaging(store, [(Path(manifest.root) / e.path, e.sha256) for e in manifest.entries])
+
+
 def store_mission(
-    checked: CheckedMission, store: Store, new_blobs: list[str], progress: Progress = no_progress
+    checked: CheckedMission,
+    store: Store,
+    new_blobs: list[str],
+    staging: BlobStaging | None,
+    progress: Progress = no_progress,
 ) -> None:
-    """Put the alignment sample and (``copy`` storage) every file into the content-addressed store,
-    appending to ``new_blobs`` each blob this call added (so a caller can remove them on failure)."""
+    """Put the alignment sample and the files ``staging`` copied (:func:`stage_mission`) into the
+    content-addressed store, appending to ``new_blobs`` each blob this call added (so a caller can
+    remove them on failure)."""
     sample = checked.scan.stable_sample
     data, sha = sample_blob(sample if sample is not None else np.zeros((0, 3)))
     if put_blob_bytes(store, data, sha):
         new_blobs.append(sha)
-    if checked.storage != "copy":
+    if staging is None:
         return
-    entries = checked.manifest.entries
-    progress("storing", 0, sum(e.size_bytes for e in entries))
-    for e in entries:
-        if put_blob(store, Path(checked.manifest.root) / e.path, e.sha256):
-            new_blobs.append(e.sha256)
-        progress("storing", e.size_bytes, None)
+    total = sum(e.size_bytes for e in checked.manifest.entries)
+    progress("storing", 0, total)
+    staging.commit(new_blobs)
+    progress("storing", total, None)
     log.info("mission %s: %d new blobs stored", checked.name, len(new_blobs))

@@ -15,6 +15,7 @@ from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import PointCloudError
 from siteline.lasio import detect_eight_bit, open_las
 from siteline.partition import (
+    PARALLEL_MIN_POINTS,
     Partition,
     PassSource,
     RunWriter,
@@ -26,8 +27,28 @@ from siteline.records.scan import COLOUR_NAMES, LasScan
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import SiteChunk, source_crs, source_transformer
+from siteline.workers import start_pool
 
 STABLE_CLASSES = ("ground", "building")
+
+
+def start_readers(mission_dir: Path, workers: int) -> None:
+    """Start the ``workers`` processes that :func:`scan_las` reads a point cloud of the mission folder
+    with (one of at least ``PARALLEL_MIN_POINTS`` points), so that they start up while the caller
+    hashes the mission; an unreadable file is left to the scan to report."""
+    if workers < 2:
+        return
+    for path in sorted(Path(mission_dir).rglob("*")):
+        if path.suffix.lower() not in (".las", ".laz") or not path.is_file():
+            continue
+        try:
+            with open_las(path) as reader:
+                points = int(reader.header.point_count)
+        except PointCloudError:
+            continue
+        if points >= PARALLEL_MIN_POINTS:
+            start_pool(workers)
+            return
 
 
 def scan_las(

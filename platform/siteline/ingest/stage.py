@@ -1,9 +1,11 @@
 """The ingest stage: the mission folder's manifest, then plan (catalog) -> execute (read, check and
 store the mission) -> record (catalog) (DESIGN.md §1, §2, §3, §9).
 
-Order matters for "nothing half-written": everything is read and checked first, then files go into
-the content-addressed store, and only then one transaction writes the catalog rows. A failure before
-the commit removes the blobs this ingest added (and no other's)."""
+Order matters for "nothing half-written": the mission's files are copied beside the store while it is
+read and checked (the copy and its flush to disk overlap the reading), appear in the
+content-addressed store only once every check passed, and only then one transaction writes the
+catalog rows. A failure before the commit drops the copies and removes the blobs this ingest added
+(and no other's)."""
 
 from __future__ import annotations
 
@@ -21,10 +23,11 @@ from siteline.catalog.scenes import blobs_in_use
 from siteline.catalog.sites import get_site
 from siteline.config import Settings
 from siteline.errors import MissionError
-from siteline.ingest.execute import execute_ingest, store_mission
+from siteline.ingest.execute import execute_ingest, stage_mission, store_mission
 from siteline.ingest.inventory import mission_manifest
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
+from siteline.ingest.pointcloud import start_readers
 from siteline.partition import keep_partition, new_partition_folder, partition_key
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
@@ -32,7 +35,7 @@ from siteline.records.runs import StageRun
 from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import TileSpec
 from siteline.stores import layout
-from siteline.stores.blobs import remove_blobs
+from siteline.stores.blobs import BlobStaging, remove_blobs
 
 log = logging.getLogger(__name__)
 
@@ -75,10 +78,11 @@ def _store_and_record(
     checked: CheckedMission,
     run: StageRun,
     progress: Progress,
+    staging: BlobStaging | None,
 ) -> IngestResult:
     new_blobs: list[str] = []
     try:
-        store_mission(checked, settings.store, new_blobs, progress)
+        store_mission(checked, settings.store, new_blobs, staging, progress)
         # one registration per site at a time: pairs are formed from the scenes around this one
         with catalog.lock(f"site:{plan.site_id}:scenes"), catalog.transaction() as s:
             ids = record_ingest(s, plan.site_id, checked, run)
@@ -117,6 +121,7 @@ def ingest_mission(
     opts = opts or IngestOptions()
     with catalog.transaction() as s:
         get_site(s, site_name)  # an unknown site is refused before a byte is hashed
+    start_readers(Path(mission_dir), workers)  # they start up while the mission is hashed
     manifest = mission_manifest(Path(mission_dir), step(progress, "hashing"))
     # one ingest of a mission's content at a time: a copy dropped twice at once is ingested once
     with catalog.lock(f"mission:{manifest.sha256}"):
@@ -127,12 +132,15 @@ def ingest_mission(
         run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
         home = layout.partitions(settings.home)
         runs = new_partition_folder(home)
+        staging = stage_mission(manifest, opts.storage, settings.store)
         try:
             checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
-            result = _store_and_record(catalog, settings, plan, checked, run, progress)
+            result = _store_and_record(catalog, settings, plan, checked, run, progress, staging)
             keep_partition(runs, home, _partition_key(checked, plan))
             return result
         finally:
+            if staging is not None:
+                staging.close()
             shutil.rmtree(runs, ignore_errors=True)
 
 

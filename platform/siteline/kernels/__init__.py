@@ -47,3 +47,13 @@ def _bind(namespace: MutableMapping[str, Any]) -> MutableMapping[str, Any]:
 def kernel(fn: F) -> F:
     """Mark ``fn`` (nopython-compatible) as a kernel, compiled on first use."""
     return cast(F, _Lazy(fn))
+
+
+def load() -> None:
+    """Import numba and load one kernel from the disk cache: the start-up (about 1 s here) a process
+    pays before its first kernel runs, which worker processes pay as they start (siteline.workers)."""
+    import numpy as np
+
+    from siteline.kernels import radix
+
+    radix.run_starts(np.zeros(1, np.int64))

@@ -9,8 +9,9 @@ object :data:`MARKER` exists, written last and removed first.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,6 +24,15 @@ MARKER = ".siteline-complete"
 def join(uri: str, *parts: str) -> str:
     """``uri`` with ``parts`` appended ('/'-separated for URLs and POSIX paths alike)."""
     return "/".join([uri.rstrip("/"), *(p.strip("/") for p in parts)])
+
+
+@dataclass(frozen=True)
+class StagedFile:
+    """A file :meth:`Store.stage_file` has started to put: ``commit()`` makes it appear whole at its
+    address, ``discard()`` drops it (either once)."""
+
+    commit: Callable[[], None]
+    discard: Callable[[], None]
 
 
 class Store(ABC):
@@ -64,6 +74,12 @@ class Store(ABC):
     @abstractmethod
     def put_file(self, source: Path, uri: str) -> None:
         """Copy the local file ``source`` to ``uri`` whole or not at all."""
+
+    def stage_file(self, source: Path, uri: str) -> StagedFile:
+        """Put the local file ``source`` at ``uri`` in two steps: the slow part now (a caller may run
+        it beside other work), the file's appearance at ``uri`` on ``commit()``. Here nothing is
+        staged: ``commit()`` copies (a local store copies now and commits with a rename)."""
+        return StagedFile(commit=lambda: self.put_file(source, uri), discard=lambda: None)
 
     @abstractmethod
     def get_file(self, uri: str, dest: Path) -> None:

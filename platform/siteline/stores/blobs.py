@@ -2,20 +2,56 @@
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 from siteline.stores import layout
-from siteline.stores.base import Store
+from siteline.stores.base import StagedFile, Store
 
 
-def put_blob(store: Store, source: Path, sha256: str) -> bool:
-    """Copy ``source`` into the store under its hash (whole or not at all); return whether it was new.
-    An existing blob is left as it is."""
-    dest = layout.blob(store, sha256)
-    if store.exists(dest):
-        return False
-    store.put_file(source, dest)
-    return True
+class BlobStaging:
+    """Files being copied into the blob store in a background thread, so the copy (and its flush to
+    disk) runs beside the reading of the mission instead of after it: none appears in the store
+    before :meth:`commit`, and :meth:`close` drops what was not committed. A blob already stored
+    is not copied again."""
+
+    def __init__(self, store: Store, files: list[tuple[Path, str]]) -> None:
+        self.store = store
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix="siteline-blobs")
+        self._staged: Future[list[tuple[str, StagedFile]]] = self._thread.submit(self._stage, files)
+
+    def _stage(self, files: list[tuple[Path, str]]) -> list[tuple[str, StagedFile]]:
+        staged: list[tuple[str, StagedFile]] = []
+        try:
+            for source, sha in files:
+                dest = layout.blob(self.store, sha)
+                if not self.store.exists(dest):
+                    staged.append((sha, self.store.stage_file(source, dest)))
+        except BaseException:
+            for _, f in staged:
+                f.discard()
+            raise
+        return staged
+
+    def commit(self, added: list[str]) -> None:
+        """Wait for the copies and make them appear in the store (:class:`StoreError` when one
+        failed), appending to ``added`` the hash of each blob this call added (a blob another writer
+        stored meanwhile is kept, and the copy dropped)."""
+        pending = self._staged.result()  # what commit takes is popped: close drops the rest
+        while pending:
+            sha, staged = pending.pop(0)
+            if self.store.exists(layout.blob(self.store, sha)):
+                staged.discard()
+            else:
+                staged.commit()
+                added.append(sha)
+
+    def close(self) -> None:
+        """Wait for the thread and drop every copy not committed."""
+        self._thread.shutdown(wait=True)
+        if self._staged.exception() is None:
+            for _, staged in self._staged.result():
+                staged.discard()
 
 
 def put_blob_bytes(store: Store, data: bytes, sha256: str) -> bool:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from siteline.errors import StoreError
-from siteline.stores.base import MARKER, Store, join
+from siteline.stores.base import MARKER, StagedFile, Store, join
 from siteline.stores.owners import owner_tag, sweep_stale
 
 if TYPE_CHECKING:
@@ -23,19 +23,28 @@ def local_path(uri: str) -> Path:
     return Path(uri.split("://", 1)[1]) if "://" in uri else Path(uri)
 
 
+def _temporary(dest: Path) -> Path:
+    """A temporary name next to ``dest`` that this process owns (same suffix, so writers that choose
+    a format by suffix still do); leftovers of writers that died are swept first."""
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    sweep_stale(dest.parent, ".*.tmp-*")
+    return dest.with_name(f".{dest.name}.tmp-{owner_tag()}{dest.suffix}")
+
+
+def _flush(path: Path) -> None:
+    with open(path, "rb") as fh:
+        os.fsync(fh.fileno())
+
+
 @contextmanager
 def atomic_file(dest: Path) -> Iterator[Path]:
-    """Yield a temporary path next to ``dest`` (same suffix, so writers that choose a format by
-    suffix still do); on a clean exit it is flushed to disk and renamed to ``dest``, so readers see
-    the old file or the whole new one; on an error it is removed."""
+    """Yield a temporary path next to ``dest``; on a clean exit it is flushed to disk and renamed to
+    ``dest``, so readers see the old file or the whole new one; on an error it is removed."""
     dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    sweep_stale(dest.parent, ".*.tmp-*")  # any writer's in this folder that died
-    tmp = dest.with_name(f".{dest.name}.tmp-{owner_tag()}{dest.suffix}")
+    tmp = _temporary(dest)
     try:
         yield tmp
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
+        _flush(tmp)
         os.replace(tmp, dest)
     finally:
         tmp.unlink(missing_ok=True)
@@ -115,11 +124,31 @@ class LocalStore(Store):
             raise StoreError(f"cannot write {uri} into the store: {exc}") from exc
 
     def put_file(self, source: Path, uri: str) -> None:
+        self.stage_file(source, uri).commit()
+
+    def stage_file(self, source: Path, uri: str) -> StagedFile:
+        """Copy ``source`` under a temporary name next to ``uri`` and flush it to disk now; ``commit()``
+        renames it into place."""
+        dest = local_path(uri)
         try:
-            with atomic_file(local_path(uri)) as tmp:
+            tmp = _temporary(dest)
+            try:
                 shutil.copyfile(source, tmp)  # in the kernel (sendfile): 5x a read/write loop here
+                _flush(tmp)
+            except BaseException:
+                tmp.unlink(missing_ok=True)
+                raise
         except OSError as exc:
             raise StoreError(f"cannot copy {source} into the store at {uri}: {exc}") from exc
+
+        def commit() -> None:
+            try:
+                os.replace(tmp, dest)
+            except OSError as exc:
+                tmp.unlink(missing_ok=True)
+                raise StoreError(f"cannot copy {source} into the store at {uri}: {exc}") from exc
+
+        return StagedFile(commit=commit, discard=lambda: tmp.unlink(missing_ok=True))
 
     def get_file(self, uri: str, dest: Path) -> None:
         try:
