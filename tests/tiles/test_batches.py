@@ -117,3 +117,27 @@ def test_memory_is_set_by_the_budget_not_the_density(tmp_path) -> None:
     assert high[1] / low[1] <= 1.3, (low, high)
     # what the writing itself takes (the peak above the process's size before it)
     assert (whole[1] - whole[0]) / (high[1] - high[0]) >= 2, (high, whole)
+
+
+def test_gather_reads_slices_in_order_and_refuses_a_short_run_file(tmp_path) -> None:
+    """A batch's slices come back in the parts' order whatever their order in the run files (read
+    straight into the records), and a run file shorter than its slices is refused, naming it."""
+    import pytest
+
+    from siteline.errors import TileError
+    from siteline.partition import RECORD
+    from siteline.tiles.batches import _gather
+
+    runs = []
+    for k in range(2):
+        rec = np.zeros(100, RECORD)
+        rec["gps_time"] = np.arange(100) + 1000 * k
+        path = tmp_path / f"run-{k}.bin"
+        rec.tofile(path)
+        runs.append(str(path))
+    parts = [(0, runs[1], 50, 10, 0), (0, runs[0], 0, 30, 0), (1, runs[0], 30, 5, 0), (1, runs[1], 0, 50, 0)]
+    got = _gather(parts)["gps_time"]
+    want = np.r_[1050:1060, 0:30, 30:35, 1000:1050]
+    assert np.array_equal(got, want)
+    with pytest.raises(TileError, match="run-0.bin ends early"):
+        _gather([(0, runs[0], 90, 20, 0)])

@@ -23,13 +23,14 @@ import hashlib
 import os
 import zlib
 from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.errors import TileError
-from siteline.kernels import radix
+from siteline.kernels import rows as row_kernels
 from siteline.partition import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.stores.remote import file_system
@@ -52,6 +53,7 @@ BATCH_POINTS = DEFAULT_TILE_BATCH_POINTS
 # a slice of the partition: (block, run file, offset, count, lowest z count)
 Part = tuple[int, str, int, int, int]
 Columns = Callable[[int, int], dict[str, np.ndarray]]
+_IOV_MAX = 1024  # buffers one preadv takes (POSIX's least IOV_MAX)
 
 
 def tile_seed(key: str, seed: int) -> int:
@@ -77,7 +79,8 @@ def batches(parts: list[Part], budget: int) -> list[list[Part]]:
 
 def _gather(parts: list[Part]) -> np.ndarray:
     """A batch's records from its slices of the runs, in order. Slices that lie end to end in a run
-    file (a chunk's next blocks) are read as one range: one read, or one ranged GET of an fsspec URL."""
+    file (a chunk's next blocks) are read as one range: one read straight into the records (a local
+    file), or one ranged GET of an fsspec URL."""
     dest = np.r_[0, np.cumsum([p[3] for p in parts])]
     out = np.empty(int(dest[-1]), RECORD)
     ranges: list[tuple[str, int, int, list[int]]] = []
@@ -87,19 +90,46 @@ def _gather(parts: list[Part]) -> np.ndarray:
             ranges[-1] = (path, ranges[-1][1], offset + count, [*ranges[-1][3], k])
         else:
             ranges.append((path, offset, offset + count, [k]))
-    for path, start, end, members in ranges:
-        records = _read(path, start, end)
-        for k in members:
-            at = parts[k][2] - start
-            out[dest[k] : dest[k + 1]] = records[at : at + parts[k][3]]
+    rows = _bytes(out)
+    with ExitStack() as files:
+        opened: dict[str, int] = {}
+        for path, start, end, members in ranges:
+            into = [rows[dest[k] : dest[k + 1]] for k in members]
+            if "://" in path:
+                records = _bytes(_read(path, start, end))
+                at = np.r_[0, np.cumsum([len(b) for b in into])]
+                for b, a in zip(into, at[:-1], strict=True):
+                    b[:] = records[a : a + len(b)]
+                continue
+            if path not in opened:
+                opened[path] = files.enter_context(open(path, "rb", buffering=0)).fileno()
+            _read_into(opened[path], path, start, into)
     return out
 
 
 def _read(path: str, start: int, end: int) -> np.ndarray:
-    """Records [start, end) of a run file (a local path or an fsspec URL: one ranged read)."""
+    """Records [start, end) of a run file at an fsspec URL (one ranged read)."""
     size = RECORD.itemsize
     fs, where = file_system(path)
     return np.frombuffer(fs.cat_file(where, start=start * size, end=end * size), dtype=RECORD)
+
+
+def _read_into(fd: int, path: str, start: int, into: list[np.ndarray]) -> None:
+    """Fill ``into`` (byte rows of records) from record ``start`` of the open run file ``fd`` on."""
+    at = start * RECORD.itemsize
+    views = [b.data.cast("B") for b in into]
+    k = 0
+    while k < len(views):
+        got = os.preadv(fd, views[k : k + _IOV_MAX], at)
+        if got == 0:
+            raise TileError(f"run file {path} ends early: the partition changed while tiling.")
+        at += got
+        while got:  # a read may stop short (a huge one): go on from where it stopped
+            if got >= views[k].nbytes:
+                got -= views[k].nbytes
+                k += 1
+            else:
+                views[k], got = views[k][got:], 0
 
 
 def _levels(rec: np.ndarray, parts: list[Part], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
@@ -127,25 +157,32 @@ def _in_memory(
     seen = np.zeros(len(plan.key), np.int64)
     where = plan.place(rec[COUNTS], levels, spec, seen)
     _check_placed(key, plan, seen)
-    inverse = np.empty_like(where)
-    inverse[where] = np.arange(len(where))
-    # one field at a time (np.take: about twice a fancy index's speed here)
-    columns = {name: np.take(rec[name], inverse, axis=0) for name in ATTRIBUTES}
-    scale = time_scale(columns["gps_time"])
-    return plan, lambda a, b: {k: v[a:b] for k, v in columns.items()}, scale
+    placed = np.empty(len(rec), RECORD)
+    row_kernels.scatter_rows(_bytes(placed), _bytes(rec), where)
+    return plan, lambda a, b: _columns(placed[a:b]), time_scale(placed["gps_time"])
+
+
+def _bytes(rec: np.ndarray) -> np.ndarray:
+    """Records (N,) as (N, itemsize) uint8 (a view)."""
+    return rec.view(np.uint8).reshape(len(rec), RECORD.itemsize)
+
+
+def _columns(rec: np.ndarray) -> dict[str, np.ndarray]:
+    """Each attribute of records as its own contiguous array."""
+    return {name: np.ascontiguousarray(rec[name]) for name in ATTRIBUTES}
 
 
 def _out_of_core(
     key: str, groups: list[list[Part]], spec: TileSpec, seed: int, z0: int, scratch: Path
 ) -> tuple[NodePlan, Columns, float | None]:
-    rows, scales = [], []
+    counted, scales = [], []
     for k, parts in enumerate(groups):  # pass 1: levels and counts
         rec = _gather(parts)
         levels = _levels(rec, parts, spec, seed, z0)
         np.save(scratch / f"{key}.levels-{k}.npy", levels)
-        rows.append(cube_counts(rec[COUNTS], levels, spec))
+        counted.append(cube_counts(rec[COUNTS], levels, spec))
         scales.append(time_scale(rec["gps_time"]))
-    plan = plan_nodes(add_cube_counts(rows), spec, level_count(spec), seed ^ 0x5EED)
+    plan = plan_nodes(add_cube_counts(counted), spec, level_count(spec), seed ^ 0x5EED)
     scale = _scale(scales)
     sorted_path = scratch / f"{key}.sorted"
     with open(sorted_path, "wb") as fh:
@@ -157,18 +194,15 @@ def _out_of_core(
         where = plan.place(rec[COUNTS], levels, spec, seen)
         if scale is not None and not round_trips(rec["gps_time"], scale):
             scale = None
-        out = np.memmap(sorted_path, dtype=RECORD, mode="r+", shape=(plan.points,))
-        order = radix.radix_order(where)  # written in file order: a sweep of its pages (2.3x a scatter)
-        out[where[order]] = np.take(rec, order)
-        out.flush()
-        del out  # unmapped: its pages leave this process
+        out = np.memmap(sorted_path, dtype=np.uint8, mode="r+", shape=(plan.points, RECORD.itemsize))
+        row_kernels.scatter_rows(out, _bytes(rec), where)
+        del out  # unmapped (not flushed: a scratch file): its pages leave this process
         os.unlink(scratch / f"{key}.levels-{k}.npy")
 
     _check_placed(key, plan, seen)
 
     def columns(a: int, b: int) -> dict[str, np.ndarray]:
-        rec = np.fromfile(sorted_path, dtype=RECORD, count=b - a, offset=a * RECORD.itemsize)
-        return {name: np.ascontiguousarray(rec[name]) for name in ATTRIBUTES}
+        return _columns(np.fromfile(sorted_path, dtype=RECORD, count=b - a, offset=a * RECORD.itemsize))
 
     return plan, columns, scale
 
