@@ -6,6 +6,7 @@ uploaded, and then marked complete; its endpoint and credentials come from fsspe
 from __future__ import annotations
 
 import hashlib
+import os
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -34,6 +35,42 @@ def file_system(uri: str) -> tuple[Any, str]:
             f"cannot open the store {uri}: {exc}. Install the file system's package (s3fs for s3://, "
             "gcsfs for gs://) or fix the URL."
         ) from exc
+
+
+_IOV_MAX = 1024  # buffers one preadv takes (POSIX's least IOV_MAX)
+
+
+def read_into(uri: str, offset: int, buffers: list[memoryview]) -> int:
+    """Fill ``buffers`` (writable bytes, in order) from byte ``offset`` of the file at ``uri`` until
+    they are full or the file ends; return the bytes read. A local file is read straight into them
+    (preadv), any other with one ranged GET."""
+    from fsspec.implementations.local import LocalFileSystem
+
+    want = sum(b.nbytes for b in buffers)
+    fs, path = file_system(uri)
+    if not isinstance(fs, LocalFileSystem):
+        data = fs.cat_file(path, start=offset, end=offset + want)
+        at = 0
+        for b in buffers:
+            n = min(b.nbytes, len(data) - at)
+            b[:n] = data[at : at + n]
+            at += n
+        return at
+    views = [b for b in buffers if b.nbytes]
+    done = k = 0
+    with open(path, "rb", buffering=0) as fh:
+        while k < len(views):
+            got = os.preadv(fh.fileno(), views[k : k + _IOV_MAX], offset + done)
+            if got == 0:
+                break
+            done += got
+            while got:  # a read may stop short (a huge one): go on from where it stopped
+                if got >= views[k].nbytes:
+                    got -= views[k].nbytes
+                    k += 1
+                else:
+                    views[k], got = views[k][got:], 0
+    return done
 
 
 def cached_download(store: Store, uri: str, sha256: str | None) -> Path:

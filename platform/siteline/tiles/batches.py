@@ -23,7 +23,6 @@ import hashlib
 import os
 import zlib
 from collections.abc import Callable
-from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,7 @@ from siteline.errors import TileError
 from siteline.kernels import rows as row_kernels
 from siteline.partition import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
-from siteline.stores.remote import file_system
+from siteline.stores.remote import read_into
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
 from siteline.tiles.layout import (
     ATTRIBUTES,
@@ -53,7 +52,6 @@ BATCH_POINTS = DEFAULT_TILE_BATCH_POINTS
 # a slice of the partition: (block, run file, offset, count, lowest z count)
 Part = tuple[int, str, int, int, int]
 Columns = Callable[[int, int], dict[str, np.ndarray]]
-_IOV_MAX = 1024  # buffers one preadv takes (POSIX's least IOV_MAX)
 
 
 def tile_seed(key: str, seed: int) -> int:
@@ -79,8 +77,8 @@ def batches(parts: list[Part], budget: int) -> list[list[Part]]:
 
 def _gather(parts: list[Part]) -> np.ndarray:
     """A batch's records from its slices of the runs, in order. Slices that lie end to end in a run
-    file (a chunk's next blocks) are read as one range: one read straight into the records (a local
-    file), or one ranged GET of an fsspec URL."""
+    file (a chunk's next blocks) are read as one range, straight into the records
+    (:func:`siteline.stores.remote.read_into`: one read, or one ranged GET of an fsspec URL)."""
     dest = np.r_[0, np.cumsum([p[3] for p in parts])]
     out = np.empty(int(dest[-1]), RECORD)
     ranges: list[tuple[str, int, int, list[int]]] = []
@@ -91,45 +89,12 @@ def _gather(parts: list[Part]) -> np.ndarray:
         else:
             ranges.append((path, offset, offset + count, [k]))
     rows = _bytes(out)
-    with ExitStack() as files:
-        opened: dict[str, int] = {}
-        for path, start, end, members in ranges:
-            into = [rows[dest[k] : dest[k + 1]] for k in members]
-            if "://" in path:
-                records = _bytes(_read(path, start, end))
-                at = np.r_[0, np.cumsum([len(b) for b in into])]
-                for b, a in zip(into, at[:-1], strict=True):
-                    b[:] = records[a : a + len(b)]
-                continue
-            if path not in opened:
-                opened[path] = files.enter_context(open(path, "rb", buffering=0)).fileno()
-            _read_into(opened[path], path, start, into)
-    return out
-
-
-def _read(path: str, start: int, end: int) -> np.ndarray:
-    """Records [start, end) of a run file at an fsspec URL (one ranged read)."""
     size = RECORD.itemsize
-    fs, where = file_system(path)
-    return np.frombuffer(fs.cat_file(where, start=start * size, end=end * size), dtype=RECORD)
-
-
-def _read_into(fd: int, path: str, start: int, into: list[np.ndarray]) -> None:
-    """Fill ``into`` (byte rows of records) from record ``start`` of the open run file ``fd`` on."""
-    at = start * RECORD.itemsize
-    views = [b.data.cast("B") for b in into if b.nbytes]
-    k = 0
-    while k < len(views):
-        got = os.preadv(fd, views[k : k + _IOV_MAX], at)
-        if got == 0:
+    for path, start, end, members in ranges:
+        into = [rows[dest[k] : dest[k + 1]].data.cast("B") for k in members if dest[k + 1] > dest[k]]
+        if read_into(path, start * size, into) != (end - start) * size:
             raise TileError(f"run file {path} ends early: the partition changed while tiling.")
-        at += got
-        while got:  # a read may stop short (a huge one): go on from where it stopped
-            if got >= views[k].nbytes:
-                got -= views[k].nbytes
-                k += 1
-            else:
-                views[k], got = views[k][got:], 0
+    return out
 
 
 def _levels(rec: np.ndarray, parts: list[Part], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
