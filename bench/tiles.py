@@ -113,7 +113,7 @@ def view_read(points: int) -> None:
         las = Path(d) / "c.las"
         make_las(las, points, z_noise_m=0.02, half_m=150.0)  # a 300 m surface, as LiDAR samples it
         stores = {}
-        for order in ("random", "input"):
+        for order in ("reversed-morton", "random", "input"):
             r = write_tiles(
                 las,
                 make_site_spec("b", "EPSG:32618", ORIGIN),

@@ -59,7 +59,7 @@ def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
     assert np.array_equal(new_points, old_points)  # the same points, in the current layout
     with cat.transaction() as s:
         stats = s.get(Scene, ids[0]).statistics["tiles"]
-    assert stats["spec"]["node_order"] == "random" and stats["generation"] == 1
+    assert stats["spec"]["node_order"] == "reversed-morton" and stats["generation"] == 1
 
     again = tile_scene(cat, settings, ids[0]).message
     assert "nothing to do" in again and "--retile" not in again

@@ -78,7 +78,9 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
     last_level = level_count(spec) - 1
     for tile, nodes in tiles.by_tile.items():
         data = tiles.read({tile: tiles.prefix(tile)}, ("gps_time",))
-        assert len(np.unique(data.attributes["gps_time"])) == len(data.attributes["gps_time"])  # no duplicates
+        assert len(np.unique(data.attributes["gps_time"])) == len(
+            data.attributes["gps_time"]
+        )  # no duplicates
         i, j = parse_tile_key(tile)
         counts = np.rint((data.xyz_m - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(
             np.int64
@@ -96,14 +98,18 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
             upto = tiles.read_tile(tile, ("gps_time",), level=lv)
             assert len(upto) == int(nodes.up_to(lv).sum())
             cell = int(round(spec.spacing(lv) / spec.quantum_m))
-            c = np.rint((upto.xyz_m - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(np.int64)
+            c = np.rint((upto.xyz_m - tile_origin_local(i, j, spec.tile_size_m)) / spec.quantum_m).astype(
+                np.int64
+            )
 
             def key(c: np.ndarray, cell: int = cell, zmin: int = zmin) -> set:
                 return set(map(tuple, np.c_[c[:, 0] // cell, c[:, 1] // cell, (c[:, 2] - zmin) // cell]))
 
             assert key(c) == key(counts)
             # a node's points of levels <= lv are its first ones (levels sorted inside a node)
-            first = np.concatenate([np.arange(s0, s0 + k) for s0, k in zip(nodes.start, nodes.up_to(lv), strict=True)])
+            first = np.concatenate(
+                [np.arange(s0, s0 + k) for s0, k in zip(nodes.start, nodes.up_to(lv), strict=True)]
+            )
             assert set(upto.attributes["gps_time"]) == set(data.attributes["gps_time"][first])
     # every node but a tile's sparse remainder holds node_points; bands cut into cubes where dense
     rows = tiles.nodes
@@ -121,7 +127,12 @@ def test_node_index_grows_with_points_not_levels(tmp_path) -> None:
     rng = np.random.default_rng(1)
     n = 400_000  # 400 points/m2 over 40 x 25 m: a dense surface
     local = np.c_[rng.uniform(-20, 20, n), rng.uniform(-12.5, 12.5, n), rng.normal(0, 0.05, n)]
-    write_las(tmp_path / "d.las", local + np.asarray(origin), crs="EPSG:32618", classification=np.full(n, 2, np.uint8))
+    write_las(
+        tmp_path / "d.las",
+        local + np.asarray(origin),
+        crs="EPSG:32618",
+        classification=np.full(n, 2, np.uint8),
+    )
     _, result, tiles = _tile(tmp_path, tmp_path / "d.las", origin)
     assert len(result.nodes) <= n / 2000, len(result.nodes)
     attrs = json.loads((Path(result.uri) / "zarr.json").read_text())["attributes"]
@@ -339,9 +350,11 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
     root.attrs.update({"siteline_tiles": 1, "nodes": docs, "spec": old_spec})
     assert TileSpec.from_dict(old_spec).node_order == "input"
     old = SceneTiles.open(result.uri)
-    assert old.spec.node_order == "input" and len(old.nodes) == len(docs) and "nodes" in json.loads(
-        (Path(result.uri) / "zarr.json").read_text()
-    )["attributes"]
+    assert (
+        old.spec.node_order == "input"
+        and len(old.nodes) == len(docs)
+        and "nodes" in json.loads((Path(result.uri) / "zarr.json").read_text())["attributes"]
+    )
     cam = Camera.look_at((-40, -50, 30), (5, 5, 0), 320, 240, fx=200.0)
     local = geo - np.asarray(origin)
     planes = cam.scaled(0.5).frustum_planes(1e-3)
@@ -368,7 +381,7 @@ def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
         classification=np.full(n, 2, np.uint8),
     )
     _, _, tiles = _tile(tmp_path, tmp_path / "p.las", origin)
-    assert tiles.spec.node_order == "random"
+    assert tiles.spec.node_order == "reversed-morton"
     tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t))
     nodes = tiles.by_tile[tile]
     k = int(np.argmax(np.diff(nodes.below, axis=1)[np.arange(len(nodes)), nodes.level]))  # largest last level
@@ -413,3 +426,41 @@ def test_reads_decode_only_the_chunks_they_touch(tmp_path) -> None:
         assert got.stats.points_decoded <= 2 * (end - first) * 1024 < tiles.prefix(tile)
         again = fresh.read_nodes({tile: (np.array([last]), np.array([count]))}, ("gps_time",))
         assert (again.stats.points_decoded == 0) == (cache > 4096)
+
+
+def test_each_level_of_a_node_is_in_node_order_and_compresses(tmp_path) -> None:
+    """Default order: inside every (node, level) the stored counts ascend by the reversed Morton key
+    (the points of a seeded shuffle, reordered), and its counts take fewer bytes than shuffled."""
+    import zarr
+
+    from tests.test_kernels import _order_key_reference
+
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    rng = np.random.default_rng(8)
+    n = 120_000  # 300 points/m2 over 20 x 20 m
+    local = np.c_[rng.uniform(0, 20, (n, 2)), rng.normal(0, 0.03, n)]
+    write_las(tmp_path / "d.las", local + np.asarray(origin), crs="EPSG:32618")
+    stores = {}
+    for order in ("reversed-morton", "random"):
+        (tmp_path / order).mkdir()
+        stores[order] = _tile(tmp_path / order, tmp_path / "d.las", origin, spec=TileSpec(node_order=order))
+    (_, result, tiles), (_, shuffled, _) = stores["reversed-morton"], stores["random"]
+    assert tiles.spec.node_order == "reversed-morton" and result.points == n
+    size = {
+        order: sum(f.stat().st_size for f in Path(res.uri, "tiles").glob("*/xyz_counts/**/*") if f.is_file())
+        for order, (_, res, _) in stores.items()
+    }
+    groups = 0
+    for tile, nodes in tiles.by_tile.items():
+        counts = zarr.open_array(Path(result.uri, "tiles", tile, "xyz_counts"), mode="r")[:]
+        other = zarr.open_array(Path(shuffled.uri, "tiles", tile, "xyz_counts"), mode="r")[:]
+        key = _order_key_reference(counts)
+        for k in range(len(nodes)):
+            ends = int(nodes.start[k]) + nodes.below[k]  # the node's levels, one after another
+            for a, b in zip(ends[:-1], ends[1:], strict=True):
+                if b - a > 1:
+                    groups += 1
+                    assert np.all(key[a : b - 1] <= key[a + 1 : b]), (tile, k, a)
+                    assert np.array_equal(np.unique(counts[a:b], axis=0), np.unique(other[a:b], axis=0))
+    assert groups > 20
+    assert size["reversed-morton"] < 0.85 * size["random"], size

@@ -223,8 +223,8 @@ def scene_tile(
     retile: bool = typer.Option(
         False,
         "--retile",
-        help="Tile a tiled scene again in the current layout (a store written before shuffled octree "
-        "nodes reads up to 4x the points a view needs). Its pairs are then processed again, and "
+        help="Tile a tiled scene again in the current layout (a store written before node prefixes "
+        "spanned their nodes reads up to 4x the points a view needs). Its pairs are then processed again, and "
         "imported label sets must be imported again.",
     ),
     as_json: bool = JsonOption,

@@ -125,3 +125,50 @@ def place_points(
         where[p] = slots[first[g]]
         first[g] += 1
     return where
+
+
+ORDER_BITS = 4  # the low bits of each count a node-order key holds
+_SMALL = 64  # groups up to this many points are sorted by insertion, not by counting
+
+
+@kernel
+def order_key(x: np.int64, y: np.int64, z: np.int64) -> np.int64:
+    """The node-order key of a point (counts x, y, z): the Morton code of their 4 low bits read from
+    the lowest bit up, bit 0 of x most significant, then bit 0 of y, bit 0 of z, bit 1 of x, ...
+    (12 bits)."""
+    k = np.int64(0)
+    for b in range(ORDER_BITS):
+        k = (k << 3) | ((x >> b) & 1) << 2 | ((y >> b) & 1) << 1 | ((z >> b) & 1)
+    return k
+
+
+@kernel
+def order_in_groups(counts: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(N,) int64 order that sorts each group of points (rows ``bounds[g]:bounds[g + 1]`` of counts
+    (N, 3)) by :func:`order_key`, ties in their order (a stable counting sort): ``rows[order]`` is
+    in node order."""
+    n = counts.shape[0]
+    key = np.empty(n, np.int64)
+    for p in range(n):
+        key[p] = order_key(counts[p, 0], counts[p, 1], counts[p, 2])
+    order = np.arange(n)
+    count = np.empty((1 << 3 * ORDER_BITS) + 1, np.int64)
+    for g in range(bounds.shape[0] - 1):
+        a, b = bounds[g], bounds[g + 1]
+        if b - a <= _SMALL:
+            for i in range(a + 1, b):
+                j = i
+                while j > a and key[order[j - 1]] > key[i]:
+                    order[j] = order[j - 1]
+                    j -= 1
+                order[j] = i
+            continue
+        count[:] = 0
+        for p in range(a, b):
+            count[key[p] + 1] += 1
+        for d in range(count.shape[0] - 1):
+            count[d + 1] += count[d]
+        for p in range(a, b):
+            order[a + count[key[p]]] = p
+            count[key[p]] += 1
+    return order

@@ -17,3 +17,21 @@ def scatter_rows(dst: np.ndarray, src: np.ndarray, where: np.ndarray) -> None:
         j = where[i]
         for b in range(width):
             dst[j, b] = src[i, b]
+
+
+@kernel
+def split_columns(
+    src: np.ndarray, order: np.ndarray, offsets: np.ndarray, sizes: np.ndarray, starts: np.ndarray, total: int
+) -> np.ndarray:
+    """Rows ``order`` of ``src`` (N, W) uint8 split into columns, in one pass: field f (bytes
+    ``offsets[f]`` to ``offsets[f] + sizes[f]`` of a row) of the i-th row taken goes to bytes
+    ``starts[f] + i sizes[f]`` onwards of the (total,) uint8 result."""
+    dst = np.empty(total, np.uint8)
+    for i in range(order.shape[0]):
+        j = order[i]
+        for f in range(offsets.shape[0]):
+            o, s = offsets[f], sizes[f]
+            base = starts[f] + i * s
+            for b in range(s):
+                dst[base + b] = src[j, o + b]
+    return dst

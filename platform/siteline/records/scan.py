@@ -46,7 +46,7 @@ class LasScan:
     def content_seed(self) -> int:
         """A seed that depends on the cloud's content only (point count, GPS times, classes, bounds to
         the centimetre in the site frame): the same mission gives the same level-of-detail draw and
-        node shuffle whatever its scene id, arrival order or the origin's magnitude."""
+        node order whatever its scene id, arrival order or the origin's magnitude."""
         doc = {
             "points": self.point_count,
             "gps": [round(v, 6) for v in self.gps_time_range] if self.gps_time_range else None,

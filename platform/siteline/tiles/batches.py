@@ -9,9 +9,10 @@ in batches of whole blocks:
 1. per batch: gather its records, level them, count them per (level, node cube); the levels go to
    a scratch file;
 2. the tile's node plan from the counts;
-3. per batch again: gather, place each point (its group's seeded slot), scatter the records into a
+3. per batch again: gather, place each point (its group's next slot), scatter the records into a
    scratch file of the tile in array order;
-4. the scratch file is written to the Zarr arrays shard by shard.
+4. the scratch file is written to the Zarr arrays shard by shard, each shard's groups read whole
+   and put in node order (:meth:`siteline.tiles.nodes.NodePlan.node_order`).
 
 A tile that fits one batch does the same in memory. Memory is thus set by ``batch_points``, not by
 density, and the arrays are the same whatever the batches (a tested property).
@@ -22,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import os
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +52,8 @@ BATCH_POINTS = DEFAULT_TILE_BATCH_POINTS
 
 # a slice of the partition: (block, run file, offset, count, lowest z count)
 Part = tuple[int, str, int, int, int]
-Columns = Callable[[int, int], dict[str, np.ndarray]]
+Rows = Callable[[int, int], np.ndarray]  # records [a, b) of a tile, as placed
+Columns = Callable[[int, int], dict[str, np.ndarray]]  # each attribute of rows [a, b), in node order
 
 
 def tile_seed(key: str, seed: int) -> int:
@@ -124,7 +126,7 @@ def _in_memory(
     _check_placed(key, plan, seen)
     placed = np.empty(len(rec), RECORD)
     row_kernels.scatter_rows(_bytes(placed), _bytes(rec), where)
-    return plan, lambda a, b: _columns(placed[a:b]), time_scale(placed["gps_time"])
+    return plan, _in_node_order(plan, lambda a, b: placed[a:b]), time_scale(placed["gps_time"])
 
 
 def _bytes(rec: np.ndarray) -> np.ndarray:
@@ -132,9 +134,41 @@ def _bytes(rec: np.ndarray) -> np.ndarray:
     return rec.view(np.uint8).reshape(len(rec), RECORD.itemsize)
 
 
-def _columns(rec: np.ndarray) -> dict[str, np.ndarray]:
-    """Each attribute of records as its own contiguous array."""
-    return {name: np.ascontiguousarray(rec[name]) for name in ATTRIBUTES}
+_OFFSETS: Mapping[str, tuple] = RECORD.fields or {}
+# (name, dtype, byte offset) of each attribute of a record
+_FIELDS: list[tuple[str, np.dtype, int]] = [
+    (name, RECORD[name], int(_OFFSETS[name][1])) for name in ATTRIBUTES
+]
+
+
+def _columns(rec: np.ndarray, order: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Each attribute of records ``rec[order]`` (all of them, in order, when None) as its own
+    contiguous array: views of one buffer (each column 8-byte aligned), filled in one pass."""
+    order = np.arange(len(rec)) if order is None else order
+    m = len(order)
+    sizes = np.array([dtype.itemsize for _, dtype, _ in _FIELDS])
+    ends = np.cumsum(-(-m * sizes // 8) * 8)
+    starts = np.r_[0, ends[:-1]]
+    offsets = np.array([offset for _, _, offset in _FIELDS])
+    buf = row_kernels.split_columns(_bytes(rec), order, offsets, sizes, starts, int(ends[-1]))
+    return {
+        name: buf[a : a + m * dtype.itemsize].view(dtype.base).reshape(m, *dtype.shape)
+        for (name, dtype, _), a in zip(_FIELDS, starts, strict=True)
+    }
+
+
+def _in_node_order(plan: NodePlan, rows: Rows) -> Columns:
+    """The columns of rows [a, b) in node order, from the rows as placed: the whole groups around
+    them are read and ordered (:meth:`NodePlan.node_order`), so a write may cut groups anywhere."""
+    if plan.order != "reversed-morton":
+        return lambda a, b: _columns(rows(a, b))
+
+    def columns(a: int, b: int) -> dict[str, np.ndarray]:
+        lo, hi = plan.groups_around(a, b)
+        rec = rows(lo, hi)
+        return _columns(rec, plan.node_order(rec[COUNTS], lo)[a - lo : b - lo])
+
+    return columns
 
 
 def _out_of_core(
@@ -166,10 +200,10 @@ def _out_of_core(
 
     _check_placed(key, plan, seen)
 
-    def columns(a: int, b: int) -> dict[str, np.ndarray]:
-        return _columns(np.fromfile(sorted_path, dtype=RECORD, count=b - a, offset=a * RECORD.itemsize))
+    def rows(a: int, b: int) -> np.ndarray:
+        return np.fromfile(sorted_path, dtype=RECORD, count=b - a, offset=a * RECORD.itemsize)
 
-    return plan, columns, scale
+    return plan, _in_node_order(plan, rows), scale
 
 
 def _check_placed(key: str, plan: NodePlan, seen: np.ndarray) -> None:

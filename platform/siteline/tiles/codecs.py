@@ -1,7 +1,9 @@
 """How tile arrays are compressed (zarr v3 codecs): the one place to choose a codec per attribute.
 
-Every array takes blosc-zstd at ``TileSpec.clevel`` with bit shuffle (inside a node the points are
-shuffled, so no delta codec helps; bit planes do: a chunk's high bits barely change). Two filters
+Every array takes blosc-zstd at ``TileSpec.clevel`` with bit shuffle: inside a level of a node the
+points are sorted by the low bits of their counts (``node_order="reversed-morton"``), so those bit
+planes come in runs, and a chunk's high bits barely change (no delta codec helps: neighbours in the
+arrays are not neighbours in space). Two filters
 narrow what blosc sees, both lossless and both decoded by zarr itself, so a reader gets the stored
 dtype back:
 

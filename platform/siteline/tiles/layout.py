@@ -7,7 +7,8 @@ per occupied cube of edge ``root_spacing_m / 2**L`` among the points no earlier 
 additive level of detail). A node is a band of levels inside one cube of the tile's octree, sized to
 hold thousands of points (siteline.tiles.nodes): the tile's arrays are sorted by (band, cube, level),
 so every node is one contiguous range whose coarser levels come first; inside a level the points are
-shuffled (seeded), so a view can read a level in part (a continuous level of detail). The node index
+in ``TileSpec.node_order`` (by default sorted by the bit-reversed Morton code of their low bits), so that every
+prefix of the level spans the node and a view can read a level in part (a continuous level of detail). The node index
 is stored beside the tiles (siteline.tiles.index).
 Coordinates are int32 counts of ``quantum_m`` relative to the tile's float64 origin (the site origin
 plus (i T, j T, 0)).

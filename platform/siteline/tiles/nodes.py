@@ -3,15 +3,17 @@
 
 A tile's node plan is made from its points counted per (level, finest node cube) (:func:`cube_counts`,
 which adds up over batches of points), and each point is then placed by its group (band, cube,
-level) and a seeded permutation of the group's slots (:meth:`NodePlan.place`): so a tile too big
-for memory is placed batch after batch, and gets the same arrays whatever its batches.
+level) in the group's slots (:meth:`NodePlan.place`: in input order, or a seeded permutation for
+``node_order="random"``): so a tile too big for memory is placed batch after batch, and gets the same
+arrays whatever its batches. With ``node_order="reversed-morton"`` each group's points are then sorted
+by their order key (:meth:`NodePlan.node_order`, over whole groups once all their points are placed).
 
 Levels are grouped, coarse first, into bands of at least ``spec.node_points`` points of the tile (a
 short tail joins the band before it); a band is cut into the cubes of the deepest octree depth (at
 most ``spec.max_node_depth``) at which its occupied cubes still hold ``spec.node_points`` on average.
 A node is one band in one cube, one contiguous range of the tile's arrays: its points sorted by
-level and shuffled (seeded) inside a level, so a node's first k points are its coarser levels whole
-and a uniform subsample of the next. The index thus grows with points / ``node_points``, not with
+level and in node order inside a level, so a node's first k points are its coarser levels whole
+and a subsample of the next spread over the node. The index thus grows with points / ``node_points``, not with
 levels x cubes (about 100 points a node before).
 
 Cubes: depth d splits the tile into 2**d x 2**d columns of edge ``(T / quantum) >> max_node_depth``
@@ -105,7 +107,8 @@ class NodePlan:
     """Where a tile's points go: its groups (one band of one cube at one level) in array order, by
     ``key`` (band, cube, level packed), each group's ``start`` and ``count`` in the tile's arrays; and
     the nodes (a band in a cube: its groups) with their band, depth, cube, start, count and points
-    per level. ``seed`` seeds each group's slot permutation."""
+    per level. ``order``: the spec's node order; ``seed`` seeds each group's slot permutation when
+    it is "random"."""
 
     key: np.ndarray
     start: np.ndarray
@@ -115,7 +118,7 @@ class NodePlan:
     z0: int
     cube_bits: int
     seed: int
-    random: bool
+    order: str
     first_level: np.ndarray
     level: np.ndarray
     depth: np.ndarray
@@ -136,11 +139,28 @@ class NodePlan:
         where = node_kernels.place_points(
             np.ascontiguousarray(counts), levels, _fine_edge(spec), spec.max_node_depth, self.band_of_level,
             self.depth_of_band, self.z0, self.cube_bits, self.key, self.start, self.count, seen, self.seed,
-            self.random,
+            self.order == "random",
         )  # fmt: skip
         if len(where) and where[0] < 0:
             raise TileError("a tile's points changed between its node plan and their placement.")
         return where
+
+    def groups_around(self, a: int, b: int) -> tuple[int, int]:
+        """Rows [lo, hi) of the tile's arrays: the whole groups that hold rows [a, b)."""
+        bounds = np.r_[self.start, self.points]
+        return int(bounds[np.searchsorted(bounds, a, "right") - 1]), int(bounds[np.searchsorted(bounds, b)])
+
+    def node_order(self, counts: np.ndarray, lo: int) -> np.ndarray:
+        """The order that puts placed rows [lo, lo + len(counts)) (whole groups; counts (M, 3) int32) in
+        node order: each group sorted by :func:`siteline.kernels.nodes.order_key` of its points,
+        ties in input order, for "reversed-morton"; as placed otherwise."""
+        if self.order != "reversed-morton":
+            return np.arange(len(counts))
+        bounds = np.r_[self.start, self.points]
+        inner = bounds[(bounds >= lo) & (bounds <= lo + len(counts))] - lo
+        if len(counts) and (inner[0] != 0 or inner[-1] != len(counts)):
+            raise TileError("a tile's rows to order do not cover whole groups of its node plan.")
+        return node_kernels.order_in_groups(counts, inner)
 
     def table(self, tile: str, lo: np.ndarray, hi: np.ndarray) -> NodeTable:
         """The node rows of the tile with its nodes' bounds (site-local metres)."""
@@ -229,7 +249,7 @@ def _with_nodes(
     cell = np.stack([nc & ((1 << nd) - 1), (nc >> nd) & ((1 << nd) - 1), (nc >> (2 * nd)) + z0], axis=1)
     span = np.array(spans, np.uint8).reshape(-1, 2)[nb]
     return NodePlan(
-        key, start, count, band_of_level, depth_of_band, z0, cube_bits, seed, spec.node_order == "random",
+        key, start, count, band_of_level, depth_of_band, z0, cube_bits, seed, spec.node_order,
         span[:, 0], span[:, 1], nd.astype(np.int8), cell.astype(np.int32).reshape(-1, 3), start[head],
         lc.sum(axis=1), lc,
     )  # fmt: skip

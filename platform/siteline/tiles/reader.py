@@ -137,7 +137,9 @@ class TileNodes:
         t = table.rows(o)
         below = np.zeros((len(t), t.level_counts.shape[1] + 1), np.int64)
         np.cumsum(t.level_counts, axis=1, out=below[:, 1:])
-        return cls(t.lo, t.hi, t.first_level.astype(np.int64), t.level.astype(np.int64), t.start, t.count, below)
+        return cls(
+            t.lo, t.hi, t.first_level.astype(np.int64), t.level.astype(np.int64), t.start, t.count, below
+        )
 
     def __len__(self) -> int:
         return len(self.start)
@@ -359,11 +361,11 @@ class SceneTiles:
     ) -> Points:
         """Points in ``bounds`` ((xmin, ymin, xmax, ymax) or 6 values with z, site-local metres) up to
         ``level`` (or the level that reaches ``resolution`` metres; all levels when both are None).
-        In a store with shuffled nodes, ``resolution`` reads the level that crosses it in part, as a
+        In a store whose node prefixes span their nodes (``spec.partial_levels``), ``resolution`` reads the level that crosses it in part, as a
         view does (:meth:`node_takes`), so the result has about that spacing whatever the density."""
         if level is not None and resolution is not None:
             raise TileError("give level or resolution, not both.")
-        if resolution is not None and self.spec.node_order != "random":
+        if resolution is not None and not self.spec.partial_levels:
             level, resolution = self.level_for_resolution(resolution), None
         lo = hi = None
         if bounds is not None:
@@ -395,8 +397,8 @@ class SceneTiles:
         surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance; and
         the frustum's planes.
 
-        Levels coarser than that spacing are read whole. In a store whose nodes are shuffled
-        (``node_order="random"``) the level that crosses it is read in part: the first ``take`` points
+        Levels coarser than that spacing are read whole. In a store whose node prefixes span their
+        nodes (``spec.partial_levels``: any order but "input") the level that crosses it is read in part: the first ``take`` points
         of each of its nodes, ``take / count = (r - 1) N_<a / N_a`` with ``r = (spacing(a-1) / need)**2``
         (a surface's density grows as 1 / spacing**2) and ``N`` the tile's points per level, so the
         density read is what the footprint needs, whatever the data hold. Otherwise that level is
@@ -424,7 +426,7 @@ class SceneTiles:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Which of ``tile``'s nodes (a mask over ``by_tile[tile]``) to read, and how many points of
         each, for a spacing of ``need_m`` metres per node: the levels coarser than it whole and, in a
-        store with shuffled nodes, the level that crosses it in part (see :meth:`levels_for_view`); in
+        store whose node prefixes span their nodes, the level that crosses it in part (see :meth:`levels_for_view`); in
         one with input order that level whole. A node holds a band of levels sorted by level, so its
         coarse levels are a prefix of it and the part of the crossing level follows them."""
         nodes = self.by_tile[tile]
@@ -434,7 +436,7 @@ class SceneTiles:
         whole = nodes.below[rows, cap]  # levels under the crossing one
         at = nodes.below[rows, cap + 1] - whole  # the crossing level's points in the node
         part = at.copy()
-        if self.spec.node_order == "random":
+        if self.spec.partial_levels:
             edge = (allowed > 0) & (at > 0)
             a = allowed[edge]
             totals = self.level_totals[tile]
@@ -486,8 +488,8 @@ class SceneTiles:
         (``level="auto"``, the last level in part: see :meth:`levels_for_view`; an int caps every node
         at that level; None reads all levels). lod_factor 1 keeps coverage within a point of reading
         everything (~4 points read per pixel of a surface for 1 px points, ~0.5 for 3 px disks); larger
-        reads fewer at some coverage cost (bench/tiles.py measures both). Stores written before
-        shuffled nodes read whole levels, up to 4x more. Points outside the frustum are dropped
+        reads fewer at some coverage cost (bench/tiles.py measures both). Stores written in input
+        order read whole levels, up to 4x more. Points outside the frustum are dropped
         (float64 test), so at full level the result is exactly the brute-force frustum selection."""
         if level == "auto":
             selection, planes = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)

@@ -40,7 +40,7 @@ def tile_scene(
     executor: Executor | None = None,
 ) -> TileOutcome:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
-    ``retile`` (tile it again in the current layout, e.g. a store written before shuffled nodes).
+    ``retile`` (tile it again in the current layout, e.g. a store written in input order).
 
     The store (its node index inside) is published whole before its address and the scene's status
     are committed; a store without rows (a crash between the two) is replaced. A re-tiling writes the
