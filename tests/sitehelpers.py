@@ -1,11 +1,13 @@
-"""Helpers shared by tests that need an ingested synthetic site (imported from tests/, which pytest
-puts on sys.path)."""
+"""Helpers shared by tests: an ingested synthetic site, the node-order key (imported from tests/,
+which pytest puts on sys.path)."""
 
 from __future__ import annotations
 
 import json
 import shutil
 from pathlib import Path
+
+import numpy as np
 
 from siteline.catalog import migrate, open_catalog
 from siteline.catalog.engine import make_engine
@@ -89,3 +91,13 @@ def writable_copy(release_root: Path | str, dest: Path) -> Path:
     for p in dest.rglob("*"):
         os.chmod(p, 0o755 if p.is_dir() else 0o644)
     return dest
+
+
+def node_order_key(counts: np.ndarray) -> np.ndarray:
+    """The node-order key bit by bit: bit b of x, y, z at 11 - 3 b, 10 - 3 b, 9 - 3 b (b < 4)."""
+    c = counts.astype(np.int64)  # two's complement low bits, as the kernel takes them
+    key = np.zeros(len(c), np.int64)
+    for b in range(4):
+        for axis in range(3):
+            key |= ((c[:, axis] >> b) & 1) << (11 - 3 * b - axis)
+    return key

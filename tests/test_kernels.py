@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sitehelpers import node_order_key
 
 from siteline.kernels.cut import bounds, tile_codes
 from siteline.kernels.radix import radix_order, run_starts
@@ -115,16 +116,6 @@ def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
     assert (place_points(counts[:2], levels[:2], 781, 6, *plan, seen, 42, shuffle) == -1).all()
 
 
-def _order_key_reference(counts: np.ndarray) -> np.ndarray:
-    """The node-order key bit by bit: bit b of x, y, z at 11 - 3 b, 10 - 3 b, 9 - 3 b (b < 4)."""
-    c = counts.astype(np.int64)  # two's complement low bits, as the kernel takes them
-    key = np.zeros(len(c), np.int64)
-    for b in range(4):
-        for axis in range(3):
-            key |= ((c[:, axis] >> b) & 1) << (11 - 3 * b - axis)
-    return key
-
-
 def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> None:
     """Groups small (insertion) and large (counting), with negative counts and duplicates: each
     sorted by the key, ties in input order, never a point across groups."""
@@ -137,7 +128,7 @@ def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> Non
     sizes = np.array([0, 1, 2, 40, 64, 65, 3_000, 12_000])
     sizes = np.r_[sizes, len(counts) - sizes.sum()]
     bounds = np.r_[0, np.cumsum(sizes)]
-    key = _order_key_reference(counts)
+    key = node_order_key(counts)
     assert [order_key(*map(int, c)) for c in counts[:50]] == key[:50].tolist()
     assert order_key(1, 0, 0) == 1 << 11 and order_key(0, 0, 8) == 1  # bit 0 of x leads
     want = np.concatenate(

@@ -432,8 +432,7 @@ def test_each_level_of_a_node_is_in_node_order_and_compresses(tmp_path) -> None:
     """Default order: inside every (node, level) the stored counts ascend by the reversed Morton key
     (the points of a seeded shuffle, reordered), and its counts take fewer bytes than shuffled."""
     import zarr
-
-    from tests.test_kernels import _order_key_reference
+    from sitehelpers import node_order_key
 
     origin = (445_000.0, 5_030_000.0, 80.0)
     rng = np.random.default_rng(8)
@@ -454,7 +453,7 @@ def test_each_level_of_a_node_is_in_node_order_and_compresses(tmp_path) -> None:
     for tile, nodes in tiles.by_tile.items():
         counts = zarr.open_array(Path(result.uri, "tiles", tile, "xyz_counts"), mode="r")[:]
         other = zarr.open_array(Path(shuffled.uri, "tiles", tile, "xyz_counts"), mode="r")[:]
-        key = _order_key_reference(counts)
+        key = node_order_key(counts)
         for k in range(len(nodes)):
             ends = int(nodes.start[k]) + nodes.below[k]  # the node's levels, one after another
             for a, b in zip(ends[:-1], ends[1:], strict=True):
