@@ -1,4 +1,4 @@
-"""Re-tiling a scene whose store predates shuffled octree nodes: the CLI says how, `--retile` writes the
+"""Re-tiling a scene whose store keeps input order inside its nodes: the CLI says how, `--retile` writes the
 current layout beside the old store and swaps it in, and the scene's pairs are processed again instead
 of reusing outputs aligned with the old order."""
 
