@@ -134,34 +134,28 @@ def _bytes(rec: np.ndarray) -> np.ndarray:
     return rec.view(np.uint8).reshape(len(rec), RECORD.itemsize)
 
 
-_OFFSETS: Mapping[str, tuple] = RECORD.fields or {}
-# (name, dtype, byte offset) of each attribute of a record
-_FIELDS: list[tuple[str, np.dtype, int]] = [
-    (name, RECORD[name], int(_OFFSETS[name][1])) for name in ATTRIBUTES
-]
+_FIELD_AT: Mapping[str, tuple] = RECORD.fields or {}  # name -> (dtype, byte offset in a record)
+_DTYPES = [RECORD[name] for name in ATTRIBUTES]
+_OFFSETS = np.array([_FIELD_AT[name][1] for name in ATTRIBUTES])
+_SIZES = np.array([dtype.itemsize for dtype in _DTYPES])
 
 
-def _columns(rec: np.ndarray, order: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Each attribute of records ``rec[order]`` (all of them, in order, when None) as its own
-    contiguous array: views of one buffer (each column 8-byte aligned), filled in one pass."""
-    order = np.arange(len(rec)) if order is None else order
+def _columns(rec: np.ndarray, order: np.ndarray) -> dict[str, np.ndarray]:
+    """Each attribute of records ``rec[order]`` as its own contiguous array: views of one buffer
+    (each column 8-byte aligned), filled in one pass."""
     m = len(order)
-    sizes = np.array([dtype.itemsize for _, dtype, _ in _FIELDS])
-    ends = np.cumsum(-(-m * sizes // 8) * 8)
+    ends = np.cumsum(-(-m * _SIZES // 8) * 8)
     starts = np.r_[0, ends[:-1]]
-    offsets = np.array([offset for _, _, offset in _FIELDS])
-    buf = row_kernels.split_columns(_bytes(rec), order, offsets, sizes, starts, int(ends[-1]))
+    buf = row_kernels.split_columns(_bytes(rec), order, _OFFSETS, _SIZES, starts, int(ends[-1]))
     return {
         name: buf[a : a + m * dtype.itemsize].view(dtype.base).reshape(m, *dtype.shape)
-        for (name, dtype, _), a in zip(_FIELDS, starts, strict=True)
+        for name, dtype, a in zip(ATTRIBUTES, _DTYPES, starts, strict=True)
     }
 
 
 def _in_node_order(plan: NodePlan, rows: Rows) -> Columns:
     """The columns of rows [a, b) in node order, from the rows as placed: the whole groups around
     them are read and ordered (:meth:`NodePlan.node_order`), so a write may cut groups anywhere."""
-    if plan.order != "reversed-morton":
-        return lambda a, b: _columns(rows(a, b))
 
     def columns(a: int, b: int) -> dict[str, np.ndarray]:
         lo, hi = plan.groups_around(a, b)

@@ -4,17 +4,17 @@
 A tile's node plan is made from its points counted per (level, finest node cube) (:func:`cube_counts`,
 which adds up over batches of points), and each point is then placed by its group (band, cube,
 level) in the group's slots (:meth:`NodePlan.place`: in input order, or a seeded permutation for
-``node_order="random"``): so a tile too big for memory is placed batch after batch, and gets the same
-arrays whatever its batches. With ``node_order="reversed-morton"`` each group's points are then sorted
-by their order key (:meth:`NodePlan.node_order`, over whole groups once all their points are placed).
+``node_order="random"``): so a tile too big for memory is placed batch after batch, and gets the
+same arrays whatever its batches. With ``node_order="reversed-morton"`` each group's points are then
+sorted by their order key (:meth:`NodePlan.node_order`, over whole groups once all are placed).
 
 Levels are grouped, coarse first, into bands of at least ``spec.node_points`` points of the tile (a
 short tail joins the band before it); a band is cut into the cubes of the deepest octree depth (at
 most ``spec.max_node_depth``) at which its occupied cubes still hold ``spec.node_points`` on average.
 A node is one band in one cube, one contiguous range of the tile's arrays: its points sorted by
 level and in node order inside a level, so a node's first k points are its coarser levels whole
-and a subsample of the next spread over the node. The index thus grows with points / ``node_points``, not with
-levels x cubes (about 100 points a node before).
+and a subsample of the next spread over the node. The index thus grows with points /
+``node_points``, not with levels x cubes (about 100 points a node before).
 
 Cubes: depth d splits the tile into 2**d x 2**d columns of edge ``(T / quantum) >> max_node_depth``
 quanta times 2**(max_node_depth - d), from the tile origin; z is cut with the same edge from z = 0.
@@ -23,6 +23,7 @@ quanta times 2**(max_node_depth - d), from the tile origin; z is cut with the sa
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -145,9 +146,14 @@ class NodePlan:
             raise TileError("a tile's points changed between its node plan and their placement.")
         return where
 
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(G + 1,) the first row of each group in the tile's arrays, then the row past the last."""
+        return np.r_[self.start, self.points]
+
     def groups_around(self, a: int, b: int) -> tuple[int, int]:
         """Rows [lo, hi) of the tile's arrays: the whole groups that hold rows [a, b)."""
-        bounds = np.r_[self.start, self.points]
+        bounds = self.bounds
         return int(bounds[np.searchsorted(bounds, a, "right") - 1]), int(bounds[np.searchsorted(bounds, b)])
 
     def node_order(self, counts: np.ndarray, lo: int) -> np.ndarray:
@@ -156,7 +162,7 @@ class NodePlan:
         ties in input order, for "reversed-morton"; as placed otherwise."""
         if self.order != "reversed-morton":
             return np.arange(len(counts))
-        bounds = np.r_[self.start, self.points]
+        bounds = self.bounds
         inner = bounds[(bounds >= lo) & (bounds <= lo + len(counts))] - lo
         if len(counts) and (inner[0] != 0 or inner[-1] != len(counts)):
             raise TileError("a tile's rows to order do not cover whole groups of its node plan.")

@@ -45,8 +45,9 @@ class TilingPlan:
         hint = ""
         if not self.current.spec.partial_levels:
             hint = (
-                " Its store keeps input order inside its nodes, so views read whole levels (up to 4x the points "
-                f"they need): `siteline scene tile {self.scene_id} --retile` tiles it again in the current layout."
+                " Its store keeps input order inside its nodes, so views read whole levels (up to 4x the "
+                f"points they need): `siteline scene tile {self.scene_id} --retile` tiles it again in the "
+                "current layout."
             )
         return f"scene {self.scene_id} is already tiled at {self.current.uri}: nothing to do.{hint}"
 

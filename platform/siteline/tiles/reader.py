@@ -361,8 +361,9 @@ class SceneTiles:
     ) -> Points:
         """Points in ``bounds`` ((xmin, ymin, xmax, ymax) or 6 values with z, site-local metres) up to
         ``level`` (or the level that reaches ``resolution`` metres; all levels when both are None).
-        In a store whose node prefixes span their nodes (``spec.partial_levels``), ``resolution`` reads the level that crosses it in part, as a
-        view does (:meth:`node_takes`), so the result has about that spacing whatever the density."""
+        In a store whose node prefixes span their nodes (``spec.partial_levels``), ``resolution``
+        reads the level that crosses it in part, as a view does (:meth:`node_takes`), so the result
+        has about that spacing whatever the density."""
         if level is not None and resolution is not None:
             raise TileError("give level or resolution, not both.")
         if resolution is not None and not self.spec.partial_levels:
@@ -398,10 +399,11 @@ class SceneTiles:
         the frustum's planes.
 
         Levels coarser than that spacing are read whole. In a store whose node prefixes span their
-        nodes (``spec.partial_levels``: any order but "input") the level that crosses it is read in part: the first ``take`` points
-        of each of its nodes, ``take / count = (r - 1) N_<a / N_a`` with ``r = (spacing(a-1) / need)**2``
-        (a surface's density grows as 1 / spacing**2) and ``N`` the tile's points per level, so the
-        density read is what the footprint needs, whatever the data hold. Otherwise that level is
+        nodes (``spec.partial_levels``: any order but "input") the level that crosses it is read in
+        part: the first ``take`` points of each of its nodes, ``take / count = (r - 1) N_<a / N_a``
+        with ``r = (spacing(a-1) / need)**2`` (a surface's density grows as 1 / spacing**2) and ``N``
+        the tile's points per level, so the density read is what the footprint needs, whatever the
+        data hold. Otherwise that level is
         read whole (1-4 points per footprint of a surface)."""
         cam = camera.scaled(scale)
         planes = cam.frustum_planes(near_m)
@@ -426,8 +428,8 @@ class SceneTiles:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Which of ``tile``'s nodes (a mask over ``by_tile[tile]``) to read, and how many points of
         each, for a spacing of ``need_m`` metres per node: the levels coarser than it whole and, in a
-        store whose node prefixes span their nodes, the level that crosses it in part (see :meth:`levels_for_view`); in
-        one with input order that level whole. A node holds a band of levels sorted by level, so its
+        store whose node prefixes span their nodes, the level that crosses it in part (see
+        :meth:`levels_for_view`); in one with input order that level whole. A node holds a band of levels sorted by level, so its
         coarse levels are a prefix of it and the part of the crossing level follows them."""
         nodes = self.by_tile[tile]
         allowed = self.levels_for_resolutions(need_m)
