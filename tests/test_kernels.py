@@ -136,3 +136,54 @@ def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> Non
     )
     assert np.array_equal(order_in_groups(counts, bounds), want)
     assert order_in_groups(counts[:0], np.zeros(1, np.int64)).shape == (0,)
+
+
+def test_las_coordinates_and_colour_as_laspy_computes_them() -> None:
+    """scaled_xyz is laspy's count * scale + offset bit for bit (no fused multiply-add), at
+    georeferenced magnitudes; colour_u8 keeps the high byte of 16-bit colour or the 0-255 value."""
+    from siteline.kernels.cut import colour_u8, scaled_xyz
+
+    rng = np.random.default_rng(4)
+    x, y, z = (rng.integers(-(2**31), 2**31 - 1, 20_000).astype(np.int32) for _ in range(3))
+    scale, offset = np.array([0.000123, 0.01, 0.001]), np.array([5_030_123.456789, 445_001.1, -12.3])
+    want = np.stack([x * scale[0] + offset[0], y * scale[1] + offset[1], z * scale[2] + offset[2]], axis=1)
+    assert scaled_xyz(x, y, z, scale, offset).tobytes() == want.tobytes()
+    rgb = rng.integers(0, 2**16, (3, 1000)).astype(np.uint16)
+    assert np.array_equal(colour_u8(*rgb, 8), (rgb.T >> 8).astype(np.uint8))
+    small = rgb % 256
+    assert np.array_equal(colour_u8(*small, 0), small.T.astype(np.uint8))
+
+
+def _records(n: int, seed: int) -> np.ndarray:
+    from siteline.partition import RECORD
+
+    rng = np.random.default_rng(seed)
+    rec = np.zeros(n, RECORD)
+    rec["xyz_counts"] = rng.integers(-(2**31), 2**31 - 1, (n, 3))
+    rec["rgb"] = rng.integers(0, 256, (n, 3))
+    rec["intensity"] = rng.integers(0, 2**16, n)
+    rec["class"] = rng.integers(0, 256, n)
+    rec["gps_time"] = rng.normal(4e5, 1e3, n)
+    rec["return_number"] = rng.integers(0, 8, n)
+    return rec
+
+
+def test_records_split_into_fields_and_scatter_back_as_numpy_does() -> None:
+    """split_records gathers each field of records rec[order] (numpy's fancy index of each field);
+    scatter_records puts fields back into records at given places; inverse inverts a permutation."""
+    from siteline.kernels.radix import inverse
+    from siteline.kernels.rows import scatter_records, split_records
+
+    rec = _records(5_000, 0)
+    order = np.random.default_rng(1).permutation(len(rec))[:3_000]
+    fields = [
+        np.empty((len(order), *rec.dtype[name].shape), rec.dtype[name].base) for name in rec.dtype.names
+    ]
+    split_records(rec, order, *fields)
+    for name, got in zip(rec.dtype.names, fields, strict=True):
+        assert np.array_equal(got, rec[name][order]), name
+    full = np.random.default_rng(2).permutation(len(rec))
+    assert np.array_equal(inverse(full), np.argsort(full))
+    out = np.zeros(len(rec), rec.dtype)  # point i of the fields (record full[i]) back to full[i]
+    scatter_records(full, *(np.ascontiguousarray(rec[name][full]) for name in rec.dtype.names), out)
+    assert out.tobytes() == rec.tobytes()

@@ -15,6 +15,7 @@ import laspy
 import numpy as np
 
 from siteline.errors import PointCloudError
+from siteline.kernels import cut
 
 DEFAULT_CHUNK_POINTS = 1_000_000
 # LAS coordinate scales siteline accepts (metres per count): finer collapses a cloud into a few
@@ -38,14 +39,6 @@ class PointChunk:
     gps_time: np.ndarray | None
     return_number: np.ndarray
     colour_8bit: bool | None = None
-
-
-def colour_to_u8(rgb16: np.ndarray, eight_bit: bool) -> np.ndarray:
-    """LAS colour (N, 3) uint16 -> uint8: 8-bit values stored in 16-bit fields are kept, true 16-bit
-    values are shifted down by 8 bits."""
-    if eight_bit:
-        return rgb16.astype(np.uint8)
-    return (rgb16 >> 8).astype(np.uint8)
 
 
 def open_las(path: Path) -> laspy.LasReader:
@@ -106,24 +99,17 @@ def iter_chunks(
     with contextlib.nullcontext(reader) if reader is not None else open_las(path) as reader:
         has_rgb = "red" in reader.header.point_format.dimension_names
         has_time = "gps_time" in reader.header.point_format.dimension_names
+        scale = np.asarray(reader.header.scales, dtype=np.float64)
+        offset = np.asarray(reader.header.offsets, dtype=np.float64)
         try:
             for pts in _point_records(reader, chunk_points, start, stop):
-                xyz = np.stack(
-                    [
-                        np.asarray(pts.x, dtype=np.float64),
-                        np.asarray(pts.y, dtype=np.float64),
-                        np.asarray(pts.z, dtype=np.float64),
-                    ],
-                    axis=1,
-                )
+                xyz = cut.scaled_xyz(pts.X, pts.Y, pts.Z, scale, offset)
                 rgb = None
                 if has_rgb:
-                    rgb16 = np.stack(
-                        [np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)], axis=1
-                    )
+                    red, green, blue = np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)
                     if eight_bit is None:
-                        eight_bit = bool(rgb16.max(initial=0) <= 255)
-                    rgb = colour_to_u8(rgb16, eight_bit)
+                        eight_bit = max(int(c.max(initial=0)) for c in (red, green, blue)) <= 255
+                    rgb = cut.colour_u8(red, green, blue, 0 if eight_bit else 8)
                 yield PointChunk(
                     xyz_crs=xyz,
                     rgb=rgb,

@@ -26,8 +26,9 @@ from typing import Any, Protocol
 import numpy as np
 
 from siteline.crs import ZUnit, parse_source_crs
+from siteline.directio import append_blocks, finish_blocks
 from siteline.errors import TileError
-from siteline.kernels import cut, radix
+from siteline.kernels import cut, radix, rows
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
@@ -157,17 +158,12 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
     order = radix.radix_order(code)
     code = code[order]
     ch = sc.chunk
-    fields = {
-        COUNTS: counts,
-        "rgb": ch.rgb,
-        "intensity": ch.intensity,
-        "class": sc.classes,
-        "gps_time": ch.gps_time,
-        "return_number": ch.return_number,
-    }
     rec = np.empty(n, RECORD)
-    for name, values in fields.items():  # a gather then a strided copy: 3x numpy's fancy index
-        rec[name] = np.take(values, order, axis=0) if values is not None else 0
+    rows.scatter_records(
+        radix.inverse(order), counts, ch.rgb if ch.rgb is not None else np.zeros((n, 3), np.uint8),
+        ch.intensity, sc.classes, ch.gps_time if ch.gps_time is not None else np.zeros(n),
+        ch.return_number, rec,
+    )  # fmt: skip
     first = radix.run_starts(code)
     zmin = np.minimum.reduceat(rec[COUNTS][:, 2], first) if n else np.zeros(0, np.int32)
     tile, block = code[first] // (side * side), code[first] % (side * side)
@@ -178,23 +174,33 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
 @dataclass
 class RunWriter:
     """A visitor that appends each chunk's records, sorted by tile and block, to the run file
-    ``folder/name``."""
+    ``folder/name``, around the page cache (siteline.directio): whole blocks as it goes, the last
+    bytes (``tail``, under a block) when :meth:`run` closes it."""
 
     folder: str
     name: str
     spec: dict[str, Any]
     rows: list[np.ndarray] = field(default_factory=list)
     written: int = 0
+    tail: bytes = b""
 
     def add(self, sc: SiteChunk) -> None:
         rec, rows = chunk_records(sc, TileSpec.from_dict(self.spec))
-        with open(os.path.join(self.folder, self.name), "ab") as fh:
-            rec.tofile(fh)
+        at = self.written * RECORD.itemsize - len(self.tail)
+        self.tail = append_blocks(self._path, at, self.tail, rec.view(np.uint8).data)
         rows[:, 1] += self.written
         self.rows.append(rows)
         self.written += len(rec)
 
+    @property
+    def _path(self) -> str:
+        return os.path.join(self.folder, self.name)
+
     def run(self) -> Run:
+        """The run, its file complete."""
+        if self.tail:
+            finish_blocks(self._path, self.written * RECORD.itemsize - len(self.tail), self.tail)
+            self.tail = b""
         table = np.concatenate(self.rows) if self.rows else np.zeros((0, 4), np.int64)
         return Run(self.name, *table.T)
 

@@ -42,10 +42,13 @@ def keep_freed_memory() -> None:
 
 
 def _start_worker() -> None:
+    import gc
+
     from siteline.kernels import load
 
     keep_freed_memory()
     load()
+    gc.freeze()  # what start-up imported is never garbage: full collections no longer walk it
 
 
 def _ready() -> None:

@@ -1,5 +1,6 @@
-"""Kernels of the one pass over a point cloud: checking site-local points and cutting a chunk into
-tile runs (siteline.partition, siteline.sitestream)."""
+"""Kernels of the one pass over a point cloud: a LAS chunk's coordinates and colour, checking
+site-local points and cutting a chunk into tile runs (siteline.lasio, siteline.partition,
+siteline.sitestream)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,30 @@ from typing import Any
 import numpy as np
 
 from siteline.kernels import kernel
+
+
+@kernel
+def scaled_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, scale: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 coordinates of a LAS chunk's (N,) integer counts X, Y, Z: ``count * scale +
+    offset`` per axis (laspy's arithmetic, bit for bit), in one pass."""
+    out = np.empty((x.shape[0], 3))
+    for p in range(x.shape[0]):
+        out[p, 0] = x[p] * scale[0] + offset[0]
+        out[p, 1] = y[p] * scale[1] + offset[1]
+        out[p, 2] = z[p] * scale[2] + offset[2]
+    return out
+
+
+@kernel
+def colour_u8(red: np.ndarray, green: np.ndarray, blue: np.ndarray, shift: int) -> np.ndarray:
+    """(N, 3) uint8 colour of a LAS chunk's (N,) uint16 channels: the low byte of each value shifted
+    right by ``shift`` (8 for true 16-bit colour, 0 for 0-255 stored in 16-bit fields)."""
+    out = np.empty((red.shape[0], 3), np.uint8)
+    for p in range(red.shape[0]):
+        out[p, 0] = (red[p] >> shift) & 0xFF
+        out[p, 1] = (green[p] >> shift) & 0xFF
+        out[p, 2] = (blue[p] >> shift) & 0xFF
+    return out
 
 
 @kernel

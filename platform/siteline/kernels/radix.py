@@ -58,3 +58,12 @@ def run_starts(key: np.ndarray) -> np.ndarray:
             starts[count] = k
             count += 1
     return starts
+
+
+@kernel
+def inverse(order: np.ndarray) -> np.ndarray:
+    """(N,) int64 position of each element in the permutation ``order`` (N,): ``out[order[k]] = k``."""
+    out = np.empty(order.shape[0], np.int64)
+    for k in range(order.shape[0]):
+        out[order[k]] = k
+    return out

@@ -6,7 +6,6 @@ uploaded, and then marked complete; its endpoint and credentials come from fsspe
 from __future__ import annotations
 
 import hashlib
-import os
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -14,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from siteline.directio import read_blocks
 from siteline.errors import StoreError
 from siteline.hashing import sha256_file
 from siteline.stores.base import MARKER, Store, join, walk_files
@@ -37,13 +37,11 @@ def file_system(uri: str) -> tuple[Any, str]:
         ) from exc
 
 
-_IOV_MAX = 1024  # buffers one preadv takes (POSIX's least IOV_MAX)
-
-
 def read_into(uri: str, offset: int, buffers: list[memoryview]) -> int:
     """Fill ``buffers`` (writable bytes, in order) from byte ``offset`` of the file at ``uri`` until
-    they are full or the file ends; return the bytes read. A local file is read straight into them
-    (preadv), any other with one ranged GET."""
+    they are full or the file ends; return the bytes read. A local file is read around the page cache
+    in whole blocks (siteline.directio: what it reads, the partition's runs, is read once), any other
+    with one ranged GET."""
     from fsspec.implementations.local import LocalFileSystem
 
     want = sum(b.nbytes for b in buffers)
@@ -56,21 +54,7 @@ def read_into(uri: str, offset: int, buffers: list[memoryview]) -> int:
             b[:n] = data[at : at + n]
             at += n
         return at
-    views = [b for b in buffers if b.nbytes]
-    done = k = 0
-    with open(path, "rb", buffering=0) as fh:
-        while k < len(views):
-            got = os.preadv(fh.fileno(), views[k : k + _IOV_MAX], offset + done)
-            if got == 0:
-                break
-            done += got
-            while got:  # a read may stop short (a huge one): go on from where it stopped
-                if got >= views[k].nbytes:
-                    got -= views[k].nbytes
-                    k += 1
-                else:
-                    views[k], got = views[k][got:], 0
-    return done
+    return read_blocks(path, offset, [b for b in buffers if b.nbytes])
 
 
 def cached_download(store: Store, uri: str, sha256: str | None) -> Path:

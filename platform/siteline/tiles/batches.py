@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import hashlib
 import os
+import threading
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -77,12 +79,13 @@ def batches(parts: list[Part], budget: int) -> list[list[Part]]:
     return out
 
 
-def _gather(parts: list[Part]) -> np.ndarray:
-    """A batch's records from its slices of the runs, in order. Slices that lie end to end in a run
-    file (a chunk's next blocks) are read as one range, straight into the records
-    (:func:`siteline.stores.remote.read_into`: one read, or one ranged GET of an fsspec URL)."""
+def _gather(parts: list[Part], out: np.ndarray | None = None) -> np.ndarray:
+    """A batch's records from its slices of the runs, in order (into ``out`` when given: records of
+    the batch's size). Slices that lie end to end in a run file (a chunk's next blocks) are read as
+    one range (:func:`siteline.stores.remote.read_into`: one read, or one ranged GET of an fsspec
+    URL)."""
     dest = np.r_[0, np.cumsum([p[3] for p in parts])]
-    out = np.empty(int(dest[-1]), RECORD)
+    out = np.empty(int(dest[-1]), RECORD) if out is None else out
     ranges: list[tuple[str, int, int, list[int]]] = []
     for k in sorted(range(len(parts)), key=lambda k: (parts[k][1], parts[k][2])):
         _, path, offset, count, _ = parts[k]
@@ -97,6 +100,22 @@ def _gather(parts: list[Part]) -> np.ndarray:
         if read_into(path, start * size, into) != (end - start) * size:
             raise TileError(f"run file {path} ends early: the partition changed while tiling.")
     return out
+
+
+def _gathered(groups: list[list[Part]]) -> Iterator[np.ndarray]:
+    """Each batch's records in turn: the next batch is read in a thread while the caller works on
+    this one (the runs come from disk, siteline.directio), into records this thread allocates."""
+    with ThreadPoolExecutor(1, thread_name_prefix="siteline-gather") as ahead:
+
+        def read(parts: list[Part]) -> Future[np.ndarray]:
+            return ahead.submit(_gather, parts, np.empty(sum(p[3] for p in parts), RECORD))
+
+        pending = [read(parts) for parts in groups[:1]]
+        for k in range(len(groups)):
+            rec = pending.pop().result()
+            if k + 1 < len(groups):
+                pending.append(read(groups[k + 1]))
+            yield rec
 
 
 def _levels(rec: np.ndarray, parts: list[Part], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
@@ -134,9 +153,7 @@ def _bytes(rec: np.ndarray) -> np.ndarray:
     return rec.view(np.uint8).reshape(len(rec), RECORD.itemsize)
 
 
-_FIELD_AT: Mapping[str, tuple] = RECORD.fields or {}  # name -> (dtype, byte offset in a record)
 _DTYPES = [RECORD[name] for name in ATTRIBUTES]
-_OFFSETS = np.array([_FIELD_AT[name][1] for name in ATTRIBUTES])
 _SIZES = np.array([dtype.itemsize for dtype in _DTYPES])
 
 
@@ -145,12 +162,13 @@ def _columns(rec: np.ndarray, order: np.ndarray) -> dict[str, np.ndarray]:
     (each column 8-byte aligned), filled in one pass."""
     m = len(order)
     ends = np.cumsum(-(-m * _SIZES // 8) * 8)
-    starts = np.r_[0, ends[:-1]]
-    buf = row_kernels.split_columns(_bytes(rec), order, _OFFSETS, _SIZES, starts, int(ends[-1]))
-    return {
+    buf = np.empty(int(ends[-1]), np.uint8)
+    cols = {
         name: buf[a : a + m * dtype.itemsize].view(dtype.base).reshape(m, *dtype.shape)
-        for name, dtype, a in zip(ATTRIBUTES, _DTYPES, starts, strict=True)
+        for name, dtype, a in zip(ATTRIBUTES, _DTYPES, np.r_[0, ends[:-1]], strict=True)
     }
+    row_kernels.split_records(rec, order, *cols.values())
+    return cols
 
 
 def _in_node_order(plan: NodePlan, rows: Rows) -> Columns:
@@ -165,24 +183,37 @@ def _in_node_order(plan: NodePlan, rows: Rows) -> Columns:
     return columns
 
 
+_PLACED = threading.local()  # this thread's file of placed records (_placed_file)
+
+
+def _placed_file(folder: Path, size: int) -> Path:
+    """This thread's scratch file of placed records in ``folder``, at least ``size`` bytes. One file
+    serves every tile a worker writes, overwritten in place: on virtual machines the first write of a
+    file page costs about 20x an overwrite (docs/performance.md). Whoever made ``folder`` removes it."""
+    path: Path | None = getattr(_PLACED, "path", None)
+    if path is None or path.parent != folder or not path.exists():
+        path = folder / f".placed-{os.getpid()}-{threading.get_ident()}"
+        path.touch()
+        _PLACED.path = path
+    if path.stat().st_size < size:
+        os.truncate(path, size)
+    return path
+
+
 def _out_of_core(
-    key: str, groups: list[list[Part]], spec: TileSpec, seed: int, z0: int, scratch: Path
+    key: str, groups: list[list[Part]], spec: TileSpec, seed: int, z0: int, scratch: Path, placed: Path
 ) -> tuple[NodePlan, Columns, float | None]:
     counted, scales = [], []
-    for k, parts in enumerate(groups):  # pass 1: levels and counts
-        rec = _gather(parts)
+    for k, (parts, rec) in enumerate(zip(groups, _gathered(groups), strict=True)):  # pass 1: levels, counts
         levels = _levels(rec, parts, spec, seed, z0)
         np.save(scratch / f"{key}.levels-{k}.npy", levels)
         counted.append(cube_counts(rec[COUNTS], levels, spec))
         scales.append(time_scale(rec["gps_time"]))
     plan = plan_nodes(add_cube_counts(counted), spec, level_count(spec), seed ^ 0x5EED)
     scale = _scale(scales)
-    sorted_path = scratch / f"{key}.sorted"
-    with open(sorted_path, "wb") as fh:
-        fh.truncate(plan.points * RECORD.itemsize)
+    sorted_path = _placed_file(placed, plan.points * RECORD.itemsize)
     seen = np.zeros(len(plan.key), np.int64)
-    for k, parts in enumerate(groups):  # pass 2: each point to its place
-        rec = _gather(parts)
+    for k, rec in enumerate(_gathered(groups)):  # pass 2: each point to its place
         levels = np.load(scratch / f"{key}.levels-{k}.npy")
         where = plan.place(rec[COUNTS], levels, spec, seen)
         if scale is not None and not round_trips(rec["gps_time"], scale):
@@ -282,6 +313,7 @@ def write_tile(
         if len(groups) == 1:
             plan, columns, scale = _in_memory(key, parts, spec, seed, z0)
         else:
-            plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(work))
+            placed = Path(scratch) if scratch is not None else Path(work)
+            plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(work), placed)
         checksum, lo, hi = sync(_write(group_path, key, plan, columns, spec, scale))
     return key, plan.points, checksum, plan.table(key, lo, hi)
