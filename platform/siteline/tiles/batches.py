@@ -6,16 +6,17 @@ siteline.partition). Levels are decided inside level-0 cubes with ranks seeded p
 (:func:`siteline.tiles.nodes.cube_counts`), so a tile of more than ``batch_points`` points is handled
 in batches of whole blocks:
 
-1. per batch: gather its records, level them, count them per (level, node cube); the levels go to
-   a scratch file;
+1. per batch: gather its records (the next batch is read from the run files while this one is
+   worked on), level them, count them per (level, node cube); the levels go to a scratch file;
 2. the tile's node plan from the counts;
-3. per batch again: gather, place each point (its group's next slot), scatter the records into a
-   scratch file of the tile in array order;
+3. per batch again: gather, place each point (its group's next slot), scatter the records into the
+   worker's scratch file (one per worker, overwritten tile after tile) in array order;
 4. the scratch file is written to the Zarr arrays shard by shard, each shard's groups read whole
    and put in node order (:meth:`siteline.tiles.nodes.NodePlan.node_order`).
 
-A tile that fits one batch does the same in memory. Memory is thus set by ``batch_points``, not by
-density, and the arrays are the same whatever the batches (a tested property).
+A tile that fits one batch does the same in memory. Memory is thus set by ``batch_points`` (the
+batch worked on and the one read ahead), not by density, and the arrays are the same whatever the
+batches (a tested property).
 """
 
 from __future__ import annotations
