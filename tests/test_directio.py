@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from siteline import directio
-from siteline.stores.local import copy_to_disk
 
 SHM = Path("/dev/shm")
 
@@ -78,5 +77,5 @@ def test_copy_to_disk_copies_every_size(folders: list[Path]) -> None:
             src = folder / f"src-{n}"
             src.write_bytes(rng.integers(0, 256, n, dtype=np.uint8).tobytes())
             dest = folder / f"dest-{n}"
-            copy_to_disk(src, dest)
+            directio.copy_to_disk(src, dest)
             assert dest.read_bytes() == src.read_bytes(), (folder, n)

@@ -1,5 +1,6 @@
 """Files written and read around the page cache (O_DIRECT), a shared primitive: the partition's run
-files, written once by ingest and read once by the tile stage.
+files, written once by ingest and read once by the tile stage, and the copy of a mission's files
+into the store, flushed to disk and not read back soon.
 
 On virtual machines the first touch of a page the host has taken back costs about 2 ns a byte of
 kernel time, and a file written through the page cache takes a new page for every 4 KiB it holds: a
@@ -11,11 +12,16 @@ fall back to the page cache, with the same results.
 
 from __future__ import annotations
 
+import fcntl
+import io
 import mmap
 import os
+import shutil
 import threading
+from pathlib import Path
 
 BLOCK = 4096  # alignment of direct I/O offsets, lengths and buffers: a multiple of any block size
+COPY_BYTES = 8 << 20  # bytes a copy moves at a time
 _DIRECT = getattr(os, "O_DIRECT", 0)
 _LOCAL = threading.local()
 
@@ -101,3 +107,42 @@ def read_blocks(path: str, offset: int, views: list[memoryview]) -> int:
         return done
     finally:
         buf.release()
+
+
+def copy_to_disk(source: Path, dest: Path) -> None:
+    """Copy ``source`` to the new file ``dest`` and flush it to disk, around the page cache where the
+    file system allows it (a 1.36 GB copy: 2.0 s of CPU through the cache here, 0.6 s direct);
+    elsewhere a kernel copy (sendfile), then fsync."""
+    fd, direct = _open(str(dest), os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    if not direct:
+        os.close(fd)
+        shutil.copyfile(source, dest)
+        with open(dest, "rb") as fh:
+            os.fsync(fh.fileno())
+        return
+    buf = _buffer(COPY_BYTES)
+    view = buf[:COPY_BYTES]
+    try:
+        with open(source, "rb", buffering=0) as src:
+            while n := _fill(src, view):
+                if n % BLOCK:  # the tail, not a whole block: written through the cache
+                    fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~_DIRECT)
+                _write_all(fd, view[:n])
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+        view.release()
+        buf.release()
+
+
+def _fill(src: io.RawIOBase, view: memoryview) -> int:
+    """Read into ``view`` until it is full or the file ends; the bytes read."""
+    n = 0
+    while n < len(view) and (k := src.readinto(view[n:])):
+        n += k
+    return n
+
+
+def _write_all(fd: int, data: memoryview) -> None:
+    while data:
+        data = data[os.write(fd, data) :]

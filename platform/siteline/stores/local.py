@@ -3,9 +3,6 @@ temporary name owned by this process (siteline.stores.owners), then renamed into
 
 from __future__ import annotations
 
-import fcntl
-import io
-import mmap
 import os
 import shutil
 from collections.abc import Callable, Iterator
@@ -13,6 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from siteline.directio import copy_to_disk
 from siteline.errors import StoreError
 from siteline.stores.base import MARKER, StagedFile, Store, join
 from siteline.stores.owners import owner_tag, sweep_stale
@@ -37,49 +35,6 @@ def _temporary(dest: Path) -> Path:
 def _flush(path: Path) -> None:
     with open(path, "rb") as fh:
         os.fsync(fh.fileno())
-
-
-_DIRECT_BLOCK = 8 << 20  # bytes a direct write moves: a multiple of any file system's block
-
-
-def copy_to_disk(source: Path, dest: Path) -> None:
-    """Copy ``source`` to the new file ``dest`` and flush it to disk. Where the file system allows
-    it, the copy bypasses the page cache (O_DIRECT): a mission's file is written once and not read
-    back soon, and on virtual machines every new page-cache page costs about 1.5 ns a byte of
-    kernel time (a 1.36 GB copy: 2.0 s of CPU, against 0.2 s direct; docs/performance.md). Elsewhere
-    (no O_DIRECT, tmpfs) a kernel copy, then fsync."""
-    direct = getattr(os, "O_DIRECT", 0)
-    try:
-        fd = os.open(dest, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | direct, 0o666) if direct else -1
-    except OSError:  # EINVAL: this file system has no direct I/O
-        fd = -1
-    if fd < 0:
-        shutil.copyfile(source, dest)  # in the kernel (sendfile): 5x a read/write loop here
-        _flush(dest)
-        return
-    try:
-        view = memoryview(mmap.mmap(-1, _DIRECT_BLOCK))  # page-aligned, as direct I/O needs
-        with open(source, "rb", buffering=0) as src:
-            while n := _fill(src, view):
-                if n % mmap.PAGESIZE:  # the tail: not a whole block, so written through the cache
-                    fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~direct)
-                _write_all(fd, view[:n])
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _fill(src: io.RawIOBase, view: memoryview) -> int:
-    """Read into ``view`` until it is full or the file ends; the bytes read."""
-    n = 0
-    while n < len(view) and (k := src.readinto(view[n:])):
-        n += k
-    return n
-
-
-def _write_all(fd: int, data: memoryview) -> None:
-    while data:
-        data = data[os.write(fd, data) :]
 
 
 @contextmanager

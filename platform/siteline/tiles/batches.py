@@ -191,11 +191,11 @@ def _placed_file(folder: Path, size: int) -> Path:
     """This thread's scratch file of placed records in ``folder``, at least ``size`` bytes. One file
     serves every tile a worker writes, overwritten in place: on virtual machines the first write of a
     file page costs about 20x an overwrite (docs/performance.md). Whoever made ``folder`` removes it."""
-    path: Path | None = getattr(_PLACED, "path", None)
+    path: Path | None = getattr(_PLACED, "file", None)
     if path is None or path.parent != folder or not path.exists():
         path = folder / f".placed-{os.getpid()}-{threading.get_ident()}"
         path.touch()
-        _PLACED.path = path
+        _PLACED.file = path
     if path.stat().st_size < size:
         os.truncate(path, size)
     return path
