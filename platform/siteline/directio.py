@@ -123,11 +123,13 @@ def copy_to_disk(source: Path, dest: Path) -> None:
     buf = _buffer(COPY_BYTES)
     view = buf[:COPY_BYTES]
     try:
+        at = 0
         with open(source, "rb", buffering=0) as src:
             while n := _fill(src, view):
                 if n % BLOCK:  # the tail, not a whole block: written through the cache
                     fcntl.fcntl(fd, fcntl.F_SETFL, fcntl.fcntl(fd, fcntl.F_GETFL) & ~_DIRECT)
-                _write_all(fd, view[:n])
+                _pwrite_all(fd, view[:n], at)
+                at += n
         os.fsync(fd)
     finally:
         os.close(fd)
@@ -141,8 +143,3 @@ def _fill(src: io.RawIOBase, view: memoryview) -> int:
     while n < len(view) and (k := src.readinto(view[n:])):
         n += k
     return n
-
-
-def _write_all(fd: int, data: memoryview) -> None:
-    while data:
-        data = data[os.write(fd, data) :]
