@@ -142,7 +142,9 @@ def _point_records(
         yield pts
 
 
-def detect_eight_bit(reader: laspy.LasReader, path: Path, chunk_points: int = DEFAULT_CHUNK_POINTS) -> bool | None:
+def detect_eight_bit(
+    reader: laspy.LasReader, path: Path, chunk_points: int = DEFAULT_CHUNK_POINTS
+) -> bool | None:
     """Whether the file ``path``'s colour holds 0-255 in 16-bit fields, judged as :func:`iter_chunks`
     does (its first ``chunk_points`` points); None when it has no colour. Leaves the reader at point 0."""
     if "red" not in reader.header.point_format.dimension_names:
@@ -183,7 +185,7 @@ def read_site_local(
         far = np.abs(local).max(initial=0.0)
         if far > MAX_SITE_LOCAL_M:
             raise PointCloudError(
-                f"point cloud {path} has points {far:.0f} m from the origin {tuple(o)}; give the site origin "
+                f"point cloud {path} has points {far:.0f} m from the origin {tuple(o.tolist())}; give the site origin "
                 "(e.g. --origin X Y Z near the data): float32 would lose precision there."
             )
         xyzs.append(local.astype(np.float32))

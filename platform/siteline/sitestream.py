@@ -122,7 +122,7 @@ def site_chunks(
         far = float(np.abs(np.r_[lo, hi]).max(initial=0.0)) if len(local) else 0.0
         if far > MAX_SITE_LOCAL_M:
             raise PointCloudError(
-                f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(origin)} (limit "
+                f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(origin.tolist())} (limit "
                 f"{MAX_SITE_LOCAL_M:,.0f} m): wrong site, wrong CRS or corrupt coordinates."
             )
         codes = chunk.classification

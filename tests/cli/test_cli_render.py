@@ -67,6 +67,7 @@ def test_render_without_origin_on_georeferenced_cloud_is_refused(tmp_path, capsy
         capsys, "render", str(las), "--camera", str(tmp_path / "cam.json"), "--out", str(tmp_path / "r")
     )
     assert code == 2 and "origin" in err and "cloud.laz" in err
+    assert "(0.0, 0.0, 0.0)" in err and "np.float64" not in err  # the origin as plain numbers
 
 
 def test_render_bad_inputs_are_named(tmp_path, capsys) -> None:

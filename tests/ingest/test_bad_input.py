@@ -4,6 +4,7 @@ in the catalog or the store."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import struct
 from pathlib import Path
@@ -99,8 +100,11 @@ def test_nan_coordinates(cat, site_settings, tmp_path) -> None:
 
 def test_absurd_coordinates(cat, site_settings, tmp_path) -> None:
     _flat_las(tmp_path / "m" / "cloud.las", origin=(745000.0, 5030000.0, 80.0))
-    with pytest.raises(PointCloudError, match="from the site origin"):
+    with pytest.raises(PointCloudError, match="from the site origin") as err:
         ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+    # the message names the file and the origin in plain numbers (not numpy reprs)
+    assert "cloud.las" in str(err.value) and "np.float64" not in str(err.value)
+    assert re.search(r"origin \(\d+\.\d+, \d+\.\d+, -?\d+\.\d+\)", str(err.value))
     _assert_nothing_written(cat, site_settings)
 
 
