@@ -154,7 +154,10 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
         local, spec.tile_size_m, spec.quantum_m, block_edge(spec), side, counts, code
     )
     if far >= 2**31 - 1:
-        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
+        raise TileError(
+            f"a point lies {far * spec.quantum_m:,.0f} m from its tile's origin (z from the site origin): "
+            f"more than int32 counts of the {spec.quantum_m} m quantum reach; is the quantum right?"
+        )
     order = radix.radix_order(code)
     code = code[order]
     ch = sc.chunk
@@ -213,7 +216,10 @@ def read_range(source: PassSource, start: int, stop: int, visitors: tuple[Any, .
     tr = source_transformer(path, source.site, parse_source_crs(source.crs), z_unit)
     for sc in site_chunks(path, source.site, tr, start=start, stop=stop, eight_bit=source.eight_bit):
         for v in visitors:
-            v.add(sc)
+            try:
+                v.add(sc)
+            except TileError as e:
+                raise TileError(f"point cloud {path}: {e}") from e
     return visitors
 
 

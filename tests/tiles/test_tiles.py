@@ -15,6 +15,7 @@ import pyproj
 import pytest
 
 from siteline.cameras import Camera
+from siteline.errors import TileError
 from siteline.lasio import write_las
 from siteline.render import RenderSettings, render_points
 from siteline.site import make_site_spec
@@ -225,6 +226,20 @@ def test_existing_store_is_not_overwritten(tmp_path) -> None:
     site, result, _ = _tile(tmp_path, tmp_path / "c.las", origin)
     with pytest.raises(Exception, match="already exists"):
         write_tiles(tmp_path / "c.las", site, pyproj.CRS("EPSG:32618"), Path(result.uri), workers=1)
+
+
+def test_counts_past_int32_are_refused_naming_the_file(tmp_path) -> None:
+    # a micrometre quantum: 15 m of z is 1.5e7 counts, fine; 3 km overflows int32 (2.1 km)
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    _cloud(tmp_path / "c.las", origin, n=1_000)
+    xyz = _cloud(tmp_path / "far.las", origin, n=1_000)
+    xyz[5, 2] = origin[2] + 3_000.0
+    write_las(tmp_path / "far.las", xyz, crs="EPSG:32618")
+    spec = TileSpec(quantum_m=1e-6)
+    with pytest.raises(TileError, match=r"far\.las: a point lies 3,000 m .* quantum"):
+        _tile(tmp_path, tmp_path / "far.las", origin, spec=spec)
+    assert not (tmp_path / "scene.zarr").exists()
+    assert _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)[1].points == 1_000
 
 
 KILL_SCRIPT = textwrap.dedent("""
