@@ -251,10 +251,13 @@ def scene_of_mission(session: Session, mission_id: int) -> Scene | None:
 
 
 def blobs_in_use(session: Session, shas: list[str]) -> set[str]:
-    """Which of ``shas`` some mission's files reference (blobs another ingest committed)."""
+    """Which of ``shas`` the catalog references (blobs another ingest committed): a mission's file or a
+    scene's alignment sample."""
     if not shas:
         return set()
-    return set(session.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(shas))).scalars())
+    files = session.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(shas))).scalars()
+    sample = Scene.statistics["stable_sample_sha256"].as_string()
+    return set(files) | set(session.execute(sa.select(sample).where(sample.in_(shas))).scalars())
 
 
 def lock_site(session: Session, site_id: int) -> Site:

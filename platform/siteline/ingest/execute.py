@@ -108,10 +108,7 @@ def store_mission(
     """Put the alignment sample and the files ``staging`` copied (:func:`stage_mission`) into the
     content-addressed store, appending to ``new_blobs`` each blob this call added (so a caller can
     remove them on failure)."""
-    sample = checked.scan.stable_sample
-    data, sha = sample_blob(sample if sample is not None else np.zeros((0, 3)))
-    if put_blob_bytes(store, data, sha):
-        new_blobs.append(sha)
+    _put_sample(checked, store, new_blobs)
     if staging is None:
         return
     total = sum(e.size_bytes for e in checked.manifest.entries)
@@ -119,3 +116,30 @@ def store_mission(
     staging.commit(new_blobs)
     progress("storing", total, None)
     log.info("mission %s: %d new blobs stored", checked.name, len(new_blobs))
+
+
+def restore_blobs(checked: CheckedMission, store: Store, new_blobs: list[str]) -> None:
+    """Store again each blob of the mission that is missing, from the mission folder, appending its
+    hash to ``new_blobs``: a failed ingest of a mission sharing content removes the blobs it added,
+    which this one may have found stored and not copied. Called under the catalog's blobs lock
+    (siteline.ingest.stage), so no such removal runs between this check and the catalog's commit."""
+    _put_sample(checked, store, new_blobs)
+    if checked.storage != "copy":
+        return
+    root = Path(checked.manifest.root)
+    for entry in checked.manifest.entries:
+        dest = layout.blob(store, entry.sha256)
+        if not store.exists(dest):
+            store.put_file(root / entry.path, dest)
+            new_blobs.append(entry.sha256)
+            log.warning(
+                "mission %s: blob of %s stored again (a failed ingest removed it)", checked.name, entry.path
+            )
+
+
+def _put_sample(checked: CheckedMission, store: Store, new_blobs: list[str]) -> None:
+    """Store the mission's alignment sample unless it is stored (appending its hash when new)."""
+    sample = checked.scan.stable_sample
+    data, sha = sample_blob(sample if sample is not None else np.zeros((0, 3)))
+    if put_blob_bytes(store, data, sha):
+        new_blobs.append(sha)

@@ -5,7 +5,9 @@ Order matters for "nothing half-written": the mission's files are copied beside 
 read and checked (the copy and its flush to disk overlap the reading), appear in the
 content-addressed store only once every check passed, and only then one transaction writes the
 catalog rows. A failure before the commit drops the copies and removes the blobs this ingest added
-(and no other's)."""
+(and no other's: under a lock (``BLOBS_LOCK``), the blobs the catalog references stay, and an
+ingest about to record its mission stores again any blob it had found stored that such a removal
+took)."""
 
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from siteline.catalog.scenes import blobs_in_use
 from siteline.catalog.sites import get_site
 from siteline.config import Settings
 from siteline.errors import MissionError
-from siteline.ingest.execute import execute_ingest, stage_mission, store_mission
+from siteline.ingest.execute import execute_ingest, restore_blobs, stage_mission, store_mission
 from siteline.ingest.inventory import mission_manifest
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
@@ -38,6 +40,8 @@ from siteline.stores import layout
 from siteline.stores.blobs import BlobStaging, remove_blobs
 
 log = logging.getLogger(__name__)
+# held while an ingest records its mission or a failed one removes the blobs it added
+BLOBS_LOCK = "store:blobs"
 
 
 @dataclass
@@ -83,14 +87,18 @@ def _store_and_record(
     new_blobs: list[str] = []
     try:
         store_mission(checked, settings.store, new_blobs, staging, progress)
-        # one registration per site at a time: pairs are formed from the scenes around this one
-        with catalog.lock(f"site:{plan.site_id}:scenes"), catalog.transaction() as s:
-            ids = record_ingest(s, plan.site_id, checked, run)
+        # one registration per site at a time: pairs are formed from the scenes around this one; the
+        # blobs lock keeps a failed ingest from removing a shared blob between restore and commit
+        with catalog.lock(f"site:{plan.site_id}:scenes"), catalog.lock(BLOBS_LOCK):
+            restore_blobs(checked, settings.store, new_blobs)
+            with catalog.transaction() as s:
+                ids = record_ingest(s, plan.site_id, checked, run)
     except BaseException as exc:
-        with catalog.transaction() as s:
-            shared = blobs_in_use(s, new_blobs)
-        # content another mission committed meanwhile stays; only this ingest's own blobs go
-        remove_blobs(settings.store, [b for b in new_blobs if b not in shared])
+        with catalog.lock(BLOBS_LOCK):
+            with catalog.transaction() as s:
+                shared = blobs_in_use(s, new_blobs)
+            # content another mission committed meanwhile stays; only this ingest's own blobs go
+            remove_blobs(settings.store, [b for b in new_blobs if b not in shared])
         if isinstance(exc, sa.exc.IntegrityError):
             raise MissionError(
                 f"mission {checked.manifest.root.name} conflicts with one ingested at the same time "
