@@ -5,25 +5,34 @@ process, so ingest and tiling in one process pay the start-up (about half a seco
 spawn, not fork: zarr, lazrs and a Prefect worker run threads that a forked child must not inherit.
 A worker loads the compiled kernels as it starts (siteline.kernels), and :func:`start_pool` starts
 the workers ahead of the pass, so that this start-up runs beside other work (ingest's hashing).
-Each worker keeps freed memory for reuse (glibc ``mallopt``): the passes allocate arrays of hundreds
-of MB in turn, and on virtual machines where the first touch of a page is slow, returning them to
-the system and faulting them in again doubled the time of levelling a tile."""
+Each worker keeps freed memory for reuse (glibc ``mallopt``, and one malloc arena for all its
+threads, :data:`_WORKER_ENV`): the passes allocate arrays of hundreds of MB in turn, and on virtual
+machines where the first touch of a page is slow, returning them to the system and faulting them in
+again doubled the time of levelling a tile."""
 
 from __future__ import annotations
 
 import atexit
 import ctypes
 import ctypes.util
+import os
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any
 
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_MAX = -4
 _POOLS: dict[int, ProcessPoolExecutor] = {}
+# read by a worker's allocator as it starts (glibc fixes its number of arenas at the first thread's
+# allocation, before an initializer could call mallopt): every thread on the one heap that keeps
+# freed memory. A thread's own arena gives its freed top back, and zarr's event-loop thread, where a
+# tile's shards are put in node order and compressed, faulted its pages in again for every shard: a
+# tenth of the tile stage's time (docs/performance.md)
+_WORKER_ENV = {"MALLOC_ARENA_MAX": "1"}
 _LOCK = threading.Lock()
 
 
@@ -57,19 +66,34 @@ def _ready() -> None:
 
 def start_pool(workers: int) -> None:
     """Start the workers of :func:`process_pool` ``(workers)`` now, without waiting for them."""
-    pool = process_pool(workers)
-    for _ in range(workers):
-        pool.submit(_ready)
+    process_pool(workers)
+
+
+@contextmanager
+def _worker_env() -> Iterator[None]:
+    """:data:`_WORKER_ENV` in this process's environment while it spawns workers (a variable the
+    user set keeps its value)."""
+    added = {k: v for k, v in _WORKER_ENV.items() if k not in os.environ}
+    os.environ.update(added)
+    try:
+        yield
+    finally:
+        for k in added:
+            os.environ.pop(k, None)
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
-    """The process's pool of ``workers`` spawned processes (started now if it is not running)."""
+    """The process's pool of ``workers`` spawned processes (started now if it is not running: each
+    submit spawns a worker while none is idle, so the first ``workers`` spawn them all)."""
     with _LOCK:
         pool = _POOLS.get(workers)
         if pool is None:
             pool = ProcessPoolExecutor(
                 max_workers=workers, mp_context=get_context("spawn"), initializer=_start_worker
             )
+            with _worker_env():
+                for _ in range(workers):
+                    pool.submit(_ready)
             _POOLS[workers] = pool
         return pool
 

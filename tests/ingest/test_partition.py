@@ -128,3 +128,31 @@ def test_started_workers_load_the_kernels_as_they_start() -> None:
     pool = process_pool(2)
     loaded = [pool.submit(eval, "'numba' in __import__('sys').modules") for _ in range(4)]
     assert all(f.result(timeout=120) for f in loaded)
+
+
+def test_workers_start_with_one_allocator_arena_and_leave_the_environment_alone(monkeypatch) -> None:
+    """Workers spawn with MALLOC_ARENA_MAX=1 (their threads' memory stays on the one heap that keeps
+    freed pages); this process's environment is as it was, and a value the user set wins."""
+    import os
+
+    from siteline import workers
+
+    monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
+    workers.discard_pool(3)
+    try:
+        pool = workers.process_pool(3)
+        seen = {pool.submit(_worker_env_var).result(timeout=120) for _ in range(6)}
+        assert seen == {"1"} and len(pool._processes) == 3  # all three spawned with it
+        assert "MALLOC_ARENA_MAX" not in os.environ
+        workers.discard_pool(3)
+        monkeypatch.setenv("MALLOC_ARENA_MAX", "4")
+        assert workers.process_pool(3).submit(_worker_env_var).result(timeout=120) == "4"
+        assert os.environ["MALLOC_ARENA_MAX"] == "4"
+    finally:
+        workers.discard_pool(3)
+
+
+def _worker_env_var() -> str | None:
+    import os
+
+    return os.environ.get("MALLOC_ARENA_MAX")
