@@ -96,17 +96,22 @@ def read_blocks(path: str, offset: int, views: list[memoryview]) -> int:
                 got += n
         finally:
             os.close(fd)
-        have = max(0, min(got - (offset - lo), want))
-        at, done = offset - lo, 0
-        for v in views:
-            if done >= have:
-                break
-            n = min(v.nbytes, have - done)
-            v[:n] = buf[at + done : at + done + n]
-            done += n
-        return done
+        at = offset - lo
+        return spread(buf[at : at + max(0, min(got - at, want))], views)
     finally:
         buf.release()
+
+
+def spread(data: memoryview | bytes, views: list[memoryview]) -> int:
+    """Copy ``data`` into ``views`` (writable bytes) in order until either ends; the bytes copied."""
+    data, done = memoryview(data), 0
+    for v in views:
+        if done == data.nbytes:
+            break
+        n = min(v.nbytes, data.nbytes - done)
+        v[:n] = data[done : done + n]
+        done += n
+    return done
 
 
 def copy_to_disk(source: Path, dest: Path) -> None:

@@ -123,7 +123,8 @@ def restore_blobs(checked: CheckedMission, store: Store, new_blobs: list[str]) -
     hash to ``new_blobs``: a failed ingest of a mission sharing content removes the blobs it added,
     which this one may have found stored and not copied. Called under the catalog's blobs lock
     (siteline.ingest.stage), so no such removal runs between this check and the catalog's commit."""
-    _put_sample(checked, store, new_blobs)
+    if not store.exists(layout.blob(store, checked.sample_sha256)):
+        _put_sample(checked, store, new_blobs)
     if checked.storage != "copy":
         return
     root = Path(checked.manifest.root)

@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from siteline.directio import read_blocks
+from siteline.directio import read_blocks, spread
 from siteline.errors import StoreError
 from siteline.hashing import sha256_file
 from siteline.stores.base import MARKER, Store, join, walk_files
@@ -47,13 +47,7 @@ def read_into(uri: str, offset: int, buffers: list[memoryview]) -> int:
     want = sum(b.nbytes for b in buffers)
     fs, path = file_system(uri)
     if not isinstance(fs, LocalFileSystem):
-        data = fs.cat_file(path, start=offset, end=offset + want)
-        at = 0
-        for b in buffers:
-            n = min(b.nbytes, len(data) - at)
-            b[:n] = data[at : at + n]
-            at += n
-        return at
+        return spread(fs.cat_file(path, start=offset, end=offset + want), buffers)
     return read_blocks(path, offset, [b for b in buffers if b.nbytes])
 
 
