@@ -108,7 +108,7 @@ def iter_chunks(
                 if has_rgb:
                     red, green, blue = np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)
                     if eight_bit is None:
-                        eight_bit = max(int(c.max(initial=0)) for c in (red, green, blue)) <= 255
+                        eight_bit = _eight_bit(red, green, blue)
                     rgb = cut.colour_u8(red, green, blue, 0 if eight_bit else 8)
                 yield PointChunk(
                     xyz_crs=xyz,
@@ -154,8 +154,12 @@ def detect_eight_bit(
         reader.seek(0)
     except (laspy.LaspyException, OSError, ValueError, RuntimeError) as exc:
         raise PointCloudError(f"point cloud {path} is truncated or corrupt: {exc}") from exc
-    rgb = [np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue)]
-    return bool(max((int(c.max(initial=0)) for c in rgb), default=0) <= 255)
+    return _eight_bit(np.asarray(pts.red), np.asarray(pts.green), np.asarray(pts.blue))
+
+
+def _eight_bit(*channels: np.ndarray) -> bool:
+    """Whether LAS colour channels (uint16) hold only 0-255: 8-bit colour in 16-bit fields."""
+    return max(int(c.max(initial=0)) for c in channels) <= 255
 
 
 @dataclass

@@ -403,8 +403,7 @@ class SceneTiles:
         part: the first ``take`` points of each of its nodes, ``take / count = (r - 1) N_<a / N_a``
         with ``r = (spacing(a-1) / need)**2`` (a surface's density grows as 1 / spacing**2) and ``N``
         the tile's points per level, so the density read is what the footprint needs, whatever the
-        data hold. Otherwise that level is
-        read whole (1-4 points per footprint of a surface)."""
+        data hold. Otherwise that level is read whole (1-4 points per footprint of a surface)."""
         cam = camera.scaled(scale)
         planes = cam.frustum_planes(near_m)
         centre = cam.center
@@ -429,8 +428,9 @@ class SceneTiles:
         """Which of ``tile``'s nodes (a mask over ``by_tile[tile]``) to read, and how many points of
         each, for a spacing of ``need_m`` metres per node: the levels coarser than it whole and, in a
         store whose node prefixes span their nodes, the level that crosses it in part (see
-        :meth:`levels_for_view`); in one with input order that level whole. A node holds a band of levels sorted by level, so its
-        coarse levels are a prefix of it and the part of the crossing level follows them."""
+        :meth:`levels_for_view`); in one with input order that level whole. A node holds a band of
+        levels sorted by level, so its coarse levels are a prefix of it and the part of the crossing
+        level follows them."""
         nodes = self.by_tile[tile]
         allowed = self.levels_for_resolutions(need_m)
         rows = np.arange(len(nodes))
