@@ -159,3 +159,25 @@ def test_flat_scene_icp_is_finite_and_flagged() -> None:
     assert empty.degenerate and empty.residual_m == np.inf and empty.matched == 0
     # too few points to align: the record (what a scene's registration keeps) is still written
     assert empty.to_dict()["correction"] == np.eye(4).tolist() and empty.to_dict()["matched"] == 0
+
+
+def test_content_seed_ignores_the_origins_last_bits() -> None:
+    """The level-of-detail seed of a scan whose bound is -65.005 m is the same whether the site-local
+    float came out a hair above or below it (what a (1000, 2000) and a (-8.4e6, 5.6e6) origin give for
+    the same LAS); a bound that really moves by a millimetre changes it."""
+    from dataclasses import replace
+
+    from siteline.records.scan import LasScan
+
+    def scan(y_min: float) -> LasScan:
+        return LasScan(
+            path="cloud.las", source_crs="EPSG:3857", transformed=False, point_count=213_521,
+            bounds_min=[-80.0, y_min, -2.021], bounds_max=[79.997, 65.01, 44.237],
+            class_histogram={"ground": 10}, unknown_codes={}, outside_fence=0, colour="rgb 16-bit",
+            density_pts_m2=10.26, version="1.2", point_format=3, scale=[0.001] * 3, offset=[0.0] * 3,
+            gps_time_range=[1.0, 2.0], z_unit={"name": "metre"}, creation_date=None,
+        )  # fmt: skip
+
+    small, large = scan(-65.00500000000011), scan(-65.00499999988824)
+    assert small.content_seed() == large.content_seed()
+    assert replace(small, bounds_min=[-80.0, -65.006, -2.021]).content_seed() != small.content_seed()

@@ -29,7 +29,7 @@ KNOBS = ReleaseKnobs.exactly(PARAMS, min_image_px=64)
 
 
 def _release(root: Path, origin: tuple[float, float, float]) -> Path:
-    cfg = SynthConfig(epochs=2, density_pts_m2=2.0, seed=5, origin=origin, crs="EPSG:3857")
+    cfg = SynthConfig(epochs=2, density_pts_m2=10.0, seed=7, origin=origin, crs="EPSG:3857")
     site_dir = root / "site"
     write_site(site_dir, cfg)
     home = root / "home"

@@ -44,14 +44,19 @@ class LasScan:
     stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def content_seed(self) -> int:
-        """A seed that depends on the cloud's content only (point count, GPS times, classes, bounds to
-        the centimetre in the site frame): the same mission gives the same level-of-detail draw and
-        node order whatever its scene id, arrival order or the origin's magnitude."""
+        """A seed that depends on the cloud's content only (point count, GPS times, classes, bounds in
+        whole millimetres of the site frame): the same mission gives the same level-of-detail draw and
+        node order whatever its scene id, arrival order or the origin's magnitude.
+
+        The bounds are site-local floats whose last bits depend on the origin (a bound of -65.005 m is
+        -65.00500000000011 at one origin and -65.00499999988824 at another), so they are snapped to
+        the nearest millimetre, the tile quantum that holds the points themselves: rounding to the
+        centimetre put such a bound on either side of a half and changed the whole draw."""
         doc = {
             "points": self.point_count,
             "gps": [round(v, 6) for v in self.gps_time_range] if self.gps_time_range else None,
             "classes": dict(sorted(self.class_histogram.items())),
-            "bounds": [round(v, 2) for v in (*self.bounds_min, *self.bounds_max)],
+            "bounds_mm": [int(np.rint(v * 1000.0)) for v in (*self.bounds_min, *self.bounds_max)],
         }
         digest = hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).digest()
         return int.from_bytes(digest[:4], "big")
