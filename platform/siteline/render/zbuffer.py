@@ -10,7 +10,7 @@ smaller index, so the output does not depend on the device or the batch size.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -81,6 +81,29 @@ def _check_inputs(xyz: np.ndarray | torch.Tensor, attributes: Mapping[str, np.nd
     return n
 
 
+def _projector(cam: Camera, settings: RenderSettings, dev: torch.device) -> Callable[[torch.Tensor], tuple]:
+    """Projection of (M, 3) site-local points through the scaled camera ``cam``: (valid, u, v, z),
+    valid where in front of ``near_m`` and within the image widened by half a point (NaN and inf
+    fail every comparison, so they are invalid; nothing is cast yet)."""
+    W, H = cam.width, cam.height
+    dtype = torch.float64 if settings.precision == "float64" else torch.float32
+    Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
+    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
+    fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
+    margin = float(settings.point_size_px // 2)
+
+    def project(p: torch.Tensor) -> tuple:
+        c = torch.addmm(tt, p.to(dev, non_blocking=True).to(dtype), Rt)  # (M, 3) camera coordinates
+        z = c[:, 2]
+        inv_z = 1.0 / z
+        u = c[:, 0] * inv_z * fx + cx
+        v = c[:, 1] * inv_z * fy + cy
+        valid = (z > settings.near_m) & (u >= -margin) & (u < W + margin) & (v >= -margin) & (v < H + margin)
+        return valid, u, v, z
+
+    return project
+
+
 def _splat(
     pts: torch.Tensor, cam: Camera, settings: RenderSettings, dev: torch.device, zbuf: torch.Tensor
 ) -> int:
@@ -89,25 +112,14 @@ def _splat(
     (float32 depth bits << 32 | point index); return how many points fell in the frustum."""
     W, H = cam.width, cam.height
     npix = W * H
-    dtype = torch.float64 if settings.precision == "float64" else torch.float32
-    Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
-    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
-    fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
+    project = _projector(cam, settings, dev)
     offsets = disk_offsets(settings.point_size_px)
-    margin = float(settings.point_size_px // 2)
-    zero = torch.zeros((), dtype=dtype, device=dev)
+    zero = torch.zeros((), dtype=torch.float64 if settings.precision == "float64" else torch.float32, device=dev)
     in_frustum = 0
     n = int(pts.shape[0])
     for start in range(0, n, settings.chunk_points):
         stop = min(n, start + settings.chunk_points)
-        p = pts[start:stop].to(dev, non_blocking=True).to(dtype)
-        c = torch.addmm(tt, p, Rt)  # (M, 3) camera coordinates
-        z = c[:, 2]
-        inv_z = 1.0 / z
-        u = c[:, 0] * inv_z * fx + cx
-        v = c[:, 1] * inv_z * fy + cy
-        # NaN and inf fail every comparison, so they are invalid here; nothing is cast yet.
-        valid = (z > settings.near_m) & (u >= -margin) & (u < W + margin) & (v >= -margin) & (v < H + margin)
+        valid, u, v, z = project(pts[start:stop])
         in_frustum += int(valid.sum())
         ui = torch.where(valid, u, zero).floor_().to(torch.int64)
         vi = torch.where(valid, v, zero).floor_().to(torch.int64)
@@ -124,6 +136,32 @@ def _splat(
             ok = (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
             zbuf.scatter_reduce_(0, torch.where(ok, vo * W + uo, npix), key, reduce="amin")
     return in_frustum
+
+
+def coverage_of(
+    xyz: np.ndarray | torch.Tensor, camera: Camera, settings: RenderSettings, device: str | torch.device = "cpu"
+) -> float:
+    """The share of pixels a render of ``xyz`` through ``camera`` with ``settings`` hits (the
+    ``coverage`` of :func:`render_points`, exactly): the same projection, each point's disk marked
+    on a boolean image widened by half a point, with no depth test and nothing decoded. View
+    generation probes thousands of candidates for this one figure."""
+    _check_inputs(xyz, {})
+    dev = torch.device(device)
+    cam = camera.scaled(settings.scale)
+    W, H = cam.width, cam.height
+    m = settings.point_size_px // 2
+    project = _projector(cam, settings, dev)
+    centres = torch.zeros((H + 2 * m, W + 2 * m), dtype=torch.bool, device=dev)
+    pts = _as_tensor(xyz)
+    for start in range(0, int(pts.shape[0]), settings.chunk_points):
+        valid, u, v, _ = project(pts[start : start + settings.chunk_points])
+        ui = u[valid].floor_().to(torch.int64) + m
+        vi = v[valid].floor_().to(torch.int64) + m
+        centres[vi, ui] = True
+    hit = torch.zeros((H, W), dtype=torch.bool, device=dev)
+    for du, dv in disk_offsets(settings.point_size_px):  # pixel (x, y) is hit by a centre at (x - du, y - dv)
+        hit |= centres[m - dv : m - dv + H, m - du : m - du + W]
+    return int(hit.sum()) / hit.numel() if hit.numel() else 0.0  # as numpy's mean of the hit mask
 
 
 def _decode(

@@ -15,7 +15,7 @@ from siteline.errors import ViewsError
 from siteline.fence import inside_fence
 from siteline.progress import no_step
 from siteline.render.settings import RenderSettings
-from siteline.render.zbuffer import render_points
+from siteline.render.zbuffer import coverage_of, render_points
 from siteline.tolerances import (
     LENGTH_TOL_M,
     POSE_CENTER_QUANTUM_M,
@@ -196,6 +196,12 @@ def reject(
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
     settings = RenderSettings(scale=params.scale, point_size_px=params.point_size_px)
     judged: dict[int, SyntheticView] = {}
+    probed = [
+        v.camera for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True)
+        if at_least(h, params.min_height_m, LENGTH_TOL_M) and (ins or not v.params["mirrored"])
+        and at_least(dist, params.clearance_m, LENGTH_TOL_M) and up == 0
+    ]  # fmt: skip
+    source.prefetch(probed, params.scale)
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
         if not at_least(h, params.min_height_m, LENGTH_TOL_M):
             judged[id(v)] = replace(v, rejected="underground")
@@ -206,9 +212,9 @@ def reject(
         elif up > 0:
             judged[id(v)] = replace(v, rejected="under_geometry")
         else:
-            r = render_points(source.points_for_view(v.camera, params.scale), v.camera, settings)
-            low = not at_least(r.coverage, params.min_coverage, RATIO_TOL)
-            judged[id(v)] = replace(v, coverage=r.coverage, rejected="low_coverage" if low else None)
+            coverage = coverage_of(source.points_for_view(v.camera, params.scale), v.camera, settings)
+            low = not at_least(coverage, params.min_coverage, RATIO_TOL)
+            judged[id(v)] = replace(v, coverage=coverage, rejected="low_coverage" if low else None)
     return [judged.get(id(v), v) for v in views]
 
 

@@ -3,6 +3,7 @@ store provides another)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
@@ -16,6 +17,9 @@ class PointSource(Protocol):
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
         """(N, 3) float32 site-local points a render of ``camera`` at ``scale`` needs."""
+
+    def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
+        """Say that probes of ``cameras`` at ``scale`` come next (a source may read them at once)."""
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         """(M,) distance in metres from each query (M, 3) to the nearest point."""
@@ -34,6 +38,9 @@ class ArrayPointSource:
 
     def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
         return self.xyz
+
+    def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
+        return None
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
