@@ -155,3 +155,28 @@ def nearest_segment(
 
 def is_finite_ring(vertices_m: Sequence[Sequence[float]]) -> bool:
     return all(math.isfinite(c) for v in vertices_m for c in v)
+
+
+# a scene's outline: concave hull of its sample (shapely's ratio: 0 most concave, 1 convex), simplified
+FOOTPRINT_RATIO = 0.2
+FOOTPRINT_SIMPLIFY_M = 2.0
+
+
+def footprint(sample_xy: np.ndarray) -> list[tuple[float, float]] | None:
+    """The outline of a scene's (N, 2+) site-local sample: a concave hull, simplified and snapped to
+    the centimetre, as a fence ring (no closing vertex); None when the points span no area."""
+    xy = np.unique(np.round(np.asarray(sample_xy, dtype=np.float64)[:, :2], 2), axis=0)
+    if len(xy) < 3:
+        return None
+    hull = shapely.concave_hull(shapely.multipoints(xy), ratio=FOOTPRINT_RATIO)
+    if isinstance(hull, shapely.MultiPolygon):
+        hull = max(hull.geoms, key=lambda g: g.area)
+    if not isinstance(hull, shapely.Polygon) or hull.area <= 0.0:
+        return None
+    simple = hull.simplify(FOOTPRINT_SIMPLIFY_M, preserve_topology=True)
+    ring = np.round(np.asarray(shapely.get_coordinates(shapely.Polygon(simple.exterior)))[:, :2], 2)
+    try:
+        return validate_fence(np.vstack([ring, ring[:1]]) if not np.array_equal(ring[0], ring[-1]) else ring,
+                              source="scene footprint")
+    except GeometryError:  # a degenerate outline: no footprint rather than a wrong one
+        return None

@@ -22,12 +22,16 @@ def _rgb(values: list[int]) -> tuple[int, int, int]:
 
 @dataclass(frozen=True)
 class SiteClass:
-    """One site class: uint8 id, name, whether change detection ignores it, display colour (RGB)."""
+    """One site class: uint8 id, name, whether change detection ignores it, display colour (RGB), and
+    whether its points are compared by geometry only (``geometry_only``: a point with a counterpart
+    of any kept class within the radius is unchanged, one without is changed; ASPRS 0/1
+    "unclassified", whose points may be anything)."""
 
     id: int
     name: str
     ignore: bool
     color: tuple[int, int, int]
+    geometry_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,13 @@ class Taxonomy:
             lut[c.id] = c.ignore
         return lut
 
+    def geometry_only_lut(self) -> np.ndarray:
+        """(256,) bool: True at the ids of classes compared by geometry only."""
+        lut = np.zeros(256, dtype=bool)
+        for c in self.classes:
+            lut[c.id] = c.geometry_only
+        return lut
+
     def code_lut(self, source: str) -> tuple[np.ndarray, np.ndarray]:
         """(256,) uint8 lookup from source codes to class ids, and (256,) bool of codes that are mapped."""
         if source not in self.source_codes:
@@ -131,7 +142,9 @@ class Taxonomy:
         return {
             "name": self.name,
             "classes": [
-                {"id": c.id, "name": c.name, "ignore": c.ignore, "color": list(c.color)} for c in self.classes
+                {"id": c.id, "name": c.name, "ignore": c.ignore, "color": list(c.color)}
+                | ({"geometry_only": True} if c.geometry_only else {})
+                for c in self.classes
             ],
             "source_codes": {
                 source: {str(code): target for code, target in sorted(table.items())}
@@ -148,7 +161,9 @@ class Taxonomy:
             return cls(
                 name=doc["name"],
                 classes=tuple(
-                    SiteClass(int(c["id"]), c["name"], bool(c["ignore"]), _rgb(c["color"]))
+                    SiteClass(
+                        int(c["id"]), c["name"], bool(c["ignore"]), _rgb(c["color"]), bool(c.get("geometry_only", False))
+                    )
                     for c in doc["classes"]
                 ),
                 source_codes={

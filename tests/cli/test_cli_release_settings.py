@@ -41,7 +41,7 @@ def test_site_settings_are_stored_shown_updated_and_checked(home, capsys) -> Non
     assert code == 0, err
     assert json.loads(out)["release_settings"] == {"preset": "fast", "pair": {"scale": "auto", "min_valid": 0.3}}
     for bad, message in ((["--views", "0"], "views"), (["--scale", "big"], "--scale 'big'"),
-                         (["--unset", "colour"], "not a release setting"), (["--preset", "turbo"], "unknown preset")):  # fmt: skip
+                         (["--unset", "hue"], "not a release setting"), (["--preset", "turbo"], "unknown preset")):  # fmt: skip
         code, _, err = run_cli(capsys, "site", "update", "s", *bad)
         assert code == 2 and message in err, err
     assert json.loads(run_cli(capsys, "site", "show", "s", "--json")[1])["release_settings"]["preset"] == "fast"

@@ -15,8 +15,9 @@ from sitehelpers import copy_mission, epoch_dirs, make_home
 
 from siteline.cameras import Camera
 from siteline.catalog import open_catalog
+from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Mission, Pair, Scene
-from siteline.catalog.scenes import list_scenes, scene_cameras
+from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
 from siteline.ingest import IngestOptions, ingest_mission
@@ -122,18 +123,40 @@ def test_xmp_poses_without_colmap_model(cat, site_settings, synth_site, tmp_path
             assert np.linalg.norm(cam.center - truth[name].center) < 0.01
 
 
-def test_lidar_only_mission_is_valid(tmp_path) -> None:
+def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None:
+    """No photos: the cameras are planned from the point cloud over the site's fence, recorded with
+    their source, and every one stands over the data at the stated height above its ground."""
     site = tmp_path / "site"
     write_site(site, SynthConfig(epochs=1, density_pts_m2=1.0, seed=2, photos=False, colmap=False))
     settings = make_home(tmp_path, site_dir=site)
     cat = open_catalog(settings)
     r = ingest_mission(cat, settings, epoch_dirs(site)[0], "demo")
-    assert r.created and r.registration["source"] == "none"
+    assert r.created and r.registration["source"] == "planned"
+    assert r.registration["over"] == "site fence" and r.registration["survey"]["altitude_m"] == 80.0
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
         assert sc.capture_time.year == 2024  # from the raw folder name
-        assert scene_cameras(s, sc.id) == []
+        cams = scene_cameras(s, sc.id)
+        sources = {c.source for c in s.query(CameraRow).filter_by(scene_id=sc.id)}
+        bounds = scene_statistics(sc).scan.bounds_min, scene_statistics(sc).scan.bounds_max
+    assert len(cams) == r.registration["images"] > 10 and sources == {"planned"}
+    nadir = [c for n, c in cams if "nadir" in n]
+    assert nadir and all(np.allclose(c.forward, [0, 0, -1], atol=1e-5) for c in nadir)
+    for name, cam in cams:
+        # nadir cameras over the data (the grid is buffered by half a line spacing, 13.5 m here);
+        # obliques stand back from the edge so that they look at it at 45 degrees from 80 m
+        margin = 15.0 if "nadir" in name else 85.0
+        assert bounds[0][0] - margin <= cam.center[0] <= bounds[1][0] + margin, name
+        assert bounds[0][1] - margin <= cam.center[1] <= bounds[1][1] + margin, name
+        assert 60.0 < cam.center[2] - bounds[0][2] < 140.0
+    # the same cloud and settings plan the same cameras (another home, the same mission)
+    again = make_home(tmp_path / "again", site_dir=site)
+    cat2 = open_catalog(again)
+    r2 = ingest_mission(cat2, again, epoch_dirs(site)[0], "demo")
+    with cat2.transaction() as s:
+        assert scene_cameras(s, r2.scene_id) == cams
     cat.dispose()
+    cat2.dispose()
 
 
 def test_extreme_las_scale_and_offset_survive_exactly(tmp_path) -> None:

@@ -76,7 +76,7 @@ def test_images_under_the_floor_are_refused_with_the_scale_that_would_do() -> No
         ({"pair": {"views": 0}}, "views"),
         ({"pair": {"scale": "big"}}, "scale"),
         ({"pair": {"views": "auto"}}, "may be 'auto'"),
-        ({"pair": {"colour": 1}}, "unknown knob"),
+        ({"pair": {"hue": 1}}, "unknown knob"),
         ({"preset": "turbo"}, "unknown preset"),
         ({"min_image_px": 0}, "min_image_px"),
         ({"pad": "yes"}, "pad"),
@@ -94,4 +94,4 @@ def test_update_writes_over_and_unsets() -> None:
     assert new.to_dict() == {"preset": "fast", "pair": {"views": 60}}
     assert ReleaseKnobs.from_dict(new.to_dict()) == new
     with pytest.raises(ReleaseError, match="not a release setting"):
-        stored.updated(ReleaseKnobs(), unset=["colour"])
+        stored.updated(ReleaseKnobs(), unset=["hue"])

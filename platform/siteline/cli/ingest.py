@@ -84,13 +84,34 @@ def ingest(
         help="Capture time, ISO 8601 with a zone (2024-11-27T16:31:00Z), for a mission that cannot tell it "
         "(a LiDAR-only LAS without a creation date); overrides the photos' time. Recorded as given.",
     ),
+    plan_cameras: bool = typer.Option(
+        False, "--plan-cameras", help="Plan the cameras from the point cloud even when the mission has "
+        "photos (a mission without photos always gets planned cameras)."
+    ),
+    camera: str = typer.Option(
+        "zenmuse-l2", "--camera", help="Camera of planned cameras: zenmuse-l2, zenmuse-p1-35mm, or a JSON "
+        "file of width, height, fx (fy, cx, cy) in pixels."
+    ),
+    altitude_m: float = typer.Option(80.0, "--altitude", help="Planned cameras' height above the ground, metres."),
+    overlap: tuple[float, float] = typer.Option(
+        (0.7, 0.6), "--overlap", help="Planned survey's forward and side overlap (0-0.95)."
+    ),
+    oblique_pitch: float = typer.Option(
+        45.0, "--oblique-pitch", help="Planned oblique cameras' tilt below the horizontal, degrees (0: none)."
+    ),
     as_json: bool = JsonOption,
 ) -> None:
-    """Ingest a mission folder as a new scene of a site and tile it (a re-run of the same content does nothing)."""
+    """Ingest a mission folder (or one LAS/LAZ file) as a new scene of a site and tile it (a re-run of the
+    same content does nothing)."""
     from siteline import pipeline
+    from siteline.camera_models import camera_model
     from siteline.ingest import IngestOptions
+    from siteline.register.planned import SurveyPlan
 
+    survey = SurveyPlan(camera_model(camera), altitude_m, overlap[0], overlap[1], oblique_pitch)
     opts = IngestOptions(
+        plan_cameras=plan_cameras,
+        survey=survey,
         captured_at=parse_time(captured_at, "--captured-at") if captured_at else None,
         crs=crs,
         z_unit=z_unit,
@@ -118,7 +139,8 @@ def ingest(
             result.message
             if not result.created
             else f"{result.message}: {result.scan.get('point_count', 0):,} points, "
-            f"{result.registration.get('source')} cameras, pairs {result.pairs}"
+            f"{result.registration.get('images', 0)} {result.registration.get('source')} cameras, "
+            f"pairs {result.pairs}"
         ),
     )
 

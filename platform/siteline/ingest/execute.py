@@ -19,7 +19,7 @@ from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
-from siteline.register import AlignmentPolicy, check_alignment, register_cameras
+from siteline.register import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
 from siteline.stores import Store, layout
 from siteline.stores.blobs import BlobStaging, put_blob_bytes
 
@@ -66,6 +66,9 @@ def execute_ingest(
     cameras, registration, source = register_cameras(
         photos, colmap_dir(entries, root), plan.site, opts.ransac_max_error_m, opts.max_georegistration_rms_m
     )
+    if not cameras or opts.plan_cameras:
+        survey = scan.survey_sample if scan.survey_sample is not None else np.zeros((0, 4))
+        cameras, registration, source = planned_cameras(survey, scan.footprint, plan.site, opts.survey, len(photos))
     when, when_source = capture_time(photos, entries, scan, root, opts.captured_at)
     if plan.scene_at(when) is not None:
         raise MissionError(

@@ -141,7 +141,9 @@ def inventory(
     count before hashing starts, ``progress`` the bytes hashed as they go."""
     root = Path(root)
     if not root.is_dir():
-        raise MissionError(f"mission folder {root} does not exist or is not a folder.")
+        raise MissionError(
+            f"mission folder {root} does not exist or is not a folder (nor a .las or .laz file)."
+        )
     files = _walk(root)
     if not files:
         raise MissionError(f"mission folder {root} is empty.")
@@ -161,8 +163,16 @@ def manifest_sha256(entries: Sequence[FileEntry]) -> str:
 
 
 def mission_manifest(root: Path, progress: Callable[..., None] = no_step) -> MissionManifest:
-    """The inventory of the mission folder ``root`` and its manifest hash. ``progress(amount, total)``
-    receives the byte count before hashing starts and the bytes hashed as they go."""
+    """The inventory of the mission folder ``root`` and its manifest hash; ``root`` may also be one
+    LAS/LAZ file, a mission of that file alone (its folder is the mission's root, nothing else in it
+    is read). ``progress(amount, total)`` receives the byte count before hashing starts and the bytes
+    hashed as they go."""
     root = Path(root).resolve() if Path(root).exists() else Path(root)
+    if root.is_file() and file_kind(PurePosixPath(root.name)) == "las":
+        _check_file(root, PurePosixPath(root.name), root.parent, root.parent.resolve())
+        size = root.stat().st_size
+        progress(0, size)
+        entries = [FileEntry(root.name, size, sha256_file(root, progress), "las")]
+        return MissionManifest(root.parent, tuple(entries), manifest_sha256(entries))
     entries = inventory(root, progress=progress, total=lambda t: progress(0, t))
     return MissionManifest(root, tuple(entries), manifest_sha256(entries))

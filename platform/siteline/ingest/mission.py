@@ -91,7 +91,10 @@ def capture_time(
 
 
 def mission_name(entries: Sequence[FileEntry], root: Path) -> str:
-    """The name a mission is known by: its raw DJI folder's, else its folder's."""
+    """The name a mission is known by: its raw DJI folder's, else its one file's stem (a mission of a
+    bare LAS/LAZ), else its folder's."""
+    if len(entries) == 1 and "/" not in entries[0].path:
+        return Path(entries[0].path).stem
     return next(
         (Path(e.path).parts[0] for e in entries if RAW_FOLDER.match(Path(e.path).parts[0])), root.name
     )

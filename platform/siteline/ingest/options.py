@@ -9,6 +9,7 @@ from typing import Any
 from siteline.crs import parse_z_unit
 from siteline.errors import MissionError
 from siteline.records.enums import STORAGES, Storage
+from siteline.register.planned import SurveyPlan
 
 
 @dataclass(frozen=True)
@@ -22,7 +23,9 @@ class IngestOptions:
     ICP by up to ~0.2 m on the synthetic site, so the default limit is 0.5 m; the measured
     correction is recorded either way. captured_at: the capture time (UTC) when the mission cannot
     tell it (a LiDAR-only mission whose LAS has no creation date) or tells it wrong; it overrides the
-    photos, the raw folder name and the LAS header, and is recorded as given."""
+    photos, the raw folder name and the LAS header, and is recorded as given. plan_cameras: plan the
+    scene's cameras from its point cloud (``survey``: camera model, height, overlaps) even when the
+    mission has photos; a mission without photos always gets planned cameras."""
 
     crs: str | None = None
     z_unit: str | None = None
@@ -33,6 +36,8 @@ class IngestOptions:
     max_alignment_translation_m: float = 0.5
     max_alignment_residual_m: float = 0.15
     captured_at: datetime | None = None
+    plan_cameras: bool = False
+    survey: SurveyPlan = SurveyPlan()
 
     def __post_init__(self) -> None:
         if self.z_unit is not None:
@@ -53,4 +58,6 @@ class IngestOptions:
             "z_unit": self.z_unit,
             "accept_misalignment": self.accept_misalignment,
             "captured_at": self.captured_at.isoformat() if self.captured_at else None,
+            "plan_cameras": self.plan_cameras,
+            "survey": self.survey.to_dict(),
         }

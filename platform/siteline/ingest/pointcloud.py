@@ -13,6 +13,7 @@ import pyproj
 
 from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import PointCloudError
+from siteline.fence import footprint
 from siteline.lasio import detect_eight_bit, open_las
 from siteline.partition import (
     PARALLEL_MIN_POINTS,
@@ -23,13 +24,15 @@ from siteline.partition import (
     read_file,
 )
 from siteline.progress import no_step
-from siteline.records.scan import COLOUR_NAMES, LasScan
+from siteline.records.scan import COLOUR_NAMES, STRETCH_PERCENTILES, ColourStats, LasScan, RgbContent
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import SiteChunk, source_crs, source_transformer
 from siteline.workers import start_pool
 
 STABLE_CLASSES = ("ground", "building")
+# the most points of the all-class sample a scan keeps (every k-th point of the file)
+SURVEY_SAMPLE_MAX = 50_000
 
 
 def start_readers(mission_dir: Path, workers: int) -> None:
@@ -81,15 +84,16 @@ def scan_las(
     source = PassSource(str(path), site, crs_text(src), z_unit_of(src, z_unit).to_dict(), eight_bit)
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
     keep_p = min(1.0, sample_max / max(n_total, 1))
+    stride = max(1, -(-n_total // SURVEY_SAMPLE_MAX))
     ranges = point_ranges(n_total, workers)
     spec = TileSpec.for_site(site)
     folder = runs_into
     visitors = [
-        (_Totals(stable_ids, keep_p, (seed, k), eight_bit),)
+        (_Totals(stable_ids, keep_p, (seed, k), eight_bit, ranges[k][0], stride),)
         + ((RunWriter(str(folder), f"run-{k:05d}.bin", spec.to_dict()),) if folder else ())
         for k in range(len(ranges))
     ]
-    t = _Totals(stable_ids, keep_p, (seed, 0), eight_bit)
+    t = _Totals(stable_ids, keep_p, (seed, 0), eight_bit, 0, stride)
     runs = []
     for done in read_file(source, n_total, visitors, workers, lambda _l, n, _t: progress(n)):
         t.merge(done[0])
@@ -109,7 +113,13 @@ class _Totals:
     """What the scan accumulates chunk by chunk."""
 
     def __init__(
-        self, stable_ids: np.ndarray, keep_p: float, seed: tuple[int, int], eight_bit: bool | None
+        self,
+        stable_ids: np.ndarray,
+        keep_p: float,
+        seed: tuple[int, int],
+        eight_bit: bool | None,
+        first: int,
+        stride: int,
     ) -> None:
         self.stable_lut = np.zeros(256, bool)
         self.stable_lut[stable_ids] = True
@@ -122,6 +132,11 @@ class _Totals:
         self.tmin, self.tmax = np.inf, -np.inf
         self.samples: list[np.ndarray] = []
         self.colour = "none" if eight_bit is None else COLOUR_NAMES[eight_bit]
+        # every stride-th point of the file (by its index: the same whatever the workers or origin),
+        # all classes, with its intensity: for planned cameras, the footprint and colour statistics
+        self.index, self.stride = first, stride
+        self.survey: list[np.ndarray] = []
+        self.rgb_lo, self.rgb_hi = np.full(3, 255), np.zeros(3, np.int64)
 
     def add(self, sc: SiteChunk) -> None:
         local, chunk, cls = sc.local, sc.chunk, sc.classes
@@ -136,6 +151,12 @@ class _Totals:
             self.tmax = max(self.tmax, float(chunk.gps_time.max()))
         stable = np.flatnonzero(self.stable_lut[cls])
         self.samples.append(local[stable[self.rng.random(len(stable)) < self.keep_p]])
+        take = np.arange(-self.index % self.stride, len(local), self.stride)
+        self.survey.append(np.c_[local[take], chunk.intensity[take]])
+        self.index += len(local)
+        if chunk.rgb is not None and len(local):
+            self.rgb_lo = np.minimum(self.rgb_lo, chunk.rgb.min(axis=0))
+            self.rgb_hi = np.maximum(self.rgb_hi, chunk.rgb.max(axis=0))
 
     def merge(self, other: _Totals) -> None:
         """Add the totals of another range."""
@@ -146,6 +167,19 @@ class _Totals:
         self.count += other.count
         self.tmin, self.tmax = min(self.tmin, other.tmin), max(self.tmax, other.tmax)
         self.samples += other.samples
+        self.survey += other.survey
+        self.rgb_lo, self.rgb_hi = np.minimum(self.rgb_lo, other.rgb_lo), np.maximum(self.rgb_hi, other.rgb_hi)
+
+    def colour_stats(self, survey: np.ndarray) -> ColourStats:
+        """Whether the colour carries information, and the intensity and z stretches of the sample."""
+        rgb: RgbContent = "absent" if self.colour == "none" else "constant"
+        if rgb == "constant" and self.count and bool((self.rgb_hi > self.rgb_lo).any()):
+            rgb = "varies"
+        lo_i, hi_i = np.percentile(survey[:, 3], STRETCH_PERCENTILES) if len(survey) else (0.0, 0.0)
+        lo_z, hi_z = np.percentile(survey[:, 2], STRETCH_PERCENTILES) if len(survey) else (0.0, 0.0)
+        return ColourStats(
+            rgb, (float(lo_i), float(hi_i)) if hi_i > lo_i else None, (float(lo_z), float(max(hi_z, lo_z)))
+        )
 
 
 def _scan(
@@ -158,6 +192,8 @@ def _scan(
     t: _Totals,
 ) -> LasScan:
     area = max(float((t.hi[0] - t.lo[0]) * (t.hi[1] - t.lo[1])), 1e-6)
+    survey = np.concatenate(t.survey) if t.survey else np.zeros((0, 4))
+    outline = footprint(survey)
     names = {c.id: c.name for c in site.taxonomy.classes}
     day = header.creation_date
     return LasScan(
@@ -179,5 +215,8 @@ def _scan(
         gps_time_range=[t.tmin, t.tmax] if np.isfinite(t.tmin) else None,
         z_unit=z_unit_of(src, z_unit).to_dict(),
         creation_date=day.isoformat() if day is not None else None,
+        colour_stats=t.colour_stats(survey),
+        footprint=[list(v) for v in outline] if outline is not None else None,
         stable_sample=np.concatenate(t.samples) if t.samples else np.zeros((0, 3)),
+        survey_sample=survey,
     )

@@ -40,13 +40,15 @@ def change_flags(
     radius_m: float,
     ignored: np.ndarray,
     backend: str = "pykdtree",
+    geometric: np.ndarray | None = None,
 ) -> np.ndarray:
     """Change of each point of A against B, (N,) uint8: 0 unchanged, 1 changed, 255 ignored.
 
     a_xyz (N, 3), b_xyz (M, 3): site-local metres (float32 or float64). a_cls, b_cls: uint8 site
     classes. ignored: (256,) bool lookup of ignored classes. A point of A is ignored when its class
     is; otherwise changed when B has no point of a non-ignored class within ``radius_m``, or when the
-    nearest such point has another class.
+    nearest such point has another class, unless either class is compared by geometry only
+    (``geometric``: (256,) bool lookup, e.g. "unclassified"; all True: a class-agnostic rule).
     """
     out = np.full(len(a_xyz), IGNORED, dtype=np.uint8)
     live = ~ignored[a_cls]
@@ -59,7 +61,10 @@ def change_flags(
     dist, idx = nearest(b_xyz[b_keep], a_xyz[live], radius_m, backend)
     found = np.isfinite(dist)
     same = np.zeros(len(dist), dtype=bool)
-    same[found] = b_cls[b_keep][idx[found]] == a_cls[live][found]
+    b_near, a_live = b_cls[b_keep][idx[found]], a_cls[live][found]
+    same[found] = b_near == a_live
+    if geometric is not None:
+        same[found] |= geometric[b_near] | geometric[a_live]
     out[live] = np.where(same, UNCHANGED, CHANGED)
     return out
 

@@ -129,13 +129,19 @@ def _count(flags: np.ndarray, counts: dict[str, int]) -> None:
 
 
 def write_labels(
-    t1: SceneTiles, t2: SceneTiles, radius_m: float, ignored: np.ndarray, out: Path
+    t1: SceneTiles,
+    t2: SceneTiles,
+    radius_m: float,
+    ignored: np.ndarray,
+    out: Path,
+    geometric: np.ndarray | None = None,
 ) -> LabelResult:
     """Compute both directions in one pass over the site grid (each tile of each scene against the
     other scene's points in the tile's grid cell widened by ``radius_m``) into the new Zarr group
     ``out`` (removed again on an error; publish it through ``siteline.stores.Store.publish`` for
     all-or-nothing). Each tile of each scene is read and decoded once; decoded tiles live until the
-    columns of tiles that need them for a halo are done (at most three columns per scene)."""
+    columns of tiles that need them for a halo are done (at most three columns per scene).
+    ``ignored`` and ``geometric``: the taxonomy's lookups (siteline.labels.change.change_flags)."""
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
@@ -162,7 +168,7 @@ def write_labels(
                 if mine is None:
                     continue
                 their_xyz, their_cls = sides[other[side]][1].halo(ij)
-                flags = change_flags(mine[0], mine[1], their_xyz, their_cls, radius_m, ignored)
+                flags = change_flags(mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, geometric=geometric)
                 tile = dec.keys[ij]
                 _write_flags(groups[side], tile, flags, tiles.spec)
                 digests[side][tile] = hashlib.sha256(flags.tobytes()).hexdigest()

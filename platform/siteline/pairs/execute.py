@@ -62,9 +62,11 @@ def pair_labels(
         record = dict(store.open_group(uri).attrs) | {"uri": uri}
     else:
         progress("labels", 0, None)
-        ignored = plan.site.taxonomy.ignored_lut()
+        taxonomy = plan.site.taxonomy
         with store.publish(uri) as work:
-            record = write_labels(t1, t2, radius, ignored, work).to_dict() | {"uri": uri}
+            record = write_labels(
+                t1, t2, radius, taxonomy.ignored_lut(), work, geometric=taxonomy.geometry_only_lut()
+            ).to_dict() | {"uri": uri}
     log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
     return PairLabels(radius, uri, record | {"radius": info})
 
@@ -75,7 +77,8 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
     if not plan.cameras:
         raise PairError(
             f"pair {plan.pair_id}: the later scene {plan.t2.id} has no cameras to derive views from "
-            "(a LiDAR-only mission); ingest photos with it."
+            f"(ingested before cameras were planned for missions without photos); ingest its mission "
+            f"again into a new site, or with photos."
         )
     params, taxonomy = plan.params, plan.site.taxonomy
     ground = t2.points(resolution=0.5, attributes=("class",))
@@ -88,7 +91,7 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
     views = generate_views(
         cams,
         plane,
-        plan.site.fence,
+        plan.fence,
         source,
         params.view_params_spec(),
         progress=lambda k: progress("views", k, len(cams)),
@@ -118,7 +121,7 @@ def _render_all(
         (work / sub).mkdir(parents=True)
     while queue:
         v = queue.pop(0)
-        r = render_pair_view(scenes, v.camera, params, device)
+        r = render_pair_view(scenes, v.camera, params, device, plan.colour)
         low = not at_least(r.valid, params.min_valid, RATIO_TOL)
         if low:
             rejected["low_valid"] = rejected.get("low_valid", 0) + 1
@@ -172,7 +175,8 @@ def execute_pair(
         summary = {
             "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
             "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.record,
-            "ground_plane": views.ground.to_dict(), "candidates": views.candidates, "rejected": rejected,
+            "ground_plane": views.ground.to_dict(), "fence": plan.fence_source, "colour": plan.colour.to_dict(),
+            "candidates": views.candidates, "rejected": rejected,
             "views": [r.to_dict() for r in records],
         }  # fmt: skip
         (work / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")

@@ -14,7 +14,7 @@ def output_of(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
     return PairOutput(
         plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
         tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
-        plan.params.to_dict(),
+        plan.params.to_dict(), doc.get("colour") or {"source": "rgb"}, doc.get("fence", "site fence"),
     )  # fmt: skip
 
 

@@ -11,6 +11,7 @@ from typing import Any
 from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
 from siteline.records.enums import HOLE_RULES, HoleRule
+from siteline.render.colour import COLOUR_CHOICES
 from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views.params import SAMPLER_VERSION, ViewParams
@@ -33,6 +34,9 @@ class PairParams:
     other is ``ignore`` or ``changed`` (siteline.pairs.render.pair_mask). sampler: the view
     sampler's version (pose snapping and keyed stratified sample, siteline.views.generate), recorded
     in the lineage and part of the outputs' key, so outputs of another sampler are not reused.
+    colour: what the A/B images show (``auto``: RGB when both scenes carry it, else intensity, else
+    an elevation ramp; or ``rgb``, ``intensity``, ``elevation``: siteline.render.colour); at its
+    default ``auto`` it is left out of the digest, so outputs made before it existed keep their key.
 
     The persisted JSON stays flat (the knobs above), so the catalog, the lineage and ``release diff``
     show each knob once under its one name."""
@@ -50,6 +54,7 @@ class PairParams:
     one_side_hole: HoleRule = "ignore"
     all_points: bool = False
     sampler: str = SAMPLER_VERSION
+    colour: str = "auto"
 
     def __post_init__(self) -> None:
         if self.sampler != SAMPLER_VERSION:
@@ -59,6 +64,8 @@ class PairParams:
             )
         if not 0.0 <= self.min_valid <= 1.0:
             raise PairError(f"min_valid {self.min_valid} must lie in [0, 1].")
+        if self.colour not in COLOUR_CHOICES:
+            raise PairError(f"colour {self.colour!r}: use one of {', '.join(COLOUR_CHOICES)}.")
         if self.one_side_hole not in HOLE_RULES:
             raise PairError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
         clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage", "point_size_px"})
@@ -100,4 +107,7 @@ class PairParams:
 
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""
-        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()[:12]
+        doc = self.to_dict()
+        if doc["colour"] == "auto":
+            del doc["colour"]
+        return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]

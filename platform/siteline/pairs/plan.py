@@ -18,6 +18,7 @@ from siteline.pairs.params import PairParams
 from siteline.records.labelsets import LabelSetRef
 from siteline.records.pairs import PairVersions
 from siteline.records.tiling import TileSource
+from siteline.render.colour import ColourPlan, resolve_colour
 from siteline.site import SiteSpec
 from siteline.stores import Store, layout
 
@@ -49,8 +50,11 @@ class PairScene:
 @dataclass(frozen=True)
 class PairPlan:
     """Everything processing a pair needs from the catalog: the pair, its site, both scenes, the later
-    scene's real cameras (views are derived from them), the parameters, where the outputs go (keyed
-    by :func:`output_digest`) and whether the catalog already records them."""
+    scene's cameras (photo or planned; views are derived from them), the parameters, where the
+    outputs go (keyed by :func:`output_digest`), whether the catalog already records them, and the
+    fence views are judged against (``fence``: the site's, else the later scene's footprint; None
+    when there is neither) with where it came from (``fence_source``), and the colour the images
+    show (``params.colour`` resolved from both scenes' colour statistics)."""
 
     pair_id: int
     site: SiteSpec
@@ -61,6 +65,9 @@ class PairPlan:
     digest: str
     root: str
     recorded: bool
+    fence: tuple[tuple[float, float], ...] | None = None
+    fence_source: str = "none"
+    colour: ColourPlan = ColourPlan("rgb")
 
     @property
     def versions(self) -> PairVersions:
@@ -101,7 +108,19 @@ def plan_pair(
     digest = output_digest(
         params, (t1.label_set.version, t2.label_set.version), (t1.generation, t2.generation)
     )
+    site = site_of(session, pair.site_id)
+    scans = [scene_statistics(get_scene(session, sid)).scan for sid in ids]
+    colour = resolve_colour(
+        params.colour, *((sid, sc.colour_stats if sc else None) for sid, sc in zip(ids, scans, strict=True))
+    )
+    fence, fence_source = site.fence, "site fence"
+    if fence is None:
+        scan = scans[1]
+        outline = scan.footprint if scan is not None else None
+        fence = tuple((float(x), float(y)) for x, y in outline) if outline else None
+        fence_source = f"footprint of scene {ids[1]}" if fence else "none"
     return PairPlan(
-        pair_id, site_of(session, pair.site_id), t1, t2, tuple(scene_cameras(session, ids[1])), params, digest,
+        pair_id, site, t1, t2, tuple(scene_cameras(session, ids[1])), params, digest,
         layout.pair_outputs(store, pair_id, digest), bool(pair_view_ids(session, pair_id, digest)),
+        fence, fence_source, colour,
     )  # fmt: skip

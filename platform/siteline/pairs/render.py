@@ -15,6 +15,7 @@ from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.records.enums import HOLE_RULES
+from siteline.render.colour import ColourPlan
 from siteline.render.zbuffer import render_points
 from siteline.stores import join
 from siteline.tiles.reader import SceneTiles
@@ -82,25 +83,33 @@ class LabelledPair:
 
 
 def render_pair_view(
-    pair: LabelledPair, camera: Camera, params: PairParams, device: str = "cpu"
+    pair: LabelledPair,
+    camera: Camera,
+    params: PairParams,
+    device: str = "cpu",
+    colour: ColourPlan = ColourPlan("rgb"),
 ) -> PairRender:
     """Render ``camera`` on both scenes with ``params`` (scale, point size, level of detail or
-    ``all_points``, ``one_side_hole``: :func:`pair_mask`) and build the mask."""
+    ``all_points``, ``one_side_hole``: :func:`pair_mask`) in ``colour`` (the pair's RGB, intensity
+    or elevation: siteline.render.colour) and build the mask."""
     settings = params.render_settings()
     out = []
     read = 0
-    for tiles in (pair.t1, pair.t2):
+    source = colour.attribute
+    for side, tiles in ((1, pair.t1), (2, pair.t2)):
         pts = tiles.points_for_view(
             camera,
             params.scale,
-            attributes=("rgb", "change"),
+            attributes=(source, "change") if source else ("change",),
             lod_factor=params.lod_factor,
             point_size_px=params.point_size_px,
             level=None if params.all_points else "auto",
         )
         read += pts.stats.points_read
         xyz = pts.xyz_m.astype(np.float32)  # site-local: float32 keeps millimetres here
-        out.append(render_points(xyz, camera, settings, pts.attributes, device=device))
+        values = pts.attributes.pop(source) if source else None
+        attrs = pts.attributes | {"rgb": colour.colours(side, pts.xyz_m, values)}
+        out.append(render_points(xyz, camera, settings, attrs, device=device))
     ra, rb = out
     mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole)
     n_valid = int((mask != MASK_IGNORE).sum())

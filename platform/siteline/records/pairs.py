@@ -4,7 +4,7 @@ outputs live (DESIGN.md §4-§6)."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any, NamedTuple
 
 
@@ -59,7 +59,9 @@ class PairOutput:
     """A processed pair's outputs in the store at ``root``: the scenes (t1, t2 ids), the change radius
     (metres), the rendered views in index order, the 3D label record (store address, counts,
     checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
-    label sets and tilings) and the pair parameters (their JSON form)."""
+    label sets and tilings), the pair parameters (their JSON form), the colour the images show
+    (siteline.render.colour.ColourPlan's JSON form; outputs made before it: RGB) and the fence views
+    were judged against (the site's, or a scene's footprint)."""
 
     pair_id: int
     t1: int
@@ -71,6 +73,8 @@ class PairOutput:
     versions: PairVersions
     digest: str
     params: dict[str, Any]
+    colour: dict[str, Any] = field(default_factory=lambda: {"source": "rgb"})
+    fence: str = "site fence"
 
     @property
     def view_count(self) -> int:

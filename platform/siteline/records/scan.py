@@ -6,13 +6,40 @@ import hashlib
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 # how a scan names a file's colour, and whether it is 0-255 in 16-bit fields
 COLOUR_NAMES = {True: "rgb 8-bit stored in 16-bit fields", False: "rgb 16-bit"}
 EIGHT_BIT = {name: eight for eight, name in COLOUR_NAMES.items()}
+# the percentiles a scene's intensity and elevation are stretched between when rendered as colour
+STRETCH_PERCENTILES = (2.0, 98.0)
+RgbContent = Literal["varies", "constant", "absent"]
+
+
+@dataclass(frozen=True)
+class ColourStats:
+    """Whether a scene's RGB carries information ("varies"; "constant": every point the same colour,
+    all-zero included; "absent": the point format has none), and the 2nd-98th percentile stretches
+    of its intensity (None when constant) and of its site-local z (metres), from the scan's sample."""
+
+    rgb: RgbContent
+    intensity_range: tuple[float, float] | None
+    z_range_m: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rgb": self.rgb,
+            "intensity_range": list(self.intensity_range) if self.intensity_range else None,
+            "z_range_m": list(self.z_range_m),
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> ColourStats:
+        ir = doc.get("intensity_range")
+        z = doc["z_range_m"]
+        return cls(doc["rgb"], (float(ir[0]), float(ir[1])) if ir else None, (float(z[0]), float(z[1])))
 
 
 @dataclass(frozen=True)
@@ -20,8 +47,12 @@ class LasScan:
     """What one pass over a LAS/LAZ file found. path: the file (relative to its mission once
     ingested). Bounds are site-local metres (float64). class_histogram: points per site class name;
     unknown_codes: points per file code the taxonomy lacks. outside_fence: points made ``ignore`` by
-    the fence. z_unit: the unit of the file's z and its source (siteline.crs.ZUnit). stable_sample:
-    (N, 3) float64 site-local points of stable classes for the alignment check (never persisted)."""
+    the fence. z_unit: the unit of the file's z and its source (siteline.crs.ZUnit). colour_stats:
+    what the colour and intensity hold (None: scanned before it was recorded). footprint: the
+    outline of the points (a fence ring, site-local metres; siteline.fence.footprint), or None.
+    stable_sample: (N, 3) float64 site-local points of stable classes for the alignment check;
+    survey_sample: (N, 4) x, y, z (site-local) and intensity of every k-th point of the file (both
+    never persisted)."""
 
     path: str
     source_crs: str
@@ -41,7 +72,10 @@ class LasScan:
     gps_time_range: list[float] | None
     z_unit: dict[str, Any]
     creation_date: str | None
+    colour_stats: ColourStats | None = None
+    footprint: list[list[float]] | None = None
     stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
+    survey_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def content_seed(self) -> int:
         """A seed that depends on the cloud's content only (point count, GPS times, classes, bounds in
@@ -66,14 +100,20 @@ class LasScan:
         return replace(self, path=path)
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON form (the stable sample is left out)."""
-        doc = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "stable_sample"}
+        """The JSON form (the samples are left out)."""
+        doc = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in _SAMPLES}
         doc["unknown_codes"] = {str(k): v for k, v in self.unknown_codes.items()}
+        doc["colour_stats"] = self.colour_stats.to_dict() if self.colour_stats else None
         return doc
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> LasScan:
-        names = {f.name for f in fields(cls)} - {"stable_sample"}
+        names = {f.name for f in fields(cls)} - _SAMPLES
         values = {k: v for k, v in doc.items() if k in names}
         values["unknown_codes"] = {int(k): int(v) for k, v in doc.get("unknown_codes", {}).items()}
+        stats = doc.get("colour_stats")
+        values["colour_stats"] = ColourStats.from_dict(stats) if stats else None
         return cls(**values)
+
+
+_SAMPLES = frozenset({"stable_sample", "survey_sample"})

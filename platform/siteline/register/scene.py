@@ -15,6 +15,7 @@ from siteline.photos import PhotoMeta
 from siteline.records.enums import CameraSource
 from siteline.register.georegister import georegister
 from siteline.register.icp import point_to_plane_icp
+from siteline.register.planned import SurveyPlan, plan_cameras
 from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
 from siteline.site import SiteSpec
 
@@ -56,6 +57,34 @@ def register_cameras(
     if models:
         record["camera_models"] = models  # the DewarpData distortion each undistorted camera came from
     return cams, record, "xmp"
+
+
+def planned_cameras(
+    sample: np.ndarray,
+    footprint: list[list[float]] | None,
+    spec: SiteSpec,
+    survey: SurveyPlan,
+    photos: int,
+) -> tuple[dict[str, Camera], dict[str, Any], CameraSource]:
+    """Cameras planned over the site's fence, or the scene's footprint when the site has none, from
+    the scene's (N, 3+) site-local sample; the registration record says how (``photos``: how many
+    photos the mission had, which the planned cameras replace)."""
+    if spec.fence is not None:
+        area, where = [(float(x), float(y)) for x, y in spec.fence], "site fence"
+    elif footprint is not None:
+        area, where = [(float(x), float(y)) for x, y in footprint], "scene footprint"
+    else:
+        raise RegistrationError(
+            "planned cameras: the point cloud spans no area (its points lie on a line or a point) and "
+            "the site has no fence."
+        )
+    cams = plan_cameras(sample[:, :3], area, survey)
+    record: dict[str, Any] = {
+        "source": "planned", "images": len(cams), "over": where, "survey": survey.to_dict(),
+        "note": "cameras planned from the point cloud" + (f" ({photos} photos not used)" if photos else
+                                                          " (LiDAR-only mission: no photos)"),
+    }  # fmt: skip
+    return cams, record, "planned"
 
 
 def check_alignment(

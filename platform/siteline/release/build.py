@@ -28,6 +28,9 @@ from siteline.release.splits import split_pairs
 from siteline.stores import join, open_store, publish_folder
 
 log = logging.getLogger(__name__)
+# an A or B image with fewer non-black pixels than this share of its pixels is blank: its points carry
+# no colour (all-zero RGB, a constant intensity), and such a release is refused at build
+BLANK_SHARE = 0.01
 
 
 def read_png(uri: str) -> np.ndarray:
@@ -35,12 +38,33 @@ def read_png(uri: str) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(open_store(uri).read_bytes(uri))))
 
 
+def blank_sides(a: np.ndarray, b: np.ndarray) -> list[str]:
+    """Which of a view's (H, W, 3) uint8 A and B images are blank (under BLANK_SHARE non-black)."""
+    return [side for side, img in (("A", a), ("B", b)) if img.any(axis=-1).mean() < BLANK_SHARE]
+
+
+def _refuse_blank(blank: Mapping[int, int], outputs: Mapping[int, PairOutput]) -> None:
+    """:class:`ReleaseError` naming the pairs with blank A or B images (pair id -> views)."""
+    if blank:
+        worst = ", ".join(
+            f"pair {pid}: {n} of {len(outputs[pid].views)} views (colour from {outputs[pid].colour['source']})"
+            for pid, n in sorted(blank.items())
+        )
+        raise ReleaseError(
+            f"blank images: an A or B image with under {BLANK_SHARE:.0%} non-black pixels ({worst}); the "
+            "points carry no colour there. Build with --colour intensity or --colour elevation (or auto, "
+            "which takes them when a scene has no RGB). Nothing was written."
+        )
+
+
 def _write_items(
     plan: ReleasePlan, outputs: Mapping[int, PairOutput], split_of: Mapping[int, str], work: Path,
     progress: Progress,
 ) -> list[ReleaseItem]:  # fmt: skip
-    """Every view of every pair as a release item: its five images in ``work/<split>/<folder>/``."""
+    """Every view of every pair as a release item: its five images in ``work/<split>/<folder>/``;
+    :class:`ReleaseError` when any A or B image is blank (the caller's draft folder is then dropped)."""
     items = []
+    blank: dict[int, int] = {}
     pad = plan.params.pad
     total = sum(len(o.views) for o in outputs.values())
     for pid in sorted(outputs):
@@ -49,6 +73,8 @@ def _write_items(
             item_id = f"{plan.site_name}_p{pid:04d}_v{v.index:04d}"
             split = split_of[pid]
             rendered = {sub: read_png(join(out.root, sub, v.file)) for sub in ("A", "B", "label")}
+            if blank_sides(rendered["A"], rendered["B"]):
+                blank[pid] = blank.get(pid, 0) + 1
             arrays = layout.item_images(rendered["A"], rendered["B"], rendered["label"], pad)
             for sub, arr in arrays.items():
                 dest = work / split / sub / f"{item_id}.png"
@@ -63,6 +89,7 @@ def _write_items(
                 )
             )  # fmt: skip
             progress("release images", 1, total)
+    _refuse_blank(blank, outputs)
     return items
 
 
@@ -70,7 +97,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
     params = plan.params
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
-         "labels": o.labels}
+         "labels": o.labels, "colour_source": o.colour["source"], "colour": o.colour, "fence": o.fence}
         for o in (outputs[pid] for pid in sorted(outputs))
     ]  # fmt: skip
     return {

@@ -24,6 +24,8 @@ from siteline.release.params import ReleaseParams
 
 AUTO = "auto"
 AUTO_KNOBS = ("scale", "point_size_px")
+# knobs for which "auto" is a value of their own, resolved later (colour: siteline.render.colour)
+VALUE_AUTO_KNOBS = ("colour",)
 TARGET_LONG_SIDE_PX = 512
 MIN_IMAGE_PX = 256
 _PAIR_KNOBS = tuple(f.name for f in fields(PairParams) if f.name != "sampler")
@@ -46,11 +48,13 @@ class ReleaseKnobs:
         unknown = sorted(set(self.pair) - set(_PAIR_KNOBS))
         if unknown:
             raise ReleaseError(f"release settings: unknown knob(s) {unknown}; known: {sorted(_PAIR_KNOBS)}.")
-        bad_auto = sorted(k for k, v in self.pair.items() if v == AUTO and k not in AUTO_KNOBS)
+        bad_auto = sorted(
+            k for k, v in self.pair.items() if v == AUTO and k not in AUTO_KNOBS + VALUE_AUTO_KNOBS
+        )
         if bad_auto:
             raise ReleaseError(f"release settings: only {', '.join(AUTO_KNOBS)} may be 'auto', not {bad_auto}.")
         try:  # each value checked by the spec that owns it
-            PairParams.from_dict({k: v for k, v in self.pair.items() if v != AUTO})
+            PairParams.from_dict({k: v for k, v in self.pair.items() if v != AUTO or k in VALUE_AUTO_KNOBS})
         except SitelineError as exc:
             raise ReleaseError(f"release settings: {exc}") from exc
         if self.pad is not None and not isinstance(self.pad, bool):
@@ -147,7 +151,7 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
             auto -= set(PRESETS[layer.preset])
             preset = layer.preset
         for name, value in layer.pair.items():
-            if value == AUTO:
+            if value == AUTO and name in AUTO_KNOBS:
                 auto.add(name)
             else:
                 doc[name] = value
@@ -182,3 +186,44 @@ def check_image_size(params: ReleaseParams, survey: SiteSurvey, what: str) -> No
             f"{cam.width} x {cam.height} px cameras){hint}, under the {floor} px floor: use --scale {need:g} or "
             "more, or lower --min-image-px knowingly. Nothing was written."
         )
+
+
+def expected_coverage(spacing_px: float, point_size_px: int) -> float:
+    """The share of a surface's pixels that points at a mean spacing of ``spacing_px`` pixels, drawn as
+    ``point_size_px`` disks, cover when they fall at random (1 - exp(-disk area / spacing_px**2)): a
+    lower bound for scanned surfaces, which are more even than random."""
+    from siteline.render.zbuffer import disk_offsets
+
+    area = len(disk_offsets(point_size_px))
+    return 1.0 - math.exp(-area / max(spacing_px, 1e-9) ** 2)
+
+
+def check_coverage(params: ReleaseParams, survey: SiteSurvey, what: str) -> None:
+    """Refuse ``what`` before any view is made when even the camera seeing the sparsest scene's
+    points closest together (nearest pixel spacing, from its height above that scene's ground)
+    would cover less than ``min_coverage`` of a surface at this scale and point size (every view
+    would be rejected after minutes), naming a scale and a point size that would do."""
+    pair = params.pair
+    if not survey.cameras or not survey.min_density_pts_m2:
+        return
+    spacing_m = 1.0 / math.sqrt(survey.min_density_pts_m2)
+    spacing_px = min(spacing_m * c.fx * pair.scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras)
+    got = expected_coverage(spacing_px, pair.point_size_px)
+    if got >= pair.min_coverage:
+        return
+    sizes = [p for p in range(1, 16, 2) if expected_coverage(spacing_px, p) >= pair.min_coverage]
+    need = -math.log(1.0 - min(pair.min_coverage, 0.999))  # disk area / spacing_px**2 needed
+    from siteline.render.zbuffer import disk_offsets
+
+    scale = math.floor(1000 * pair.scale * math.sqrt(len(disk_offsets(pair.point_size_px)) / need) / spacing_px) / 1000
+    long_side = min(max(c.width, c.height) for c in survey.cameras)
+    fixes = [f"--scale {scale:g} or less"] if scale * long_side >= params.min_image_px else []
+    if sizes:
+        fixes.append(f"--point-size {sizes[0]}")
+    raise ReleaseError(
+        f"{what}: at scale {pair.scale:g} with {pair.point_size_px} px points, the sparsest scene's points "
+        f"({survey.min_density_pts_m2:.3g} points/m2, {spacing_m:.2f} m apart) lie {spacing_px:.1f} px apart "
+        f"even for the nearest camera, and would cover about {got:.0%} of a surface: every view would "
+        f"fall under --min-coverage {pair.min_coverage:g}. Use {' or '.join(fixes + ['--scale auto --point-size auto'])}. "
+        "Nothing was made."
+    )

@@ -26,7 +26,7 @@ from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.pairs.plan import PairPlan, plan_pair
 from siteline.release import layout
-from siteline.release.knobs import ReleaseKnobs, check_image_size, resolve
+from siteline.release.knobs import ReleaseKnobs, check_coverage, check_image_size, resolve
 from siteline.release.params import ReleaseParams
 from siteline.stores import layout as paths
 
@@ -229,6 +229,7 @@ def release_params(session: Session, site_name: str, knobs: ReleaseKnobs | None,
     survey = site_survey(session, site)
     params = resolve([stored, knobs or ReleaseKnobs()], survey)
     check_image_size(params, survey, what)
+    check_coverage(params, survey, what)
     return params
 
 

@@ -1,0 +1,138 @@
+"""Cameras planned from a point cloud when a mission has no photos: a nadir survey grid over the
+scene's area at a stated height above its ground, with oblique passes around its edge, in the
+intrinsics of a named capture camera. Pure functions of a site-local sample of the scene's points (no randomness): the same cloud
+and settings give the same cameras at any origin magnitude (poses are snapped to the pose quanta)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import shapely
+
+from siteline.camera_models import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, CameraModel
+from siteline.cameras import Camera
+from siteline.errors import RegistrationError
+from siteline.tolerances import POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM
+
+# a camera is planned only over data: at least this many sample points under its image's centre area
+MIN_POINTS_UNDER = 20
+
+
+@dataclass(frozen=True)
+class SurveyPlan:
+    """How planned cameras are laid out. altitude_m: above the ground under each camera (the 10th
+    percentile of the sample's z around it); forward_overlap / side_overlap: of consecutive images on
+    a line and of neighbouring lines (0-1); oblique_pitch_deg: downward tilt of the oblique cameras
+    looking into the area from around its edge (0: no oblique pass)."""
+
+    camera: CameraModel = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
+    altitude_m: float = 80.0
+    forward_overlap: float = 0.7
+    side_overlap: float = 0.6
+    oblique_pitch_deg: float = 45.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.altitude_m) and 5.0 <= self.altitude_m <= 1000.0):
+            raise RegistrationError(f"planned cameras: altitude {self.altitude_m} m must lie in [5, 1000].")
+        for name in ("forward_overlap", "side_overlap"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 0.95:
+                raise RegistrationError(f"planned cameras: {name} {v} must lie in [0, 0.95].")
+        if not 0.0 <= self.oblique_pitch_deg < 90.0:
+            raise RegistrationError(
+                f"planned cameras: oblique pitch {self.oblique_pitch_deg} must lie in [0, 90) degrees."
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "camera": self.camera.to_dict(), "altitude_m": self.altitude_m,
+            "forward_overlap": self.forward_overlap, "side_overlap": self.side_overlap,
+            "oblique_pitch_deg": self.oblique_pitch_deg,
+        }  # fmt: skip
+
+
+def _ground_z(sample: np.ndarray, xy: np.ndarray, radius_m: float) -> np.ndarray:
+    """(K,) ground height under each (K, 2) position: the 10th percentile of the sample's z within
+    ``radius_m`` (NaN where fewer than MIN_POINTS_UNDER sample points lie there)."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(sample[:, :2])
+    out = np.full(len(xy), np.nan)
+    for k, near in enumerate(tree.query_ball_point(xy, radius_m)):
+        if len(near) >= MIN_POINTS_UNDER:
+            out[k] = float(np.percentile(sample[near, 2], 10))
+    return out
+
+
+def _snapped(cam: Camera) -> Camera:
+    return cam.snapped(POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM)
+
+
+def _nadir(model: CameraModel, center: np.ndarray) -> Camera:
+    # looking straight down, image up to +y (north): image width along x, across the north-south lines
+    target = center - np.array([0.0, 0.0, 1.0])
+    return Camera.look_at(center, target, model.width, model.height, model.fx, model.fy, model.cx, model.cy)
+
+
+def plan_cameras(
+    sample: np.ndarray, area: list[tuple[float, float]], plan: SurveyPlan
+) -> dict[str, Camera]:
+    """Survey cameras over ``area`` (a fence ring, site-local metres) from a (N, 3) site-local sample
+    of the scene: north-south lines of nadir images at ``plan.altitude_m`` above the local ground,
+    spaced by the image footprint less the overlaps, kept where the image's centre area holds data,
+    and an oblique camera at every other line position around the area's edge looking inward at
+    ``plan.oblique_pitch_deg`` below the horizontal. Names: ``planned-nadir-NNNN``,
+    ``planned-oblique-NNNN``. :class:`RegistrationError` when no camera lies over data."""
+    pts = np.asarray(sample, dtype=np.float64)
+    model, h = plan.camera, plan.altitude_m
+    across, along = model.ground_footprint_m(h)  # image width along x, height along y
+    dx, dy = across * (1.0 - plan.side_overlap), along * (1.0 - plan.forward_overlap)
+    poly = shapely.Polygon(area)
+    x0, y0, x1, y1 = poly.bounds
+    xs = x0 + dx / 2.0 + dx * np.arange(max(1, math.ceil((x1 - x0) / dx)))
+    ys = y0 + dy / 2.0 + dy * np.arange(max(1, math.ceil((y1 - y0) / dy)))
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    xy = np.c_[gx.ravel(), gy.ravel()]
+    xy = xy[shapely.intersects_xy(poly.buffer(min(dx, dy) / 2.0), xy[:, 0], xy[:, 1])]
+    cams: dict[str, Camera] = {}
+    if len(pts) and len(xy):
+        ground = _ground_z(pts, xy, min(dx, dy) / 2.0)
+        for k in np.flatnonzero(np.isfinite(ground)):
+            centre = np.array([xy[k, 0], xy[k, 1], ground[k] + h])
+            cams[f"planned-nadir-{len(cams) + 1:04d}"] = _snapped(_nadir(model, centre))
+    if not cams:
+        raise RegistrationError(
+            f"planned cameras: no survey position over the scene's data at {h:g} m (the area spans "
+            f"{x1 - x0:.0f} x {y1 - y0:.0f} m); is the fence over the point cloud?"
+        )
+    if plan.oblique_pitch_deg > 0:
+        cams |= _obliques(pts, poly, plan, 2.0 * min(dx, dy))
+    return cams
+
+
+def _obliques(pts: np.ndarray, poly: shapely.Polygon, plan: SurveyPlan, step_m: float) -> dict[str, Camera]:
+    """Oblique cameras every ``step_m`` along the area's edge, each standing back from the edge so
+    that it looks at the edge point at ``plan.oblique_pitch_deg``, aimed inward."""
+    model, h = plan.camera, plan.altitude_m
+    pitch = math.radians(plan.oblique_pitch_deg)
+    back = h / math.tan(pitch)
+    edge = poly.exterior
+    stations = np.arange(0.0, edge.length, step_m)
+    at = np.asarray(shapely.get_coordinates(edge.interpolate(stations)))
+    centre = np.asarray(poly.representative_point().coords[0])
+    ground = _ground_z(pts, at, step_m)
+    out: dict[str, Camera] = {}
+    for k in np.flatnonzero(np.isfinite(ground)):
+        inward = centre - at[k]
+        norm = float(np.hypot(*inward))
+        if norm < 1e-6:
+            continue
+        inward /= norm
+        eye = np.r_[at[k] - inward * back, ground[k] + h]
+        target = np.r_[at[k], ground[k]]
+        cam = Camera.look_at(eye, target, model.width, model.height, model.fx, model.fy, model.cx, model.cy)
+        out[f"planned-oblique-{len(out) + 1:04d}"] = _snapped(cam)
+    return out
