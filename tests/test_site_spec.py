@@ -133,3 +133,21 @@ def test_bad_site_name() -> None:
 def test_site_from_crs_refuses_float32() -> None:
     with pytest.raises(GeometryError, match="float64"):
         site_from_crs(np.zeros((2, 3), np.float32), (0, 0, 0))
+
+
+def test_footprint_follows_the_data() -> None:
+    """A scene's footprint is a fence ring around an L-shaped cloud that leaves the notch out."""
+    import numpy as np
+    import shapely
+
+    from siteline.fence import footprint, inside_fence
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 100, (20_000, 2))
+    pts = pts[~((pts[:, 0] > 50) & (pts[:, 1] > 50))]  # an L: the north-east quarter is empty
+    ring = footprint(pts)
+    assert ring is not None and shapely.Polygon(ring).is_valid
+    assert inside_fence(np.array([[25.0, 25.0], [25.0, 75.0], [75.0, 25.0]]), ring).all()
+    assert not inside_fence(np.array([[85.0, 85.0]]), ring).any()
+    assert 6_500 < shapely.Polygon(ring).area < 7_800  # the L is 7,500 m2
+    assert footprint(np.zeros((10, 2))) is None  # no area

@@ -75,3 +75,34 @@ def test_stratified_order_prefixes_are_the_samples(n) -> None:
     order = stratified_order(views, seed=3)
     assert len(order) == 30 and len({id(v) for v in order}) == 30
     assert stratified_sample(views, n, seed=3) == key_sorted(order[:n], seed=3)
+
+
+def test_a_prefetched_batch_serves_each_probe_the_points_of_its_own_read(scenes) -> None:
+    """A parent camera's probes read together give each probe exactly the points (as a set) that its
+    own read gives, and read fewer points in all than one read per probe."""
+    _, cat = scenes
+    tiles, cams, _, _ = _inputs(cat)
+    probes = [c.camera for c in cams[:6]]
+    single, batched = TilePointSource(tiles, SKIP), TilePointSource(tiles, SKIP)
+    own = [single.points_for_view(c, PARAMS.scale) for c in probes]
+    batched.prefetch(probes, PARAMS.scale)
+    got = [batched.points_for_view(c, PARAMS.scale) for c in probes]
+    for mine, theirs in zip(own, got, strict=True):
+        assert len(mine) and np.array_equal(np.unique(mine, axis=0), np.unique(theirs, axis=0))
+    assert batched.reads == 1 and batched.points_read < single.points_read
+
+
+def test_coverage_of_equals_the_renders_coverage() -> None:
+    from siteline.cameras import Camera
+    from siteline.render.settings import RenderSettings
+    from siteline.render.zbuffer import coverage_of, render_points
+
+    rng = np.random.default_rng(0)
+    for k in range(60):
+        xyz = rng.normal(0, 10, (int(rng.integers(0, 3000)), 3)).astype(np.float32)
+        if len(xyz) and k % 5 == 0:
+            xyz[0] = np.nan
+        w, h = (int(v) for v in rng.integers(20, 160, 2))
+        cam = Camera.look_at(rng.normal(0, 5, 3) + [0, 0, 40], [0, 0, 0], w, h, float(rng.uniform(20, 200)))
+        s = RenderSettings(scale=float(rng.choice([0.37, 0.5, 1.0])), point_size_px=int(rng.choice([1, 3, 5, 7])))
+        assert coverage_of(xyz, cam, s) == render_points(xyz, cam, s).coverage

@@ -119,6 +119,24 @@ def _layout_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
     ]
 
 
+def _camera_lines(lin: dict[str, Any]) -> list[str]:
+    """Where each scene's cameras came from, and each pair's colour and fence."""
+    sources = {s["id"]: (s.get("registration") or {}).get("source", "unknown") for s in lin["scenes"]}
+    lines = ["- cameras: " + ", ".join(f"scene {sid} {src}" for sid, src in sorted(sources.items()))]
+    if "planned" in sources.values():
+        lines.append(
+            "  (planned: no photos, so siteline planned survey cameras from the point cloud; views derive from "
+            "them as from photo cameras)"
+        )
+    lines += [
+        f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
+        + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")
+        + f", views judged against the {q.get('fence', 'site fence')}"
+        for q in lin["pairs"]
+    ]
+    return lines
+
+
 def _source_lines(lin: dict[str, Any]) -> list[str]:
     p = lin["parameters"]
     radius = (
@@ -136,6 +154,7 @@ def _source_lines(lin: dict[str, Any]) -> list[str]:
         ),
         "- pairs: "
         + ", ".join(f"{q['id']} ({q['t1']}->{q['t2']}, r={q['radius_m']:.3f} m)" for q in lin["pairs"]),
+        *_camera_lines(lin),
         "",
         "## Parameters",
         "",

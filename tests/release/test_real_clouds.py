@@ -1,0 +1,131 @@
+"""Real public point clouds (tests/data/real) from a bare LAS/LAZ to a published release, through the
+installed ``siteline`` executable as a user runs it: no photos (cameras planned from the cloud), no
+fence (the scene's footprint), ASPRS 1/2 classes, a feet CRS in WKT, a cloud with RGB and one
+without (intensity), and infeasible settings refused in seconds."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+from realdata import AUTZEN, TOPOGRAPHY, centre_xy, later_epoch
+
+EXE = Path(sys.executable).parent / "siteline"
+pytestmark = pytest.mark.e2e
+
+
+def _run(home: Path, *argv: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    env = os.environ | {"SITELINE_HOME": str(home)}
+    for name in ("SITELINE_DATABASE_URL", "SITELINE_STORE_URL", "PREFECT_API_URL"):
+        env.pop(name, None)
+    return subprocess.run([str(EXE), *argv], capture_output=True, text=True, env=env, timeout=timeout)
+
+
+def _ok(home: Path, *argv: str) -> str:
+    r = _run(home, *argv)
+    assert r.returncode == 0, f"siteline {' '.join(argv)}: exit {r.returncode}\n{r.stdout}\n{r.stderr}"
+    return r.stdout
+
+
+def _site(tmp: Path, name: str, src: Path, crs: str, origin: tuple[float, float, float], change: dict) -> Path:
+    """A home with a site of ``src`` and a later epoch of it with ``change`` planted, both ingested
+    as bare files (no photos, no fence)."""
+    home = tmp / "home"
+    later = later_epoch(src, tmp / f"{src.stem}_later.laz", **change)
+    _ok(home, "init")
+    _ok(home, "site", "create", name, "--crs", crs, "--origin", *map(str, origin))
+    _ok(home, "ingest", str(src), "--site", name)
+    _ok(home, "ingest", str(later), "--site", name)
+    return home
+
+
+def _images(root: Path, side: str) -> list[np.ndarray]:
+    return [np.asarray(Image.open(p).convert("RGB")) for p in sorted(root.glob(f"*/{side}/*.png"))]
+
+
+@pytest.fixture(scope="module")
+def autzen(tmp_path_factory) -> Path:
+    c = centre_xy(AUTZEN)  # feet
+    change = {"removed_box": (c[0] - 250, c[1] - 100, c[0] - 150, c[1]),
+              "built_box": (c[0] + 100, c[1] - 50, c[0] + 180, c[1] + 30, 20.0)}  # fmt: skip
+    return _site(tmp_path_factory.mktemp("autzen"), "autzen", AUTZEN, "EPSG:32610", (493000, 4878000, 130), change)
+
+
+def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
+    scene = json.loads(_ok(autzen, "scene", "show", "1", "--json"))
+    assert scene["registration"]["source"] == "planned" and scene["cameras"] > 20
+    assert scene["z_unit"]["name"] == "foot"  # the WKT's unit, converted to metres
+    assert scene["class_histogram"].get("ignore", 0) == 0  # ASPRS 1 is unclassified, not ignore
+    assert scene["class_histogram"]["unclassified"] == 83_893
+    _ok(autzen, "release", "build", "--site", "autzen", "--name", "autzen-cd", "--views", "24")
+    _ok(autzen, "release", "publish", "autzen-cd", "1.0.0")
+    _ok(autzen, "release", "verify", "autzen-cd", "1.0.0")
+    root = autzen / "releases" / "autzen-cd" / "1.0.0"
+    manifest = json.loads((root / "manifest.json").read_text())
+    (pair,) = manifest["lineage"]["pairs"]
+    assert pair["colour_source"] == "rgb" and pair["fence"] == "footprint of scene 2"
+    assert {s["registration"]["source"] for s in manifest["lineage"]["scenes"]} == {"planned"}
+    items = manifest["items"]
+    assert len(items) >= 20 and all(it["valid"] >= 0.25 for it in items)
+    a, b = _images(root, "A"), _images(root, "B")
+    assert len(a) == len(b) == len(items)
+    assert min(img.any(axis=-1).mean() for img in a + b) > 0.2  # no blank image
+    assert max(it["change_ratio"] for it in items) > 0.01  # the planted structure is seen
+    assert "planned" in (root / "README.md").read_text()
+
+
+def test_infeasible_settings_are_refused_before_any_view(autzen) -> None:
+    t0 = time.perf_counter()
+    r = _run(autzen, "release", "build", "--site", "autzen", "--name", "paper", "--scale", "0.125", "--point-size", "1")
+    took = time.perf_counter() - t0
+    assert r.returncode == 2 and took < 10.0, (r.returncode, took, r.stderr)
+    assert "--point-size 5" in r.stderr and "min-coverage" in r.stderr
+    assert not (autzen / "releases" / "paper").exists()
+
+
+def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
+    c = centre_xy(TOPOGRAPHY)
+    change = {"removed_box": (c[0] - 60, c[1] - 60, c[0] - 20, c[1] - 20),
+              "built_box": (c[0] + 30, c[1] + 30, c[0] + 70, c[1] + 60, 8.0), "days": 400}  # fmt: skip
+    home = _site(tmp_path, "topo", TOPOGRAPHY, "EPSG:2949", (273500, 5274500, 800), change)
+    scene = json.loads(_ok(home, "scene", "show", "1", "--json"))
+    assert scene["colour"] == "none"
+    r = _run(home, "release", "build", "--site", "topo", "--name", "rgb", "--colour", "rgb", "--views", "8")
+    assert r.returncode == 2 and "carry no colour" in r.stderr
+    _ok(home, "release", "build", "--site", "topo", "--name", "topo-cd", "--views", "16")
+    root = home / "releases" / "topo-cd" / ".drafts" / "1.0.0"
+    (pair,) = json.loads((root / "manifest.json").read_text())["lineage"]["pairs"]
+    assert pair["colour"]["source"] == "intensity" and pair["colour"]["stretch_t1"][1] > 1000
+    a = _images(root, "A")
+    assert a and min(img.any(axis=-1).mean() for img in a) > 0.2
+    grey = np.concatenate([img.reshape(-1, 3) for img in a])
+    assert np.array_equal(grey[:, 0], grey[:, 1])  # intensity is grey
+
+
+def test_black_colour_is_refused_at_build_never_published(tmp_path) -> None:
+    """RGB that varies in one point only (the rest black) passes the scan's check, so auto takes RGB;
+    the build then finds every image blank and refuses, naming the fix, with nothing written."""
+    import laspy
+
+    src = tmp_path / "black.laz"
+    las = laspy.read(AUTZEN)
+    c = centre_xy(AUTZEN)
+    las.points = las.points[(np.abs(np.asarray(las.x) - c[0]) < 250) & (np.abs(np.asarray(las.y) - c[1]) < 200)]
+    for ch in ("red", "green", "blue"):
+        values = np.zeros(len(las.points), np.uint16)
+        values[0] = 255
+        setattr(las, ch, values)
+    las.write(src)
+    home = _site(tmp_path, "black", src, "EPSG:32610", (493000, 4878000, 130),
+                 {"built_box": (c[0] + 50, c[1] - 50, c[0] + 130, c[1] + 30, 20.0)})  # fmt: skip
+    r = _run(home, "release", "build", "--site", "black", "--name", "black-cd", "--views", "8")
+    assert r.returncode == 2 and "blank images" in r.stderr and "--colour intensity" in r.stderr
+    assert not (home / "releases" / "black-cd" / ".drafts" / "1.0.0").exists()
+    _ok(home, "release", "build", "--site", "black", "--name", "black-cd", "--views", "4", "--colour", "intensity")
