@@ -18,6 +18,7 @@ from PIL import Image
 from realdata import AUTZEN, TOPOGRAPHY, centre_xy, later_epoch
 
 EXE = Path(sys.executable).parent / "siteline"
+AUTZEN_DATES = ("2020-05-01T10:00:00Z", "2020-05-31T10:00:00Z")
 pytestmark = pytest.mark.e2e
 
 
@@ -34,15 +35,19 @@ def _ok(home: Path, *argv: str) -> str:
     return r.stdout
 
 
-def _site(tmp: Path, name: str, src: Path, crs: str, origin: tuple[float, float, float], change: dict) -> Path:
+def _site(
+    tmp: Path, name: str, src: Path, crs: str, origin: tuple[float, float, float], change: dict,
+    dates: tuple[str, str] | None = None, ingest: tuple[str, ...] = (),
+) -> Path:  # fmt: skip
     """A home with a site of ``src`` and a later epoch of it with ``change`` planted, both ingested
-    as bare files (no photos, no fence)."""
+    as bare files (no photos, no fence), dated by ``dates`` (--captured-at) when the files cannot
+    tell (GPS week seconds)."""
     home = tmp / "home"
     later = later_epoch(src, tmp / f"{src.stem}_later.laz", **change)
     _ok(home, "init")
     _ok(home, "site", "create", name, "--crs", crs, "--origin", *map(str, origin))
-    _ok(home, "ingest", str(src), "--site", name)
-    _ok(home, "ingest", str(later), "--site", name)
+    for path, when in zip((src, later), dates or (None, None), strict=True):
+        _ok(home, "ingest", str(path), "--site", name, *ingest, *(("--captured-at", when) if when else ()))
     return home
 
 
@@ -55,11 +60,26 @@ def autzen(tmp_path_factory) -> Path:
     c = centre_xy(AUTZEN)  # feet
     change = {"removed_box": (c[0] - 250, c[1] - 100, c[0] - 150, c[1]),
               "built_box": (c[0] + 100, c[1] - 50, c[0] + 180, c[1] + 30, 20.0)}  # fmt: skip
-    return _site(tmp_path_factory.mktemp("autzen"), "autzen", AUTZEN, "EPSG:32610", (493000, 4878000, 130), change)
+    # its GPS times are week seconds: the file cannot tell its date, so the test gives one
+    return _site(tmp_path_factory.mktemp("autzen"), "autzen", AUTZEN, "EPSG:32610", (493000, 4878000, 130), change,
+                 dates=AUTZEN_DATES)  # fmt: skip
+
+
+def test_a_file_that_cannot_tell_its_date_is_refused(autzen, tmp_path) -> None:
+    """autzen's GPS times are seconds of an unnamed week: no date without --captured-at (its header's
+    creation day is when the file was written), exit 2 naming the file; nothing is added."""
+    before = _ok(autzen, "scene", "list", "--site", "autzen", "--json")
+    copy = tmp_path / "again.laz"
+    later_epoch(AUTZEN, copy, days=90)
+    r = _run(autzen, "ingest", str(copy), "--site", "autzen")
+    assert r.returncode == 2 and "seconds of an unnamed GPS week" in r.stderr and "--captured-at" in r.stderr
+    assert "again.laz" in r.stderr
+    assert _ok(autzen, "scene", "list", "--site", "autzen", "--json") == before
 
 
 def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
     scene = json.loads(_ok(autzen, "scene", "show", "1", "--json"))
+    assert scene["capture_time_source"] == "given (--captured-at)"
     assert scene["registration"]["source"] == "planned" and scene["cameras"] > 20
     assert scene["z_unit"]["name"] == "foot"  # the WKT's unit, converted to metres
     assert scene["class_histogram"].get("ignore", 0) == 0  # ASPRS 1 is unclassified, not ignore
@@ -94,9 +114,15 @@ def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
     c = centre_xy(TOPOGRAPHY)
     change = {"removed_box": (c[0] - 60, c[1] - 60, c[0] - 20, c[1] - 20),
               "built_box": (c[0] + 30, c[1] + 30, c[0] + 70, c[1] + 60, 8.0), "days": 400}  # fmt: skip
-    home = _site(tmp_path, "topo", TOPOGRAPHY, "EPSG:2949", (273500, 5274500, 800), change)
+    home = _site(tmp_path, "topo", TOPOGRAPHY, "EPSG:2949", (273500, 5274500, 800), change,
+                 ingest=("--overlap", "0.5", "0.3", "--altitude", "100"))  # fewer planned cameras  # fmt: skip
     scene = json.loads(_ok(home, "scene", "show", "1", "--json"))
     assert scene["colour"] == "none"
+    # adjusted standard GPS time: the date is the file's, less the 18 leap seconds of 2018
+    assert scene["capture_time"].startswith("2018-09-07T14:56:02.8")
+    assert scene["capture_time_source"] == "las gps time (adjusted standard)"
+    survey = scene["registration"]["survey"]
+    assert (survey["forward_overlap"], survey["side_overlap"], survey["altitude_m"]) == (0.5, 0.3, 100.0)
     r = _run(home, "release", "build", "--site", "topo", "--name", "rgb", "--colour", "rgb", "--views", "8")
     assert r.returncode == 2 and "carry no colour" in r.stderr
     _ok(home, "release", "build", "--site", "topo", "--name", "topo-cd", "--views", "16")
@@ -124,7 +150,7 @@ def test_black_colour_is_refused_at_build_never_published(tmp_path) -> None:
         setattr(las, ch, values)
     las.write(src)
     home = _site(tmp_path, "black", src, "EPSG:32610", (493000, 4878000, 130),
-                 {"built_box": (c[0] + 50, c[1] - 50, c[0] + 130, c[1] + 30, 20.0)})  # fmt: skip
+                 {"built_box": (c[0] + 50, c[1] - 50, c[0] + 130, c[1] + 30, 20.0)}, AUTZEN_DATES)  # fmt: skip
     r = _run(home, "release", "build", "--site", "black", "--name", "black-cd", "--views", "8")
     assert r.returncode == 2 and "blank images" in r.stderr and "--colour intensity" in r.stderr
     assert not (home / "releases" / "black-cd" / ".drafts" / "1.0.0").exists()

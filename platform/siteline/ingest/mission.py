@@ -15,8 +15,24 @@ from siteline.records.scan import LasScan
 
 PREFERRED_LAS = ("lidars/terra_las/cloud_merged.las", "lidars/terra_las/cloud_merged.laz")
 RAW_FOLDER = re.compile(r"^DJI_(\d{12})_\d{3}_")
-# GPS time runs ahead of UTC by the leap seconds since 1980
-GPS_UTC_OFFSET_S = 18
+GPS_EPOCH = datetime(1980, 1, 6, tzinfo=UTC)
+# GPS time runs ahead of UTC by the leap seconds since 1980: (UTC day from which it applies, seconds)
+LEAP_SECONDS = (
+    (date(1981, 7, 1), 1), (date(1982, 7, 1), 2), (date(1983, 7, 1), 3), (date(1985, 7, 1), 4),
+    (date(1988, 1, 1), 5), (date(1990, 1, 1), 6), (date(1991, 1, 1), 7), (date(1992, 7, 1), 8),
+    (date(1993, 7, 1), 9), (date(1994, 7, 1), 10), (date(1996, 1, 1), 11), (date(1997, 7, 1), 12),
+    (date(1999, 1, 1), 13), (date(2006, 1, 1), 14), (date(2009, 1, 1), 15), (date(2012, 7, 1), 16),
+    (date(2015, 7, 1), 17), (date(2017, 1, 1), 18),
+)  # fmt: skip
+# adjusted standard GPS time (LAS global encoding bit 0) is GPS seconds since the epoch less 1e9
+ADJUSTED_GPS_OFFSET_S = 1e9
+
+
+def gps_to_utc(gps_seconds: float) -> datetime:
+    """UTC of seconds since the GPS epoch (1980-01-06), less the leap seconds then in force."""
+    t = GPS_EPOCH + timedelta(seconds=gps_seconds)
+    leap = max((n for day, n in LEAP_SECONDS if t.date() >= day), default=0)
+    return t - timedelta(seconds=leap)
 
 
 def choose_las(entries: Sequence[FileEntry], root: Path) -> FileEntry:
@@ -66,8 +82,10 @@ def capture_time(
     given: datetime | None = None,
 ) -> tuple[datetime, str]:  # fmt: skip
     """(UTC capture time, where it came from): ``given`` (``--captured-at``) when given; else the
-    earliest photo time; else the raw folder's DJI_YYYYMMDDHHMM; else the LAS creation date and GPS
-    time."""
+    earliest photo time; else the raw folder's DJI_YYYYMMDDHHMM; else the LAS's earliest GPS time
+    when it is adjusted standard GPS time (absolute). A LAS whose GPS times are seconds of an unknown
+    week, or that has none, cannot tell: its header's creation day is when the file was written
+    (an export of a 2010 scan made in 2025), so the mission is refused, naming what the file holds."""
     if given is not None:
         return given.astimezone(UTC), "given (--captured-at)"
     times = [m.capture_time for m in photos.values() if m.capture_time is not None]
@@ -77,17 +95,17 @@ def capture_time(
         m = RAW_FOLDER.match(Path(e.path).parts[0])
         if m:
             return datetime.strptime(m.group(1), "%Y%m%d%H%M").replace(tzinfo=UTC), "raw folder name"
-    day = date.fromisoformat(scan.creation_date) if scan.creation_date else None
-    if day is None:
-        raise MissionError(
-            f"mission {root}: no photo time, no DJI raw folder name (DJI_YYYYMMDDHHMM_...) and no creation date "
-            f"in the header of {root / scan.path}: the capture time is unknown; give it with "
-            "--captured-at (ISO 8601, e.g. 2024-11-27T16:31:00Z)."
-        )
-    t = datetime(day.year, day.month, day.day, tzinfo=UTC)
-    if scan.gps_time_range is not None:
-        t += timedelta(seconds=(scan.gps_time_range[0] % 86400.0) - GPS_UTC_OFFSET_S)
-    return t, "las header"
+    if scan.gps_time_range is not None and scan.gps_time_standard:
+        return gps_to_utc(scan.gps_time_range[0] + ADJUSTED_GPS_OFFSET_S), "las gps time (adjusted standard)"
+    holds = (
+        "GPS times in seconds of an unnamed GPS week" if scan.gps_time_range is not None else "no GPS time"
+    )
+    made = f"; its header's creation day {scan.creation_date} is when the file was written" if scan.creation_date else ""
+    raise MissionError(
+        f"mission {root}: no photo time, no DJI raw folder name (DJI_YYYYMMDDHHMM_...) and {root / scan.path} "
+        f"holds {holds}{made}: the capture time is unknown and scenes are ordered by it; give it with "
+        "--captured-at (ISO 8601, e.g. 2024-11-27T16:31:00Z)."
+    )
 
 
 def mission_name(entries: Sequence[FileEntry], root: Path) -> str:

@@ -215,6 +215,7 @@ def _scan(
         gps_time_range=[t.tmin, t.tmax] if np.isfinite(t.tmin) else None,
         z_unit=z_unit_of(src, z_unit).to_dict(),
         creation_date=day.isoformat() if day is not None else None,
+        gps_time_standard=bool(int(header.global_encoding.gps_time_type)),
         colour_stats=t.colour_stats(survey),
         footprint=[list(v) for v in outline] if outline is not None else None,
         stable_sample=np.concatenate(t.samples) if t.samples else np.zeros((0, 3)),

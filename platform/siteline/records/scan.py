@@ -48,7 +48,9 @@ class LasScan:
     ingested). Bounds are site-local metres (float64). class_histogram: points per site class name;
     unknown_codes: points per file code the taxonomy lacks. outside_fence: points made ``ignore`` by
     the fence. z_unit: the unit of the file's z and its source (siteline.crs.ZUnit). colour_stats:
-    what the colour and intensity hold (None: scanned before it was recorded). footprint: the
+    what the colour and intensity hold (None: scanned before it was recorded). gps_time_standard:
+    whether the header's global encoding says GPS times are adjusted standard GPS time (absolute:
+    seconds since the GPS epoch less 1e9) rather than seconds of the GPS week. footprint: the
     outline of the points (a fence ring, site-local metres; siteline.fence.footprint), or None.
     stable_sample: (N, 3) float64 site-local points of stable classes for the alignment check;
     survey_sample: (N, 4) x, y, z (site-local) and intensity of every k-th point of the file (both
@@ -73,6 +75,7 @@ class LasScan:
     z_unit: dict[str, Any]
     creation_date: str | None
     colour_stats: ColourStats | None = None
+    gps_time_standard: bool | None = None
     footprint: list[list[float]] | None = None
     stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
     survey_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
