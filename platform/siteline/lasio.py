@@ -73,15 +73,57 @@ def check_header(header: laspy.LasHeader, path: Path) -> None:
             f"{MAX_SCALE:g} m per count, positive): {bad[0]:g} would collapse, mirror or coarsen the cloud."
         )
     if header.are_points_compressed:
+        check_laz_count(header, path)
         return
     size = Path(path).stat().st_size
     end = int(getattr(header, "start_of_first_evlr", 0) or 0) or size
     holds = (end - int(header.offset_to_point_data)) // int(header.point_format.size)
-    if holds > header.point_count:
+    if holds != header.point_count:
         raise PointCloudError(
             f"point cloud {path}: its header counts {header.point_count:,} points but the file holds {holds:,}: "
-            "the header is wrong (the rest would be dropped silently); rewrite the file with a LAS tool."
-        )
+            + ("the header is wrong (the rest would be dropped silently); rewrite the file with a LAS tool."
+               if holds > header.point_count else "the file is truncated (or its header forged).")
+        )  # fmt: skip
+
+
+def laz_chunk_counts(header: laspy.LasHeader, path: Path) -> tuple[list[int], bool]:
+    """The point counts of a LAZ file's chunks from its chunk table (lazrs), and whether they are exact:
+    a variable-size table records each chunk's count; a fixed-size one (laszip's default, 50,000) says
+    only that every chunk but the last is full. :class:`PointCloudError` when there is no table."""
+    import lazrs
+
+    vlr = next((v for v in header.vlrs if getattr(v, "record_id", None) == 22204), None)
+    if vlr is None:
+        raise PointCloudError(f"point cloud {path}: a compressed file without its laszip record.")
+    laz = lazrs.LazVlr(vlr.record_data)
+    try:
+        with open(path, "rb") as f:
+            f.seek(int(header.offset_to_point_data))
+            table = lazrs.read_chunk_table(f, laz)
+    except (lazrs.LazrsError, OSError, ValueError) as exc:
+        raise PointCloudError(f"point cloud {path}: its LAZ chunk table cannot be read ({exc}).") from exc
+    if table is None:
+        raise PointCloudError(f"point cloud {path}: its LAZ chunk table is missing (a truncated file?).")
+    return [int(n) for n, _ in table], bool(laz.uses_variable_size_chunks())
+
+
+def check_laz_count(header: laspy.LasHeader, path: Path) -> None:
+    """Refuse a LAZ whose header point count its chunk table contradicts: more points than its chunks
+    can hold (a forged count: nothing is allocated for it), or fewer than its full chunks hold (the
+    rest would be dropped silently). A fixed-size table cannot tell a count short by less than its
+    last chunk's points (pointwise LAZ does not record that chunk's count); a variable-size one is exact."""
+    counts, exact = laz_chunk_counts(header, path)
+    n = int(header.point_count)
+    low, high = (sum(counts), sum(counts)) if exact else (sum(counts[:-1]) + (1 if counts else 0), sum(counts))
+    if not counts and n == 0:
+        return
+    if not low <= n <= high:
+        holds = f"{low:,}" if low == high else f"{low:,} to {high:,}"
+        raise PointCloudError(
+            f"point cloud {path}: its header counts {n:,} points but its {len(counts)} LAZ chunks hold {holds}: "
+            + ("the header is wrong (points past its count would be dropped silently); rewrite the file with "
+               "a LAS tool." if n < low else "the header is forged or the file truncated.")
+        )  # fmt: skip
 
 
 def iter_chunks(

@@ -3,6 +3,7 @@ in the catalog or the store."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -113,7 +114,8 @@ def test_no_crs_and_no_override(cat, site_settings, tmp_path) -> None:
     with pytest.raises(CRSError, match="no CRS.*--crs"):
         ingest_mission(cat, site_settings, tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
-    r = ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs="EPSG:32618"))
+    when = __import__("datetime").datetime(2024, 6, 1, tzinfo=__import__("datetime").UTC)
+    r = ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs="EPSG:32618", captured_at=when))
     assert r.created
 
 
@@ -223,3 +225,75 @@ def test_failure_after_copy_removes_new_blobs(cat, site_settings, synth_site, tm
 
 def test_las_path_constant_is_where_terra_writes() -> None:
     assert str(LAS_RELPATH) == "lidars/terra_las/cloud_merged.las"
+
+
+def _count_patched(src: Path, dest: Path, count: int) -> Path:
+    """``src`` (LAS 1.2) with its header's point count set to ``count`` (legacy field, byte 107)."""
+    data = bytearray(src.read_bytes())
+    data[107:111] = struct.pack("<I", count)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest.write_bytes(bytes(data))
+    return dest
+
+
+@pytest.mark.parametrize(("count", "words"), [(55_000, "header is wrong"), (4_000_000_000, "forged")])
+def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_settings, tmp_path, count, words) -> None:
+    """A real LAZ (3 chunks of up to 50,000 points) whose header counts half its points would have been
+    cut short without a word; one claiming 4e9 points is refused from its chunk table before anything
+    is allocated. Ingest (in parallel ranges), and a plain open, refuse both naming the file."""
+    import time
+
+    from realdata import AUTZEN
+
+    from siteline.lasio import open_las
+
+    path = _count_patched(AUTZEN, tmp_path / "m" / "cloud.laz", count)
+    t0 = time.perf_counter()
+    with pytest.raises(PointCloudError, match=f"cloud.laz.*{words}"):
+        open_las(path)
+    assert time.perf_counter() - t0 < 2.0
+    opts = IngestOptions(captured_at=__import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC), crs="EPSG:2994")
+    with pytest.raises(PointCloudError, match="LAZ chunks hold 100,001 to 150,000"):
+        ingest_mission(cat, site_settings, tmp_path / "m", "demo", opts, workers=2)
+    _assert_nothing_written(cat, site_settings)
+    open_las(_count_patched(AUTZEN, tmp_path / "ok" / "cloud.laz", 110_000)).close()  # the true count
+
+
+def test_las_whose_header_counts_more_points_than_it_holds_is_refused_at_open(tmp_path) -> None:
+    from siteline.lasio import open_las
+
+    path = tmp_path / "cloud.las"
+    _flat_las(path, n=1_000)
+    forged = _count_patched(path, tmp_path / "forged.las", 2**31)
+    with pytest.raises(PointCloudError, match="forged.las.*truncated"):
+        open_las(forged)
+
+
+def test_non_finite_gps_times_never_reach_the_catalog(db_url, tmp_path) -> None:
+    """A LAS holding an infinite and a NaN GPS time ingests on SQLite and PostgreSQL: the scene's
+    statistics hold the range of the finite times (JSON has no Infinity), and a failed ingest after
+    it still cleans up."""
+    import datetime as dt
+
+    from sitehelpers import make_home
+
+    from siteline.catalog import open_catalog
+    from siteline.catalog.scenes import scene_statistics
+
+    settings = make_home(tmp_path, url=db_url)
+    path = tmp_path / "m" / "cloud.las"
+    n = 2000
+    rng = np.random.default_rng(0)
+    xyz = np.c_[rng.uniform(-30, 30, (n, 2)), rng.normal(0, 0.02, n)] + np.array([445000.0, 5030000.0, 80.0])
+    gps = np.linspace(1000.0, 2000.0, n)
+    gps[5], gps[9] = np.inf, np.nan
+    write_las(path, xyz, crs="EPSG:32618", classification=np.full(n, 2, np.uint8), gps_time=gps)
+    cat = open_catalog(settings)
+    opts = IngestOptions(captured_at=dt.datetime(2024, 1, 1, tzinfo=dt.UTC))
+    r = ingest_mission(cat, settings, tmp_path / "m", "demo", opts)
+    with cat.transaction() as s:
+        scan = scene_statistics(s.get(Scene, r.scene_id)).scan
+        raw = s.execute(sa.text("SELECT statistics FROM scene WHERE id = :i"), {"i": r.scene_id}).scalar_one()
+    assert scan.gps_time_range == [1000.0, 2000.0]
+    assert "Infinity" not in (raw if isinstance(raw, str) else json.dumps(raw))
+    cat.dispose()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import threading
+from datetime import UTC, datetime
 from pathlib import Path
 
 import laspy
@@ -23,6 +24,9 @@ from siteline.errors import RegistrationError
 from siteline.ingest import IngestOptions, ingest_mission
 from siteline.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
+
+# a bare LAS without an absolute GPS time cannot tell its capture time: the tests give it
+DATED = IngestOptions(captured_at=datetime(2024, 6, 1, 12, tzinfo=UTC))
 
 
 def _truth_cameras(site, index):
@@ -174,7 +178,7 @@ def test_extreme_las_scale_and_offset_survive_exactly(tmp_path) -> None:
     exact = np.c_[las.x, las.y, las.z] - np.asarray(origin)
     settings = make_home(tmp_path)
     cat = open_catalog(settings)
-    r = ingest_mission(cat, settings, mission, "demo")
+    r = ingest_mission(cat, settings, mission, "demo", DATED)
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
         assert sc.bounds["min"] == exact.min(axis=0).tolist()
@@ -201,7 +205,7 @@ def test_other_crs_is_transformed_in_float64(tmp_path) -> None:
     )
     settings = make_home(tmp_path)
     cat = open_catalog(settings)
-    r = ingest_mission(cat, settings, mission, "demo")
+    r = ingest_mission(cat, settings, mission, "demo", DATED)
     assert r.scan["transformed"] and r.scan["source_crs"] == "EPSG:32617"
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)

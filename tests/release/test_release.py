@@ -101,6 +101,43 @@ def test_installed_verify_exits_1_on_a_tampered_release_and_0_once_restored(buil
     assert json.loads(good.stdout)["ok"] is True
 
 
+@pytest.mark.parametrize("gut", ["manifest", "everything"])
+def test_installed_verify_fails_a_gutted_release(built, gut) -> None:
+    """Deleting the manifest (or every file) of a published release is tampering: verify checks what
+    the catalog recorded at publish, exits 1 and names it, and says which folder it checked."""
+    import shutil
+    import subprocess
+    import sys
+
+    settings, _, pub = built
+    exe = Path(sys.executable).with_name("siteline")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")}
+    env |= {"SITELINE_HOME": str(settings.home), "SITELINE_DATABASE_URL": settings.database_url}
+    root = Path(pub.root)
+    backup = root.parent / f".backup-{gut}"
+    shutil.copytree(root, backup, symlinks=True)
+    try:
+        os.chmod(root, 0o755)
+        victims = [root / "manifest.json"] if gut == "manifest" else [p for p in root.rglob("*") if p.is_file()]
+        for p in victims:
+            p.unlink()
+        bad = subprocess.run(
+            [str(exe), "release", "verify", "rel", pub.version, "--json"], env=env, capture_output=True, text=True
+        )
+    finally:
+        shutil.rmtree(root)
+        shutil.copytree(backup, root, symlinks=True)
+        shutil.rmtree(backup)
+    assert bad.returncode == 1, (bad.stdout, bad.stderr)
+    doc = json.loads(bad.stdout)
+    assert doc["ok"] is False and doc["root"] == str(root)
+    assert any("manifest.json: missing" in p and "tampered" in p for p in doc["problems"])
+    if gut == "everything":
+        assert sum("recorded by the catalog" in p for p in doc["problems"]) >= 3
+    good = subprocess.run([str(exe), "release", "verify", "rel", pub.version], env=env, capture_output=True, text=True)
+    assert good.returncode == 0 and f"checked {root}" in good.stdout
+
+
 def test_published_release_is_read_only_and_never_republished(built) -> None:
     settings, cat, pub = built
     some = next(Path(pub.root).rglob("*.png"))

@@ -50,6 +50,12 @@ def release_item_counts(session: Session, release_id: int) -> dict[str, int]:
     return {split: int(n) for split, n in rows}
 
 
+def release_item_files(session: Session, release_id: int) -> list[str]:
+    """Every image path (relative to the release root) the catalog recorded for a release's items."""
+    rows = session.scalars(sa.select(ReleaseItem.files).where(ReleaseItem.release_id == release_id))
+    return sorted(path for files in rows for path in files.values())
+
+
 def release_record(session: Session, rel: Release) -> dict[str, Any]:
     items = release_item_counts(session, rel.id)
     return {

@@ -12,6 +12,7 @@ from siteline.catalog.releases import (
     get_release,
     list_releases,
     query_items,
+    release_item_files,
     release_location,
     release_record,
 )
@@ -173,21 +174,22 @@ def verify(
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
-        recorded = get_release(s, name, version).manifest_sha256
+        rel = get_release(s, name, version)
+        recorded, files = rel.manifest_sha256, release_item_files(s, rel.id)
         findings = inspect_release(s, settings(), name, version)
     problems = [
         f.message + (f" Mend it with `siteline release repair {name} {version}`." if f.mendable else "")
         for f in findings
     ]
-    if (root / "manifest.json").is_file():
-        problems += verify_files(root, recorded)
+    if root.is_dir() or recorded is not None:
+        problems += verify_files(root, recorded, files)
     emit(
         as_json,
         {"name": name, "version": version, "root": str(root), "ok": not problems, "problems": problems},
         lambda: console.print(
             "\n".join(problems)
             if problems
-            else f"{name} {version}: every checksum matches the catalog's manifest"
+            else f"{name} {version}: every checksum matches the catalog's manifest (checked {root})"
         ),
     )
     if problems:

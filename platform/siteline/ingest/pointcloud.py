@@ -147,8 +147,12 @@ class _Totals:
         self.hi = np.maximum(self.hi, sc.hi)
         self.count += len(local)
         if chunk.gps_time is not None and len(chunk.gps_time):
-            self.tmin = min(self.tmin, float(chunk.gps_time.min()))
-            self.tmax = max(self.tmax, float(chunk.gps_time.max()))
+            # the range of finite times only: JSON has no Infinity (SQLite's JSON functions and
+            # PostgreSQL refuse it) and NaN compares as nothing
+            finite = chunk.gps_time[np.isfinite(chunk.gps_time)]
+            if len(finite):
+                self.tmin = min(self.tmin, float(finite.min()))
+                self.tmax = max(self.tmax, float(finite.max()))
         stable = np.flatnonzero(self.stable_lut[cls])
         self.samples.append(local[stable[self.rng.random(len(stable)) < self.keep_p]])
         take = np.arange(-self.index % self.stride, len(local), self.stride)

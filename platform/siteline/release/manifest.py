@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -75,13 +76,23 @@ def safe_relative(path: str) -> bool:
     )
 
 
-def verify_files(root: Path, manifest_sha256: str | None = None) -> list[str]:
+def verify_files(
+    root: Path, manifest_sha256: str | None = None, recorded_files: Sequence[str] = ()
+) -> list[str]:
     """Problems found by recomputing every checksum of the manifest, one line each: a file missing,
     resized, changed, replaced by a symlink or not listed; a listed path or item id that leaves the
-    release; and, given the catalog's ``manifest_sha256``, a manifest that is not the one recorded
-    (edited fields, a forged file whose entry was updated to match)."""
+    release; given the catalog's ``manifest_sha256``, a manifest that is not the one recorded
+    (edited fields, a forged file whose entry was updated to match) or that is missing; and each of
+    ``recorded_files`` (the item images the catalog recorded) that is missing or left unlisted, which
+    is checked even when the manifest is gone."""
     root = Path(root)
     problems = []
+    present = (root / MANIFEST).is_file()
+    gone = [rel for rel in recorded_files if not (root / rel).is_file()]
+    if manifest_sha256 is not None and not present:
+        problems.append(f"{MANIFEST}: missing (the catalog recorded sha256 {manifest_sha256[:12]}...): tampered with")
+    if not present:
+        return problems + [f"{rel}: missing (recorded by the catalog)" for rel in gone]
     if manifest_sha256 is not None:
         actual = (
             hashlib.sha256((root / MANIFEST).read_bytes()).hexdigest()
@@ -94,6 +105,8 @@ def verify_files(root: Path, manifest_sha256: str | None = None) -> list[str]:
             )
     doc = read_manifest(root)
     listed = set()
+    named = {f["path"] for f in doc["files"]}
+    problems += [f"{rel}: recorded by the catalog but not in the manifest" for rel in recorded_files if rel not in named]
     for f in doc["files"]:
         rel = f["path"]
         listed.add(rel)
