@@ -71,7 +71,7 @@ class RunProgress:
         tenth = int(10 * self.done[task] / known) if known else 0
         if known and tenth > self.logged.get(task, -1):
             self.logged[task] = tenth
-            get_run_logger().info("%s: %s %s of %s", self.title, task, f"{self.done[task]:,.0f}", f"{known:,}")
+            get_run_logger().info("%s: %s %s", self.title, task, counted(task, self.done[task], known))
         now = time.monotonic()
         if now - self.last >= 1.0 or (known and self.done[task] >= known):
             self.last = now
@@ -85,12 +85,28 @@ class RunProgress:
         return round(100.0 * got / total_weight, 1)
 
     def _describe(self, task: str) -> str:
-        known = self.totals.get(task)
-        count = f"{self.done[task]:,.0f} of {known:,}" if known else f"{self.done[task]:,.0f}"
-        return f"{self.title}: {task} {count}"
+        return f"{self.title}: {task} {counted(task, self.done[task], self.totals.get(task))}"
 
     def finish(self, note: str) -> None:
         update_progress_artifact(self.id, 100.0, description=f"{self.title}: {note}")
+
+
+# what each library progress task counts (siteline.progress callers), for the UI's words
+TASK_UNITS = {
+    "hashing": "bytes", "storing": "bytes", "reading points": "points", "reading labels": "points",
+    "views": "cameras", "renders": "views", "writing tiles": "tiles", "matching tiles": "tiles",
+    "release images": "images", "labels": "",
+}  # fmt: skip
+
+
+def counted(task: str, done: float, total: int | None) -> str:
+    """``done`` (of ``total``) in ``task``'s unit: bytes as MB, the rest as counts with their noun."""
+    unit = TASK_UNITS.get(task, "")
+    if unit == "bytes":
+        mb = f"{done / 1e6:,.1f} MB" + (f" of {total / 1e6:,.1f} MB" if total else "")
+        return mb
+    count = f"{done:,.0f} of {total:,}" if total else f"{done:,.0f}"
+    return f"{count} {unit}".rstrip()
 
 
 def ingest_dashboards(site: str, mission: str, res: dict[str, Any]) -> None:

@@ -21,42 +21,63 @@ from siteline.errors import CRSError, GeometryError
 MAX_ABS_COORDINATE_M = 1.0e8
 
 
-def parse_crs(text: str) -> pyproj.CRS:
-    """The CRS named by ``text`` (``EPSG:32618``, WKT, PROJ JSON); :class:`CRSError` if unusable."""
+def crs_label(text: str, crs: pyproj.CRS | None = None) -> str:
+    """``text`` as a message names a CRS: itself when short (``EPSG:2994``), else the CRS's name (a
+    WKT or PROJ JSON is hundreds of characters)."""
+    text = text.strip()
+    if len(text) <= 40:
+        return repr(text)
+    return f"{crs.name!r} (given as WKT)" if crs is not None else f"{text[:40]!r}..."
+
+
+def parse_crs(text: str, near: tuple[float, float] | None = None) -> pyproj.CRS:
+    """The CRS named by ``text`` (``EPSG:32618``, WKT, PROJ JSON); :class:`CRSError` if unusable.
+    ``near``: a point (x, y) in that CRS (the site origin) that names the UTM zone to suggest."""
     if not isinstance(text, str) or not text.strip():
         raise CRSError("CRS is empty: give an EPSG code such as EPSG:32618, or a WKT string.")
     try:
         crs = pyproj.CRS.from_user_input(text.strip())
     except PyprojCRSError as exc:
-        raise CRSError(f"CRS {text!r} is not known to PROJ: {exc}. Give e.g. EPSG:32618.") from exc
+        raise CRSError(f"CRS {crs_label(text)} is not known to PROJ: {exc}. Give e.g. EPSG:32618.") from exc
+    label = crs_label(text, crs)
     if crs.is_geographic:
         raise CRSError(
-            f"CRS {text!r} ({crs.name}) is geographic (degrees); siteline needs a projected CRS in metres, "
-            "e.g. the UTM zone of the site (EPSG:326xx)."
+            f"CRS {label} ({crs.name}) is geographic (degrees); siteline needs a projected CRS in metres, "
+            f"e.g. {metric_alternative(crs, near)}."
         )
     if not crs.is_projected and not crs.is_engineering and not crs.is_compound:
-        raise CRSError(f"CRS {text!r} ({crs.name}) is not a projected CRS.")
+        raise CRSError(f"CRS {label} ({crs.name}) is not a projected CRS.")
     unit = crs.axis_info[0].unit_name if crs.axis_info else "metre"
     if unit not in ("metre", "meter", "m"):
         raise CRSError(
-            f"site CRS {text!r} ({crs.name}) has horizontal unit {unit!r}; a site's frame is in metres "
+            f"site CRS {label} has horizontal unit {unit!r}; a site's frame is in metres "
             f"(radii, spacings and tile sizes are metres). Create the site in a metric CRS such as "
-            f"{metric_alternative(crs)}; missions in {crs_text(crs)} are then converted at ingest, "
+            f"{metric_alternative(crs, near)}; missions in this CRS are then converted at ingest, "
             "z included (`siteline ingest --crs`, `--z-unit`)."
         )
     return crs
 
 
-def metric_alternative(crs: pyproj.CRS) -> str:
-    """A metric CRS (``EPSG:nnnn (name)``) covering ``crs``'s area of use: the UTM zone of its
-    datum at the centre of that area, or of WGS 84."""
+def metric_alternative(crs: pyproj.CRS, near: tuple[float, float] | None = None) -> str:
+    """A metric CRS (``EPSG:nnnn (name)``): the UTM zone, in ``crs``'s datum or WGS 84, of the point
+    ``near`` (x, y in ``crs``: the data's or the site's centre) or else of the centre of ``crs``'s
+    area of use."""
     from pyproj.aoi import AreaOfInterest
     from pyproj.database import query_utm_crs_info
 
     area = crs.area_of_use
-    if area is None:
+    lonlat = None
+    if near is not None and crs.geodetic_crs is not None:
+        try:
+            to_geo = pyproj.Transformer.from_crs(crs, crs.geodetic_crs.to_2d(), always_xy=True)
+            lon, lat = to_geo.transform(float(near[0]), float(near[1]))
+            if math.isfinite(lon) and math.isfinite(lat) and abs(lat) <= 84.0:
+                lonlat = (lon, lat)
+        except PyprojCRSError:
+            lonlat = None
+    if lonlat is None and area is None:
         return "the UTM zone of the site (EPSG:326xx north, EPSG:327xx south)"
-    lon, lat = (area.west + area.east) / 2.0, (area.south + area.north) / 2.0
+    lon, lat = lonlat or ((area.west + area.east) / 2.0, (area.south + area.north) / 2.0)  # type: ignore[union-attr]
     aoi = AreaOfInterest(lon, lat, lon, lat)
     geodetic = crs.geodetic_crs
     datum = geodetic.datum.name if geodetic is not None and geodetic.datum is not None else ""

@@ -81,8 +81,8 @@ def make_site_spec(
         raise SiteError(
             f"site name {name!r} is not allowed: use 1-64 letters, digits, '_', '.', '-', starting with a letter or digit."
         )
-    canonical = crs_text(parse_crs(crs))
     xyz = parse_origin(origin)
+    canonical = crs_text(parse_crs(crs, near=(xyz[0], xyz[1])))
     ring = tuple(validate_fence(fence_m, source=f"site {name} fence")) if fence_m is not None else None
     if not (isinstance(tile_size_m, int | float) and 0.5 <= float(tile_size_m) <= 10_000.0):
         raise SiteError(f"site {name}: tile size {tile_size_m!r} m is outside 0.5-10000 m.")

@@ -4,7 +4,7 @@ coordinates, taxonomy mapping and the fence. Ingest's scan and the tile writer b
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,16 +43,48 @@ def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
         raise CRSError(f"point cloud {path}: its CRS record cannot be parsed ({exc}); pass --crs.") from exc
 
 
+def wrong_header_crs(crs: pyproj.CRS, mins: Sequence[float], maxs: Sequence[float]) -> str | None:
+    """Why a header's CRS cannot be the CRS its coordinates are in (None when it may be): degrees
+    beyond +-180 / +-90, or coordinates more than 1,000 km outside a projected CRS's area of use."""
+    lo, hi = np.asarray(mins, dtype=np.float64)[:2], np.asarray(maxs, dtype=np.float64)[:2]
+    if crs.is_geographic:
+        if max(abs(lo[0]), abs(hi[0])) > 180.0 or max(abs(lo[1]), abs(hi[1])) > 90.0:
+            return f"{crs.name} is in degrees, but x reaches {max(abs(lo[0]), abs(hi[0])):,.0f} and y {max(abs(lo[1]), abs(hi[1])):,.0f}"
+        return None
+    area = crs.area_of_use
+    if area is None or not crs.is_projected:
+        return None
+    try:
+        x0, y0, x1, y1 = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True).transform_bounds(*area.bounds)
+    except Exception:  # an area PROJ cannot project: no judgement
+        return None
+    unit = crs.axis_info[0].unit_conversion_factor if crs.axis_info else 1.0
+    margin = 1.0e6 / unit
+    if not all(np.isfinite([x0, y0, x1, y1])):
+        return None
+    if hi[0] < x0 - margin or lo[0] > x1 + margin or hi[1] < y0 - margin or lo[1] > y1 + margin:
+        return f"its coordinates ({lo[0]:,.0f}, {lo[1]:,.0f}) lie more than 1,000 km outside {crs.name}'s area of use"
+    return None
+
+
 def source_crs(path: Path, crs_override: str | None, reader: laspy.LasReader | None = None) -> pyproj.CRS:
-    """The CRS of a point cloud: its own record, or ``crs_override`` when it has none. ``reader``: the
-    file already opened."""
+    """The CRS of a point cloud: its own record, or ``crs_override`` when it has none or when the
+    record is provably wrong (:func:`wrong_header_crs`). ``reader``: the file already opened."""
     if reader is not None:
-        in_file = file_crs(reader, path)
+        in_file, mins, maxs = file_crs(reader, path), reader.header.mins, reader.header.maxs
     else:
         with open_las(path) as opened:
-            in_file = file_crs(opened, path)
+            in_file, mins, maxs = file_crs(opened, path), opened.header.mins, opened.header.maxs
     if in_file is None and crs_override is None:
         raise CRSError(f"point cloud {path} has no CRS record; pass --crs (e.g. --crs EPSG:32618).")
+    wrong = wrong_header_crs(in_file, mins, maxs) if in_file is not None else None
+    if wrong is not None:
+        if crs_override is None:
+            raise CRSError(
+                f"point cloud {path}: its header's CRS cannot be right ({wrong}); pass --crs with the CRS its "
+                "coordinates are in (it overrides a header that is provably wrong)."
+            )
+        in_file = None
     if (
         in_file is not None
         and crs_override is not None

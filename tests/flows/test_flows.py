@@ -271,3 +271,12 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
             assert not (settings.home / "stores").exists() and not (worker_home / "stores").exists()
             assert list((worker_home / "staging" / "cache").rglob("*"))
     assert results["threads"] == results["dask"]
+
+
+def test_progress_words_name_their_unit() -> None:
+    """The UI's progress says what it counts: 'hashing 0.0 MB of 8.9 MB', not 'hashing 0 of 8,869,660'."""
+    from ui import counted
+
+    assert counted("hashing", 0, 8_869_660) == "0.0 MB of 8.9 MB"
+    assert counted("reading points", 5_000, 110_000) == "5,000 of 110,000 points"
+    assert counted("renders", 3, None) == "3 views"

@@ -145,3 +145,43 @@ def test_z_unit_rules() -> None:
     assert z_unit_of(pyproj.CRS(OREGON_FT), parse_z_unit("m")).source == "--z-unit"
     with pytest.raises(CRSError, match="--z-unit 'yards'"):
         parse_z_unit("yards")
+
+
+def test_a_feet_wkt_site_crs_is_refused_briefly_naming_the_utm_zone_of_the_origin() -> None:
+    """A feet CRS given as WKT (no EPSG code, no area of use): the refusal names it by its name, once,
+    and suggests the UTM zone of the site origin, not 'EPSG:326xx'."""
+    import laspy
+    from realdata import AUTZEN
+
+    from siteline.errors import CRSError
+    from siteline.site import make_site_spec
+
+    wkt = laspy.read(AUTZEN).header.parse_crs().to_wkt()
+    with pytest.raises(CRSError) as err:
+        make_site_spec("x", wkt, (636590.0, 849216.0, 400.0))
+    text = str(err.value)
+    assert "EPSG:26910" in text and "326xx" not in text and "PROJCRS" not in text
+    assert text.count("NAD_1983_HARN_Lambert_Conformal_Conic") == 1
+
+
+def test_a_header_crs_its_coordinates_disprove_is_refused_and_overridden_by_crs(tmp_path) -> None:
+    """A header that says WGS 84 over projected coordinates: refused saying why (not 'non-finite
+    coordinates'); --crs then overrides it."""
+    import laspy
+    from pyproj import CRS
+    from realdata import AUTZEN
+
+    from siteline.errors import CRSError
+    from siteline.sitestream import source_crs
+
+    src = laspy.read(AUTZEN)
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    las.header.offsets, las.header.scales = src.header.offsets, src.header.scales
+    las.header.add_crs(CRS.from_epsg(4326))
+    las.points = src.points[:2000]
+    path = tmp_path / "wrong.las"
+    las.write(path)
+    with pytest.raises(CRSError, match="wrong.las.*WGS 84 is in degrees, but x reaches 63"):
+        source_crs(path, None)
+    assert source_crs(path, "EPSG:2994").to_epsg() == 2994
+    assert source_crs(AUTZEN, None).name == "NAD_1983_HARN_Lambert_Conformal_Conic"  # a right header stays
