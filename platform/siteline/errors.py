@@ -80,6 +80,11 @@ class RegistrationError(SitelineError, ValueError):
     """A scene cannot be registered (georegistration or alignment failed)."""
 
 
+class WorkerError(SitelineError, RuntimeError):
+    """A worker process died under a command (killed, or out of memory): nothing was stored; the
+    command may be run again. The CLI exits 1 (a failure, not a bad request)."""
+
+
 class TileError(SitelineError, RuntimeError):
     """A tile store is missing, partial or inconsistent."""
 

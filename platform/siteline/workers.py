@@ -24,6 +24,8 @@ from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any
 
+from siteline.errors import WorkerError
+
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_MAX = -4
 _POOLS: dict[int, ProcessPoolExecutor] = {}
@@ -108,17 +110,21 @@ def discard_pool(workers: int) -> None:
 
 def pool_map(pool: Executor | None, fn: Callable[..., Any], *iterables: Iterable[Any]) -> Iterator[Any]:
     """``fn`` over ``iterables`` in ``pool`` (results in order), or in this process when None. A pool
-    whose worker died is discarded so the next pass starts a fresh one."""
+    whose worker died is discarded so the next pass starts a fresh one, and the death is a
+    :class:`WorkerError` (one line for the user, not a traceback)."""
     if pool is None:
         yield from map(fn, *iterables)
         return
     try:
         yield from pool.map(fn, *iterables)
-    except BrokenProcessPool:
+    except BrokenProcessPool as exc:
         for workers, known in list(_POOLS.items()):
             if known is pool:
                 discard_pool(workers)
-        raise
+        raise WorkerError(
+            "a worker process died (killed, or out of memory) while reading or writing points; nothing "
+            "was stored: run the command again (with fewer --workers if memory ran short)."
+        ) from exc
 
 
 @atexit.register

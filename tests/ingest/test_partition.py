@@ -156,3 +156,29 @@ def _worker_env_var() -> str | None:
     import os
 
     return os.environ.get("MALLOC_ARENA_MAX")
+
+
+def _die(k: int) -> int:
+    import os
+
+    if k == 1:
+        os._exit(9)  # a worker killed under the pass
+    return k
+
+
+def test_a_dead_worker_is_one_clear_error_and_the_next_pass_gets_a_fresh_pool(capsys, monkeypatch) -> None:
+    from siteline import cli
+    from siteline.errors import WorkerError
+    from siteline.workers import pool_map, process_pool
+
+    with pytest.raises(WorkerError, match="worker process died.*run the command again"):
+        list(pool_map(process_pool(2), _die, range(4)))
+    assert list(pool_map(process_pool(2), _die, [0, 2, 3])) == [0, 2, 3]
+
+    def broken(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        raise WorkerError("a worker process died (killed, or out of memory)")
+
+    monkeypatch.setattr(cli, "app", broken)
+    assert cli.main(["ingest", "x", "--site", "s"]) == 1
+    err = capsys.readouterr().err
+    assert "worker process died" in err and "Traceback" not in err

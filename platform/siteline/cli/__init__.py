@@ -11,7 +11,7 @@ from rich.text import Text
 from siteline import __version__
 from siteline.cli import bench, db, demo, ingest, labels, previews, release, render, site, synth, watch
 from siteline.cli.common import err_console, plain
-from siteline.errors import SitelineError
+from siteline.errors import SitelineError, WorkerError
 
 
 def _click_errors() -> tuple[type[Exception], ...]:
@@ -99,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         rc = app(args=argv, standalone_mode=False)
+    except WorkerError as exc:  # the command ran and failed: no traceback, status 1
+        err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
+        return 1
     except SitelineError as exc:
         err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
         return 2
