@@ -125,7 +125,8 @@ PROFILES: dict[str, Profile] = {
         Profile(
             "changemamba",
             "ChangeMamba ChangeDetectionDataset(<out>/<split>, names from <out>/<split>_list.txt): T1|T2|GT/<name>",
-            "label / 255 then long: GT holds 0 / 255 / 65025 (16-bit), read as 0 unchanged, 1 changed, 255 ignore",
+            "GT / 255 then long: GT holds 0 / 255 / 65025 (16-bit), read as 0 unchanged, 1 changed, 255 ignore "
+            "(this layout has no label/ folder)",
             "ignore is honoured with stock settings, nothing to change: its cross-entropy and Lovasz losses "
             "(changedetection/tasks/bcd.py) and its evaluator skip 255",
             _per_split({"A": "T1", "B": "T2", "changemamba-gt": "GT"}),
@@ -148,8 +149,9 @@ PROFILES: dict[str, Profile] = {
             "torchange LEVIRCD(dataset_dir=<out>/<split>): A/*.png, B and label found by rewriting '/A/' and "
             "'/A' in each path",
             "the evaluator binarises label > 0",
-            "to honour ignore: mask the evaluator's pixels with ignore/<name>.png (255 = ignore) or score "
-            "predictions with `siteline release score`",
+            "torchange's loss cannot skip ignore: it trains on label/, where ignore is written as unchanged "
+            "(0); its metrics honour ignore only if you mask the evaluator's pixels with ignore/<name>.png "
+            "(255 = ignore), or score predictions with `siteline release score`",
             _per_split({"A": "A", "B": "B", "label": "label", "ignore": "ignore"}),
             # lower case, so no file name starts with 'A' (one site per release: no collision)
             stem=lambda split, item: item.lower(),
