@@ -32,7 +32,7 @@ from siteline.kernels import cut, radix, rows
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
-from siteline.sitestream import SiteChunk, site_chunks, source_transformer
+from siteline.sitestream import Correction, SiteChunk, site_chunks, source_transformer
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.workers import pool_map, process_pool
 
@@ -69,10 +69,13 @@ class PassSource:
     crs: str
     z_unit: dict[str, Any] | None
     eight_bit: bool | None
+    correction: Correction | None = None
 
     def key(self, content_sha256: str, spec: TileSpec) -> str:
         """The name of a partition of this file's content cut on ``spec``'s grid."""
-        return partition_key(content_sha256, self.site, self.crs, self.z_unit, self.eight_bit, spec)
+        return partition_key(
+            content_sha256, self.site, self.crs, self.z_unit, self.eight_bit, spec, self.correction
+        )
 
 
 def partition_key(
@@ -82,14 +85,18 @@ def partition_key(
     z_unit: dict[str, Any] | None,
     eight_bit: bool | None,
     spec: TileSpec,
+    correction: Correction | None = None,
 ) -> str:
     """A digest of everything that decides a partition's records: the file's content, the site
-    frame, the source CRS and z unit (resolved), the colour depth and the tile grid and quantum."""
-    doc = {
+    frame, the source CRS and z unit (resolved), the colour depth, the tile grid and quantum, and the
+    co-registration applied (when there is one)."""
+    doc: dict[str, Any] = {
         "sha256": content_sha256, "site": site.to_dict(), "crs": crs, "z_unit": z_unit,
         "eight_bit": bool(eight_bit), "tile_size_m": spec.tile_size_m, "quantum_m": spec.quantum_m,
         "block": block_edge(spec), "record": RECORD.descr, "format": 2,
     }  # fmt: skip
+    if correction is not None:
+        doc["correction"] = [list(row) for row in correction]
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:32]
 
 
@@ -214,7 +221,10 @@ def read_range(source: PassSource, start: int, stop: int, visitors: tuple[Any, .
     path = Path(source.path)
     z_unit = ZUnit.from_dict(source.z_unit) if source.z_unit else None
     tr = source_transformer(path, source.site, parse_source_crs(source.crs), z_unit)
-    for sc in site_chunks(path, source.site, tr, start=start, stop=stop, eight_bit=source.eight_bit):
+    chunks = site_chunks(
+        path, source.site, tr, start=start, stop=stop, eight_bit=source.eight_bit, correction=source.correction
+    )
+    for sc in chunks:
         for v in visitors:
             try:
                 v.add(sc)

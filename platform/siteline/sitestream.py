@@ -35,6 +35,16 @@ class SiteChunk:
     hi: np.ndarray
 
 
+# a rigid correction of site-local coordinates, (4, 4) row-major as nested tuples (picklable, JSON-able)
+Correction = tuple[tuple[float, ...], ...]
+
+
+def correction_parts(correction: Correction) -> tuple[np.ndarray, np.ndarray]:
+    """(R (3, 3), t (3,)) float64 of a correction."""
+    m = np.asarray(correction, dtype=np.float64)
+    return m[:3, :3], m[:3, 3]
+
+
 def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
     """The CRS of a LAS header (WKT or GeoTIFF keys), None when it has none."""
     try:
@@ -132,20 +142,26 @@ def site_chunks(
     start: int = 0,
     stop: int | None = None,
     eight_bit: bool | None = None,
+    correction: Correction | None = None,
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
     origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
     ``reader``: the file already opened. ``class_lut``: (256,) uint8 site class id per file code and
     (256,) bool of the codes it maps; None: the taxonomy's LAS source codes. ``start``/``stop``,
-    ``eight_bit``: as :func:`siteline.lasio.iter_chunks`."""
+    ``eight_bit``: as :func:`siteline.lasio.iter_chunks`. ``correction``: a rigid transform (4 x 4,
+    site-local metres) applied after the origin is subtracted: the co-registration of a later scene
+    onto the earlier one (siteline.register), so every reader sees the corrected geometry."""
     tax = site.taxonomy
     lut, known = class_lut if class_lut is not None else tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
+    R, t = (None, None) if correction is None else correction_parts(correction)
     for chunk in iter_chunks(path, chunk_points, eight_bit, reader=reader, start=start, stop=stop):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)
         local = xyz - origin
+        if R is not None:
+            local = local @ R.T + t
         lo, hi, bad = cut.bounds(local)
         if bad:
             raise PointCloudError(

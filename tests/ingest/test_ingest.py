@@ -18,12 +18,13 @@ from siteline.cameras import Camera
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Mission, Pair, Scene
-from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics
+from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics, tile_source
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
 from siteline.ingest import IngestOptions, ingest_mission
 from siteline.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
+from siteline.tiles import tile_scene
 
 # a bare LAS without an absolute GPS time cannot tell its capture time: the tests give it
 DATED = IngestOptions(captured_at=datetime(2024, 6, 1, 12, tzinfo=UTC))
@@ -214,22 +215,44 @@ def test_other_crs_is_transformed_in_float64(tmp_path) -> None:
     cat.dispose()
 
 
-def test_misaligned_scene_is_refused_unless_accepted(cat, site_settings, synth_site, tmp_path) -> None:
+def _dropped(synth_site, tmp_path, metres: float):  # noqa: ANN001, ANN202
+    """Epoch 1 with its cloud dropped by ``metres`` (a vertical datum slip: ellipsoidal vs orthometric
+    heights is the classic one)."""
+    mission = copy_mission(synth_site, 1, tmp_path / f"drop{metres:g}")
+    las = laspy.read(mission / LAS_RELPATH)
+    las.z = np.asarray(las.z) - metres
+    las.write(mission / LAS_RELPATH)
+    return mission
+
+
+def test_a_scene_a_metre_off_is_co_registered_and_corrected(cat, site_settings, synth_site, tmp_path) -> None:
+    """A 1 m slip is registered onto the previous scene and the correction applied: the scene's tiles
+    lie where the previous scene's do (its ground at the same height)."""
+    from siteline.tiles.reader import SceneTiles
+
+    r0 = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    r = ingest_mission(cat, site_settings, _dropped(synth_site, tmp_path, 1.0), "demo")
+    a = r.registration["alignment"]
+    assert a["applied"] and 0.95 < a["translation_m"] < 1.05 and a["residual_m"] < 0.05
+    for sid in (r0.scene_id, r.scene_id):
+        tile_scene(cat, site_settings, sid, workers=1)
+    with cat.transaction() as s:
+        stores = [tile_source(s, sid) for sid in (r0.scene_id, r.scene_id)]
+    z = [np.median(SceneTiles.from_source(src).points(resolution=1.0).xyz_m[:, 2]) for src in stores]
+    assert abs(z[0] - z[1]) < 0.1
+
+
+def test_a_scene_metres_off_is_refused_unless_accepted_then_recorded_not_applied(
+    cat, site_settings, synth_site, tmp_path
+) -> None:
     ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
-    mission = copy_mission(synth_site, 1, tmp_path)
-    las_path = mission / LAS_RELPATH
-    las = laspy.read(las_path)
-    # a vertical datum slip (ellipsoidal vs orthometric heights is the classic one): the cloud drops 1 m.
-    # Horizontal slips are only seen where the scene has vertical structure (the check then records
-    # ``degenerate``); this sparse site is mostly flat ground.
-    las.z = np.asarray(las.z) - 1.0
-    las.write(las_path)
-    with pytest.raises(RegistrationError, match="misaligned"):
+    mission = _dropped(synth_site, tmp_path, 10.0)
+    with pytest.raises(RegistrationError, match="cannot be co-registered"):
         ingest_mission(cat, site_settings, mission, "demo")
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Scene.id))).scalar_one() == 1
     r = ingest_mission(cat, site_settings, mission, "demo", IngestOptions(accept_misalignment=True))
-    assert r.registration["alignment"]["translation_m"] > 0.9 and r.registration["alignment"]["accepted"]
+    assert r.registration["alignment"]["accepted"] and not r.registration["alignment"]["applied"]
 
 
 def test_concurrent_ingests_into_postgresql_both_land(tmp_path, synth_site, postgres_url) -> None:

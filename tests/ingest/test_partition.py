@@ -43,7 +43,7 @@ def test_a_failed_ingest_keeps_no_partition(cat, site_settings, synth_site, tmp_
     kept = _kept(site_settings)
     mission = copy_mission(synth_site, 1, tmp_path)
     las = laspy.read(mission / LAS_RELPATH)
-    las.z = np.asarray(las.z) - 1.0  # refused as misaligned, after the scan
+    las.z = np.asarray(las.z) - 10.0  # refused (cannot be co-registered), after the scan
     las.write(mission / LAS_RELPATH)
     with pytest.raises(RegistrationError):
         ingest_mission(cat, site_settings, mission, "demo")

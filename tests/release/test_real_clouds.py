@@ -59,7 +59,8 @@ def _images(root: Path, side: str) -> list[np.ndarray]:
 def autzen(tmp_path_factory) -> Path:
     c = centre_xy(AUTZEN)  # feet
     change = {"removed_box": (c[0] - 250, c[1] - 100, c[0] - 150, c[1]),
-              "built_box": (c[0] + 100, c[1] - 50, c[0] + 180, c[1] + 30, 20.0)}  # fmt: skip
+              "built_box": (c[0] + 100, c[1] - 50, c[0] + 180, c[1] + 30, 20.0),
+              "shift": (1.8 / 0.3048, -1.2 / 0.3048, 0.4 / 0.3048)}  # 2.2 m off, as epochs of two flights  # fmt: skip
     # its GPS times are week seconds: the file cannot tell its date, so the test gives one
     return _site(tmp_path_factory.mktemp("autzen"), "autzen", AUTZEN, "EPSG:32610", (493000, 4878000, 130), change,
                  dates=AUTZEN_DATES, ingest=("--overlap", "0.5", "0.3"))  # fmt: skip
@@ -75,6 +76,23 @@ def test_a_file_that_cannot_tell_its_date_is_refused(autzen, tmp_path) -> None:
     assert r.returncode == 2 and "seconds of an unnamed GPS week" in r.stderr and "--captured-at" in r.stderr
     assert "again.laz" in r.stderr
     assert _ok(autzen, "scene", "list", "--site", "autzen", "--json") == before
+
+
+def test_an_epoch_metres_off_is_co_registered_and_its_tiles_corrected(autzen) -> None:
+    """The later epoch lies 2.2 m off (1.8, -1.2, 0.4 m in the file's feet): ingest registers it onto
+    the first, applies the correction to its tiles (its unchanged points then coincide with the first
+    scene's) and records it; the release's changes are the planted ones, not the offset."""
+    from scipy.spatial import cKDTree
+
+    from siteline.tiles.reader import SceneTiles
+
+    align = json.loads(_ok(autzen, "scene", "show", "2", "--json"))["registration"]["alignment"]
+    assert align["applied"] and 2.1 < align["translation_m"] < 2.3 and align["residual_m"] < 0.05
+    stores = [json.loads(_ok(autzen, "scene", "show", str(i), "--json"))["tile_store"] for i in (1, 2)]
+    first, later = (SceneTiles.open(uri) for uri in stores)
+    pa, pb = (t.read({k: t.prefix(k) for k in t.by_tile}, ()).xyz_m for t in (first, later))
+    d, _ = cKDTree(pa).query(pb)
+    assert np.median(d) < 0.01 and (d < 0.05).mean() > 0.95  # the planted structure is the rest
 
 
 def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
@@ -98,6 +116,9 @@ def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
     assert len(a) == len(b) == len(items)
     assert min(img.any(axis=-1).mean() for img in a + b) > 0.2  # no blank image
     assert max(it["change_ratio"] for it in items) > 0.01  # the planted structure is seen
+    # not the 2.2 m offset (uncorrected, at r = 0.9 m nearly every pixel would be changed)
+    assert np.median([it["change_ratio"] for it in items]) < 0.1
+    assert "co-registered onto scene 1" in (root / "README.md").read_text()
     assert "planned" in (root / "README.md").read_text()
 
 

@@ -87,6 +87,15 @@ def scene_cameras(session: Session, scene_id: int) -> list[tuple[str, Camera]]:
     ]
 
 
+def scene_correction(scene: Scene) -> tuple[tuple[float, ...], ...] | None:
+    """The co-registration ingest applied to a scene (4 x 4 site-local, previous scene from this one),
+    or None when none was applied (siteline.register.check_alignment)."""
+    alignment = (scene.registration or {}).get("alignment") or {}
+    if not alignment.get("applied"):
+        return None
+    return tuple(tuple(float(v) for v in row) for row in alignment["correction"])
+
+
 def site_survey(session: Session, site: Site) -> SiteSurvey:
     """The site's registered cameras (size, focal length, height above their scene's lowest point)
     and its sparsest scene's density: what auto release settings are derived from."""

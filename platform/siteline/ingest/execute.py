@@ -7,10 +7,12 @@ from __future__ import annotations
 import hashlib
 import io
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from siteline.cameras import Camera
 from siteline.crs import parse_z_unit
 from siteline.errors import MissionError
 from siteline.ingest.mission import capture_time, choose_las, colmap_dir, mission_name, read_photos
@@ -19,6 +21,7 @@ from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
+from siteline.records.scan import LasScan
 from siteline.register import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
 from siteline.stores import Store, layout
 from siteline.stores.blobs import BlobStaging, put_blob_bytes
@@ -82,6 +85,12 @@ def execute_ingest(
         registration["alignment"] = check_alignment(
             scan.stable_sample, sample, before.id, root.name, policy, opts.accept_misalignment
         )
+        if registration["alignment"]["applied"]:
+            scan, cameras = corrected(scan, cameras, registration["alignment"]["correction"])
+            log.info(
+                "mission %s: co-registered onto scene %d, moved by %.3f m (residual %.3f m)", root.name,
+                before.id, registration["alignment"]["translation_m"], registration["alignment"]["residual_m"],
+            )  # fmt: skip
     log.info(
         "mission %s: %s points, %d cameras (%s), captured %s (%s)",
         root.name, f"{scan.point_count:,}", len(cameras), source or "none", when.isoformat(), when_source,
@@ -91,6 +100,22 @@ def execute_ingest(
         plan.manifest, mission_name(entries, root), scan, las.sha256, cameras, source or "xmp", registration,
         when, when_source, sample_sha, opts.storage,
     )  # fmt: skip
+
+
+def corrected(
+    scan: LasScan, cameras: dict[str, Camera], correction: list[list[float]]
+) -> tuple[LasScan, dict[str, Camera]]:
+    """The scan's stable sample and footprint and the scene's cameras moved by a co-registration
+    (4 x 4, site-local: previous scene from this one), as its tiles will be (siteline.sitestream)."""
+    m = np.asarray(correction, dtype=np.float64)
+    R, t = m[:3, :3], m[:3, 3]
+    sample = scan.stable_sample @ R.T + t if scan.stable_sample is not None else None
+    outline = None
+    if scan.footprint is not None:
+        ring = np.c_[np.asarray(scan.footprint, dtype=np.float64), np.zeros(len(scan.footprint))] @ R.T + t
+        outline = np.round(ring[:, :2], 2).tolist()
+    moved = {name: cam.with_pose(cam.R @ R.T, cam.t - cam.R @ R.T @ t) for name, cam in cameras.items()}
+    return replace(scan, stable_sample=sample, footprint=outline), moved
 
 
 def stage_mission(manifest: MissionManifest, storage: str, store: Store) -> BlobStaging | None:

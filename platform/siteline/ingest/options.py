@@ -17,11 +17,10 @@ class IngestOptions:
     """crs: CRS of a LAS without one (any CRS PROJ knows). z_unit: unit of the LAS z (m, ft, ftUS;
     default: the unit its CRS implies, siteline.crs.z_unit_of). storage: ``copy`` (content-addressed
     store) or ``reference``. Thresholds: georegistration RMS (m) and RANSAC inlier distance (m);
-    alignment against the previous scene: largest ICP correction (m) and residual (m) accepted
-    without ``accept_misalignment``. The alignment check catches gross misregistration (a wrong CRS,
-    offset or datum): construction changes between epochs (new walls next to old slabs, snow) bias
-    ICP by up to ~0.2 m on the synthetic site, so the default limit is 0.5 m; the measured
-    correction is recorded either way. captured_at: the capture time (UTC) when the mission cannot
+    co-registration onto the previous scene: largest ICP correction (m, 3 m: more means a wrong CRS,
+    offset or datum) and residual (m) accepted without ``accept_misalignment``; a correction over
+    0.25 m is applied to the scene (siteline.register.AlignmentPolicy: construction changes between
+    epochs bias ICP by up to 0.16 m on the synthetic site), any correction is recorded. captured_at: the capture time (UTC) when the mission cannot
     tell it (a LiDAR-only mission whose LAS has no creation date) or tells it wrong; it overrides the
     photos, the raw folder name and the LAS header, and is recorded as given. plan_cameras: plan the
     scene's cameras from its point cloud (``survey``: camera model, height, overlaps) even when the
@@ -33,7 +32,7 @@ class IngestOptions:
     accept_misalignment: bool = False
     max_georegistration_rms_m: float = 0.1
     ransac_max_error_m: float = 0.5
-    max_alignment_translation_m: float = 0.5
+    max_alignment_translation_m: float = 3.0
     max_alignment_residual_m: float = 0.15
     captured_at: datetime | None = None
     plan_cameras: bool = False

@@ -144,7 +144,9 @@ def ingest_mission(
         try:
             checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
             result = _store_and_record(catalog, settings, plan, checked, run, progress, staging)
-            keep_partition(runs, home, _partition_key(checked, plan))
+            if not (checked.registration.get("alignment") or {}).get("applied"):
+                # the runs were cut before the co-registration: a corrected scene's tiles cut anew
+                keep_partition(runs, home, _partition_key(checked, plan))
             return result
         finally:
             if staging is not None:

@@ -128,6 +128,14 @@ def _camera_lines(lin: dict[str, Any]) -> list[str]:
             "  (planned: no photos, so siteline planned survey cameras from the point cloud; views derive from "
             "them as from photo cameras)"
         )
+    for s in lin["scenes"]:
+        a = (s.get("registration") or {}).get("alignment")
+        if a:
+            how = "applied" if a.get("applied") else "recorded, not applied"
+            lines.append(
+                f"- scene {s['id']} co-registered onto scene {a.get('against_scene')}: ICP moves it "
+                f"{a['translation_m']:.3f} m ({how}), residual on stable surfaces {a['residual_m']:.3f} m"
+            )
     lines += [
         f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
         + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")

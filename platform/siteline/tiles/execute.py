@@ -73,6 +73,7 @@ def execute_tiling(
             batch_points=batch_points,
             executor=executor,
             scratch=store.staging,
+            correction=plan.correction,
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,

@@ -7,13 +7,14 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from siteline.catalog.scenes import get_scene, las_location, scene_statistics
+from siteline.catalog.scenes import get_scene, las_location, scene_correction, scene_statistics
 from siteline.catalog.sites import site_of
 from siteline.errors import TileError
 from siteline.records.mission import LasLocation
 from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import SceneTiling
 from siteline.site import SiteSpec
+from siteline.sitestream import Correction
 
 
 @dataclass(frozen=True)
@@ -22,7 +23,7 @@ class TilingPlan:
     cloud is kept, the source CRS and z unit ingest recorded, whether the scene is tiled, the tiling
     last recorded, if any, the seed of the level-of-detail draw (from the cloud's content), and
     whether its colour is 0-255 in 16-bit fields as ingest judged it (None: no colour, or not
-    recorded)."""
+    recorded), and the co-registration onto the previous scene that ingest applied (None: none)."""
 
     scene_id: int
     site: SiteSpec
@@ -33,6 +34,7 @@ class TilingPlan:
     current: SceneTiling | None
     seed: int
     eight_bit: bool | None = None
+    correction: Correction | None = None
 
     def generation(self, retile: bool) -> int:
         """The generation a tiling written now gets: the next one for a re-tiling (the old store stays
@@ -68,4 +70,5 @@ def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
         current=stats.tiling,
         seed=stats.scan.content_seed(),
         eight_bit=EIGHT_BIT.get(stats.scan.colour),
+        correction=scene_correction(scene),
     )

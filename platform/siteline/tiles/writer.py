@@ -44,7 +44,7 @@ from siteline.partition import (
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.site import SiteSpec
-from siteline.sitestream import source_transformer
+from siteline.sitestream import Correction, source_transformer
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.stores.remote import file_system
 from siteline.tiles.batches import BATCH_POINTS, Part, write_tile
@@ -149,6 +149,7 @@ def write_tiles(
     batch_points: int = BATCH_POINTS,
     executor: Executor | None = None,
     scratch: Path | None = None,
+    correction: Correction | None = None,
 ) -> TileResult:
     """Tile ``las_path`` into the new Zarr group ``out`` (a local path or an fsspec URL; it must not
     exist; removed again on an error); return its node index. ``z_unit``: the unit of the file's z
@@ -161,7 +162,8 @@ def write_tiles(
     written (a Dask cluster's ``Client.get_executor()``, say) instead of this machine's process
     pool; the partition's runs are then copied beside ``out``, where its workers read them.
     ``scratch``: a local folder for the partition, on the file system of ``kept`` for it to be
-    taken over (default: the system's temporary folder)."""
+    taken over (default: the system's temporary folder). ``correction``: the scene's co-registration
+    (siteline.sitestream.site_chunks), applied to every point as it is cut."""
     import zarr
 
     t0 = time.perf_counter()
@@ -172,7 +174,7 @@ def write_tiles(
     # the caller's executor (a cluster's) reads the runs beside the store; this machine's pool, here
     runs_uri = f"{target.rstrip('/')}.runs-{owner_tag()}" if executor is not None else None
     source = PassSource(
-        str(las_path), site, crs_text(src_crs), z_unit_of(src_crs, z_unit).to_dict(), eight_bit
+        str(las_path), site, crs_text(src_crs), z_unit_of(src_crs, z_unit).to_dict(), eight_bit, correction
     )
     try:
         partition = claim_partition(kept[0], source.key(kept[1], spec), spill_dir) if kept else None
