@@ -111,7 +111,9 @@ def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
     assert pair["colour_source"] == "rgb" and pair["fence"] == "footprint of scene 2"
     assert {s["registration"]["source"] for s in manifest["lineage"]["scenes"]} == {"planned"}
     items = manifest["items"]
-    assert len(items) >= 12 and all(it["valid"] >= 0.25 for it in items)
+    assert len(items) >= 8 and all(it["valid"] >= 0.25 for it in items)
+    assert {it["split"] for it in items} == {"train", "val", "test"}  # one pair, every split populated
+    assert "spatial bands" in manifest["split_rule"]["rule"]
     a, b = _images(root, "A"), _images(root, "B")
     assert len(a) == len(b) == len(items)
     assert min(img.any(axis=-1).mean() for img in a + b) > 0.2  # no blank image

@@ -48,13 +48,10 @@ def test_layout_manifest_and_datasheet(built) -> None:
             assert (root / it["split"] / sub / f"{it['id']}.png").is_file()
         m = np.asarray(Image.open(root / it["split"] / "label" / f"{it['id']}.png"))
         assert set(np.unique(m)) <= {0, 1, 255}
-    # splits are disjoint by pair
-    seen = {}
-    for it in doc["items"]:
-        assert seen.setdefault(it["pair"], it["split"]) == it["split"]
-    assert sorted(p for ids in doc["splits"].values() for p in ids) == sorted(
-        {it["pair"] for it in doc["items"]}
-    )
+    # two pairs, fewer than the splits: each pair's views in spatial bands, every split populated
+    assert {it["split"] for it in doc["items"]} == {"train", "val", "test"}
+    assert "spatial bands" in doc["split_rule"]["rule"] and "max_shared_footprint" in doc["split_rule"]
+    assert {p for ids in doc["splits"].values() for p in ids} == {it["pair"] for it in doc["items"]}
     lin = doc["lineage"]
     assert lin["parameters"]["scale"] == 0.5 and lin["sites"][0]["name"] == "demo"
     assert all(s["mission_manifest_sha256"] for s in lin["scenes"])
@@ -136,6 +133,19 @@ def test_installed_verify_fails_a_gutted_release(built, gut) -> None:
         assert sum("recorded by the catalog" in p for p in doc["problems"]) >= 3
     good = subprocess.run([str(exe), "release", "verify", "rel", pub.version], env=env, capture_output=True, text=True)
     assert good.returncode == 0 and f"checked {root}" in good.stdout
+
+
+def test_a_publish_killed_after_its_record_is_finished_by_the_next_publish(built) -> None:
+    """The README's promise: a version recorded as published but left writable (its publish killed
+    before make_read_only) is made read-only by the next `release publish`, which exits 0."""
+    settings, cat, pub = built
+    root = Path(pub.root)
+    files = [p for p in root.rglob("*") if p.is_file()]
+    for p in [root, *files]:
+        os.chmod(p, 0o755 if p.is_dir() else 0o644)
+    info = publish_release(cat, settings, "rel", pub.version)
+    assert info.version == pub.version
+    assert not any(p.stat().st_mode & 0o222 for p in [root, *files])
 
 
 def test_published_release_is_read_only_and_never_republished(built) -> None:

@@ -50,6 +50,22 @@ def release_item_counts(session: Session, release_id: int) -> dict[str, int]:
     return {split: int(n) for split, n in rows}
 
 
+def earlier_item_splits(session: Session, name: str, version: str) -> dict[tuple[int, int], str]:
+    """(pair id, view index) -> split of every item of the latest version of ``name`` before
+    ``version`` (empty for a first version): what a new version keeps (siteline.release.splits)."""
+    def semver(v: str) -> tuple[int, ...]:
+        return tuple(int(x) for x in v.split("."))
+
+    rows = [r for r in list_releases(session, name) if semver(r.version) < semver(version)]
+    if not rows:
+        return {}
+    latest = max(rows, key=lambda r: semver(r.version))
+    items = session.execute(
+        sa.select(ReleaseItem.pair_id, ReleaseItem.item_id, ReleaseItem.split).where(ReleaseItem.release_id == latest.id)
+    ).all()
+    return {(pid, int(item.rsplit("_v", 1)[1])): split for pid, item, split in items}
+
+
 def release_item_files(session: Session, release_id: int) -> list[str]:
     """Every image path (relative to the release root) the catalog recorded for a release's items."""
     rows = session.scalars(sa.select(ReleaseItem.files).where(ReleaseItem.release_id == release_id))

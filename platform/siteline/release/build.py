@@ -24,7 +24,7 @@ from siteline.records.release import DraftRelease, ReleaseItem
 from siteline.release import datasheet, layout
 from siteline.release.manifest import METRIC_DEFINITION, file_entries, write_manifest
 from siteline.release.plan import ReleasePlan
-from siteline.release.splits import split_pairs
+from siteline.release.splits import assign_splits
 from siteline.stores import join, open_store, publish_folder
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,7 @@ def _refuse_blank(blank: Mapping[int, int], outputs: Mapping[int, PairOutput]) -
 
 
 def _write_items(
-    plan: ReleasePlan, outputs: Mapping[int, PairOutput], split_of: Mapping[int, str], work: Path,
+    plan: ReleasePlan, outputs: Mapping[int, PairOutput], split_of: Mapping[tuple[int, int], str], work: Path,
     progress: Progress,
 ) -> list[ReleaseItem]:  # fmt: skip
     """Every view of every pair as a release item: its five images in ``work/<split>/<folder>/``;
@@ -71,7 +71,10 @@ def _write_items(
         out = outputs[pid]
         for v in out.views:
             item_id = f"{plan.site_name}_p{pid:04d}_v{v.index:04d}"
-            split = split_of[pid]
+            split = split_of.get((pid, v.index))
+            if split is None:  # left out: a train view on ground a val or test view shows
+                progress("release images", 1, total)
+                continue
             rendered = {sub: read_png(join(out.root, sub, v.file)) for sub in ("A", "B", "label")}
             if blank_sides(rendered["A"], rendered["B"]):
                 blank[pid] = blank.get(pid, 0) + 1
@@ -135,10 +138,12 @@ def execute_build(
     missing = [p.pair_id for p in plan.pairs if p.pair_id not in outputs]
     if missing:
         raise ReleaseError(f"pair {missing[0]} has no outputs to build release {plan.name} from.")
-    splits = split_pairs(sorted(outputs), plan.params.pair.seed)
-    split_of = {pid: sp for sp, ids in splits.items() for pid in ids}
+    split_plan = assign_splits(
+        {pid: outputs[pid].views for pid in sorted(outputs)}, plan.params.pair.seed, plan.earlier_splits
+    )
+    splits = split_plan.pairs()
     with publish_folder(plan.draft) as work:
-        items = _write_items(plan, outputs, split_of, work, progress)
+        items = _write_items(plan, outputs, split_plan.of, work, progress)
         rows = [it.to_dict() for it in items]
         stats = datasheet.statistics(work, rows)
         (work / "stats.json").write_text(json.dumps(stats, indent=1) + "\n")
@@ -146,7 +151,8 @@ def execute_build(
         doc = {
             "format": layout.FORMAT, "layout": layout.layout_record(plan.params.pad), "name": plan.name,
             "version": plan.version, "created": datetime.now(UTC).isoformat(), "code_version": __version__,
-            "files": [], "lineage": _lineage(plan, outputs), "splits": splits, "items": rows,
+            "files": [], "lineage": _lineage(plan, outputs), "splits": splits, "split_rule": split_plan.rule,
+            "items": rows,
             "metric": METRIC_DEFINITION, "stats": stats,
         }  # fmt: skip
         (work / "README.md").write_text(datasheet.datasheet(doc, stats))

@@ -75,7 +75,8 @@ def _radius_lines(pairs: list[dict[str, Any]]) -> list[str]:
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing: expected false "
                 f"change on unchanged surfaces {fc['per_direction']:.2%} per direction, {fc['union']:.2%} in the "
-                "mask (2^(-k^2) per direction)"
+                f"mask (2^(-k^2) per direction); the smallest change it resolves is {q['radius_m']:.2f} m (a "
+                "surface that moved less, or a new object nearer than that to an old surface, is unchanged)"
             )
     return out
 
@@ -180,7 +181,14 @@ def _source_lines(lin: dict[str, Any]) -> list[str]:
 
 
 def _split_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
-    lines = ["## Splits (disjoint by pair)", ""]
+    rule = doc.get("split_rule") or {"rule": "whole pairs, seeded"}
+    lines = ["## Splits", "", f"- rule: {rule['rule']}"]
+    if "max_shared_footprint" in rule:
+        lines.append(
+            f"- the largest share of a val or test view's footprint that train views also show: "
+            f"{rule['max_shared_footprint']:.0%}; train views left out for it: {rule.get('left_out', 0)}"
+        )
+    lines.append("")
     for split in ("train", "val", "test"):
         s = stats["class_balance"].get(split)
         if s:

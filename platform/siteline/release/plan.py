@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.labelsets import label_set_ref
 from siteline.catalog.pairs import get_pair
-from siteline.catalog.releases import find_release, list_releases
+from siteline.catalog.releases import earlier_item_splits, find_release, list_releases
 from siteline.catalog.scenes import (
     get_scene,
     list_pairs,
@@ -165,7 +165,8 @@ def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[dict[str,
 class ReleasePlan:
     """What building a draft release needs from the catalog: the site and its record for the lineage,
     the release's name and version (and the key that chose it), its parameters, each pair's plan
-    (where its outputs are), the scenes' lineage, and the draft's folder."""
+    (where its outputs are), the scenes' lineage, the draft's folder, and the splits of the latest
+    earlier version's items (which this one keeps: siteline.release.splits)."""
 
     site_name: str
     site_lineage: dict[str, Any]
@@ -178,6 +179,7 @@ class ReleasePlan:
     draft: Path
     reason: str
     up_to_date: str | None
+    earlier_splits: dict[tuple[int, int], str] = field(default_factory=dict)
 
     @property
     def output_digests(self) -> dict[str, str]:
@@ -217,6 +219,7 @@ def plan_release(
     return ReleasePlan(
         site_name, record, name, version, params, pairs, tuple(scene_lineage(session, pairs)), key,
         paths.release_draft(settings.home, name, version), reason, up_to_date,
+        earlier_item_splits(session, name, version),
     )  # fmt: skip
 
 
@@ -245,8 +248,9 @@ class PublishPlan:
 
 
 def plan_publish(session: Session, settings: Settings, name: str, version: str) -> PublishPlan:
-    """The plan of publishing draft ``name`` ``version``; refused when there is no such release or it
-    is already published."""
+    """The plan of publishing draft ``name`` ``version``; refused when there is no such release, it is
+    already published, or a pair it was built from has been superseded since (a middle scene ingested
+    while it was built)."""
     check_release_name(name)
     semver(version)
     rel = find_release(session, name, version)
@@ -255,6 +259,13 @@ def plan_publish(session: Session, settings: Settings, name: str, version: str) 
     if rel.status == "published":
         raise ImmutableError(
             f"release {name} {version} is already published: a published version is never rewritten."
+        )
+    gone = [pid for pid in (rel.parameters or {}).get("pairs", []) if get_pair(session, pid).status == "superseded"]
+    if gone:
+        raise ReleaseError(
+            f"release {name} {version} was built from pair(s) {', '.join(map(str, gone))}, superseded since "
+            "(a scene was ingested between their scenes): its pairs are no longer consecutive. Build it "
+            "again (`siteline release build`); nothing was published."
         )
     return PublishPlan(
         name, version, paths.release_draft(settings.home, name, version),

@@ -1,17 +1,54 @@
-"""Splits of a release, disjoint by pair."""
+"""Splits of a release: stable across versions, never empty while there are views to split.
+
+- An item (pair, view index) that an earlier version of the release holds keeps its split in every
+  later version; a new view of such a pair takes the split of the pair's nearest (by ground anchor)
+  view that kept one; a new pair goes whole to the split furthest under its share.
+- A first version of three or more pairs assigns whole pairs (seeded): no view of a pair in two splits.
+- With fewer pairs than splits, each pair's views are cut into spatial bands along the long axis of
+  their ground anchors (test the first ``test_fraction`` of them, val the last ``val_fraction``), and
+  a train view is left out of the release while a val or test view shares more than
+  ``MAX_SHARED`` of its footprint with train views, at most half of the train views (footprints as
+  discs: anchor = where the view's optical axis meets the ground, radius = that distance x half the
+  image diagonal / focal length); the largest share left is stated in the manifest.
+"""
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
 import numpy as np
+import shapely
+
+from siteline.records.pairs import RenderedView
+
+SPLITS = ("train", "val", "test")
+# the most of a val or test view's footprint that train views may cover (single-pair band splits)
+MAX_SHARED = 0.5
+Item = tuple[int, int]  # (pair id, view index)
+
+
+@dataclass(frozen=True)
+class SplitPlan:
+    """Each item's split, the items left out (train views too close to val/test ground), and the rule
+    as the manifest states it."""
+
+    of: dict[Item, str]
+    left_out: tuple[Item, ...] = ()
+    rule: dict[str, Any] = field(default_factory=dict)
+
+    def pairs(self) -> dict[str, list[int]]:
+        """The pairs with items in each split."""
+        return {s: sorted({p for (p, _), sp in self.of.items() if sp == s}) for s in ("test", "val", "train")}
 
 
 def split_pairs(
     pair_ids: list[int], seed: int, val_fraction: float = 0.15, test_fraction: float = 0.15
 ) -> dict[str, list[int]]:
     """Assign whole pairs to train/val/test (seeded): no view of one pair lands in two splits.
-
-    One pair: all train. Two: train and test. Three or more: at least one each for val and test.
-    """
+    One pair: all train. Two: train and test. Three or more: at least one each for val and test."""
     ids = sorted(pair_ids)
     order = [ids[i] for i in np.random.default_rng(seed).permutation(len(ids))]
     n = len(order)
@@ -22,3 +59,107 @@ def split_pairs(
         "val": sorted(order[n_test : n_test + n_val]),
         "train": sorted(order[n_test + n_val :]),
     }
+
+
+def footprint_disc(view: RenderedView) -> tuple[np.ndarray, float]:
+    """(anchor xy, radius m) of a view's ground footprint as a disc (module docstring)."""
+    from siteline.cameras import Camera
+
+    cam = Camera.from_dict(view.camera)
+    depth = float(view.params.get("central_depth_m") or 0.0) or max(float(cam.center[2]), 1.0)
+    anchor = cam.center + cam.forward * depth
+    radius = depth * math.hypot(cam.width, cam.height) / (2.0 * cam.fx)
+    return anchor[:2], radius
+
+
+def assign_splits(
+    views: Mapping[int, Sequence[RenderedView]],
+    seed: int,
+    previous: Mapping[Item, str] | None = None,
+    val_fraction: float = 0.15,
+    test_fraction: float = 0.15,
+) -> SplitPlan:
+    """The split of every item of ``views`` (pair id -> its rendered views), keeping ``previous``
+    (the latest earlier version's items) where it can (module docstring)."""
+    previous = dict(previous or {})
+    known = {p for p, _ in previous}
+    pairs = sorted(views)
+    shares = {"train": 1.0 - val_fraction - test_fraction, "val": val_fraction, "test": test_fraction}
+    if not known:
+        if len(pairs) >= len(SPLITS):
+            whole = split_pairs(pairs, seed, val_fraction, test_fraction)
+            first = {(p, v.index): s for s, ids in whole.items() for p in ids for v in views[p]}
+            return SplitPlan(first, (), {"rule": "whole pairs, seeded", "seed": seed})
+        return _bands(views, val_fraction, test_fraction)
+    of: dict[Item, str] = {}
+    for p in pairs:
+        if p not in known:
+            continue
+        kept = {v.index: previous[(p, v.index)] for v in views[p] if (p, v.index) in previous}
+        discs = {v.index: footprint_disc(v)[0] for v in views[p]}
+        for v in views[p]:
+            if v.index in kept:
+                of[(p, v.index)] = kept[v.index]
+            elif kept:
+                near = min(kept, key=lambda i: float(np.linalg.norm(discs[i] - discs[v.index])))
+                of[(p, v.index)] = kept[near]
+            else:
+                of[(p, v.index)] = "train"
+    for p in pairs:  # new pairs, whole, to the split furthest under its share of pairs
+        if p in known:
+            continue
+        counts = {s: len({q for (q, _), sp in of.items() if sp == s}) for s in SPLITS}
+        total = max(sum(counts.values()), 1)
+        want = min(SPLITS, key=lambda s: (counts[s] / total - shares[s], SPLITS.index(s)))
+        of |= {(p, v.index): want for v in views[p]}
+    return SplitPlan(of, (), {"rule": "items keep their split; new views take their nearest view's, new pairs "
+                                      "the split furthest under its share", "seed": seed})  # fmt: skip
+
+
+def _shared(shapes: Sequence[shapely.Polygon], train: set[int], k: int) -> float:
+    """The share of footprint ``k`` that the footprints of ``train`` cover."""
+    if not train:
+        return 0.0
+    return float(shapely.union_all([shapes[t] for t in train]).intersection(shapes[k]).area / shapes[k].area)
+
+
+def _bands(views: Mapping[int, Sequence[RenderedView]], val_fraction: float, test_fraction: float) -> SplitPlan:
+    of: dict[Item, str] = {}
+    left: list[Item] = []
+    worst_share = 0.0
+    for p in sorted(views):
+        vs = list(views[p])
+        discs = [footprint_disc(v) for v in vs]
+        xy = np.array([d[0] for d in discs]) if discs else np.zeros((0, 2))
+        if len(vs) < 3:
+            of |= {(p, v.index): "train" for v in vs}
+            continue
+        centred = xy - xy.mean(axis=0)
+        axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+        order = np.argsort(centred @ axis, kind="stable")
+        n_test = max(1, round(test_fraction * len(vs)))
+        n_val = max(1, round(val_fraction * len(vs)))
+        split = np.full(len(vs), "train", dtype=object)
+        split[order[:n_test]] = "test"
+        split[order[len(vs) - n_val :]] = "val"
+        shapes = [shapely.Point(float(x), float(y)).buffer(r, 32) for (x, y), r in discs]
+        train = {k for k in range(len(vs)) if split[k] == "train"}
+        budget = len(train) // 2  # never more than half of train left out: a small site keeps a train set
+        held = [k for k in range(len(vs)) if split[k] != "train"]
+
+        for k in held:
+            while train and budget and _shared(shapes, train, k) > MAX_SHARED:
+                worst = max(train, key=lambda t: shapes[t].intersection(shapes[k]).area)
+                train.discard(worst)
+                left.append((p, vs[worst].index))
+                budget -= 1
+        worst_share = max(worst_share, max((_shared(shapes, train, k) for k in held), default=0.0))
+        of |= {(p, vs[k].index): str(split[k]) for k in range(len(vs)) if split[k] != "train" or k in train}
+    rule = {
+        "rule": "fewer pairs than splits: each pair's views in spatial bands along the long axis of their "
+        f"ground anchors (test the first {test_fraction:.0%}, val the last {val_fraction:.0%}); train views "
+        f"left out while a val or test view shares more than {MAX_SHARED:.0%} of its footprint with train, "
+        "at most half of them (a site smaller than a few footprints cannot separate further)",
+        "target_shared_footprint": MAX_SHARED, "max_shared_footprint": round(worst_share, 3), "left_out": len(left),
+    }  # fmt: skip
+    return SplitPlan(of, tuple(left), rule)

@@ -106,7 +106,9 @@ def _build(
 def publish_release(
     catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None = None
 ) -> ReleaseInfo:
-    """Verify the draft's checksums, move it into place, mark it published, make it read-only."""
+    """Verify the draft's checksums, move it into place, mark it published, make it read-only; a
+    publish an earlier one left half-way (moved but not recorded, or recorded but still writable)
+    is finished instead."""
     with catalog.lock(f"release:{name}"):
         return _publish(catalog, settings, name, version, run_id)
 
@@ -115,10 +117,17 @@ def _publish(
     catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None
 ) -> ReleaseInfo:
     with catalog.transaction() as s:
-        plan = plan_publish(s, settings, name, version)
-        unfinished = [
-            f for f in inspect_release(s, settings, name, version) if f.kind == "moved-not-recorded"
-        ]
+        # a publish killed after its catalog commit left the version published but writable: finish it
+        writable_left = [f for f in inspect_release(s, settings, name, version) if f.kind == "writable"]
+        if not writable_left:
+            plan = plan_publish(s, settings, name, version)
+            unfinished = [
+                f for f in inspect_release(s, settings, name, version) if f.kind == "moved-not-recorded"
+            ]
+    if writable_left:
+        log.info("%s", writable_left[0].message)
+        mend(catalog, settings, writable_left[0], run_id)
+        return _release_info(catalog, name, version)
     if unfinished:  # an earlier publish moved it into place and died: finish that one
         log.info("%s", unfinished[0].message)
         mend(catalog, settings, unfinished[0], run_id)
