@@ -233,6 +233,10 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         "A bi-temporal change-detection dataset rendered by siteline from drone LiDAR scenes of a construction site, "
         "following the iVISION-2DCD method: pixel-aligned image pairs from synthetic cameras and symmetric change masks.",
         "",
+        f"Version {doc['version']}: {doc['lineage'].get('version_reason', 'first version')} (semantic versioning for "
+        "datasets: new items only is a minor version, an item changed or removed or a split, parameter or "
+        "format changed a major one).",
+        "",
         "![samples: t1, t2, mask (green unchanged, red changed, white ignore)](montage.png)",
         "",
     ]

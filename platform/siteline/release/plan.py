@@ -76,14 +76,33 @@ def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
     return out or ["lineage changed"]
 
 
+def _only_added(previous: Mapping[str, Any], key: Mapping[str, Any], old_digests: Mapping[str, str],
+                digests: Mapping[str, str]) -> bool:  # fmt: skip
+    """Whether ``key`` only adds pairs to ``previous``: every earlier pair kept with the same label
+    sets and outputs, the same parameters, format and padding (its items are then unchanged, and
+    keep their splits: siteline.release.splits)."""
+    old_pairs, new_pairs = set(previous.get("pairs", [])), set(key["pairs"])
+    if not old_pairs < new_pairs:
+        return False
+    if any(previous.get(k) != key.get(k) for k in ("params", "format", "pad")):
+        return False
+    before = previous.get("label_sets", {})
+    if any(key["label_sets"].get(sid) != v for sid, v in before.items()):
+        return False
+    return all(old_digests.get(str(p)) == digests.get(str(p)) for p in old_pairs)
+
+
 def next_version(
     session: Session, name: str, lineage_key: Mapping[str, Any], digests: Mapping[str, str]
 ) -> tuple[str, str, str | None]:
-    """(version, why, up to date with) for a build of ``name``: 1.0.0 first; a major bump when pairs,
-    label sets or parameters change; a minor one when only the pairs' outputs were remade (a re-tiled
-    scene); and the latest version itself (third item) when its inputs (lineage key and the pairs'
-    output digests) are these: nothing new to build. A version recorded before label sets were
-    versioned used version 1 of every scene."""
+    """(version, why, up to date with) for a build of ``name``, by semantic versioning for datasets:
+    1.0.0 first; a minor bump when it only adds items (pairs added, every earlier item unchanged and
+    in its split); a major bump when an item changes or goes (a pair dropped or superseded, a label
+    set, a parameter, the format or padding changed, or a pair's outputs remade: a re-tiled scene);
+    and the latest version itself (third item) when its inputs (lineage key and the pairs' output
+    digests) are these: nothing new to build. A version recorded before label sets were versioned
+    used version 1 of every scene. (A metadata-only change, a patch, has no build: a build always
+    writes the items.)"""
     rows = list_releases(session, name)
     if not rows:
         return "1.0.0", "first version", None
@@ -92,12 +111,16 @@ def next_version(
     recorded = latest.parameters or {}
     previous = dict(recorded.get("lineage_key") or {})
     previous.setdefault("label_sets", dict.fromkeys(lineage_key.get("label_sets", {}), 1))
+    old_digests = dict(recorded.get("output_digests") or {})
     if previous != dict(lineage_key):
-        return f"{major + 1}.0.0", "; ".join(_changes(previous, lineage_key)), None
-    if recorded.get("output_digests") == dict(digests):
+        why = "; ".join(_changes(previous, lineage_key))
+        if _only_added(previous, lineage_key, old_digests, digests):
+            return f"{major}.{minor + 1}.0", f"new items only ({why})", None
+        return f"{major + 1}.0.0", why, None
+    if old_digests == dict(digests):
         return latest.version, "up to date", latest.version
-    remade = sorted(int(p) for p, d in digests.items() if (recorded.get("output_digests") or {}).get(p) != d)
-    return f"{major}.{minor + 1}.0", f"outputs remade for pairs {', '.join(map(str, remade))} (a scene re-tiled)", None
+    remade = sorted(int(p) for p, d in digests.items() if old_digests.get(p) != d)
+    return f"{major + 1}.0.0", f"items changed: outputs remade for pairs {', '.join(map(str, remade))} (a scene re-tiled)", None
 
 
 def choose_pairs(session: Session, site_name: str, pair_ids: Sequence[int] | None = None) -> list[int]:
