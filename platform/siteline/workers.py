@@ -17,6 +17,7 @@ import ctypes
 import ctypes.util
 import os
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -52,11 +53,33 @@ def keep_freed_memory() -> None:
         mallopt(_M_TRIM_THRESHOLD, 2**30)
 
 
+# how often (seconds) a worker checks that the process that started it is alive
+PARENT_CHECK_S = 1.0
+
+
+def exit_with_parent(parent: int, period_s: float = PARENT_CHECK_S) -> threading.Thread:
+    """Start a daemon thread that ends this process once its parent ``parent`` is gone (it is then
+    re-parented, so ``os.getppid()`` changes): a worker of a killed ingest does not live on holding its
+    memory (a parent-death signal would fire when the parent's spawning thread ends, not the process,
+    and the pool is shared by every thread)."""
+
+    def watch() -> None:
+        while True:
+            time.sleep(period_s)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    thread = threading.Thread(target=watch, name="siteline-parent-watch", daemon=True)
+    thread.start()
+    return thread
+
+
 def _start_worker() -> None:
     import gc
 
     from siteline.kernels import load
 
+    exit_with_parent(os.getppid())
     keep_freed_memory()
     load()
     gc.freeze()  # what start-up imported is never garbage: full collections no longer walk it

@@ -182,3 +182,43 @@ def test_a_dead_worker_is_one_clear_error_and_the_next_pass_gets_a_fresh_pool(ca
     assert cli.main(["ingest", "x", "--site", "s"]) == 1
     err = capsys.readouterr().err
     assert "worker process died" in err and "Traceback" not in err
+
+
+KILLED_PARENT = """
+import sys, time
+from siteline.workers import process_pool
+pool = process_pool(2)
+pids = [pool.submit(__import__("os").getpid).result() for _ in range(4)]
+print(" ".join(map(str, sorted(set(pids)))), flush=True)
+time.sleep(60)
+"""
+
+
+def test_workers_of_a_killed_parent_exit_within_seconds() -> None:
+    """kill -9 of a process holding the pool (an ingest killed mid-partition): its spawned workers,
+    re-parented to init, notice within about a second and exit instead of holding their memory."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-c", KILLED_PARENT], stdout=subprocess.PIPE, text=True)
+    try:
+        workers = [int(p) for p in proc.stdout.readline().split()]
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert workers
+
+    def alive(pid: int) -> bool:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and any(alive(p) for p in workers):
+        time.sleep(0.2)
+    assert not any(alive(p) for p in workers)
