@@ -18,6 +18,7 @@ from siteline.fence import inside_fence
 from siteline.kernels import cut
 from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
 from siteline.site import SiteSpec
+from siteline.tolerances import LENGTH_TOL_M
 
 
 @dataclass
@@ -143,6 +144,7 @@ def site_chunks(
     stop: int | None = None,
     eight_bit: bool | None = None,
     correction: Correction | None = None,
+    fence_tol_m: float = LENGTH_TOL_M,
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
     origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
@@ -150,7 +152,10 @@ def site_chunks(
     (256,) bool of the codes it maps; None: the taxonomy's LAS source codes. ``start``/``stop``,
     ``eight_bit``: as :func:`siteline.lasio.iter_chunks`. ``correction``: a rigid transform (4 x 4,
     site-local metres) applied after the origin is subtracted: the co-registration of a later scene
-    onto the earlier one (siteline.register), so every reader sees the corrected geometry."""
+    onto the earlier one (siteline.register), so every reader sees the corrected geometry.
+    ``fence_tol_m``: how far outside the fence still counts as inside (a label import reads
+    coordinates rounded to the tile quantum, so it takes that quantum: a point ingest found inside
+    stays inside)."""
     tax = site.taxonomy
     lut, known = class_lut if class_lut is not None else tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
@@ -177,6 +182,6 @@ def site_chunks(
         cls = lut[codes]
         outside = np.zeros(len(cls), dtype=bool)
         if site.fence is not None:
-            outside = ~inside_fence(local[:, :2], site.fence, box=(lo[0], lo[1], hi[0], hi[1]))
+            outside = ~inside_fence(local[:, :2], site.fence, tol_m=fence_tol_m, box=(lo[0], lo[1], hi[0], hi[1]))
             cls = np.where(outside, tax.ignore_id, cls)
         yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside, lo, hi)

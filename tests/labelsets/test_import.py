@@ -244,3 +244,41 @@ def test_a_label_set_of_another_tiling_is_refused(scenes, tmp_path) -> None:
     finally:
         with cat.transaction() as s:
             s.get(Scene, 2).statistics = saved
+
+
+def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_path) -> None:
+    """Points 0.1 mm inside the fence round (1 mm tile quantum) to 0.3 mm outside it: ingest kept them,
+    and re-importing the unchanged export must not flip them to ignore (it made a new label set)."""
+    import datetime as dt
+
+    from sitehelpers import make_home
+
+    from siteline.catalog import open_catalog
+    from siteline.catalog.sites import add_site
+    from siteline.ingest import IngestOptions, ingest_mission
+    from siteline.lasio import write_las
+    from siteline.site import make_site_spec
+    from siteline.tiles import tile_scene
+
+    origin = (445_000.0, 5_030_000.0, 80.0)
+    settings = make_home(tmp_path)  # site demo without a fence; add one with an edge at x = 10.0007 m
+    cat = open_catalog(settings)
+    edge = 10.0007
+    with cat.transaction() as s:
+        add_site(s, make_site_spec("fenced", "EPSG:32618", origin, [(-20, -20), (edge, -20), (edge, 20), (-20, 20), (-20, -20)]))
+    rng = np.random.default_rng(0)
+    xy = np.c_[rng.uniform(-19, 9, 3000), rng.uniform(-19, 19, 3000)]
+    near = np.c_[np.full(40, edge - 0.0001), np.linspace(-15, 15, 40)]  # 0.1 mm inside; the tiles hold 10.001
+    local = np.r_[np.c_[xy, rng.normal(0, 0.02, 3000)], np.c_[near, np.zeros(40)]]
+    mission = tmp_path / "m"
+    write_las(mission / "cloud.las", local + np.asarray(origin), crs="EPSG:32618",
+              classification=np.full(len(local), 2, np.uint8), scale=0.0001)  # fmt: skip
+    when = dt.datetime(2024, 6, 1, tzinfo=dt.UTC)
+    r = ingest_mission(cat, settings, mission, "fenced", IngestOptions(captured_at=when))
+    tile_scene(cat, settings, r.scene_id, workers=1)
+    assert r.scan["outside_fence"] == 0
+    export(cat, r.scene_id, tmp_path / "unchanged.las")
+    res = import_labels(cat, settings, r.scene_id, tmp_path / "unchanged.las")
+    assert not res.created and res.changed == 0, res
+    assert versions(cat, r.scene_id) == [1]
+    cat.dispose()

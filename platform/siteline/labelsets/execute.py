@@ -129,7 +129,8 @@ def _spill(
         has_time = "gps_time" in reader.header.point_format.dimension_names
         crs = file_crs(reader, path) or site.pyproj_crs  # an editor may drop the CRS: it is the export's
         tr = source_transformer(path, site, crs)
-        for sc in site_chunks(path, site, tr, reader=reader, class_lut=lut):
+        # the file's coordinates are the tiles' (rounded to the quantum): ingest's inside stays inside
+        for sc in site_chunks(path, site, tr, reader=reader, class_lut=lut, fence_tol_m=tiles.spec.quantum_m):
             unknown += np.bincount(sc.chunk.classification[~sc.known_code], minlength=256)
             rec = np.empty(len(sc.local), SPILL_DTYPE)
             rec["idx"] = np.arange(n, n + len(rec))
