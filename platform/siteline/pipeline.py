@@ -23,7 +23,14 @@ from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
-from siteline.release.plan import check_release_name, choose_pairs, release_params, semver
+from siteline.release.plan import (
+    check_release_name,
+    check_view_count,
+    choose_pairs,
+    pair_camera_counts,
+    release_params,
+    semver,
+)
 from siteline.release.stage import build_release
 from siteline.tiles import TileOutcome, tile_scene
 
@@ -151,6 +158,7 @@ def release(
     with catalog.transaction() as s:
         params = release_params(s, site, knobs, f"release {name}")
         chosen = choose_pairs(s, site, pair_ids)
+        check_view_count(pair_camera_counts(s, chosen), params.pair, f"release {name}")
     log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
              params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
     outputs = process_pairs(catalog, settings, chosen, params.pair, progress, device, run_id, label_sets)

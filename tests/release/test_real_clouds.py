@@ -131,6 +131,10 @@ def test_infeasible_settings_are_refused_before_any_view(autzen) -> None:
     assert r.returncode == 2 and took < 10.0, (r.returncode, took, r.stderr)
     assert "--point-size 5" in r.stderr and "min-coverage" in r.stderr
     assert not (autzen / "releases" / "paper").exists()
+    t0 = time.perf_counter()
+    r = _run(autzen, "release", "build", "--site", "autzen", "--name", "many", "--views", "5000")
+    assert r.returncode == 2 and time.perf_counter() - t0 < 10.0, r.stderr
+    assert "can give at most" in r.stderr and "fewer than --views 5000" in r.stderr
 
 
 def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:

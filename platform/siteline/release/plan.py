@@ -18,12 +18,14 @@ from siteline.catalog.scenes import (
     list_pairs,
     list_scenes,
     mission_of_scene,
+    scene_cameras,
     scene_statistics,
     site_survey,
 )
 from siteline.catalog.sites import get_site, site_of
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
+from siteline.pairs.params import PairParams
 from siteline.pairs.plan import PairPlan, plan_pair
 from siteline.release import layout
 from siteline.release.knobs import ReleaseKnobs, check_coverage, check_image_size, resolve
@@ -90,6 +92,27 @@ def _only_added(previous: Mapping[str, Any], key: Mapping[str, Any], old_digests
     if any(key["label_sets"].get(sid) != v for sid, v in before.items()):
         return False
     return all(old_digests.get(str(p)) == digests.get(str(p)) for p in old_pairs)
+
+
+def pair_camera_counts(session: Session, pair_ids: Sequence[int]) -> dict[int, int]:
+    """Each pair's later scene's camera count (views derive from them)."""
+    return {pid: len(scene_cameras(session, get_pair(session, pid).t2_scene_id)) for pid in pair_ids}
+
+
+def check_view_count(cameras: Mapping[int, int], params: PairParams, what: str) -> None:
+    """Refuse ``what`` before any view is made when a pair's cameras (pair id -> count) cannot give
+    ``params.views`` candidates at all (each camera gives at most heights x {original, mirrored} x
+    forward steps), naming the most it could give and the ways past it."""
+    spec = params.view_params_spec()
+    per_camera = len(spec.vertical_fractions) * (2 if spec.mirror else 1) * len(spec.forward_fractions)
+    for pid, n in sorted(cameras.items()):
+        most = n * per_camera
+        if most < params.views:
+            raise ReleaseError(
+                f"{what}: pair {pid} can give at most {most} candidate views ({n} cameras x "
+                f"{per_camera} each), fewer than --views {params.views}: lower --views, or plan more cameras "
+                "(`siteline ingest --plan-cameras` with a higher --overlap). Nothing was made."
+            )
 
 
 def next_version(
@@ -221,6 +244,7 @@ def plan_release(
         semver(version)
     chosen = choose_pairs(session, site_name, pair_ids)
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
+    check_view_count({p.pair_id: len(p.cameras) for p in pairs}, params.pair, f"release {name}")
     key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
            "label_sets": used_label_sets(pairs)}  # fmt: skip
     digests = output_digests(pairs)
