@@ -39,4 +39,11 @@ def test_added_pairs_are_a_minor_version_and_move_no_item(tmp_path, synth_site) 
     files_b = {f["path"]: f["sha256"] for f in b["files"]}
     assert all(files_b[p] == h for p, h in files_a.items() if p.endswith(".png") and "montage" not in p)
     assert {it["pair"] for it in b["items"]} == {1, 2}
+    published = publish_release(cat, settings, "ver", second.version)
+    from siteline.release.query import diff_releases
+
+    with cat.transaction() as s:
+        d = diff_releases(s, "ver", "1.0.0", "1.1.0")
+    assert d["why"].startswith("new items only") and d["pairs"]["added"] == [2]
+    assert "Version 1.1.0: new items only" in (Path(published.root) / "README.md").read_text()
     cat.dispose()

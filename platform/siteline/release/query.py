@@ -51,6 +51,8 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, An
         "name": name,
         "from": v1,
         "to": v2,
+        # why the later version exists (its bump: new items only -> minor, an item changed -> major)
+        "why": mb.get("lineage", {}).get("version_reason"),
         "pairs": {"added": sorted(set(pb) - set(pa)), "removed": sorted(set(pa) - set(pb))},
         "parameters": {
             k: [flat_a.get(k), flat_b.get(k)]
