@@ -306,3 +306,22 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
     assert mine and mine == by_item(local.root)
     scenes = {sc["id"]: sc for sc in read_manifest(Path(local.root))["lineage"]["scenes"]}
     assert read_manifest(Path(pub.root))["lineage"]["scenes"] == [scenes[1], scenes[2]]
+
+
+def test_reused_change_labels_record_their_points(built) -> None:
+    """A pair's change labels made by an earlier run (a build killed before its record) are reused
+    with their point count, never None in the lineage."""
+    from siteline.labelsets.store import open_labelled
+    from siteline.pairs.execute import pair_labels
+    from siteline.pairs.plan import plan_pair
+    from siteline.progress import no_progress
+
+    from .conftest import PARAMS
+
+    settings, cat, _ = built
+    with cat.transaction() as s:
+        plan = plan_pair(s, settings.store, 1, PARAMS)
+    t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
+    labels = pair_labels(plan, t1, t2, settings.store, no_progress)  # the store exists: reused
+    counts = labels.record["counts"]
+    assert labels.record["points"] == sum(n for side in counts.values() for n in side.values()) > 0

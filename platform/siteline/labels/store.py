@@ -179,7 +179,7 @@ def write_labels(
             for side, dg in digests.items()
         }
         checksum = hashlib.sha256(f"{h['t1']}:{h['t2']}".encode()).hexdigest()
-        root.attrs.update({"radius_m": radius_m, "counts": counts, "checksum": checksum})
+        root.attrs.update({"radius_m": radius_m, "counts": counts, "checksum": checksum, "points": n_total})
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
