@@ -59,8 +59,9 @@ def pair_labels(
     info["expected_false_change"] = expected_false_change(info["multiplier"])
     uri = layout.pair_labels(store, plan.pair_id, plan.versions, radius)
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
-        record = dict(store.open_group(uri).attrs) | {"uri": uri}
-        record.setdefault("points", sum(n for side in record["counts"].values() for n in side.values()))
+        record: dict[str, Any] = dict(store.open_group(uri).attrs) | {"uri": uri}
+        counts: dict[str, dict[str, int]] = record["counts"]
+        record.setdefault("points", sum(n for side in counts.values() for n in side.values()))
     else:
         progress("labels", 0, None)
         taxonomy = plan.site.taxonomy
