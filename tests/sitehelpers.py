@@ -101,3 +101,16 @@ def node_order_key(counts: np.ndarray) -> np.ndarray:
         for axis in range(3):
             key |= ((c[:, axis] >> b) & 1) << (11 - 3 * b - axis)
     return key
+
+
+def ingest_and_tile(cat, settings: Settings, missions: list[Path], site: str = "demo") -> list[int]:  # noqa: ANN001
+    """Ingest and tile each mission folder in turn (the library's stages, as a service would); their
+    scene ids."""
+    from siteline.ingest import ingest_mission
+    from siteline.tiles import tile_scene
+
+    ids = []
+    for m in missions:
+        ids.append(ingest_mission(cat, settings, m, site).scene_id)
+        tile_scene(cat, settings, ids[-1], workers=1)
+    return ids

@@ -4,14 +4,13 @@ two pairs through the new scene while it was built (an attack run published e00 
 from __future__ import annotations
 
 import pytest
-from sitehelpers import epoch_dirs, make_home
+from sitehelpers import epoch_dirs, ingest_and_tile, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.errors import ReleaseError
 from siteline.ingest import ingest_mission
 from siteline.release import publish_release
-from siteline.tiles import tile_scene
 
 from .conftest import KNOBS
 
@@ -20,8 +19,7 @@ def test_a_draft_whose_pair_was_superseded_is_not_published(tmp_path, synth_site
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)
     e0, e1, e2 = epoch_dirs(synth_site)
-    for m in (e0, e2):
-        tile_scene(cat, settings, ingest_mission(cat, settings, m, "demo").scene_id, workers=1)
+    ingest_and_tile(cat, settings, [e0, e2])
     draft = pipeline.release(cat, settings, "demo", "race", KNOBS)  # the pair e00 -> e02
     ingest_mission(cat, settings, e1, "demo")  # the middle scene lands before the publish
     with pytest.raises(ReleaseError, match="superseded since.*Build it again"):

@@ -6,13 +6,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from sitehelpers import epoch_dirs, make_home
+from sitehelpers import epoch_dirs, ingest_and_tile, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
-from siteline.ingest import ingest_mission
 from siteline.release import publish_release
-from siteline.tiles import tile_scene
 
 from .conftest import KNOBS
 
@@ -25,10 +23,9 @@ def test_added_pairs_are_a_minor_version_and_move_no_item(tmp_path, synth_site) 
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)
     e0, e1, e2 = epoch_dirs(synth_site)
-    for m in (e0, e1):
-        tile_scene(cat, settings, ingest_mission(cat, settings, m, "demo").scene_id, workers=1)
+    ingest_and_tile(cat, settings, [e0, e1])
     first = publish_release(cat, settings, "ver", pipeline.release(cat, settings, "demo", "ver", KNOBS).version)
-    tile_scene(cat, settings, ingest_mission(cat, settings, e2, "demo").scene_id, workers=1)
+    ingest_and_tile(cat, settings, [e2])
     second = pipeline.release(cat, settings, "demo", "ver", KNOBS)
     assert second.version == "1.1.0" and second.reason.startswith("new items only (pairs added: 2")
     a, b = _manifest(first), _manifest(second)
