@@ -176,7 +176,6 @@ def footprint(sample_xy: np.ndarray) -> list[tuple[float, float]] | None:
     simple = hull.simplify(FOOTPRINT_SIMPLIFY_M, preserve_topology=True)
     ring = np.round(np.asarray(shapely.get_coordinates(shapely.Polygon(simple.exterior)))[:, :2], 2)
     try:
-        return validate_fence(np.vstack([ring, ring[:1]]) if not np.array_equal(ring[0], ring[-1]) else ring,
-                              source="scene footprint")
+        return validate_fence(ring, source="scene footprint")  # shapely's exterior ring is closed
     except GeometryError:  # a degenerate outline: no footprint rather than a wrong one
         return None

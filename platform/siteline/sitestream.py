@@ -17,6 +17,7 @@ from siteline.errors import CRSError, PointCloudError
 from siteline.fence import inside_fence
 from siteline.kernels import cut
 from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
+from siteline.poses import Rigid
 from siteline.site import SiteSpec
 from siteline.tolerances import LENGTH_TOL_M
 
@@ -40,10 +41,10 @@ class SiteChunk:
 Correction = tuple[tuple[float, ...], ...]
 
 
-def correction_parts(correction: Correction) -> tuple[np.ndarray, np.ndarray]:
-    """(R (3, 3), t (3,)) float64 of a correction."""
+def correction_rigid(correction: Correction | list[list[float]]) -> Rigid:
+    """A correction (4 x 4) as the pose it is: the previous scene's site-local frame from this one's."""
     m = np.asarray(correction, dtype=np.float64)
-    return m[:3, :3], m[:3, 3]
+    return Rigid("prev", "new", m[:3, :3], m[:3, 3])
 
 
 def file_crs(reader: laspy.LasReader, path: Path) -> pyproj.CRS | None:
@@ -159,14 +160,14 @@ def site_chunks(
     tax = site.taxonomy
     lut, known = class_lut if class_lut is not None else tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
-    R, t = (None, None) if correction is None else correction_parts(correction)
+    corrected = None if correction is None else correction_rigid(correction)
     for chunk in iter_chunks(path, chunk_points, eight_bit, reader=reader, start=start, stop=stop):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)
         local = xyz - origin
-        if R is not None:
-            local = local @ R.T + t
+        if corrected is not None:
+            local = corrected.apply(local)
         lo, hi, bad = cut.bounds(local)
         if bad:
             raise PointCloudError(

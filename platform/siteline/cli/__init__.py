@@ -99,12 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         rc = app(args=argv, standalone_mode=False)
-    except WorkerError as exc:  # the command ran and failed: no traceback, status 1
-        err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
-        return 1
     except SitelineError as exc:
         err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
-        return 2
+        return 1 if isinstance(exc, WorkerError) else 2  # a dead worker: the command ran and failed
     except typer.Exit as exc:
         return exc.exit_code
     except typer.Abort:

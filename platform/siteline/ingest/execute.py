@@ -19,10 +19,12 @@ from siteline.ingest.mission import capture_time, choose_las, colmap_dir, missio
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
+from siteline.poses import Rigid
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
 from siteline.records.scan import LasScan
 from siteline.register import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
+from siteline.sitestream import correction_rigid
 from siteline.stores import Store, layout
 from siteline.stores.blobs import BlobStaging, put_blob_bytes
 
@@ -107,14 +109,17 @@ def corrected(
 ) -> tuple[LasScan, dict[str, Camera]]:
     """The scan's stable sample and footprint and the scene's cameras moved by a co-registration
     (4 x 4, site-local: previous scene from this one), as its tiles will be (siteline.sitestream)."""
-    m = np.asarray(correction, dtype=np.float64)
-    R, t = m[:3, :3], m[:3, 3]
-    sample = scan.stable_sample @ R.T + t if scan.stable_sample is not None else None
+    prev_from_new = correction_rigid(correction)
+    sample = prev_from_new.apply(scan.stable_sample) if scan.stable_sample is not None else None
     outline = None
     if scan.footprint is not None:
-        ring = np.c_[np.asarray(scan.footprint, dtype=np.float64), np.zeros(len(scan.footprint))] @ R.T + t
+        ring = prev_from_new.apply(np.c_[np.asarray(scan.footprint, dtype=np.float64), np.zeros(len(scan.footprint))])
         outline = np.round(ring[:, :2], 2).tolist()
-    moved = {name: cam.with_pose(cam.R @ R.T, cam.t - cam.R @ R.T @ t) for name, cam in cameras.items()}
+    new_from_prev = prev_from_new.inverse()
+    moved = {}
+    for name, cam in cameras.items():
+        pose = Rigid("cam", "new", cam.R, cam.t) @ new_from_prev  # cam_from_prev
+        moved[name] = cam.with_pose(pose.R, pose.t)
     return replace(scan, stable_sample=sample, footprint=outline), moved
 
 

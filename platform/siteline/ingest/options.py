@@ -20,8 +20,9 @@ class IngestOptions:
     co-registration onto the previous scene: largest ICP correction (m, 3 m: more means a wrong CRS,
     offset or datum) and residual (m) accepted without ``accept_misalignment``; a correction over
     0.25 m is applied to the scene (siteline.register.AlignmentPolicy: construction changes between
-    epochs bias ICP by up to 0.16 m on the synthetic site), any correction is recorded. captured_at: the capture time (UTC) when the mission cannot
-    tell it (a LiDAR-only mission whose LAS has no creation date) or tells it wrong; it overrides the
+    epochs bias ICP by up to 0.16 m on the synthetic site), any correction is recorded.
+    captured_at: the capture time (UTC) when the mission cannot tell it (a LAS with no absolute GPS
+    time and no photos) or tells it wrong; it overrides the
     photos, the raw folder name and the LAS header, and is recorded as given. plan_cameras: plan the
     scene's cameras from its point cloud (``survey``: camera model, height, overlaps) even when the
     mission has photos; a mission without photos always gets planned cameras."""

@@ -1,7 +1,8 @@
 """Cameras planned from a point cloud when a mission has no photos: a nadir survey grid over the
 scene's area at a stated height above its ground, with oblique passes around its edge, in the
-intrinsics of a named capture camera. Pure functions of a site-local sample of the scene's points (no randomness): the same cloud
-and settings give the same cameras at any origin magnitude (poses are snapped to the pose quanta)."""
+intrinsics of a named capture camera. Pure functions of a site-local sample of the scene's points
+(no randomness): the same cloud and settings give the same cameras at any origin magnitude (poses
+are snapped to the pose quanta)."""
 
 from __future__ import annotations
 

@@ -188,14 +188,18 @@ def check_image_size(params: ReleaseParams, survey: SiteSurvey, what: str) -> No
         )
 
 
+def disk_area_px(point_size_px: int) -> int:
+    """The pixels one drawn point covers (the renderer's disk)."""
+    from siteline.render.zbuffer import disk_offsets
+
+    return len(disk_offsets(point_size_px))
+
+
 def expected_coverage(spacing_px: float, point_size_px: int) -> float:
     """The share of a surface's pixels that points at a mean spacing of ``spacing_px`` pixels, drawn as
     ``point_size_px`` disks, cover when they fall at random (1 - exp(-disk area / spacing_px**2)): a
     lower bound for scanned surfaces, which are more even than random."""
-    from siteline.render.zbuffer import disk_offsets
-
-    area = len(disk_offsets(point_size_px))
-    return 1.0 - math.exp(-area / max(spacing_px, 1e-9) ** 2)
+    return 1.0 - math.exp(-disk_area_px(point_size_px) / max(spacing_px, 1e-9) ** 2)
 
 
 def check_coverage(params: ReleaseParams, survey: SiteSurvey, what: str) -> None:
@@ -213,9 +217,7 @@ def check_coverage(params: ReleaseParams, survey: SiteSurvey, what: str) -> None
         return
     sizes = [p for p in range(1, 16, 2) if expected_coverage(spacing_px, p) >= pair.min_coverage]
     need = -math.log(1.0 - min(pair.min_coverage, 0.999))  # disk area / spacing_px**2 needed
-    from siteline.render.zbuffer import disk_offsets
-
-    scale = math.floor(1000 * pair.scale * math.sqrt(len(disk_offsets(pair.point_size_px)) / need) / spacing_px) / 1000
+    scale = math.floor(1000 * pair.scale * math.sqrt(disk_area_px(pair.point_size_px) / need) / spacing_px) / 1000
     long_side = min(max(c.width, c.height) for c in survey.cameras)
     fixes = [f"--scale {scale:g} or less"] if scale * long_side >= params.min_image_px else []
     if sizes:

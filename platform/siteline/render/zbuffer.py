@@ -81,12 +81,17 @@ def _check_inputs(xyz: np.ndarray | torch.Tensor, attributes: Mapping[str, np.nd
     return n
 
 
+def _dtype(settings: RenderSettings) -> torch.dtype:
+    """The float type projections are computed in."""
+    return torch.float64 if settings.precision == "float64" else torch.float32
+
+
 def _projector(cam: Camera, settings: RenderSettings, dev: torch.device) -> Callable[[torch.Tensor], tuple]:
     """Projection of (M, 3) site-local points through the scaled camera ``cam``: (valid, u, v, z),
     valid where in front of ``near_m`` and within the image widened by half a point (NaN and inf
     fail every comparison, so they are invalid; nothing is cast yet)."""
     W, H = cam.width, cam.height
-    dtype = torch.float64 if settings.precision == "float64" else torch.float32
+    dtype = _dtype(settings)
     Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
     tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
     fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
@@ -114,7 +119,7 @@ def _splat(
     npix = W * H
     project = _projector(cam, settings, dev)
     offsets = disk_offsets(settings.point_size_px)
-    zero = torch.zeros((), dtype=torch.float64 if settings.precision == "float64" else torch.float32, device=dev)
+    zero = torch.zeros((), dtype=_dtype(settings), device=dev)
     in_frustum = 0
     n = int(pts.shape[0])
     for start in range(0, n, settings.chunk_points):

@@ -196,25 +196,24 @@ def reject(
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
     settings = RenderSettings(scale=params.scale, point_size_px=params.point_size_px)
     judged: dict[int, SyntheticView] = {}
-    probed = [
-        v.camera for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True)
-        if at_least(h, params.min_height_m, LENGTH_TOL_M) and (ins or not v.params["mirrored"])
-        and at_least(dist, params.clearance_m, LENGTH_TOL_M) and up == 0
-    ]  # fmt: skip
-    source.prefetch(probed, params.scale)
+    probed = []
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
-        if not at_least(h, params.min_height_m, LENGTH_TOL_M):
-            judged[id(v)] = replace(v, rejected="underground")
-        elif v.params["mirrored"] and not ins:
-            judged[id(v)] = replace(v, rejected="outside_fence")
-        elif not at_least(dist, params.clearance_m, LENGTH_TOL_M):
-            judged[id(v)] = replace(v, rejected="near_surface")
-        elif up > 0:
-            judged[id(v)] = replace(v, rejected="under_geometry")
+        reason = (
+            "underground" if not at_least(h, params.min_height_m, LENGTH_TOL_M)
+            else "outside_fence" if v.params["mirrored"] and not ins
+            else "near_surface" if not at_least(dist, params.clearance_m, LENGTH_TOL_M)
+            else "under_geometry" if up > 0
+            else None
+        )  # fmt: skip
+        if reason is not None:
+            judged[id(v)] = replace(v, rejected=reason)
         else:
-            coverage = coverage_of(source.points_for_view(v.camera, params.scale), v.camera, settings)
-            low = not at_least(coverage, params.min_coverage, RATIO_TOL)
-            judged[id(v)] = replace(v, coverage=coverage, rejected="low_coverage" if low else None)
+            probed.append(v)
+    source.prefetch([v.camera for v in probed], params.scale)  # the probes that pass the cheap tests
+    for v in probed:
+        coverage = coverage_of(source.points_for_view(v.camera, params.scale), v.camera, settings)
+        low = not at_least(coverage, params.min_coverage, RATIO_TOL)
+        judged[id(v)] = replace(v, coverage=coverage, rejected="low_coverage" if low else None)
     return [judged.get(id(v), v) for v in views]
 
 
