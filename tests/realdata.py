@@ -30,11 +30,13 @@ def later_epoch(
     shift: tuple[float, float, float] = (0.0, 0.0, 0.0),
     days: int = 30,
     seed: int = 0,
+    reclass: dict[int, int] | None = None,
 ) -> Path:
     """Write ``out``: the points of ``src`` less those in ``removed_box`` (xmin, ymin, xmax, ymax in
     the file's units), plus a box structure ``built_box`` (xmin, ymin, xmax, ymax, height) whose roof
     and walls are sampled at the cloud's density from points of the file's own class 6 (building),
-    all moved by ``shift`` (file units), GPS times and the creation date ``days`` later."""
+    all moved by ``shift`` (file units), GPS times and the creation date ``days`` later, and class
+    codes mapped by ``reclass`` (another vendor's scheme)."""
     las = laspy.read(src)
     xyz = np.c_[las.x, las.y, las.z]
     keep = np.ones(len(xyz), bool)
@@ -46,6 +48,11 @@ def later_epoch(
     new.points = points
     if built_box is not None:
         new = _with_structure(new, xyz[keep], built_box, seed)
+    if reclass:
+        codes = np.asarray(new.classification).copy()
+        for old, code in reclass.items():
+            codes[np.asarray(new.classification) == old] = code
+        new.classification = codes
     new.x = np.asarray(new.x) + shift[0]
     new.y = np.asarray(new.y) + shift[1]
     new.z = np.asarray(new.z) + shift[2]

@@ -6,17 +6,23 @@ is missing. No Prefect here."""
 from __future__ import annotations
 
 import logging
+import math
+import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
 from siteline.catalog import Catalog
+from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion, plan_site_deletion
 from siteline.catalog.pairs import unprocessed_pairs
-from siteline.catalog.scenes import get_scene, pair_ids_of_scene, scene_ids_of_pairs
+from siteline.catalog.scenes import needs_tiling, pair_ids_of_scene, scene_ids_of_pairs
+from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings
+from siteline.fence import validate_fence
 from siteline.ingest import IngestOptions, IngestResult, ingest_mission
 from siteline.pairs.params import PairParams
+from siteline.pairs.plan import pair_change_rule
 from siteline.pairs.stage import process_pair
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
@@ -32,6 +38,8 @@ from siteline.release.plan import (
     semver,
 )
 from siteline.release.stage import build_release
+from siteline.stores import layout
+from siteline.taxonomy import Taxonomy
 from siteline.tiles import TileOutcome, tile_scene
 
 log = logging.getLogger(__name__)
@@ -77,13 +85,14 @@ def tile_scenes(
     run_id: str | None = None,
     executor: Executor | None = None,
 ) -> list[TileOutcome]:
-    """Tile every scene of ``scene_ids`` that is not tiled yet (its tiles written by ``executor``, a
-    Dask cluster's say, when given)."""
+    """Tile every scene of ``scene_ids`` that is not tiled yet, or was tiled under an earlier version
+    of its site's taxonomy or fence (its tiles written by ``executor``, a Dask cluster's say, when
+    given)."""
     done = []
     for sid in scene_ids:
         with catalog.transaction() as s:
-            tiled = get_scene(s, sid).status == "tiled"
-        if not tiled:
+            due = needs_tiling(s, sid)
+        if due:
             done.append(
                 tile_scene(
                     catalog,
@@ -96,6 +105,31 @@ def tile_scenes(
                 )
             )
     return done
+
+
+def redefine_site(
+    catalog: Catalog,
+    settings: Settings,
+    site: str,
+    taxonomy: Taxonomy | None = None,
+    fence: Sequence[Sequence[float]] | None = None,
+    clear_fence: bool = False,
+    workers: int = 2,
+    progress: Progress = no_progress,
+) -> tuple[int, list[TileOutcome]]:
+    """Give ``site`` a new taxonomy and/or fence (a closed ring, site-local metres; ``clear_fence``:
+    none) as its next version, then tile its scenes again under it (their classes mapped anew from
+    their point clouds; label set 1 and the pairs' outputs follow, the outputs keyed by the new
+    tiling). Return the version and what tiling did. A re-tiling cut short is finished by the next
+    ``release build`` (a scene tiled under an earlier version is tiled again before its pairs)."""
+    ring = None
+    if fence is not None:
+        ring = [list(v) for v in validate_fence(fence, source=f"site {site} fence")]
+    with catalog.transaction() as s:
+        row, scene_ids = redefine_catalog_site(s, site, taxonomy, ring, clear_fence)
+        version = row.version
+    log.info("site %s is at version %d: tiling its %d scenes again", site, version, len(scene_ids))
+    return version, tile_scenes(catalog, settings, scene_ids, workers=workers, progress=progress)
 
 
 def process_pairs(
@@ -159,9 +193,27 @@ def release(
         params = release_params(s, site, knobs, f"release {name}")
         chosen = choose_pairs(s, site, pair_ids)
         check_view_count(pair_camera_counts(s, chosen), params.pair, f"release {name}")
+        for pid in chosen:  # stated before any pair is processed, not found in the masks afterwards
+            rule = pair_change_rule(s, pid, params.pair.change_rule, label_sets)
+            if rule.differences:
+                other = "geometry" if rule.rule == "semantic" else "semantic"
+                log.warning(
+                    "release %s, pair %d: the scenes classify differently (%s); its change labels use the %s "
+                    "rule (%s; --change-rule %s to change it)",
+                    name, pid, "; ".join(rule.differences), rule.rule, rule.why, other,
+                )  # fmt: skip
     log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
              params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
     outputs = process_pairs(catalog, settings, chosen, params.pair, progress, device, run_id, label_sets)
+    for out in outputs.values():
+        if out.radius_m > params.radius_ceiling_m:
+            spacing = max((out.labels.get("radius") or {}).get("median_spacing_m", {}).values(), default=float("nan"))
+            log.warning(
+                "release %s, pair %d: change radius %.2f m (the sparser scene's points lie %.2f m apart) is above "
+                "the radius ceiling %.2f m: a change smaller than %.2f m is labelled unchanged. Survey denser, or "
+                "accept it with --radius-ceiling %.2g",
+                name, out.pair_id, out.radius_m, spacing, params.radius_ceiling_m, out.radius_m, math.ceil(out.radius_m * 10) / 10,
+            )  # fmt: skip
     # build on the label sets the outputs used, even if a newer one was imported meanwhile
     used = {
         sid: v
@@ -171,3 +223,67 @@ def release(
     return build_release(
         catalog, settings, site, name, params, chosen, version, run_id, used, publish, progress
     )
+
+
+@dataclass(frozen=True)
+class Deleted:
+    """What a deletion removed: scenes, pairs, draft releases ("name version"), stores and blobs, and
+    the pairs it made again between the scenes around a deleted one."""
+
+    scenes: tuple[int, ...]
+    pairs: tuple[int, ...]
+    drafts: tuple[str, ...]
+    stores: int
+    blobs: int
+    repaired: tuple[int, ...]
+
+    def message(self, what: str) -> str:
+        text = (
+            f"deleted {what}: {len(self.scenes)} scene(s), {len(self.pairs)} pair(s), {self.stores} store(s), "
+            f"{self.blobs} mission blob(s)"
+        )
+        if self.drafts:
+            text += f", draft release(s) {', '.join(self.drafts)}"
+        if self.repaired:
+            text += f"; the scenes around it are paired again (pair {', '.join(map(str, self.repaired))})"
+        return text
+
+
+def delete_scene(catalog: Catalog, settings: Settings, scene_id: int) -> Deleted:
+    """Delete scene ``scene_id``: its stores, pairs (their outputs and previews), the drafts built on
+    them, its mission (and the blobs no other mission names), then its rows; the scenes just before
+    and after it become a pair again. Refused, nothing touched, while a published release was built
+    on one of its pairs. A deletion cut short leaves rows naming missing stores; run it again."""
+    with catalog.lock(f"scene:{scene_id}:tiles"), catalog.transaction() as s:
+        plan = plan_scene_deletion(s, scene_id)
+    return _delete(catalog, settings, plan)
+
+
+def delete_site(catalog: Catalog, settings: Settings, name: str) -> Deleted:
+    """Delete site ``name`` with every scene of it (as :func:`delete_scene`), refused while a
+    published release was built on one of its pairs."""
+    with catalog.transaction() as s:
+        plan = plan_site_deletion(s, name)
+    return _delete(catalog, settings, plan)
+
+
+def _delete(catalog: Catalog, settings: Settings, plan: Deletion) -> Deleted:
+    store, home = settings.store, settings.home
+    stores = [*plan.stores]
+    for pid in plan.pairs:
+        stores += [layout.pair_folder(store, pid), *layout.pair_label_stores(store, pid)]
+    for uri in stores:  # stores first: rows that outlive a crash name what is gone, never the reverse
+        store.remove(uri)
+    for pid in plan.pairs:
+        shutil.rmtree(layout.previews(home) / "pairs" / f"pair-{pid}", ignore_errors=True)
+    for name, version in plan.drafts:
+        shutil.rmtree(layout.release_draft(home, name, version), ignore_errors=True)
+    with catalog.transaction() as s:
+        repaired = delete_rows(s, plan)
+    for sha in plan.blobs:
+        store.remove(layout.blob(store, sha))
+    log.info("%s deleted (%d stores, %d blobs)", plan.what, len(stores), len(plan.blobs))
+    return Deleted(
+        plan.scenes, plan.pairs, tuple(f"{n} {v}" for n, v in plan.drafts), len(stores), len(plan.blobs),
+        tuple(repaired),
+    )  # fmt: skip

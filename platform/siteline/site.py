@@ -26,6 +26,8 @@ class SiteSpec:
     crs: canonical CRS text (``EPSG:nnnn`` or WKT2). origin: float64 (x, y, z) in that CRS.
     fence: ring of (x, y) site-local metres without the closing vertex, or None.
     tile_size_m: edge of the square tile grid in site-local metres, anchored at the site origin.
+    version: the version of its taxonomy and fence (1 at creation; each `site update --taxonomy/--fence`
+    adds one); the catalog's, not part of the site's JSON.
     """
 
     name: str
@@ -34,6 +36,7 @@ class SiteSpec:
     fence: tuple[tuple[float, float], ...] | None
     taxonomy: Taxonomy
     tile_size_m: float = DEFAULT_TILE_SIZE_M
+    version: int = 1
 
     @property
     def pyproj_crs(self) -> pyproj.CRS:

@@ -176,6 +176,29 @@ class Taxonomy:
             raise SchemaError(f"{source}: {exc}") from exc
 
 
+# LAS 1.4 R15 Table 17: the codes ASPRS defines (0-22; 23-63 reserved, 64-255 user-definable)
+ASPRS_CODES = frozenset(range(23))
+
+
+def detect_scheme(codes: dict[int, int], taxonomy: Taxonomy) -> str:
+    """The classification scheme a LAS file's class codes (points per code) look like:
+    ``unclassified`` (codes 0 and 1 only: nothing was classified), ``asprs`` (ASPRS standard codes,
+    as DJI Terra and airborne vendors write them), ``asprs+site`` (with the codes the site taxonomy
+    adds for construction, e.g. DJI Modify exports mapped in its ``las`` source), ``custom`` (codes
+    neither defines), ``empty``."""
+    present = {int(c) for c, n in codes.items() if n}
+    site_codes = set(taxonomy.source_codes.get("las", {}))
+    if not present:
+        return "empty"
+    if present <= {0, 1}:
+        return "unclassified"
+    if present <= ASPRS_CODES:
+        return "asprs"
+    if present <= ASPRS_CODES | site_codes:
+        return "asprs+site"
+    return "custom"
+
+
 def load_taxonomy(path: Path) -> Taxonomy:
     """Read and validate a taxonomy JSON file."""
     return Taxonomy.from_dict(load_json(path, "taxonomy"), source=f"taxonomy file {path}")

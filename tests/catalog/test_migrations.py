@@ -120,3 +120,34 @@ def test_label_set_versions_migrate_up_and_down_with_data(db_url: str) -> None:
     assert "uri" not in {c["name"] for c in sa.inspect(engine).get_columns("label_set")}
     migrate.downgrade(engine, "base")
     engine.dispose()
+
+
+def test_a_mission_goes_into_two_sites_after_0007_and_downgrade_says_what_blocks_it(db_url: str) -> None:
+    """0006 -> 0007 keeps sites (at version 1) and missions; the same manifest may then be in two
+    sites, and a downgrade back to one-site-per-manifest refuses while it is."""
+    engine = make_engine(db_url)
+    migrate.upgrade(engine, "0006")
+    site = (
+        "INSERT INTO site (name, crs, origin_x, origin_y, origin_z, taxonomy, tile_size_m, created_at) "
+        "VALUES ('{}', 'EPSG:32618', 0, 0, 0, '{{}}', 50, CURRENT_TIMESTAMP)"
+    )
+    mission = (
+        "INSERT INTO mission (site_id, manifest_sha256, name, received_at, status, storage, root_uri) "
+        "VALUES ({}, 'm', 'm', CURRENT_TIMESTAMP, 'ingested', 'copy', '/x')"
+    )
+    with engine.begin() as conn:
+        conn.execute(sa.text(site.format("a")))
+        conn.execute(sa.text(site.format("b")))
+        conn.execute(sa.text(mission.format(1)))
+    migrate.upgrade(engine)
+    assert _diff(engine) == []
+    with engine.begin() as conn:
+        assert conn.execute(sa.text("SELECT name, version FROM site ORDER BY name")).all() == [("a", 1), ("b", 1)]
+        conn.execute(sa.text(mission.format(2)))
+    with pytest.raises(Exception, match="ingested into several sites"):
+        migrate.downgrade(engine, "0006")
+    with engine.begin() as conn:
+        conn.execute(sa.text("DELETE FROM mission WHERE site_id = 2"))
+    migrate.downgrade(engine, "0006")
+    migrate.downgrade(engine, "base")
+    engine.dispose()

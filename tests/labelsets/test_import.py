@@ -147,6 +147,42 @@ def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
     assert res.changed == int(edit.sum()) and res.changes == {"ground->building": int(edit.sum())}
 
 
+def test_a_file_without_its_record_needs_to_say_how_its_codes_read(scenes, tmp_path) -> None:
+    """An export whose siteline record an editor dropped, recoded to ASPRS (ground 2, building 6):
+    2 is also a site id (building), so without --taxonomy-map it is refused, exit 2, nothing
+    written; ``--taxonomy-map las`` reads it through the site taxonomy's LAS codes, and an unchanged
+    file read as ``site`` ids makes no version."""
+    settings, cat = scenes
+    before = versions(cat, 2)
+    las = export(cat, 2, tmp_path / "s2.las")
+    cls = np.asarray(las.classification)
+    keep = np.isin(cls, [GROUND, BUILDING])
+    header = laspy.LasHeader(point_format=las.header.point_format.id, version=str(las.header.version))
+    header.offsets, header.scales = las.header.offsets, las.header.scales
+    header.add_crs(las.header.parse_crs())
+    bare = laspy.LasData(header)  # no siteline record
+    bare.points = laspy.ScaleAwarePointRecord(las.points.array[keep], header.point_format, header.scales, header.offsets)
+    asprs = np.where(cls[keep] == GROUND, 2, 6).astype(np.uint8)
+    edit = centre_box(bare, 10.0) & (asprs == 2)
+    asprs[edit] = 6  # ground -> building
+    bare.classification = asprs
+    bare.write(tmp_path / "asprs.las")
+    r = _cli(settings, "labels", "import", "2", str(tmp_path / "asprs.las"))
+    assert r.returncode == 2 and "carries no siteline label-set record" in r.stderr, r.stderr
+    assert "ASPRS 2 and 5 would read as building and vehicle" in r.stderr and "--taxonomy-map las" in r.stderr
+    assert versions(cat, 2) == before
+    r = _cli(settings, "labels", "import", "2", str(tmp_path / "asprs.las"), "--taxonomy-map", "las", "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["changed"] == int(edit.sum()) and res["changes"] == {"ground->building": int(edit.sum())}
+    site = export(cat, 2, tmp_path / "now.las")
+    site.write(tmp_path / "now.las")
+    r = _cli(settings, "labels", "import", "2", str(tmp_path / "now.las"), "--taxonomy-map", "site", "--json")
+    assert r.returncode == 0 and not json.loads(r.stdout)["created"], r.stderr
+    r = _cli(settings, "labels", "import", "2", str(tmp_path / "now.las"), "--taxonomy-map", "nosuch.json")
+    assert r.returncode == 2 and "taxonomy map nosuch.json does not exist" in r.stderr
+
+
 def _store_listing(settings, scene_id: int) -> list[str]:  # noqa: ANN001
     root = Path(layout.label_set(settings.store, scene_id, 1)).parent
     return sorted(p.name for p in root.iterdir()) if root.exists() else []
@@ -172,7 +208,7 @@ def test_bad_files_are_refused_and_leave_nothing(scenes, tmp_path) -> None:
     bare.header.add_crs(other.header.parse_crs())
     bare.points = other.points.copy()
     bare.write(tmp_path / "scene2_bare.las")
-    _refused(cat, settings, tmp_path / "scene2_bare.las", LabelSetError, r"match no point of scene 1")
+    _refused(cat, settings, tmp_path / "scene2_bare.las", LabelSetError, r"match no point of scene 1", taxonomy_map="site")
 
     mine = export(cat, 1, tmp_path / "scene1.las")
     n = len(mine.points)

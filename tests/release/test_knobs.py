@@ -59,6 +59,11 @@ def test_layers_apply_preset_then_knobs_site_then_command() -> None:
     p = resolve([ReleaseKnobs(), ReleaseKnobs()], SYNTH)  # nothing set: both auto, defaults elsewhere
     assert (p.pair.scale, p.pair.point_size_px, p.pair.views, p.min_image_px, p.pad) == (0.78, 3, 300, 256, True)
     assert resolve([ReleaseKnobs(pad=False, min_image_px=64)], SYNTH).min_image_px == 64
+    # the radius ceiling: 1 m unless a layer sets it, in the parameters' JSON only when set
+    assert p.radius_ceiling_m == 1.0 and "radius_ceiling_m" not in p.to_dict()
+    q = resolve([ReleaseKnobs(radius_ceiling_m=0.3), ReleaseKnobs(pair={"change_rule": "geometry"})], SYNTH)
+    assert q.radius_ceiling_m == 0.3 and q.to_dict()["radius_ceiling_m"] == 0.3 and q.pair.change_rule == "geometry"
+    assert type(q).from_dict(q.to_dict()) == q
 
 
 def test_images_under_the_floor_are_refused_with_the_scale_that_would_do() -> None:
@@ -81,6 +86,9 @@ def test_images_under_the_floor_are_refused_with_the_scale_that_would_do() -> No
         ({"min_image_px": 0}, "min_image_px"),
         ({"pad": "yes"}, "pad"),
         ({"speed": 1}, "unknown key"),
+        ({"radius_ceiling_m": 0}, "radius_ceiling_m"),
+        ({"radius_ceiling_m": "1m"}, "radius_ceiling_m"),
+        ({"pair": {"change_rule": "classes"}}, "change rule 'classes'"),
     ],
 )
 def test_bad_settings_are_refused_by_name(doc, message) -> None:
@@ -90,8 +98,9 @@ def test_bad_settings_are_refused_by_name(doc, message) -> None:
 
 def test_update_writes_over_and_unsets() -> None:
     stored = ReleaseKnobs(preset="fast", pair={"views": 40, "scale": 0.5}, min_image_px=128)
-    new = stored.updated(ReleaseKnobs(pair={"views": 60}), unset=["scale", "min_image_px"])
-    assert new.to_dict() == {"preset": "fast", "pair": {"views": 60}}
+    new = stored.updated(ReleaseKnobs(pair={"views": 60}, radius_ceiling_m=0.2), unset=["scale", "min_image_px"])
+    assert new.to_dict() == {"preset": "fast", "pair": {"views": 60}, "radius_ceiling_m": 0.2}
+    assert "radius_ceiling_m" not in new.updated(ReleaseKnobs(), unset=["radius_ceiling_m"]).to_dict()
     assert ReleaseKnobs.from_dict(new.to_dict()) == new
     with pytest.raises(ReleaseError, match="not a release setting"):
         stored.updated(ReleaseKnobs(), unset=["hue"])

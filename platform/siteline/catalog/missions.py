@@ -40,7 +40,7 @@ def record_ingest(session: Session, site_id: int, checked: CheckedMission, run: 
     a time: pairs are formed from the scenes around this one)."""
     site = lock_site(session, site_id)
     manifest = checked.manifest
-    if mission_by_manifest(session, manifest.sha256) is not None:
+    if mission_by_manifest(session, manifest.sha256, site.id) is not None:
         raise MissionError(f"mission {manifest.root.name} was ingested concurrently; nothing new.")
     if scene_at(session, site, checked.capture_time) is not None:
         raise MissionError(

@@ -44,6 +44,10 @@ class Site(Base):
     # siteline.release.knobs.ReleaseKnobs.to_dict(): preset and knobs; {} means auto from the cameras
     release_settings: Mapped[dict[str, Any]] = mapped_column(sa.JSON, default=dict, server_default="{}")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    # the version of the taxonomy and fence above (1 at creation; `site update --taxonomy/--fence`
+    # adds one) and the earlier versions: [{"version", "taxonomy", "fence", "replaced_at"}]
+    version: Mapped[int] = mapped_column(sa.Integer, default=1, server_default="1")
+    history: Mapped[list[dict[str, Any]]] = mapped_column(sa.JSON, default=list, server_default="[]")
 
     @property
     def origin(self) -> tuple[float, float, float]:
@@ -52,11 +56,14 @@ class Site(Base):
 
 class Mission(Base):
     __tablename__ = "mission"
-    __table_args__ = (sa.CheckConstraint(_in("status", MISSION_STATUSES), name="status"),)
+    __table_args__ = (
+        sa.CheckConstraint(_in("status", MISSION_STATUSES), name="status"),
+        sa.UniqueConstraint("site_id", "manifest_sha256"),  # one mission may go into several sites
+    )
 
     id: Mapped[int] = mapped_column(primary_key=True)
     site_id: Mapped[int] = mapped_column(sa.ForeignKey("site.id", ondelete="RESTRICT"), index=True)
-    manifest_sha256: Mapped[str] = mapped_column(sa.String(64), unique=True)
+    manifest_sha256: Mapped[str] = mapped_column(sa.String(64))
     name: Mapped[str] = mapped_column(sa.Text)
     received_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     status: Mapped[str] = mapped_column(sa.String(16), default="received")

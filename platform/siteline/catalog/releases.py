@@ -86,6 +86,9 @@ def release_record(session: Session, rel: Release) -> dict[str, Any]:
         "preset": (rel.parameters or {}).get("preset"),
         "pair_params": (rel.parameters or {}).get("pair_params"),
         "pairs": (rel.parameters or {}).get("pairs"),
+        # the change radius of each pair: a smaller change is labelled unchanged
+        "smallest_change_m": (rel.parameters or {}).get("smallest_change_m"),
+        "radius_ceiling_m": (rel.parameters or {}).get("radius_ceiling_m"),
     }
 
 

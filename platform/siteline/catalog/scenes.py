@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import datetime
 from typing import Any
 
+import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
@@ -20,8 +22,12 @@ from siteline.records.scene import SceneStatistics, SceneSummary
 from siteline.records.tiling import SceneTiling, TileSource
 
 
-def mission_by_manifest(session: Session, sha256: str) -> Mission | None:
-    return session.execute(sa.select(Mission).where(Mission.manifest_sha256 == sha256)).scalar_one_or_none()
+def mission_by_manifest(session: Session, sha256: str, site_id: int) -> Mission | None:
+    """The mission of manifest ``sha256`` ingested into site ``site_id`` (a mission may go into
+    several sites), or None."""
+    return session.execute(
+        sa.select(Mission).where(Mission.manifest_sha256 == sha256, Mission.site_id == site_id)
+    ).scalar_one_or_none()
 
 
 def mission_files(session: Session, mission_id: int) -> list[MissionFile]:
@@ -232,6 +238,7 @@ def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
         "bounds_m": scene.bounds,
         "class_histogram": scan.class_histogram if scan else None,
         "unknown_codes": {str(k): v for k, v in scan.unknown_codes.items()} if scan else None,
+        "class_scheme": scan.class_scheme if scan else None,
         "density_pts_m2": scan.density_pts_m2 if scan else None,
         "source_crs": scan.source_crs if scan else None,
         "transformed": scan.transformed if scan else None,
@@ -315,14 +322,39 @@ def las_location(session: Session, scene_id: int) -> LasLocation:
     return LasLocation(mission.storage, mission.root_uri, row.path, row.sha256)  # type: ignore[arg-type]
 
 
-def record_tiling(session: Session, scene_id: int, tiling: SceneTiling, run: StageRun) -> None:
+def record_tiling(
+    session: Session, scene_id: int, tiling: SceneTiling, run: StageRun, counts: np.ndarray | None = None
+) -> None:
     """Record a tile store that is published whole (its node index inside it): its address, the
-    scene's status and tiling statistics, and the stage run."""
+    scene's status and tiling statistics, and the stage run; with ``counts`` ((256,) points per class
+    id of a re-tiling, whose classes may be mapped anew), the class histogram of the scan and of
+    label set 1, which the store holds."""
     scene = get_scene(session, scene_id)
     scene.tile_store_uri = tiling.uri
     scene.status = "tiled"
-    scene.statistics = scene_statistics(scene).with_tiling(tiling).to_json()
+    stats = scene_statistics(scene).with_tiling(tiling)
+    if counts is not None and stats.scan is not None:
+        site = session.get(Site, scene.site_id)
+        names = {int(c["id"]): c["name"] for c in site.taxonomy["classes"]} if site is not None else {}
+        hist = {names.get(i, str(i)): int(n) for i, n in enumerate(counts) if n}
+        stats = replace(stats, scan=replace(stats.scan, class_histogram=hist))
+        first = session.execute(
+            sa.select(LabelSet).where(LabelSet.scene_id == scene_id, LabelSet.version == 1)
+        ).scalar_one_or_none()
+        if first is not None:
+            first.class_histogram = hist
+    scene.statistics = stats.to_json()
     add_completed(session, run)
+
+
+def needs_tiling(session: Session, scene_id: int) -> bool:
+    """Whether the scene is not tiled, or was tiled under an earlier version of its site."""
+    scene = get_scene(session, scene_id)
+    tiling = scene_statistics(scene).tiling
+    site = session.get(Site, scene.site_id)
+    if scene.status != "tiled" or tiling is None or site is None:
+        return True
+    return tiling.site_version != (site.version or 1)
 
 
 def scene_ids_of_pairs(session: Session, pair_ids: list[int]) -> list[int]:

@@ -7,7 +7,8 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from siteline.catalog.models import Scene, Site
+from siteline.catalog.base import utcnow
+from siteline.catalog.models import LabelSet, Scene, Site
 from siteline.errors import SiteError, SiteNotFoundError
 from siteline.fence import fence_area_m2
 from siteline.site import SiteSpec
@@ -55,6 +56,56 @@ def set_release_settings(session: Session, name: str, release_settings: dict[str
     return site
 
 
+def redefine_site(
+    session: Session, name: str, taxonomy: Taxonomy | None, fence: list[list[float]] | None, clear_fence: bool
+) -> tuple[Site, list[int]]:
+    """Record site ``name``'s next version with ``taxonomy`` and/or ``fence`` (an open ring, site-local
+    metres; ``clear_fence``: none) replacing the current ones, which go to its history; return it
+    and its scenes (each to be tiled again). Refused, nothing changed, when a scene holds imported
+    label sets (aligned with the tiles the change replaces: export them first) or class codes the
+    new taxonomy does not map."""
+    site = session.execute(sa.select(Site).where(Site.name == name).with_for_update()).scalar_one_or_none()
+    if site is None:
+        get_site(session, name)  # names the known sites
+        raise SiteNotFoundError(f"unknown site {name!r}.")
+    if taxonomy is None and fence is None and not clear_fence:
+        raise SiteError(f"site {name}: give --taxonomy, --fence or --no-fence to change.")
+    scenes = list(session.execute(sa.select(Scene).where(Scene.site_id == site.id).order_by(Scene.id)).scalars())
+    imported = session.execute(
+        sa.select(LabelSet.scene_id, LabelSet.version)
+        .where(LabelSet.scene_id.in_([sc.id for sc in scenes]), LabelSet.version > 1)
+        .order_by(LabelSet.scene_id, LabelSet.version)
+    ).all()
+    if imported:
+        which = ", ".join(f"scene {sid} v{v}" for sid, v in imported)
+        raise SiteError(
+            f"site {name}: imported label sets ({which}) are aligned with the tiles this change replaces. "
+            "Export each (`siteline scene export SCENE --version V`), delete them from the scenes or start "
+            "their corrections again after the change; nothing was changed."
+        )
+    if taxonomy is not None:
+        _, known = taxonomy.code_lut("las") if "las" in taxonomy.source_codes else (None, None)
+        for sc in scenes:
+            codes = (sc.statistics or {}).get("code_histogram") or {}
+            missing = sorted(int(c) for c in codes if known is None or not known[int(c)])
+            if missing:
+                raise SiteError(
+                    f"site {name}: taxonomy {taxonomy.name!r} does not map class codes {missing} of scene "
+                    f"{sc.id}'s point cloud: add them to its 'las' source codes. Nothing was changed."
+                )
+    site.history = [
+        *(site.history or []),
+        {"version": site.version or 1, "taxonomy": site.taxonomy, "fence": site.fence, "replaced_at": utcnow().isoformat()},
+    ]  # fmt: skip
+    if taxonomy is not None:
+        site.taxonomy = taxonomy.to_dict()
+    if fence is not None or clear_fence:
+        site.fence = fence
+    site.version = (site.version or 1) + 1
+    session.flush()
+    return site, [sc.id for sc in scenes]
+
+
 def list_sites(session: Session) -> list[Site]:
     return list(session.execute(sa.select(Site).order_by(Site.name)).scalars())
 
@@ -69,6 +120,7 @@ def site_spec(site: Site) -> SiteSpec:
         fence=fence,
         taxonomy=Taxonomy.from_dict(site.taxonomy, source=f"site {site.name} taxonomy"),
         tile_size_m=site.tile_size_m,
+        version=site.version or 1,
     )
 
 
@@ -89,6 +141,7 @@ def site_record(site: Site, scenes: int) -> dict[str, Any]:
         "origin": list(site.origin),
         "fence_m": [list(v) for v in spec.fence] if spec.fence else None,
         "fence_area_m2": fence_area_m2(spec.fence) if spec.fence else None,
+        "version": site.version or 1,
         "taxonomy": spec.taxonomy.name,
         "classes": {c.name: c.id for c in spec.taxonomy.classes},
         "tile_size_m": site.tile_size_m,

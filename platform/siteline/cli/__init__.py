@@ -63,15 +63,19 @@ def _print_version(value: bool) -> None:
 
 
 def show_logs(verbosity: int) -> None:
-    """Show the library's log lines (``logging`` under ``siteline``) on stderr: -v what each stage read,
-    decided and wrote (INFO), -vv more (DEBUG)."""
-    if verbosity <= 0:
-        return
+    """Show the library's log lines (``logging`` under ``siteline``) on stderr: warnings always (a
+    build's differing class schemes, a radius above the ceiling), -v what each stage read, decided
+    and wrote (INFO), -vv more (DEBUG)."""
     import logging
 
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S"))
     logger = logging.getLogger("siteline")
+    if verbosity <= 0:
+        handler.setFormatter(logging.Formatter("warning: %(message)s"))
+        logger.handlers = [handler]
+        logger.setLevel(logging.WARNING)
+        return
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S"))
     logger.handlers = [handler]
     logger.setLevel(logging.INFO if verbosity == 1 else logging.DEBUG)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -99,6 +100,10 @@ def ingest(
     oblique_pitch: float = typer.Option(
         45.0, "--oblique-pitch", help="Planned oblique cameras' tilt below the horizontal, degrees (0: none)."
     ),
+    unmapped_codes: str = typer.Option(
+        "refuse", "--unmapped-codes", help="Class codes the site taxonomy does not map: refuse the file "
+        "(naming them) or make their points ignore."
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Ingest a mission folder (or one LAS/LAZ file) as a new scene of a site and tile it (a re-run of the
@@ -118,6 +123,7 @@ def ingest(
         storage="copy" if copy else "reference",
         accept_misalignment=accept_misalignment,
         max_georegistration_rms_m=max_rms_m,
+        unmapped_codes=unmapped_codes,
     )
     cfg = settings()
     columns = [
@@ -288,3 +294,32 @@ def scene_export(
         {"out": str(out), "points": n, "label_set_version": version},
         lambda: console.print(f"wrote {n:,} points to {out} (classes of label set {version})"),
     )
+
+
+def confirmed(yes: bool, what: str) -> None:
+    """Go on with deleting ``what`` when ``--yes`` was given or a person at a terminal says so."""
+    import sys
+
+    if yes:
+        return
+    if not sys.stdin.isatty():
+        raise typer.BadParameter(f"deleting {what} cannot be undone: pass --yes to confirm.")
+    if not typer.confirm(f"delete {what}? This cannot be undone"):
+        raise typer.Exit(1)
+
+
+@scene_app.command("delete")
+def scene_delete(
+    scene_id: int = typer.Argument(..., help="Scene id."),
+    yes: bool = typer.Option(False, "--yes", help="Do not ask (needed when not at a terminal)."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Delete a scene: its tiles, label sets, pairs (their outputs) and draft releases built on them, its
+    mission and its rows; the scenes around it are paired again. Refused while a published release
+    was built on one of its pairs."""
+    from siteline import pipeline
+
+    confirmed(yes, f"scene {scene_id}")
+    with catalog() as cat:
+        done = pipeline.delete_scene(cat, settings(), scene_id)
+    emit(as_json, asdict(done), lambda: console.print(done.message(f"scene {scene_id}")))

@@ -39,7 +39,9 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "all_points": (bool | None, typer.Option(None, "--all-points/--lod", help="Render every point (no level of detail; slower).")),
     "lod_factor": (float | None, typer.Option(None, "--lod-factor", help="Level of detail read per view (1 = half a drawn point).")),
     "colour": (str | None, typer.Option(None, "--colour", help="What images show: auto (RGB, else intensity, else elevation), rgb, intensity or elevation.")),
+    "change_rule": (str | None, typer.Option(None, "--change-rule", help="auto (geometry when the scenes classify differently), semantic or geometry (class-agnostic).")),
     "pad": (bool | None, typer.Option(None, "--pad/--no-pad", help="Pad images to multiples of 32 and at least 256 px.")),
+    "radius_ceiling": (float | None, typer.Option(None, "--radius-ceiling", help="Warn when a pair's change radius (the smallest change it resolves) is above this, metres (default 1).")),
     "min_image_px": (int | None, typer.Option(None, "--min-image-px", help="Refuse a build whose images' long side is under this (default 256).")),
 }  # fmt: skip
 
@@ -54,10 +56,12 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
     if values.get("radius") is not None:
         radius = _number(values["radius"], "--radius", float)
         pair["radius_m"] = None if radius == AUTO else radius
-    for name in ("views", "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour"):
+    for name in ("views", "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule"):
         if values.get(name) is not None:
             pair[name] = values[name]
-    return ReleaseKnobs(values.get("preset"), pair, values.get("pad"), values.get("min_image_px"))
+    return ReleaseKnobs(
+        values.get("preset"), pair, values.get("pad"), values.get("min_image_px"), values.get("radius_ceiling")
+    )
 
 
 def with_knob_options(fn: F) -> F:

@@ -43,8 +43,10 @@ def imported_event(scene_id: int, version: int, site: str) -> dict:
 def import_cmd(
     scene_id: int = typer.Argument(..., help="Scene id the file was exported from."),
     file: Path = typer.Argument(..., help="Corrected LAS/LAZ file (e.g. from `siteline scene export`)."),
-    taxonomy_map: Path | None = typer.Option(
-        None, "--taxonomy-map", help='JSON mapping the file\'s class codes to site classes: {"2": "ground"}.'
+    taxonomy_map: str | None = typer.Option(
+        None, "--taxonomy-map", help='How to read the file\'s class codes: a JSON file mapping them to site '
+        'classes ({"2": "ground"}), "las" (the site taxonomy\'s LAS codes, e.g. ASPRS) or "site" (site class ids; '
+        "needed when the file lost the record `scene export` writes).",
     ),
     note: str | None = typer.Option(None, "--note", help="What was corrected (kept with the version)."),
     max_unmatched: float | None = typer.Option(
@@ -62,9 +64,10 @@ def import_cmd(
 ) -> None:
     """Import corrected classes as the scene's next label-set version (nothing changes on refusal)."""
     from siteline.catalog.scenes import site_name_of_scene
-    from siteline.labelsets import DEFAULT_MAX_UNMATCHED, import_labels, read_taxonomy_map
+    from siteline.labelsets import DEFAULT_MAX_UNMATCHED, import_labels
+    from siteline.labelsets.mapping import parse_taxonomy_map
 
-    mapping = read_taxonomy_map(taxonomy_map) if taxonomy_map else None
+    mapping = parse_taxonomy_map(taxonomy_map) if taxonomy_map else None
     limit = DEFAULT_MAX_UNMATCHED if max_unmatched is None else max_unmatched
     columns = (
         TextColumn("{task.description}"),

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 import typer
+from rich.progress import Progress
 from sqlalchemy.orm import Session
 
 from siteline.catalog.sites import (
@@ -16,13 +17,22 @@ from siteline.catalog.sites import (
     set_release_settings,
     site_record,
 )
-from siteline.cli.common import JsonOption, catalog, console, emit, print_record, print_table
+from siteline.cli.common import (
+    JsonOption,
+    bar_progress,
+    catalog,
+    console,
+    emit,
+    print_record,
+    print_table,
+    settings,
+)
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
 from siteline.fence import load_fence_geojson
 from siteline.release.knobs import ReleaseKnobs
 from siteline.site import DEFAULT_TILE_SIZE_M, make_site_spec
-from siteline.taxonomy import load_taxonomy
+from siteline.taxonomy import default_taxonomy, load_taxonomy
 
 app = typer.Typer(help="Construction sites: CRS, origin, fence, taxonomy.", no_args_is_help=True)
 
@@ -104,23 +114,70 @@ def update(
     unset: list[str] | None = typer.Option(
         None, "--unset", help="A release setting to drop (back to auto or its default), e.g. scale (repeatable)."
     ),
+    taxonomy: str | None = typer.Option(
+        None, "--taxonomy", help="A new taxonomy JSON (or 'default'): a new site version; its scenes are tiled again."
+    ),
+    fence: Path | None = typer.Option(
+        None, "--fence", help="A new fence (GeoJSON Polygon in the site CRS): a new site version; scenes tiled again."
+    ),
+    no_fence: bool = typer.Option(False, "--no-fence", help="Drop the fence (views judged against each scene's footprint)."),
+    workers: int = typer.Option(2, "--workers", help="Processes tiling each scene again."),
     as_json: bool = JsonOption,
     *,
     knobs: ReleaseKnobs,
 ) -> None:
-    """Change a site's release settings: the options given are written over the stored ones; the next
-    release build uses them (a changed knob makes a new major version)."""
-    with catalog() as cat, cat.transaction() as session:
-        site = get_site(session, name)
-        stored = ReleaseKnobs.from_dict(site.release_settings, f"site {name} release settings")
-        new = stored.updated(knobs, unset or ())
-        site = set_release_settings(session, name, new.to_dict())
-        record = site_record(site, scene_count(session, site)) | {"release_now": _release_now(session, name)}
-    emit(
-        as_json,
-        record,
-        lambda: console.print(f"site {name} release settings: {new.to_dict() or 'all defaults (auto)'}"),
-    )
+    """Change a site's release settings (the options given are written over the stored ones; the next
+    release build uses them, a changed knob makes a new major version), and its taxonomy or fence:
+    the site's next version, under which its scenes are tiled again here (releases then record it)."""
+    redefine = taxonomy is not None or fence is not None or no_fence
+    if fence is not None and no_fence:
+        raise typer.BadParameter("give --fence or --no-fence, not both.")
+    tax = None
+    if taxonomy is not None:
+        tax = default_taxonomy() if taxonomy == "default" else load_taxonomy(Path(taxonomy))
+    with catalog() as cat:
+        with cat.transaction() as session:
+            site = get_site(session, name)
+            origin = site.origin
+            stored = ReleaseKnobs.from_dict(site.release_settings, f"site {name} release settings")
+            new = stored.updated(knobs, unset or ())
+            set_release_settings(session, name, new.to_dict())
+        ring = None
+        if fence is not None:
+            ring = load_fence_geojson(fence, origin)
+            ring = [*ring, ring[0]]
+        lines = [f"site {name} release settings: {new.to_dict() or 'all defaults (auto)'}"]
+        if redefine:
+            from siteline import pipeline
+
+            with Progress(console=console, transient=True, disable=as_json) as bar:
+                version, tiled = pipeline.redefine_site(
+                    cat, settings(), name, tax, ring, no_fence, workers, bar_progress(bar)
+                )
+            lines += [f"site {name} is at version {version}", *(t.message for t in tiled)]
+        with cat.transaction() as session:
+            site = get_site(session, name)
+            record = site_record(site, scene_count(session, site)) | {"release_now": _release_now(session, name)}
+    emit(as_json, record, lambda: console.print("\n".join(lines)))
+
+
+@app.command("delete")
+def delete(
+    name: str = typer.Argument(..., help="Site name."),
+    yes: bool = typer.Option(False, "--yes", help="Do not ask (needed when not at a terminal)."),
+    as_json: bool = JsonOption,
+) -> None:
+    """Delete a site with all its scenes, pairs, stores and draft releases; refused while a published
+    release was built on one of its pairs."""
+    from dataclasses import asdict
+
+    from siteline import pipeline
+    from siteline.cli.ingest import confirmed
+
+    confirmed(yes, f"site {name} and all its scenes")
+    with catalog() as cat:
+        done = pipeline.delete_site(cat, settings(), name)
+    emit(as_json, asdict(done), lambda: console.print(done.message(f"site {name}")))
 
 
 def _release_now(session: Session, name: str) -> dict[str, Any] | str:

@@ -24,6 +24,7 @@ from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
 from siteline.records.scan import LasScan
 from siteline.register import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
+from siteline.site import SiteSpec
 from siteline.sitestream import correction_rigid
 from siteline.stores import Store, layout
 from siteline.stores.blobs import BlobStaging, put_blob_bytes
@@ -66,6 +67,7 @@ def execute_ingest(
         root / las.path, plan.site, opts.crs, z_unit=z_unit, progress=step(progress, "reading points"),
         workers=workers, runs_into=runs_into,
     )  # fmt: skip
+    check_codes(scan, root / las.path, plan.site, opts.unmapped_codes)
     scan = scan.at(las.path)
     photos = read_photos(entries, root)
     cameras, registration, source = register_cameras(
@@ -102,6 +104,23 @@ def execute_ingest(
         plan.manifest, mission_name(entries, root), scan, las.sha256, cameras, source or "xmp", registration,
         when, when_source, sample_sha, opts.storage,
     )  # fmt: skip
+
+
+def check_codes(scan: LasScan, path: Path, site: SiteSpec, unmapped: str) -> None:
+    """Refuse a point cloud holding class codes the site taxonomy does not map (unless ``unmapped``
+    is ``ignore``), naming the codes, their points and the scheme the file looks like."""
+    if not scan.unknown_codes:
+        return
+    codes = ", ".join(f"{c} ({n:,} points)" for c, n in sorted(scan.unknown_codes.items()))
+    if unmapped == "ignore":
+        log.warning("point cloud %s: class codes %s are not in site %s's taxonomy: made ignore", path, codes, site.name)
+        return
+    raise MissionError(
+        f"point cloud {path}: class codes {codes} are not mapped by site {site.name}'s taxonomy "
+        f"{site.taxonomy.name!r} (the file's codes look like {scan.class_scheme or 'an unknown'} classification). "
+        f"Map them in the taxonomy's 'las' source codes and run `siteline site update {site.name} --taxonomy "
+        "FILE`, or ingest with --unmapped-codes ignore to make those points ignore. Nothing was ingested."
+    )
 
 
 def corrected(

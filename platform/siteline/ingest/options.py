@@ -11,6 +11,8 @@ from siteline.errors import MissionError
 from siteline.records.enums import STORAGES, Storage
 from siteline.register.planned import SurveyPlan
 
+UNMAPPED_CODES = ("refuse", "ignore")
+
 
 @dataclass(frozen=True)
 class IngestOptions:
@@ -25,7 +27,9 @@ class IngestOptions:
     time and no photos) or tells it wrong; it overrides the
     photos, the raw folder name and the LAS header, and is recorded as given. plan_cameras: plan the
     scene's cameras from its point cloud (``survey``: camera model, height, overlaps) even when the
-    mission has photos; a mission without photos always gets planned cameras."""
+    mission has photos; a mission without photos always gets planned cameras. unmapped_codes: a class
+    code the site taxonomy does not map is refused (``refuse``, naming the codes) or its points made
+    ``ignore`` (``ignore``, recorded in the scan)."""
 
     crs: str | None = None
     z_unit: str | None = None
@@ -38,8 +42,11 @@ class IngestOptions:
     captured_at: datetime | None = None
     plan_cameras: bool = False
     survey: SurveyPlan = SurveyPlan()
+    unmapped_codes: str = "refuse"
 
     def __post_init__(self) -> None:
+        if self.unmapped_codes not in UNMAPPED_CODES:
+            raise MissionError(f"unmapped codes {self.unmapped_codes!r}: use one of {', '.join(UNMAPPED_CODES)}.")
         if self.z_unit is not None:
             parse_z_unit(self.z_unit)
         if self.captured_at is not None and self.captured_at.tzinfo is None:
@@ -60,4 +67,5 @@ class IngestOptions:
             "captured_at": self.captured_at.isoformat() if self.captured_at else None,
             "plan_cameras": self.plan_cameras,
             "survey": self.survey.to_dict(),
+            "unmapped_codes": self.unmapped_codes,
         }

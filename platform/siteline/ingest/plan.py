@@ -9,8 +9,7 @@ from datetime import datetime
 from sqlalchemy.orm import Session
 
 from siteline.catalog.scenes import mission_by_manifest, scene_of_mission, scene_summaries
-from siteline.catalog.sites import get_site, site_of, site_spec
-from siteline.errors import MissionError
+from siteline.catalog.sites import get_site, site_spec
 from siteline.records.mission import MissionManifest
 from siteline.records.scene import SceneSummary
 from siteline.site import SiteSpec
@@ -46,17 +45,12 @@ class IngestPlan:
 
 
 def plan_ingest(session: Session, site_name: str, manifest: MissionManifest) -> IngestPlan:
-    """The plan of ingesting the mission of ``manifest`` into ``site_name`` (one transaction).
-    :class:`MissionError` when the same mission was ingested into another site."""
+    """The plan of ingesting the mission of ``manifest`` into ``site_name`` (one transaction); the
+    same mission may be ingested into other sites too."""
     site = get_site(session, site_name)
-    existing = mission_by_manifest(session, manifest.sha256)
+    existing = mission_by_manifest(session, manifest.sha256, site.id)
     found = None
     if existing is not None:
-        if existing.site_id != site.id:
-            other = site_of(session, existing.site_id).name
-            raise MissionError(
-                f"mission {manifest.root} (manifest {manifest.sha256[:12]}) was already ingested into site {other}."
-            )
         scene = scene_of_mission(session, existing.id)
         found = ExistingMission(existing.id, scene.id if scene is not None else None)
     return IngestPlan(site.id, site_spec(site), manifest, found, scene_summaries(session, site))

@@ -28,6 +28,7 @@ from siteline.records.scan import COLOUR_NAMES, STRETCH_PERCENTILES, ColourStats
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.sitestream import SiteChunk, source_crs, source_transformer
+from siteline.taxonomy import detect_scheme
 from siteline.workers import start_pool
 
 STABLE_CLASSES = ("ground", "building")
@@ -127,6 +128,7 @@ class _Totals:
         self.rng = np.random.default_rng(list(seed))
         self.hist = np.zeros(256, np.int64)
         self.unknown = np.zeros(256, np.int64)
+        self.codes = np.zeros(256, np.int64)
         self.lo, self.hi = np.full(3, np.inf), np.full(3, -np.inf)
         self.count = self.outside = 0
         self.tmin, self.tmax = np.inf, -np.inf
@@ -141,6 +143,7 @@ class _Totals:
     def add(self, sc: SiteChunk) -> None:
         local, chunk, cls = sc.local, sc.chunk, sc.classes
         self.unknown += np.bincount(chunk.classification[~sc.known_code], minlength=256)
+        self.codes += np.bincount(chunk.classification, minlength=256)
         self.outside += int(sc.outside.sum())
         self.hist += np.bincount(cls, minlength=256)
         self.lo = np.minimum(self.lo, sc.lo)
@@ -165,6 +168,7 @@ class _Totals:
     def merge(self, other: _Totals) -> None:
         """Add the totals of another range."""
         self.unknown += other.unknown
+        self.codes += other.codes
         self.outside += other.outside
         self.hist += other.hist
         self.lo, self.hi = np.minimum(self.lo, other.lo), np.maximum(self.hi, other.hi)
@@ -199,6 +203,7 @@ def _scan(
     survey = np.concatenate(t.survey) if t.survey else np.zeros((0, 4))
     outline = footprint(survey)
     names = {c.id: c.name for c in site.taxonomy.classes}
+    codes = {i: int(v) for i, v in enumerate(t.codes) if v}
     day = header.creation_date
     return LasScan(
         path=str(path),
@@ -209,6 +214,8 @@ def _scan(
         bounds_max=t.hi.tolist(),
         class_histogram={names.get(i, str(i)): int(v) for i, v in enumerate(t.hist) if v},
         unknown_codes={i: int(v) for i, v in enumerate(t.unknown) if v},
+        code_histogram=codes,
+        class_scheme=detect_scheme(codes, site.taxonomy),
         outside_fence=t.outside,
         colour=t.colour,
         density_pts_m2=t.count / area,

@@ -23,9 +23,10 @@ from typing import Any
 import numpy as np
 import zarr
 
-from siteline.errors import LabelSetError, SchemaError
+from siteline.errors import LabelSetError
 from siteline.hashing import sha256_file
 from siteline.labelsets.compare import changes_by_class, histogram, pair_counts
+from siteline.labelsets.mapping import TaxonomyMap, coding_lut
 from siteline.labelsets.match import match_points, point_keys
 from siteline.labelsets.plan import ImportPlan
 from siteline.labelsets.store import open_labelled, write_tile_classes
@@ -76,14 +77,36 @@ class MatchCounts:
     histogram: dict[str, int] = field(default_factory=dict)
 
 
-def _check_origin(doc: Mapping[str, Any] | None, scene_id: int, site: SiteSpec, path: Path) -> None:
-    """Refuse a file whose siteline record says it was exported from another scene or site."""
-    if doc is None:
-        return
-    if doc.get("site") != site.name or doc.get("scene") != scene_id:
+def _check_origin(
+    doc: Mapping[str, Any] | None, scene_id: int, site: SiteSpec, path: Path, taxonomy_map: TaxonomyMap
+) -> None:
+    """Refuse a file whose siteline record says it was exported from another scene or site, and,
+    without ``taxonomy_map``, one whose codes cannot be known to be the site's class ids: no siteline
+    record (ASPRS codes 2 and 5 would read as the site's classes 2 and 5), or a record of another
+    taxonomy (the site's was updated since the export)."""
+    if doc is not None and (doc.get("site") != site.name or doc.get("scene") != scene_id):
         raise LabelSetError(
             f"labels file {path} was exported from scene {doc.get('scene')} of site {doc.get('site')}, "
             f"not scene {scene_id} of site {site.name}: import it into that scene. Nothing was written."
+        )
+    if taxonomy_map is not None:
+        return
+    how = (
+        "Give --taxonomy-map FILE (a JSON map of code -> class), --taxonomy-map las (the site taxonomy's LAS "
+        "codes, e.g. ASPRS) or --taxonomy-map site (they are this site's class ids). Nothing was written."
+    )
+    if doc is None:
+        names = {c.id: c.name for c in site.taxonomy.classes}
+        raise LabelSetError(
+            f"labels file {path} carries no siteline label-set record (`siteline scene export` writes one; an "
+            f"editor may drop it), so its class codes cannot be taken as site {site.name}'s class ids (ASPRS 2 "
+            f"and 5 would read as {names.get(2, 'nothing')} and {names.get(5, 'nothing')}). {how}"
+        )
+    ids = {int(c["id"]): c["name"] for c in (doc.get("taxonomy") or {}).get("classes", [])}
+    if ids != {c.id: c.name for c in site.taxonomy.classes}:
+        raise LabelSetError(
+            f"labels file {path} was exported under taxonomy {(doc.get('taxonomy') or {}).get('name')!r}, whose "
+            f"class ids differ from site {site.name}'s taxonomy {site.taxonomy.name!r} now. {how}"
         )
 
 
@@ -117,7 +140,7 @@ def _spill_chunk(rec: np.ndarray, local: np.ndarray, tiles: SceneTiles, spill_di
 
 def _spill(
     path: Path, plan: ImportPlan, tiles: SceneTiles, lut: tuple[np.ndarray, np.ndarray], spill_dir: Path,
-    progress: Progress,
+    progress: Progress, taxonomy_map: TaxonomyMap = "site",
 ) -> tuple[int, bool, np.ndarray]:  # fmt: skip
     """Stream the file into per-tile spill files; return its point count, whether it has GPS times,
     and the count per unknown code."""
@@ -125,7 +148,7 @@ def _spill(
     unknown = np.zeros(256, dtype=np.int64)
     n = 0
     with open_las(path) as reader:
-        _check_origin(read_labels_vlr(reader.header, path), plan.scene_id, site, path)
+        _check_origin(read_labels_vlr(reader.header, path), plan.scene_id, site, path, taxonomy_map)
         has_time = "gps_time" in reader.header.point_format.dimension_names
         crs = file_crs(reader, path) or site.pyproj_crs  # an editor may drop the CRS: it is the export's
         tr = source_transformer(path, site, crs)
@@ -236,7 +259,7 @@ def _refuse_poor_match(
 
 def execute_label_import(
     plan: ImportPlan, path: Path, store: Store, scratch: Path,
-    taxonomy_map: Mapping[int, str | int] | None = None, note: str | None = None,
+    taxonomy_map: TaxonomyMap = None, note: str | None = None,
     max_unmatched: float = DEFAULT_MAX_UNMATCHED, progress: Progress = no_progress,
 ) -> LabelSetImport:  # fmt: skip
     """Match the classes of ``path`` to the scene of ``plan`` and publish them as the store of
@@ -244,8 +267,8 @@ def execute_label_import(
     files go to a folder of ``scratch`` that is removed at the end."""
     t0 = time.perf_counter()
     try:
-        lut = plan.site.taxonomy.id_lut(dict(taxonomy_map) if taxonomy_map else None)
-    except SchemaError as exc:
+        lut = coding_lut(plan.site.taxonomy, taxonomy_map)
+    except LabelSetError as exc:
         raise LabelSetError(f"labels file {path}: {exc}") from exc
     sha = sha256_file(path)
     uri = layout.label_set(store, plan.scene_id, plan.version)
@@ -256,7 +279,7 @@ def execute_label_import(
     spill_dir = Path(tempfile.mkdtemp(prefix=f"{SPILL_PREFIX}{plan.scene_id}-{owner_tag()}-", dir=scratch))
     m = MatchCounts()
     try:
-        n_file, has_time, unknown = _spill(path, plan, tiles, lut, spill_dir, progress)
+        n_file, has_time, unknown = _spill(path, plan, tiles, lut, spill_dir, progress, taxonomy_map)
         _refuse_unknown(path, plan, unknown, taxonomy_map is not None)
         if n_file == 0:
             raise LabelSetError(f"labels file {path} holds no points. Nothing was written.")

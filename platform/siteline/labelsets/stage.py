@@ -4,7 +4,6 @@ record (catalog)."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -14,6 +13,7 @@ from siteline.catalog.labelsets import record_label_set
 from siteline.config import Settings
 from siteline.errors import LabelSetError
 from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED, execute_label_import
+from siteline.labelsets.mapping import TaxonomyMap
 from siteline.labelsets.plan import ImportPlan, plan_label_import
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
@@ -28,7 +28,7 @@ def import_labels(
     settings: Settings,
     scene_id: int,
     path: Path,
-    taxonomy_map: Mapping[int, str | int] | None = None,
+    taxonomy_map: TaxonomyMap = None,
     note: str | None = None,
     max_unmatched: float = DEFAULT_MAX_UNMATCHED,
     progress: Progress = no_progress,
@@ -36,7 +36,8 @@ def import_labels(
 ) -> LabelSetImport:
     """Import the classes of ``path`` as the next label-set version of ``scene_id``.
 
-    Codes are site class ids (as ``scene export`` writes them) unless ``taxonomy_map`` maps them.
+    Codes are site class ids, vouched for by the record ``scene export`` writes, unless
+    ``taxonomy_map`` says how to read them (siteline.labelsets.mapping).
     Points are matched by position in tile quanta, GPS time and return number; refused (nothing
     written) when the file is of another scene, holds unknown codes, is unreadable, or when more
     than ``max_unmatched`` of its points match nothing or match a point already taken. The store is
@@ -53,7 +54,7 @@ def import_labels(
 
 
 def _import(
-    catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, taxonomy_map: Mapping[int, str | int] | None,
+    catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, taxonomy_map: TaxonomyMap,
     note: str | None, max_unmatched: float, progress: Progress, run_id: str | None,
 ) -> LabelSetImport:  # fmt: skip
     scene_id = plan.scene_id

@@ -39,6 +39,13 @@ def run_migrations_offline() -> None:
 def run_migrations_online() -> None:
     engine = _engine()
     with engine.connect() as connection:
+        sqlite = connection.dialect.name == "sqlite"
+        if sqlite:
+            # a batch rebuild drops and recreates a table: with foreign keys enforced, dropping one that
+            # other rows reference (mission, by scene) fails; the rebuilt table keeps the same rows.
+            # The pragma is a no-op inside a transaction, so it is set before one begins.
+            connection.commit()
+            connection.exec_driver_sql("PRAGMA foreign_keys=OFF")
         context.configure(
             connection=connection,
             target_metadata=target_metadata,
@@ -49,6 +56,11 @@ def run_migrations_online() -> None:
         with context.begin_transaction():
             context.run_migrations()
         connection.commit()
+        if sqlite:
+            problems = connection.exec_driver_sql("PRAGMA foreign_key_check").all()
+            connection.exec_driver_sql("PRAGMA foreign_keys=ON")
+            if problems:
+                raise RuntimeError(f"the migration left rows whose references are gone: {problems[:5]}")
 
 
 if context.is_offline_mode():

@@ -57,7 +57,7 @@ def pair_labels(
         info = info | {"given": True, "multiplier": radius / (auto / label_params.radius_multiplier)}
     # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
     info["expected_false_change"] = expected_false_change(info["multiplier"])
-    uri = layout.pair_labels(store, plan.pair_id, plan.versions, radius)
+    uri = layout.pair_labels(store, plan.pair_id, plan.versions, radius, plan.change_rule.rule)
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
         record: dict[str, Any] = dict(store.open_group(uri).attrs) | {"uri": uri}
         counts: dict[str, dict[str, int]] = record["counts"]
@@ -67,7 +67,7 @@ def pair_labels(
         taxonomy = plan.site.taxonomy
         with store.publish(uri) as work:
             record = write_labels(
-                t1, t2, radius, taxonomy.ignored_lut(), work, geometric=taxonomy.geometry_only_lut()
+                t1, t2, radius, taxonomy.ignored_lut(), work, geometric=plan.change_rule.geometric_lut(taxonomy)
             ).to_dict() | {"uri": uri}
     log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
     return PairLabels(radius, uri, record | {"radius": info})
@@ -178,6 +178,7 @@ def execute_pair(
             "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
             "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.record,
             "ground_plane": views.ground.to_dict(), "fence": plan.fence_source, "colour": plan.colour.to_dict(),
+            "change_rule": plan.change_rule.to_dict(),
             "candidates": views.candidates, "rejected": rejected,
             "views": [r.to_dict() for r in records],
         }  # fmt: skip

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from siteline.labels.rule import ChangeRulePlan
 from siteline.pairs.plan import PairPlan
 from siteline.records.pairs import PairOutput, RenderedView
 from siteline.stores import Store, join
@@ -15,6 +16,7 @@ def output_of(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
         plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
         tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
         plan.params.to_dict(), doc.get("colour") or {"source": "rgb"}, doc.get("fence", "site fence"),
+        ChangeRulePlan.from_dict(doc.get("change_rule")).to_dict(),
     )  # fmt: skip
 
 

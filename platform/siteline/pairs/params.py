@@ -10,6 +10,7 @@ from typing import Any
 
 from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
+from siteline.labels.rule import CHANGE_RULES
 from siteline.records.enums import HOLE_RULES, HoleRule
 from siteline.render.colour import COLOUR_CHOICES
 from siteline.render.settings import RenderSettings
@@ -37,6 +38,10 @@ class PairParams:
     colour: what the A/B images show (``auto``: RGB when both scenes carry it, else intensity, else
     an elevation ramp; or ``rgb``, ``intensity``, ``elevation``: siteline.render.colour); at its
     default ``auto`` it is left out of the digest, so outputs made before it existed keep their key.
+    change_rule: whether classes take part in change (``semantic``, DESIGN.md §4) or geometry only
+    (``geometry``: a point is changed only when nothing kept lies within the radius); ``auto`` takes
+    geometry for a pair whose scenes classify differently (siteline.labels.rule), and is left out of
+    the digest like ``colour``.
 
     The persisted JSON stays flat (the knobs above), so the catalog, the lineage and ``release diff``
     show each knob once under its one name."""
@@ -55,6 +60,7 @@ class PairParams:
     all_points: bool = False
     sampler: str = SAMPLER_VERSION
     colour: str = "auto"
+    change_rule: str = "auto"
 
     def __post_init__(self) -> None:
         if self.sampler != SAMPLER_VERSION:
@@ -66,6 +72,8 @@ class PairParams:
             raise PairError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if self.colour not in COLOUR_CHOICES:
             raise PairError(f"colour {self.colour!r}: use one of {', '.join(COLOUR_CHOICES)}.")
+        if self.change_rule not in CHANGE_RULES:
+            raise PairError(f"change rule {self.change_rule!r}: use one of {', '.join(CHANGE_RULES)}.")
         if self.one_side_hole not in HOLE_RULES:
             raise PairError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
         clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage", "point_size_px"})
@@ -108,6 +116,7 @@ class PairParams:
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""
         doc = self.to_dict()
-        if doc["colour"] == "auto":
-            del doc["colour"]
+        for knob in ("colour", "change_rule"):  # auto: resolved per pair, outputs made before keep their key
+            if doc[knob] == "auto":
+                del doc[knob]
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]

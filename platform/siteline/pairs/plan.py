@@ -9,11 +9,12 @@ from dataclasses import dataclass
 from sqlalchemy.orm import Session
 
 from siteline.cameras import Camera
-from siteline.catalog.labelsets import label_set_ref, newest_versions
+from siteline.catalog.labelsets import label_set, label_set_ref, newest_versions
 from siteline.catalog.pairs import get_pair, pair_view_ids
 from siteline.catalog.scenes import get_scene, scene_cameras, scene_statistics, tile_source
 from siteline.catalog.sites import site_of
 from siteline.errors import PairError
+from siteline.labels.rule import ChangeRulePlan, resolve_change_rule
 from siteline.pairs.params import PairParams
 from siteline.records.labelsets import LabelSetRef
 from siteline.records.pairs import PairVersions
@@ -23,16 +24,21 @@ from siteline.site import SiteSpec
 from siteline.stores import Store, layout
 
 
-def output_digest(params: PairParams, versions: tuple[int, int], tilings: tuple[int, int] = (0, 0)) -> str:
+def output_digest(
+    params: PairParams, versions: tuple[int, int], tilings: tuple[int, int] = (0, 0), rule: str = "semantic"
+) -> str:
     """The key of a pair's outputs: the parameters' digest, extended by the label-set versions when
-    either is not 1 and by the scenes' tiling generations when either was re-tiled (so outputs made
-    before either was recorded keep their key, and a re-tiled scene never reuses outputs aligned
-    with its old tile order)."""
-    if tuple(versions) == (1, 1) and tuple(tilings) == (0, 0):
+    either is not 1, by the scenes' tiling generations when either was re-tiled and by the change
+    rule when it is ``geometry`` (so outputs made before each was recorded keep their key, a
+    re-tiled scene never reuses outputs aligned with its old tile order, and an ``auto`` rule that
+    resolves to geometry never reuses semantic labels)."""
+    if tuple(versions) == (1, 1) and tuple(tilings) == (0, 0) and rule == "semantic":
         return params.digest()
     text = f"{params.digest()}:labels:{versions[0]}:{versions[1]}"
     if tuple(tilings) != (0, 0):
         text += f":tiles:{tilings[0]}:{tilings[1]}"
+    if rule != "semantic":
+        text += f":rule:{rule}"
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
@@ -54,7 +60,8 @@ class PairPlan:
     outputs go (keyed by :func:`output_digest`), whether the catalog already records them, and the
     fence views are judged against (``fence``: the site's, else the later scene's footprint; None
     when there is neither) with where it came from (``fence_source``), and the colour the images
-    show (``params.colour`` resolved from both scenes' colour statistics)."""
+    show (``params.colour`` resolved from both scenes' colour statistics) and the change rule
+    (``params.change_rule`` resolved from the class histograms of the label sets it uses)."""
 
     pair_id: int
     site: SiteSpec
@@ -68,6 +75,7 @@ class PairPlan:
     fence: tuple[tuple[float, float], ...] | None = None
     fence_source: str = "none"
     colour: ColourPlan = ColourPlan("rgb")
+    change_rule: ChangeRulePlan = ChangeRulePlan()
 
     @property
     def versions(self) -> PairVersions:
@@ -82,10 +90,37 @@ def _pair_scene(session: Session, pair_id: int, scene_id: int, version: int | No
             "(or `siteline release build`, which tiles and processes what it needs)."
         )
     tiling = scene_statistics(scene).tiling
+    site_version = site_of(session, scene.site_id).version
+    if tiling is not None and tiling.site_version != site_version:
+        raise PairError(
+            f"pair {pair_id}: scene {scene_id} was tiled under version {tiling.site_version} of its site, which "
+            f"is at version {site_version} now (its taxonomy or fence changed): `siteline release build` tiles it "
+            f"again, or `siteline scene tile {scene_id}`."
+        )
     return PairScene(
         scene_id, tile_source(session, scene_id), label_set_ref(session, scene_id, version),
         tiling.generation if tiling is not None else 0,
     )  # fmt: skip
+
+
+def _change_rule(
+    session: Session, site: SiteSpec, ids: tuple[int, int], versions: Mapping[int, int], choice: str
+) -> ChangeRulePlan:
+    first, second = ((sid, label_set(session, sid, versions[sid]).class_histogram) for sid in ids)
+    return resolve_change_rule(choice, first, second, site.taxonomy)
+
+
+def pair_change_rule(
+    session: Session, pair_id: int, choice: str, pinned: Mapping[int, int] | None = None
+) -> ChangeRulePlan:
+    """The change rule ``choice`` resolves to for ``pair_id`` on each scene's newest label set (or
+    the version ``pinned`` names), with how the scenes' class schemes differ: what a release states
+    before any pair is processed."""
+    pair = get_pair(session, pair_id)
+    ids = (pair.t1_scene_id, pair.t2_scene_id)
+    newest = newest_versions(session, list(ids))
+    chosen = {sid: (pinned or {}).get(sid, newest.get(sid, 1)) for sid in ids}
+    return _change_rule(session, site_of(session, pair.site_id), ids, chosen, choice)
 
 
 def plan_pair(
@@ -105,10 +140,11 @@ def plan_pair(
     newest = newest_versions(session, list(ids))
     chosen = {sid: (pinned or {}).get(sid, newest.get(sid, 1)) for sid in ids}
     t1, t2 = (_pair_scene(session, pair_id, sid, chosen[sid]) for sid in ids)
-    digest = output_digest(
-        params, (t1.label_set.version, t2.label_set.version), (t1.generation, t2.generation)
-    )
     site = site_of(session, pair.site_id)
+    rule = _change_rule(session, site, ids, chosen, params.change_rule)
+    digest = output_digest(
+        params, (t1.label_set.version, t2.label_set.version), (t1.generation, t2.generation), rule.rule
+    )
     scans = [scene_statistics(get_scene(session, sid)).scan for sid in ids]
     colour = resolve_colour(
         params.colour, *((sid, sc.colour_stats if sc else None) for sid, sc in zip(ids, scans, strict=True))
@@ -122,5 +158,5 @@ def plan_pair(
     return PairPlan(
         pair_id, site, t1, t2, tuple(scene_cameras(session, ids[1])), params, digest,
         layout.pair_outputs(store, pair_id, digest), bool(pair_view_ids(session, pair_id, digest)),
-        fence, fence_source, colour,
+        fence, fence_source, colour, rule,
     )  # fmt: skip

@@ -60,8 +60,9 @@ class PairOutput:
     (metres), the rendered views in index order, the 3D label record (store address, counts,
     checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
     label sets and tilings), the pair parameters (their JSON form), the colour the images show
-    (siteline.render.colour.ColourPlan's JSON form; outputs made before it: RGB) and the fence views
-    were judged against (the site's, or a scene's footprint)."""
+    (siteline.render.colour.ColourPlan's JSON form; outputs made before it: RGB), the fence views
+    were judged against (the site's, or a scene's footprint) and the change rule of its labels
+    (siteline.labels.rule.ChangeRulePlan's JSON form)."""
 
     pair_id: int
     t1: int
@@ -75,6 +76,7 @@ class PairOutput:
     params: dict[str, Any]
     colour: dict[str, Any] = field(default_factory=lambda: {"source": "rgb"})
     fence: str = "site fence"
+    change_rule: dict[str, Any] = field(default_factory=lambda: {"rule": "semantic"})
 
     @property
     def view_count(self) -> int:

@@ -46,7 +46,8 @@ class ColourStats:
 class LasScan:
     """What one pass over a LAS/LAZ file found. path: the file (relative to its mission once
     ingested). Bounds are site-local metres (float64). class_histogram: points per site class name;
-    unknown_codes: points per file code the taxonomy lacks. outside_fence: points made ``ignore`` by
+    unknown_codes: points per file code the taxonomy lacks; code_histogram: points per file code, and
+    class_scheme what they look like (siteline.taxonomy.detect_scheme). outside_fence: points made ``ignore`` by
     the fence. z_unit: the unit of the file's z and its source (siteline.crs.ZUnit). colour_stats:
     what the colour and intensity hold (None: scanned before it was recorded). gps_time_standard:
     whether the header's global encoding says GPS times are adjusted standard GPS time (absolute:
@@ -77,6 +78,8 @@ class LasScan:
     colour_stats: ColourStats | None = None
     gps_time_standard: bool | None = None
     footprint: list[list[float]] | None = None
+    code_histogram: dict[int, int] = field(default_factory=dict)
+    class_scheme: str | None = None
     stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
     survey_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
 
@@ -106,6 +109,7 @@ class LasScan:
         """The JSON form (the samples are left out)."""
         doc = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in _SAMPLES}
         doc["unknown_codes"] = {str(k): v for k, v in self.unknown_codes.items()}
+        doc["code_histogram"] = {str(k): v for k, v in self.code_histogram.items()}
         doc["colour_stats"] = self.colour_stats.to_dict() if self.colour_stats else None
         return doc
 
@@ -114,6 +118,7 @@ class LasScan:
         names = {f.name for f in fields(cls)} - _SAMPLES
         values = {k: v for k, v in doc.items() if k in names}
         values["unknown_codes"] = {int(k): int(v) for k, v in doc.get("unknown_codes", {}).items()}
+        values["code_histogram"] = {int(k): int(v) for k, v in doc.get("code_histogram", {}).items()}
         stats = doc.get("colour_stats")
         values["colour_stats"] = ColourStats.from_dict(stats) if stats else None
         return cls(**values)

@@ -247,8 +247,9 @@ class SceneTiling:
     """What tiling a scene recorded (``scene.statistics["tiles"]``): the store's address, spec and
     checksum (a label-set store follows the order it implies), its generation (0 until the scene is
     tiled again; part of its pairs' output keys), and counts: points, tiles, levels, bytes on disk,
-    seconds spent, node index rows, and the bytes of the LAS/LAZ file it was tiled from (0: not
-    recorded), to compare bytes per point with."""
+    seconds spent, node index rows, the bytes of the LAS/LAZ file it was tiled from (0: not
+    recorded), to compare bytes per point with, and the version of the site (its taxonomy and fence)
+    the classes were mapped under."""
 
     uri: str
     spec: TileSpec
@@ -261,6 +262,7 @@ class SceneTiling:
     seconds: float
     nodes: int = 0
     source_bytes: int = 0
+    site_version: int = 1
 
     @property
     def bytes_per_point(self) -> float:
@@ -292,6 +294,7 @@ class SceneTiling:
             seconds=float(doc.get("seconds", 0.0)),
             nodes=int(doc.get("nodes", 0)),
             source_bytes=int(doc.get("source_bytes", 0)),
+            site_version=int(doc.get("site_version", 1)),
         )
 
 

@@ -100,7 +100,8 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
     params = plan.params
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
-         "labels": o.labels, "colour_source": o.colour["source"], "colour": o.colour, "fence": o.fence}
+         "labels": o.labels, "colour_source": o.colour["source"], "colour": o.colour, "fence": o.fence,
+         "change_rule": o.change_rule}
         for o in (outputs[pid] for pid in sorted(outputs))
     ]  # fmt: skip
     return {
@@ -115,9 +116,11 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
     }
 
 
-def catalog_parameters(plan: ReleasePlan, pairs: list[int]) -> dict[str, Any]:
-    """What the catalog records of a release's parameters (``release.parameters``)."""
+def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, Any]:
+    """What the catalog records of a release's parameters (``release.parameters``), with the
+    smallest change each pair resolves (its change radius, metres)."""
     params = plan.params
+    pairs = sorted(outputs)
     return {
         "pair_params": params.pair.to_dict(),
         "preset": params.preset,
@@ -127,6 +130,8 @@ def catalog_parameters(plan: ReleasePlan, pairs: list[int]) -> dict[str, Any]:
         "label_sets": plan.lineage_key["label_sets"],
         "output_digests": plan.output_digests,
         "version_reason": plan.reason,
+        "smallest_change_m": {str(pid): outputs[pid].radius_m for pid in pairs},
+        "radius_ceiling_m": params.radius_ceiling_m,
     }
 
 
@@ -168,5 +173,5 @@ def execute_build(
     )
     return DraftRelease(
         plan.name, plan.version, str(plan.draft), manifest_sha, tuple(items), stats,
-        catalog_parameters(plan, sorted(outputs)), {pid: o.digest for pid, o in outputs.items()},
+        catalog_parameters(plan, outputs), {pid: o.digest for pid, o in outputs.items()},
     )  # fmt: skip

@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from siteline.release.params import DEFAULT_RADIUS_CEILING_M
+
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}
 
 
@@ -65,8 +67,9 @@ def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def _radius_lines(pairs: list[dict[str, Any]]) -> list[str]:
-    """One line per pair: its radius and the false change it implies on unchanged surfaces."""
+def _radius_lines(pairs: list[dict[str, Any]], ceiling: float) -> list[str]:
+    """One line per pair: its radius, the false change it implies on unchanged surfaces and, when it
+    is above the release's radius ceiling (metres), that it is."""
     out = []
     for q in pairs:
         info = (q.get("labels") or {}).get("radius") or {}
@@ -77,6 +80,7 @@ def _radius_lines(pairs: list[dict[str, Any]]) -> list[str]:
                 f"change on unchanged surfaces {fc['per_direction']:.2%} per direction, {fc['union']:.2%} in the "
                 f"mask (2^(-k^2) per direction); the smallest change it resolves is {q['radius_m']:.2f} m (a "
                 "surface that moved less, or a new object nearer than that to an old surface, is unchanged)"
+                + (f"; ABOVE the radius ceiling of {ceiling:.2f} m" if q["radius_m"] > ceiling else "")
             )
     return out
 
@@ -141,9 +145,20 @@ def _camera_lines(lin: dict[str, Any]) -> list[str]:
         f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
         + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")
         + f", views judged against the {q.get('fence', 'site fence')}"
+        + _rule_text(q.get("change_rule"))
         for q in lin["pairs"]
     ]
     return lines
+
+
+def _rule_text(rule: dict[str, Any] | None) -> str:
+    """How a pair's change labels treat classes, and why (outputs made before it: semantic)."""
+    if not rule:
+        return ", change rule semantic"
+    text = f", change rule {rule['rule']} ({rule.get('why', '')})"
+    if rule.get("differences"):
+        text += ": " + "; ".join(rule["differences"])
+    return text
 
 
 def _source_lines(lin: dict[str, Any]) -> list[str]:
@@ -155,7 +170,10 @@ def _source_lines(lin: dict[str, Any]) -> list[str]:
     return [
         "## Sources",
         "",
-        f"- sites: {', '.join(s['name'] + ' (' + s['crs'] + ')' for s in lin['sites'])}",
+        "- sites: " + ", ".join(
+            f"{s['name']} ({s['crs']}" + (f", version {s['version']}: taxonomy {s['taxonomy']}" if "version" in s else "") + ")"
+            for s in lin["sites"]
+        ),
         "- scenes: "
         + ", ".join(
             f"{s['id']} @ {s['capture_time'][:10]} (label set {s.get('label_set_version', 1)})"
@@ -171,7 +189,9 @@ def _source_lines(lin: dict[str, Any]) -> list[str]:
         f"- render scale {p['scale']}, point size {p['point_size_px']} px, level-of-detail factor {p['lod_factor']}",
         f"- views per pair {p['views']}, seed {p['seed']}, minimum coverage {p['min_coverage']}",
         f"- change radius: {radius}",
-        *_radius_lines(lin["pairs"]),
+        *_radius_lines(
+            lin["pairs"], lin.get("release_params", {}).get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M)
+        ),
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
         f"**{p.get('one_side_hole', 'ignore')}**; change is the union (OR) of the two directions.",

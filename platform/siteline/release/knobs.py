@@ -20,27 +20,32 @@ from siteline.errors import ReleaseError, SitelineError
 from siteline.pairs.params import PairParams
 from siteline.presets import PRESETS
 from siteline.records.release import SiteSurvey
-from siteline.release.params import ReleaseParams
+from siteline.release.params import DEFAULT_RADIUS_CEILING_M, ReleaseParams
 
 AUTO = "auto"
 AUTO_KNOBS = ("scale", "point_size_px")
-# knobs for which "auto" is a value of their own, resolved later (colour: siteline.render.colour)
-VALUE_AUTO_KNOBS = ("colour",)
+# knobs for which "auto" is a value of their own, resolved per pair (colour: siteline.render.colour;
+# change_rule: siteline.labels.rule)
+VALUE_AUTO_KNOBS = ("colour", "change_rule")
 TARGET_LONG_SIDE_PX = 512
 MIN_IMAGE_PX = 256
+# the release settings beside the pair knobs
+_RELEASE_KEYS = ("preset", "pad", "min_image_px", "radius_ceiling_m")
 _PAIR_KNOBS = tuple(f.name for f in fields(PairParams) if f.name != "sampler")
 
 
 @dataclass(frozen=True)
 class ReleaseKnobs:
     """One layer of release settings: a preset, any subset of the pair knobs (PairParams fields;
-    ``scale`` and ``point_size_px`` may be ``"auto"``), padding, and the smallest long side in pixels a
-    release image may have. ``None`` and absent knobs leave the layer below in force."""
+    ``scale`` and ``point_size_px`` may be ``"auto"``), padding, the smallest long side in pixels a
+    release image may have, and the change radius (metres) above which a build warns. ``None`` and
+    absent knobs leave the layer below in force."""
 
     preset: str | None = None
     pair: Mapping[str, Any] = field(default_factory=dict)
     pad: bool | None = None
     min_image_px: int | None = None
+    radius_ceiling_m: float | None = None
 
     def __post_init__(self) -> None:
         if self.preset is not None and self.preset not in PRESETS:
@@ -63,6 +68,9 @@ class ReleaseKnobs:
             isinstance(self.min_image_px, bool) or not isinstance(self.min_image_px, int) or self.min_image_px < 1
         ):
             raise ReleaseError(f"release settings: min_image_px {self.min_image_px!r} must be a positive integer.")
+        c = self.radius_ceiling_m
+        if c is not None and (isinstance(c, bool) or not isinstance(c, int | float) or not 0 < c < math.inf):
+            raise ReleaseError(f"release settings: radius_ceiling_m {c!r} must be a positive number of metres.")
 
     @classmethod
     def exactly(cls, params: PairParams, **kw: Any) -> ReleaseKnobs:
@@ -71,7 +79,8 @@ class ReleaseKnobs:
 
     def updated(self, other: ReleaseKnobs, unset: Sequence[str] = ()) -> ReleaseKnobs:
         """This layer with ``other``'s set fields written over it, then the knobs named in ``unset``
-        (pair knobs, ``preset``, ``pad``, ``min_image_px``) removed: what ``site update`` stores."""
+        (pair knobs, ``preset``, ``pad``, ``min_image_px``, ``radius_ceiling_m``) removed: what
+        ``site update`` stores."""
         doc = self.to_dict()
         new = other.to_dict()
         doc["pair"] = {**doc.get("pair", {}), **new.pop("pair", {})}
@@ -79,16 +88,16 @@ class ReleaseKnobs:
         for name in unset:
             if name in doc["pair"]:
                 del doc["pair"][name]
-            elif name in ("preset", "pad", "min_image_px"):
+            elif name in _RELEASE_KEYS:
                 doc.pop(name, None)
             elif name not in _PAIR_KNOBS:
-                raise ReleaseError(f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, preset, pad, min_image_px.")
+                raise ReleaseError(f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, {', '.join(_RELEASE_KEYS)}.")
         return ReleaseKnobs.from_dict(doc)
 
     def to_dict(self) -> dict[str, Any]:
         """Only what is set (the site's JSON)."""
         doc: dict[str, Any] = {"pair": dict(self.pair)} if self.pair else {}
-        for name in ("preset", "pad", "min_image_px"):
+        for name in _RELEASE_KEYS:
             if getattr(self, name) is not None:
                 doc[name] = getattr(self, name)
         return doc
@@ -96,12 +105,12 @@ class ReleaseKnobs:
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any] | None, source: str = "release settings") -> ReleaseKnobs:
         doc = dict(doc or {})
-        unknown = sorted(set(doc) - {"preset", "pair", "pad", "min_image_px"})
+        unknown = sorted(set(doc) - {"pair", *_RELEASE_KEYS})
         if unknown:
             raise ReleaseError(f"{source}: unknown key(s) {unknown}.")
         if not isinstance(doc.get("pair", {}), Mapping):
             raise ReleaseError(f"{source}: 'pair' must be an object of knobs.")
-        return cls(doc.get("preset"), dict(doc.get("pair", {})), doc.get("pad"), doc.get("min_image_px"))
+        return cls(pair=dict(doc.get("pair", {})), **{k: doc.get(k) for k in _RELEASE_KEYS})
 
 
 def auto_scale(survey: SiteSurvey) -> tuple[float, str]:
@@ -144,7 +153,7 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
     """The release parameters of ``layers`` (site, then command) over the defaults, with ``auto``
     worked out from ``survey``; the explanation of each derived knob is in ``derived``."""
     doc = PairParams().to_dict()
-    auto, preset, pad, min_px = set(AUTO_KNOBS), None, True, MIN_IMAGE_PX
+    auto, preset, pad, min_px, ceiling = set(AUTO_KNOBS), None, True, MIN_IMAGE_PX, DEFAULT_RADIUS_CEILING_M
     for layer in layers:
         if layer.preset is not None:
             doc |= PRESETS[layer.preset]
@@ -158,6 +167,7 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
                 auto.discard(name)
         pad = pad if layer.pad is None else layer.pad
         min_px = min_px if layer.min_image_px is None else layer.min_image_px
+        ceiling = ceiling if layer.radius_ceiling_m is None else float(layer.radius_ceiling_m)
     derived: dict[str, str] = {}
     if "scale" in auto:
         doc["scale"], derived["scale"] = auto_scale(survey)
@@ -167,7 +177,7 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
         pair = PairParams.from_dict(doc)
     except SitelineError as exc:
         raise ReleaseError(f"release settings: {exc}") from exc
-    return ReleaseParams(pair, preset, pad, min_image_px=min_px, derived=derived)
+    return ReleaseParams(pair, preset, pad, min_image_px=min_px, derived=derived, radius_ceiling_m=ceiling)
 
 
 def check_image_size(params: ReleaseParams, survey: SiteSurvey, what: str) -> None:

@@ -262,7 +262,8 @@ def plan_release(
         )
     semver(version)
     site = get_site(session, site_name)
-    record = {"name": site.name, "crs": site.crs, "origin": list(site.origin), "fence_m": site.fence}
+    record = {"name": site.name, "crs": site.crs, "origin": list(site.origin), "fence_m": site.fence,
+              "version": site.version or 1, "taxonomy": site.taxonomy["name"]}  # fmt: skip
     return ReleasePlan(
         site_name, record, name, version, params, pairs, tuple(scene_lineage(session, pairs)), key,
         paths.release_draft(settings.home, name, version), reason, up_to_date,

@@ -90,6 +90,10 @@ class Store(ABC):
         """Remove the file or folder at ``uri`` (a folder's marker first); a missing one is fine."""
 
     @abstractmethod
+    def names(self, uri: str) -> list[str]:
+        """The names of the files and folders directly in the folder ``uri``, sorted ([] when none)."""
+
+    @abstractmethod
     def open_group(self, uri: str, mode: str = "r") -> zarr.Group:
         """The Zarr group at ``uri``; :class:`StoreError` when there is none."""
 

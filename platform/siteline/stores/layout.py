@@ -19,9 +19,10 @@ Store root::
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
-from siteline.stores.base import Store
+from siteline.stores.base import Store, join
 
 
 def blob(store: Store, sha256: str) -> str:
@@ -39,10 +40,25 @@ def label_set(store: Store, scene_id: int, version: int) -> str:
     return store.uri("labelsets", f"scene-{scene_id}", f"v{version}.zarr")
 
 
-def pair_labels(store: Store, pair_id: int, versions: tuple[int, int], radius_m: float) -> str:
-    """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2)."""
+def pair_labels(
+    store: Store, pair_id: int, versions: tuple[int, int], radius_m: float, rule: str = "semantic"
+) -> str:
+    """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
+    by the change ``rule`` (siteline.labels.rule)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
-    return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um.zarr")
+    by = "" if rule == "semantic" else f"-{rule}"
+    return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um{by}.zarr")
+
+
+def pair_label_stores(store: Store, pair_id: int) -> list[str]:
+    """Every 3D change-label store of a pair, whatever its versions, radius and rule."""
+    folder = store.uri("labels")
+    return [join(folder, n) for n in store.names(folder) if re.fullmatch(rf"pair-{pair_id}[-.].*", n)]
+
+
+def pair_folder(store: Store, pair_id: int) -> str:
+    """The folder of every output of a pair (one per output digest)."""
+    return store.uri("pairs", f"pair-{pair_id}")
 
 
 def pair_outputs(store: Store, pair_id: int, digest: str) -> str:

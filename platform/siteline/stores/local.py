@@ -164,6 +164,10 @@ class LocalStore(Store):
         else:
             p.unlink(missing_ok=True)
 
+    def names(self, uri: str) -> list[str]:
+        p = local_path(uri)
+        return sorted(c.name for c in p.iterdir()) if p.is_dir() else []
+
     def open_group(self, uri: str, mode: str = "r") -> zarr.Group:
         import zarr
 

@@ -121,6 +121,13 @@ class FsspecStore(Store):
             fs.rm(path, recursive=True)
         fs.invalidate_cache()
 
+    def names(self, uri: str) -> list[str]:
+        fs, path = file_system(uri)
+        fs.invalidate_cache()
+        if not fs.isdir(path):
+            return []
+        return sorted(p.rstrip("/").rsplit("/", 1)[-1] for p in fs.ls(path, detail=False))
+
     def open_group(self, uri: str, mode: str = "r") -> zarr.Group:
         import zarr
 

@@ -77,7 +77,7 @@ def execute_tiling(
         )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,
-        written.bytes, written.seconds, len(written.nodes), las.stat().st_size,
+        written.bytes, written.seconds, len(written.nodes), las.stat().st_size, plan.site.version,
     )  # fmt: skip
     log.info(
         "tiled scene %d: %s points in %d tiles, %d levels, %d nodes, %.1f bytes/point (source %.1f), "

@@ -36,6 +36,12 @@ class TilingPlan:
     eight_bit: bool | None = None
     correction: Correction | None = None
 
+    @property
+    def stale(self) -> bool:
+        """Whether the recorded tiling mapped classes under an earlier version of the site (its
+        taxonomy or fence changed since): it is tiled again."""
+        return self.current is not None and self.current.site_version != self.site.version
+
     def generation(self, retile: bool) -> int:
         """The generation a tiling written now gets: the next one for a re-tiling (the old store stays
         until the new one is recorded), else the recorded one (0 for a scene never tiled)."""

@@ -517,3 +517,11 @@ class SceneTiles:
             if len(sel):
                 selection[tile] = (sel, take[sel])
         return selection, planes
+
+
+def class_counts(tiles: SceneTiles) -> np.ndarray:
+    """(256,) int64: the points of each class id in the scene's store (its label set 1)."""
+    counts = np.zeros(256, dtype=np.int64)
+    for tile in sorted(tiles.by_tile):
+        counts += np.bincount(tiles.read_tile(tile, ("class",)).attributes["class"], minlength=256)
+    return counts

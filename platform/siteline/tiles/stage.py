@@ -15,6 +15,7 @@ from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import layout
 from siteline.tiles.execute import execute_tiling
 from siteline.tiles.plan import plan_tiling
+from siteline.tiles.reader import SceneTiles, class_counts
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +41,9 @@ def tile_scene(
     executor: Executor | None = None,
 ) -> TileOutcome:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
-    ``retile`` (tile it again in the current layout, e.g. a store written in input order).
+    ``retile`` (tile it again in the current layout, e.g. a store written in input order) or its
+    tiling is of an earlier site version (``site update --taxonomy/--fence``): then its classes are
+    mapped again, and label set 1's class histogram follows.
 
     The store (its node index inside) is published whole before its address and the scene's status
     are committed; a store without rows (a crash between the two) is replaced. A re-tiling writes the
@@ -61,7 +64,7 @@ def _tile(
         plan = plan_tiling(s, scene_id)
     store = settings.store
     done = plan.tiled and plan.current is not None and store.is_complete(plan.current.uri)
-    if done and not retile:
+    if done and not retile and not plan.stale:
         log.info("scene %d is already tiled", scene_id)
         return TileOutcome(None, plan.already_tiled())
     spec = spec or TileSpec.for_site(plan.site)
@@ -79,8 +82,9 @@ def _tile(
         executor,
     )
     try:
+        counts = class_counts(SceneTiles.open(tiling.uri)) if done else None
         with catalog.transaction() as s:
-            record_tiling(s, scene_id, tiling, run)
+            record_tiling(s, scene_id, tiling, run, counts)
     except BaseException:
         store.remove(tiling.uri)
         raise
