@@ -93,13 +93,15 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
         group = store.open_group(f"{labels}/{side}")
         assert sorted(group["tiles"].group_keys()) == sorted(t.by_tile)
 
-    # two corrections of one scene imported at once: two versions, both stores whole
-    fixes = []
+    # two corrections of one scene, both exported from label set 1, imported at once: two versions,
+    # both stores whole, and the second merges its changes onto the first's (none is undone)
+    fixes, edited = [], []
     for k, cls in enumerate((4, 5)):
         export_label_set(cat, 1, tmp_path / f"s1_{k}.las")
         las = laspy.read(tmp_path / f"s1_{k}.las")
         codes = np.asarray(las.classification).copy()
-        codes[np.flatnonzero(codes != 255)[: 200 * (k + 1)]] = cls  # each file corrects other points
+        edited.append(np.flatnonzero(codes != 255)[200 * k : 200 * (k + 1)])  # each file corrects other points
+        codes[edited[-1]] = cls
         las.classification = codes
         las.write(tmp_path / f"s1_{k}_fixed.las")
         fixes.append(["labels", "import", "1", str(tmp_path / f"s1_{k}_fixed.las"), "--no-announce"])
@@ -107,7 +109,21 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
     with cat.transaction() as s:
         rows = label_sets(s, 1)
         assert [r.version for r in rows] == [1, 2, 3]
+        assert rows[2].details["merged_from"] == 1 and rows[1].details["merged_from"] is None
         readers = [open_labelled(*labelled_source(s, 1, v)) for v in (2, 3)]
     for r in readers:
         assert all(len(r.read_tile(t, ("class",))) for t in r.by_tile)
+    export_label_set(cat, 1, tmp_path / "s1_now.las")
+    now = np.asarray(laspy.read(tmp_path / "s1_now.las").classification)
+    assert (now[edited[0]] == 4).all() and (now[edited[1]] == 5).all()  # both corrections hold
+    # a third correction from label set 1 that changes the first's points otherwise: refused, exit 2
+    las = laspy.read(tmp_path / "s1_0.las")
+    codes = np.asarray(las.classification).copy()
+    codes[edited[0][:50]] = 7
+    las.classification = codes
+    las.write(tmp_path / "s1_clash.las")
+    (clash,) = _race(settings, ["labels", "import", "1", str(tmp_path / "s1_clash.las"), "--no-announce"])
+    assert clash.returncode == 2 and "changed 50 of the points it changes" in clash.stderr, clash.stderr
+    with cat.transaction() as s:
+        assert [r.version for r in label_sets(s, 1)] == [1, 2, 3]
     cat.dispose()

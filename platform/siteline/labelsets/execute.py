@@ -75,6 +75,7 @@ class MatchCounts:
     changed: int = 0
     changes: dict[str, int] = field(default_factory=dict)
     histogram: dict[str, int] = field(default_factory=dict)
+    conflicts: int = 0
 
 
 def _check_origin(
@@ -168,10 +169,12 @@ def _spill(
 
 
 def _match_tile(
-    tiles: SceneTiles, tile: str, inc: np.ndarray, has_time: bool
-) -> tuple[np.ndarray, np.ndarray, Any]:
+    tiles: SceneTiles, tile: str, inc: np.ndarray, has_time: bool, base: SceneTiles | None = None
+) -> tuple[np.ndarray, np.ndarray, Any, int]:
     """The stored classes of ``tile``, its new classes with the spilled file points ``inc`` matched
-    in, and the match (siteline.labelsets.match)."""
+    in, the match (siteline.labelsets.match) and the conflicts. With ``base`` (the label set the file
+    was exported from, older than the stored one), only the file's changes from the base are
+    written over the stored classes, and a point both changed (to different classes) is a conflict."""
     spec = tiles.spec
     origin = tile_origin_local(*parse_tile_key(tile), spec.tile_size_m)
     data = tiles.read_tile(tile, ("gps_time", "return_number", "class"))
@@ -188,13 +191,21 @@ def _match_tile(
     )
     m = match_points(stored, incoming)
     new = attrs["class"].copy()
-    new[m.stored] = inc["class"][m.incoming]
-    return attrs["class"], new, m
+    theirs = inc["class"][m.incoming]
+    if base is None:
+        new[m.stored] = theirs
+        return attrs["class"], new, m, 0
+    was = base.read_tile(tile, ("class",)).attributes["class"][m.stored]
+    mine = attrs["class"][m.stored]
+    edited = theirs != was
+    conflicts = int((edited & (mine != was) & (theirs != mine)).sum())
+    new[m.stored[edited]] = theirs[edited]
+    return attrs["class"], new, m, conflicts
 
 
 def _match_tiles(
     tiles: SceneTiles, spill_dir: Path, has_time: bool, work: Path, site: SiteSpec, n_file: int,
-    progress: Progress,
+    progress: Progress, base: SceneTiles | None = None,
 ) -> MatchCounts:  # fmt: skip
     """Match every tile's stored points to its spilled file points and write the tile's classes. A
     file point near a tile edge was spilled to both tiles: once matched it is skipped in the next;
@@ -212,7 +223,8 @@ def _match_tiles(
         inc = np.fromfile(spill, dtype=SPILL_DTYPE) if spill.exists() else np.zeros(0, SPILL_DTYPE)
         if taken_edge and inc["edge"].any():
             inc = inc[~(inc["edge"] & np.isin(inc["idx"], np.concatenate(taken_edge)))]
-        old, new, m = _match_tile(tiles, tile, inc, has_time)
+        old, new, m, conflicts = _match_tile(tiles, tile, inc, has_time, base)
+        out.conflicts += conflicts
         counts += pair_counts(old, new)
         write_tile_classes(group, tile, new, tiles.spec)
         hit, dup = inc[m.incoming], inc[m.duplicated]
@@ -242,6 +254,18 @@ def _refuse_unknown(path: Path, plan: ImportPlan, unknown: np.ndarray, mapped: b
         f"of site {plan.site.name}'s taxonomy (ids {sorted(c.id for c in plan.site.taxonomy.classes)}): "
         f"{hint}. Nothing was written."
     )
+
+
+def _refuse_conflicts(path: Path, plan: ImportPlan, m: MatchCounts) -> None:
+    """Refuse a merge in which both the file and the label sets imported since its export changed
+    the same points to different classes."""
+    if m.conflicts and plan.base is not None:
+        raise LabelSetError(
+            f"labels file {path} was exported from label set {plan.base.version} of scene {plan.scene_id}; "
+            f"since then label set {plan.parent.version} changed {m.conflicts:,} of the points it changes, to "
+            f"other classes. Export label set {plan.parent.version}, redo those corrections on it and import "
+            "that. Nothing was written."
+        )
 
 
 def _refuse_poor_match(
@@ -284,8 +308,10 @@ def execute_label_import(
         if n_file == 0:
             raise LabelSetError(f"labels file {path} holds no points. Nothing was written.")
         with contextlib.suppress(_Unchanged), store.publish(uri) as work:
-            m = _match_tiles(tiles, spill_dir, has_time, work, plan.site, n_file, progress)
+            base = open_labelled(plan.tiles, plan.base) if plan.merging and plan.base is not None else None
+            m = _match_tiles(tiles, spill_dir, has_time, work, plan.site, n_file, progress, base)
             _refuse_poor_match(path, plan, m, n_file, max_unmatched)
+            _refuse_conflicts(path, plan, m)
             if m.changed == 0:
                 raise _Unchanged
             zarr.open_group(str(work), mode="a").attrs.update(
@@ -296,9 +322,11 @@ def execute_label_import(
         shutil.rmtree(spill_dir, ignore_errors=True)
     created = m.changed > 0
     log.info(
-        "labels of %s matched %s of %s points of scene %d; %s changed class%s",
+        "labels of %s matched %s of %s points of scene %d; %s changed class%s%s",
         path.name, f"{m.matched:,}", f"{n_file:,}", plan.scene_id, f"{m.changed:,}",
         f" -> label set {plan.version}" if created else ": no new version",
+        f" (its changes since label set {plan.base.version} merged onto {plan.parent.version})"
+        if plan.merging and plan.base is not None else "",
     )  # fmt: skip
     return LabelSetImport(
         plan.scene_id, plan.version if created else plan.parent.version, plan.parent.version,
@@ -306,4 +334,5 @@ def execute_label_import(
         m.changed, m.changes, m.histogram,
         "position+gps_time+return_number" if has_time else "position+return_number",
         time.perf_counter() - t0, created, note, max_unmatched,
+        plan.base.version if plan.merging and plan.base is not None else None,
     )  # fmt: skip

@@ -15,6 +15,7 @@ from siteline.errors import LabelSetError
 from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED, execute_label_import
 from siteline.labelsets.mapping import TaxonomyMap
 from siteline.labelsets.plan import ImportPlan, plan_label_import
+from siteline.lasio import open_las, read_labels_vlr
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.records.runs import StageRun
@@ -47,10 +48,21 @@ def import_labels(
         raise LabelSetError(f"labels file {path} does not exist.")
     if not 0.0 <= max_unmatched < 1.0:
         raise LabelSetError(f"max_unmatched {max_unmatched}: use a fraction in [0, 1).")
+    base = exported_from(path, scene_id)
     with catalog.lock(f"scene:{scene_id}:labels"):  # one import per scene at a time: versions 2, 3, ...
         with catalog.transaction() as s:
-            plan = plan_label_import(s, scene_id)
+            plan = plan_label_import(s, scene_id, base)
         return _import(catalog, settings, plan, path, taxonomy_map, note, max_unmatched, progress, run_id)
+
+
+def exported_from(path: Path, scene_id: int) -> int | None:
+    """The label-set version ``path`` was exported from, as its siteline record says (None: no
+    record, or one of another scene, which the import refuses by name)."""
+    with open_las(path) as reader:
+        doc = read_labels_vlr(reader.header, path)
+    if doc is None or doc.get("scene") != scene_id or not isinstance(doc.get("label_set_version"), int):
+        return None
+    return int(doc["label_set_version"])
 
 
 def _import(

@@ -12,7 +12,9 @@ class LabelSetImport:
     matched the scene's. untouched: stored points the file does not hold (they keep the previous
     version's class). changes: changed points per "old -> new" class. key: what matched a point
     (position, GPS time, return number). created: False when no point changed class (no version is
-    made; ``version`` is then the current one)."""
+    made; ``version`` is then the current one). merged_from: the earlier label set the file was
+    exported from, when its changes from it were merged onto a newer parent (None: exported from the
+    parent, or unknown)."""
 
     scene_id: int
     version: int
@@ -33,13 +35,15 @@ class LabelSetImport:
     created: bool = True
     note: str | None = None
     max_unmatched: float = 0.001
+    merged_from: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def details(self) -> dict[str, Any]:
         """What the catalog keeps of the match (``label_set.details``)."""
-        keep = ("file", "points_in_file", "matched", "unmatched", "duplicated", "untouched", "changes", "key")
+        keep = ("file", "points_in_file", "matched", "unmatched", "duplicated", "untouched", "changes", "key",
+                "merged_from")  # fmt: skip
         return {k: getattr(self, k) for k in keep} | {"max_unmatched": self.max_unmatched}
 
 
