@@ -52,6 +52,21 @@ from siteline.stores import join  # noqa: E402
 # the library's INFO lines (views, renders, releases) reach the run logs: PREFECT_LOGGING_EXTRA_LOGGERS=siteline
 # gives the logger Prefect's handlers, this its level
 logging.getLogger("siteline").setLevel(logging.INFO)
+
+
+class MessageOnly(logging.Filter):
+    """Prefect logs a failed task or flow run with its traceback; a SitelineError is an expected
+    failure whose message says what to fix (a truncated LAS, an unknown site), so its records keep the
+    message and drop the traceback. Any other exception keeps its traceback."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.exc_info and isinstance(record.exc_info[1], SitelineError):
+            record.exc_info, record.exc_text = None, None
+        return True
+
+
+for _name in ("prefect.task_runs", "prefect.flow_runs"):
+    logging.getLogger(_name).addFilter(MessageOnly())
 T = TypeVar("T")
 PAIR_SLOTS = "siteline-pairs"
 RELEASE_SLOTS = "siteline-release"

@@ -280,3 +280,44 @@ def test_progress_words_name_their_unit() -> None:
     assert counted("hashing", 0, 8_869_660) == "0.0 MB of 8.9 MB"
     assert counted("reading points", 5_000, 110_000) == "5,000 of 110,000 points"
     assert counted("renders", 3, None) == "3 views"
+
+
+def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, tmp_path, monkeypatch) -> None:
+    """A SitelineError (here a tile store the scene's LAS is missing from) fails the run with its
+    message in the run logs and no traceback; a programming error keeps its traceback."""
+    import logging
+
+    import pipeline
+
+    import siteline.pipeline as tiles_pkg
+    from siteline.catalog import open_catalog
+    from siteline.errors import TileError
+    from siteline.ingest import ingest_mission
+
+    settings = _home(tmp_path, small_site, monkeypatch)
+    cat = open_catalog(settings)
+    sid = ingest_mission(cat, settings, _missions(small_site)[0], "demo").scene_id
+    cat.dispose()
+    records: list[logging.LogRecord] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            records.append(record)
+
+    handler = Keep()
+    logging.getLogger("prefect").addHandler(handler)
+    try:
+        for exc in (TileError("scene 1: point cloud cloud.las is missing from the store."), KeyError("bug")):
+            records.clear()
+
+            def fail(*a, exc=exc, **k):
+                raise exc
+
+            monkeypatch.setattr(tiles_pkg, "tile_scene", fail)
+            assert pipeline.tile_scene_flow(sid, return_state=True).is_failed()
+            failed = [r for r in records if r.levelno >= logging.ERROR]
+            assert failed and any(str(exc) in r.getMessage() for r in failed)
+            traced = [r for r in failed if r.exc_info or r.exc_text]
+            assert bool(traced) == isinstance(exc, KeyError), [r.getMessage() for r in traced]
+    finally:
+        logging.getLogger("prefect").removeHandler(handler)

@@ -71,12 +71,24 @@ def test_a_file_that_cannot_tell_its_date_is_refused(autzen, tmp_path) -> None:
     """autzen's GPS times are seconds of an unnamed week: no date without --captured-at (its header's
     creation day is when the file was written), exit 2 naming the file; nothing is added."""
     before = _ok(autzen, "scene", "list", "--site", "autzen", "--json")
+    listing = sorted((autzen / "stores").rglob("*"))
     copy = tmp_path / "again.laz"
     later_epoch(AUTZEN, copy, days=90)
     r = _run(autzen, "ingest", str(copy), "--site", "autzen")
     assert r.returncode == 2 and "seconds of an unnamed GPS week" in r.stderr and "--captured-at" in r.stderr
     assert "again.laz" in r.stderr
     assert _ok(autzen, "scene", "list", "--site", "autzen", "--json") == before
+    assert sorted((autzen / "stores").rglob("*")) == listing  # no blob, and no empty blob folder, left
+    # a partition folder an ingest killed after its commit was writing (its pid is dead) goes at the
+    # next ingest or tiling
+    from siteline.stores.owners import owner_tag
+
+    host, _, token = owner_tag().split("+")
+    stale = autzen / "partitions" / f".new-{host}+999999999+{token}"
+    stale.mkdir(parents=True)
+    (stale / "run-00000.bin").write_bytes(b"x" * 1000)
+    assert "already" in _ok(autzen, "ingest", str(AUTZEN), "--site", "autzen", "--captured-at", AUTZEN_DATES[0])
+    assert not stale.exists()
 
 
 def test_an_epoch_metres_off_is_co_registered_and_its_tiles_corrected(autzen) -> None:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sys
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -115,7 +117,24 @@ def main(argv: list[str] | None = None) -> int:
         usage: Any = exc
         usage.show()
         return int(usage.exit_code)
+    except Exception as exc:
+        from siteline.diskspace import disk_full, full_disk_message
+
+        if not disk_full(exc):
+            raise
+        err_console.print(Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True)
+        return 1  # the command ran and failed for want of space
     return rc if isinstance(rc, int) else 0
+
+
+def _home() -> Path:
+    """SITELINE_HOME as the settings resolve it (its default when they cannot be read)."""
+    from siteline.config import load_settings
+
+    try:
+        return Path(load_settings().home)
+    except Exception:
+        return Path(os.environ.get("SITELINE_HOME", "."))
 
 
 if __name__ == "__main__":

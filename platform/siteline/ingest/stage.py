@@ -38,6 +38,7 @@ from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import TileSpec
 from siteline.stores import layout
 from siteline.stores.blobs import BlobStaging, remove_blobs
+from siteline.stores.owners import sweep_stale
 
 log = logging.getLogger(__name__)
 # held while an ingest records its mission or a failed one removes the blobs it added
@@ -136,6 +137,7 @@ def ingest_mission(
         with catalog.transaction() as s:
             plan = plan_ingest(s, site_name, manifest)
         if plan.existing is not None:
+            sweep_stale(layout.partitions(settings.home), ".new-*")  # what a killed run of it left
             return _already(plan)
         run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
         home = layout.partitions(settings.home)

@@ -3,6 +3,7 @@ temporary name owned by this process (siteline.stores.owners), then renamed into
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 from collections.abc import Callable, Iterator
@@ -30,6 +31,12 @@ def _temporary(dest: Path) -> Path:
     dest.parent.mkdir(parents=True, exist_ok=True)
     sweep_stale(dest.parent, ".*.tmp-*")
     return dest.with_name(f".{dest.name}.tmp-{owner_tag()}{dest.suffix}")
+
+
+def _prune(folder: Path) -> None:
+    """Remove ``folder`` if it is empty (a failed or dropped copy leaves no empty folder behind)."""
+    with contextlib.suppress(OSError):
+        folder.rmdir()
 
 
 def _flush(path: Path) -> None:
@@ -132,12 +139,20 @@ class LocalStore(Store):
         renames it into place."""
         dest = local_path(uri)
         try:
-            tmp = _temporary(dest)
-            try:
-                copy_to_disk(source, tmp)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
-                raise
+            for attempt in (1, 2):
+                tmp = _temporary(dest)
+                try:
+                    copy_to_disk(source, tmp)
+                    break
+                except FileNotFoundError:
+                    # another writer's discard pruned the (then empty) folder between our mkdir and open
+                    tmp.unlink(missing_ok=True)
+                    if attempt == 2 or not source.exists():
+                        raise
+                except BaseException:
+                    tmp.unlink(missing_ok=True)
+                    _prune(dest.parent)
+                    raise
         except OSError as exc:
             raise StoreError(f"cannot copy {source} into the store at {uri}: {exc}") from exc
 
@@ -148,7 +163,11 @@ class LocalStore(Store):
                 tmp.unlink(missing_ok=True)
                 raise StoreError(f"cannot copy {source} into the store at {uri}: {exc}") from exc
 
-        return StagedFile(commit=commit, discard=lambda: tmp.unlink(missing_ok=True))
+        def discard() -> None:
+            tmp.unlink(missing_ok=True)
+            _prune(dest.parent)
+
+        return StagedFile(commit=commit, discard=discard)
 
     def get_file(self, uri: str, dest: Path) -> None:
         try:
@@ -163,6 +182,8 @@ class LocalStore(Store):
             shutil.rmtree(p, ignore_errors=True)
         else:
             p.unlink(missing_ok=True)
+            if p.parent.parent.name == "blobs":  # a blob's shard folder (blobs/<sha[:2]>) left empty
+                _prune(p.parent)
 
     def names(self, uri: str) -> list[str]:
         p = local_path(uri)

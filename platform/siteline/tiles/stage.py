@@ -13,6 +13,7 @@ from siteline.progress import Progress, no_progress
 from siteline.records.runs import StageRun
 from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import layout
+from siteline.stores.owners import sweep_stale
 from siteline.tiles.execute import execute_tiling
 from siteline.tiles.plan import plan_tiling
 from siteline.tiles.reader import SceneTiles, class_counts
@@ -70,6 +71,7 @@ def _tile(
     spec = spec or TileSpec.for_site(plan.site)
     run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
     kept = layout.partitions(settings.home)
+    sweep_stale(kept, ".new-*")  # a partition an ingest killed after its commit was writing
     tiling = execute_tiling(
         plan,
         store,

@@ -1,0 +1,47 @@
+"""A full disk, told in one line: which file system, how much is free, what to do."""
+
+from __future__ import annotations
+
+import errno
+import shutil
+from pathlib import Path
+
+_FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT}
+# what SQLite and PostgreSQL say (through SQLAlchemy) when their disk is full
+_FULL_TEXTS = ("database or disk is full", "no space left on device", "could not extend file")
+
+
+def disk_full(exc: BaseException) -> bool:
+    """Whether ``exc`` (or an exception it was raised from) says a disk is full."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, OSError) and cur.errno in _FULL_ERRNOS:
+            return True
+        if any(t in str(cur).lower() for t in _FULL_TEXTS):
+            return True
+        cur = cur.__cause__ or cur.__context__
+    return False
+
+
+def full_disk_message(exc: BaseException, home: Path) -> str:
+    """One line for a command that stopped on a full disk: the file it was writing when known, the
+    free space of the file system holding ``home`` (SITELINE_HOME: catalog, stores, scratch), and
+    the fix."""
+    cur: BaseException | None = exc
+    where = ""
+    while cur is not None:
+        if isinstance(cur, OSError) and cur.filename:
+            where = f" writing {cur.filename}"
+            break
+        cur = cur.__cause__ or cur.__context__
+    probe = home
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    usage = shutil.disk_usage(probe)
+    return (
+        f"the disk is full{where}: the file system holding {home} has {usage.free / 1e6:.1f} MB free of "
+        f"{usage.total / 1e6:.0f} MB. Free space there (or set SITELINE_HOME or SITELINE_STORE_URL to a "
+        "larger disk) and run the command again; what this run was writing has been removed."
+    )
