@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import sys
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -40,6 +41,7 @@ from siteline.catalog import Catalog, open_catalog  # noqa: E402
 from siteline.catalog.scenes import pair_ids_of_scene, site_name_of_pair, site_name_of_scene  # noqa: E402
 from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import Settings, load_settings  # noqa: E402
+from siteline.diskspace import disk_full, full_disk_message  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
 from siteline.ingest import IngestOptions  # noqa: E402
 from siteline.pairs.params import PairParams  # noqa: E402
@@ -57,10 +59,15 @@ logging.getLogger("siteline").setLevel(logging.INFO)
 class MessageOnly(logging.Filter):
     """Prefect logs a failed task or flow run with its traceback; a SitelineError is an expected
     failure whose message says what to fix (a truncated LAS, an unknown site), so its records keep the
-    message and drop the traceback. Any other exception keeps its traceback."""
+    message and drop the traceback, and so does a full disk (its message says what to free). Any
+    other exception keeps its traceback."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if record.exc_info and isinstance(record.exc_info[1], SitelineError):
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, SitelineError):
+            record.exc_info, record.exc_text = None, None
+        elif exc is not None and disk_full(exc):
+            record.msg, record.args = f"{record.getMessage()}: {full_disk_message(exc, load_settings().home)}", None
             record.exc_info, record.exc_text = None, None
         return True
 
@@ -70,22 +77,24 @@ for _name in ("prefect.task_runs", "prefect.flow_runs"):
 T = TypeVar("T")
 PAIR_SLOTS = "siteline-pairs"
 RELEASE_SLOTS = "siteline-release"
-SLOT_LEASE_S = 600  # a killed holder's slot is freed after this
+# a live holder renews its slot's lease every fraction of this (Prefect's renewal thread); a killed
+# holder's slot is freed when the lease runs out, so a machine failure blocks no other run for long
+SLOT_LEASE_S = 30
 
 
 def transient(task: Any, task_run: Any, state: Any) -> bool:
     """Retry I/O only: store errors, OS and network errors, a lost database connection. Never bad
-    input (a SitelineError says what to fix) and never a programming error (it would fail again)."""
+    input (a SitelineError says what to fix), a full disk, or a programming error (it would fail again)."""
     import sqlalchemy as sa
 
     try:
         state.result()
-    except StoreError:
-        return True
+    except StoreError as exc:
+        return not disk_full(exc)  # a full disk stays full: its one-line message says what to free
     except SitelineError:
         return False
-    except (OSError, TimeoutError, ConnectionError):
-        return True
+    except (OSError, TimeoutError, ConnectionError) as exc:
+        return not disk_full(exc)
     except sa.exc.DBAPIError as exc:
         return bool(exc.connection_invalidated) or isinstance(exc, sa.exc.OperationalError)
     except Exception:
@@ -167,6 +176,7 @@ def _close_stale_runs() -> None:
         )
         for tr in stale_tasks:
             client.set_task_run_state(tr.id, Crashed(message=message), force=True)
+        _abandon_progress(client, [tr.id for tr in stale_tasks], message)
         children = client.read_flow_runs(
             flow_run_filter=FlowRunFilter(
                 parent_flow_run_id=FlowRunFilterParentFlowRunId(any_=[flow_run.id]),
@@ -180,6 +190,38 @@ def _close_stale_runs() -> None:
             "attempt %d: marked %d task runs and %d sub-flow runs of the killed attempt crashed; finished "
             "outputs are reused", flow_run.run_count, len(stale_tasks), len(children),
         )  # fmt: skip
+
+
+@contextmanager
+def _slot(limit: str, what: str) -> Iterator[None]:
+    """Hold one slot of the global concurrency limit ``limit`` for ``what``, saying in the run log
+    that it waits and for how long it waited (a run waiting on a full limit shows Running)."""
+    log = get_run_logger()
+    log.info("%s waits for a %s slot (the service's limit on such work at once)", what, limit)
+    t0 = time.monotonic()
+    with concurrency(limit, occupy=1, lease_duration=SLOT_LEASE_S, raise_on_lease_renewal_failure=False):
+        waited = time.monotonic() - t0
+        log.info("%s got a %s slot after %.0f s", what, limit, waited)
+        yield
+
+
+def _abandon_progress(client: Any, task_run_ids: list[Any], message: str) -> None:
+    """Say on the progress artifacts of the killed attempt's task runs that their work was abandoned
+    (their bars would otherwise stand still at their last figure)."""
+    if not task_run_ids:
+        return
+    from prefect.client.schemas.actions import ArtifactUpdate
+    from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterTaskRunId, ArtifactFilterType
+
+    arts = client.read_artifacts(
+        artifact_filter=ArtifactFilter(
+            task_run_id=ArtifactFilterTaskRunId(any_=task_run_ids), type=ArtifactFilterType(any_=["progress"])
+        )
+    )
+    for art in arts:
+        client.update_artifact(
+            art.id, ArtifactUpdate(data=art.data, description=f"{art.description or ''} - abandoned: {message}")
+        )
 
 
 # --- tasks -------------------------------------------------------------------------------------
@@ -214,7 +256,7 @@ def tile_task(scene_id: int) -> dict[str, Any] | None:
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def process_pair_task(pair_id: int, pair_params: dict[str, Any]) -> PairOutput:
     p = PairParams.from_dict(pair_params)
-    with concurrency(PAIR_SLOTS, occupy=1, lease_duration=SLOT_LEASE_S):
+    with _slot(PAIR_SLOTS, f"pair {pair_id}"):
         progress = RunProgress(slug("pair", pair_id), f"pair {pair_id}", {"labels": 1.0, "views": 1.0, "renders": 4.0})
         outs = _stage(
             "process_pair", f"pair:{pair_id}", p.to_dict(), pipeline.process_pairs, [pair_id], p, progress=progress
@@ -226,7 +268,7 @@ def process_pair_task(pair_id: int, pair_params: dict[str, Any]) -> PairOutput:
 
 @task(retries=1, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def build_release_task(site: str, name: str, release_settings: dict[str, Any] | None, publish: bool) -> ReleaseInfo:
-    with concurrency(RELEASE_SLOTS, occupy=1, lease_duration=SLOT_LEASE_S):
+    with _slot(RELEASE_SLOTS, f"release {name}"):
         progress = RunProgress(slug("release", name), f"release {name}",
                                {"labels": 1.0, "views": 1.0, "renders": 4.0, "release images": 2.0})  # fmt: skip
         info = _stage(

@@ -283,8 +283,9 @@ def test_progress_words_name_their_unit() -> None:
 
 
 def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, tmp_path, monkeypatch) -> None:
-    """A SitelineError (here a tile store the scene's LAS is missing from) fails the run with its
-    message in the run logs and no traceback; a programming error keeps its traceback."""
+    """A SitelineError (here a tile store the scene's LAS is missing from) or a full disk fails the
+    run with its message in the run logs and no traceback; a programming error keeps its traceback."""
+    import errno
     import logging
 
     import pipeline
@@ -307,7 +308,8 @@ def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, 
     handler = Keep()
     logging.getLogger("prefect").addHandler(handler)
     try:
-        for exc in (TileError("scene 1: point cloud cloud.las is missing from the store."), KeyError("bug")):
+        full = OSError(errno.ENOSPC, "No space left on device")
+        for exc in (TileError("scene 1: point cloud cloud.las is missing from the store."), full, KeyError("bug")):
             records.clear()
 
             def fail(*a, exc=exc, **k):
@@ -317,6 +319,9 @@ def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, 
             assert pipeline.tile_scene_flow(sid, return_state=True).is_failed()
             failed = [r for r in records if r.levelno >= logging.ERROR]
             assert failed and any(str(exc) in r.getMessage() for r in failed)
+            if exc is full:  # not retried, and told what to free
+                assert any("the disk is full" in r.getMessage() for r in failed)
+                assert not any("Retries are exhausted" in r.getMessage() for r in failed)
             traced = [r for r in failed if r.exc_info or r.exc_text]
             assert bool(traced) == isinstance(exc, KeyError), [r.getMessage() for r in traced]
     finally:

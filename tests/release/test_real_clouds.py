@@ -214,6 +214,7 @@ def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
     assert np.array_equal(grey[:, 0], grey[:, 1])  # intensity is grey
 
 
+@pytest.mark.slow  # 25 s: two ingests and two builds; `make test-all` runs it
 def test_black_colour_is_refused_at_build_never_published(tmp_path) -> None:
     """RGB that varies in one point only (the rest black) passes the scan's check, so auto takes RGB;
     the build then finds every image blank and refuses, naming the fix, with nothing written."""

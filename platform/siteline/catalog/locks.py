@@ -2,13 +2,14 @@
 pair output, per release name, per scene's tiles or labels, per mission.
 
 On PostgreSQL a lock is a session advisory lock held on a connection of its own; on SQLite (one
-machine) an ``flock`` on a file beside the database. Either way the lock is released when the block
+machine) an ``flock`` on a file beside the database, removed by its holder when done. Either way the lock is released when the block
 ends or when its process dies (the server drops the session, the kernel the file lock), so a killed
 writer never leaves a lock behind.
 """
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import hashlib
 import logging
@@ -60,25 +61,51 @@ def _postgres(engine: sa.Engine, name: str, timeout_s: float | None) -> Iterator
             conn.commit()
 
 
+def _open_locked(path: Path, name: str, deadline: float | None, timeout_s: float | None) -> int:
+    """A descriptor of ``path`` holding its ``flock``, the file still the one at ``path`` (a holder
+    removes it when done: a waiter that got the lock on a removed file opens the new one)."""
+    while True:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
+        except FileNotFoundError:  # the folder was pruned between the two calls
+            continue
+        try:
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if deadline is not None and time.monotonic() > deadline:
+                        raise _timed_out(name, timeout_s or 0.0) from None
+                    time.sleep(POLL_S)
+            try:
+                same = os.stat(path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+        except BaseException:
+            os.close(fd)
+            raise
+        if same:
+            return fd
+        os.close(fd)
+
+
 @contextmanager
 def _file(path: Path, name: str, timeout_s: float | None) -> Iterator[None]:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    fd = _open_locked(path, name, deadline, timeout_s)
     try:
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if deadline is not None and time.monotonic() > deadline:
-                    raise _timed_out(name, timeout_s or 0.0) from None
-                time.sleep(POLL_S)
         os.ftruncate(fd, 0)
         os.write(fd, f"{name}\n{os.getpid()}\n".encode())
         try:
             yield
         finally:
+            # removed while still held, so no lock file outlives its holder (a killed holder's file
+            # stays until the next holder of that name is done)
+            path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                path.parent.rmdir()
             fcntl.flock(fd, fcntl.LOCK_UN)
     finally:
         os.close(fd)
