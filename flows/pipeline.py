@@ -78,8 +78,9 @@ T = TypeVar("T")
 PAIR_SLOTS = "siteline-pairs"
 RELEASE_SLOTS = "siteline-release"
 # a live holder renews its slot's lease every fraction of this (Prefect's renewal thread); a killed
-# holder's slot is freed when the lease runs out, so a machine failure blocks no other run for long
-SLOT_LEASE_S = 30
+# holder's slot is freed when the lease runs out (the server's repossessor looks every 15 s), so a
+# machine failure blocks no other run for long. 60 s is the shortest lease the server accepts.
+SLOT_LEASE_S = 60
 
 
 def transient(task: Any, task_run: Any, state: Any) -> bool:

@@ -17,8 +17,10 @@ from siteline.catalog import Catalog
 from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion, plan_site_deletion
 from siteline.catalog.pairs import unprocessed_pairs
 from siteline.catalog.scenes import needs_tiling, pair_ids_of_scene, scene_ids_of_pairs
+from siteline.catalog.sites import get_site, imported_label_sets, site_spec
 from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings
+from siteline.errors import LabelSetError
 from siteline.fence import validate_fence
 from siteline.ingest import IngestOptions, IngestResult, ingest_mission
 from siteline.pairs.params import PairParams
@@ -120,16 +122,48 @@ def redefine_site(
     """Give ``site`` a new taxonomy and/or fence (a closed ring, site-local metres; ``clear_fence``:
     none) as its next version, then tile its scenes again under it (their classes mapped anew from
     their point clouds; label set 1 and the pairs' outputs follow, the outputs keyed by the new
-    tiling). Return the version and what tiling did. A re-tiling cut short is finished by the next
-    ``release build`` (a scene tiled under an earlier version is tiled again before its pairs)."""
+    tiling), and carry each scene's newest imported label set over: its corrections (the points it
+    changed from label set 1) exported first (kept under ``SITELINE_HOME/exports/``), then imported
+    onto the new tiles' label set 1 with their classes matched by name (points now outside the fence
+    become ignore), so the new mapping holds everywhere else. Return the version and what tiling and carrying
+    did. A re-tiling cut short is finished by the next ``release build`` (a scene tiled under an
+    earlier version is tiled again before its pairs); a carried file that cannot be imported (a
+    class the new taxonomy lacks) is named, to import with ``--taxonomy-map``."""
+    from siteline.labelsets import import_labels
+    from siteline.labelsets.export import export_corrections
+
     ring = None
     if fence is not None:
         ring = [list(v) for v in validate_fence(fence, source=f"site {site} fence")]
     with catalog.transaction() as s:
+        carry = imported_label_sets(s, site)
+        old = site_spec(get_site(s, site))
+    folder = settings.home / "exports" / f"{site}-v{old.version}"
+    files = {}
+    for sid, version in sorted(carry.items()):
+        files[sid] = folder / f"scene-{sid}-label-set-{version}.laz"
+        files[sid].parent.mkdir(parents=True, exist_ok=True)
+        if export_corrections(catalog, sid, version, files[sid]) == 0:  # it corrected nothing
+            files.pop(sid).unlink(missing_ok=True)
+    with catalog.transaction() as s:
         row, scene_ids = redefine_catalog_site(s, site, taxonomy, ring, clear_fence)
-        version = row.version
+        version, now = row.version, site_spec(row)
     log.info("site %s is at version %d: tiling its %d scenes again", site, version, len(scene_ids))
-    return version, tile_scenes(catalog, settings, scene_ids, workers=workers, progress=progress)
+    outcomes = tile_scenes(catalog, settings, scene_ids, workers=workers, progress=progress)
+    kept = {c.name for c in now.taxonomy.classes}  # a class the new taxonomy dropped is named by the import
+    by_name: dict[int, str | int] = {c.id: c.name for c in old.taxonomy.classes if c.name in kept}
+    for sid, path in files.items():
+        try:
+            done = import_labels(
+                catalog, settings, sid, path, by_name, f"carried to site version {version} from {path.name}",
+                progress=progress, carried=True,
+            )  # fmt: skip
+            message = f"scene {sid}: corrections of label set {carry[sid]} carried over as label set {done.version}"
+        except LabelSetError as exc:
+            message = f"scene {sid}: corrections of label set {carry[sid]} not carried ({exc}); its file is {path}"
+        log.info(message)
+        outcomes.append(TileOutcome(None, message))
+    return version, outcomes
 
 
 def process_pairs(

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import laspy
+import numpy as np
 import pytest
 from realdata import TOPOGRAPHY, centre_xy, later_epoch
 
@@ -21,6 +23,8 @@ from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
 from siteline.ingest import IngestOptions
+from siteline.labelsets import import_labels
+from siteline.labelsets.export import export_label_set
 from siteline.register.planned import SurveyPlan
 from siteline.release.knobs import ReleaseKnobs
 from siteline.site import make_site_spec
@@ -106,14 +110,28 @@ def test_a_wrong_taxonomy_is_fixed_with_site_update(topo, tmp_path) -> None:
     scene = _json(home, "scene", "show", "1")
     assert scene["class_histogram"] == {"ground": 4_235, "unclassified": 24_550}
     before = scene["tile_store"]
+    # a correction imported before the change: 300 unclassified points of scene 1 are material
+    export_label_set(cat, 1, tmp_path / "s1.laz")
+    las = laspy.read(tmp_path / "s1.laz")
+    codes = np.asarray(las.classification).copy()
+    codes[np.flatnonzero(codes == 11)[:300]] = 4  # unclassified -> material
+    las.classification = codes
+    las.write(tmp_path / "s1_fixed.laz")
+    assert import_labels(cat, settings, 1, tmp_path / "s1_fixed.laz").version == 2
     out = _ok(home, "site", "update", "topo", "--taxonomy", str(_water_taxonomy(tmp_path / "tax.json")))
     assert "site topo is at version 2" in out and out.count("re-tiled") == 2, out
+    # the correction is carried onto the new tiles (its file kept), water mapped anew under it
+    assert "corrections of label set 2 carried over as label set 3" in out, out
+    assert (home / "exports" / "topo-v1" / "scene-1-label-set-2.laz").exists()
+    carried = _json(home, "labels", "show", "1")
+    assert carried["version"] == 3 and carried["class_histogram"]["material"] == 300
+    assert carried["class_histogram"]["unclassified"] == 24_250
     site = _json(home, "site", "show", "topo")
     assert site["version"] == 2 and site["taxonomy"] == "topo-water" and site["classes"]["water"] == 12
     scene = _json(home, "scene", "show", "1")
     assert scene["class_histogram"] == {"ground": 3_634, "unclassified": 24_550, "water": 601}
     assert scene["tile_store"] != before and not Path(before).exists()
-    assert _json(home, "labels", "show", "1")["class_histogram"]["water"] == 601
+    assert carried["class_histogram"]["water"] == 601
     # a taxonomy that leaves a code of the scenes unmapped is refused, nothing changed
     bad = json.loads((tmp_path / "tax.json").read_text())
     del bad["source_codes"]["las"]["9"]

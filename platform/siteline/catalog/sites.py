@@ -61,9 +61,8 @@ def redefine_site(
 ) -> tuple[Site, list[int]]:
     """Record site ``name``'s next version with ``taxonomy`` and/or ``fence`` (an open ring, site-local
     metres; ``clear_fence``: none) replacing the current ones, which go to its history; return it
-    and its scenes (each to be tiled again). Refused, nothing changed, when a scene holds imported
-    label sets (aligned with the tiles the change replaces: export them first) or class codes the
-    new taxonomy does not map."""
+    and its scenes (each to be tiled again). Refused, nothing changed, when a scene holds class codes
+    the new taxonomy does not map."""
     site = session.execute(sa.select(Site).where(Site.name == name).with_for_update()).scalar_one_or_none()
     if site is None:
         get_site(session, name)  # names the known sites
@@ -71,18 +70,6 @@ def redefine_site(
     if taxonomy is None and fence is None and not clear_fence:
         raise SiteError(f"site {name}: give --taxonomy, --fence or --no-fence to change.")
     scenes = list(session.execute(sa.select(Scene).where(Scene.site_id == site.id).order_by(Scene.id)).scalars())
-    imported = session.execute(
-        sa.select(LabelSet.scene_id, LabelSet.version)
-        .where(LabelSet.scene_id.in_([sc.id for sc in scenes]), LabelSet.version > 1)
-        .order_by(LabelSet.scene_id, LabelSet.version)
-    ).all()
-    if imported:
-        which = ", ".join(f"scene {sid} v{v}" for sid, v in imported)
-        raise SiteError(
-            f"site {name}: imported label sets ({which}) are aligned with the tiles this change replaces. "
-            "Export each (`siteline scene export SCENE --version V`), delete them from the scenes or start "
-            "their corrections again after the change; nothing was changed."
-        )
     if taxonomy is not None:
         _, known = taxonomy.code_lut("las") if "las" in taxonomy.source_codes else (None, None)
         for sc in scenes:
@@ -104,6 +91,19 @@ def redefine_site(
     site.version = (site.version or 1) + 1
     session.flush()
     return site, [sc.id for sc in scenes]
+
+
+def imported_label_sets(session: Session, name: str) -> dict[int, int]:
+    """Scene id -> its newest imported label-set version (above 1), for the scenes of site ``name``
+    that have one."""
+    site = get_site(session, name)
+    rows = session.execute(
+        sa.select(LabelSet.scene_id, sa.func.max(LabelSet.version))
+        .join(Scene, Scene.id == LabelSet.scene_id)
+        .where(Scene.site_id == site.id, LabelSet.version > 1)
+        .group_by(LabelSet.scene_id)
+    ).all()
+    return {int(sid): int(v) for sid, v in rows}
 
 
 def list_sites(session: Session) -> list[Site]:

@@ -33,11 +33,14 @@ class ImportPlan:
         return self.base is not None and self.base.version != self.parent.version
 
 
-def plan_label_import(session: Session, scene_id: int, base_version: int | None = None) -> ImportPlan:
+def plan_label_import(
+    session: Session, scene_id: int, base_version: int | None = None, parent_version: int | None = None
+) -> ImportPlan:
     """The plan of importing labels into scene ``scene_id`` (one transaction), exported from label
-    set ``base_version`` (None: unknown, taken as the newest)."""
+    set ``base_version`` (None: unknown, taken as the parent), over label set ``parent_version``
+    (None: the newest; 1 when corrections are carried onto a scene tiled again)."""
     scene = get_scene(session, scene_id)
-    source, parent = labelled_source(session, scene_id)
+    source, parent = labelled_source(session, scene_id, parent_version)
     version = max(r.version for r in label_sets(session, scene_id)) + 1
     base = parent
     if base_version is not None and base_version != parent.version:

@@ -34,8 +34,11 @@ def import_labels(
     max_unmatched: float = DEFAULT_MAX_UNMATCHED,
     progress: Progress = no_progress,
     run_id: str | None = None,
+    carried: bool = False,
 ) -> LabelSetImport:
-    """Import the classes of ``path`` as the next label-set version of ``scene_id``.
+    """Import the classes of ``path`` as the next label-set version of ``scene_id``; ``carried``: the
+    file holds a whole label set exported before the scene was tiled again, imported over label set 1
+    (what the new tiles hold) rather than merged onto the newest.
 
     Codes are site class ids, vouched for by the record ``scene export`` writes, unless
     ``taxonomy_map`` says how to read them (siteline.labelsets.mapping).
@@ -48,10 +51,10 @@ def import_labels(
         raise LabelSetError(f"labels file {path} does not exist.")
     if not 0.0 <= max_unmatched < 1.0:
         raise LabelSetError(f"max_unmatched {max_unmatched}: use a fraction in [0, 1).")
-    base = exported_from(path, scene_id)
+    base = None if carried else exported_from(path, scene_id)
     with catalog.lock(f"scene:{scene_id}:labels"):  # one import per scene at a time: versions 2, 3, ...
         with catalog.transaction() as s:
-            plan = plan_label_import(s, scene_id, base)
+            plan = plan_label_import(s, scene_id, base, 1 if carried else None)
         return _import(catalog, settings, plan, path, taxonomy_map, note, max_unmatched, progress, run_id)
 
 
