@@ -177,7 +177,10 @@ def _close_stale_runs() -> None:
         )
         for tr in stale_tasks:
             client.set_task_run_state(tr.id, Crashed(message=message), force=True)
-        _abandon_progress(client, [tr.id for tr in stale_tasks], message)
+        try:
+            _abandon_progress(client, [tr.id for tr in stale_tasks], message)
+        except Exception as exc:  # a bar left standing must not stop the recovery
+            get_run_logger().warning("could not mark the killed attempt's progress abandoned: %s", exc)
         children = client.read_flow_runs(
             flow_run_filter=FlowRunFilter(
                 parent_flow_run_id=FlowRunFilterParentFlowRunId(any_=[flow_run.id]),

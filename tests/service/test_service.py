@@ -150,7 +150,8 @@ def test_the_service(tmp_path, synth_site) -> None:
         # the site's release settings are what the service builds with
         assert svc.siteline("site", "update", "demo", "--views", "6").returncode == 0
 
-        # three uploads, one after another -> two releases, images of at least 256 px (512: auto scale)
+        # three uploads, one after another -> two releases (the third adds pairs only: a minor version),
+        # images of at least 256 px (512: auto scale)
         t0 = time.monotonic()
         svc.drop(missions[0])
         svc.drop(missions[1])
@@ -158,9 +159,9 @@ def test_the_service(tmp_path, synth_site) -> None:
         figures["two uploads -> 1.0.0 (s)"] = time.monotonic() - t0
         t0 = time.monotonic()
         svc.drop(missions[2])
-        _until("release 2.0.0", lambda: "2.0.0" in svc.versions(), 600)
-        figures["third upload -> 2.0.0 (s)"] = time.monotonic() - t0
-        manifest = json.loads((svc.home / "releases" / "demo-cd" / "2.0.0" / "manifest.json").read_text())
+        _until("release 1.1.0", lambda: "1.1.0" in svc.versions(), 600)
+        figures["third upload -> 1.1.0 (s)"] = time.monotonic() - t0
+        manifest = json.loads((svc.home / "releases" / "demo-cd" / "1.1.0" / "manifest.json").read_text())
         assert manifest["lineage"]["parameters"]["views"] == 6
         assert all(max(it["size_px"]) >= 512 for it in manifest["items"]) and len(manifest["lineage"]["pairs"]) == 2
 
@@ -171,7 +172,7 @@ def test_the_service(tmp_path, synth_site) -> None:
         _until("the re-drop's ingest", lambda: any(r["name"].startswith("ingest-demo-second-copy") and r["state_type"] in TERMINAL for r in svc.runs()), 300)  # fmt: skip
         time.sleep(15)
         assert sum(r["name"].startswith("scene-") for r in svc.runs()) == scene_runs
-        assert svc.versions() == ["1.0.0", "2.0.0"]
+        assert svc.versions() == ["1.0.0", "1.1.0"]
 
         # two label imports at once: no failed run, one new release with both (the other up to date)
         fixes = [_corrected(svc, scene, tmp_path, 2) for scene in (1, 3)]
@@ -181,8 +182,8 @@ def test_the_service(tmp_path, synth_site) -> None:
         _until("both label runs", lambda: sum(r["name"].endswith("labels-v2") for r in svc.runs()) == 2, 120)
         _until("the service to settle", svc.settled, 900)
         assert not [r["name"] for r in svc.runs() if r["state_type"] != "COMPLETED"]
-        assert svc.versions() == ["1.0.0", "2.0.0", "3.0.0"]
-        lineage = json.loads((svc.home / "releases" / "demo-cd" / "3.0.0" / "manifest.json").read_text())["lineage"]
+        assert svc.versions() == ["1.0.0", "1.1.0", "2.0.0"]
+        lineage = json.loads((svc.home / "releases" / "demo-cd" / "2.0.0" / "manifest.json").read_text())["lineage"]
         assert {sc["id"]: sc["label_set_version"] for sc in lineage["scenes"]} == {1: 2, 2: 1, 3: 2}
 
         # the worker killed mid-pair: its flow process finishes the work, the release appears by itself
@@ -192,8 +193,8 @@ def test_the_service(tmp_path, synth_site) -> None:
         t0 = time.monotonic()
         for pid in svc.processes("prefect worker start"):
             os.kill(pid, signal.SIGKILL)
-        _until("release 4.0.0 after the worker's kill", lambda: "4.0.0" in svc.versions(), 600)
-        figures["worker killed mid-pair -> 4.0.0 (s)"] = time.monotonic() - t0
+        _until("release 3.0.0 after the worker's kill", lambda: "3.0.0" in svc.versions(), 600)
+        figures["worker killed mid-pair -> 3.0.0 (s)"] = time.monotonic() - t0
         assert _scene_run(svc, "scene-2-labels-v2")["state_type"] == "COMPLETED"
 
         # the worker and the flow process killed together (a machine failure): the run is marked
@@ -204,10 +205,10 @@ def test_the_service(tmp_path, synth_site) -> None:
         t0 = time.monotonic()
         for pid in svc.processes("prefect worker start") + svc.processes("prefect.engine"):
             os.kill(pid, signal.SIGKILL)
-        _until("release 5.0.0 after the machine failure", lambda: "5.0.0" in svc.versions(), 900, 5.0)
-        figures["worker and flow killed -> 5.0.0 (s)"] = time.monotonic() - t0
+        _until("release 4.0.0 after the machine failure", lambda: "4.0.0" in svc.versions(), 900, 5.0)
+        figures["worker and flow killed -> 4.0.0 (s)"] = time.monotonic() - t0
         # crash detection (heartbeats) and a slot lease that a dead holder cannot renew: minutes, not ten
-        assert figures["worker and flow killed -> 5.0.0 (s)"] < 180, figures
+        assert figures["worker and flow killed -> 4.0.0 (s)"] < 180, figures
         run = _until("the rescheduled run to complete",
                      lambda: (r := _scene_run(svc, "scene-1-labels-v3"))["state_type"] == "COMPLETED" and r, 300)  # fmt: skip
         assert run["run_count"] >= 2
@@ -226,8 +227,8 @@ def test_the_service(tmp_path, synth_site) -> None:
              f"{svc.api.removesuffix('/api')}/artifacts/artifact/{latest['id']}"],
             capture_output=True, text=True, timeout=120,
         )  # fmt: skip
-        montage = f"{svc.preview}/releases/demo-cd/5.0.0/montage.png"
-        assert "Release demo-cd 5.0.0 (published)" in page.stdout and f'src="{montage}"' in page.stdout
+        montage = f"{svc.preview}/releases/demo-cd/4.0.0/montage.png"
+        assert "Release demo-cd 4.0.0 (published)" in page.stdout and f'src="{montage}"' in page.stdout
         got = httpx.get(montage, timeout=30)
         assert got.status_code == 200 and got.content[:8] == b"\x89PNG\r\n\x1a\n"
     finally:
