@@ -37,9 +37,11 @@ def _run(home: Path, *argv: str) -> subprocess.CompletedProcess:
                           text=True, timeout=300)  # fmt: skip
 
 
-# sizes that fill the disk during the blob copy and partition (slow: `make test-all`), the catalog
-# commit, and the tile writes
-@pytest.mark.parametrize("size", [pytest.param("1500k", marks=pytest.mark.slow), "4500k", "6m"])
+# sizes that fill the disk during the blob copy and partition, the catalog commit, and the tile writes
+# (`make test` runs the catalog case, `make test-all` all three)
+@pytest.mark.parametrize(
+    "size", [pytest.param("1500k", marks=pytest.mark.slow), "4500k", pytest.param("6m", marks=pytest.mark.slow)]
+)
 def test_a_full_disk_is_one_line_and_leaves_nothing(small_fs, size) -> None:
     home = small_fs(size) / "home"
     assert _run(home, "init").returncode == 0

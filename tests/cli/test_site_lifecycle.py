@@ -164,6 +164,7 @@ def test_one_file_goes_into_two_sites(topo) -> None:
     assert _json(home, "scene", "show", "1")["point_count"] == 28_785  # the shared file's other scene stays
 
 
+@pytest.mark.slow  # 22 s: an ingest and a two-pair build; `make test-all` runs it
 def test_scenes_and_sites_are_deleted_unless_a_published_release_needs_them(topo) -> None:
     """A scene between two is deleted: its pairs, stores and the draft built on them go, and the
     scenes around it are paired again; a scene or site a published release was built from is not."""
