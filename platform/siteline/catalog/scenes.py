@@ -13,6 +13,7 @@ from sqlalchemy.orm import Session
 from siteline.cameras import Camera
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Scene, Site
+from siteline.catalog.sites import site_of
 from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, TileError
 from siteline.records.mission import LasLocation
@@ -334,8 +335,7 @@ def record_tiling(
     scene.status = "tiled"
     stats = scene_statistics(scene).with_tiling(tiling)
     if counts is not None and stats.scan is not None:
-        site = session.get(Site, scene.site_id)
-        names = {int(c["id"]): c["name"] for c in site.taxonomy["classes"]} if site is not None else {}
+        names = {c.id: c.name for c in site_of(session, scene.site_id).taxonomy.classes}
         hist = {names.get(i, str(i)): int(n) for i, n in enumerate(counts) if n}
         stats = replace(stats, scan=replace(stats.scan, class_histogram=hist))
         first = session.execute(

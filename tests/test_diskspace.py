@@ -1,0 +1,56 @@
+"""A full disk told in one line, without mounting anything: which errors count as a full disk, what
+the line says, and the CLI's exit status and output when a command hits one (the tmpfs test in
+tests/test_full_disk.py fills a real disk where mounting is allowed)."""
+
+from __future__ import annotations
+
+import errno
+import sqlite3
+
+import pytest
+import sqlalchemy as sa
+
+from siteline.diskspace import disk_full, full_disk_message
+
+
+def _raised_from(cause: BaseException) -> RuntimeError:
+    try:
+        try:
+            raise cause
+        except BaseException as exc:
+            raise RuntimeError("writing tiles failed") from exc
+    except RuntimeError as outer:
+        return outer
+
+
+def test_full_disks_are_told_apart_from_other_errors(tmp_path) -> None:
+    full = OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "tile.bin"))
+    assert disk_full(full) and disk_full(OSError(errno.EDQUOT, "Disk quota exceeded"))
+    assert disk_full(_raised_from(full))  # found through the chain
+    db = sa.exc.OperationalError("COMMIT", {}, sqlite3.OperationalError("database or disk is full"))
+    assert disk_full(db)
+    assert not disk_full(OSError(errno.EACCES, "Permission denied")) and not disk_full(KeyError("x"))
+    line = full_disk_message(_raised_from(full), tmp_path / "home" / "not-yet")
+    assert f"writing {tmp_path / 'tile.bin'}" in line and "MB free of" in line and "\n" not in line
+    assert f"the file system holding {tmp_path / 'home' / 'not-yet'}" in line
+
+
+def test_the_cli_ends_a_full_disk_with_one_line_and_exit_1(tmp_path, monkeypatch, capsys) -> None:
+    from siteline import cli
+    from siteline.cli import site as site_cli
+
+    monkeypatch.setenv("SITELINE_HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("SITELINE_DATABASE_URL", raising=False)
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(site_cli, "list_sites", full)
+    assert cli.main(["init"]) == 0
+    capsys.readouterr()
+    assert cli.main(["site", "list"]) == 1
+    err = capsys.readouterr().err
+    assert "error: the disk is full" in err and "Traceback" not in err
+    monkeypatch.setattr(site_cli, "list_sites", lambda *a, **k: (_ for _ in ()).throw(KeyError("bug")))
+    with pytest.raises(KeyError):  # any other error is not dressed up as a full disk
+        cli.main(["site", "list"])
