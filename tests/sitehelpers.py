@@ -4,7 +4,10 @@ which pytest puts on sys.path)."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +57,17 @@ def make_home(
         add_site(s, make_site_spec(name, SYNTH.crs, SYNTH.origin, fence))
     cat.dispose()
     return settings
+
+
+EXE = Path(sys.executable).with_name("siteline")
+
+
+def run_exe(home: Path, *argv: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """Run the installed ``siteline`` executable with ``home`` as SITELINE_HOME (and no other
+    SITELINE_ setting of this process); capture its output."""
+    full = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")}
+    full |= {"SITELINE_HOME": str(home)} | (env or {})
+    return subprocess.run([str(EXE), *argv], env=full, capture_output=True, text=True, timeout=300)
 
 
 def run_cli(capsys, *argv: str) -> tuple[int, str, str]:

@@ -9,15 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-EXE = Path(sys.executable).with_name("siteline")
-
-
-def run_exe(home: Path, *argv: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    """Run the installed executable with ``home`` as SITELINE_HOME; capture its output."""
-    full = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")}
-    full |= {"SITELINE_HOME": str(home)} | (env or {})
-    return subprocess.run([str(EXE), *argv], env=full, capture_output=True, text=True, timeout=300)
+from sitehelpers import EXE, run_exe
 
 
 @pytest.fixture(scope="module")

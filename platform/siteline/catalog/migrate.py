@@ -10,6 +10,7 @@ from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 
+from siteline.catalog.addresses import Roots, rooted
 from siteline.errors import CatalogError, RevisionMismatchError
 
 # shipped inside the package (the repository's top-level migrations/ links here)
@@ -55,12 +56,16 @@ def current_revision(engine: sa.Engine) -> str | None:
         return MigrationContext.configure(conn).get_current_revision()
 
 
-def upgrade(engine: sa.Engine, revision: str = "head") -> None:
-    command.upgrade(alembic_config(engine), revision)
+def upgrade(engine: sa.Engine, revision: str = "head", roots: Roots | None = None) -> None:
+    """Migrate up to ``revision``; ``roots`` (the home's and store's) let a migration record store
+    addresses relative to them (without, addresses written before stay as they were)."""
+    with rooted(roots):
+        command.upgrade(alembic_config(engine), revision)
 
 
-def downgrade(engine: sa.Engine, revision: str = "base") -> None:
-    command.downgrade(alembic_config(engine), revision)
+def downgrade(engine: sa.Engine, revision: str = "base", roots: Roots | None = None) -> None:
+    with rooted(roots):
+        command.downgrade(alembic_config(engine), revision)
 
 
 def check_revision(engine: sa.Engine) -> None:

@@ -1,6 +1,9 @@
 """Catalog tables (DESIGN.md §1, §8): sites, missions and their files, scenes, cameras, label sets,
 pairs, views, renders, releases and their items, and stage runs.
 
+Store addresses (``*_uri`` columns, a render's paths, a tiling's ``uri``) are recorded relative to the
+store root or the home (siteline.catalog.addresses) and read back as absolute addresses.
+
 Coordinates and bounds are float64 in the site-local frame unless a name says otherwise; the site
 origin is float64 in the site CRS. Poses are COLMAP ``cam_from_world`` (row-major R, t).
 """
@@ -13,6 +16,7 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
+from siteline.catalog.addresses import StoreAddress
 from siteline.catalog.base import Base, Float64, UTCDateTime, utcnow
 from siteline.records.enums import (
     CAMERA_SOURCES,
@@ -68,7 +72,7 @@ class Mission(Base):
     received_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     status: Mapped[str] = mapped_column(sa.String(16), default="received")
     storage: Mapped[str] = mapped_column(sa.String(16), default="copy")
-    root_uri: Mapped[str] = mapped_column(sa.Text)
+    root_uri: Mapped[str] = mapped_column(StoreAddress)
 
     files: Mapped[list[MissionFile]] = relationship(
         back_populates="mission", lazy="raise", cascade="all, delete-orphan"
@@ -111,7 +115,7 @@ class Scene(Base):
     # georegistration (Sim3, residuals) and alignment check against the previous scene
     registration: Mapped[dict[str, Any]] = mapped_column(sa.JSON, default=dict)
     statistics: Mapped[dict[str, Any]] = mapped_column(sa.JSON, default=dict)
-    tile_store_uri: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
+    tile_store_uri: Mapped[str | None] = mapped_column(StoreAddress, nullable=True)
     status: Mapped[str] = mapped_column(sa.String(16), default="registered")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
@@ -156,7 +160,7 @@ class LabelSet(Base):
     source: Mapped[str] = mapped_column(sa.Text)
     class_histogram: Mapped[dict[str, int]] = mapped_column(sa.JSON, default=dict)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
-    uri: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
+    uri: Mapped[str | None] = mapped_column(StoreAddress, nullable=True)
     parent_version: Mapped[int | None] = mapped_column(sa.Integer, nullable=True)
     source_sha256: Mapped[str | None] = mapped_column(sa.String(64), nullable=True)
     note: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
@@ -230,7 +234,7 @@ class Release(Base):
     status: Mapped[str] = mapped_column(sa.String(16), default="draft")
     manifest_sha256: Mapped[str | None] = mapped_column(sa.String(64), nullable=True)
     parameters: Mapped[dict[str, Any]] = mapped_column(sa.JSON, default=dict)
-    root_uri: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
+    root_uri: Mapped[str | None] = mapped_column(StoreAddress, nullable=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     published_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from siteline.catalog.addresses import to_record
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Pair, Render, View
 from siteline.catalog.stages import add_completed
@@ -33,7 +34,9 @@ def pair_view_ids(session: Session, pair_id: int, digest: str) -> dict[int, int]
 
 def unprocessed_pairs(session: Session, pair_ids: list[int]) -> list[int]:
     """Those of ``pair_ids`` with no recorded outputs under any parameters: work nobody did yet."""
-    done = set(session.execute(sa.select(View.pair_id).where(View.pair_id.in_(pair_ids)).distinct()).scalars())
+    done = set(
+        session.execute(sa.select(View.pair_id).where(View.pair_id.in_(pair_ids)).distinct()).scalars()
+    )
     return [pid for pid in pair_ids if pid not in done]
 
 
@@ -46,7 +49,8 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
     pair.radius_m = output.radius_m
     if pair.status != "superseded":  # a superseded pair stays out of new releases
         pair.status = "processed"
-    pair.parameters = {**(pair.parameters or {}), digest: {"params": params, "labels": output.labels}}
+    labels = dict(output.labels) | ({"uri": to_record(output.labels["uri"])} if "uri" in output.labels else {})
+    pair.parameters = {**(pair.parameters or {}), digest: {"params": params, "labels": labels}}
     session.execute(sa.delete(View).where(View.pair_id == pair.id, View.param_digest == digest))
     cams = dict(
         session.execute(
@@ -68,7 +72,10 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
                 Render(
                     view_id=view.id, scene_id=sid, scale=params["scale"], point_size_px=params["point_size_px"],
                     coverage=coverage, change_ratio=rec.change_ratio,
-                    paths={"image": join(output.root, side, rec.file), "label": join(output.root, "label", rec.file)},
+                    paths={
+                        "image": to_record(join(output.root, side, rec.file)),
+                        "label": to_record(join(output.root, "label", rec.file)),
+                    },
                 )
             )  # fmt: skip
     add_completed(session, run)

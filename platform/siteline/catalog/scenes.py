@@ -11,6 +11,7 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.cameras import Camera
+from siteline.catalog.addresses import from_record, to_record
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Scene, Site
 from siteline.catalog.sites import site_of
@@ -290,8 +291,12 @@ def mission_file(session: Session, mission_id: int, path: str | None) -> Mission
 
 
 def scene_statistics(scene: Scene) -> SceneStatistics:
-    """What ingest and tiling recorded about ``scene`` (the one reader of ``scene.statistics``)."""
-    return SceneStatistics.from_json(scene.statistics)
+    """What ingest and tiling recorded about ``scene`` (the one reader of ``scene.statistics``), its
+    tile store's address absolute."""
+    stats = SceneStatistics.from_json(scene.statistics)
+    if stats.tiling is None:
+        return stats
+    return stats.with_tiling(replace(stats.tiling, uri=from_record(stats.tiling.uri)))
 
 
 def scene_summaries(session: Session, site: Site) -> tuple[SceneSummary, ...]:
@@ -333,7 +338,7 @@ def record_tiling(
     scene = get_scene(session, scene_id)
     scene.tile_store_uri = tiling.uri
     scene.status = "tiled"
-    stats = scene_statistics(scene).with_tiling(tiling)
+    stats = scene_statistics(scene).with_tiling(replace(tiling, uri=to_record(tiling.uri)))
     if counts is not None and stats.scan is not None:
         names = {c.id: c.name for c in site_of(session, scene.site_id).taxonomy.classes}
         hist = {names.get(i, str(i)): int(n) for i, n in enumerate(counts) if n}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sqlalchemy as sa
 import typer
 
+from siteline.catalog import store_roots
 from siteline.catalog.engine import make_engine, ping
 from siteline.cli.common import JsonOption, console, emit, print_record, settings
 
@@ -26,7 +27,7 @@ def init() -> None:
     cfg.store.ensure()
     engine = _engine()
     try:
-        migrate.upgrade(engine, "head")
+        migrate.upgrade(engine, "head", store_roots(cfg))
         rev = migrate.current_revision(engine)
     finally:
         engine.dispose()
@@ -43,7 +44,7 @@ def upgrade(revision: str = typer.Argument("head", help="Target revision.")) -> 
 
     engine = _engine()
     try:
-        migrate.upgrade(engine, revision)
+        migrate.upgrade(engine, revision, store_roots(settings()))
         console.print(f"catalog at revision {migrate.current_revision(engine)}")
     finally:
         engine.dispose()
@@ -58,7 +59,7 @@ def downgrade(
 
     engine = _engine()
     try:
-        migrate.downgrade(engine, revision)
+        migrate.downgrade(engine, revision, store_roots(settings()))
         console.print(f"catalog at revision {migrate.current_revision(engine)}")
     finally:
         engine.dispose()

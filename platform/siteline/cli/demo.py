@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from siteline.catalog import Catalog, open_catalog
+from siteline.catalog import Catalog, open_catalog, store_roots
 from siteline.catalog.engine import make_engine
 from siteline.catalog.releases import get_release, list_releases
 from siteline.catalog.sites import add_site, get_site, scene_count, site_record
@@ -83,7 +83,7 @@ def demo(
     cfg = settings()
     cfg.home.mkdir(parents=True, exist_ok=True)
     engine = make_engine(cfg.database_url)
-    migrate.upgrade(engine)
+    migrate.upgrade(engine, roots=store_roots(cfg))
     engine.dispose()
     console.rule("1. catalog")
     console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}")

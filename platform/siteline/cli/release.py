@@ -187,7 +187,7 @@ def verify(
         as_json,
         {"name": name, "version": version, "root": str(root), "ok": not problems, "problems": problems},
         lambda: console.print(
-            "\n".join(problems)
+            "\n".join([f"{name} {version} (checked {root}):", *problems])
             if problems
             else f"{name} {version}: every checksum matches the catalog's manifest (checked {root})"
         ),

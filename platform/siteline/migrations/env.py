@@ -10,6 +10,7 @@ from __future__ import annotations
 from alembic import context
 
 from siteline.catalog import Base  # importing the catalog registers every table
+from siteline.catalog.addresses import current_roots, rooted
 
 config = context.config
 target_metadata = Base.metadata
@@ -65,5 +66,12 @@ def run_migrations_online() -> None:
 
 if context.is_offline_mode():
     run_migrations_offline()
+elif config.attributes.get("engine") is None and current_roots() is None:
+    # the plain `alembic` command: store addresses are recorded against the configured home
+    from siteline.catalog import store_roots
+    from siteline.config import load_settings
+
+    with rooted(store_roots(load_settings())):
+        run_migrations_online()
 else:
     run_migrations_online()

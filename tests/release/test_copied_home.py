@@ -1,0 +1,100 @@
+"""A SITELINE_HOME copied elsewhere (``cp -a home home2``) reads and writes its own stores: the
+catalog records store addresses relative to the home and the store root, and ``release verify``
+names the folder it checked."""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+import subprocess
+from pathlib import Path
+
+import sqlalchemy as sa
+from sitehelpers import make_home, run_exe
+
+from siteline.catalog import migrate, open_catalog, store_roots
+from siteline.catalog.addresses import Roots, rooted
+from siteline.catalog.engine import make_engine
+
+
+def _dump(db: Path) -> str:
+    con = sqlite3.connect(db)
+    try:
+        return "\n".join(con.iterdump())
+    finally:
+        con.close()
+
+
+def test_a_copied_home_checks_its_own_release(built, tmp_path):
+    settings, cat, pub = built
+    home = settings.home
+    copy = tmp_path / "home2"
+    subprocess.run(["cp", "-a", str(home), str(copy)], check=True)
+
+    dump = _dump(copy / "catalog.sqlite")
+    assert str(home) not in dump, "the catalog records an absolute path of the home"
+    assert "store:tiles/" in dump and "home:releases/" in dump
+
+    ok = run_exe(copy, "release", "verify", "rel", pub.version)
+    assert ok.returncode == 0, ok.stdout + ok.stderr
+    assert f"checked {copy.resolve()}" in ok.stdout
+
+    shown = run_exe(copy, "scene", "show", "1", "--json")
+    assert shown.returncode == 0, shown.stderr
+    assert f'"{copy.resolve()}/stores/tiles/' in shown.stdout
+
+    published = copy / "releases" / "rel" / pub.version
+    for split in ("train", "val", "test"):
+        shutil.rmtree(published / split / "A", ignore_errors=True)
+    (published / "manifest.json").unlink()
+    bad = run_exe(copy, "release", "verify", "rel", pub.version)
+    assert bad.returncode == 1, bad.stdout + bad.stderr
+    assert f"checked {copy.resolve()}" in bad.stdout and "manifest.json" in bad.stdout
+
+    # the original is untouched and still whole
+    orig = run_exe(home, "release", "verify", "rel", pub.version)
+    assert orig.returncode == 0, orig.stdout + orig.stderr
+
+
+def test_migration_makes_recorded_addresses_relative(tmp_path):
+    """A catalog written before the rule (absolute addresses) is rewritten by `db upgrade` under its
+    settings' roots, and written absolute again by a downgrade."""
+    settings = make_home(tmp_path)
+    engine = make_engine(settings.database_url)
+    roots = store_roots(settings)
+    tiles = f"{roots.store}/tiles/scene-1.zarr"
+    elsewhere = "/data/survey/mission-7"
+    migrate.downgrade(engine, "0007", roots)
+    with engine.begin() as conn:
+        conn.execute(sa.text(
+            "INSERT INTO mission (id, site_id, manifest_sha256, name, received_at, status, storage, root_uri) "
+            "VALUES (1, 1, :sha, 'm', '2026-01-01', 'received', 'reference', :root)"
+        ), {"sha": "0" * 64, "root": elsewhere})  # fmt: skip
+        conn.execute(sa.text(
+            "INSERT INTO scene (id, site_id, mission_id, capture_time, point_count, bounds, registration, "
+            "statistics, tile_store_uri, status, created_at) VALUES (1, 1, 1, '2026-01-01', 10, '{}', '{}', "
+            ":stats, :uri, 'tiled', '2026-01-01')"
+        ), {"stats": f'{{"tiles": {{"uri": "{tiles}"}}}}', "uri": tiles})  # fmt: skip
+    migrate.upgrade(engine, "head", roots)
+    with engine.connect() as conn:
+        row = conn.execute(sa.text("SELECT tile_store_uri, statistics FROM scene")).one()
+        mission_root = conn.execute(sa.text("SELECT root_uri FROM mission")).scalar_one()
+    assert row[0] == "store:tiles/scene-1.zarr" and "store:tiles/scene-1.zarr" in row[1]
+    assert mission_root == elsewhere  # outside both roots: kept absolute
+
+    cat = open_catalog(settings)
+    with cat.transaction() as s:
+        assert s.execute(sa.text("SELECT 1")).scalar_one() == 1
+        from siteline.catalog.models import Scene
+
+        assert s.get(Scene, 1).tile_store_uri == tiles
+    cat.dispose()
+
+    migrate.downgrade(engine, "0007", Roots(roots.store, roots.home))
+    with engine.connect() as conn:
+        assert conn.execute(sa.text("SELECT tile_store_uri FROM scene")).scalar_one() == tiles
+    with rooted(None):
+        migrate.upgrade(engine, "head")  # without roots: left absolute, still read as written
+    with engine.connect() as conn:
+        assert conn.execute(sa.text("SELECT tile_store_uri FROM scene")).scalar_one() == tiles
+    engine.dispose()
