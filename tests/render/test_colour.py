@@ -39,7 +39,9 @@ def test_stretches_are_per_scene_for_intensity_and_shared_for_elevation() -> Non
     assert e.stretch_t1 == e.stretch_t2 == (-2.0, 40.0)
 
 
-@pytest.mark.parametrize(("choice", "words"), [("rgb", "scene 2 (constant)"), ("intensity", "scene 2"), ("hue", "use one of")])
+@pytest.mark.parametrize(
+    ("choice", "words"), [("rgb", "scene 2 (constant)"), ("intensity", "scene 2"), ("hue", "use one of")]
+)
 def test_impossible_choices_are_refused(choice, words) -> None:
     with pytest.raises(PairError, match=words.replace("(", r"\(").replace(")", r"\)")):
         resolve_colour(choice, (1, RGB), (2, FLAT))

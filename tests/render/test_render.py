@@ -238,15 +238,3 @@ def test_rigid_motion_of_scene_and_camera_changes_nothing(cells, depth_ids, angl
     assert np.array_equal(a.index, b.index)
     assert np.array_equal(a.attributes["id"], b.attributes["id"])
     assert np.allclose(a.depth, b.depth, rtol=1e-4, equal_nan=True)
-
-
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
-def test_cuda_equals_cpu() -> None:
-    xyz, rgb, cls = box_scene(5, 50000)
-    cam = oblique_camera(706, 510)
-    for ps in (1, 3):
-        s = RenderSettings(scale=1.0, point_size_px=ps)
-        a = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb, "cls": cls})
-        b = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb, "cls": cls}, device="cuda")
-        assert np.array_equal(a.hit, b.hit)
-        assert (a.index != b.index).mean() < 1e-3  # fused multiply-add may move a boundary point
