@@ -5,7 +5,7 @@ site at two densities, against a plain laspy read and a lazrs decode of the same
     python bench/ingest.py --scene 200000000 [--scene-area-m2 32300] --formats las   # one paper scene
 
 Per file: M points/s of ingest + tile and of the tile stage alone (which takes the partition into
-tile runs that ingest's scan kept, siteline.partition), per core, as a ratio of the plain
+tile runs that ingest's scan kept, siteline.pointpass.partition), per core, as a ratio of the plain
 read (LAS) and of the lazrs decode (LAZ, laspy's parallel lazrs backend); peak resident memory; bytes
 per point of the tile store against the LAZ file; node index rows and points per node. Each
 measurement runs in its own subprocess so its peak memory (ru_maxrss) is its own; the last lines are
@@ -37,7 +37,7 @@ def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.05, half_m:
     """n points over a (2 half_m)^2 site, written in chunks (memory stays bounded), in flight-line
     order (sorted by GPS time along y strips, as a scanner writes them); z_noise_m spreads them
     vertically about a gentle surface."""
-    from siteline.lasio import fill_record, las_header
+    from siteline.pointpass.lasio import fill_record, las_header
 
     rng = np.random.default_rng(seed)
     header = las_header("EPSG:32618", ORIGIN - [half_m + 10, half_m + 10, 10], 0.001)
@@ -117,7 +117,7 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         cat.dispose()
         shutil.rmtree(home, ignore_errors=True)  # the stored copy, tiles and catalog of the run
     sec = time.perf_counter() - t
-    from siteline.workers import _POOLS, shutdown_pools
+    from siteline.pointpass.workers import _POOLS, shutdown_pools
 
     # each process's own peak (VmHWM): ru_maxrss would count the parent's size at the fork
     kids = max((_vm_hwm_mib(pid) for pool in _POOLS.values() for pid in pool._processes), default=0.0)

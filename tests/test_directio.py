@@ -1,4 +1,4 @@
-"""Files written and read around the page cache (siteline.directio) and the store's copy to disk:
+"""Files written and read around the page cache (siteline.stores.directio) and the store's copy to disk:
 the same bytes as a plain write and read, at any size and offset, on a file system with direct I/O
 and on one without (tmpfs)."""
 
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from siteline import directio
+from siteline.stores import directio
 
 SHM = Path("/dev/shm")
 

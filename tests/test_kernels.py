@@ -1,4 +1,4 @@
-"""The compiled kernels (siteline.kernels) against plain numpy on the same arrays."""
+"""The compiled kernels (siteline.pointpass.kernels) against plain numpy on the same arrays."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from sitehelpers import node_order_key
 
-from siteline.kernels.cut import bounds, tile_codes
-from siteline.kernels.radix import radix_order, run_starts
+from siteline.pointpass.kernels.cut import bounds, tile_codes
+from siteline.pointpass.kernels.radix import radix_order, run_starts
 
 
 @pytest.mark.parametrize("bits", [0, 4, 16, 17, 33, 62])
@@ -65,7 +65,7 @@ def test_run_starts_cut_sorted_codes() -> None:
 
 
 def test_cube_rows_count_points_per_level_and_cube() -> None:
-    from siteline.kernels.nodes import LEVEL_SHIFT, Z_OFFSET, cube_rows
+    from siteline.pointpass.kernels.nodes import LEVEL_SHIFT, Z_OFFSET, cube_rows
 
     rng = np.random.default_rng(3)
     counts = np.c_[rng.integers(-5, 50_000, (20_000, 2)), rng.integers(-3_000, 9_000, 20_000)].astype(
@@ -93,7 +93,7 @@ def test_cube_rows_count_points_per_level_and_cube() -> None:
 def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
     """One group of 1,000 slots starting at 7: placed in one batch or in uneven batches, its points
     take the same slots, each once (the seeded permutation, or in order)."""
-    from siteline.kernels.nodes import place_points
+    from siteline.pointpass.kernels.nodes import place_points
 
     n = 1_000
     counts, levels = np.zeros((n, 3), np.int32), np.zeros(n, np.uint8)
@@ -119,7 +119,7 @@ def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
 def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> None:
     """Groups small (insertion) and large (counting), with negative counts and duplicates: each
     sorted by the key, ties in input order, never a point across groups."""
-    from siteline.kernels.nodes import order_in_groups, order_key
+    from siteline.pointpass.kernels.nodes import order_in_groups, order_key
 
     rng = np.random.default_rng(5)
     counts = rng.integers(-(2**20), 2**20, (20_000, 3)).astype(np.int32)
@@ -141,7 +141,7 @@ def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> Non
 def test_las_coordinates_and_colour_as_laspy_computes_them() -> None:
     """scaled_xyz is laspy's count * scale + offset bit for bit (no fused multiply-add), at
     georeferenced magnitudes; colour_u8 keeps the high byte of 16-bit colour or the 0-255 value."""
-    from siteline.kernels.cut import colour_u8, scaled_xyz
+    from siteline.pointpass.kernels.cut import colour_u8, scaled_xyz
 
     rng = np.random.default_rng(4)
     x, y, z = (rng.integers(-(2**31), 2**31 - 1, 20_000).astype(np.int32) for _ in range(3))
@@ -155,7 +155,7 @@ def test_las_coordinates_and_colour_as_laspy_computes_them() -> None:
 
 
 def _records(n: int, seed: int) -> np.ndarray:
-    from siteline.partition import RECORD
+    from siteline.pointpass.schema import RECORD
 
     rng = np.random.default_rng(seed)
     rec = np.zeros(n, RECORD)
@@ -171,8 +171,8 @@ def _records(n: int, seed: int) -> np.ndarray:
 def test_records_split_into_fields_and_scatter_back_as_numpy_does() -> None:
     """split_records gathers each field of records rec[order] (numpy's fancy index of each field);
     scatter_records puts fields back into records at given places; inverse inverts a permutation."""
-    from siteline.kernels.radix import inverse
-    from siteline.kernels.rows import scatter_records, split_records
+    from siteline.pointpass.kernels.radix import inverse
+    from siteline.pointpass.kernels.rows import scatter_records, split_records
 
     rec = _records(5_000, 0)
     order = np.random.default_rng(1).permutation(len(rec))[:3_000]

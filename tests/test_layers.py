@@ -11,9 +11,9 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "platform" / "siteline"
 PRIMITIVES = {
-    "errors", "codes", "tolerances", "hashing", "config", "stores", "crs", "lasio", "sitestream",
+    "errors", "codes", "tolerances", "hashing", "config", "stores", "crs", "pointpass",
     "photos", "dji", "cameras", "poses", "specs", "progress", "fence", "site", "taxonomy", "schemas", "metrics",
-    "records", "watch", "partition", "workers", "kernels", "directio",
+    "records", "watch",
 }  # fmt: skip
 STAGES = {"ingest", "register", "tiles", "labels", "labelsets", "views", "render", "pairs", "release"}
 TOP = {"pipeline", "cli", "__main__"}

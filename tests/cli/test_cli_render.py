@@ -10,7 +10,7 @@ from sitehelpers import run_cli
 
 from siteline.cameras import Camera
 from siteline.fence import fence_geojson
-from siteline.lasio import write_las
+from siteline.pointpass.lasio import write_las
 
 ORIGIN = (445000.0, 5030000.0, 80.0)
 

@@ -10,7 +10,7 @@ import pytest
 from siteline.cameras import Camera
 from siteline.errors import PointCloudError, RegistrationError, ViewsError
 from siteline.labels import CHANGED, IGNORED, change_flags
-from siteline.lasio import write_las
+from siteline.pointpass.lasio import write_las
 from siteline.register.georegister import check_spread
 from siteline.register.icp import point_to_plane_icp
 from siteline.render import RenderSettings, render_georeferenced, render_points

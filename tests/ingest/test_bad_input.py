@@ -26,7 +26,7 @@ from siteline.errors import (
     SiteNotFoundError,
 )
 from siteline.ingest import IngestOptions, ingest_mission
-from siteline.lasio import write_las
+from siteline.pointpass.lasio import write_las
 from siteline.synth import LAS_RELPATH
 
 
@@ -245,7 +245,7 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_setti
 
     from realdata import AUTZEN
 
-    from siteline.lasio import open_las
+    from siteline.pointpass.lasio import open_las
 
     path = _count_patched(AUTZEN, tmp_path / "m" / "cloud.laz", count)
     t0 = time.perf_counter()
@@ -260,7 +260,7 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_setti
 
 
 def test_las_whose_header_counts_more_points_than_it_holds_is_refused_at_open(tmp_path) -> None:
-    from siteline.lasio import open_las
+    from siteline.pointpass.lasio import open_las
 
     path = tmp_path / "cloud.las"
     _flat_las(path, n=1_000)

@@ -22,7 +22,7 @@ from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
 from siteline.ingest import IngestOptions, ingest_mission
-from siteline.lasio import write_las
+from siteline.pointpass.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 from siteline.tiles import tile_scene
 

@@ -1,5 +1,5 @@
 """Ingest reads a point cloud once for ingest and tiling: its scan, in parallel point ranges, cuts the
-points into tile runs that the tile stage takes over (siteline.partition)."""
+points into tile runs that the tile stage takes over (siteline.pointpass.partition)."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from sitehelpers import copy_mission, epoch_dirs
 
-from siteline import partition
 from siteline.errors import RegistrationError
 from siteline.ingest import ingest_mission
 from siteline.ingest.pointcloud import scan_las
-from siteline.lasio import write_las
+from siteline.pointpass import partition, schema
+from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.stores import layout
 from siteline.synth import LAS_RELPATH
@@ -71,7 +71,7 @@ def test_parallel_ranges_scan_and_partition_as_one_process_does(synth_site, tmp_
     assert pa.keys() == pb.keys()
 
     def records(parts: list[tuple[int, str, int, int, int]]) -> np.ndarray:
-        return np.concatenate([np.fromfile(p, partition.RECORD, count=c, offset=o * partition.RECORD.itemsize)
+        return np.concatenate([np.fromfile(p, schema.RECORD, count=c, offset=o * schema.RECORD.itemsize)
                                for _, p, o, c, _ in parts])  # fmt: skip
 
     for tile in pa:  # the same records per tile, in the same order
@@ -122,7 +122,7 @@ def test_readers_start_ahead_only_for_a_point_cloud_read_in_parallel(tmp_path, m
 
 def test_started_workers_load_the_kernels_as_they_start() -> None:
     """The pool's workers import numba and load a kernel in their initializer, before any task."""
-    from siteline.workers import process_pool, start_pool
+    from siteline.pointpass.workers import process_pool, start_pool
 
     start_pool(2)
     pool = process_pool(2)
@@ -135,7 +135,7 @@ def test_workers_start_with_one_allocator_arena_and_leave_the_environment_alone(
     freed pages); this process's environment is as it was, and a value the user set wins."""
     import os
 
-    from siteline import workers
+    from siteline.pointpass import workers
 
     monkeypatch.delenv("MALLOC_ARENA_MAX", raising=False)
     workers.discard_pool(3)
@@ -169,7 +169,7 @@ def _die(k: int) -> int:
 def test_a_dead_worker_is_one_clear_error_and_the_next_pass_gets_a_fresh_pool(capsys, monkeypatch) -> None:
     from siteline import cli
     from siteline.errors import WorkerError
-    from siteline.workers import pool_map, process_pool
+    from siteline.pointpass.workers import pool_map, process_pool
 
     with pytest.raises(WorkerError, match="worker process died.*run the command again"):
         list(pool_map(process_pool(2), _die, range(4)))
@@ -186,7 +186,7 @@ def test_a_dead_worker_is_one_clear_error_and_the_next_pass_gets_a_fresh_pool(ca
 
 KILLED_PARENT = """
 import sys, time
-from siteline.workers import process_pool
+from siteline.pointpass.workers import process_pool
 pool = process_pool(2)
 pids = [pool.submit(__import__("os").getpid).result() for _ in range(4)]
 print(" ".join(map(str, sorted(set(pids)))), flush=True)

@@ -18,7 +18,7 @@ from labelsets.edits import centre_box, export, shuffled, versions
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
 from siteline.labelsets import import_labels
-from siteline.lasio import read_labels_vlr
+from siteline.pointpass.lasio import read_labels_vlr
 from siteline.stores import layout
 
 GROUND, BUILDING, MATERIAL, WORKS = 1, 2, 4, 6
@@ -292,7 +292,7 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
     from siteline.catalog import open_catalog
     from siteline.catalog.sites import add_site
     from siteline.ingest import IngestOptions, ingest_mission
-    from siteline.lasio import write_las
+    from siteline.pointpass.lasio import write_las
     from siteline.site import make_site_spec
     from siteline.tiles import tile_scene
 

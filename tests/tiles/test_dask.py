@@ -9,7 +9,7 @@ import numpy as np
 import pyproj
 import pytest
 
-from siteline.lasio import write_las
+from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.stores import open_store
 from siteline.tiles import SceneTiles, TileSpec, write_tiles

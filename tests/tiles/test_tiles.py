@@ -16,7 +16,7 @@ import pytest
 
 from siteline.cameras import Camera
 from siteline.errors import TileError
-from siteline.lasio import write_las
+from siteline.pointpass.lasio import write_las
 from siteline.render import RenderSettings, render_points
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, TileSpec, export_las, write_tiles

@@ -10,8 +10,8 @@ import pyproj
 import pytest
 
 from siteline.cameras import Camera
-from siteline.lasio import write_las
 from siteline.pairs.sources import TilePointSource
+from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, write_tiles
 from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views

@@ -4,7 +4,7 @@ The ingest stage: :func:`~siteline.ingest.plan.plan_ingest` (catalog) ->
 :func:`~siteline.ingest.execute.execute_ingest` and ``store_mission`` (read, check, store) ->
 ``siteline.catalog.missions.record_ingest``; :func:`ingest_mission` runs them. Only the CLI, the flows
 and ``siteline.pipeline`` import this package; the primitives it builds on (``siteline.photos``,
-``siteline.sitestream``, ``siteline.hashing``, ``siteline.stores``) live below it.
+``siteline.pointpass.sitestream``, ``siteline.hashing``, ``siteline.stores``) live below it.
 """
 
 from __future__ import annotations

@@ -19,13 +19,13 @@ from siteline.ingest.mission import capture_time, choose_las, colmap_dir, missio
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
+from siteline.pointpass.sitestream import correction_rigid
 from siteline.poses import Rigid
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
 from siteline.records.scan import LasScan
 from siteline.register import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
 from siteline.site import SiteSpec
-from siteline.sitestream import correction_rigid
 from siteline.stores import Store, layout
 from siteline.stores.blobs import BlobStaging, put_blob_bytes
 
@@ -58,7 +58,7 @@ def execute_ingest(
 ) -> CheckedMission:
     """Read and check the mission of ``plan`` (its point cloud over ``workers`` processes): nothing is
     stored yet; the point cloud's tile runs go into the empty folder ``runs_into`` when given
-    (siteline.partition). :class:`MissionError` (or the error of the check that failed) names
+    (siteline.pointpass.partition). :class:`MissionError` (or the error of the check that failed) names
     the file and the problem."""
     root, entries = plan.manifest.root, plan.manifest.entries
     las = choose_las(entries, root)
@@ -127,7 +127,7 @@ def corrected(
     scan: LasScan, cameras: dict[str, Camera], correction: list[list[float]]
 ) -> tuple[LasScan, dict[str, Camera]]:
     """The scan's stable sample and footprint and the scene's cameras moved by a co-registration
-    (4 x 4, site-local: previous scene from this one), as its tiles will be (siteline.sitestream)."""
+    (4 x 4, site-local: previous scene from this one), as its tiles will be (siteline.pointpass.sitestream)."""
     prev_from_new = correction_rigid(correction)
     sample = prev_from_new.apply(scan.stable_sample) if scan.stable_sample is not None else None
     outline = None

@@ -1,4 +1,4 @@
-"""The one validating pass of ingest over a mission's LAS/LAZ (through :mod:`siteline.partition`, in
+"""The one validating pass of ingest over a mission's LAS/LAZ (through :mod:`siteline.pointpass.partition`, in
 parallel point ranges): statistics, unknown codes, and a sample of stable-class points for the
 alignment check; the same pass cuts the points into tile runs that the tile stage takes over."""
 
@@ -14,8 +14,8 @@ import pyproj
 from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import PointCloudError
 from siteline.fence import footprint
-from siteline.lasio import detect_eight_bit, open_las
-from siteline.partition import (
+from siteline.pointpass.lasio import detect_eight_bit, open_las
+from siteline.pointpass.partition import (
     PARALLEL_MIN_POINTS,
     Partition,
     PassSource,
@@ -23,13 +23,13 @@ from siteline.partition import (
     point_ranges,
     read_file,
 )
+from siteline.pointpass.sitestream import SiteChunk, source_crs, source_transformer
+from siteline.pointpass.workers import start_pool
 from siteline.progress import no_step
 from siteline.records.scan import COLOUR_NAMES, STRETCH_PERCENTILES, ColourStats, LasScan, RgbContent
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
-from siteline.sitestream import SiteChunk, source_crs, source_transformer
 from siteline.taxonomy import detect_scheme
-from siteline.workers import start_pool
 
 STABLE_CLASSES = ("ground", "building")
 # the most points of the all-class sample a scan keeps (every k-th point of the file)
@@ -72,7 +72,7 @@ def scan_las(
     and gather statistics. z is converted to metres from ``z_unit`` (``--z-unit``) or the unit the
     file's CRS implies (recorded in the scan). ``runs_into``: an empty folder where the same pass
     cuts the points into tile runs on the site's default grid, for the tile stage
-    (siteline.partition; the caller keeps or removes it). ``progress(amount, total)`` receives the header's point count
+    (siteline.pointpass.partition; the caller keeps or removes it). ``progress(amount, total)`` receives the header's point count
     before reading and the points read as they go."""
     path = Path(path)
     with open_las(path) as reader:

@@ -30,7 +30,7 @@ from siteline.ingest.inventory import mission_manifest
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
 from siteline.ingest.pointcloud import start_readers
-from siteline.partition import keep_partition, new_partition_folder, partition_key
+from siteline.pointpass.partition import keep_partition, new_partition_folder, partition_key
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
 from siteline.records.runs import StageRun
@@ -157,7 +157,7 @@ def ingest_mission(
 
 
 def _partition_key(checked: CheckedMission, plan: IngestPlan) -> str:
-    """The name the tile stage looks for the scene's partition under (siteline.partition)."""
+    """The name the tile stage looks for the scene's partition under (siteline.pointpass.partition)."""
     scan, site = checked.scan, plan.site
     spec = TileSpec.for_site(site)
     eight_bit = EIGHT_BIT.get(scan.colour)

@@ -30,11 +30,11 @@ from siteline.labelsets.mapping import TaxonomyMap, coding_lut
 from siteline.labelsets.match import match_points, point_keys
 from siteline.labelsets.plan import ImportPlan
 from siteline.labelsets.store import open_labelled, write_tile_classes
-from siteline.lasio import open_las, read_labels_vlr
+from siteline.pointpass.lasio import open_las, read_labels_vlr
+from siteline.pointpass.sitestream import file_crs, site_chunks, source_transformer
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.site import SiteSpec
-from siteline.sitestream import file_crs, site_chunks, source_transformer
 from siteline.stores import Store, layout
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.tiles.layout import parse_tile_key, quantise, tile_index, tile_key, tile_origin_local

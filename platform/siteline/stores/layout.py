@@ -80,7 +80,7 @@ def scratch(home: Path) -> Path:
 
 def partitions(home: Path) -> Path:
     """Partitions of point clouds into tile runs that ingest keeps for the tile stage
-    (siteline.partition; claimed by tiling, or swept after a week)."""
+    (siteline.pointpass.partition; claimed by tiling, or swept after a week)."""
     return home / "partitions"
 
 

@@ -11,9 +11,9 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from siteline.directio import copy_to_disk
 from siteline.errors import StoreError
 from siteline.stores.base import MARKER, StagedFile, Store, join
+from siteline.stores.directio import copy_to_disk
 from siteline.stores.owners import owner_tag, sweep_stale
 
 if TYPE_CHECKING:

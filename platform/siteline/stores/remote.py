@@ -13,10 +13,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from siteline.directio import read_blocks, spread
 from siteline.errors import StoreError
 from siteline.hashing import sha256_file
 from siteline.stores.base import MARKER, Store, join, walk_files
+from siteline.stores.directio import read_blocks, spread
 from siteline.stores.local import atomic_file
 from siteline.stores.owners import owner_tag
 
@@ -40,7 +40,7 @@ def file_system(uri: str) -> tuple[Any, str]:
 def read_into(uri: str, offset: int, buffers: list[memoryview]) -> int:
     """Fill ``buffers`` (writable bytes, in order) from byte ``offset`` of the file at ``uri`` until
     they are full or the file ends; return the bytes read. A local file is read around the page cache
-    in whole blocks (siteline.directio: what it reads, the partition's runs, is read once), any other
+    in whole blocks (siteline.stores.directio: what it reads, the partition's runs, is read once), any other
     with one ranged GET."""
     from fsspec.implementations.local import LocalFileSystem
 

@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 from siteline.crs import parse_crs, parse_origin
 from siteline.errors import SynthError
 from siteline.fence import fence_geojson
-from siteline.lasio import las_header
+from siteline.pointpass.lasio import las_header
 from siteline.stores import publish_folder
 from siteline.synth import model as m
 from siteline.synth.lidar import LidarSpec, sample_epoch

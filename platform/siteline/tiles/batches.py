@@ -1,7 +1,7 @@
 """One tile levelled, ordered into nodes and written a few blocks at a time (runs in a worker process).
 
 A tile's points come from the partition as slices of its blocks (columns of its level-0 cubes,
-siteline.partition). Levels are decided inside level-0 cubes with ranks seeded per block
+siteline.pointpass.partition). Levels are decided inside level-0 cubes with ranks seeded per block
 (:func:`siteline.tiles.lod.block_ranks`), and the node plan adds up per-cube counts
 (:func:`siteline.tiles.nodes.cube_counts`), so a tile of more than ``batch_points`` points is handled
 in batches of whole blocks:
@@ -33,8 +33,8 @@ import numpy as np
 
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.errors import TileError
-from siteline.kernels import rows as row_kernels
-from siteline.partition import RECORD
+from siteline.pointpass.kernels import rows as row_kernels
+from siteline.pointpass.schema import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.stores.remote import read_into
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
@@ -105,7 +105,7 @@ def _gather(parts: list[Part], out: np.ndarray | None = None) -> np.ndarray:
 
 def _gathered(groups: list[list[Part]]) -> Iterator[np.ndarray]:
     """Each batch's records in turn: the next batch is read in a thread while the caller works on
-    this one (the runs come from disk, siteline.directio), into records this thread allocates."""
+    this one (the runs come from disk, siteline.stores.directio), into records this thread allocates."""
     with ThreadPoolExecutor(1, thread_name_prefix="siteline-gather") as ahead:
 
         def read(parts: list[Part]) -> Future[np.ndarray]:

@@ -9,7 +9,7 @@ from typing import Any
 import laspy
 import numpy as np
 
-from siteline.lasio import labels_vlr, las_header
+from siteline.pointpass.lasio import labels_vlr, las_header
 from siteline.site import SiteSpec
 from siteline.stores import atomic_file
 from siteline.tiles.reader import Points, SceneTiles, in_bounds

@@ -21,8 +21,8 @@ import math
 import numpy as np
 
 from siteline.errors import TileError
-from siteline.partition import COUNTS as COUNTS  # the name tiles store their positions under
-from siteline.partition import RECORD
+from siteline.pointpass.schema import ATTRIBUTES as ATTRIBUTES
+from siteline.pointpass.schema import COUNTS as COUNTS  # the name tiles store their positions under
 from siteline.records.tiling import TileSpec
 
 # Stored arrays per tile. Positions are stored as ``xyz_counts`` (int32 quanta from the tile origin)
@@ -30,7 +30,6 @@ from siteline.records.tiling import TileSpec
 # written before the rename call the counts ``xyz`` (LEGACY_COUNTS); reads fall back to it.
 LEGACY_COUNTS = "xyz"
 METRES = "xyz_m"
-ATTRIBUTES: tuple[str, ...] = RECORD.names or ()
 
 
 def tile_index(xy_local: np.ndarray, tile_size_m: float) -> np.ndarray:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.kernels import levels as levels_kernels
-from siteline.kernels import radix
+from siteline.pointpass.kernels import levels as levels_kernels
+from siteline.pointpass.kernels import radix
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import level_count
 
@@ -42,7 +42,7 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, order: np.ndarray, z0: int
     When the cubes nest (each level's edge is half the previous one, in whole quanta: the default
     spec), the points are sorted once by (cube path, rank), where every cube of every level is a
     contiguous run, and each level looks only at the next point of each finest cube
-    (siteline.kernels.levels); otherwise each level sorts its own cube keys.
+    (siteline.pointpass.kernels.levels); otherwise each level sorts its own cube keys.
     """
     n = len(counts)
     levels = np.full(n, 255, dtype=np.uint8)

@@ -28,10 +28,10 @@ from functools import cached_property
 import numpy as np
 
 from siteline.errors import TileError
-from siteline.kernels import nodes as node_kernels
-from siteline.kernels.nodes import LEVEL_BITS as _LEVEL_BITS
-from siteline.kernels.nodes import LEVEL_SHIFT as _CUBE_KEY_BITS
-from siteline.kernels.nodes import Z_OFFSET as _Z_OFFSET
+from siteline.pointpass.kernels import nodes as node_kernels
+from siteline.pointpass.schema import LEVEL_BITS as _LEVEL_BITS
+from siteline.pointpass.schema import LEVEL_SHIFT as _CUBE_KEY_BITS
+from siteline.pointpass.schema import Z_OFFSET as _Z_OFFSET
 from siteline.records.tiling import NodeTable, TileSpec
 
 _CUBE_BITS = 30
@@ -158,7 +158,7 @@ class NodePlan:
 
     def node_order(self, counts: np.ndarray, lo: int) -> np.ndarray:
         """The order that puts placed rows [lo, lo + len(counts)) (whole groups; counts (M, 3) int32) in
-        node order: each group sorted by :func:`siteline.kernels.nodes.order_key` of its points,
+        node order: each group sorted by :func:`siteline.pointpass.kernels.nodes.order_key` of its points,
         ties in input order, for "reversed-morton"; as placed otherwise."""
         if self.order != "reversed-morton":
             return np.arange(len(counts))

@@ -10,11 +10,11 @@ from sqlalchemy.orm import Session
 from siteline.catalog.scenes import get_scene, las_location, scene_correction, scene_statistics
 from siteline.catalog.sites import site_of
 from siteline.errors import TileError
+from siteline.pointpass.sitestream import Correction
 from siteline.records.mission import LasLocation
 from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import SceneTiling
 from siteline.site import SiteSpec
-from siteline.sitestream import Correction
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 Two phases, both spread over worker processes (``workers``):
 
-1. **Partition** (siteline.partition): the file's points cut into tile runs in parallel ranges. Ingest
+1. **Partition** (siteline.pointpass.partition): the file's points cut into tile runs in parallel ranges. Ingest
    keeps the partition its scan made (the same pass), so tiling right after ingest skips this phase;
    otherwise it runs here.
 2. **Write**: each tile gathers its slices of every run, is levelled (siteline.tiles.lod), ordered
@@ -31,8 +31,8 @@ import pyproj
 
 from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import TileError
-from siteline.lasio import detect_eight_bit, open_las
-from siteline.partition import (
+from siteline.pointpass.lasio import detect_eight_bit, open_las
+from siteline.pointpass.partition import (
     PARALLEL_MIN_POINTS,
     Partition,
     PassSource,
@@ -41,16 +41,16 @@ from siteline.partition import (
     point_ranges,
     read_file,
 )
+from siteline.pointpass.sitestream import Correction, source_transformer
+from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.site import SiteSpec
-from siteline.sitestream import Correction, source_transformer
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.stores.remote import file_system
 from siteline.tiles.batches import BATCH_POINTS, Part, write_tile
 from siteline.tiles.index import FORMAT_VERSION, write_index
 from siteline.tiles.layout import tile_key
-from siteline.workers import pool_map, process_pool
 
 log = logging.getLogger(__name__)
 
@@ -156,14 +156,14 @@ def write_tiles(
     recorded at ingest (None: the unit its CRS implies). ``eight_bit``: whether its colour is 0-255 in
     16-bit fields, as ingest recorded it (None: judged from its first chunk). ``kept``: (partitions
     folder, the file's sha256) where ingest may have kept this file's partition
-    (siteline.partition); used when it matches. ``batch_points``: a tile of more points is levelled
+    (siteline.pointpass.partition); used when it matches. ``batch_points``: a tile of more points is levelled
     and ordered in batches of its blocks, so a worker's memory stays about 200 bytes x
     ``batch_points`` whatever the density (the same store). ``executor``: where the tiles are
     written (a Dask cluster's ``Client.get_executor()``, say) instead of this machine's process
     pool; the partition's runs are then copied beside ``out``, where its workers read them.
     ``scratch``: a local folder for the partition, on the file system of ``kept`` for it to be
     taken over (default: the system's temporary folder). ``correction``: the scene's co-registration
-    (siteline.sitestream.site_chunks), applied to every point as it is cut."""
+    (siteline.pointpass.sitestream.site_chunks), applied to every point as it is cut."""
     import zarr
 
     t0 = time.perf_counter()

@@ -51,9 +51,9 @@ def kernel(fn: F) -> F:
 
 def load() -> None:
     """Import numba and load one kernel from the disk cache: the start-up (about 1 s here) a process
-    pays before its first kernel runs, which worker processes pay as they start (siteline.workers)."""
+    pays before its first kernel runs, which worker processes pay as they start (siteline.pointpass.workers)."""
     import numpy as np
 
-    from siteline.kernels import radix
+    from siteline.pointpass.kernels import radix
 
     radix.run_starts(np.zeros(1, np.int64))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.kernels import kernel
+from siteline.pointpass.kernels import kernel
 
 _DIGIT_BITS = 16
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.kernels import kernel
-from siteline.kernels.radix import run_starts
+from siteline.pointpass.kernels import kernel
+from siteline.pointpass.kernels.radix import run_starts
 
 
 @kernel

@@ -15,7 +15,7 @@ import laspy
 import numpy as np
 
 from siteline.errors import PointCloudError
-from siteline.kernels import cut
+from siteline.pointpass.kernels import cut
 
 DEFAULT_CHUNK_POINTS = 1_000_000
 # LAS coordinate scales siteline accepts (metres per count): finer collapses a cloud into a few

@@ -3,7 +3,7 @@ writing): one spawned pool per worker count, started on first use and kept for t
 process, so ingest and tiling in one process pay the start-up (about half a second a worker) once.
 
 spawn, not fork: zarr, lazrs and a Prefect worker run threads that a forked child must not inherit.
-A worker loads the compiled kernels as it starts (siteline.kernels), and :func:`start_pool` starts
+A worker loads the compiled kernels as it starts (siteline.pointpass.kernels), and :func:`start_pool` starts
 the workers ahead of the pass, so that this start-up runs beside other work (ingest's hashing).
 Each worker keeps freed memory for reuse (glibc ``mallopt``, and one malloc arena for all its
 threads, :data:`_WORKER_ENV`): the passes allocate arrays of hundreds of MB in turn, and on virtual
@@ -77,7 +77,7 @@ def exit_with_parent(parent: int, period_s: float = PARENT_CHECK_S) -> threading
 def _start_worker() -> None:
     import gc
 
-    from siteline.kernels import load
+    from siteline.pointpass.kernels import load
 
     exit_with_parent(os.getppid())
     keep_freed_memory()

@@ -1,6 +1,6 @@
 """Kernels of the one pass over a point cloud: a LAS chunk's coordinates and colour, checking
-site-local points and cutting a chunk into tile runs (siteline.lasio, siteline.partition,
-siteline.sitestream)."""
+site-local points and cutting a chunk into tile runs (siteline.pointpass.lasio, siteline.pointpass.partition,
+siteline.pointpass.sitestream)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from siteline.kernels import kernel
+from siteline.pointpass.kernels import kernel
 
 
 @kernel

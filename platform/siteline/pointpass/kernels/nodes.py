@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.kernels import kernel
-from siteline.kernels.radix import radix_order, run_starts
-
-LEVEL_SHIFT = 48  # a level's place in a cube-count key
-Z_OFFSET = 1 << 20  # added to a cube's z in a cube-count key
-LEVEL_BITS = 4  # a level's bits at the bottom of a group key
+from siteline.pointpass.kernels import kernel
+from siteline.pointpass.kernels.radix import radix_order, run_starts
+from siteline.pointpass.schema import LEVEL_BITS, LEVEL_SHIFT, ORDER_BITS, Z_OFFSET
 
 
 @kernel
@@ -127,7 +124,6 @@ def place_points(
     return where
 
 
-ORDER_BITS = 4  # the low bits of each count a node-order key holds
 _SMALL = 64  # groups up to this many points are sorted by insertion, not by counting
 
 

@@ -1,11 +1,11 @@
 """Kernels that move fixed-width records: rows of (N, itemsize) bytes, and the partition's records
-(siteline.partition.RECORD) to and from one array per field, typed on the record."""
+(siteline.pointpass.schema.RECORD) to and from one array per field, typed on the record."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from siteline.kernels import kernel
+from siteline.pointpass.kernels import kernel
 
 
 @kernel
@@ -32,7 +32,7 @@ def scatter_records(
     rec: np.ndarray,
 ) -> None:
     """Point i of the fields ((N, 3) xyz_counts and rgb, (N,) the others, in the record's order) into
-    record ``where[i]`` of ``rec`` (siteline.partition.RECORD): sequential reads and scattered writes,
+    record ``where[i]`` of ``rec`` (siteline.pointpass.schema.RECORD): sequential reads and scattered writes,
     in one pass (about 1.6x numpy's gather of each field into a strided view here)."""
     for i in range(where.shape[0]):
         r = rec[where[i]]
@@ -57,7 +57,7 @@ def split_records(
     gps_time: np.ndarray,
     return_number: np.ndarray,
 ) -> None:
-    """Records ``rec[order]`` of a tile (siteline.partition.RECORD) split into one array per field (in
+    """Records ``rec[order]`` of a tile (siteline.pointpass.schema.RECORD) split into one array per field (in
     the record's order), in one pass: (M, 3) xyz_counts and rgb, (M,) the others; each field is read
     at its width (about 4x a byte-by-byte copy of the same fields)."""
     for i in range(order.shape[0]):

@@ -1,5 +1,5 @@
 """One pass over a LAS/LAZ file in the site frame, in parallel point ranges, that cuts its points
-into tile runs: records (:data:`RECORD`) sorted by site-grid tile and block within each chunk, one
+into tile runs: records (siteline.pointpass.schema.RECORD) sorted by site-grid tile and block within each chunk, one
 run file per range with a (tile and block, offset, count) row per chunk, tile and block. A block is
 a column of a tile's level-0 cubes (:func:`block_edge`), so a tile's level of detail can be built a
 few blocks at a time (siteline.tiles.batches). Ingest's scan rides the same pass (its
@@ -26,36 +26,23 @@ from typing import Any, Protocol
 import numpy as np
 
 from siteline.crs import ZUnit, parse_source_crs
-from siteline.directio import append_blocks, finish_blocks
 from siteline.errors import TileError
-from siteline.kernels import cut, radix, rows
+from siteline.pointpass.kernels import cut, radix, rows
+from siteline.pointpass.schema import BLOCK_BITS, COUNTS, RECORD, block_of, cell_ids, tile_of
+from siteline.pointpass.sitestream import Correction, SiteChunk, site_chunks, source_transformer
+from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
-from siteline.sitestream import Correction, SiteChunk, site_chunks, source_transformer
+from siteline.stores.directio import append_blocks, finish_blocks
 from siteline.stores.owners import owner_tag, sweep_stale
-from siteline.workers import pool_map, process_pool
 
-# the stored arrays of a tile, as one record: int32 quanta from the tile origin, then the attributes
-COUNTS = "xyz_counts"
-RECORD = np.dtype(
-    [
-        (COUNTS, "<i4", (3,)),
-        ("rgb", "u1", (3,)),
-        ("intensity", "<u2"),
-        ("class", "u1"),
-        ("gps_time", "<f8"),
-        ("return_number", "u1"),
-    ]
-)
 # below this many points one process does everything (a pool costs about half a second to start)
 PARALLEL_MIN_POINTS = 2_000_000
 # points per range: small enough to report progress and balance the workers
 RANGE_POINTS = 4_000_000
 # a kept partition nobody claimed within this many seconds is removed by the next pass
 KEEP_S = 7 * 24 * 3600.0
-_TILE_OFFSET = 1 << 20
-_BLOCK_BITS = 16  # blocks a tile side: at most 256
 _INDEX = "runs.npz"
 
 
@@ -124,27 +111,12 @@ def block_edge(spec: TileSpec) -> int:
     larger, or when a tile would need more than 256 blocks a side)."""
     tile_q = int(round(spec.tile_size_m / spec.quantum_m))
     edge = max(int(round(spec.level0_spacing_m / spec.quantum_m)), 1)
-    return tile_q if edge >= tile_q or -(-tile_q // edge) > 1 << (_BLOCK_BITS // 2) else edge
+    return tile_q if edge >= tile_q or -(-tile_q // edge) > 1 << (BLOCK_BITS // 2) else edge
 
 
 def blocks_per_side(spec: TileSpec) -> int:
     tile_q = int(round(spec.tile_size_m / spec.quantum_m))
     return -(-tile_q // block_edge(spec))
-
-
-def cell_ids(ij: np.ndarray, block: np.ndarray) -> np.ndarray:
-    """(N,) int64 ids of (site-grid tile (N, 2), block in the tile (N,)), ordered by tile then block."""
-    return ((ij[:, 0] + _TILE_OFFSET) << 21 | (ij[:, 1] + _TILE_OFFSET)) << _BLOCK_BITS | block
-
-
-def tile_of(cell: int) -> tuple[int, int]:
-    """The (i, j) of a cell id."""
-    tile_id = cell >> _BLOCK_BITS
-    return (tile_id >> 21) - _TILE_OFFSET, (tile_id & ((1 << 21) - 1)) - _TILE_OFFSET
-
-
-def block_of(cell: int) -> int:
-    return cell & ((1 << _BLOCK_BITS) - 1)
 
 
 def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -184,7 +156,7 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
 @dataclass
 class RunWriter:
     """A visitor that appends each chunk's records, sorted by tile and block, to the run file
-    ``folder/name``, around the page cache (siteline.directio): whole blocks as it goes, the last
+    ``folder/name``, around the page cache (siteline.stores.directio): whole blocks as it goes, the last
     bytes (``tail``, under a block) when :meth:`run` closes it."""
 
     folder: str

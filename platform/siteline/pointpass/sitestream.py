@@ -15,8 +15,8 @@ import pyproj
 from siteline.crs import ToSiteCRS, ZUnit, parse_source_crs, z_unit_of
 from siteline.errors import CRSError, PointCloudError
 from siteline.fence import inside_fence
-from siteline.kernels import cut
-from siteline.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
+from siteline.pointpass.kernels import cut
+from siteline.pointpass.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
 from siteline.poses import Rigid
 from siteline.site import SiteSpec
 from siteline.tolerances import LENGTH_TOL_M
@@ -151,7 +151,7 @@ def site_chunks(
     origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
     ``reader``: the file already opened. ``class_lut``: (256,) uint8 site class id per file code and
     (256,) bool of the codes it maps; None: the taxonomy's LAS source codes. ``start``/``stop``,
-    ``eight_bit``: as :func:`siteline.lasio.iter_chunks`. ``correction``: a rigid transform (4 x 4,
+    ``eight_bit``: as :func:`siteline.pointpass.lasio.iter_chunks`. ``correction``: a rigid transform (4 x 4,
     site-local metres) applied after the origin is subtracted: the co-registration of a later scene
     onto the earlier one (siteline.register), so every reader sees the corrected geometry.
     ``fence_tol_m``: how far outside the fence still counts as inside (a label import reads

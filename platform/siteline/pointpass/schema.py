@@ -1,0 +1,60 @@
+"""The engine's record schema and the bit layout of every key it packs: one place to read them.
+
+A point travels from a LAS chunk to a tile as one :data:`RECORD` (the partition's run files hold
+them; the tile store keeps one array per field, siteline.tiles.codecs). Keys are int64:
+
+- a **cell** (:func:`cell_ids`): ``((i + 2**20) << 21 | (j + 2**20)) << 16 | block`` — the site-grid
+  tile (i, j) and the block inside it (row-major, at most 256 a side), ordered by tile then block;
+- a **cube count** key (tiles' node plan): ``level << 48 | (cube z + 2**20) << 2d | cube y << d | cube x``
+  at depth d;
+- a **group** key: ``(band << cube bits | cube) << 4 | level``;
+- a **node-order** key: the Morton code of the low :data:`ORDER_BITS` bits of a point's counts, read
+  from the lowest bit up (x, y, z).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# the stored arrays of a tile, as one record: int32 quanta from the tile origin, then the attributes
+COUNTS = "xyz_counts"
+RECORD = np.dtype(
+    [
+        (COUNTS, "<i4", (3,)),
+        ("rgb", "u1", (3,)),
+        ("intensity", "<u2"),
+        ("class", "u1"),
+        ("gps_time", "<f8"),
+        ("return_number", "u1"),
+    ]
+)
+ATTRIBUTES: tuple[str, ...] = RECORD.names or ()
+
+# cell keys
+TILE_OFFSET = 1 << 20  # added to a tile index so it packs unsigned
+TILE_BITS = 21  # bits of each tile index
+BLOCK_BITS = 16  # bits of a block inside its tile: at most 256 blocks a side
+
+# cube-count and group keys of a tile's node plan
+LEVEL_SHIFT = 48  # a level's place in a cube-count key
+Z_OFFSET = 1 << 20  # added to a cube's z in a cube-count key
+LEVEL_BITS = 4  # a level's bits at the bottom of a group key
+
+# node-order keys
+ORDER_BITS = 4  # the low bits of each count a node-order key holds
+
+
+def cell_ids(ij: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """(N,) int64 ids of (site-grid tile (N, 2), block in the tile (N,)), ordered by tile then block."""
+    return ((ij[:, 0] + TILE_OFFSET) << TILE_BITS | (ij[:, 1] + TILE_OFFSET)) << BLOCK_BITS | block
+
+
+def tile_of(cell: int) -> tuple[int, int]:
+    """The (i, j) of a cell id."""
+    tile_id = cell >> BLOCK_BITS
+    return (tile_id >> TILE_BITS) - TILE_OFFSET, (tile_id & ((1 << TILE_BITS) - 1)) - TILE_OFFSET
+
+
+def block_of(cell: int) -> int:
+    """The block (inside its tile) of a cell id."""
+    return cell & ((1 << BLOCK_BITS) - 1)
