@@ -28,6 +28,7 @@ import laspy
 import numpy as np
 
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
+from siteline.pointpass import TilingResources
 
 ORIGIN = np.array([445_000.0, 5_030_000.0, 80.0])
 HALF_M = 50.0  # the site: 100 m x 100 m, i.e. 4 tiles of 50 m
@@ -104,7 +105,7 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         t = time.perf_counter()
         r = ingest_mission(cat, settings, Path(path).parent, "b")
         t_ingest = time.perf_counter() - t
-        tiling = tile_scene(cat, settings, r.scene_id, workers=workers).tiling
+        tiling = tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=workers)).tiling
         assert tiling is not None
         n = tiling.points
         out = {

@@ -18,6 +18,9 @@ import numpy as np
 import pyproj
 from scipy.spatial import cKDTree
 
+from siteline.pointpass import TilingResources
+from siteline.tiles.writer import TileInput
+
 
 def main() -> None:
     ap = argparse.ArgumentParser()
@@ -47,11 +50,9 @@ def main() -> None:
         tiles = []
         for i, ep in enumerate(doc["epochs"]):
             r = write_tiles(
-                d / "site" / ep["mission_dir"] / LAS_RELPATH,
-                site,
-                pyproj.CRS(cfg.crs),
+                TileInput(d / "site" / ep["mission_dir"] / LAS_RELPATH, site, pyproj.CRS(cfg.crs)),
                 d / f"s{i}.zarr",
-                workers=1,
+                resources=TilingResources(workers=1),
             )
             tiles.append(SceneTiles.open(r.uri))
         n = sum(t.point_count for t in tiles)

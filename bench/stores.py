@@ -18,6 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from siteline.pointpass import TilingResources
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -65,7 +67,7 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     t["ingest (2 missions)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     for sid in scenes:
-        tile_scene(cat, settings, sid, workers=1)
+        tile_scene(cat, settings, sid, resources=TilingResources(workers=1))
     t["tile (2 scenes)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     process_pair(cat, settings, 1, params)

@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from siteline.pointpass import TilingResources
+from siteline.tiles.writer import TileInput
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ingest import ORIGIN, make_las  # noqa: E402  (the same generated site as bench/ingest.py)
 
@@ -39,7 +42,11 @@ def child(mode: str, path: str, out: str) -> None:
         extra = {}
     else:
         site = make_site_spec("b", "EPSG:32618", ORIGIN)
-        r = write_tiles(Path(path), site, pyproj.CRS("EPSG:32618"), Path(out), workers=2)
+        r = write_tiles(
+            TileInput(Path(path), site, pyproj.CRS("EPSG:32618")),
+            Path(out),
+            resources=TilingResources(workers=2),
+        )
         n, extra = r.points, {"bytes_per_point": r.bytes_per_point, "tiles": r.tiles, "levels": r.levels}
     sec = time.perf_counter() - t
     print(
@@ -115,12 +122,10 @@ def view_read(points: int) -> None:
         stores = {}
         for order in ("reversed-morton", "random", "input"):
             r = write_tiles(
-                las,
-                make_site_spec("b", "EPSG:32618", ORIGIN),
-                pyproj.CRS("EPSG:32618"),
+                TileInput(las, make_site_spec("b", "EPSG:32618", ORIGIN), pyproj.CRS("EPSG:32618")),
                 Path(d) / f"{order}.zarr",
                 TileSpec(node_order=order),
-                workers=2,
+                TilingResources(workers=2),
             )
             stores[order] = SceneTiles.open(r.uri)
         cam = Camera.look_at((0, 0, 80), (0, 0, 0), 5645, 4082, 4000.0)

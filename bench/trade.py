@@ -28,11 +28,13 @@ from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, me
 from siteline.metrics import confusion, scores
 from siteline.pairs.render import pair_mask
 from siteline.pairs.sources import TilePointSource
+from siteline.pointpass import TilingResources
 from siteline.render import RenderSettings, render_points
 from siteline.site import SiteSpec, make_site_spec
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 from siteline.taxonomy import default_taxonomy
 from siteline.tiles import SceneTiles, write_tiles
+from siteline.tiles.writer import TileInput
 from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
 
 
@@ -74,7 +76,11 @@ def _load(site_dir: Path, epoch: dict, site: SiteSpec, truth_key: str, work: Pat
     las.gps_time = np.arange(len(xyz), dtype=np.float64)
     indexed = work / f"{name}.las"
     las.write(indexed)
-    r = write_tiles(indexed, site, pyproj.CRS(site.crs), work / f"{name}.zarr", workers=1)
+    r = write_tiles(
+        TileInput(indexed, site, pyproj.CRS(site.crs)),
+        work / f"{name}.zarr",
+        resources=TilingResources(workers=1),
+    )
     return Scene(xyz, cls, truth, SceneTiles.open(r.uri))
 
 

@@ -45,6 +45,7 @@ from siteline.diskspace import disk_full, full_disk_message  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
 from siteline.ingest import IngestOptions  # noqa: E402
 from siteline.pairs.params import PairParams  # noqa: E402
+from siteline.pointpass import TilingResources  # noqa: E402
 from siteline.records.pairs import PairOutput  # noqa: E402
 from siteline.records.release import ReleaseInfo  # noqa: E402
 from siteline.records.runs import StageRun  # noqa: E402
@@ -249,7 +250,7 @@ def tile_task(scene_id: int) -> dict[str, Any] | None:
     progress = RunProgress(slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0})
     with cluster_executor() as executor:  # on a Dask runner, the cluster's workers write the tiles
         done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id], progress=progress,
-                      executor=executor)  # fmt: skip
+                      resources=TilingResources(executor=executor))  # fmt: skip
     for outcome in done:
         get_run_logger().info(outcome.message)
     progress.finish(done[0].message if done else f"scene {scene_id} was tiled already")

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from siteline.pointpass import TilingResources
+
 PG_ADMIN_URL = os.environ.get(
     "SITELINE_TEST_POSTGRES_URL", "postgresql+psycopg://postgres@127.0.0.1:5432/postgres"
 )
@@ -156,6 +158,6 @@ def scenes(tmp_path_factory, synth_site):
     cat = open_catalog(settings)
     for m in epoch_dirs(synth_site)[:2]:
         r = ingest_mission(cat, settings, m, "demo")
-        tile_scene(cat, settings, r.scene_id, workers=1)
+        tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
     yield settings, cat
     cat.dispose()

@@ -17,6 +17,7 @@ from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
 from siteline.fence import load_fence_geojson
+from siteline.pointpass import TilingResources
 from siteline.site import make_site_spec
 from siteline.synth import SynthConfig
 
@@ -126,5 +127,5 @@ def ingest_and_tile(cat, settings: Settings, missions: list[Path], site: str = "
     ids = []
     for m in missions:
         ids.append(ingest_mission(cat, settings, m, site).scene_id)
-        tile_scene(cat, settings, ids[-1], workers=1)
+        tile_scene(cat, settings, ids[-1], resources=TilingResources(workers=1))
     return ids

@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "platform" / "siteline"
 PRIMITIVES = {
     "errors", "codes", "tolerances", "hashing", "config", "stores", "crs", "pointpass",
     "photos", "dji", "cameras", "poses", "specs", "progress", "fence", "site", "taxonomy", "schemas", "metrics",
-    "records", "watch",
+    "records", "watch", "lazy",
 }  # fmt: skip
 STAGES = {"ingest", "register", "tiles", "labels", "labelsets", "views", "render", "pairs", "release"}
 TOP = {"pipeline", "cli", "__main__"}

@@ -9,7 +9,6 @@ import logging
 import math
 import shutil
 from collections.abc import Iterable, Mapping, Sequence
-from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +25,7 @@ from siteline.ingest import IngestOptions, IngestResult, ingest_mission
 from siteline.pairs.params import PairParams
 from siteline.pairs.plan import pair_change_rule
 from siteline.pairs.stage import process_pair
+from siteline.pointpass import TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
@@ -72,7 +72,9 @@ def ingest(
     )
     if result.scene_id is None:
         return Ingested(result, None)
-    tiled = tile_scene(catalog, settings, result.scene_id, workers=workers, progress=progress, run_id=run_id)
+    tiled = tile_scene(
+        catalog, settings, result.scene_id, resources=TilingResources(workers), progress=progress, run_id=run_id
+    )
     if tiled.tiling is not None:
         result.message += f"; {tiled.message}"
     return Ingested(result, tiled)
@@ -82,29 +84,19 @@ def tile_scenes(
     catalog: Catalog,
     settings: Settings,
     scene_ids: Iterable[int],
-    workers: int = 2,
+    resources: TilingResources = TilingResources(),
     progress: Progress = no_progress,
     run_id: str | None = None,
-    executor: Executor | None = None,
 ) -> list[TileOutcome]:
     """Tile every scene of ``scene_ids`` that is not tiled yet, or was tiled under an earlier version
-    of its site's taxonomy or fence (its tiles written by ``executor``, a Dask cluster's say, when
-    given)."""
+    of its site's taxonomy or fence, with ``resources`` (workers, or a Dask cluster's executor)."""
     done = []
     for sid in scene_ids:
         with catalog.transaction() as s:
             due = needs_tiling(s, sid)
         if due:
             done.append(
-                tile_scene(
-                    catalog,
-                    settings,
-                    sid,
-                    workers=workers,
-                    progress=progress,
-                    run_id=run_id,
-                    executor=executor,
-                )
+                tile_scene(catalog, settings, sid, resources=resources, progress=progress, run_id=run_id)
             )
     return done
 
@@ -149,7 +141,7 @@ def redefine_site(
         row, scene_ids = redefine_catalog_site(s, site, taxonomy, ring, clear_fence)
         version, now = row.version, site_spec(row)
     log.info("site %s is at version %d: tiling its %d scenes again", site, version, len(scene_ids))
-    outcomes = tile_scenes(catalog, settings, scene_ids, workers=workers, progress=progress)
+    outcomes = tile_scenes(catalog, settings, scene_ids, TilingResources(workers), progress=progress)
     kept = {c.name for c in now.taxonomy.classes}  # a class the new taxonomy dropped is named by the import
     by_name: dict[int, str | int] = {c.id: c.name for c in old.taxonomy.classes if c.name in kept}
     for sid, path in files.items():

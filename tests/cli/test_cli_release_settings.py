@@ -15,6 +15,7 @@ from sitehelpers import SYNTH, epoch_dirs, make_home, run_cli
 
 from siteline.catalog import open_catalog
 from siteline.ingest import ingest_mission
+from siteline.pointpass import TilingResources
 from siteline.release import read_manifest
 from siteline.tiles import tile_scene
 
@@ -39,12 +40,17 @@ def test_site_settings_are_stored_shown_updated_and_checked(home, capsys) -> Non
     assert "no registered camera" in record["release_now"]  # auto needs a scene's cameras
     code, out, err = run_cli(capsys, "site", "update", "s", "--preset", "fast", "--unset", "views", "--json")
     assert code == 0, err
-    assert json.loads(out)["release_settings"] == {"preset": "fast", "pair": {"scale": "auto", "min_valid": 0.3}}
+    assert json.loads(out)["release_settings"] == {
+        "preset": "fast",
+        "pair": {"scale": "auto", "min_valid": 0.3},
+    }
     for bad, message in ((["--views", "0"], "views"), (["--scale", "big"], "--scale 'big'"),
                          (["--unset", "hue"], "not a release setting"), (["--preset", "turbo"], "unknown preset")):  # fmt: skip
         code, _, err = run_cli(capsys, "site", "update", "s", *bad)
         assert code == 2 and message in err, err
-    assert json.loads(run_cli(capsys, "site", "show", "s", "--json")[1])["release_settings"]["preset"] == "fast"
+    assert (
+        json.loads(run_cli(capsys, "site", "show", "s", "--json")[1])["release_settings"]["preset"] == "fast"
+    )
 
 
 @pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
@@ -52,9 +58,16 @@ def test_release_build_uses_the_site_settings_and_is_up_to_date_once_built(tmp_p
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)
     for m in epoch_dirs(synth_site)[:2]:
-        tile_scene(cat, settings, ingest_mission(cat, settings, m, "demo").scene_id, workers=1)
+        tile_scene(
+            cat,
+            settings,
+            ingest_mission(cat, settings, m, "demo").scene_id,
+            resources=TilingResources(workers=1),
+        )
     cat.dispose()
-    done = _exe(settings, "site", "update", "demo", "--views", "2", "--min-coverage", "0.1", "--min-valid", "0")
+    done = _exe(
+        settings, "site", "update", "demo", "--views", "2", "--min-coverage", "0.1", "--min-valid", "0"
+    )
     assert done.returncode == 0, done.stderr
     shown = json.loads(_exe(settings, "site", "show", "demo", "--json").stdout)["release_now"]
     assert (shown["scale"], shown["point_size_px"], shown["views"]) == (0.78, 5, 2)
@@ -72,7 +85,9 @@ def test_release_build_uses_the_site_settings_and_is_up_to_date_once_built(tmp_p
     assert again.returncode == 0, again.stderr
     assert "release s is up to date: 1.0.0 (published)" in again.stdout
     small = _exe(settings, "release", "build", "--site", "demo", "--name", "s", "--scale", "0.25")
-    assert small.returncode == 2 and "165 x 124 px" in small.stderr and "under the 256 px floor" in small.stderr
+    assert (
+        small.returncode == 2 and "165 x 124 px" in small.stderr and "under the 256 px floor" in small.stderr
+    )
     assert sorted((settings.home / "releases").rglob("*")) == before  # nothing written by either
 
     assert _exe(settings, "site", "update", "demo", "--point-size", "3").returncode == 0

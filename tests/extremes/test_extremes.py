@@ -10,6 +10,7 @@ import pytest
 from siteline.cameras import Camera
 from siteline.errors import PointCloudError, RegistrationError, ViewsError
 from siteline.labels import CHANGED, IGNORED, change_flags
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.register.georegister import check_spread
 from siteline.register.icp import point_to_plane_icp
@@ -17,6 +18,7 @@ from siteline.render import RenderSettings, render_georeferenced, render_points
 from siteline.site import make_site_spec
 from siteline.taxonomy import default_taxonomy
 from siteline.tiles import SceneTiles, write_tiles
+from siteline.tiles.writer import TileInput
 from siteline.views import fit_ground_plane
 
 IGN = default_taxonomy().ignored_lut()
@@ -64,7 +66,11 @@ def test_tiles_round_trip_every_las_scale_and_origin(tmp_path, origin, crs, scal
     las = laspy.read(tmp_path / "c.las")
     geo = np.c_[las.x, las.y, las.z]
     site = make_site_spec("x", crs, origin)
-    r = write_tiles(tmp_path / "c.las", site, pyproj.CRS(crs), tmp_path / "s.zarr", workers=1)
+    r = write_tiles(
+        TileInput(tmp_path / "c.las", site, pyproj.CRS(crs)),
+        tmp_path / "s.zarr",
+        resources=TilingResources(workers=1),
+    )
     t = SceneTiles.open(r.uri)
     data = t.read({k: t.prefix(k) for k in t.by_tile}, ("gps_time",))
     back = data.xyz_m + np.asarray(origin)
@@ -101,7 +107,11 @@ def test_one_point_and_empty_clouds_through_tiles_and_ingest(tmp_path) -> None:
 
     site = make_site_spec("x", "EPSG:32618", (445_000.0, 5_030_000.0, 80.0))
     write_las(tmp_path / "one.las", np.array([[445_001.0, 5_030_002.0, 81.0]]), crs="EPSG:32618")
-    r = write_tiles(tmp_path / "one.las", site, pyproj.CRS("EPSG:32618"), tmp_path / "one.zarr", workers=1)
+    r = write_tiles(
+        TileInput(tmp_path / "one.las", site, pyproj.CRS("EPSG:32618")),
+        tmp_path / "one.zarr",
+        resources=TilingResources(workers=1),
+    )
     pts = SceneTiles.open(r.uri).points(attributes=())
     assert pts.xyz_m.tolist() == [[1.0, 2.0, 1.0]]
     write_las(tmp_path / "empty.las", np.zeros((0, 3)), crs="EPSG:32618")

@@ -18,6 +18,7 @@ from siteline.config import Settings, sqlite_url
 from siteline.fence import load_fence_geojson
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams
+from siteline.pointpass import TilingResources
 from siteline.release.knobs import ReleaseKnobs
 from siteline.site import make_site_spec
 from siteline.synth import SynthConfig, write_site
@@ -44,7 +45,7 @@ def _release(root: Path, origin: tuple[float, float, float]) -> Path:
     truth = json.loads((site_dir / "truth" / "site.json").read_text())
     for e in truth["epochs"]:
         r = ingest_mission(cat, settings, site_dir / e["mission_dir"], "mag")
-        tile_scene(cat, settings, r.scene_id, workers=1)
+        tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
     info = pipeline.release(cat, settings, "mag", "rel", KNOBS)
     cat.dispose()
     return Path(info.root)

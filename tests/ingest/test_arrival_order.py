@@ -9,6 +9,7 @@ from siteline.catalog import open_catalog
 from siteline.catalog.scenes import list_pairs, pair_ids_of_scene
 from siteline.catalog.sites import get_site
 from siteline.ingest import ingest_mission
+from siteline.pointpass import TilingResources
 from siteline.tiles import tile_scene
 
 
@@ -28,10 +29,10 @@ def test_pairs_follow_capture_order_and_tiles_do_not_depend_on_arrival(tmp_path,
         around = pair_ids_of_scene(s, ids[0])
     assert pairs == [(ids[0], ids[1]), (ids[1], ids[2])]  # not (e00, e02)
     assert len(around) == 1
-    late = tile_scene(cat, settings, ids[1], workers=1).tiling
+    late = tile_scene(cat, settings, ids[1], resources=TilingResources(workers=1)).tiling
     cat.dispose()
     settings2, cat2, ids2 = _home(tmp_path, synth_site, [1], "alone")
-    alone = tile_scene(cat2, settings2, ids2[1], workers=1).tiling
+    alone = tile_scene(cat2, settings2, ids2[1], resources=TilingResources(workers=1)).tiling
     cat2.dispose()
     assert ids[1] != ids2[1]  # scene 3 there, scene 1 here
     assert late is not None and alone is not None and late.checksum == alone.checksum

@@ -22,6 +22,7 @@ from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
 from siteline.ingest import IngestOptions, ingest_mission
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 from siteline.tiles import tile_scene
@@ -235,7 +236,7 @@ def test_a_scene_a_metre_off_is_co_registered_and_corrected(cat, site_settings, 
     a = r.registration["alignment"]
     assert a["applied"] and 0.95 < a["translation_m"] < 1.05 and a["residual_m"] < 0.05
     for sid in (r0.scene_id, r.scene_id):
-        tile_scene(cat, site_settings, sid, workers=1)
+        tile_scene(cat, site_settings, sid, resources=TilingResources(workers=1))
     with cat.transaction() as s:
         stores = [tile_source(s, sid) for sid in (r0.scene_id, r.scene_id)]
     z = [np.median(SceneTiles.from_source(src).points(resolution=1.0).xyz_m[:, 2]) for src in stores]

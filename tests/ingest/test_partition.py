@@ -11,7 +11,7 @@ from sitehelpers import copy_mission, epoch_dirs
 from siteline.errors import RegistrationError
 from siteline.ingest import ingest_mission
 from siteline.ingest.pointcloud import scan_las
-from siteline.pointpass import partition, schema
+from siteline.pointpass import TilingResources, partition, schema
 from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.stores import layout
@@ -30,10 +30,12 @@ def test_tiling_takes_the_partition_ingest_kept_and_writes_the_same_store(
     r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
     kept = _kept(site_settings)
     assert len(kept) == 1 and not kept[0].startswith(".")
-    first = tile_scene(cat, site_settings, r.scene_id, workers=1).tiling
+    first = tile_scene(cat, site_settings, r.scene_id, resources=TilingResources(workers=1)).tiling
     assert first is not None and _kept(site_settings) == []  # claimed and removed
     # a re-tiling finds no partition, cuts the file itself, and writes the very same arrays
-    again = tile_scene(cat, site_settings, r.scene_id, workers=1, retile=True).tiling
+    again = tile_scene(
+        cat, site_settings, r.scene_id, resources=TilingResources(workers=1), retile=True
+    ).tiling
     assert again is not None and again.generation == first.generation + 1
     assert again.checksum == first.checksum and again.points == first.points
 
@@ -93,9 +95,9 @@ def test_the_batch_setting_reaches_the_tile_stage(cat, site_settings, synth_site
     with pytest.raises(ConfigError, match="SITELINE_TILE_BATCH_POINTS"):
         load_settings({"SITELINE_TILE_BATCH_POINTS": "lots"})
     r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
-    first = tile_scene(cat, site_settings, r.scene_id, workers=1).tiling
+    first = tile_scene(cat, site_settings, r.scene_id, resources=TilingResources(workers=1)).tiling
     small = replace(site_settings, tile_batch_points=2_000)  # every tile in batches
-    again = tile_scene(cat, small, r.scene_id, workers=1, retile=True).tiling
+    again = tile_scene(cat, small, r.scene_id, resources=TilingResources(workers=1), retile=True).tiling
     assert first is not None and again is not None and again.checksum == first.checksum
 
 

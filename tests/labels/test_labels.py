@@ -11,9 +11,11 @@ from scipy.spatial import cKDTree
 from sitehelpers import SYNTH, epoch_dirs
 
 from siteline.labels import CHANGED, IGNORED, UNCHANGED, change_flags, write_labels
+from siteline.pointpass import TilingResources
 from siteline.synth import LAS_RELPATH
 from siteline.taxonomy import default_taxonomy
 from siteline.tiles import SceneTiles, write_tiles
+from siteline.tiles.writer import TileInput
 
 TAX = default_taxonomy()
 IGN = TAX.ignored_lut()
@@ -71,7 +73,11 @@ def _site_tiles(tmp_path, synth_site, index, origin=SYNTH.origin, name="s"):
     ring = load_fence_geojson(synth_site / "fence.geojson", SYNTH.origin)
     site = make_site_spec("s", SYNTH.crs, origin, [*ring, ring[0]])
     las = epoch_dirs(synth_site)[index] / LAS_RELPATH
-    r = write_tiles(las, site, pyproj.CRS(SYNTH.crs), tmp_path / f"{name}{index}.zarr", workers=1)
+    r = write_tiles(
+        TileInput(las, site, pyproj.CRS(SYNTH.crs)),
+        tmp_path / f"{name}{index}.zarr",
+        resources=TilingResources(workers=1),
+    )
     return SceneTiles.open(r.uri)
 
 

@@ -18,6 +18,7 @@ from labelsets.edits import centre_box, export, shuffled, versions
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
 from siteline.labelsets import import_labels
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import read_labels_vlr
 from siteline.stores import layout
 
@@ -161,7 +162,9 @@ def test_a_file_without_its_record_needs_to_say_how_its_codes_read(scenes, tmp_p
     header.offsets, header.scales = las.header.offsets, las.header.scales
     header.add_crs(las.header.parse_crs())
     bare = laspy.LasData(header)  # no siteline record
-    bare.points = laspy.ScaleAwarePointRecord(las.points.array[keep], header.point_format, header.scales, header.offsets)
+    bare.points = laspy.ScaleAwarePointRecord(
+        las.points.array[keep], header.point_format, header.scales, header.offsets
+    )
     asprs = np.where(cls[keep] == GROUND, 2, 6).astype(np.uint8)
     edit = centre_box(bare, 10.0) & (asprs == 2)
     asprs[edit] = 6  # ground -> building
@@ -171,7 +174,9 @@ def test_a_file_without_its_record_needs_to_say_how_its_codes_read(scenes, tmp_p
     assert r.returncode == 2 and "carries no siteline label-set record" in r.stderr, r.stderr
     assert "ASPRS 2 and 5 would read as building and vehicle" in r.stderr and "--taxonomy-map las" in r.stderr
     assert versions(cat, 2) == before
-    r = _cli(settings, "labels", "import", "2", str(tmp_path / "asprs.las"), "--taxonomy-map", "las", "--json")
+    r = _cli(
+        settings, "labels", "import", "2", str(tmp_path / "asprs.las"), "--taxonomy-map", "las", "--json"
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["changed"] == int(edit.sum()) and res["changes"] == {"ground->building": int(edit.sum())}
@@ -208,7 +213,14 @@ def test_bad_files_are_refused_and_leave_nothing(scenes, tmp_path) -> None:
     bare.header.add_crs(other.header.parse_crs())
     bare.points = other.points.copy()
     bare.write(tmp_path / "scene2_bare.las")
-    _refused(cat, settings, tmp_path / "scene2_bare.las", LabelSetError, r"match no point of scene 1", taxonomy_map="site")
+    _refused(
+        cat,
+        settings,
+        tmp_path / "scene2_bare.las",
+        LabelSetError,
+        r"match no point of scene 1",
+        taxonomy_map="site",
+    )
 
     mine = export(cat, 1, tmp_path / "scene1.las")
     n = len(mine.points)
@@ -301,7 +313,12 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
     cat = open_catalog(settings)
     edge = 10.0007
     with cat.transaction() as s:
-        add_site(s, make_site_spec("fenced", "EPSG:32618", origin, [(-20, -20), (edge, -20), (edge, 20), (-20, 20), (-20, -20)]))
+        add_site(
+            s,
+            make_site_spec(
+                "fenced", "EPSG:32618", origin, [(-20, -20), (edge, -20), (edge, 20), (-20, 20), (-20, -20)]
+            ),
+        )
     rng = np.random.default_rng(0)
     xy = np.c_[rng.uniform(-19, 9, 3000), rng.uniform(-19, 19, 3000)]
     near = np.c_[np.full(40, edge - 0.0001), np.linspace(-15, 15, 40)]  # 0.1 mm inside; the tiles hold 10.001
@@ -311,7 +328,7 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
               classification=np.full(len(local), 2, np.uint8), scale=0.0001)  # fmt: skip
     when = dt.datetime(2024, 6, 1, tzinfo=dt.UTC)
     r = ingest_mission(cat, settings, mission, "fenced", IngestOptions(captured_at=when))
-    tile_scene(cat, settings, r.scene_id, workers=1)
+    tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
     assert r.scan["outside_fence"] == 0
     export(cat, r.scene_id, tmp_path / "unchanged.las")
     res = import_labels(cat, settings, r.scene_id, tmp_path / "unchanged.las")

@@ -10,13 +10,14 @@ import numpy as np
 
 from siteline.labelsets.execute import SPILL_DTYPE, _match_tiles, _spill
 from siteline.labelsets.plan import ImportPlan
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.progress import no_progress
 from siteline.records import LabelSetRef, TileSource
 from siteline.site import make_site_spec
 from siteline.tiles.export import export_las
 from siteline.tiles.reader import SceneTiles
-from siteline.tiles.writer import write_tiles
+from siteline.tiles.writer import TileInput, write_tiles
 
 ORIGIN = (500_000.0, 4_000_000.0, 10.0)
 
@@ -35,7 +36,7 @@ def test_points_at_tile_edges_match_once(tmp_path) -> None:
         return_number=np.ones(n, np.uint8), intensity=np.zeros(n, np.uint16),
     )  # fmt: skip
     store = tmp_path / "tiles.zarr"
-    write_tiles(las, site, site.pyproj_crs, store, workers=1)
+    write_tiles(TileInput(las, site, site.pyproj_crs), store, resources=TilingResources(workers=1))
     tiles = SceneTiles.open(store)
     assert tiles.point_count == n and len(tiles.by_tile) >= 9
 
@@ -49,7 +50,9 @@ def test_points_at_tile_edges_match_once(tmp_path) -> None:
     spill = tmp_path / "spill"
     spill.mkdir()
     plan = ImportPlan(7, site, TileSource(str(store), tiles.spec), LabelSetRef(7, 1, None, "las"), 2)
-    n_file, has_time, unknown = _spill(tmp_path / "edited.las", plan, tiles, site.taxonomy.id_lut(), spill, no_progress)
+    n_file, has_time, unknown = _spill(
+        tmp_path / "edited.las", plan, tiles, site.taxonomy.id_lut(), spill, no_progress
+    )
     assert n_file == n and has_time and not unknown.any()
     spilled = sum(len(np.fromfile(p, SPILL_DTYPE)) for p in spill.iterdir())
     assert spilled > n  # points near an edge went to both tiles

@@ -10,6 +10,7 @@ from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams
+from siteline.pointpass import TilingResources
 from siteline.release import publish_release
 from siteline.release.knobs import ReleaseKnobs
 from siteline.tiles import tile_scene
@@ -24,7 +25,7 @@ def built(tmp_path_factory, synth_site):
     cat = open_catalog(settings)
     for m in epoch_dirs(synth_site):
         r = ingest_mission(cat, settings, m, "demo")
-        tile_scene(cat, settings, r.scene_id, workers=1)
+        tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
     info = pipeline.release(cat, settings, "demo", "rel", KNOBS)
     pub = publish_release(cat, settings, "rel", info.version)
     yield settings, cat, pub

@@ -21,6 +21,7 @@ from siteline.catalog.sites import add_site
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams, pair_mask
+from siteline.pointpass import TilingResources
 from siteline.release import publish_release, read_manifest, verify_files
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
@@ -115,11 +116,16 @@ def test_installed_verify_fails_a_gutted_release(built, gut) -> None:
     shutil.copytree(root, backup, symlinks=True)
     try:
         os.chmod(root, 0o755)
-        victims = [root / "manifest.json"] if gut == "manifest" else [p for p in root.rglob("*") if p.is_file()]
+        victims = (
+            [root / "manifest.json"] if gut == "manifest" else [p for p in root.rglob("*") if p.is_file()]
+        )
         for p in victims:
             p.unlink()
         bad = subprocess.run(
-            [str(exe), "release", "verify", "rel", pub.version, "--json"], env=env, capture_output=True, text=True
+            [str(exe), "release", "verify", "rel", pub.version, "--json"],
+            env=env,
+            capture_output=True,
+            text=True,
         )
     finally:
         shutil.rmtree(root)
@@ -131,7 +137,9 @@ def test_installed_verify_fails_a_gutted_release(built, gut) -> None:
     assert any("manifest.json: missing" in p and "tampered" in p for p in doc["problems"])
     if gut == "everything":
         assert sum("recorded by the catalog" in p for p in doc["problems"]) >= 3
-    good = subprocess.run([str(exe), "release", "verify", "rel", pub.version], env=env, capture_output=True, text=True)
+    good = subprocess.run(
+        [str(exe), "release", "verify", "rel", pub.version], env=env, capture_output=True, text=True
+    )
     assert good.returncode == 0 and f"checked {root}" in good.stdout
 
 
@@ -245,7 +253,9 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     assert np.array_equal(a.mask, b.mask) and (a.mask != 255).any()
     assert np.array_equal(a.a, b.b)
     coarse = render_pair_view(forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0))
-    every = render_pair_view(forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0, all_points=True))
+    every = render_pair_view(
+        forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0, all_points=True)
+    )
     assert every.points_read > coarse.points_read  # --all-points: no level of detail
     assert every.coverage_a >= coarse.coverage_a
 
@@ -266,7 +276,10 @@ def test_preset_is_applied_and_recorded(built) -> None:
     info = pipeline.release(cat, settings, "demo", "presetrel", knobs)
     lin = read_manifest(info.root)["lineage"]
     assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
-    assert (lin["parameters"]["scale"], lin["parameters"]["point_size_px"]) == (0.5, 3)  # a knob beats its preset
+    assert (lin["parameters"]["scale"], lin["parameters"]["point_size_px"]) == (
+        0.5,
+        3,
+    )  # a knob beats its preset
 
 
 @pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
@@ -278,7 +291,7 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
     try:
         for m in epoch_dirs(synth_site)[:2]:
             r = ingest_mission(cat, settings, m, "demo")
-            tile_scene(cat, settings, r.scene_id, workers=1)
+            tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
         info = pipeline.release(cat, settings, "demo", "rel", KNOBS)
         pub = publish_release(cat, settings, "rel", info.version)
         with cat.transaction() as s:

@@ -11,10 +11,13 @@ import textwrap
 import numpy as np
 import pyproj
 
+from siteline.pointpass import TilingResources
+from siteline.pointpass.partition import Slice
 from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, TileSpec, write_tiles
 from siteline.tiles.batches import batches
+from siteline.tiles.writer import TileInput
 
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
 
@@ -32,7 +35,8 @@ def _surface(path, n: int, seed: int = 0, half_m: float = 25.0) -> None:
 
 
 def test_batches_take_whole_blocks_within_the_budget() -> None:
-    parts = [(0, "a", 0, 5, 0), (0, "b", 0, 5, 0), (1, "a", 5, 30, 0), (2, "a", 35, 4, 0), (3, "b", 5, 4, 0)]
+    rows = [(0, "a", 0, 5, 0), (0, "b", 0, 5, 0), (1, "a", 5, 30, 0), (2, "a", 35, 4, 0), (3, "b", 5, 4, 0)]
+    parts = [Slice(*r) for r in rows]
     got = batches(parts, 12)
     assert [[p[0] for p in b] for b in got] == [[0, 0], [1], [2, 3]]  # block 1 alone is over budget
     assert batches(parts, 10**9) == [parts]
@@ -46,7 +50,10 @@ def test_the_store_is_the_same_whatever_the_batches(tmp_path) -> None:
     for budget in (10**9, 4_000):  # one batch a tile; dozens of batches a tile
         out = tmp_path / f"b{budget}.zarr"
         runs[budget] = write_tiles(
-            tmp_path / "s.las", site, pyproj.CRS("EPSG:32618"), out, spec, workers=1, batch_points=budget
+            TileInput(tmp_path / "s.las", site, pyproj.CRS("EPSG:32618")),
+            out,
+            spec,
+            TilingResources(workers=1, batch_points=budget),
         )
     one, many = runs[10**9], runs[4_000]
     assert one.checksum == many.checksum and one.points == many.points == 60_000
@@ -135,9 +142,10 @@ def test_gather_reads_slices_in_order_and_refuses_a_short_run_file(tmp_path) -> 
         path = tmp_path / f"run-{k}.bin"
         rec.tofile(path)
         runs.append(str(path))
-    parts = [(0, runs[1], 50, 10, 0), (0, runs[0], 0, 30, 0), (1, runs[0], 30, 5, 0), (1, runs[1], 0, 50, 0)]
+    rows = [(0, runs[1], 50, 10, 0), (0, runs[0], 0, 30, 0), (1, runs[0], 30, 5, 0), (1, runs[1], 0, 50, 0)]
+    parts = [Slice(*r) for r in rows]
     got = _gather(parts)["gps_time"]
     want = np.r_[1050:1060, 0:30, 30:35, 1000:1050]
     assert np.array_equal(got, want)
     with pytest.raises(TileError, match="run-0.bin ends early"):
-        _gather([(0, runs[0], 90, 20, 0)])
+        _gather([Slice(0, runs[0], 90, 20, 0)])

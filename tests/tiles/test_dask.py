@@ -9,10 +9,12 @@ import numpy as np
 import pyproj
 import pytest
 
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.stores import open_store
 from siteline.tiles import SceneTiles, TileSpec, write_tiles
+from siteline.tiles.writer import TileInput
 
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
 
@@ -44,16 +46,15 @@ def test_a_dask_cluster_writes_the_tiles_into_the_shared_store(tmp_path, request
     site = make_site_spec("t", "EPSG:32618", ORIGIN)
     crs = pyproj.CRS("EPSG:32618")
     spec = TileSpec(node_points=1024)
-    here = write_tiles(tmp_path / "c.las", site, crs, tmp_path / "here.zarr", spec, workers=1)
+    here = write_tiles(
+        TileInput(tmp_path / "c.las", site, crs), tmp_path / "here.zarr", spec, TilingResources(workers=1)
+    )
     url = request.getfixturevalue("s3_store") if where == "s3" else str(tmp_path / "stores")
     store = open_store(url, tmp_path / "staging")
     store.ensure()
     uri = store.uri("tiles", "scene-1.zarr")
     with get_task_stream(client) as stream, store.publish_shared(uri) as target:
-        there = write_tiles(
-            tmp_path / "c.las", site, crs, target, spec, executor=client.get_executor(), batch_points=5_000,
-            scratch=store.staging,
-        )  # fmt: skip
+        there = write_tiles(TileInput(tmp_path / "c.las", site, crs), target, spec, TilingResources(batch_points=5_000, executor=client.get_executor(), scratch=store.staging))  # fmt: skip
     assert there.checksum == here.checksum and there.points == n and there.tiles == here.tiles == 4
     wrote = [t for t in stream.data if "write_tile" in str(t["key"])]
     assert len(wrote) == there.tiles and len({t["worker"] for t in wrote}) == 2  # both workers wrote

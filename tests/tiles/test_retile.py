@@ -15,6 +15,7 @@ from siteline.catalog import open_catalog
 from siteline.catalog.models import Scene
 from siteline.catalog.scenes import tile_source
 from siteline.pairs import PairParams, find_pair_output, process_pair
+from siteline.pointpass import TilingResources
 from siteline.tiles import SceneTiles, TileSpec, tile_scene
 
 EXE = Path(sys.executable).with_name("siteline")
@@ -44,8 +45,10 @@ def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)
     ids = [ingest_mission(cat, settings, m, "demo").scene_id for m in epoch_dirs(synth_site)[:2]]
-    tile_scene(cat, settings, ids[0], spec=TileSpec(node_order="input"), workers=1)  # as an old store
-    tile_scene(cat, settings, ids[1], workers=1)
+    tile_scene(
+        cat, settings, ids[0], resources=TilingResources(workers=1), spec=TileSpec(node_order="input")
+    )  # as an old store
+    tile_scene(cat, settings, ids[1], resources=TilingResources(workers=1))
     before = process_pair(cat, settings, 1, PARAMS)
     old_uri, old_points = _points(cat, ids[0])
 

@@ -16,11 +16,13 @@ import pytest
 
 from siteline.cameras import Camera
 from siteline.errors import TileError
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.render import RenderSettings, render_points
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, TileSpec, export_las, write_tiles
 from siteline.tiles.layout import level_count, parse_tile_key, tile_origin_local
+from siteline.tiles.writer import TileInput
 
 ALL = ("rgb", "class", "intensity", "gps_time", "return_number")
 
@@ -44,7 +46,12 @@ def _cloud(path: Path, origin, n=20_000, crs="EPSG:32618", scale=0.001, seed=0, 
 
 def _tile(tmp_path, las, origin, crs="EPSG:32618", spec=None):
     site = make_site_spec("t", crs, origin)
-    result = write_tiles(las, site, pyproj.CRS.from_user_input(crs), tmp_path / "scene.zarr", spec, workers=1)
+    result = write_tiles(
+        TileInput(las, site, pyproj.CRS.from_user_input(crs)),
+        tmp_path / "scene.zarr",
+        spec,
+        TilingResources(workers=1),
+    )
     return site, result, SceneTiles.open(result.uri)
 
 
@@ -225,7 +232,11 @@ def test_existing_store_is_not_overwritten(tmp_path) -> None:
     _cloud(tmp_path / "c.las", origin, n=1_000)
     site, result, _ = _tile(tmp_path, tmp_path / "c.las", origin)
     with pytest.raises(Exception, match="already exists"):
-        write_tiles(tmp_path / "c.las", site, pyproj.CRS("EPSG:32618"), Path(result.uri), workers=1)
+        write_tiles(
+            TileInput(tmp_path / "c.las", site, pyproj.CRS("EPSG:32618")),
+            Path(result.uri),
+            resources=TilingResources(workers=1),
+        )
 
 
 def test_counts_past_int32_are_refused_naming_the_file(tmp_path) -> None:
@@ -247,6 +258,7 @@ KILL_SCRIPT = textwrap.dedent("""
     import siteline.tiles.writer as w
     from siteline.catalog import open_catalog
     from siteline.config import load_settings
+    from siteline.pointpass import TilingResources
     from siteline.tiles import tile_scene
     real = w.write_tile
     done = []
@@ -257,7 +269,7 @@ KILL_SCRIPT = textwrap.dedent("""
         return real(*a, **k)
     w.write_tile = dying
     settings = load_settings()
-    tile_scene(open_catalog(settings), settings, int(sys.argv[1]), workers=1)
+    tile_scene(open_catalog(settings), settings, int(sys.argv[1]), resources=TilingResources(workers=1))
 """)
 
 
@@ -302,12 +314,12 @@ def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> 
     cat = open_catalog(settings)
     with cat.transaction() as s:
         assert s.get(Scene, sid).status == "registered" and s.get(Scene, sid).tile_store_uri is None
-    rerun = tile_scene(cat, settings, sid, workers=1).tiling
+    rerun = tile_scene(cat, settings, sid, resources=TilingResources(workers=1)).tiling
     assert not [p for p in tiles_dir.iterdir() if p.name.startswith(".")]  # stale partials were cleared
     cat.dispose()
     clean_settings, (sid2, _) = _ingested_home(tmp_path, synth_dir, "b")
     cat2 = open_catalog(clean_settings)
-    clean = tile_scene(cat2, clean_settings, sid2, workers=1).tiling
+    clean = tile_scene(cat2, clean_settings, sid2, resources=TilingResources(workers=1)).tiling
     cat2.dispose()
     assert rerun.checksum == clean.checksum and rerun.points == clean.points
 
@@ -320,7 +332,8 @@ def test_two_processes_tile_two_scenes_at_once(tmp_path, synth_dir) -> None:
     settings, ids = _ingested_home(tmp_path, synth_dir, "c")
     code = (
         "import sys\nfrom siteline.catalog import open_catalog\nfrom siteline.config import load_settings\n"
-        "from siteline.tiles import tile_scene\ns = load_settings()\ntile_scene(open_catalog(s), s, int(sys.argv[1]), workers=1)\n"
+        "from siteline.tiles import tile_scene\nfrom siteline.pointpass import TilingResources\ns = load_settings()\n"
+        "tile_scene(open_catalog(s), s, int(sys.argv[1]), resources=TilingResources(workers=1))\n"
     )
     procs = [subprocess.Popen([sys.executable, "-c", code, str(i)], env=_env(settings)) for i in ids]
     assert [p.wait(timeout=300) for p in procs] == [0, 0]

@@ -11,9 +11,11 @@ import pytest
 
 from siteline.cameras import Camera
 from siteline.pairs.sources import TilePointSource
+from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, write_tiles
+from siteline.tiles.writer import TileInput
 from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
 
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
@@ -52,7 +54,11 @@ def _generate(tmp_path, density: float) -> dict:
     las = tmp_path / f"d{density:g}.las"
     write_las(las, local + np.asarray(ORIGIN), crs="EPSG:32618", classification=cls)
     site = make_site_spec("m", "EPSG:32618", ORIGIN)
-    r = write_tiles(las, site, pyproj.CRS("EPSG:32618"), tmp_path / f"d{density:g}.zarr", workers=1)
+    r = write_tiles(
+        TileInput(las, site, pyproj.CRS("EPSG:32618")),
+        tmp_path / f"d{density:g}.zarr",
+        resources=TilingResources(workers=1),
+    )
     index = SceneTiles.open(r.uri)
     tiles = SceneTiles(r.uri, index.nodes, index.spec, cache_bytes=4 * 2**20)  # a fixed cache budget
     plane = fit_ground_plane(local[cls == 2], seed=0)

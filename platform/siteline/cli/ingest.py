@@ -258,11 +258,14 @@ def scene_tile(
     as_json: bool = JsonOption,
 ) -> None:
     """Tile a registered scene into its Zarr store (a scene already tiled is left alone unless --retile)."""
+    from siteline.pointpass import TilingResources
     from siteline.tiles import tile_scene
 
     cfg = settings()
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
-        done = tile_scene(cat, cfg, scene_id, workers=workers, progress=bar_progress(bar), retile=retile)
+        done = tile_scene(
+                cat, cfg, scene_id, resources=TilingResources(workers), progress=bar_progress(bar), retile=retile
+            )
     emit(
         as_json,
         {"message": done.message, "tiles": done.tiling.to_dict() if done.tiling else None},

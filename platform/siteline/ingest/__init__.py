@@ -9,7 +9,14 @@ and ``siteline.pipeline`` import this package; the primitives it builds on (``si
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from siteline.lazy import lazy_names
+
+if TYPE_CHECKING:  # mypy and editors see the real signatures; nothing is imported at run time
+    from siteline.ingest.options import IngestOptions as IngestOptions
+    from siteline.ingest.stage import IngestResult as IngestResult
+    from siteline.ingest.stage import ingest_mission as ingest_mission
 
 # imported on first use: a worker process that reads a point cloud needs none of the stage's catalog
 _WHERE = {

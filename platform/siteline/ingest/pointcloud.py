@@ -82,7 +82,7 @@ def scan_las(
         eight_bit = detect_eight_bit(reader, path) if n_total else None
     progress(0, n_total)
     tr = source_transformer(path, site, src, z_unit)
-    source = PassSource(str(path), site, crs_text(src), z_unit_of(src, z_unit).to_dict(), eight_bit)
+    source = PassSource(str(path), site, crs_text(src), z_unit_of(src, z_unit), eight_bit)
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
     keep_p = min(1.0, sample_max / max(n_total, 1))
     stride = max(1, -(-n_total // SURVEY_SAMPLE_MAX))
@@ -104,7 +104,7 @@ def scan_las(
             f"point cloud {path}: header says {n_total} points but {t.count} were read (truncated?)."
         )
     if folder is not None:
-        Partition(folder, tuple(runs)).save()
+        Partition(folder, tuple(runs)).save(source.made_from(spec))
     if t.count == 0:
         raise PointCloudError(f"point cloud {path} holds no points.")
     return _scan(path, header, site, src, tr, z_unit, t)

@@ -30,15 +30,12 @@ from siteline.ingest.inventory import mission_manifest
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
 from siteline.ingest.pointcloud import start_readers
-from siteline.pointpass.partition import keep_partition, new_partition_folder, partition_key
+from siteline.pointpass.partition import PartitionCache
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
 from siteline.records.runs import StageRun
-from siteline.records.scan import EIGHT_BIT
-from siteline.records.tiling import TileSpec
 from siteline.stores import layout
 from siteline.stores.blobs import BlobStaging, remove_blobs
-from siteline.stores.owners import sweep_stale
 
 log = logging.getLogger(__name__)
 # held while an ingest records its mission or a failed one removes the blobs it added
@@ -133,32 +130,25 @@ def ingest_mission(
     start_readers(Path(mission_dir), workers)  # they start up while the mission is hashed
     manifest = mission_manifest(Path(mission_dir), step(progress, "hashing"))
     # one ingest of a mission's content at a time: a copy dropped twice at once is ingested once
+    cache = PartitionCache(layout.partitions(settings.home))
     with catalog.lock(f"mission:{manifest.sha256}"):
         with catalog.transaction() as s:
             plan = plan_ingest(s, site_name, manifest)
         if plan.existing is not None:
-            sweep_stale(layout.partitions(settings.home), ".new-*")  # what a killed run of it left
+            cache.sweep_unfinished()  # what a killed run of it left
             return _already(plan)
         run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
-        home = layout.partitions(settings.home)
-        runs = new_partition_folder(home)
+        runs = cache.new_folder()
         staging = stage_mission(manifest, opts.storage, settings.store)
         try:
             checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
             result = _store_and_record(catalog, settings, plan, checked, run, progress, staging)
             if not (checked.registration.get("alignment") or {}).get("applied"):
                 # the runs were cut before the co-registration: a corrected scene's tiles cut anew
-                keep_partition(runs, home, _partition_key(checked, plan))
+                cache.keep(runs, checked.las_sha256)
             return result
         finally:
             if staging is not None:
                 staging.close()
             shutil.rmtree(runs, ignore_errors=True)
 
-
-def _partition_key(checked: CheckedMission, plan: IngestPlan) -> str:
-    """The name the tile stage looks for the scene's partition under (siteline.pointpass.partition)."""
-    scan, site = checked.scan, plan.site
-    spec = TileSpec.for_site(site)
-    eight_bit = EIGHT_BIT.get(scan.colour)
-    return partition_key(checked.las_sha256, site, scan.source_crs, scan.z_unit, eight_bit, spec)

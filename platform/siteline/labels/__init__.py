@@ -6,7 +6,19 @@ by every command that takes release knobs) do not pull in the tile store and zar
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from siteline.lazy import lazy_names
+
+if TYPE_CHECKING:  # mypy and editors see the real signatures; nothing is imported at run time
+    from siteline.labels.change import CHANGED as CHANGED
+    from siteline.labels.change import IGNORED as IGNORED
+    from siteline.labels.change import UNCHANGED as UNCHANGED
+    from siteline.labels.change import change_flags as change_flags
+    from siteline.labels.change import median_spacing as median_spacing
+    from siteline.labels.store import LabelResult as LabelResult
+    from siteline.labels.store import auto_radius as auto_radius
+    from siteline.labels.store import write_labels as write_labels
 
 _WHERE = {
     "CHANGED": "siteline.labels.change",

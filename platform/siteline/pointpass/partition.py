@@ -21,7 +21,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -44,47 +44,52 @@ RANGE_POINTS = 4_000_000
 # a kept partition nobody claimed within this many seconds is removed by the next pass
 KEEP_S = 7 * 24 * 3600.0
 _INDEX = "runs.npz"
+_MADE_FROM = "made-from.json"
 
 
 @dataclass(frozen=True)
 class PassSource:
     """What a worker needs to read the file into the site frame (picklable): the file, the site, the
-    source CRS text, the z unit (dict) and whether colour is 0-255 in 16-bit fields."""
+    source CRS text, the z unit (None: the unit the CRS implies), whether colour is 0-255 in 16-bit
+    fields, and the co-registration applied to every point."""
 
     path: str
     site: SiteSpec
     crs: str
-    z_unit: dict[str, Any] | None
+    z_unit: ZUnit | None
     eight_bit: bool | None
     correction: Correction | None = None
 
-    def key(self, content_sha256: str, spec: TileSpec) -> str:
-        """The name of a partition of this file's content cut on ``spec``'s grid."""
-        return partition_key(
-            content_sha256, self.site, self.crs, self.z_unit, self.eight_bit, spec, self.correction
-        )
+    def made_from(self, spec: TileSpec) -> dict[str, Any]:
+        """Everything but the file's content that decides the records of a partition of this source
+        cut on ``spec``'s grid: the site frame, the source CRS and z unit, the colour depth, the tile
+        grid and quantum, the record layout and the co-registration (when there is one)."""
+        doc: dict[str, Any] = {
+            "site": self.site.to_dict(), "crs": self.crs,
+            "z_unit": self.z_unit.to_dict() if self.z_unit is not None else None,
+            "eight_bit": bool(self.eight_bit), "tile_size_m": spec.tile_size_m, "quantum_m": spec.quantum_m,
+            "block": block_edge(spec), "record": RECORD.descr, "format": 2,
+        }  # fmt: skip
+        if self.correction is not None:
+            doc["correction"] = [list(row) for row in self.correction]
+        return doc
 
 
-def partition_key(
-    content_sha256: str,
-    site: SiteSpec,
-    crs: str,
-    z_unit: dict[str, Any] | None,
-    eight_bit: bool | None,
-    spec: TileSpec,
-    correction: Correction | None = None,
-) -> str:
-    """A digest of everything that decides a partition's records: the file's content, the site
-    frame, the source CRS and z unit (resolved), the colour depth, the tile grid and quantum, and the
-    co-registration applied (when there is one)."""
-    doc: dict[str, Any] = {
-        "sha256": content_sha256, "site": site.to_dict(), "crs": crs, "z_unit": z_unit,
-        "eight_bit": bool(eight_bit), "tile_size_m": spec.tile_size_m, "quantum_m": spec.quantum_m,
-        "block": block_edge(spec), "record": RECORD.descr, "format": 2,
-    }  # fmt: skip
-    if correction is not None:
-        doc["correction"] = [list(row) for row in correction]
+def _key(made_from: dict[str, Any], content_sha256: str) -> str:
+    """The name of a partition: a digest of its file's content and of what else made its records."""
+    doc = {**made_from, "sha256": content_sha256}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+class Slice(NamedTuple):
+    """A tile's slice of one run of the partition: its block in the tile, the run file (a local path
+    or, shared with a cluster, a URL), the first record and the number of records, and the lowest z count."""
+
+    block: int
+    path: str
+    offset: int
+    points: int
+    zmin: int
 
 
 class ChunkVisitor(Protocol):
@@ -191,8 +196,7 @@ def read_range(source: PassSource, start: int, stop: int, visitors: tuple[Any, .
     """Hand every chunk of points [start, stop) of the file, in the site frame, to each visitor (runs
     in a worker process); return the visitors."""
     path = Path(source.path)
-    z_unit = ZUnit.from_dict(source.z_unit) if source.z_unit else None
-    tr = source_transformer(path, source.site, parse_source_crs(source.crs), z_unit)
+    tr = source_transformer(path, source.site, parse_source_crs(source.crs), source.z_unit)
     chunks = site_chunks(
         path, source.site, tr, start=start, stop=stop, eight_bit=source.eight_bit, correction=source.correction
     )
@@ -246,23 +250,24 @@ class Partition:
     folder: Path
     runs: tuple[Run, ...]
 
-    def parts_by_tile(self) -> dict[tuple[int, int], list[tuple[int, str, int, int, int]]]:
+    def parts_by_tile(self) -> dict[tuple[int, int], list[Slice]]:
         """Per tile (i, j), its slices (block, run file path, offset, count, lowest z count) by
         block, then in run order."""
         runs = self.runs
         cols = [np.concatenate([getattr(r, c) for r in runs]) for c in ("cell", "offset", "count", "zmin")]
         which = np.concatenate([np.full(len(r.cell), k) for k, r in enumerate(runs)])
         order = np.argsort(cols[0], kind="stable")
-        out: dict[tuple[int, int], list[tuple[int, str, int, int, int]]] = {}
+        out: dict[tuple[int, int], list[Slice]] = {}
         rows = zip(*(c[order].tolist() for c in (cols[0], which, *cols[1:])), strict=True)
         for cell, k, off, c, z in rows:
-            out.setdefault(tile_of(cell), []).append(
-                (block_of(cell), str(self.folder / runs[k].name), off, c, z)
-            )
+            out.setdefault(tile_of(cell), []).append(Slice(block_of(cell), str(self.folder / runs[k].name), off, c, z))
         return out
 
-    def save(self) -> None:
-        """Write the index of the runs beside them."""
+    def save(self, made_from: dict[str, Any] | None = None) -> None:
+        """Write the index of the runs beside them, and what made them (:meth:`PassSource.made_from`:
+        how a :class:`PartitionCache` names the partition it keeps)."""
+        if made_from is not None:
+            (self.folder / _MADE_FROM).write_text(json.dumps(made_from, sort_keys=True, default=str))
         np.savez(
             self.folder / _INDEX,
             names=np.array([r.name for r in self.runs]),
@@ -281,37 +286,55 @@ class Partition:
         return cls(folder, runs)
 
 
-def new_partition_folder(home: Path) -> Path:
-    """A fresh folder for a partition being written (owner-tagged; provably stale ones are swept,
-    and kept ones older than ``KEEP_S``)."""
-    home.mkdir(parents=True, exist_ok=True)
-    sweep_stale(home, ".new-*")
-    now = time.time()
-    for kept in home.iterdir():
-        if not kept.name.startswith(".") and now - kept.stat().st_mtime > KEEP_S:
-            shutil.rmtree(kept, ignore_errors=True)
-    folder = home / f".new-{owner_tag()}"
-    folder.mkdir()
-    return folder
+@dataclass(frozen=True)
+class PartitionCache:
+    """The partitions ingest keeps for the tile stage, in ``folder`` (``SITELINE_HOME/partitions``),
+    each named by a digest of its file's content and of what else made its records (the one place
+    the name is made): ingest cuts a file into a :meth:`new_folder` as it scans it and :meth:`keep`
+    s it; the tile stage :meth:`claim` s the one that matches what it would cut, or cuts anew."""
 
+    folder: Path
 
-def keep_partition(folder: Path, home: Path, key: str) -> None:
-    """Move the saved partition ``folder`` to ``home/key`` for the tile stage (replacing one there)."""
-    dest = home / key
-    shutil.rmtree(dest, ignore_errors=True)
-    os.replace(folder, dest)
+    def sweep_unfinished(self) -> None:
+        """Remove partitions a killed ingest was writing (their owner is provably gone)."""
+        if self.folder.is_dir():
+            sweep_stale(self.folder, ".new-*")
 
+    def new_folder(self) -> Path:
+        """A fresh folder for a partition being written (owner-tagged; provably stale ones are swept,
+        and kept ones older than ``KEEP_S``)."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.sweep_unfinished()
+        now = time.time()
+        for kept in self.folder.iterdir():
+            if not kept.name.startswith(".") and now - kept.stat().st_mtime > KEEP_S:
+                shutil.rmtree(kept, ignore_errors=True)
+        folder = self.folder / f".new-{owner_tag()}"
+        folder.mkdir()
+        return folder
 
-def claim_partition(home: Path, key: str, into: Path) -> Partition | None:
-    """Take the kept partition ``home/key`` (moved to ``into``, so no other caller gets it), None when
-    there is none or it cannot be read."""
-    src = home / key
-    try:
-        os.replace(src, into)
-    except OSError:
-        return None
-    try:
-        return Partition.load(into)
-    except (OSError, ValueError, KeyError, IndexError, TypeError):
-        shutil.rmtree(into, ignore_errors=True)
-        return None
+    def keep(self, runs: Path, content_sha256: str) -> bool:
+        """Keep the saved partition ``runs`` (a :meth:`new_folder`) of a file with content
+        ``content_sha256`` for the tile stage, replacing one of the same name; False (nothing kept)
+        when it does not record what made it."""
+        try:
+            made_from = json.loads((runs / _MADE_FROM).read_text())
+        except (OSError, ValueError):
+            return False
+        dest = self.folder / _key(made_from, content_sha256)
+        shutil.rmtree(dest, ignore_errors=True)
+        os.replace(runs, dest)
+        return True
+
+    def claim(self, source: PassSource, content_sha256: str, spec: TileSpec, into: Path) -> Partition | None:
+        """Take the kept partition of ``source`` (content ``content_sha256``) cut on ``spec``'s grid,
+        moved to ``into`` so no other caller gets it; None when there is none or it cannot be read."""
+        try:
+            os.replace(self.folder / _key(source.made_from(spec), content_sha256), into)
+        except OSError:
+            return None
+        try:
+            return Partition.load(into)
+        except (OSError, ValueError, KeyError, IndexError, TypeError):
+            shutil.rmtree(into, ignore_errors=True)
+            return None

@@ -10,7 +10,18 @@ pull in the renderer and torch.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from siteline.lazy import lazy_names
+
+if TYPE_CHECKING:  # mypy and editors see the real signatures; nothing is imported at run time
+    from siteline.records.release import ReleaseInfo as ReleaseInfo
+    from siteline.release.manifest import read_manifest as read_manifest
+    from siteline.release.manifest import verify_files as verify_files
+    from siteline.release.params import ReleaseParams as ReleaseParams
+    from siteline.release.splits import split_pairs as split_pairs
+    from siteline.release.stage import build_release as build_release
+    from siteline.release.stage import publish_release as publish_release
 
 _WHERE = {
     "ReleaseInfo": "siteline.records.release",

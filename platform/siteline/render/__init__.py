@@ -6,7 +6,18 @@ commands that only read the catalog do not pull in torch.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from siteline.lazy import lazy_names
+
+if TYPE_CHECKING:  # mypy and editors see the real signatures; nothing is imported at run time
+    from siteline.render.georef import render_georeferenced as render_georeferenced
+    from siteline.render.georef import to_site_local_f32 as to_site_local_f32
+    from siteline.render.outputs import write_render as write_render
+    from siteline.render.settings import RenderSettings as RenderSettings
+    from siteline.render.zbuffer import RenderResult as RenderResult
+    from siteline.render.zbuffer import disk_offsets as disk_offsets
+    from siteline.render.zbuffer import render_points as render_points
 
 _WHERE = {
     "RenderResult": "siteline.render.zbuffer",

@@ -90,6 +90,10 @@ class Store(ABC):
         """Remove the file or folder at ``uri`` (a folder's marker first); a missing one is fine."""
 
     @abstractmethod
+    def size(self, uri: str) -> int:
+        """Bytes held at ``uri``: a file's size, or a folder's files summed (0 when nothing is there)."""
+
+    @abstractmethod
     def names(self, uri: str) -> list[str]:
         """The names of the files and folders directly in the folder ``uri``, sorted ([] when none)."""
 

@@ -185,6 +185,12 @@ class LocalStore(Store):
             if p.parent.parent.name == "blobs":  # a blob's shard folder (blobs/<sha[:2]>) left empty
                 _prune(p.parent)
 
+    def size(self, uri: str) -> int:
+        path = local_path(uri)
+        if path.is_file():
+            return path.stat().st_size
+        return sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else 0
+
     def names(self, uri: str) -> list[str]:
         p = local_path(uri)
         return sorted(c.name for c in p.iterdir()) if p.is_dir() else []

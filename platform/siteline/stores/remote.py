@@ -121,6 +121,11 @@ class FsspecStore(Store):
             fs.rm(path, recursive=True)
         fs.invalidate_cache()
 
+    def size(self, uri: str) -> int:
+        fs, path = file_system(uri)
+        fs.invalidate_cache()
+        return int(fs.du(path)) if fs.exists(path) else 0
+
     def names(self, uri: str) -> list[str]:
         fs, path = file_system(uri)
         fs.invalidate_cache()

@@ -28,12 +28,14 @@ import zlib
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.errors import TileError
 from siteline.pointpass.kernels import rows as row_kernels
+from siteline.pointpass.partition import Slice
 from siteline.pointpass.schema import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.stores.remote import read_into
@@ -53,23 +55,31 @@ from siteline.tiles.nodes import NodePlan, add_cube_counts, cube_counts, plan_no
 # bytes a point at the peak; SITELINE_TILE_BATCH_POINTS, docs/performance.md)
 BATCH_POINTS = DEFAULT_TILE_BATCH_POINTS
 
-# a slice of the partition: (block, run file, offset, count, lowest z count)
-Part = tuple[int, str, int, int, int]
 Rows = Callable[[int, int], np.ndarray]  # records [a, b) of a tile, as placed
 Columns = Callable[[int, int], dict[str, np.ndarray]]  # each attribute of rows [a, b), in node order
+
+
+class WrittenTile(NamedTuple):
+    """What :func:`write_tile` wrote: the tile's key, its points, the checksum of its arrays and its
+    node rows."""
+
+    key: str
+    points: int
+    checksum: str
+    nodes: NodeTable
 
 
 def tile_seed(key: str, seed: int) -> int:
     return zlib.crc32(key.encode()) ^ (seed * 2654435761 & 0xFFFFFFFF)
 
 
-def batches(parts: list[Part], budget: int) -> list[list[Part]]:
+def batches(parts: list[Slice], budget: int) -> list[list[Slice]]:
     """Consecutive whole blocks of ``parts`` (sorted by block), each batch at most ``budget`` points
     unless one block alone holds more."""
     per_block: dict[int, int] = {}
     for p in parts:
-        per_block[p[0]] = per_block.get(p[0], 0) + p[3]
-    out: list[list[Part]] = []
+        per_block[p.block] = per_block.get(p.block, 0) + p.points
+    out: list[list[Slice]] = []
     size = 0
     for k, part in enumerate(parts):
         if (k == 0 or part[0] != parts[k - 1][0]) and (not out or size + per_block[part[0]] > budget):
@@ -80,15 +90,15 @@ def batches(parts: list[Part], budget: int) -> list[list[Part]]:
     return out
 
 
-def _gather(parts: list[Part], out: np.ndarray | None = None) -> np.ndarray:
+def _gather(parts: list[Slice], out: np.ndarray | None = None) -> np.ndarray:
     """A batch's records from its slices of the runs, in order (into ``out`` when given: records of
     the batch's size). Slices that lie end to end in a run file (a chunk's next blocks) are read as
     one range (:func:`siteline.stores.remote.read_into`: one read, or one ranged GET of an fsspec
     URL)."""
-    dest = np.r_[0, np.cumsum([p[3] for p in parts])]
+    dest = np.r_[0, np.cumsum([p.points for p in parts])]
     out = np.empty(int(dest[-1]), RECORD) if out is None else out
     ranges: list[tuple[str, int, int, list[int]]] = []
-    for k in sorted(range(len(parts)), key=lambda k: (parts[k][1], parts[k][2])):
+    for k in sorted(range(len(parts)), key=lambda k: (parts[k].path, parts[k].offset)):
         _, path, offset, count, _ = parts[k]
         if ranges and ranges[-1][0] == path and ranges[-1][2] == offset:
             ranges[-1] = (path, ranges[-1][1], offset + count, [*ranges[-1][3], k])
@@ -103,13 +113,13 @@ def _gather(parts: list[Part], out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def _gathered(groups: list[list[Part]]) -> Iterator[np.ndarray]:
+def _gathered(groups: list[list[Slice]]) -> Iterator[np.ndarray]:
     """Each batch's records in turn: the next batch is read in a thread while the caller works on
     this one (the runs come from disk, siteline.stores.directio), into records this thread allocates."""
     with ThreadPoolExecutor(1, thread_name_prefix="siteline-gather") as ahead:
 
-        def read(parts: list[Part]) -> Future[np.ndarray]:
-            return ahead.submit(_gather, parts, np.empty(sum(p[3] for p in parts), RECORD))
+        def read(parts: list[Slice]) -> Future[np.ndarray]:
+            return ahead.submit(_gather, parts, np.empty(sum(p.points for p in parts), RECORD))
 
         pending = [read(parts) for parts in groups[:1]]
         for k in range(len(groups)):
@@ -119,10 +129,10 @@ def _gathered(groups: list[list[Part]]) -> Iterator[np.ndarray]:
             yield rec
 
 
-def _levels(rec: np.ndarray, parts: list[Part], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
+def _levels(rec: np.ndarray, parts: list[Slice], spec: TileSpec, seed: int, z0: int) -> np.ndarray:
     """The levels of a batch's records (ranks seeded per block; z0: the tile's lowest z count)."""
-    blocks = np.array([p[0] for p in parts])
-    counts = np.array([p[3] for p in parts])
+    blocks = np.array([p.block for p in parts])
+    counts = np.array([p.points for p in parts])
     head = np.r_[0, np.flatnonzero(blocks[1:] != blocks[:-1]) + 1]
     sizes = np.add.reduceat(counts, head) if len(parts) else counts
     order = block_ranks(sizes, [[seed, int(b)] for b in blocks[head]] if len(parts) else [])
@@ -136,7 +146,7 @@ def _scale(values: list[float | None]) -> float | None:
 
 
 def _in_memory(
-    key: str, parts: list[Part], spec: TileSpec, seed: int, z0: int
+    key: str, parts: list[Slice], spec: TileSpec, seed: int, z0: int
 ) -> tuple[NodePlan, Columns, float | None]:
     rec = _gather(parts)
     levels = _levels(rec, parts, spec, seed, z0)
@@ -202,7 +212,7 @@ def _placed_file(folder: Path, size: int) -> Path:
 
 
 def _out_of_core(
-    key: str, groups: list[list[Part]], spec: TileSpec, seed: int, z0: int, scratch: Path, placed: Path
+    key: str, groups: list[list[Slice]], spec: TileSpec, seed: int, z0: int, scratch: Path, placed: Path
 ) -> tuple[NodePlan, Columns, float | None]:
     counted, scales = [], []
     for k, (parts, rec) in enumerate(zip(groups, _gathered(groups), strict=True)):  # pass 1: levels, counts
@@ -291,13 +301,13 @@ async def _write(
 
 def write_tile(
     key: str,
-    parts: list[Part],
+    parts: list[Slice],
     group_path: str,
     spec_doc: dict,
     seed: int,
     scratch: str | None,
     batch_points: int,
-) -> tuple[str, int, str, NodeTable]:
+) -> WrittenTile:
     """Level, order and write one tile's arrays (``parts``: its slices of the partition, by block) into
     the store ``group_path`` (a local path or an fsspec URL); a tile of more than ``batch_points``
     points goes in batches through ``scratch`` (a local folder; None: a temporary one). Returns its
@@ -309,7 +319,7 @@ def write_tile(
     spec = TileSpec.from_dict(spec_doc)
     seed = tile_seed(key, seed)
     groups = batches(parts, batch_points)
-    z0 = min(p[4] for p in parts)
+    z0 = min(p.zmin for p in parts)
     with tempfile.TemporaryDirectory(prefix="siteline-tile-", dir=scratch) as work:
         if len(groups) == 1:
             plan, columns, scale = _in_memory(key, parts, spec, seed, z0)
@@ -317,4 +327,4 @@ def write_tile(
             placed = Path(scratch) if scratch is not None else Path(work)
             plan, columns, scale = _out_of_core(key, groups, spec, seed, z0, Path(work), placed)
         checksum, lo, hi = sync(_write(group_path, key, plan, columns, spec, scale))
-    return key, plan.points, checksum, plan.table(key, lo, hi)
+    return WrittenTile(key, plan.points, checksum, plan.table(key, lo, hi))

@@ -4,18 +4,17 @@ tiled, and published whole under the store's layout. Never touches the catalog."
 from __future__ import annotations
 
 import logging
-from concurrent.futures import Executor
 from pathlib import Path
 
 from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
+from siteline.pointpass.resources import TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import Store, layout
 from siteline.stores.blobs import resolve_file
-from siteline.tiles.batches import BATCH_POINTS
 from siteline.tiles.plan import TilingPlan
-from siteline.tiles.writer import write_tiles
+from siteline.tiles.writer import TileInput, write_tiles
 
 log = logging.getLogger(__name__)
 
@@ -39,42 +38,24 @@ def execute_tiling(
     store: Store,
     spec: TileSpec,
     generation: int,
-    workers: int = 2,
+    resources: TilingResources = TilingResources(),
     progress: Progress = no_progress,
-    partitions: Path | None = None,
-    batch_points: int = BATCH_POINTS,
-    executor: Executor | None = None,
 ) -> SceneTiling:
     """Tile the scene of ``plan`` into the store at its ``generation``'s address, published whole (a
-    store left there without its marker is replaced), its node index inside; return the tiling. A
-    partition of the point cloud that ingest kept in ``partitions`` is used when it matches;
-    ``batch_points``: see :func:`siteline.tiles.writer.write_tiles`. ``executor``: where the tiles
-    are written (a Dask cluster's executor): straight into the store, which its workers share."""
+    store left there without its marker is replaced), its node index inside; return the tiling.
+    ``resources``: :class:`siteline.pointpass.TilingResources` (a partition ingest kept in its
+    ``partitions`` is used when it matches; with an ``executor``, a Dask cluster's, the tiles are
+    written straight into the store, which its workers share)."""
     las = scene_las(store, plan)
     src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
     z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
     uri = layout.tile_store(store, plan.scene_id, generation)
     store.remove(uri)
     log.info("tiling scene %d from %s into %s (generation %d)", plan.scene_id, las.name, uri, generation)
-    building = store.publish_shared(uri) if executor is not None else store.publish(uri)
+    building = store.publish_shared(uri) if resources.executor is not None else store.publish(uri)
+    source = TileInput(las, plan.site, src, z_unit, plan.eight_bit, plan.correction, plan.las.sha256)
     with building as work:
-        written = write_tiles(
-            las,
-            plan.site,
-            src,
-            work,
-            spec,
-            workers=workers,
-            seed=plan.seed,
-            progress=progress,
-            z_unit=z_unit,
-            eight_bit=plan.eight_bit,
-            kept=(partitions, plan.las.sha256) if partitions is not None else None,
-            batch_points=batch_points,
-            executor=executor,
-            scratch=store.staging,
-            correction=plan.correction,
-        )
+        written = write_tiles(source, work, spec, resources.completed(scratch=store.staging), plan.seed, progress)
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,
         written.bytes, written.seconds, len(written.nodes), las.stat().st_size, plan.site.version,

@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import logging
-from concurrent.futures import Executor
 from dataclasses import dataclass
 
 from siteline.catalog import Catalog
 from siteline.catalog.scenes import record_tiling
 from siteline.config import Settings
+from siteline.pointpass.partition import PartitionCache
+from siteline.pointpass.resources import TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.runs import StageRun
 from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import layout
-from siteline.stores.owners import sweep_stale
 from siteline.tiles.execute import execute_tiling
 from siteline.tiles.plan import plan_tiling
 from siteline.tiles.reader import SceneTiles, class_counts
@@ -34,12 +34,12 @@ def tile_scene(
     catalog: Catalog,
     settings: Settings,
     scene_id: int,
+    *,
     spec: TileSpec | None = None,
-    workers: int = 2,
+    resources: TilingResources = TilingResources(),
     progress: Progress = no_progress,
     run_id: str | None = None,
     retile: bool = False,
-    executor: Executor | None = None,
 ) -> TileOutcome:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
     ``retile`` (tile it again in the current layout, e.g. a store written in input order) or its
@@ -51,15 +51,16 @@ def tile_scene(
     next generation beside the old store, commits, then removes the old one: the scene's pairs'
     outputs are keyed by the generation, and its imported label sets, aligned with the old order,
     are refused until imported again (siteline.labelsets). One tiling of a scene runs at a time (a
-    second caller waits, then finds the scene tiled). ``executor``: write the tiles there (a Dask
-    cluster's executor, whose workers share the store) instead of ``workers`` local processes."""
+    second caller waits, then finds the scene tiled). ``resources``: workers or an executor (a Dask
+    cluster's, whose workers share the store) and the batch budget (None: the settings'); the
+    partition ingest kept is looked for in the home."""
     with catalog.lock(f"scene:{scene_id}:tiles"):
-        return _tile(catalog, settings, scene_id, spec, workers, progress, run_id, retile, executor)
+        return _tile(catalog, settings, scene_id, spec, resources, progress, run_id, retile)
 
 
 def _tile(
-    catalog: Catalog, settings: Settings, scene_id: int, spec: TileSpec | None, workers: int,
-    progress: Progress, run_id: str | None, retile: bool, executor: Executor | None = None,
+    catalog: Catalog, settings: Settings, scene_id: int, spec: TileSpec | None, resources: TilingResources,
+    progress: Progress, run_id: str | None, retile: bool,
 ) -> TileOutcome:  # fmt: skip
     with catalog.transaction() as s:
         plan = plan_tiling(s, scene_id)
@@ -69,20 +70,11 @@ def _tile(
         log.info("scene %d is already tiled", scene_id)
         return TileOutcome(None, plan.already_tiled())
     spec = spec or TileSpec.for_site(plan.site)
-    run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": workers}, run_id=run_id)
-    kept = layout.partitions(settings.home)
-    sweep_stale(kept, ".new-*")  # a partition an ingest killed after its commit was writing
-    tiling = execute_tiling(
-        plan,
-        store,
-        spec,
-        plan.generation(done),
-        workers,
-        progress,
-        kept,
-        settings.tile_batch_points,
-        executor,
-    )
+    run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": resources.workers}, run_id=run_id)
+    cache = PartitionCache(layout.partitions(settings.home))
+    cache.sweep_unfinished()  # a partition an ingest killed after its commit was writing
+    resources = resources.completed(batch_points=settings.tile_batch_points, partitions=cache)
+    tiling = execute_tiling(plan, store, spec, plan.generation(done), resources, progress)
     try:
         counts = class_counts(SceneTiles.open(tiling.uri)) if done else None
         with catalog.transaction() as s:

@@ -37,18 +37,19 @@ from siteline.pointpass.partition import (
     Partition,
     PassSource,
     RunWriter,
-    claim_partition,
+    Slice,
     point_ranges,
     read_file,
 )
+from siteline.pointpass.resources import TilingResources
 from siteline.pointpass.sitestream import Correction, source_transformer
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.site import SiteSpec
+from siteline.stores import Store, open_store
 from siteline.stores.owners import owner_tag, sweep_stale
-from siteline.stores.remote import file_system
-from siteline.tiles.batches import BATCH_POINTS, Part, write_tile
+from siteline.tiles.batches import BATCH_POINTS, WrittenTile, write_tile
 from siteline.tiles.index import FORMAT_VERSION, write_index
 from siteline.tiles.layout import tile_key
 
@@ -76,26 +77,13 @@ class TileResult:
         return self.bytes / max(self.points, 1)
 
 
-def _dir_bytes(uri: str) -> int:
-    fs, path = file_system(uri)
-    fs.invalidate_cache()
-    return int(fs.du(path))
-
-
-def _remove(uri: str) -> None:
-    fs, path = file_system(uri)
-    if fs.exists(path):
-        fs.rm(path, recursive=True)
-
-
-def _share_runs(parts: dict[str, list[Part]], folder: Path, uri: str) -> dict[str, list[Part]]:
+def _share_runs(store: Store, parts: dict[str, list[Slice]], folder: Path, uri: str) -> dict[str, list[Slice]]:
     """Copy the partition's run files to ``uri`` (where a cluster's workers read them); the same
     slices of the copies."""
-    fs, path = file_system(uri)
-    names = sorted({Path(p[1]).name for slices in parts.values() for p in slices})
-    fs.makedirs(path, exist_ok=True)
-    fs.put([str(folder / n) for n in names], [f"{path}/{n}" for n in names])
-    return {k: [(b, f"{uri}/{Path(f).name}", o, c, z) for b, f, o, c, z in v] for k, v in parts.items()}
+    names = sorted({Path(p.path).name for slices in parts.values() for p in slices})
+    for n in names:
+        store.put_file(folder / n, f"{uri}/{n}")
+    return {k: [p._replace(path=f"{uri}/{Path(p.path).name}") for p in v] for k, v in parts.items()}
 
 
 def _partition(
@@ -112,14 +100,14 @@ def _partition(
 
 def _write_all(
     pool: Executor | None,
-    parts: dict[str, list[Part]],
+    parts: dict[str, list[Slice]],
     out: str,
     spec: TileSpec,
     seed: int,
     scratch: str | None,
     batch_points: int,
     progress: Progress,
-) -> list[tuple[str, int, str, NodeTable]]:
+) -> list[WrittenTile]:
     """Write every tile of ``parts`` into the group ``out`` (in parallel with a pool), in key order;
     ``scratch``: the workers' folder for large tiles (None: each makes its own)."""
     keys = sorted(parts)
@@ -134,109 +122,99 @@ def _write_all(
     return results
 
 
+@dataclass(frozen=True)
+class TileInput:
+    """The point cloud to tile and what ingest recorded of it: the file, the site, the file's CRS,
+    the unit of its z (None: the unit the CRS implies), whether its colour is 0-255 in 16-bit fields
+    (None: judged from its first chunk), the scene's co-registration (applied to every point as it is
+    cut, siteline.pointpass.sitestream.site_chunks), and the file's sha256 (with
+    :attr:`TilingResources.partitions`: the partition ingest kept of it is used when it matches)."""
+
+    path: Path
+    site: SiteSpec
+    crs: pyproj.CRS
+    z_unit: ZUnit | None = None
+    eight_bit: bool | None = None
+    correction: Correction | None = None
+    sha256: str | None = None
+
+
 def write_tiles(
-    las_path: Path,
-    site: SiteSpec,
-    src_crs: pyproj.CRS,
+    source: TileInput,
     out: Path | str,
     spec: TileSpec | None = None,
-    workers: int = 2,
+    resources: TilingResources = TilingResources(),
     seed: int = 0,
     progress: Progress = no_progress,
-    z_unit: ZUnit | None = None,
-    eight_bit: bool | None = None,
-    kept: tuple[Path, str] | None = None,
-    batch_points: int = BATCH_POINTS,
-    executor: Executor | None = None,
-    scratch: Path | None = None,
-    correction: Correction | None = None,
 ) -> TileResult:
-    """Tile ``las_path`` into the new Zarr group ``out`` (a local path or an fsspec URL; it must not
-    exist; removed again on an error); return its node index. ``z_unit``: the unit of the file's z
-    recorded at ingest (None: the unit its CRS implies). ``eight_bit``: whether its colour is 0-255 in
-    16-bit fields, as ingest recorded it (None: judged from its first chunk). ``kept``: (partitions
-    folder, the file's sha256) where ingest may have kept this file's partition
-    (siteline.pointpass.partition); used when it matches. ``batch_points``: a tile of more points is levelled
-    and ordered in batches of its blocks, so a worker's memory stays about 200 bytes x
-    ``batch_points`` whatever the density (the same store). ``executor``: where the tiles are
-    written (a Dask cluster's ``Client.get_executor()``, say) instead of this machine's process
-    pool; the partition's runs are then copied beside ``out``, where its workers read them.
-    ``scratch``: a local folder for the partition, on the file system of ``kept`` for it to be
-    taken over (default: the system's temporary folder). ``correction``: the scene's co-registration
-    (siteline.pointpass.sitestream.site_chunks), applied to every point as it is cut."""
+    """Tile ``source`` into the new Zarr group ``out`` (a local path or an fsspec URL; it must not
+    exist; removed again on an error) with ``resources`` (workers or an executor, batch budget,
+    scratch folder, kept partitions: :class:`TilingResources`); return its node index. With an
+    executor the partition's runs are copied beside ``out``, where its workers read them."""
     import zarr
 
     t0 = time.perf_counter()
-    spec = spec or TileSpec.for_site(site)
-    target = str(out)
-    total, eight_bit = _check_source(las_path, site, src_crs, z_unit, eight_bit, target)
-    spill_dir = _spill_dir(target, scratch)
+    spec = spec or TileSpec.for_site(source.site)
+    target, store = str(out), open_store(str(out))
+    total, eight_bit = _check_source(source, store, target)
+    spill_dir = _spill_dir(target, resources.scratch)
+    executor, workers = resources.executor, resources.workers
     # the caller's executor (a cluster's) reads the runs beside the store; this machine's pool, here
     runs_uri = f"{target.rstrip('/')}.runs-{owner_tag()}" if executor is not None else None
-    source = PassSource(
-        str(las_path), site, crs_text(src_crs), z_unit_of(src_crs, z_unit).to_dict(), eight_bit, correction
-    )
+    las = source.path
+    passing = PassSource(
+        str(las), source.site, crs_text(source.crs), z_unit_of(source.crs, source.z_unit), eight_bit,
+        source.correction,
+    )  # fmt: skip
     try:
-        partition = claim_partition(kept[0], source.key(kept[1], spec), spill_dir) if kept else None
+        partition = None
+        if resources.partitions is not None and source.sha256 is not None:
+            partition = resources.partitions.claim(passing, source.sha256, spec, spill_dir)
         if partition is None:
             spill_dir.mkdir(parents=True)
-            partition = _partition(source, total, spec, spill_dir, workers, progress)
+            partition = _partition(passing, total, spec, spill_dir, workers, progress)
         else:
-            log.info("tiling %s from the partition its ingest kept", las_path.name)
+            log.info("tiling %s from the partition its ingest kept", las.name)
         t_part = time.perf_counter() - t0
         parts = {tile_key(*ij): p for ij, p in partition.parts_by_tile().items()}
         if runs_uri is not None:
-            parts = _share_runs(parts, spill_dir, runs_uri)
+            parts = _share_runs(store, parts, spill_dir, runs_uri)
         root = zarr.open_group(target, mode="w")
         root.create_group("tiles")
         if executor is None and workers > 1 and total >= PARALLEL_MIN_POINTS:
             executor = process_pool(workers)
         how = type(executor).__name__ if executor is not None else "this process"
-        log.info("writing %d tiles of %s with %s", len(parts), las_path.name, how)
+        log.info("writing %d tiles of %s with %s", len(parts), las.name, how)
         worker_scratch = None if runs_uri is not None else str(spill_dir)
-        results = _write_all(executor, parts, target, spec, seed, worker_scratch, batch_points, progress)
-        nodes, checksum = _index(root, results, total, las_path, site, spec)
-        size = _dir_bytes(target)
+        batch = resources.batch_points or BATCH_POINTS
+        results = _write_all(executor, parts, target, spec, seed, worker_scratch, batch, progress)
+        nodes, checksum = _index(root, results, total, las, spec, source.site)
+        size = store.size(target)
     except BaseException:
-        _remove(target)
+        store.remove(target)
         raise
     finally:
         shutil.rmtree(spill_dir, ignore_errors=True)
         if runs_uri is not None:
-            _remove(runs_uri)
+            store.remove(runs_uri)
     return TileResult(
-        target,
-        nodes.points,
-        len(results),
-        nodes.levels,
-        size,
-        checksum,
-        nodes,
-        time.perf_counter() - t0,
-        t_part,
+        target, nodes.points, len(results), nodes.levels, size, checksum, nodes, time.perf_counter() - t0, t_part
     )
 
 
-def _check_source(
-    las_path: Path,
-    site: SiteSpec,
-    src_crs: pyproj.CRS,
-    z_unit: ZUnit | None,
-    eight_bit: bool | None,
-    target: str,
-) -> tuple[int, bool | None]:
+def _check_source(source: TileInput, store: Store, target: str) -> tuple[int, bool | None]:
     """The file's point count and colour depth, after refusing an existing ``target``, an impossible
     transformation or an empty file."""
-    fs, path = file_system(target)
-    if fs.exists(path):
+    if store.exists(target):
         raise TileError(f"tile store {target} already exists; remove it or tile into another path.")
-    source_transformer(las_path, site, src_crs, z_unit)
-    with open_las(las_path) as reader:
+    las, eight_bit = source.path, source.eight_bit
+    source_transformer(las, source.site, source.crs, source.z_unit)
+    with open_las(las) as reader:
         total = int(reader.header.point_count)
         if eight_bit is None:
-            eight_bit = detect_eight_bit(reader, las_path)
+            eight_bit = detect_eight_bit(reader, las)
     if total == 0:
-        raise TileError(f"point cloud {las_path} holds no points to tile.")
+        raise TileError(f"point cloud {las} holds no points to tile.")
     return total, eight_bit
 
 
@@ -250,13 +228,12 @@ def _spill_dir(target: str, scratch: Path | None) -> Path:
 
 
 def _index(
-    root: Any, results: list[tuple[str, int, str, NodeTable]], total: int, las_path: Path, site: SiteSpec,
-    spec: TileSpec,
-) -> tuple[NodeTable, str]:  # fmt: skip
+    root: Any, results: list[WrittenTile], total: int, las_path: Path, spec: TileSpec, site: SiteSpec
+) -> tuple[NodeTable, str]:
     """Write the store's node index and attributes; return the index and the store's checksum."""
-    nodes = NodeTable.concat([r[3] for r in results])
-    checksum = hashlib.sha256("\n".join(f"{k}:{c}" for k, _, c, _ in results).encode()).hexdigest()
-    if nodes.points != total or sum(r[1] for r in results) != total:
+    nodes = NodeTable.concat([r.nodes for r in results])
+    checksum = hashlib.sha256("\n".join(f"{r.key}:{r.checksum}" for r in results).encode()).hexdigest()
+    if nodes.points != total or sum(r.points for r in results) != total:
         raise TileError(
             f"point cloud {las_path}: its header counts {total:,} points but {nodes.points:,} were tiled."
         )
