@@ -55,14 +55,16 @@ def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.05, half_m:
             fill_record(
                 rec,
                 np.c_[xy, z] + ORIGIN,
-                rgb=rng.integers(0, 256, (k, 3), dtype=np.uint8),
-                classification=rng.choice(np.array([2, 6, 19], np.uint8), k),
-                intensity=rng.integers(0, 255, k),
-                # a scanner's clock counts whole microseconds: each time the float64 nearest one
-                # (400000 + k 2e-6 summed in floating point is one ulp off for some k past 22.5M,
-                # and such times round-trip at no decimal scale, so they cost 4.6 bytes a point)
-                gps_time=(400_000_000_000 + 2 * (start + np.arange(k))) / 1e6,
-                return_number=np.ones(k, np.uint8),
+                dict(
+                    rgb=rng.integers(0, 256, (k, 3), dtype=np.uint8),
+                    classification=rng.choice(np.array([2, 6, 19], np.uint8), k),
+                    intensity=rng.integers(0, 255, k),
+                    # a scanner's clock counts whole microseconds: each time the float64 nearest one
+                    # (400000 + k 2e-6 summed in floating point is one ulp off for some k past 22.5M,
+                    # and such times round-trip at no decimal scale, so they cost 4.6 bytes a point)
+                    gps_time=(400_000_000_000 + 2 * (start + np.arange(k))) / 1e6,
+                    return_number=np.ones(k, np.uint8),
+                ),
             )
             w.write_points(rec)
 

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from siteline.pointpass import TilingResources
+from siteline.records.release import ReleaseOptions
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -73,7 +74,7 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     process_pair(cat, settings, 1, params)
     t["process pair (labels, views, renders)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    build_release(cat, settings, "demo", "bench", ReleaseParams(params), pair_ids=[1])
+    build_release(cat, settings, "demo", "bench", ReleaseParams(params), options=ReleaseOptions(pair_ids=[1]))
     t["build release (copies renders out)"] = time.perf_counter() - t0
     cat.dispose()
     return t

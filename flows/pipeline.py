@@ -47,7 +47,7 @@ from siteline.ingest import IngestOptions  # noqa: E402
 from siteline.pairs.params import PairParams  # noqa: E402
 from siteline.pointpass import TilingResources  # noqa: E402
 from siteline.records.pairs import PairOutput  # noqa: E402
-from siteline.records.release import ReleaseInfo  # noqa: E402
+from siteline.records.release import ReleaseInfo, ReleaseOptions  # noqa: E402
 from siteline.records.runs import StageRun  # noqa: E402
 from siteline.release.knobs import ReleaseKnobs  # noqa: E402
 from siteline.stores import join  # noqa: E402
@@ -278,7 +278,7 @@ def build_release_task(site: str, name: str, release_settings: dict[str, Any] | 
                                {"labels": 1.0, "views": 1.0, "renders": 4.0, "release images": 2.0})  # fmt: skip
         info = _stage(
             "build_release", f"release:{name}", release_settings or {}, pipeline.release, site, name,
-            _knobs(release_settings), publish=publish, progress=progress,
+            _knobs(release_settings), ReleaseOptions(publish=publish), progress=progress,
         )  # fmt: skip
     progress.finish(f"{info.version} up to date" if info.up_to_date else f"{info.version} {info.status}")
     return info

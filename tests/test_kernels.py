@@ -93,18 +93,20 @@ def test_cube_rows_count_points_per_level_and_cube() -> None:
 def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
     """One group of 1,000 slots starting at 7: placed in one batch or in uneven batches, its points
     take the same slots, each once (the seeded permutation, or in order)."""
-    from siteline.pointpass.kernels.nodes import place_points
+    from siteline.pointpass.kernels.nodes import group_points, slot_points
 
     n = 1_000
     counts, levels = np.zeros((n, 3), np.int32), np.zeros(n, np.uint8)
-    plan = (np.zeros(8, np.int64), np.zeros(1, np.int64), 0, 1, np.array([0]), np.array([7]), np.array([n]))
+    grid, key, start, size = (781, 6, 0, 1), np.array([0]), np.array([7]), np.array([n])
+    band_of_level, depth_of_band = np.zeros(8, np.int64), np.zeros(1, np.int64)
+
+    def place_points(a: int, b: int, seen: np.ndarray) -> np.ndarray:
+        group = group_points(counts[a:b], levels[a:b], grid, band_of_level, depth_of_band, key)
+        return slot_points(group, start, size, seen, 42, shuffle)
 
     def place(cuts: list[int]) -> np.ndarray:
         seen = np.zeros(1, np.int64)
-        out = [
-            place_points(counts[a:b], levels[a:b], 781, 6, *plan, seen, 42, shuffle)
-            for a, b in zip(cuts[:-1], cuts[1:], strict=True)
-        ]
+        out = [place_points(a, b, seen) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
         assert seen[0] == n
         return np.concatenate(out)
 
@@ -113,7 +115,7 @@ def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
     assert np.array_equal(np.sort(whole), np.arange(7, 7 + n))
     assert (whole[:-1] < whole[1:]).all() != shuffle
     seen = np.array([n - 1])  # one slot left for two points: no group to place them in
-    assert (place_points(counts[:2], levels[:2], 781, 6, *plan, seen, 42, shuffle) == -1).all()
+    assert (place_points(0, 2, seen) == -1).all()
 
 
 def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> None:

@@ -98,6 +98,17 @@ def test_the_library_never_imports_prefect() -> None:
     assert not bad, f"the library imports prefect: {bad} (flows/ orchestrate, the library never does)"
 
 
+def test_only_the_stores_import_fsspec() -> None:
+    """Every read and write of the data stores goes through a Store (or siteline.stores' helpers):
+    no module outside siteline.stores imports fsspec, or reaches for its file systems."""
+    bad = [
+        _rel(p) for p, tree in _modules()
+        if not _rel(p).startswith("stores/")
+        and any(m.split(".")[0] == "fsspec" or m == "siteline.stores.remote.file_system" for m in _imports(tree))
+    ]  # fmt: skip
+    assert not bad, f"fsspec outside siteline.stores: {bad}"
+
+
 def test_only_the_stores_tell_local_from_remote() -> None:
     bad = [
         _rel(p)
@@ -107,12 +118,20 @@ def test_only_the_stores_tell_local_from_remote() -> None:
     assert not bad, f"is_remote outside siteline.stores: {bad} (use a Store's methods)"
 
 
-def test_execute_parts_never_import_the_catalog() -> None:
+# a stage's catalog side: its plan and stage modules, and these, which read the catalog for a command
+# (an export of a label set, a release diff, a release's health check); every other module of a stage
+# package is its execute side (execute.py, release/build.py, release/publish.py, the writers and readers
+# they use), which works from a plan alone
+CATALOG_SIDE = {"labelsets/export.py", "release/query.py", "release/repair.py"}
+
+
+def test_execute_sides_never_import_the_catalog() -> None:
     bad = [
         _rel(p) for p, tree in _modules()
-        if p.name == "execute.py" and any(m.startswith("siteline.catalog") for m in _imports(tree))
+        if _rel(p).split("/")[0] in STAGES and p.name not in ("plan.py", "stage.py", "__init__.py")
+        and _rel(p) not in CATALOG_SIDE and any(m.startswith("siteline.catalog") for m in _imports(tree))
     ]  # fmt: skip
-    assert not bad, f"an execute part imports the catalog: {bad}"
+    assert not bad, f"a stage's execute side imports the catalog: {bad}"
 
 
 def _orm_columns() -> set[str]:
@@ -192,3 +211,48 @@ def test_every_stage_has_a_plan_an_execute_and_a_record() -> None:
             module, name = ref.split(":")
             assert callable(getattr(importlib.import_module(module), name)), ref
             assert name in doc, f"docs/ARCHITECTURE.md does not name {ref} ({stage})"
+
+
+MAX_PARAMETERS = 8
+
+
+def test_no_library_function_takes_more_than_eight_parameters() -> None:
+    """Settings travel as typed records (TilingResources, ReleaseOptions, ImportOptions, ...), not as
+    long argument lists: no function outside the CLI (whose commands mirror their options) takes
+    more than 8 (``self``/``cls`` not counted; ``*args`` and ``**kwargs`` one each)."""
+    long = []
+    for path, tree in _modules():
+        if _rel(path).startswith(("cli/", "migrations/")):
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                a = node.args
+                names = [x.arg for x in [*a.posonlyargs, *a.args, *a.kwonlyargs]]
+                n = len([x for x in names[:1] if x not in ("self", "cls")]) + len(names[1:])
+                n += (a.vararg is not None) + (a.kwarg is not None)
+                if n > MAX_PARAMETERS:
+                    long.append(f"{_rel(path)}:{node.lineno} {node.name} ({n})")
+    assert not long, "functions over 8 parameters:\n" + "\n".join(long)
+
+
+def test_mypy_sees_real_signatures_through_the_lazy_packages(tmp_path: Path) -> None:
+    """The stage packages import their names on first use (siteline.lazy); under TYPE_CHECKING they
+    import them for real, so a call with a wrong argument count is flagged, not typed ``Any``."""
+    import subprocess
+    import sys
+
+    snippet = tmp_path / "wrong_calls.py"
+    snippet.write_text(
+        "from siteline.tiles import tile_scene\nfrom siteline.ingest import ingest_mission\n"
+        "from siteline.pointpass import TilingResources\n"
+        "tile_scene(1)\ningest_mission(1, 2, 3, 4, 5, 6, 7, 8, 9, 10)\nTilingResources(workers='two')\n"
+    )
+    mypy = Path(sys.executable).with_name("mypy")
+    out = subprocess.run(
+        [str(mypy), "--no-error-summary", "--follow-imports=silent", str(snippet)],
+        cwd=PACKAGE.parents[1], capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    lines = out.stdout.splitlines()
+    assert any(":4: error: Missing positional arguments" in line for line in lines), out.stdout + out.stderr
+    assert any(":5: error: Too many arguments" in line for line in lines), out.stdout
+    assert any(":6: error: Argument \"workers\"" in line for line in lines), out.stdout

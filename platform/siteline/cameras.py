@@ -104,18 +104,16 @@ class Camera:
         fy: float | None = None,
         cx: float | None = None,
         cy: float | None = None,
-        up: npt.ArrayLike = (0.0, 0.0, 1.0),
     ) -> Camera:
-        """A camera at ``center`` (site-local metres) looking at ``target``; image up follows ``up``.
-
-        Looking straight along ``up`` (nadir), image up points to +y (north).
+        """A camera at ``center`` (site-local metres) looking at ``target``; image up follows the
+        site's up (+z). Looking straight down (nadir), image up points to +y (north).
         """
         C = np.asarray(center, dtype=np.float64)
         z = np.asarray(target, dtype=np.float64) - C
         if not np.isfinite(z).all() or np.linalg.norm(z) == 0:
             raise CameraError("look_at needs a target distinct from the centre.")
         z /= np.linalg.norm(z)
-        upv = np.asarray(up, dtype=np.float64)
+        upv = np.array([0.0, 0.0, 1.0])
         if np.linalg.norm(np.cross(z, upv)) < 1e-9:
             upv = np.array([0.0, 1.0, 0.0]) if abs(z[2]) > 0.5 else np.array([0.0, 0.0, 1.0])
         x = np.cross(z, upv)  # right = forward x up ... then y (down) = forward x right

@@ -9,7 +9,7 @@ import logging
 import math
 import shutil
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from siteline.catalog import Catalog
@@ -28,7 +28,7 @@ from siteline.pairs.stage import process_pair
 from siteline.pointpass import TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
-from siteline.records.release import ReleaseInfo
+from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
 from siteline.release.plan import (
@@ -121,7 +121,7 @@ def redefine_site(
     did. A re-tiling cut short is finished by the next ``release build`` (a scene tiled under an
     earlier version is tiled again before its pairs); a carried file that cannot be imported (a
     class the new taxonomy lacks) is named, to import with ``--taxonomy-map``."""
-    from siteline.labelsets import import_labels
+    from siteline.labelsets import ImportOptions, import_labels
     from siteline.labelsets.export import export_corrections
 
     ring = None
@@ -146,10 +146,8 @@ def redefine_site(
     by_name: dict[int, str | int] = {c.id: c.name for c in old.taxonomy.classes if c.name in kept}
     for sid, path in files.items():
         try:
-            done = import_labels(
-                catalog, settings, sid, path, by_name, f"carried to site version {version} from {path.name}",
-                progress=progress, carried=True,
-            )  # fmt: skip
+            how = ImportOptions(by_name, f"carried to site version {version} from {path.name}", carried=True)
+            done = import_labels(catalog, settings, sid, path, how, progress=progress)
             message = f"scene {sid}: corrections of label set {carry[sid]} carried over as label set {done.version}"
         except LabelSetError as exc:
             message = f"scene {sid}: corrections of label set {carry[sid]} not carried ({exc}); its file is {path}"
@@ -199,22 +197,20 @@ def release(
     site: str,
     name: str,
     knobs: ReleaseKnobs | None = None,
-    pair_ids: Sequence[int] | None = None,
-    version: str | None = None,
-    publish: bool = False,
+    options: ReleaseOptions = ReleaseOptions(),
     progress: Progress = no_progress,
-    device: str = "cpu",
     run_id: str | None = None,
-    label_sets: Mapping[int, int] | None = None,
 ) -> ReleaseInfo:
     """Everything a release of ``site`` needs, in order: its parameters (the site's release settings
     with ``knobs`` over them, siteline.release.knobs: refused before any work when its images would be
-    too small), the pairs (``pair_ids`` or all) processed on each scene's newest label set (or the
-    version ``label_sets`` pins), a draft built from exactly those outputs, published when
-    ``publish``; or the latest version when it already has these inputs (``up_to_date``)."""
+    too small), the pairs (``options.pair_ids`` or all) processed on ``options.device`` on each
+    scene's newest label set (or the version ``options.label_sets`` pins), a draft built from exactly
+    those outputs, published when ``options.publish``; or the latest version when it already has these
+    inputs (``up_to_date``)."""
     check_release_name(name)  # refused before any pair is processed
-    if version is not None:
-        semver(version)
+    pair_ids, label_sets = options.pair_ids, options.label_sets
+    if options.version is not None:
+        semver(options.version)
     with catalog.transaction() as s:
         params = release_params(s, site, knobs, f"release {name}")
         chosen = choose_pairs(s, site, pair_ids)
@@ -230,7 +226,7 @@ def release(
                 )  # fmt: skip
     log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
              params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
-    outputs = process_pairs(catalog, settings, chosen, params.pair, progress, device, run_id, label_sets)
+    outputs = process_pairs(catalog, settings, chosen, params.pair, progress, options.device, run_id, label_sets)
     for out in outputs.values():
         if out.radius_m > params.radius_ceiling_m:
             spacing = max((out.labels.get("radius") or {}).get("median_spacing_m", {}).values(), default=float("nan"))
@@ -246,9 +242,8 @@ def release(
         for out in outputs.values()
         for sid, v in ((out.t1, out.versions.t1), (out.t2, out.versions.t2))
     }
-    return build_release(
-        catalog, settings, site, name, params, chosen, version, run_id, used, publish, progress
-    )
+    built = replace(options, pair_ids=chosen, label_sets=used)
+    return build_release(catalog, settings, site, name, params, built, run_id, progress)
 
 
 @dataclass(frozen=True)

@@ -25,13 +25,16 @@ from siteline.config import Settings, sqlite_url
 from siteline.ingest import IngestOptions
 from siteline.labelsets import import_labels
 from siteline.labelsets.export import export_label_set
+from siteline.records.release import ReleaseOptions
 from siteline.register.planned import SurveyPlan
 from siteline.release.knobs import ReleaseKnobs
 from siteline.site import make_site_spec
 
 EXE = Path(sys.executable).parent / "siteline"
 ORIGIN = (273500.0, 5274500.0, 800.0)
-OPTS = IngestOptions(survey=SurveyPlan(altitude_m=100.0, forward_overlap=0.5, side_overlap=0.3))  # few cameras
+OPTS = IngestOptions(
+    survey=SurveyPlan(altitude_m=100.0, forward_overlap=0.5, side_overlap=0.3)
+)  # few cameras
 pytestmark = pytest.mark.e2e
 
 
@@ -39,7 +42,9 @@ def _run(home: Path, *argv: str) -> subprocess.CompletedProcess:
     env = os.environ | {"SITELINE_HOME": str(home)}
     for name in ("SITELINE_DATABASE_URL", "SITELINE_STORE_URL", "PREFECT_API_URL"):
         env.pop(name, None)
-    return subprocess.run([str(EXE), *argv], capture_output=True, text=True, env=env, timeout=600, stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [str(EXE), *argv], capture_output=True, text=True, env=env, timeout=600, stdin=subprocess.DEVNULL
+    )
 
 
 def _ok(home: Path, *argv: str) -> str:
@@ -69,7 +74,9 @@ def _crop(src: Path, out: Path, half_m: float) -> Path:
 
     las = laspy.read(src)
     c = centre_xy(src)
-    las.points = las.points[(np.abs(np.asarray(las.x) - c[0]) < half_m) & (np.abs(np.asarray(las.y) - c[1]) < half_m)]
+    las.points = las.points[
+        (np.abs(np.asarray(las.x) - c[0]) < half_m) & (np.abs(np.asarray(las.y) - c[1]) < half_m)
+    ]
     las.update_header()
     las.write(out)
     return out
@@ -94,7 +101,9 @@ def topo(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("lifecycle")
     first = _crop(TOPOGRAPHY, tmp / "topo.laz", 90.0)
     c = centre_xy(first)
-    later = later_epoch(first, tmp / "later.laz", removed_box=(c[0] - 40, c[1] - 40, c[0] - 10, c[1] - 10), days=400)
+    later = later_epoch(
+        first, tmp / "later.laz", removed_box=(c[0] - 40, c[1] - 40, c[0] - 10, c[1] - 10), days=400
+    )
     middle = later_epoch(first, tmp / "middle.laz", days=200)
     settings, cat = _home(tmp, "topo", "other")
     for path in (first, later):
@@ -145,7 +154,14 @@ def test_a_wrong_taxonomy_is_fixed_with_site_update(topo, tmp_path) -> None:
     local = [[x - ORIGIN[0], y - ORIGIN[1]] for x, y in ring]
     assert pipeline.redefine_site(cat, settings, "topo", fence=local, workers=1)[0] == 3
     assert _json(home, "scene", "show", "2")["class_histogram"]["ignore"] > 10_000
-    pipeline.release(cat, settings, "topo", "topo-cd", ReleaseKnobs(pair={"views": 2}), publish=True)
+    pipeline.release(
+        cat,
+        settings,
+        "topo",
+        "topo-cd",
+        ReleaseKnobs(pair={"views": 2}),
+        options=ReleaseOptions(publish=True),
+    )
     root = home / "releases" / "topo-cd" / "1.0.0"
     (site_lineage,) = json.loads((root / "manifest.json").read_text())["lineage"]["sites"]
     assert site_lineage["version"] == 3 and site_lineage["taxonomy"] == "topo-water"

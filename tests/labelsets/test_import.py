@@ -17,7 +17,7 @@ from sitehelpers import run_cli
 from labelsets.edits import centre_box, export, shuffled, versions
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
-from siteline.labelsets import import_labels
+from siteline.labelsets import ImportOptions, import_labels
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import read_labels_vlr
 from siteline.stores import layout
@@ -110,7 +110,7 @@ def test_region_export_is_corrected_alone(scenes, tmp_path) -> None:
     region.classification = cls
     region.write(tmp_path / "region_fixed.laz")
 
-    res = import_labels(cat, settings, 1, tmp_path / "region_fixed.laz", note="formwork")
+    res = import_labels(cat, settings, 1, tmp_path / "region_fixed.laz", ImportOptions(note="formwork"))
     assert res.created and res.parent_version == parent
     assert res.matched == len(region.points) and res.untouched == len(full.points) - len(region.points)
     assert res.changed == int(target.sum())
@@ -144,7 +144,7 @@ def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
         import_labels(cat, settings, 2, tmp_path / "s2_asprs.las")  # ASPRS codes read as site ids
     from siteline.labelsets import read_taxonomy_map
 
-    res = import_labels(cat, settings, 2, tmp_path / "s2_asprs.las", read_taxonomy_map(tmp_path / "map.json"))
+    res = import_labels(cat, settings, 2, tmp_path / "s2_asprs.las", ImportOptions(read_taxonomy_map(tmp_path / "map.json")))
     assert res.changed == int(edit.sum()) and res.changes == {"ground->building": int(edit.sum())}
 
 
@@ -196,7 +196,7 @@ def _store_listing(settings, scene_id: int) -> list[str]:  # noqa: ANN001
 def _refused(cat, settings, path: Path, error, match: str, **kw) -> None:  # noqa: ANN001
     before, listing = versions(cat, 1), _store_listing(settings, 1)
     with pytest.raises(error, match=match):
-        import_labels(cat, settings, 1, path, **kw)
+        import_labels(cat, settings, 1, path, ImportOptions(**kw))
     assert versions(cat, 1) == before
     assert _store_listing(settings, 1) == listing
     assert not list((settings.home / "tmp").glob("labels-scene-*"))

@@ -13,8 +13,9 @@ from sitehelpers import run_cli
 from labelsets.edits import centre_box, export, versions
 from siteline import pipeline
 from siteline.errors import ImmutableError, LabelSetError
-from siteline.labelsets import import_labels
+from siteline.labelsets import ImportOptions, import_labels
 from siteline.pairs import PairParams
+from siteline.records.release import ReleaseOptions
 from siteline.release import publish_release
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import read_manifest
@@ -28,7 +29,9 @@ KNOBS = ReleaseKnobs.exactly(PARAMS, min_image_px=64)
 def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, monkeypatch) -> None:
     settings, cat = scenes
     pinned = {1: versions(cat, 1)[-1], 2: versions(cat, 2)[-1]}
-    first = pipeline.release(cat, settings, "demo", "lab", KNOBS, label_sets=pinned, publish=True)
+    first = pipeline.release(
+        cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(label_sets=pinned, publish=True)
+    )
     assert first.version == "1.0.0"
 
     las = export(cat, 1, tmp_path / "s1.las")
@@ -37,10 +40,10 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     cls[edit] = 5  # a fleet of vehicles appears in the correction
     las.classification = cls
     las.write(tmp_path / "s1_fixed.las")
-    new = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las", note="vehicles")
+    new = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las", ImportOptions(note="vehicles"))
     assert new.created
 
-    second = pipeline.release(cat, settings, "demo", "lab", KNOBS, publish=True)
+    second = pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(publish=True))
     assert second.version == "2.0.0"  # a label set changed: major bump
     lineage = read_manifest(second.root)["lineage"]
     scenes_ = {sc["id"]: sc for sc in lineage["scenes"]}
@@ -58,7 +61,7 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     assert second.reason == f"scene 1 label set v{pinned[1]} -> v{new.version}"
     # the same inputs again: nothing is built or published, the latest version is up to date
     before = sorted((settings.home / "releases").rglob("*"))
-    third = pipeline.release(cat, settings, "demo", "lab", KNOBS, publish=True)
+    third = pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(publish=True))
     assert (third.version, third.status, third.up_to_date) == ("2.0.0", "published", True)
     assert sorted((settings.home / "releases").rglob("*")) == before
 
@@ -78,4 +81,4 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
 
     # pinning a version that does not exist is refused before anything is built
     with pytest.raises(LabelSetError, match="no label-set version 42"):
-        pipeline.release(cat, settings, "demo", "lab", KNOBS, label_sets={1: 42})
+        pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(label_sets={1: 42}))

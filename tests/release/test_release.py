@@ -22,6 +22,7 @@ from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.ingest import ingest_mission
 from siteline.pairs import PairParams, pair_mask
 from siteline.pointpass import TilingResources
+from siteline.records.release import ReleaseOptions
 from siteline.release import publish_release, read_manifest, verify_files
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
@@ -163,10 +164,17 @@ def test_published_release_is_read_only_and_never_republished(built) -> None:
     assert not (some.stat().st_mode & 0o222)
     with pytest.raises(ImmutableError, match="already published"):
         publish_release(cat, settings, "rel", "1.0.0")
-    same = pipeline.release(cat, settings, "demo", "rel", KNOBS, version="1.0.0")
+    same = pipeline.release(cat, settings, "demo", "rel", KNOBS, options=ReleaseOptions(version="1.0.0"))
     assert same.up_to_date and same.status == "published" and same.manifest_sha256 == pub.manifest_sha256
     with pytest.raises(ImmutableError, match="already published"):  # other inputs under that version
-        build_release(cat, settings, "demo", "rel", ReleaseParams(replace(PARAMS, seed=9)), version="1.0.0")
+        build_release(
+            cat,
+            settings,
+            "demo",
+            "rel",
+            ReleaseParams(replace(PARAMS, seed=9)),
+            options=ReleaseOptions(version="1.0.0"),
+        )
     with pytest.raises(ImmutableError), cat.transaction() as s:
         rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
         rel.parameters = {}
@@ -182,7 +190,14 @@ def test_bad_requests_write_nothing(built) -> None:
     with cat.transaction() as s:
         pid = s.query(Pair).first().id
     with pytest.raises(ReleaseError, match="belongs to site demo"):
-        pipeline.release(cat, settings, "lonely2" if False else "lonely", "x", KNOBS, pair_ids=[pid])
+        pipeline.release(
+            cat,
+            settings,
+            "lonely2" if False else "lonely",
+            "x",
+            KNOBS,
+            options=ReleaseOptions(pair_ids=[pid]),
+        )
     with pytest.raises(NotFoundError):
         publish_release(cat, settings, "nope", "1.0.0")
     assert {p for p in (settings.home / "releases").rglob("*")} == before

@@ -12,8 +12,8 @@ import numpy as np
 import pyproj
 
 from siteline.pointpass import TilingResources
-from siteline.pointpass.partition import Slice
 from siteline.pointpass.lasio import write_las
+from siteline.pointpass.partition import Slice
 from siteline.site import make_site_spec
 from siteline.tiles import SceneTiles, TileSpec, write_tiles
 from siteline.tiles.batches import batches

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,21 +38,32 @@ def _pad16(x: torch.Tensor, value: float = 0.0) -> torch.Tensor:
     return torch.nn.functional.pad(x, (0, (-w) % 16, 0, (-h) % 16), value=value)
 
 
+@dataclass(frozen=True)
+class TrainConfig:
+    """A training run: ``epochs`` over the train split (or ``max_iters`` iterations when given),
+    ``batch_size`` images of ``crop`` px squares at learning rate ``lr``, seeded by ``seed``, on the
+    torch ``device``, with ``workers`` data-loading processes (0: in the training process)."""
+
+    epochs: int = 1
+    max_iters: int | None = None
+    batch_size: int = 4
+    lr: float = 1e-3
+    crop: int = 256
+    seed: int = 0
+    device: str = "cpu"
+    workers: int = 0
+
+
 def train(
     root: Path,
     out_dir: Path,
-    *,
-    epochs: int = 1,
-    max_iters: int | None = None,
-    batch_size: int = 4,
-    lr: float = 1e-3,
-    crop: int = 256,
-    seed: int = 0,
-    device: str = "cpu",
-    workers: int = 0,
+    config: TrainConfig = TrainConfig(),
     progress: Callable[[int, int, float], None] | None = None,
 ) -> dict[str, Any]:
-    """Train on the release's train split; write ``model.pt`` and ``train_log.json`` into ``out_dir``."""
+    """Train on the release's train split with ``config``; write ``model.pt`` and ``train_log.json``
+    into ``out_dir``."""
+    epochs, max_iters, batch_size, lr = config.epochs, config.max_iters, config.batch_size, config.lr
+    crop, seed, device, workers = config.crop, config.seed, config.device, config.workers
     torch.manual_seed(seed)
     ds = ChangeDetectionDataset(root, "train", TrainTransforms(crop=crop, seed=seed))
     if len(ds) == 0:

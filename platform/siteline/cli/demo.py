@@ -17,6 +17,7 @@ from siteline.cli.common import console, print_record, print_table, settings
 from siteline.config import Settings
 from siteline.errors import SiteNotFoundError
 from siteline.fence import load_fence_geojson
+from siteline.records.release import ReleaseOptions
 from siteline.site import make_site_spec
 
 DEMO_SITE = "demo"
@@ -50,16 +51,16 @@ def _release(cat: Catalog, cfg: Settings, site_name: str) -> tuple[Path, str]:
         if published:
             console.print(f"release {DEMO_RELEASE} {published[-1].version} already published: reusing it")
             return Path(str(published[-1].root_uri)), published[-1].version
-    pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, publish=True)
+    pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, options=ReleaseOptions(publish=True))
     console.print(f"release {DEMO_RELEASE} {pub.version}: {pub.reason}")
     return Path(pub.root), pub.version
 
 
 def _baseline(cfg: Settings, root: Path, version: str, stats: dict, train_iters: int) -> None:
-    from siteline.baseline import evaluate, train
+    from siteline.baseline import TrainConfig, evaluate, train
 
     out = cfg.home / "baseline" / f"{DEMO_RELEASE}-{version}"
-    log = train(root, out, max_iters=train_iters, crop=128)
+    log = train(root, out, TrainConfig(max_iters=train_iters, crop=128))
     split = "test" if stats["class_balance"].get("test") else "train"
     result = evaluate(root, out / "model.pt", out / f"results-{split}.json", split)
     console.print(

@@ -64,7 +64,7 @@ def import_cmd(
 ) -> None:
     """Import corrected classes as the scene's next label-set version (nothing changes on refusal)."""
     from siteline.catalog.scenes import site_name_of_scene
-    from siteline.labelsets import DEFAULT_MAX_UNMATCHED, import_labels
+    from siteline.labelsets import DEFAULT_MAX_UNMATCHED, ImportOptions, import_labels
     from siteline.labelsets.mapping import parse_taxonomy_map
 
     mapping = parse_taxonomy_map(taxonomy_map) if taxonomy_map else None
@@ -76,7 +76,7 @@ def import_cmd(
         TimeRemainingColumn(),
     )
     with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
-        result = import_labels(cat, settings(), scene_id, file, mapping, note, limit, bar_progress(bar))
+        result = import_labels(cat, settings(), scene_id, file, ImportOptions(mapping, note, limit), bar_progress(bar))
         with cat.transaction() as s:
             site = site_name_of_scene(s, scene_id)
     announced = None

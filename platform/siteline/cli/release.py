@@ -28,7 +28,7 @@ from siteline.cli.common import (
 )
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
-from siteline.records.release import ReleaseInfo
+from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import verify_files
 from siteline.release.query import diff_releases
@@ -74,19 +74,8 @@ def build(
     from siteline import pipeline
 
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
-        info = pipeline.release(
-            cat,
-            settings(),
-            site,
-            name,
-            knobs,
-            pairs or None,
-            version,
-            publish=publish,
-            progress=bar_progress(bar),
-            device=device,
-            label_sets=parse_label_sets(label_set or []),
-        )
+        options = ReleaseOptions(pairs or None, version, parse_label_sets(label_set or []), publish, device)
+        info = pipeline.release(cat, settings(), site, name, knobs, options, progress=bar_progress(bar))
     emit(as_json, info.to_dict(), lambda: console.print(build_message(info)))
 
 
@@ -339,20 +328,17 @@ def train_cmd(
     as_json: bool = JsonOption,
 ) -> None:
     """Train FC-Siam-diff on a release (SGD 1e-3, momentum 0.9, wd 1e-4, poly 0.9, batch 4)."""
-    from siteline.baseline import train
+    from siteline.baseline import TrainConfig, train
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
     with Progress(console=console, transient=True, disable=as_json) as bar:
         task = bar.add_task("training", total=None)
+        config = TrainConfig(epochs=epochs, max_iters=max_iters, crop=crop, device=device, workers=workers)
         log = train(
             root,
             out,
-            epochs=epochs,
-            max_iters=max_iters,
-            crop=crop,
-            device=device,
-            workers=workers,
+            config,
             progress=lambda it, total, loss: bar.update(
                 task, completed=it, total=total, description=f"training loss {loss:.3f}"
             ),

@@ -55,15 +55,19 @@ def start_readers(mission_dir: Path, workers: int) -> None:
             return
 
 
+# the stable-point sample a scan keeps (for co-registration): at most this many points, drawn with
+# generators seeded by (SAMPLE_SEED, range), so a file's sample is the same on every ingest
+SAMPLE_MAX = 200_000
+SAMPLE_SEED = 0
+
+
 def scan_las(
     path: Path,
     site: SiteSpec,
     crs_override: str | None = None,
     *,
     z_unit: ZUnit | None = None,
-    sample_max: int = 200_000,
     progress: Callable[..., None] = no_step,
-    seed: int = 0,
     workers: int = 1,
     runs_into: Path | None = None,
 ) -> LasScan:
@@ -84,17 +88,17 @@ def scan_las(
     tr = source_transformer(path, site, src, z_unit)
     source = PassSource(str(path), site, crs_text(src), z_unit_of(src, z_unit), eight_bit)
     stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
-    keep_p = min(1.0, sample_max / max(n_total, 1))
+    keep_p = min(1.0, SAMPLE_MAX / max(n_total, 1))
     stride = max(1, -(-n_total // SURVEY_SAMPLE_MAX))
     ranges = point_ranges(n_total, workers)
     spec = TileSpec.for_site(site)
     folder = runs_into
     visitors = [
-        (_Totals(stable_ids, keep_p, (seed, k), eight_bit, ranges[k][0], stride),)
+        (_Totals(stable_ids, keep_p, (SAMPLE_SEED, k), eight_bit, ranges[k][0], stride),)
         + ((RunWriter(str(folder), f"run-{k:05d}.bin", spec.to_dict()),) if folder else ())
         for k in range(len(ranges))
     ]
-    t = _Totals(stable_ids, keep_p, (seed, 0), eight_bit, 0, stride)
+    t = _Totals(stable_ids, keep_p, (SAMPLE_SEED, 0), eight_bit, 0, stride)
     runs = []
     for done in read_file(source, n_total, visitors, workers, lambda _l, n, _t: progress(n)):
         t.merge(done[0])

@@ -4,7 +4,7 @@ an overwrite)."""
 
 from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED
 from siteline.labelsets.mapping import read_taxonomy_map
-from siteline.labelsets.stage import import_labels
+from siteline.labelsets.stage import ImportOptions, import_labels
 from siteline.labelsets.store import open_labelled
 
-__all__ = ["DEFAULT_MAX_UNMATCHED", "import_labels", "open_labelled", "read_taxonomy_map"]
+__all__ = ["DEFAULT_MAX_UNMATCHED", "ImportOptions", "import_labels", "open_labelled", "read_taxonomy_map"]

@@ -31,7 +31,7 @@ from siteline.labelsets.match import match_points, point_keys
 from siteline.labelsets.plan import ImportPlan
 from siteline.labelsets.store import open_labelled, write_tile_classes
 from siteline.pointpass.lasio import open_las, read_labels_vlr
-from siteline.pointpass.sitestream import file_crs, site_chunks, source_transformer
+from siteline.pointpass.sitestream import SiteReading, file_crs, site_chunks, source_transformer
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.site import SiteSpec
@@ -154,7 +154,8 @@ def _spill(
         crs = file_crs(reader, path) or site.pyproj_crs  # an editor may drop the CRS: it is the export's
         tr = source_transformer(path, site, crs)
         # the file's coordinates are the tiles' (rounded to the quantum): ingest's inside stays inside
-        for sc in site_chunks(path, site, tr, reader=reader, class_lut=lut, fence_tol_m=tiles.spec.quantum_m):
+        how = SiteReading(class_lut=lut, fence_tol_m=tiles.spec.quantum_m)
+        for sc in site_chunks(path, site, tr, how, reader=reader):
             unknown += np.bincount(sc.chunk.classification[~sc.known_code], minlength=256)
             rec = np.empty(len(sc.local), SPILL_DTYPE)
             rec["idx"] = np.arange(n, n + len(rec))

@@ -4,6 +4,7 @@ record (catalog)."""
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 
 import sqlalchemy as sa
@@ -24,29 +25,36 @@ from siteline.stores import layout
 log = logging.getLogger(__name__)
 
 
+@dataclass(frozen=True)
+class ImportOptions:
+    """How a labels file is imported. ``taxonomy_map``: how its codes read (siteline.labelsets.mapping;
+    None: site class ids, vouched for by the record ``scene export`` writes). ``note``: recorded with
+    the version. ``max_unmatched``: the share of its points that may match nothing, or a point
+    already taken, before it is refused. ``carried``: the file holds a whole label set exported before
+    the scene was tiled again, imported over label set 1 (what the new tiles hold) rather than merged
+    onto the newest."""
+
+    taxonomy_map: TaxonomyMap = None
+    note: str | None = None
+    max_unmatched: float = DEFAULT_MAX_UNMATCHED
+    carried: bool = False
+
+
 def import_labels(
     catalog: Catalog,
     settings: Settings,
     scene_id: int,
     path: Path,
-    taxonomy_map: TaxonomyMap = None,
-    note: str | None = None,
-    max_unmatched: float = DEFAULT_MAX_UNMATCHED,
+    options: ImportOptions = ImportOptions(),
     progress: Progress = no_progress,
     run_id: str | None = None,
-    carried: bool = False,
 ) -> LabelSetImport:
-    """Import the classes of ``path`` as the next label-set version of ``scene_id``; ``carried``: the
-    file holds a whole label set exported before the scene was tiled again, imported over label set 1
-    (what the new tiles hold) rather than merged onto the newest.
-
-    Codes are site class ids, vouched for by the record ``scene export`` writes, unless
-    ``taxonomy_map`` says how to read them (siteline.labelsets.mapping).
-    Points are matched by position in tile quanta, GPS time and return number; refused (nothing
-    written) when the file is of another scene, holds unknown codes, is unreadable, or when more
-    than ``max_unmatched`` of its points match nothing or match a point already taken. The store is
-    published whole before its catalog row is added."""
-    path = Path(path)
+    """Import the classes of ``path`` as the next label-set version of ``scene_id`` (``options``:
+    :class:`ImportOptions`). Points are matched by position in tile quanta, GPS time and return
+    number; refused (nothing written) when the file is of another scene, holds unknown codes, is
+    unreadable, or when more than ``max_unmatched`` of its points match nothing or match a point
+    already taken. The store is published whole before its catalog row is added."""
+    path, max_unmatched, carried = Path(path), options.max_unmatched, options.carried
     if not path.is_file():
         raise LabelSetError(f"labels file {path} does not exist.")
     if not 0.0 <= max_unmatched < 1.0:
@@ -55,7 +63,7 @@ def import_labels(
     with catalog.lock(f"scene:{scene_id}:labels"):  # one import per scene at a time: versions 2, 3, ...
         with catalog.transaction() as s:
             plan = plan_label_import(s, scene_id, base, 1 if carried else None)
-        return _import(catalog, settings, plan, path, taxonomy_map, note, max_unmatched, progress, run_id)
+        return _import(catalog, settings, plan, path, options, progress, run_id)
 
 
 def exported_from(path: Path, scene_id: int) -> int | None:
@@ -69,10 +77,10 @@ def exported_from(path: Path, scene_id: int) -> int | None:
 
 
 def _import(
-    catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, taxonomy_map: TaxonomyMap,
-    note: str | None, max_unmatched: float, progress: Progress, run_id: str | None,
+    catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, options: ImportOptions,
+    progress: Progress, run_id: str | None,
 ) -> LabelSetImport:  # fmt: skip
-    scene_id = plan.scene_id
+    scene_id, taxonomy_map, note, max_unmatched = plan.scene_id, options.taxonomy_map, options.note, options.max_unmatched
     run = StageRun(
         "import_labels", f"scene:{scene_id}", {"file": str(path), "version": plan.version}, run_id=run_id
     )

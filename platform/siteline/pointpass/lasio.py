@@ -7,9 +7,10 @@ then to site-local by float64 subtraction of the site origin, chunk by chunk; on
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import laspy
 import numpy as np
@@ -269,53 +270,41 @@ def las_header(
     return header
 
 
-def fill_record(
-    record: laspy.ScaleAwarePointRecord,
-    xyz_crs: np.ndarray,
-    rgb: np.ndarray | None = None,
-    classification: np.ndarray | None = None,
-    intensity: np.ndarray | None = None,
-    gps_time: np.ndarray | None = None,
-    return_number: np.ndarray | None = None,
-) -> None:
-    """Set a point record's fields from float64 georeferenced coordinates and attributes.
+FIELDS = ("rgb", "classification", "intensity", "gps_time", "return_number")  # what fill_record sets
 
-    Colour is written as 16-bit (value * 257), as LAS expects.
-    """
+
+def fill_record(record: laspy.ScaleAwarePointRecord, xyz_crs: np.ndarray, fields: Mapping[str, Any]) -> None:
+    """Set a point record's fields from float64 georeferenced coordinates and ``fields`` (any of
+    :data:`FIELDS`, None or absent: left zero). Colour (N, 3) 0-255 is written as 16-bit (value *
+    257), as LAS expects; ``return_number`` sets ``number_of_returns`` too."""
+    unknown = set(fields) - set(FIELDS)
+    if unknown:
+        raise PointCloudError(f"fields {sorted(unknown)} are not LAS fields siteline writes ({', '.join(FIELDS)}).")
     record.x = xyz_crs[:, 0]
     record.y = xyz_crs[:, 1]
     record.z = xyz_crs[:, 2]
+    rgb, return_number = fields.get("rgb"), fields.get("return_number")
     if rgb is not None:
-        rgb16 = rgb.astype(np.uint16) * 257
+        rgb16 = np.asarray(rgb).astype(np.uint16) * 257
         record.red, record.green, record.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    if classification is not None:
-        record.classification = classification
-    if intensity is not None:
-        record.intensity = intensity
-    if gps_time is not None:
-        record.gps_time = gps_time
+    for name in ("classification", "intensity", "gps_time"):
+        if fields.get(name) is not None:
+            setattr(record, name, fields[name])
     if return_number is not None:
         record.return_number = return_number
         record.number_of_returns = np.maximum(return_number, 1)
 
 
 def write_las(
-    path: Path,
-    xyz_crs: np.ndarray,
-    *,
-    crs: str | None,
-    rgb: np.ndarray | None = None,
-    classification: np.ndarray | None = None,
-    intensity: np.ndarray | None = None,
-    gps_time: np.ndarray | None = None,
-    return_number: np.ndarray | None = None,
-    scale: float = 0.001,
+    path: Path, xyz_crs: np.ndarray, *, crs: str | None, scale: float = 0.001, **fields: np.ndarray | None
 ) -> None:
-    """Write a small LAS/LAZ file (by extension) in one go; point format 3, version 1.2."""
+    """Write a small LAS/LAZ file (by extension) in one go; point format 3, version 1.2; ``fields``:
+    per-point arrays named as in :data:`FIELDS` (rgb, classification, intensity, gps_time,
+    return_number)."""
     xyz = np.asarray(xyz_crs, dtype=np.float64)
     header = las_header(crs, xyz.min(axis=0) if len(xyz) else np.zeros(3), scale)
     record = laspy.ScaleAwarePointRecord.zeros(len(xyz), header=header)
-    fill_record(record, xyz, rgb, classification, intensity, gps_time, return_number)
+    fill_record(record, xyz, fields)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with laspy.open(path, mode="w", header=header) as writer:
         writer.write_points(record)

@@ -29,7 +29,7 @@ from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import TileError
 from siteline.pointpass.kernels import cut, radix, rows
 from siteline.pointpass.schema import BLOCK_BITS, COUNTS, RECORD, block_of, cell_ids, tile_of
-from siteline.pointpass.sitestream import Correction, SiteChunk, site_chunks, source_transformer
+from siteline.pointpass.sitestream import Correction, SiteChunk, SiteReading, site_chunks, source_transformer
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
@@ -197,9 +197,8 @@ def read_range(source: PassSource, start: int, stop: int, visitors: tuple[Any, .
     in a worker process); return the visitors."""
     path = Path(source.path)
     tr = source_transformer(path, source.site, parse_source_crs(source.crs), source.z_unit)
-    chunks = site_chunks(
-        path, source.site, tr, start=start, stop=stop, eight_bit=source.eight_bit, correction=source.correction
-    )
+    how = SiteReading(start, stop, eight_bit=source.eight_bit, correction=source.correction)
+    chunks = site_chunks(path, source.site, tr, how)
     for sc in chunks:
         for v in visitors:
             try:

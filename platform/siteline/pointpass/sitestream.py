@@ -134,34 +134,42 @@ def source_transformer(
     return None if tr.is_identity else tr
 
 
+@dataclass(frozen=True)
+class SiteReading:
+    """How :func:`site_chunks` reads a file beyond the file and the site. ``start``/``stop``,
+    ``chunk_points``, ``eight_bit``: as :func:`siteline.pointpass.lasio.iter_chunks`. ``correction``:
+    a rigid transform (4 x 4, site-local metres) applied after the origin is subtracted: the
+    co-registration of a later scene onto the earlier one (siteline.register), so every reader sees
+    the corrected geometry. ``class_lut``: (256,) uint8 site class id per file code and (256,) bool of
+    the codes it maps; None: the taxonomy's LAS source codes. ``fence_tol_m``: how far outside the
+    fence still counts as inside (a label import reads coordinates rounded to the tile quantum, so it
+    takes that quantum: a point ingest found inside stays inside)."""
+
+    start: int = 0
+    stop: int | None = None
+    chunk_points: int = DEFAULT_CHUNK_POINTS
+    eight_bit: bool | None = None
+    correction: Correction | None = None
+    class_lut: tuple[np.ndarray, np.ndarray] | None = None
+    fence_tol_m: float = LENGTH_TOL_M
+
+
 def site_chunks(
     path: Path,
     site: SiteSpec,
     tr: ToSiteCRS | None,
-    chunk_points: int = DEFAULT_CHUNK_POINTS,
+    how: SiteReading = SiteReading(),
     reader: laspy.LasReader | None = None,
-    class_lut: tuple[np.ndarray, np.ndarray] | None = None,
-    start: int = 0,
-    stop: int | None = None,
-    eight_bit: bool | None = None,
-    correction: Correction | None = None,
-    fence_tol_m: float = LENGTH_TOL_M,
 ) -> Iterator[SiteChunk]:
     """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
-    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore.
-    ``reader``: the file already opened. ``class_lut``: (256,) uint8 site class id per file code and
-    (256,) bool of the codes it maps; None: the taxonomy's LAS source codes. ``start``/``stop``,
-    ``eight_bit``: as :func:`siteline.pointpass.lasio.iter_chunks`. ``correction``: a rigid transform (4 x 4,
-    site-local metres) applied after the origin is subtracted: the co-registration of a later scene
-    onto the earlier one (siteline.register), so every reader sees the corrected geometry.
-    ``fence_tol_m``: how far outside the fence still counts as inside (a label import reads
-    coordinates rounded to the tile quantum, so it takes that quantum: a point ingest found inside
-    stays inside)."""
+    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore; ``how``:
+    :class:`SiteReading`. ``reader``: the file already opened."""
+    class_lut, correction, fence_tol_m = how.class_lut, how.correction, how.fence_tol_m
     tax = site.taxonomy
     lut, known = class_lut if class_lut is not None else tax.code_lut("las")
     origin = np.asarray(site.origin, dtype=np.float64)
     corrected = None if correction is None else correction_rigid(correction)
-    for chunk in iter_chunks(path, chunk_points, eight_bit, reader=reader, start=start, stop=stop):
+    for chunk in iter_chunks(path, how.chunk_points, how.eight_bit, reader=reader, start=how.start, stop=how.stop):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)

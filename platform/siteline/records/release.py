@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -44,6 +44,20 @@ class DraftRelease:
     stats: dict[str, Any]
     parameters: dict[str, Any]
     digests: Mapping[int, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ReleaseOptions:
+    """What a release build is asked for beyond its site, name and parameters: the pairs (None: every
+    processed pair of the site), the version (None: the next by semantic versioning), label-set
+    versions pinned per scene (scene id -> version; None: each scene's newest), whether to publish
+    the draft, and the torch device the renders run on."""
+
+    pair_ids: Sequence[int] | None = None
+    version: str | None = None
+    label_sets: Mapping[int, int] | None = None
+    publish: bool = False
+    device: str = "cpu"
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,6 @@ record (catalog). Publish: plan -> execute (verify, move into place) -> record -
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,7 +14,7 @@ from siteline.errors import ReleaseError
 from siteline.pairs.outputs import find_outputs
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
-from siteline.records.release import ReleaseInfo
+from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.records.runs import StageRun
 from siteline.release import layout
 from siteline.release.build import execute_build
@@ -34,23 +33,22 @@ def build_release(
     site_name: str,
     name: str,
     params: ReleaseParams | None = None,
-    pair_ids: Sequence[int] | None = None,
-    version: str | None = None,
+    options: ReleaseOptions = ReleaseOptions(),
     run_id: str | None = None,
-    label_sets: Mapping[int, int] | None = None,
-    publish: bool = False,
     progress: Progress = no_progress,
 ) -> ReleaseInfo:
-    """Assemble a draft release ``name`` from the site's processed pairs (or ``pair_ids``) in format 2
-    (siteline.release.layout) with ``params`` (resolved: siteline.release.knobs), and publish it when
-    ``publish``, holding the release name's lock throughout. Every pair must already be processed
-    with these parameters and label sets: :class:`ReleaseError` names the command otherwise
-    (``siteline.pipeline.release`` processes what is missing first). Each scene's newest label set is
-    used unless ``label_sets`` (scene id -> version) pins one. When the latest version's inputs are
-    these (pairs, their outputs, label sets, parameters), nothing is built: that version is returned
-    with ``up_to_date`` (published now if it is a draft and ``publish``)."""
+    """Assemble a draft release ``name`` from the site's processed pairs (or ``options.pair_ids``) in
+    format 2 (siteline.release.layout) with ``params`` (resolved: siteline.release.knobs), and
+    publish it when ``options.publish``, holding the release name's lock throughout. Every pair must
+    already be processed with these parameters and label sets: :class:`ReleaseError` names the
+    command otherwise (``siteline.pipeline.release`` processes what is missing first). Each scene's
+    newest label set is used unless ``options.label_sets`` (scene id -> version) pins one. When the
+    latest version's inputs are these (pairs, their outputs, label sets, parameters), nothing is
+    built: that version is returned with ``up_to_date`` (published now if it is a draft and
+    ``options.publish``)."""
     params = params or ReleaseParams()
     check_release_name(name)  # before anything: a name is a folder name
+    pair_ids, version, label_sets, publish = options.pair_ids, options.version, options.label_sets, options.publish
     if version is not None:
         semver(version)
     with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time

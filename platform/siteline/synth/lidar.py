@@ -211,9 +211,7 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
             xyz = xyz[occ.visible(xyz)]
             if not len(xyz):
                 continue
-            chunk = _finish(
-                xyz, prim, rng, spec, t0, ep, occ, (jib_c, jib_d, jib_len), changed_prev, changed_next
-            )
+            chunk = _finish(xyz, prim, rng, spec, t0, ep, (occ, (jib_c, jib_d, jib_len)), (changed_prev, changed_next))
             chunk.margin_previous_m = _margin(chunk.xyz, prim, changed_prev, prev_by_key, cache_prev)
             chunk.margin_next_m = _margin(chunk.xyz, prim, changed_next, next_by_key, cache_next)
             yield chunk
@@ -223,15 +221,20 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
         n = int(rng.poisson(0.02 * (x1 - x0) * (y1 - y0)))
         xyz = np.c_[rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(3, 35, n)]
         flake = Primitive("snow:airborne", f"e{e}", 900, m.SNOW, "sphere", (0, 0, 0, 1), (245, 245, 250))
-        yield _finish(xyz, flake, rng, spec, t0, ep, None, None, False, False)
+        yield _finish(xyz, flake, rng, spec, t0, ep, None, (False, False))
 
 
 def _finish(
     xyz: np.ndarray, prim: Primitive, rng: np.random.Generator, spec: LidarSpec, t0: float, ep: m.EpochSpec,
-    occ: OcclusionBuffers | None, jib: tuple[np.ndarray, np.ndarray, float] | None, changed_prev: bool,
-    changed_next: bool,
+    seen: tuple[OcclusionBuffers, tuple[np.ndarray, np.ndarray, float]] | None, changed: tuple[bool, bool],
 ) -> EpochChunk:  # fmt: skip
+    """A primitive's sampled points as a LiDAR chunk: times, range noise, colour, returns,
+    intensity; ``seen``: the epoch's occlusion buffers and the crane jib's ground footprint (snow on
+    what is seen from above, the jib's projection error smeared on the ground; None: neither);
+    ``changed``: whether the surface changed since the previous epoch and until the next."""
     n = len(xyz)
+    occ, jib = seen if seen is not None else (None, None)
+    changed_prev, changed_next = changed
     t, sensors = _times_and_sensors(xyz, spec, t0)
     ray = xyz - sensors
     ray /= np.linalg.norm(ray, axis=1, keepdims=True) + 1e-12

@@ -108,7 +108,7 @@ class SiteModel:
                 1,
                 GROUND,
                 "terrain",
-                (x0, x1, y0, y1, *SLOPE, None, PIT_M),
+                (TERRAIN_M, SLOPE, None, PIT_M),
                 (120, 100, 80),
                 upward=True,
             )
@@ -120,7 +120,7 @@ class SiteModel:
                 2,
                 GROUND,
                 "terrain",
-                (*PIT_M, *SLOPE, pit, None),
+                (PIT_M, SLOPE, pit, None),
                 (110, 85, 60),
                 upward=True,
             )

@@ -118,7 +118,8 @@ def _sphere(n: int, rng: Rng, cx: float, cy: float, cz: float, r: float) -> np.n
     return np.array([cx, cy, cz]) + r * v
 
 
-def _terrain_area(x0: float, x1: float, y0: float, y1: float, *rest: object) -> float:
+def _terrain_area(rect: tuple[float, float, float, float], *rest: object) -> float:
+    x0, x1, y0, y1 = rect
     return (x1 - x0) * (y1 - y0)
 
 
@@ -137,10 +138,12 @@ def terrain_height(x: np.ndarray, y: np.ndarray, slope: tuple[float, float], pit
 
 
 def _terrain(
-    n: int, rng: Rng, x0: float, x1: float, y0: float, y1: float, sx: float, sy: float,
+    n: int, rng: Rng, rect: tuple[float, float, float, float], slope: tuple[float, float],
     pit: tuple[float, float, float, float, float] | None, exclude: tuple[float, float, float, float] | None,
 ) -> np.ndarray:  # fmt: skip
-    """Terrain over a rectangle, optionally only inside (pit region) or outside (``exclude``) a box."""
+    """Terrain over the rectangle ``rect`` (x0, x1, y0, y1), optionally only inside (pit region) or
+    outside (``exclude``) a box."""
+    x0, x1, y0, y1 = rect
     x = rng.uniform(x0, x1, n)
     y = rng.uniform(y0, y1, n)
     keep = np.ones(n, bool)
@@ -148,7 +151,7 @@ def _terrain(
         ex0, ex1, ey0, ey1 = exclude
         keep = ~((x >= ex0) & (x < ex1) & (y >= ey0) & (y < ey1))
     x, y = x[keep], y[keep]
-    return np.c_[x, y, terrain_height(x, y, (sx, sy), pit)]
+    return np.c_[x, y, terrain_height(x, y, slope, pit)]
 
 
 AREA: dict[str, Callable[..., float]] = {

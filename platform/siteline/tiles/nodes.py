@@ -137,10 +137,12 @@ class NodePlan:
         origin, levels (N,) uint8, in the tile's order): group g's points take its slots in a seeded
         permutation, batch after batch (``seen``: per group, the points earlier batches placed;
         updated)."""
-        where = node_kernels.place_points(
-            np.ascontiguousarray(counts), levels, _fine_edge(spec), spec.max_node_depth, self.band_of_level,
-            self.depth_of_band, self.z0, self.cube_bits, self.key, self.start, self.count, seen, self.seed,
-            self.order == "random",
+        grid = (_fine_edge(spec), spec.max_node_depth, self.z0, self.cube_bits)
+        group = node_kernels.group_points(
+            np.ascontiguousarray(counts), levels, grid, self.band_of_level, self.depth_of_band, self.key
+        )
+        where = group if len(group) and group[0] < 0 else node_kernels.slot_points(
+            group, self.start, self.count, seen, self.seed, self.order == "random"
         )  # fmt: skip
         if len(where) and where[0] < 0:
             raise TileError("a tile's points changed between its node plan and their placement.")
@@ -228,16 +230,15 @@ def plan_nodes(rows: np.ndarray, spec: TileSpec, n_levels: int, seed: int) -> No
     key = _group_key(band, d, cubes, level, spec, z0, cube_bits)
     order = np.argsort(key, kind="stable")
     groups = _runs(key[order], rows[order, 1])
-    return _with_nodes(
-        groups, spans, depth_of_band, band_of_level, z0, cube_bits, seed, spec, len(band_of_level)
-    )
+    return _with_nodes(groups, spans, depth_of_band, band_of_level, z0, cube_bits, seed, spec)
 
 
 def _with_nodes(
     groups: np.ndarray, spans: list[tuple[int, int]], depth_of_band: np.ndarray, band_of_level: np.ndarray,
-    z0: int, cube_bits: int, seed: int, spec: TileSpec, width: int,
+    z0: int, cube_bits: int, seed: int, spec: TileSpec,
 ) -> NodePlan:  # fmt: skip
-    """The plan of the groups (key, count) in array order, with their nodes."""
+    """The plan of the groups (key, count) in array order, with their nodes (a count per level of
+    ``band_of_level``)."""
     key, count = groups[:, 0], groups[:, 1]
     start = np.r_[0, np.cumsum(count)[:-1]].astype(np.int64) if len(count) else np.zeros(0, np.int64)
     band_cube = key >> _LEVEL_BITS
@@ -247,7 +248,7 @@ def _with_nodes(
     new = np.zeros(len(key), bool)
     new[head] = True
     node = np.cumsum(new) - 1
-    lc = np.zeros((len(head), width), np.int64)
+    lc = np.zeros((len(head), len(band_of_level)), np.int64)
     np.add.at(lc, (node, key & ((1 << _LEVEL_BITS) - 1)), count)
     nb = band_cube[head] >> cube_bits
     nd = depth_of_band[nb]

@@ -56,30 +56,21 @@ def _mix(x: np.uint64) -> np.uint64:
 
 
 @kernel
-def place_points(
+def group_points(
     counts: np.ndarray,
     levels: np.ndarray,
-    edge: int,
-    depth: int,
+    grid: tuple[int, int, int, int],
     band_of_level: np.ndarray,
     depth_of_band: np.ndarray,
-    z0: int,
-    cube_bits: int,
     key: np.ndarray,
-    start: np.ndarray,
-    size: np.ndarray,
-    seen: np.ndarray,
-    seed: int,
-    shuffle: bool,
 ) -> np.ndarray:
-    """(N,) array position of each of a batch of a tile's points, in the tile's order: its group
-    (band, cube at the band's depth, level; ``key`` sorted, ``start`` and ``size`` in the arrays) and
-    the next of the group's slots, in a permutation seeded by (seed, group) when ``shuffle`` (the
-    Fisher-Yates shuffle of a splitmix64 stream), in order otherwise; ``seen`` (per group, slots
-    earlier batches took) is updated. -1 everywhere when a point has no group."""
+    """(N,) the group of each of a batch of a tile's points (counts (N, 3), levels (N,)): the row of
+    ``key`` (sorted group keys: band, cube at the band's depth, level) it belongs to; ``grid``: (finest
+    cube edge in quanta, finest depth, lowest cube z, bits of a cube). -1 everywhere when a point has
+    no group."""
+    edge, depth, z0, cube_bits = grid
     n, groups = counts.shape[0], key.shape[0]
     group = np.empty(n, np.int64)
-    taken = np.zeros(groups, np.int64)
     for p in range(n):
         lv = levels[p]
         band = band_of_level[lv]
@@ -89,10 +80,28 @@ def place_points(
         cube = ((cz >> s) - z0) << (2 * d) | (cy >> s) << d | (cx >> s)
         k = ((band << cube_bits) | cube) << LEVEL_BITS | lv
         g = np.searchsorted(key, k)
-        if g >= groups or key[g] != k or seen[g] + taken[g] >= size[g]:
+        if g >= groups or key[g] != k:
             return np.full(n, -1, np.int64)
         group[p] = g
-        taken[g] += 1
+    return group
+
+
+@kernel
+def slot_points(
+    group: np.ndarray, start: np.ndarray, size: np.ndarray, seen: np.ndarray, seed: int, shuffle: bool
+) -> np.ndarray:
+    """(N,) array position of each point of a batch whose groups are ``group`` (:func:`group_points`),
+    in the tile's order: the next of its group's slots (group g's ``size[g]`` slots start at
+    ``start[g]``), in a permutation seeded by (seed, group) when ``shuffle`` (the Fisher-Yates shuffle
+    of a splitmix64 stream), in order otherwise; ``seen`` (per group, slots earlier batches took) is
+    updated. -1 everywhere when a group would take more slots than it has."""
+    n, groups = group.shape[0], start.shape[0]
+    taken = np.zeros(groups, np.int64)
+    for p in range(n):
+        taken[group[p]] += 1
+    for g in range(groups):
+        if seen[g] + taken[g] > size[g]:
+            return np.full(n, -1, np.int64)
     first = np.zeros(groups + 1, np.int64)  # each group's slots in ``slots``
     for g in range(groups):
         first[g + 1] = first[g] + taken[g]
