@@ -38,7 +38,8 @@ from ui import RunProgress, ingest_dashboards, note, pair_dashboards, release_da
 
 from siteline import pipeline  # noqa: E402
 from siteline.catalog import Catalog, open_catalog  # noqa: E402
-from siteline.catalog.scenes import pair_ids_of_scene, site_name_of_pair, site_name_of_scene  # noqa: E402
+from siteline.catalog.pairs import pair_ids_of_scene, site_name_of_pair  # noqa: E402  # noqa: E402
+from siteline.catalog.scenes import site_name_of_scene  # noqa: E402
 from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import Settings, load_settings  # noqa: E402
 from siteline.diskspace import disk_full, full_disk_message  # noqa: E402

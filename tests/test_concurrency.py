@@ -55,7 +55,7 @@ def _ok(runs: list[subprocess.CompletedProcess]) -> list[str]:
 def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
     from siteline.catalog import open_catalog
     from siteline.catalog.labelsets import label_sets, labelled_source
-    from siteline.catalog.scenes import list_missions
+    from siteline.catalog.missions import list_missions
     from siteline.ingest import ingest_mission
     from siteline.labelsets import open_labelled
     from siteline.labelsets.export import export_label_set

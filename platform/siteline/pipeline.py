@@ -14,8 +14,8 @@ from pathlib import Path
 
 from siteline.catalog import Catalog
 from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion, plan_site_deletion
-from siteline.catalog.pairs import unprocessed_pairs
-from siteline.catalog.scenes import needs_tiling, pair_ids_of_scene, scene_ids_of_pairs
+from siteline.catalog.pairs import pair_ids_of_scene, scene_ids_of_pairs, unprocessed_pairs
+from siteline.catalog.scenes import needs_tiling
 from siteline.catalog.sites import get_site, imported_label_sets, site_spec
 from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings

@@ -6,7 +6,7 @@ from __future__ import annotations
 from sitehelpers import epoch_dirs, make_home
 
 from siteline.catalog import open_catalog
-from siteline.catalog.scenes import list_pairs, pair_ids_of_scene
+from siteline.catalog.pairs import list_pairs, pair_ids_of_scene
 from siteline.catalog.sites import get_site
 from siteline.ingest import ingest_mission
 from siteline.pointpass import TilingResources

@@ -208,7 +208,7 @@ def test_other_crs_is_transformed_in_float64(tmp_path) -> None:
     settings = make_home(tmp_path)
     cat = open_catalog(settings)
     r = ingest_mission(cat, settings, mission, "demo", DATED)
-    assert r.scan["transformed"] and r.scan["source_crs"] == "EPSG:32617"
+    assert r.scan is not None and r.scan.transformed and r.scan.source_crs == "EPSG:32617"
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
         assert np.allclose(sc.bounds["min"], local.min(axis=0), atol=2e-3)

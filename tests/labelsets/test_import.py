@@ -329,7 +329,7 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
     when = dt.datetime(2024, 6, 1, tzinfo=dt.UTC)
     r = ingest_mission(cat, settings, mission, "fenced", IngestOptions(captured_at=when))
     tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
-    assert r.scan["outside_fence"] == 0
+    assert r.scan is not None and r.scan.outside_fence == 0
     export(cat, r.scene_id, tmp_path / "unchanged.las")
     res = import_labels(cat, settings, r.scene_id, tmp_path / "unchanged.las")
     assert not res.created and res.changed == 0, res

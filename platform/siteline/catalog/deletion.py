@@ -9,7 +9,8 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Release, ReleaseItem, Scene, Site
-from siteline.catalog.scenes import ensure_pair, get_scene, neighbours, scene_statistics
+from siteline.catalog.pairs import ensure_pair
+from siteline.catalog.scenes import get_scene, neighbours, scene_statistics
 from siteline.catalog.sites import get_site
 from siteline.errors import ImmutableError
 

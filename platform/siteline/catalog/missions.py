@@ -1,25 +1,21 @@
-"""Catalog writes of an ingest: the mission, its files, its scene with cameras and label set 1, and
-the pairs the scene forms. Functions take a session and never commit: the caller owns the transaction."""
+"""Catalog queries on missions and their files, and the writes of an ingest: the mission, its files,
+its scene with cameras and label set 1, and the pairs the scene forms. Functions take a session and
+never commit: the caller owns the transaction."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene
-from siteline.catalog.scenes import (
-    add_cameras,
-    ensure_pair,
-    lock_site,
-    mission_by_manifest,
-    neighbours,
-    scene_at,
-    supersede_pair,
-)
+from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
+from siteline.catalog.pairs import ensure_pair, supersede_pair
+from siteline.catalog.scenes import add_cameras, get_scene, neighbours, scene_at, scene_statistics
+from siteline.catalog.sites import lock_site
 from siteline.catalog.stages import add_completed
-from siteline.errors import MissionError
-from siteline.records.mission import CheckedMission
+from siteline.errors import MissionError, TileError
+from siteline.records.mission import CheckedMission, LasLocation
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics
 
@@ -91,3 +87,55 @@ def record_ingest(session: Session, site_id: int, checked: CheckedMission, run: 
         supersede_pair(session, before.id, after.id)
     add_completed(session, run)
     return IngestedIds(mission.id, scene.id, tuple(pairs))
+
+
+def mission_by_manifest(session: Session, sha256: str, site_id: int) -> Mission | None:
+    """The mission of manifest ``sha256`` ingested into site ``site_id`` (a mission may go into
+    several sites), or None."""
+    return session.execute(
+        sa.select(Mission).where(Mission.manifest_sha256 == sha256, Mission.site_id == site_id)
+    ).scalar_one_or_none()
+
+
+def mission_files(session: Session, mission_id: int) -> list[MissionFile]:
+    return list(
+        session.execute(
+            sa.select(MissionFile).where(MissionFile.mission_id == mission_id).order_by(MissionFile.path)
+        ).scalars()
+    )
+
+
+def list_missions(session: Session, site: Site | None = None) -> list[Mission]:
+    q = sa.select(Mission).order_by(Mission.received_at, Mission.id)
+    if site is not None:
+        q = q.where(Mission.site_id == site.id)
+    return list(session.execute(q).scalars())
+
+
+def mission_file(session: Session, mission_id: int, path: str | None) -> MissionFile | None:
+    """The file ``path`` of mission ``mission_id``, or None."""
+    return session.execute(
+        sa.select(MissionFile).where(MissionFile.mission_id == mission_id, MissionFile.path == path)
+    ).scalar_one_or_none()
+
+
+def blobs_in_use(session: Session, shas: list[str]) -> set[str]:
+    """Which of ``shas`` the catalog references (blobs another ingest committed): a mission's file or a
+    scene's alignment sample."""
+    if not shas:
+        return set()
+    files = session.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(shas))).scalars()
+    sample = Scene.statistics["stable_sample_sha256"].as_string()
+    return set(files) | set(session.execute(sa.select(sample).where(sample.in_(shas))).scalars())
+
+
+def las_location(session: Session, scene_id: int) -> LasLocation:
+    """Where scene ``scene_id``'s point cloud is kept; :class:`TileError` when its mission records none."""
+    scene = get_scene(session, scene_id)
+    stats = scene_statistics(scene)
+    mission = session.get(Mission, scene.mission_id)
+    row = mission_file(session, scene.mission_id, stats.las_file)
+    if mission is None or row is None:
+        raise TileError(f"scene {scene_id}: its mission records no point cloud file.")
+    return LasLocation(mission.storage, mission.root_uri, row.path, row.sha256)  # type: ignore[arg-type]
+

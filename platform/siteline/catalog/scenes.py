@@ -1,4 +1,5 @@
-"""Catalog queries on missions, scenes, cameras and pairs. Functions take a session; callers commit."""
+"""Catalog queries on scenes and their cameras, statistics and tilings. Functions take a session;
+callers commit."""
 
 from __future__ import annotations
 
@@ -13,38 +14,14 @@ from sqlalchemy.orm import Session
 from siteline.cameras import Camera
 from siteline.catalog.addresses import from_record, to_record
 from siteline.catalog.models import Camera as CameraRow
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Scene, Site
-from siteline.catalog.sites import site_of
+from siteline.catalog.models import LabelSet, Mission, Scene, Site
+from siteline.catalog.sites import site_name, site_of
 from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, TileError
-from siteline.records.mission import LasLocation
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneSummary
 from siteline.records.tiling import SceneTiling, TileSource
-
-
-def mission_by_manifest(session: Session, sha256: str, site_id: int) -> Mission | None:
-    """The mission of manifest ``sha256`` ingested into site ``site_id`` (a mission may go into
-    several sites), or None."""
-    return session.execute(
-        sa.select(Mission).where(Mission.manifest_sha256 == sha256, Mission.site_id == site_id)
-    ).scalar_one_or_none()
-
-
-def mission_files(session: Session, mission_id: int) -> list[MissionFile]:
-    return list(
-        session.execute(
-            sa.select(MissionFile).where(MissionFile.mission_id == mission_id).order_by(MissionFile.path)
-        ).scalars()
-    )
-
-
-def list_missions(session: Session, site: Site | None = None) -> list[Mission]:
-    q = sa.select(Mission).order_by(Mission.received_at, Mission.id)
-    if site is not None:
-        q = q.where(Mission.site_id == site.id)
-    return list(session.execute(q).scalars())
 
 
 def get_scene(session: Session, scene_id: int) -> Scene:
@@ -141,71 +118,9 @@ def add_cameras(session: Session, scene_id: int, cameras: dict[str, Camera], sou
         )
 
 
-def ensure_pair(session: Session, site: Site, t1: Scene, t2: Scene) -> Pair:
-    pair = session.execute(
-        sa.select(Pair).where(Pair.t1_scene_id == t1.id, Pair.t2_scene_id == t2.id)
-    ).scalar_one_or_none()
-    if pair is None:
-        pair = Pair(site_id=site.id, t1_scene_id=t1.id, t2_scene_id=t2.id)
-        session.add(pair)
-        session.flush()
-    return pair
-
-
-def list_pairs(session: Session, site: Site) -> list[Pair]:
-    """The site's pairs of consecutive scenes, in capture order (superseded pairs left out)."""
-    t1 = sa.orm.aliased(Scene)
-    return list(
-        session.execute(
-            sa.select(Pair)
-            .join(t1, Pair.t1_scene_id == t1.id)
-            .where(Pair.site_id == site.id, Pair.status != "superseded")
-            .order_by(t1.capture_time)
-        ).scalars()
-    )
-
-
-def supersede_pair(session: Session, t1_id: int, t2_id: int) -> None:
-    """Mark the pair (t1, t2) superseded: a scene captured between them arrived later. Its outputs and
-    the releases that used it stay; new releases draw on the consecutive pairs."""
-    session.execute(
-        sa.update(Pair)
-        .where(Pair.t1_scene_id == t1_id, Pair.t2_scene_id == t2_id)
-        .values(status="superseded")
-    )
-
-
-def pair_ids_of_scene(session: Session, scene_id: int) -> list[int]:
-    """Ids of the pairs ``scene_id`` belongs to (as t1 or t2), ascending."""
-    return list(
-        session.execute(
-            sa.select(Pair.id)
-            .where(
-                (Pair.t1_scene_id == scene_id) | (Pair.t2_scene_id == scene_id), Pair.status != "superseded"
-            )
-            .order_by(Pair.id)
-        ).scalars()
-    )
-
-
 def site_name_of_scene(session: Session, scene_id: int) -> str:
     """The name of the site of scene ``scene_id``; :class:`NotFoundError` when there is none."""
-    return _site_name(session, get_scene(session, scene_id).site_id)
-
-
-def _site_name(session: Session, site_id: int) -> str:
-    site = session.get(Site, site_id)
-    if site is None:
-        raise NotFoundError(f"no site with id {site_id}.")
-    return site.name
-
-
-def site_name_of_pair(session: Session, pair_id: int) -> str:
-    """The name of the site of pair ``pair_id``; :class:`NotFoundError` when there is none."""
-    pair = session.get(Pair, pair_id)
-    if pair is None:
-        raise NotFoundError(f"no pair with id {pair_id}.")
-    return _site_name(session, pair.site_id)
+    return site_name(session, get_scene(session, scene_id).site_id)
 
 
 def node_summary(scene: Scene) -> dict[str, int]:
@@ -244,7 +159,7 @@ def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
         "density_pts_m2": scan.density_pts_m2 if scan else None,
         "source_crs": scan.source_crs if scan else None,
         "transformed": scan.transformed if scan else None,
-        "z_unit": scan.z_unit if scan else None,
+        "z_unit": scan.z_unit.to_dict() if scan and scan.z_unit else None,
         "colour": scan.colour if scan else None,
         "capture_time_source": stats.capture_time_source,
         "registration": scene.registration,
@@ -266,28 +181,6 @@ def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
 def scene_of_mission(session: Session, mission_id: int) -> Scene | None:
     """The scene made from mission ``mission_id``, or None."""
     return session.execute(sa.select(Scene).where(Scene.mission_id == mission_id)).scalar_one_or_none()
-
-
-def blobs_in_use(session: Session, shas: list[str]) -> set[str]:
-    """Which of ``shas`` the catalog references (blobs another ingest committed): a mission's file or a
-    scene's alignment sample."""
-    if not shas:
-        return set()
-    files = session.execute(sa.select(MissionFile.sha256).where(MissionFile.sha256.in_(shas))).scalars()
-    sample = Scene.statistics["stable_sample_sha256"].as_string()
-    return set(files) | set(session.execute(sa.select(sample).where(sample.in_(shas))).scalars())
-
-
-def lock_site(session: Session, site_id: int) -> Site:
-    """The site row, locked for the rest of the transaction (one registration per site at a time)."""
-    return session.execute(sa.select(Site).where(Site.id == site_id).with_for_update()).scalar_one()
-
-
-def mission_file(session: Session, mission_id: int, path: str | None) -> MissionFile | None:
-    """The file ``path`` of mission ``mission_id``, or None."""
-    return session.execute(
-        sa.select(MissionFile).where(MissionFile.mission_id == mission_id, MissionFile.path == path)
-    ).scalar_one_or_none()
 
 
 def scene_statistics(scene: Scene) -> SceneStatistics:
@@ -315,17 +208,6 @@ def tile_source(session: Session, scene_id: int) -> TileSource:
     if scene.status != "tiled" or not scene.tile_store_uri or tiling is None:
         raise TileError(f"scene {scene_id} is not tiled yet: run `siteline scene tile {scene_id}`.")
     return TileSource(scene.tile_store_uri, tiling.spec, tiling.checksum)
-
-
-def las_location(session: Session, scene_id: int) -> LasLocation:
-    """Where scene ``scene_id``'s point cloud is kept; :class:`TileError` when its mission records none."""
-    scene = get_scene(session, scene_id)
-    stats = scene_statistics(scene)
-    mission = session.get(Mission, scene.mission_id)
-    row = mission_file(session, scene.mission_id, stats.las_file)
-    if mission is None or row is None:
-        raise TileError(f"scene {scene_id}: its mission records no point cloud file.")
-    return LasLocation(mission.storage, mission.root_uri, row.path, row.sha256)  # type: ignore[arg-type]
 
 
 def record_tiling(
@@ -362,11 +244,3 @@ def needs_tiling(session: Session, scene_id: int) -> bool:
     return tiling.site_version != (site.version or 1)
 
 
-def scene_ids_of_pairs(session: Session, pair_ids: list[int]) -> list[int]:
-    """The scenes the pairs ``pair_ids`` join, each once, in pair order (unknown pairs are skipped)."""
-    out: list[int] = []
-    for pid in pair_ids:
-        pair = session.get(Pair, pid)
-        if pair is not None:
-            out += [sid for sid in (pair.t1_scene_id, pair.t2_scene_id) if sid not in out]
-    return out

@@ -9,7 +9,7 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.base import utcnow
 from siteline.catalog.models import LabelSet, Scene, Site
-from siteline.errors import SiteError, SiteNotFoundError
+from siteline.errors import NotFoundError, SiteError, SiteNotFoundError
 from siteline.fence import fence_area_m2
 from siteline.site import SiteSpec
 from siteline.taxonomy import Taxonomy
@@ -153,3 +153,16 @@ def site_record(site: Site, scenes: int) -> dict[str, Any]:
 
 def scene_count(session: Session, site: Site) -> int:
     return session.execute(sa.select(sa.func.count(Scene.id)).where(Scene.site_id == site.id)).scalar_one()
+
+
+def lock_site(session: Session, site_id: int) -> Site:
+    """The site row, locked for the rest of the transaction (one registration per site at a time)."""
+    return session.execute(sa.select(Site).where(Site.id == site_id).with_for_update()).scalar_one()
+
+
+def site_name(session: Session, site_id: int) -> str:
+    """The name of site ``site_id``; :class:`NotFoundError` when there is none."""
+    site = session.get(Site, site_id)
+    if site is None:
+        raise NotFoundError(f"no site with id {site_id}.")
+    return site.name

@@ -10,12 +10,9 @@ from typing import Any
 import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
-from siteline.catalog.scenes import (
-    list_missions,
-    list_pairs,
-    list_scenes,
-    scene_record,
-)
+from siteline.catalog.missions import list_missions
+from siteline.catalog.pairs import list_pairs
+from siteline.catalog.scenes import list_scenes, scene_record
 from siteline.catalog.sites import get_site
 from siteline.cli.common import (
     JsonOption,
@@ -144,7 +141,7 @@ def ingest(
         lambda: console.print(
             result.message
             if not result.created
-            else f"{result.message}: {result.scan.get('point_count', 0):,} points, "
+            else f"{result.message}: {result.scan.point_count if result.scan else 0:,} points, "
             f"{result.registration.get('images', 0)} {result.registration.get('source')} cameras, "
             f"pairs {result.pairs}"
         ),

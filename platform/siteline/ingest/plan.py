@@ -8,7 +8,8 @@ from datetime import datetime
 
 from sqlalchemy.orm import Session
 
-from siteline.catalog.scenes import mission_by_manifest, scene_of_mission, scene_summaries
+from siteline.catalog.missions import mission_by_manifest
+from siteline.catalog.scenes import scene_of_mission, scene_summaries
 from siteline.catalog.sites import get_site, site_spec
 from siteline.records.mission import MissionManifest
 from siteline.records.scene import SceneSummary

@@ -228,7 +228,7 @@ def _scan(
         scale=[float(v) for v in header.scales],
         offset=[float(v) for v in header.offsets],
         gps_time_range=[t.tmin, t.tmax] if np.isfinite(t.tmin) else None,
-        z_unit=z_unit_of(src, z_unit).to_dict(),
+        z_unit=z_unit_of(src, z_unit),
         creation_date=day.isoformat() if day is not None else None,
         gps_time_standard=bool(int(header.global_encoding.gps_time_type)),
         colour_stats=t.colour_stats(survey),

@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import logging
 import shutil
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import sqlalchemy as sa
 
 from siteline.catalog import Catalog
-from siteline.catalog.missions import record_ingest
-from siteline.catalog.scenes import blobs_in_use
+from siteline.catalog.missions import blobs_in_use, record_ingest
 from siteline.catalog.sites import get_site
 from siteline.config import Settings
 from siteline.errors import MissionError
@@ -34,6 +33,7 @@ from siteline.pointpass.partition import PartitionCache
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
 from siteline.records.runs import StageRun
+from siteline.records.scan import LasScan
 from siteline.stores import layout
 from siteline.stores.blobs import BlobStaging, remove_blobs
 
@@ -54,12 +54,13 @@ class IngestResult:
     scene_id: int | None
     manifest_sha256: str
     files: int = 0
-    scan: dict[str, Any] = field(default_factory=dict)
+    scan: LasScan | None = None
     registration: dict[str, Any] = field(default_factory=dict)
     pairs: list[int] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        doc = {f.name: getattr(self, f.name) for f in fields(self)}
+        return doc | {"scan": self.scan.to_dict() if self.scan is not None else {}}
 
 
 def _already(plan: IngestPlan) -> IngestResult:
@@ -107,7 +108,7 @@ def _store_and_record(
     log.info("%s; pairs %s", message, list(ids.pairs))
     return IngestResult(
         True, message, ids.mission_id, ids.scene_id, checked.manifest.sha256, len(checked.manifest.entries),
-        checked.scan.to_dict(), checked.registration, list(ids.pairs),
+        checked.scan, checked.registration, list(ids.pairs),
     )  # fmt: skip
 
 

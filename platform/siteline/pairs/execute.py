@@ -24,7 +24,7 @@ from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput, RenderedView
 from siteline.render.outputs import png_bytes
-from siteline.stores import Store, layout
+from siteline.stores import Store, layout, move
 from siteline.tiles.reader import SceneTiles
 from siteline.tolerances import RATIO_TOL, at_least
 from siteline.views.generate import NamedCamera, SyntheticView, ViewSet, generate_views, key_sorted
@@ -157,7 +157,7 @@ def _index(kept: list[tuple[SyntheticView, dict[str, Any]]], work: Path, seed: i
         name = f"{i:04d}.png"
         tmp = rec.pop("tmp")
         for sub in FOLDERS:
-            (work / sub / tmp).rename(work / sub / name)
+            move(work / sub / tmp, work / sub / name)
         out.append(RenderedView.from_dict(replace(v, index=i).to_dict() | {"file": name} | rec))
     return out
 

@@ -26,7 +26,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from siteline.crs import ZUnit, parse_source_crs
-from siteline.errors import TileError
+from siteline.errors import StoreError, TileError
 from siteline.pointpass.kernels import cut, radix, rows
 from siteline.pointpass.schema import BLOCK_BITS, COUNTS, RECORD, block_of, cell_ids, tile_of
 from siteline.pointpass.sitestream import Correction, SiteChunk, SiteReading, site_chunks, source_transformer
@@ -35,6 +35,7 @@ from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.stores.directio import append_blocks, finish_blocks
+from siteline.stores.local import move
 from siteline.stores.owners import owner_tag, sweep_stale
 
 # below this many points one process does everything (a pool costs about half a second to start)
@@ -320,17 +321,15 @@ class PartitionCache:
             made_from = json.loads((runs / _MADE_FROM).read_text())
         except (OSError, ValueError):
             return False
-        dest = self.folder / _key(made_from, content_sha256)
-        shutil.rmtree(dest, ignore_errors=True)
-        os.replace(runs, dest)
+        move(runs, self.folder / _key(made_from, content_sha256), replace=True)
         return True
 
     def claim(self, source: PassSource, content_sha256: str, spec: TileSpec, into: Path) -> Partition | None:
         """Take the kept partition of ``source`` (content ``content_sha256``) cut on ``spec``'s grid,
         moved to ``into`` so no other caller gets it; None when there is none or it cannot be read."""
         try:
-            os.replace(self.folder / _key(source.made_from(spec), content_sha256), into)
-        except OSError:
+            move(self.folder / _key(source.made_from(spec), content_sha256), into)
+        except (OSError, StoreError):
             return None
         try:
             return Partition.load(into)

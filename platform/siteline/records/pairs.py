@@ -4,8 +4,10 @@ outputs live (DESIGN.md §4-§6)."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple
+
+from siteline.cameras import Camera
 
 
 class PairVersions(NamedTuple):
@@ -37,7 +39,7 @@ class RenderedView:
     strategy: str
     params: dict[str, Any]
     coverage: float | None
-    camera: dict[str, Any]
+    camera: Camera
     file: str
     coverage_a: float
     coverage_b: float
@@ -46,12 +48,13 @@ class RenderedView:
     points_read: int
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {f.name: getattr(self, f.name) for f in fields(self)} | {"camera": self.camera.to_dict()}
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> RenderedView:
         names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in doc.items() if k in names})
+        values = {k: v for k, v in doc.items() if k in names}
+        return cls(**values | {"camera": Camera.from_dict(doc["camera"])})
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from siteline.crs import ZUnit
+
 # how a scan names a file's colour, and whether it is 0-255 in 16-bit fields
 COLOUR_NAMES = {True: "rgb 8-bit stored in 16-bit fields", False: "rgb 16-bit"}
 EIGHT_BIT = {name: eight for eight, name in COLOUR_NAMES.items()}
@@ -73,7 +75,7 @@ class LasScan:
     scale: list[float]
     offset: list[float]
     gps_time_range: list[float] | None
-    z_unit: dict[str, Any]
+    z_unit: ZUnit | None
     creation_date: str | None
     colour_stats: ColourStats | None = None
     gps_time_standard: bool | None = None
@@ -111,6 +113,7 @@ class LasScan:
         doc["unknown_codes"] = {str(k): v for k, v in self.unknown_codes.items()}
         doc["code_histogram"] = {str(k): v for k, v in self.code_histogram.items()}
         doc["colour_stats"] = self.colour_stats.to_dict() if self.colour_stats else None
+        doc["z_unit"] = self.z_unit.to_dict() if self.z_unit is not None else None
         return doc
 
     @classmethod
@@ -121,6 +124,7 @@ class LasScan:
         values["code_histogram"] = {int(k): int(v) for k, v in doc.get("code_histogram", {}).items()}
         stats = doc.get("colour_stats")
         values["colour_stats"] = ColourStats.from_dict(stats) if stats else None
+        values["z_unit"] = ZUnit.from_dict(doc["z_unit"]) if doc.get("z_unit") else None
         return cls(**values)
 
 

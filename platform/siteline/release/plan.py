@@ -11,11 +11,10 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from siteline.catalog.labelsets import label_set_ref
-from siteline.catalog.pairs import get_pair
+from siteline.catalog.pairs import get_pair, list_pairs
 from siteline.catalog.releases import earlier_item_splits, find_release, list_releases
 from siteline.catalog.scenes import (
     get_scene,
-    list_pairs,
     list_scenes,
     mission_of_scene,
     scene_cameras,

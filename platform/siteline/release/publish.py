@@ -4,13 +4,13 @@ renamed into place (atomic on one file system), then made read-only once the cat
 from __future__ import annotations
 
 import logging
-import os
 import stat
 from pathlib import Path
 
 from siteline.errors import ImmutableError, ReleaseError
 from siteline.release.manifest import verify_files
 from siteline.release.plan import PublishPlan
+from siteline.stores import move
 
 log = logging.getLogger(__name__)
 
@@ -26,13 +26,13 @@ def move_into_place(plan: PublishPlan) -> None:
         )
     if plan.final.exists():
         raise ImmutableError(f"{plan.final} already exists: a published version is never rewritten.")
-    os.replace(plan.draft, plan.final)
+    move(plan.draft, plan.final)
     log.info("release %s %s moved into place at %s", plan.name, plan.version, plan.final)
 
 
 def move_back(plan: PublishPlan) -> None:
     """Undo :func:`move_into_place` (the catalog did not record the publish)."""
-    os.replace(plan.final, plan.draft)
+    move(plan.final, plan.draft)
 
 
 WRITE = stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH

@@ -4,7 +4,8 @@ interface (:class:`Store`: :class:`LocalStore` or :class:`FsspecStore`).
 ``SITELINE_STORE_URL`` names the root (default ``$SITELINE_HOME/stores``), e.g. ``s3://bucket/siteline``
 for workers on several machines. :func:`open_store` is the one place that tells a local address from a
 remote one; :mod:`siteline.stores.layout` says where each thing lives; local files and folders outside
-the store (releases, exports) are written whole with :func:`atomic_file` and :func:`publish_folder`.
+the store (releases, exports) are written whole with :func:`atomic_file` and :func:`publish_folder`,
+and moved whole with :func:`move`.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from siteline.stores.base import MARKER, Store, join
-from siteline.stores.local import LocalStore, atomic_file, local_path, publish_folder, write_file
+from siteline.stores.local import LocalStore, atomic_file, local_path, move, publish_folder, write_file
 from siteline.stores.remote import FsspecStore
 
 _LOCAL_PROTOCOLS = {"file", "local"}
@@ -43,6 +44,7 @@ __all__ = [
     "is_remote",
     "join",
     "local_path",
+    "move",
     "open_store",
     "publish_folder",
     "write_file",

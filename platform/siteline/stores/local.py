@@ -107,6 +107,21 @@ def _move_into_place(work: Path, dest: Path, keep_existing: Callable[[Path], boo
         raise
 
 
+def move(src: Path, dest: Path, *, replace: bool = False) -> None:
+    """Move the local file or folder ``src`` to ``dest`` in one rename (so readers see it whole or not
+    at all; both on one file system). An existing ``dest`` is replaced (a folder removed first) when
+    ``replace``, else refused: :class:`StoreError` naming it, nothing moved."""
+    src, dest = Path(src), Path(dest)
+    if dest.exists() or dest.is_symlink():
+        if not replace:
+            raise StoreError(f"{dest} already exists: it is not replaced.")
+        if dest.is_dir() and not dest.is_symlink():
+            _remove_tree(dest)
+        else:
+            dest.unlink()
+    os.replace(src, dest)
+
+
 class LocalStore(Store):
     """A store in a local folder (or a file system mounted on every worker)."""
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from siteline.crs import ZUnit, parse_source_crs
+from siteline.crs import parse_source_crs
 from siteline.errors import TileError
 from siteline.pointpass.resources import TilingResources
 from siteline.progress import Progress, no_progress
@@ -48,12 +48,11 @@ def execute_tiling(
     written straight into the store, which its workers share)."""
     las = scene_las(store, plan)
     src = parse_source_crs(plan.source_crs) if plan.source_crs else plan.site.pyproj_crs
-    z_unit = ZUnit.from_dict(plan.z_unit) if plan.z_unit else None
     uri = layout.tile_store(store, plan.scene_id, generation)
     store.remove(uri)
     log.info("tiling scene %d from %s into %s (generation %d)", plan.scene_id, las.name, uri, generation)
     building = store.publish_shared(uri) if resources.executor is not None else store.publish(uri)
-    source = TileInput(las, plan.site, src, z_unit, plan.eight_bit, plan.correction, plan.las.sha256)
+    source = TileInput(las, plan.site, src, plan.z_unit, plan.eight_bit, plan.correction, plan.las.sha256)
     with building as work:
         written = write_tiles(source, work, spec, resources.completed(scratch=store.staging), plan.seed, progress)
     tiling = SceneTiling(

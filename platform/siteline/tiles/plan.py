@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from sqlalchemy.orm import Session
 
-from siteline.catalog.scenes import get_scene, las_location, scene_correction, scene_statistics
+from siteline.catalog.missions import las_location
+from siteline.catalog.scenes import get_scene, scene_correction, scene_statistics
 from siteline.catalog.sites import site_of
+from siteline.crs import ZUnit
 from siteline.errors import TileError
 from siteline.pointpass.sitestream import Correction
 from siteline.records.mission import LasLocation
@@ -29,7 +30,7 @@ class TilingPlan:
     site: SiteSpec
     las: LasLocation
     source_crs: str | None
-    z_unit: dict[str, Any] | None
+    z_unit: ZUnit | None
     tiled: bool
     current: SceneTiling | None
     seed: int
@@ -71,7 +72,7 @@ def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
         site=site_of(session, scene.site_id),
         las=las_location(session, scene_id),
         source_crs=stats.scan.source_crs or None,
-        z_unit=stats.scan.z_unit or None,
+        z_unit=stats.scan.z_unit,
         tiled=scene.status == "tiled",
         current=stats.tiling,
         seed=stats.scan.content_seed(),
