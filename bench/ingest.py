@@ -22,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import laspy
@@ -89,7 +90,7 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         from siteline.catalog.engine import make_engine
         from siteline.catalog.sites import add_site
         from siteline.config import Settings, sqlite_url
-        from siteline.ingest import ingest_mission
+        from siteline.ingest import IngestOptions, ingest_mission
         from siteline.site import make_site_spec
         from siteline.tiles import tile_scene
 
@@ -105,7 +106,9 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
                 s, make_site_spec("b", "EPSG:32618", ORIGIN, [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)])
             )
         t = time.perf_counter()
-        r = ingest_mission(cat, settings, Path(path).parent, "b")
+        # a generated LAS's GPS times are seconds of an unnamed week: its capture time is given
+        opts = IngestOptions(captured_at=datetime(2026, 1, 1, tzinfo=UTC))
+        r = ingest_mission(cat, settings, Path(path).parent, "b", opts)
         t_ingest = time.perf_counter() - t
         tiling = tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=workers)).tiling
         assert tiling is not None
