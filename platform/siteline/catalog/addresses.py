@@ -86,6 +86,20 @@ def from_record(value: str) -> str:
     return join(root, rest) if rest else root
 
 
+class StoreAddresses(sa.types.TypeDecorator):
+    """A JSON column holding a mapping of names to store addresses (a render's files), each recorded
+    relative to the roots in force."""
+
+    impl = sa.JSON
+    cache_ok = True
+
+    def process_bind_param(self, value: dict[str, str] | None, dialect: sa.Dialect) -> dict[str, str] | None:
+        return None if value is None else {k: to_record(str(v)) for k, v in value.items()}
+
+    def process_result_value(self, value: dict[str, str] | None, dialect: sa.Dialect) -> dict[str, str] | None:
+        return None if value is None else {k: from_record(v) for k, v in value.items()}
+
+
 class StoreAddress(sa.types.TypeDecorator):
     """A text column holding a store address, recorded relative to the roots in force."""
 

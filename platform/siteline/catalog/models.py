@@ -1,8 +1,10 @@
 """Catalog tables (DESIGN.md §1, §8): sites, missions and their files, scenes, cameras, label sets,
 pairs, views, renders, releases and their items, and stage runs.
 
-Store addresses (``*_uri`` columns, a render's paths, a tiling's ``uri``) are recorded relative to the
-store root or the home (siteline.catalog.addresses) and read back as absolute addresses.
+Store addresses (``*_uri`` columns, a render's paths) are recorded relative to the store root or
+the home (siteline.catalog.addresses) and read back as absolute addresses; so are a tiling's ``uri``
+(through ``catalog.scenes.scene_statistics``); a pair's labels' ``uri`` in its parameters is recorded
+the same way (``addresses.from_record`` reads it).
 
 Coordinates and bounds are float64 in the site-local frame unless a name says otherwise; the site
 origin is float64 in the site CRS. Poses are COLMAP ``cam_from_world`` (row-major R, t).
@@ -16,7 +18,7 @@ from typing import Any
 import sqlalchemy as sa
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
-from siteline.catalog.addresses import StoreAddress
+from siteline.catalog.addresses import StoreAddress, StoreAddresses
 from siteline.catalog.base import Base, Float64, UTCDateTime, utcnow
 from siteline.records.enums import (
     CAMERA_SOURCES,
@@ -218,7 +220,7 @@ class Render(Base):
     point_size_px: Mapped[int] = mapped_column(sa.Integer)
     coverage: Mapped[float] = mapped_column(Float64)
     change_ratio: Mapped[float | None] = mapped_column(Float64, nullable=True)
-    paths: Mapped[dict[str, str]] = mapped_column(sa.JSON, default=dict)
+    paths: Mapped[dict[str, str]] = mapped_column(StoreAddresses, default=dict)
 
 
 class Release(Base):

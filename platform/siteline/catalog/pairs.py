@@ -73,10 +73,7 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
                 Render(
                     view_id=view.id, scene_id=sid, scale=params["scale"], point_size_px=params["point_size_px"],
                     coverage=coverage, change_ratio=rec.change_ratio,
-                    paths={
-                        "image": to_record(join(output.root, side, rec.file)),
-                        "label": to_record(join(output.root, "label", rec.file)),
-                    },
+                    paths={"image": join(output.root, side, rec.file), "label": join(output.root, "label", rec.file)},
                 )
             )  # fmt: skip
     add_completed(session, run)

@@ -68,6 +68,11 @@ class Store(ABC):
         """The bytes of the file at ``uri``; :class:`StoreError` naming it when it cannot be read."""
 
     @abstractmethod
+    def read_into(self, uri: str, offset: int, buffers: list[memoryview]) -> int:
+        """Fill ``buffers`` (writable bytes, in order) from byte ``offset`` of the file at ``uri`` until
+        they are full or the file ends; return the bytes read (a ranged read)."""
+
+    @abstractmethod
     def put_bytes(self, data: bytes, uri: str) -> None:
         """Store ``data`` at ``uri`` whole or not at all."""
 

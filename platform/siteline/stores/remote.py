@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from siteline.errors import StoreError
 from siteline.hashing import sha256_file
 from siteline.stores.base import MARKER, Store, join, walk_files
-from siteline.stores.directio import read_blocks, spread
+from siteline.stores.directio import spread
 from siteline.stores.local import atomic_file
 from siteline.stores.owners import owner_tag
 
@@ -35,20 +35,6 @@ def file_system(uri: str) -> tuple[Any, str]:
             f"cannot open the store {uri}: {exc}. Install the file system's package (s3fs for s3://, "
             "gcsfs for gs://) or fix the URL."
         ) from exc
-
-
-def read_into(uri: str, offset: int, buffers: list[memoryview]) -> int:
-    """Fill ``buffers`` (writable bytes, in order) from byte ``offset`` of the file at ``uri`` until
-    they are full or the file ends; return the bytes read. A local file is read around the page cache
-    in whole blocks (siteline.stores.directio: what it reads, the partition's runs, is read once), any other
-    with one ranged GET."""
-    from fsspec.implementations.local import LocalFileSystem
-
-    want = sum(b.nbytes for b in buffers)
-    fs, path = file_system(uri)
-    if not isinstance(fs, LocalFileSystem):
-        return spread(fs.cat_file(path, start=offset, end=offset + want), buffers)
-    return read_blocks(path, offset, [b for b in buffers if b.nbytes])
 
 
 def cached_download(store: Store, uri: str, sha256: str | None) -> Path:
@@ -90,6 +76,11 @@ class FsspecStore(Store):
             return bytes(fs.cat_file(path))
         except OSError as exc:
             raise StoreError(f"cannot read {uri} from the store: {exc}") from exc
+
+    def read_into(self, uri: str, offset: int, buffers: list[memoryview]) -> int:
+        """One ranged GET."""
+        fs, path = file_system(uri)
+        return spread(fs.cat_file(path, start=offset, end=offset + sum(b.nbytes for b in buffers)), buffers)
 
     def put_bytes(self, data: bytes, uri: str) -> None:
         try:

@@ -38,7 +38,7 @@ from siteline.pointpass.kernels import rows as row_kernels
 from siteline.pointpass.partition import Slice
 from siteline.pointpass.schema import RECORD
 from siteline.records.tiling import NodeTable, TileSpec
-from siteline.stores.remote import read_into
+from siteline.stores import open_store
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
 from siteline.tiles.layout import (
     ATTRIBUTES,
@@ -82,19 +82,19 @@ def batches(parts: list[Slice], budget: int) -> list[list[Slice]]:
     out: list[list[Slice]] = []
     size = 0
     for k, part in enumerate(parts):
-        if (k == 0 or part[0] != parts[k - 1][0]) and (not out or size + per_block[part[0]] > budget):
+        if (k == 0 or part.block != parts[k - 1].block) and (not out or size + per_block[part.block] > budget):
             out.append([])
             size = 0
         out[-1].append(part)
-        size += part[3]
+        size += part.points
     return out
 
 
 def _gather(parts: list[Slice], out: np.ndarray | None = None) -> np.ndarray:
     """A batch's records from its slices of the runs, in order (into ``out`` when given: records of
     the batch's size). Slices that lie end to end in a run file (a chunk's next blocks) are read as
-    one range (:func:`siteline.stores.remote.read_into`: one read, or one ranged GET of an fsspec
-    URL)."""
+    one range (``Store.read_into``: one read around the page cache, or one ranged GET of an
+    fsspec URL)."""
     dest = np.r_[0, np.cumsum([p.points for p in parts])]
     out = np.empty(int(dest[-1]), RECORD) if out is None else out
     ranges: list[tuple[str, int, int, list[int]]] = []
@@ -108,7 +108,7 @@ def _gather(parts: list[Slice], out: np.ndarray | None = None) -> np.ndarray:
     size = RECORD.itemsize
     for path, start, end, members in ranges:
         into = [rows[dest[k] : dest[k + 1]].data.cast("B") for k in members if dest[k + 1] > dest[k]]
-        if read_into(path, start * size, into) != (end - start) * size:
+        if open_store(path).read_into(path, start * size, into) != (end - start) * size:
             raise TileError(f"run file {path} ends early: the partition changed while tiling.")
     return out
 
