@@ -52,6 +52,8 @@ def _ok(runs: list[subprocess.CompletedProcess]) -> list[str]:
     return [r.stdout for r in runs]
 
 
+# 34 s each on a 2-core machine: SQLite in `make test`, PostgreSQL in `make test-all`
+@pytest.mark.parametrize("db_url", ["sqlite", pytest.param("postgresql", marks=pytest.mark.slow)], indirect=True)
 def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
     from siteline.catalog import open_catalog
     from siteline.catalog.labelsets import label_sets, labelled_source
