@@ -256,3 +256,23 @@ def test_mypy_sees_real_signatures_through_the_lazy_packages(tmp_path: Path) -> 
     assert any(":4: error: Missing positional arguments" in line for line in lines), out.stdout + out.stderr
     assert any(":5: error: Too many arguments" in line for line in lines), out.stdout
     assert any(":6: error: Argument \"workers\"" in line for line in lines), out.stdout
+
+
+def test_lazy_packages_declare_each_name_once_for_mypy_and_once_for_run_time() -> None:
+    """A lazy package names each of its names twice: in ``_WHERE`` (imported on first use) and under
+    ``TYPE_CHECKING`` (what mypy reads). The two must agree, or mypy checks calls against a name the
+    package does not give at run time (or misses one it does)."""
+    checked = 0
+    for path, tree in _modules():
+        if path.name != "__init__.py" or "lazy_names" not in path.read_text():
+            continue
+        where: dict[str, str] = {}
+        typed: dict[str, str] = {}
+        for node in tree.body:
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "_WHERE" for t in node.targets):
+                where = ast.literal_eval(node.value)
+            if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+                typed |= {a.name: n.module for n in node.body if isinstance(n, ast.ImportFrom) for a in n.names}
+        assert where and typed == where, f"{_rel(path)}: TYPE_CHECKING imports and _WHERE differ"
+        checked += 1
+    assert checked >= 8  # the stage packages and the engine
