@@ -11,7 +11,7 @@ py=${PYTHON:-python3}
 nvidia-smi -L || true
 $py -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available(), torch.cuda.get_device_name() if torch.cuda.is_available() else '')"
 echo "== renderer on CUDA against the CPU (tests/render/test_cuda.py)"
-$py -m pytest --noconftest -q -p no:cacheprovider -o addopts="-ra" tests/render/test_cuda.py 2>&1 | tail -6
+$py -m pytest --noconftest -q -p no:cacheprovider -o addopts="-ra" tests/render/test_cuda.py tests/render/test_splats.py 2>&1 | tail -8
 [ "$only_tests" = 1 ] && exit 0
 echo "== bench/render.py --device cpu ($(nproc) cores)"
 $py bench/render.py --device cpu --points "$points" --memory-points 0

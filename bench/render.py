@@ -1,5 +1,6 @@
 """Renderer benchmark (issue: point-cloud renderer): seconds, points/s and coverage for scale x point
-size on a dense synthetic scene, beside a straightforward numpy z-buffer measured in the same run.
+size (fixed disks, and world splats with the gap fill) on a dense synthetic scene, beside a
+straightforward numpy z-buffer measured in the same run.
 
     python bench/render.py [--points 12000000] [--device cpu|cuda] [--memory-points 50000000]
 
@@ -125,13 +126,18 @@ def main() -> None:
         # measure the renderer, not the host-to-device copy: the points already live on the device
         xyz, rgb = torch.from_numpy(xyz).to(args.device), torch.from_numpy(rgb).to(args.device)
     cam = Camera.look_at((0, 0, ALT_M), (0, 0, 0), W, H, FX)
+    # the scene's spacing: 70 % of the points on the ground the view covers (world splats' input)
+    spacing_m = np.float32(1.0 / np.sqrt(0.7 * args.points / ((W * ALT_M / FX) * (H * ALT_M / FX))))
+    spacing = torch.full((args.points,), float(spacing_m), device=args.device)
     rows = []
     for scale in (1.0, 0.5, 0.25, 0.125):
-        for ps in (1, 3):
-            s = RenderSettings(scale=scale, point_size_px=ps)
-            render_points(xyz[:1000], cam, s, device=args.device)  # warm-up
-            sec, r = timed(lambda s=s: render_points(xyz, cam, s, {"rgb": rgb}, device=args.device))
-            rows.append((scale, ps, sec, args.points / sec, r.coverage, r.camera.width, r.camera.height))
+        for ps, splat in ((1, "fixed"), (3, "fixed"), (1, "world")):
+            s = RenderSettings(scale=scale, point_size_px=ps, splat=splat, fill_px=2 if splat == "world" else 0)
+            render_points(xyz[:1000], cam, s, device=args.device, spacing_m=spacing[:1000])  # warm-up
+            sec, r = timed(
+                lambda s=s: render_points(xyz, cam, s, {"rgb": rgb}, device=args.device, spacing_m=spacing)
+            )
+            rows.append((scale, ps, splat, sec, args.points / sec, r.coverage, r.camera.width, r.camera.height))
     base = {}
     if args.device != "cpu":
         xyz, rgb = xyz.cpu().numpy(), rgb.cpu().numpy()
@@ -146,11 +152,11 @@ def main() -> None:
             f"pixel agreement with siteline {agree:.4%}"
         )
     print()
-    print("| scale | size (px) | point size | seconds | M points/s | coverage | speed-up vs numpy |")
-    print("|---|---|---|---|---|---|---|")
-    for scale, ps, sec, pps, cov, w, h in rows:
-        ratio = f"{base[scale] / sec:.1f}x" if scale in base and ps == 1 else ""
-        print(f"| {scale:g} | {w}x{h} | {ps} | {sec:.3f} | {pps / 1e6:.1f} | {cov:.2%} | {ratio} |")
+    print(f"| scale | size (px) | point size | splats (spacing {spacing_m:.3f} m) | seconds | M points/s | coverage | speed-up vs numpy |")
+    print("|---|---|---|---|---|---|---|---|")
+    for scale, ps, splat, sec, pps, cov, w, h in rows:
+        ratio = f"{base[scale] / sec:.1f}x" if scale in base and ps == 1 and splat == "fixed" else ""
+        print(f"| {scale:g} | {w}x{h} | {ps} | {splat} | {sec:.3f} | {pps / 1e6:.1f} | {cov:.2%} | {ratio} |")
     if args.memory_points and args.device == "cpu":
         print()
         for scale in (0.125, 1.0):

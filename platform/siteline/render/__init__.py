@@ -15,14 +15,16 @@ if TYPE_CHECKING:  # mypy and editors see the real signatures; nothing is import
     from siteline.render.georef import to_site_local_f32 as to_site_local_f32
     from siteline.render.outputs import write_render as write_render
     from siteline.render.settings import RenderSettings as RenderSettings
+    from siteline.render.splats import disk_offsets as disk_offsets
+    from siteline.render.splats import local_spacing as local_spacing
     from siteline.render.zbuffer import RenderResult as RenderResult
-    from siteline.render.zbuffer import disk_offsets as disk_offsets
     from siteline.render.zbuffer import render_points as render_points
 
 _WHERE = {
     "RenderResult": "siteline.render.zbuffer",
     "RenderSettings": "siteline.render.settings",
-    "disk_offsets": "siteline.render.zbuffer",
+    "disk_offsets": "siteline.render.splats",
+    "local_spacing": "siteline.render.splats",
     "render_georeferenced": "siteline.render.georef",
     "render_points": "siteline.render.zbuffer",
     "to_site_local_f32": "siteline.render.georef",

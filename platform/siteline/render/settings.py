@@ -10,6 +10,14 @@ from siteline.errors import RenderError
 from siteline.specs import parse_spec
 
 PRECISIONS = ("float32", "float64")
+# how big a point is drawn: one diameter for every point, or its local spacing seen from the camera
+SPLAT_MODES = ("fixed", "world")
+# a world splat's diameter as a multiple of the point spacing it stands for: points a spacing apart
+# on a jittered grid leave no pixel uncovered from about sqrt(2); 1.5 closes most gaps of the level
+# of detail's one-point-per-cube samples, and the gap fill the rest (docs/performance.md)
+WORLD_SPLAT_FACTOR = 2.0
+MAX_SPLAT_PX = 63
+MAX_FILL_PX = 8
 
 
 @dataclass(frozen=True)
@@ -28,6 +36,9 @@ class RenderSettings:
     near_m: float = 1e-3
     precision: str = "float32"
     chunk_points: int = 2_000_000
+    splat: str = "fixed"
+    splat_max_px: int = 31
+    fill_px: int = 0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.scale, int | float) and math.isfinite(self.scale) and 0 < self.scale <= 4):
@@ -45,6 +56,16 @@ class RenderSettings:
             raise RenderError(f"precision {self.precision!r} must be one of {PRECISIONS}.")
         if not isinstance(self.chunk_points, int) or self.chunk_points < 1:
             raise RenderError(f"chunk_points {self.chunk_points!r} must be a positive integer.")
+        if self.splat not in SPLAT_MODES:
+            raise RenderError(f"splat {self.splat!r} must be one of {SPLAT_MODES}.")
+        m = self.splat_max_px
+        if not isinstance(m, int) or isinstance(m, bool) or not self.point_size_px <= m <= MAX_SPLAT_PX:
+            raise RenderError(
+                f"splat_max_px {m!r} must be an integer from the point size ({self.point_size_px}) to {MAX_SPLAT_PX}."
+            )
+        f = self.fill_px
+        if not isinstance(f, int) or isinstance(f, bool) or not 0 <= f <= MAX_FILL_PX:
+            raise RenderError(f"fill_px {f!r} must be an integer from 0 to {MAX_FILL_PX}.")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

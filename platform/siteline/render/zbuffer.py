@@ -5,20 +5,30 @@ projected, invalid points (behind the near plane, NaN/inf, off-image) are sent t
 any integer cast, and every pixel keeps the minimum of the key (float32 depth bits << 32 | point
 index) via ``scatter_reduce_(..., "amin")``: the nearest point wins and equal depths break by the
 smaller index, so the output does not depend on the device or the batch size.
+
+A point covers a disk of pixels (siteline.render.splats): the point size, or with world splats its
+spacing seen from the camera. A world splat's pixels carry its depth plus a paraboloid that rises
+to the splat's world radius at its rim, so where neighbouring splats of one surface overlap each
+pixel goes to the point whose centre is nearest, while a surface farther than that radius stays
+hidden. The gap fill (siteline.render.fill) then closes what the splats left between the points
+of one surface.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import torch
 
 from siteline.cameras import Camera
 from siteline.errors import RenderError
+from siteline.render.fill import fill_gaps
 from siteline.render.settings import RenderSettings
+from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels
 
 EMPTY_KEY = torch.iinfo(torch.int64).max
 MAX_POINTS = 2**32 - 1
@@ -29,9 +39,11 @@ INDEX_MASK = 0xFFFFFFFF
 class RenderResult:
     """Outputs of one render, all (H, W[, C]) numpy arrays on the CPU.
 
-    hit: bool, a point landed. depth: float32 z_cam in metres, NaN where no hit. index: int64 winning
-    point index into the input, -1 where no hit. attributes: each input attribute gathered at the
-    winner, zero where no hit (check ``hit``). camera: the camera at the render scale.
+    hit: bool, a point landed (drawn or filled). depth: float32 z_cam in metres of the winning point,
+    NaN where no hit. index: int64 winning point index into the input, -1 where no hit. attributes:
+    each input attribute gathered at the winner, zero where no hit (check ``hit``). filled: bool, the
+    pixels the gap fill gave a neighbour's point (a subset of ``hit``). camera: the camera at the
+    render scale.
     """
 
     camera: Camera
@@ -40,6 +52,12 @@ class RenderResult:
     index: np.ndarray
     attributes: dict[str, np.ndarray]
     stats: dict[str, float] = field(default_factory=dict)
+    filled: np.ndarray | None = None
+
+    @property
+    def filled_share(self) -> float:
+        """Fraction of pixels the gap fill gave a point."""
+        return float(self.filled.mean()) if self.filled is not None and self.filled.size else 0.0
 
     @property
     def coverage(self) -> float:
@@ -53,18 +71,16 @@ class RenderResult:
         return self.attributes["rgb"]
 
 
-def disk_offsets(point_size_px: int) -> list[tuple[int, int]]:
-    """Pixel offsets (du, dv) covered by a disk of diameter ``point_size_px`` centred on a pixel."""
-    r = point_size_px / 2.0
-    k = point_size_px // 2
-    return [(du, dv) for dv in range(-k, k + 1) for du in range(-k, k + 1) if du * du + dv * dv <= r * r]
-
-
 def _as_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
     return x if isinstance(x, torch.Tensor) else torch.from_numpy(np.ascontiguousarray(x))
 
 
-def _check_inputs(xyz: np.ndarray | torch.Tensor, attributes: Mapping[str, np.ndarray | torch.Tensor]) -> int:
+def _check_inputs(
+    xyz: np.ndarray | torch.Tensor,
+    attributes: Mapping[str, np.ndarray | torch.Tensor],
+    settings: RenderSettings,
+    spacing_m: np.ndarray | torch.Tensor | None,
+) -> int:
     if xyz.ndim != 2 or xyz.shape[1] != 3:
         raise RenderError(f"points must have shape (N, 3), got {tuple(xyz.shape)}.")
     if xyz.dtype not in (np.float32, torch.float32):
@@ -78,6 +94,7 @@ def _check_inputs(xyz: np.ndarray | torch.Tensor, attributes: Mapping[str, np.nd
     for name, values in attributes.items():
         if values.shape[0] != n:
             raise RenderError(f"attribute {name!r} has {values.shape[0]} rows for {n} points.")
+    check_spacing(spacing_m, n, settings)
     return n
 
 
@@ -88,14 +105,14 @@ def _dtype(settings: RenderSettings) -> torch.dtype:
 
 def _projector(cam: Camera, settings: RenderSettings, dev: torch.device) -> Callable[[torch.Tensor], tuple]:
     """Projection of (M, 3) site-local points through the scaled camera ``cam``: (valid, u, v, z),
-    valid where in front of ``near_m`` and within the image widened by half a point (NaN and inf
-    fail every comparison, so they are invalid; nothing is cast yet)."""
+    valid where in front of ``near_m`` and within the image widened by half the widest splat (NaN and
+    inf fail every comparison, so they are invalid; nothing is cast yet)."""
     W, H = cam.width, cam.height
     dtype = _dtype(settings)
     Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
     tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
     fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
-    margin = float(settings.point_size_px // 2)
+    margin = float((settings.splat_max_px if settings.splat == "world" else settings.point_size_px) // 2)
 
     def project(p: torch.Tensor) -> tuple:
         c = torch.addmm(tt, p.to(dev, non_blocking=True).to(dtype), Rt)  # (M, 3) camera coordinates
@@ -109,82 +126,190 @@ def _projector(cam: Camera, settings: RenderSettings, dev: torch.device) -> Call
     return project
 
 
+def _focal(cam: Camera) -> float:
+    """The focal length (pixels) world splats are sized with: the larger axis, so a disk spans its
+    spacing in both."""
+    return float(max(cam.fx, cam.fy))
+
+
+# a run of at least this many points of one disk diameter is drawn offset by offset (one scatter of
+# the whole run per pixel of the disk); shorter runs are drawn as one list of (point, pixel) pairs,
+# so many diameters cost a few calls, not one per offset of each
+BULK_POINTS = 1 << 15
+
+
+def _runs(diameters: torch.Tensor) -> tuple[torch.Tensor | None, list[tuple[int, int, int]]]:
+    """The order that sorts points by disk diameter (None when they share one) and the sorted
+    points' runs ``(diameter, start, stop)``."""
+    n = int(diameters.shape[0])
+    if n == 0:
+        return None, []
+    lo, hi = int(diameters.min()), int(diameters.max())
+    if lo == hi:
+        return None, [(lo, 0, n)]
+    ordered, order = torch.sort(diameters, stable=True)
+    values, counts = torch.unique_consecutive(ordered, return_counts=True)
+    ends = torch.cumsum(counts, 0)
+    return order, [(d, e - c, e) for d, c, e in zip(values.tolist(), counts.tolist(), ends.tolist(), strict=True)]
+
+
+def _disk_pixels(
+    ui: torch.Tensor,
+    vi: torch.Tensor,
+    diameters: torch.Tensor,
+    runs: list[tuple[int, int, int]],
+    cam: Camera,
+    max_diameter_px: int,
+) -> Iterator[tuple[slice | torch.Tensor, torch.Tensor, float | torch.Tensor]]:
+    """Every pixel of the disks of points sorted by diameter (``runs``: :func:`_runs`) as ``(which,
+    pixel, rho2)``: the points (a slice or positions), the flat pixel each covers (H W, the dump
+    slot, when off the image) and its squared distance in pixels from the point's pixel."""
+    W, H = cam.width, cam.height
+
+    def flat(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        return torch.where((u >= 0) & (u < W) & (v >= 0) & (v < H), v * W + u, W * H)
+
+    short = []
+    for d, a, b in runs:
+        if b - a < BULK_POINTS:
+            short.append(torch.arange(a, b, device=ui.device))
+            continue
+        for du, dv in disk_offsets(d):
+            yield slice(a, b), flat(ui[a:b] + du, vi[a:b] + dv), float(du * du + dv * dv)
+    if short:
+        pos = torch.cat(short)
+        for point, du_t, dv_t, rho2_t in disk_pixels(diameters[pos], max_diameter_px):
+            which = pos[point]
+            yield which, flat(ui[which] + du_t, vi[which] + dv_t), rho2_t.to(torch.float32)
+
+
 def _splat(
-    pts: torch.Tensor, cam: Camera, settings: RenderSettings, dev: torch.device, zbuf: torch.Tensor
+    pts: torch.Tensor,
+    spacing: torch.Tensor | None,
+    cam: Camera,
+    settings: RenderSettings,
+    dev: torch.device,
+    zbuf: torch.Tensor,
+    depths: torch.Tensor | None = None,
 ) -> int:
     """Project ``pts`` (N, 3) site-local through the scaled camera ``cam`` in batches and keep per
     pixel of ``zbuf`` ((H W + 1,) int64; the last slot swallows invalid points) the minimum key
-    (float32 depth bits << 32 | point index); return how many points fell in the frustum."""
+    (float32 depth bits << 32 | point index); return how many points fell in the frustum. spacing:
+    (N,) metres per point, for world splats; depths: (N,) float32, receives each point's camera
+    depth when given (a world splat's key holds its depth plus the paraboloid)."""
     W, H = cam.width, cam.height
     npix = W * H
     project = _projector(cam, settings, dev)
-    offsets = disk_offsets(settings.point_size_px)
     zero = torch.zeros((), dtype=_dtype(settings), device=dev)
+    world = settings.splat == "world"
     in_frustum = 0
     n = int(pts.shape[0])
     for start in range(0, n, settings.chunk_points):
         stop = min(n, start + settings.chunk_points)
         valid, u, v, z = project(pts[start:stop])
         in_frustum += int(valid.sum())
+        if depths is not None:
+            depths[start:stop] = z.to(torch.float32)
         ui = torch.where(valid, u, zero).floor_().to(torch.int64)
         vi = torch.where(valid, v, zero).floor_().to(torch.int64)
         depth_bits = torch.where(valid, z, zero).to(torch.float32).view(torch.int32).to(torch.int64)
-        key = (depth_bits << 32) | torch.arange(start, stop, device=dev, dtype=torch.int64)
-        if len(offsets) == 1:
+        index = torch.arange(start, stop, device=dev, dtype=torch.int64)
+        if settings.point_size_px == 1 and not world:
+            key = (depth_bits << 32) | index
             zbuf.scatter_reduce_(0, torch.where(valid, vi * W + ui, npix), key, reduce="amin")
             continue
         # a disk scatters every point several times: drop the invalid ones once, first
         sel = torch.nonzero(valid).squeeze(1)
-        ui, vi, key = ui[sel], vi[sel], key[sel]
-        for du, dv in offsets:
-            uo, vo = ui + du, vi + dv
-            ok = (uo >= 0) & (uo < W) & (vo >= 0) & (vo < H)
-            zbuf.scatter_reduce_(0, torch.where(ok, vo * W + uo, npix), key, reduce="amin")
+        ui, vi, zs, index = ui[sel], vi[sel], z[sel].to(torch.float32), index[sel]
+        chunk_spacing = spacing[start:stop][sel] if world and spacing is not None else None
+        diameters = diameters_px(chunk_spacing, zs, _focal(cam), settings)
+        order, runs = _runs(diameters)
+        if order is not None:
+            ui, vi, zs, index, diameters = ui[order], vi[order], zs[order], index[order], diameters[order]
+        # world disks rise to their world radius at the rim: (z / f) rho^2 / r metres
+        rise = zs / _focal(cam) / (diameters.to(torch.float32) / 2.0)
+        for which, pix, rho2 in _disk_pixels(ui, vi, diameters, runs, cam, settings.splat_max_px):
+            zk = zs[which] + rise[which] * rho2 if world else zs[which]
+            key = (zk.view(torch.int32).to(torch.int64) << 32) | index[which]
+            zbuf.scatter_reduce_(0, pix, key, reduce="amin")
     return in_frustum
 
 
+class Coverage(NamedTuple):
+    """What a probe render covers: ``hit``, the share of pixels any point reaches; ``kept``, the share
+    a point marked kept reaches (a class that is not ignored, inside the fence), an upper bound of
+    the render's valid share on its own scene."""
+
+    hit: float
+    kept: float
+
+
 def coverage_of(
-    xyz: np.ndarray | torch.Tensor, camera: Camera, settings: RenderSettings, device: str | torch.device = "cpu"
-) -> float:
-    """The share of pixels a render of ``xyz`` through ``camera`` with ``settings`` hits (the
-    ``coverage`` of :func:`render_points`, exactly): the same projection, each point's disk marked
-    on a boolean image widened by half a point, with no depth test and nothing decoded. View
-    generation probes thousands of candidates for this one figure."""
-    _check_inputs(xyz, {})
+    xyz: np.ndarray | torch.Tensor,
+    camera: Camera,
+    settings: RenderSettings,
+    device: str | torch.device = "cpu",
+    spacing_m: np.ndarray | torch.Tensor | None = None,
+    kept: np.ndarray | torch.Tensor | None = None,
+) -> Coverage:
+    """The share of pixels a render of ``xyz`` through ``camera`` with ``settings`` hits before the
+    gap fill (the ``coverage`` of :func:`render_points` with ``fill_px`` 0, exactly), and the share
+    the points where ``kept`` ((N,) bool; all when None) hit: the same projection and splats, each
+    disk marked with no depth test and nothing decoded. View generation probes thousands of
+    candidates for these figures. spacing_m: (N,) metres per point, for world splats."""
+    _check_inputs(xyz, {}, settings, spacing_m)
     dev = torch.device(device)
     cam = camera.scaled(settings.scale)
     W, H = cam.width, cam.height
-    m = settings.point_size_px // 2
+    npix = W * H
     project = _projector(cam, settings, dev)
-    centres = torch.zeros((H + 2 * m, W + 2 * m), dtype=torch.bool, device=dev)
+    marks = torch.zeros(npix + 1, dtype=torch.uint8, device=dev)  # 0 none, 1 any point, 2 a kept point
     pts = _as_tensor(xyz)
+    spacing = None if spacing_m is None else _as_tensor(spacing_m).to(dev)
+    keep = None if kept is None else _as_tensor(kept).to(dev)
     for start in range(0, int(pts.shape[0]), settings.chunk_points):
-        valid, u, v, _ = project(pts[start : start + settings.chunk_points])
-        ui = u[valid].floor_().to(torch.int64) + m
-        vi = v[valid].floor_().to(torch.int64) + m
-        centres[vi, ui] = True
-    hit = torch.zeros((H, W), dtype=torch.bool, device=dev)
-    for du, dv in disk_offsets(settings.point_size_px):  # pixel (x, y) is hit by a centre at (x - du, y - dv)
-        hit |= centres[m - dv : m - dv + H, m - du : m - du + W]
-    return int(hit.sum()) / hit.numel() if hit.numel() else 0.0  # as numpy's mean of the hit mask
+        stop = start + settings.chunk_points
+        valid, u, v, z = project(pts[start:stop])
+        sel = torch.nonzero(valid).squeeze(1)
+        ui, vi, zs = u[sel].floor_().to(torch.int64), v[sel].floor_().to(torch.int64), z[sel].to(torch.float32)
+        mark = torch.full(sel.shape, 2, dtype=torch.uint8, device=dev)
+        if keep is not None:
+            mark = 1 + keep[start:stop][sel].to(torch.uint8)
+        diameters = diameters_px(None if spacing is None else spacing[start:stop][sel], zs, _focal(cam), settings)
+        order, runs = _runs(diameters)
+        if order is not None:
+            ui, vi, mark, diameters = ui[order], vi[order], mark[order], diameters[order]
+        for which, pix, _ in _disk_pixels(ui, vi, diameters, runs, cam, settings.splat_max_px):
+            marks.scatter_reduce_(0, pix, mark[which], reduce="amax")
+    if not npix:
+        return Coverage(0.0, 0.0)
+    m = marks[:npix]
+    return Coverage(int((m > 0).sum()) / npix, int((m == 2).sum()) / npix)  # as numpy's mean of a mask
+
+
+def _winners(zbuf: torch.Tensor, npix: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(index, depth) per pixel of a z-buffer, on its device: (H W,) int64 winning point, -1 where
+    none, and (H W,) float32 the depth its key holds (NaN where none)."""
+    keys = zbuf[:npix]
+    hit = keys != EMPTY_KEY
+    index = torch.where(hit, keys & INDEX_MASK, -1)
+    depth = torch.where(hit, (keys >> 32).to(torch.int32).view(torch.float32), float("nan"))
+    return index, depth
 
 
 def _decode(
-    zbuf: torch.Tensor, W: int, H: int, attributes: Mapping[str, np.ndarray | torch.Tensor]
+    index: torch.Tensor, depth: torch.Tensor, W: int, H: int, attributes: Mapping[str, np.ndarray | torch.Tensor]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """(hit, depth, index, attributes) images of a filled z-buffer. Only hit pixels are decoded and
-    moved, assembled with torch on the CPU: index_select / index_copy_ are several times faster than
-    numpy fancy indexing for millions of pixels (at full scale most of the buffer may be empty)."""
+    """(hit, depth, index, attributes) images of a render's winners (index (H W,) int64, -1 where
+    none; depth (H W,) float32). Only hit pixels are gathered, with torch on the CPU: index_select /
+    index_copy_ are several times faster than numpy fancy indexing for millions of pixels (at full
+    scale most of the buffer may be empty)."""
     npix = W * H
-    hit_pix_t = torch.nonzero(zbuf[:npix] != EMPTY_KEY).squeeze(1)
-    keys_cpu = zbuf[hit_pix_t].cpu()
-    hit_pix = hit_pix_t.cpu()
-    winners = keys_cpu & INDEX_MASK
-    hit_flat = torch.zeros(npix, dtype=torch.bool)
-    hit_flat[hit_pix] = True
-    index_flat = torch.full((npix,), -1, dtype=torch.int64).index_copy_(0, hit_pix, winners)
-    depth_vals = (keys_cpu >> 32).to(torch.int32).view(torch.float32)
-    depth_flat = torch.full((npix,), float("nan"), dtype=torch.float32).index_copy_(0, hit_pix, depth_vals)
+    index_cpu, depth_cpu = index.cpu(), depth.cpu()
+    hit_flat = index_cpu >= 0
+    hit_pix = torch.nonzero(hit_flat).squeeze(1)
+    winners = index_cpu[hit_pix]
+    depth_flat = torch.where(hit_flat, depth_cpu, float("nan"))
     out_attrs: dict[str, np.ndarray] = {}
     for name, values in attributes.items():
         arr = (
@@ -196,7 +321,7 @@ def _decode(
         img.index_copy_(0, hit_pix, arr.index_select(0, winners))
         out_attrs[name] = img.numpy().reshape((H, W, *tuple(arr.shape[1:])))
     hit = hit_flat.numpy().reshape(H, W)
-    return hit, depth_flat.numpy().reshape(H, W), index_flat.numpy().reshape(H, W), out_attrs
+    return hit, depth_flat.numpy().reshape(H, W), index_cpu.numpy().reshape(H, W), out_attrs
 
 
 def render_points(
@@ -205,33 +330,53 @@ def render_points(
     settings: RenderSettings | None = None,
     attributes: Mapping[str, np.ndarray | torch.Tensor] | None = None,
     device: str | torch.device = "cpu",
+    spacing_m: np.ndarray | torch.Tensor | None = None,
 ) -> RenderResult:
     """Render site-local points through ``camera`` at ``settings.scale``.
 
     xyz: (N, 3) float32, site-local metres. attributes: name -> (N,) or (N, C) arrays of any dtype
-    (uint8 RGB, uint8 class, bool flags). Returns a :class:`RenderResult` at the scaled camera.
+    (uint8 RGB, uint8 class, bool flags). spacing_m: (N,) each point's spacing in metres, which
+    world splats need (a tile read gives it; :func:`siteline.render.splats.local_spacing` estimates
+    it for a raw cloud). Returns a :class:`RenderResult` at the scaled camera.
     """
     settings = settings or RenderSettings()
     attributes = dict(attributes or {})
-    n = _check_inputs(xyz, attributes)
+    n = _check_inputs(xyz, attributes, settings, spacing_m)
     dev = torch.device(device)
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise RenderError("device 'cuda' was asked for but torch sees no CUDA device.")
     cam = camera.scaled(settings.scale)
+    npix = cam.width * cam.height
     t0 = time.perf_counter()
-    zbuf = torch.full((cam.width * cam.height + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
-    in_frustum = _splat(_as_tensor(xyz), cam, settings, dev, zbuf)
+    pts = _as_tensor(xyz)
+    spacing = None if spacing_m is None or settings.splat != "world" else _as_tensor(spacing_m).to(dev)
+    zbuf = torch.full((npix + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
+    world = settings.splat == "world"
+    depths = torch.empty(n, dtype=torch.float32, device=dev) if world else None
+    in_frustum = _splat(pts, spacing, cam, settings, dev, zbuf, depths)
+    index, depth = _winners(zbuf, npix)
+    if depths is not None and n:  # the winners' own depth, not their splat's
+        depth = torch.where(index >= 0, depths[index.clamp(min=0)], float("nan"))
+    drawn = int((index >= 0).sum())
+    filled = torch.zeros(npix, dtype=torch.bool, device=dev)
+    if settings.fill_px:
+        index, depth, filled = fill_gaps(index, depth, cam.width, cam.height, settings.fill_px)
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
     t_splat = time.perf_counter() - t0
-    hit, depth, index, out_attrs = _decode(zbuf, cam.width, cam.height, attributes)
+    hit, depth_img, index_img, out_attrs = _decode(index, depth, cam.width, cam.height, attributes)
+    filled_img = filled.cpu().numpy().reshape(cam.height, cam.width)
     stats = {
         "points_read": n,
         "points_in_frustum": in_frustum,
         "coverage": float(hit.mean()) if hit.size else 0.0,
+        "drawn": drawn / npix if npix else 0.0,
+        "filled": float(filled_img.mean()) if filled_img.size else 0.0,
         "seconds": time.perf_counter() - t0,
         "seconds_splat": t_splat,
         "width": cam.width,
         "height": cam.height,
     }
-    return RenderResult(camera=cam, hit=hit, depth=depth, index=index, attributes=out_attrs, stats=stats)
+    return RenderResult(
+        camera=cam, hit=hit, depth=depth_img, index=index_img, attributes=out_attrs, stats=stats, filled=filled_img
+    )
