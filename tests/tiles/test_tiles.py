@@ -173,7 +173,7 @@ def test_frustum_read_equals_brute_force(tmp_path) -> None:
     assert len(auto.xyz_m) < len(got.xyz_m)
     assert set(auto.attributes["gps_time"].astype(int)) <= set(brute)  # a coarser read is a subset
     # per node: near nodes deeper than far ones, so the read is finer than one level for every tile
-    chosen, _ = tiles.levels_for_view(cam, 0.125)
+    chosen = tiles.levels_for_view(cam, 0.125).selection
     deepest = max(tiles.read_nodes(chosen, ()).stats.levels.values())
     capped = tiles.points_for_view(cam, 0.125, attributes=("gps_time",), level=deepest)
     assert len(auto.xyz_m) < len(capped.xyz_m)
@@ -391,7 +391,7 @@ def test_stores_with_whole_level_nodes_still_read(tmp_path) -> None:
     assert set(got.attributes["gps_time"].astype(int)) == set(brute)
     auto = old.points_for_view(cam, 0.125, attributes=("gps_time",))
     assert 0 < len(auto.xyz_m) and set(auto.attributes["gps_time"].astype(int)) <= set(brute)
-    chosen, _ = old.levels_for_view(cam, 0.125)  # input order: whole nodes only, never a part
+    chosen = old.levels_for_view(cam, 0.125).selection  # input order: whole nodes only, never a part
     assert all(np.array_equal(take, old.by_tile[t].count[sel]) for t, (sel, take) in chosen.items())
 
 

@@ -1,5 +1,6 @@
-"""View generation on a tiled scene reads what each probe needs (frustum-culled tiles at the probe's
-own level of detail), never the whole scene, and keeps what the whole-cloud probes kept."""
+"""View generation on a tiled scene: a scene that fits in memory is read once and every probe judged
+from there; a larger one is read per probe (frustum-culled tiles at the probe's own level of detail),
+never whole; both keep what the whole-cloud probes kept."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from siteline.catalog.sites import site_of
 from siteline.pairs.sources import TilePointSource
 from siteline.tiles.reader import SceneTiles
 from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
+from siteline.views.sources import ProbePoints
 
 PARAMS = ViewParams(scale=0.25, views=12, min_coverage=0.3)
 SKIP = np.array([9, 10], np.uint8)
@@ -36,22 +38,35 @@ class WholeCloud(TilePointSource):
         self._probe = probe.xyz_m[~np.isin(probe.attributes["class"], skip)].astype(np.float32)
 
     def points_for_view(self, camera, scale):  # noqa: ANN001, ANN201
-        return self._probe
+        return ProbePoints(self._probe)
 
 
-def test_probes_read_culled_tiles_only(scenes, monkeypatch) -> None:
+def test_probes_of_a_large_scene_read_culled_tiles_only(scenes, monkeypatch) -> None:
     _, cat = scenes
     tiles, cams, site, plane = _inputs(cat)
-    source = TilePointSource(tiles, SKIP)
+    source = TilePointSource(tiles, SKIP, memory_points=0)  # as a scene larger than memory is
+    assert not source.in_memory
+    read_at_start = source.points_read
 
     def whole_scene_read(*a, **k):  # noqa: ANN002, ANN003, ANN202
         raise AssertionError("view generation read the scene without a frustum")
 
     monkeypatch.setattr(SceneTiles, "points", whole_scene_read)
     view_set = generate_views(cams, plane, site.fence, source, PARAMS)
-    assert view_set.views and source.reads > len(cams)
-    # each probe read a fraction of the scene: the frustum's tiles at the probe's level of detail
-    assert source.points_read / source.reads < 0.5 * tiles.point_count
+    assert view_set.views and source.reads > 2
+    # each read took a fraction of the scene: the frustum's tiles at the probes' level of detail
+    assert (source.points_read - read_at_start) / (source.reads - 1) < 0.5 * tiles.point_count
+
+
+def test_a_scene_that_fits_in_memory_is_read_once(scenes, monkeypatch) -> None:
+    _, cat = scenes
+    tiles, cams, site, plane = _inputs(cat)
+    source = TilePointSource(tiles, SKIP)
+    assert source.in_memory and source.reads == 1 and source.points_read == tiles.point_count
+    monkeypatch.setattr(SceneTiles, "read_nodes", lambda *a, **k: pytest.fail("a probe read the store"))
+    view_set = generate_views(cams, plane, site.fence, source, PARAMS)
+    assert view_set.views and source.reads == 1 and source.points_read == tiles.point_count
+    assert source.probes >= view_set.probed
 
 
 def test_tiled_probes_keep_the_whole_cloud_views(scenes) -> None:
@@ -83,13 +98,22 @@ def test_a_prefetched_batch_serves_each_probe_the_points_of_its_own_read(scenes)
     _, cat = scenes
     tiles, cams, _, _ = _inputs(cat)
     probes = [c.camera for c in cams[:6]]
-    single, batched = TilePointSource(tiles, SKIP), TilePointSource(tiles, SKIP)
+    single, batched = TilePointSource(tiles, SKIP, memory_points=0), TilePointSource(tiles, SKIP, memory_points=0)
+    held = TilePointSource(tiles, SKIP)
+    before = (single.reads, single.points_read, batched.points_read)
     own = [single.points_for_view(c, PARAMS.scale) for c in probes]
     batched.prefetch(probes, PARAMS.scale)
     got = [batched.points_for_view(c, PARAMS.scale) for c in probes]
-    for mine, theirs in zip(own, got, strict=True):
-        assert len(mine) and np.array_equal(np.unique(mine, axis=0), np.unique(theirs, axis=0))
-    assert batched.reads == 1 and batched.points_read < single.points_read
+    from_memory = [held.points_for_view(c, PARAMS.scale) for c in probes]
+
+    def rows(p: ProbePoints) -> np.ndarray:  # a probe's points with their spacing and kept flag, as a set
+        return np.unique(np.c_[p.xyz, p.spacing_m, p.kept], axis=0)
+
+    for mine, theirs, memory in zip(own, got, from_memory, strict=True):
+        assert len(mine.xyz) and np.array_equal(rows(mine), rows(theirs))
+        assert np.array_equal(rows(mine), rows(memory))
+    assert batched.reads == before[0] + 1
+    assert batched.points_read - before[2] < single.points_read - before[1]
 
 
 def test_coverage_of_equals_the_renders_coverage() -> None:
@@ -105,4 +129,4 @@ def test_coverage_of_equals_the_renders_coverage() -> None:
         w, h = (int(v) for v in rng.integers(20, 160, 2))
         cam = Camera.look_at(rng.normal(0, 5, 3) + [0, 0, 40], [0, 0, 0], w, h, float(rng.uniform(20, 200)))
         s = RenderSettings(scale=float(rng.choice([0.37, 0.5, 1.0])), point_size_px=int(rng.choice([1, 3, 5, 7])))
-        assert coverage_of(xyz, cam, s) == render_points(xyz, cam, s).coverage
+        assert coverage_of(xyz, cam, s).hit == render_points(xyz, cam, s).coverage

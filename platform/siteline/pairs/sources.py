@@ -8,54 +8,130 @@ from dataclasses import dataclass
 import numpy as np
 
 from siteline.cameras import Camera
-from siteline.tiles.reader import SceneTiles, Selection
-from siteline.views.sources import ArrayPointSource
+from siteline.tiles.reader import SceneTiles, Selection, ViewNodes, node_positions
+from siteline.views.sources import ArrayPointSource, ProbePoints
+
+# a scene of at most this many points is read once into memory (13 bytes a point: float32
+# site-local xyz and two flags) and every probe judged from there
+MEMORY_POINTS = 25_000_000
+
+
+@dataclass(frozen=True)
+class _Held:
+    """One tile held in memory, in store order: xyz (n, 3) float32 site-local metres, ``draw`` (n,)
+    bool (not a skipped class), ``kept`` (n,) bool (not an ignored class)."""
+
+    xyz: np.ndarray
+    draw: np.ndarray
+    kept: np.ndarray
 
 
 class TilePointSource:
     """A :class:`siteline.views.PointSource` over a tiled scene for view generation, which renders
-    hundreds of probes per real camera. Each probe reads only what it needs: the tiles its frustum
-    meets, at the spacing its own render scale and ``point_size_px`` need (``lod_factor``:
-    ``SceneTiles.points_for_view``; the probes must render with the same point size), so a probe's
-    cost grows with its pixels, not with the scene's density; the tile reader's cache keeps the tiles a pair's probes share.
-    The probes of one parent camera are read together (:meth:`prefetch`): per node, the longest
-    prefix any of them needs, once; each probe then takes its own prefix of every node from that
-    batch, the same points a read of its own gives, so a batch reads about its frusta's union once.
+    hundreds of probes per real camera. Each probe draws what its render needs: the nodes its
+    frustum meets, at the spacing its own render scale and ``point_size_px`` need (``lod_factor``:
+    ``SceneTiles.levels_for_view``; the probes must render with the same point size), with each
+    point's spacing (world splats) and whether its class is kept (not ``ignored_classes``).
+
+    A scene of at most ``memory_points`` is read once, whole, and each probe takes its nodes'
+    prefixes from memory, so view generation reads the scene once whatever the candidates. A larger
+    one is read per batch: the probes of one parent camera together (:meth:`prefetch`), per node the
+    longest prefix any of them needs, once, so a batch reads about its frusta's union once.
     Clearance and overhead checks use a coarse copy (``coarse_m``) of the solid geometry, whose size
-    grows with the site's area, not its density. Airborne snow and noise are left out of both."""
+    grows with the site's area, not its density. Airborne snow and noise (``skip_classes``) are
+    left out of all of it."""
 
     def __init__(
         self,
         tiles: SceneTiles,
         skip_classes: np.ndarray,
+        ignored_classes: np.ndarray | None = None,
         coarse_m: float = 0.25,
         lod_factor: float = 1.0,
         point_size_px: int = 1,
+        memory_points: int = MEMORY_POINTS,
     ) -> None:
         self.tiles = tiles
         self.skip = np.asarray(skip_classes, dtype=np.uint8)
+        self.ignored = np.asarray(ignored_classes if ignored_classes is not None else [], dtype=np.uint8)
         self.lod_factor = lod_factor
         self.point_size_px = point_size_px
         self.points_read = 0
         self.reads = 0
-        coarse = tiles.points(resolution=coarse_m, attributes=("class",))
-        keep = ~np.isin(coarse.attributes["class"], self.skip)
-        self._coarse = ArrayPointSource(coarse.xyz_m[keep].astype(np.float32))
+        self.probes = 0
+        self._held: dict[str, _Held] | None = None
+        if tiles.point_count <= memory_points:
+            self._held = self._hold()
+            self._coarse = ArrayPointSource(self._from_memory(self._held, self._coarse_selection(coarse_m)).xyz)
+        else:
+            read = tiles.points(resolution=coarse_m, attributes=("class",))
+            self.points_read += read.stats.points_read
+            self.reads += 1
+            self._coarse = ArrayPointSource(read.xyz_m[~np.isin(read.attributes["class"], self.skip)].astype(np.float32))
         self._batch: _Batch | None = None
+
+    @property
+    def in_memory(self) -> bool:
+        """Whether the whole scene is held in memory."""
+        return self._held is not None
+
+    def _hold(self) -> dict[str, _Held]:
+        """Every tile's points, read once."""
+        held = {}
+        for tile in sorted(self.tiles.by_tile):
+            out = self.tiles.read_tile(tile, ("class",))
+            cls = out.attributes["class"]
+            held[tile] = _Held(
+                out.xyz_m.astype(np.float32), ~np.isin(cls, self.skip), ~np.isin(cls, self.ignored)
+            )
+            self.points_read += out.stats.points_read
+        self.reads += 1
+        return held
+
+    def _coarse_selection(self, resolution_m: float) -> ViewNodes:
+        """Every node's prefix that gives ``resolution_m`` spacing (as ``SceneTiles.points``)."""
+        selection: Selection = {}
+        for tile, nodes in self.tiles.by_tile.items():
+            sel, take = self.tiles.node_takes(tile, np.ones(len(nodes), bool), np.full(len(nodes), resolution_m))
+            if len(sel):
+                selection[tile] = (sel, take)
+        return ViewNodes(selection, np.zeros((0, 4)), {t: np.full(len(v[0]), resolution_m) for t, v in selection.items()})
+
+    def _from_memory(self, held_tiles: dict[str, _Held], view: ViewNodes) -> ProbePoints:
+        """The points of ``view``'s selection from the tiles held in memory (skipped classes left
+        out), inside its planes."""
+        parts, spacing, kept = [], [], []
+        for tile in sorted(view.selection):
+            sel, take = view.selection[tile]
+            idx = node_positions(self.tiles.by_tile[tile].start[sel], take)
+            held = held_tiles[tile]
+            draw = held.draw[idx]
+            idx = idx[draw]
+            parts.append(held.xyz[idx])
+            kept.append(held.kept[idx])
+            spacing.append(np.repeat(view.spacing_m[tile], take)[draw].astype(np.float32))
+        if not parts:
+            return ProbePoints(np.zeros((0, 3), np.float32), np.zeros(0, np.float32), np.zeros(0, bool))
+        xyz, sp, kp = np.concatenate(parts), np.concatenate(spacing), np.concatenate(kept)
+        if len(view.planes):
+            inside = np.all(xyz @ view.planes[:, :3].T.astype(np.float32) + view.planes[:, 3].astype(np.float32) >= 0, axis=1)
+            xyz, sp, kp = xyz[inside], sp[inside], kp[inside]
+        return ProbePoints(xyz, sp, kp)
 
     def _spacing_px(self) -> float:
         return self.lod_factor * self.point_size_px / 2
 
     def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
-        """Read once what the probes of ``cameras`` at ``scale`` need (replacing the last batch)."""
+        """Read once what the probes of ``cameras`` at ``scale`` need (replacing the last batch); a
+        scene held in memory needs no batch."""
         self._batch = None
-        if len(cameras) < 2:
+        if len(cameras) < 2 or self._held is not None:
             return
         merged: dict[str, np.ndarray] = {}
-        chosen_by: dict[Camera, tuple[Selection, np.ndarray]] = {}
+        chosen_by: dict[Camera, ViewNodes] = {}
         for cam in cameras:
-            chosen_by[cam] = selection, _ = self.tiles.levels_for_view(cam, scale, self._spacing_px())
-            for tile, (sel, take) in selection.items():
+            chosen_by[cam] = view = self.tiles.levels_for_view(cam, scale, self._spacing_px())
+            for tile, (sel, take) in view.selection.items():
                 most = merged.setdefault(tile, np.zeros(len(self.tiles.by_tile[tile]), np.int64))
                 np.maximum.at(most, sel, take)
         tiles = sorted(merged)
@@ -66,31 +142,43 @@ class TilePointSource:
         base = np.cumsum([0] + [len(self.tiles.by_tile[t]) for t in tiles])
         node = np.concatenate([np.repeat(base[k] + chosen[t][0], chosen[t][1]) for k, t in enumerate(tiles)])
         rank = np.concatenate([np.arange(n) for t in tiles for n in chosen[t][1]]) if len(node) else node
-        keep = ~np.isin(out.attributes["class"], self.skip)
+        cls = out.attributes["class"]
         self._batch = _Batch(scale, dict(zip(tiles, base[:-1].tolist(), strict=True)), int(base[-1]),
-                             out.xyz_m, node, rank, keep, chosen_by)  # fmt: skip
+                             out.xyz_m, node, rank, ~np.isin(cls, self.skip), ~np.isin(cls, self.ignored),
+                             chosen_by)  # fmt: skip
 
-    def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
-        """(N, 3) float32 site-local metres: the points a probe of ``camera`` at ``scale`` draws (from
-        the prefetched batch when it covers this probe's tiles)."""
+    def points_for_view(self, camera: Camera, scale: float) -> ProbePoints:
+        """The points a probe of ``camera`` at ``scale`` draws, with their spacing and whether their
+        class is kept: from memory, from the prefetched batch when it covers this probe's tiles,
+        else read."""
+        self.probes += 1
         b = self._batch
-        if b is not None and b.scale == scale:
-            known = b.selections.get(camera)
-            selection, planes = known or self.tiles.levels_for_view(camera, scale, self._spacing_px())
-            if all(t in b.offset for t in selection):
-                take = np.zeros(b.nodes, np.int64)
-                for tile, (sel, n) in selection.items():
-                    take[b.offset[tile] + sel] = n
-                mine = (b.rank < take[b.node]) & b.keep
-                xyz = b.xyz[mine]
-                inside = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else mine[:0]
-                return xyz[inside].astype(np.float32)
-        out = self.tiles.points_for_view(
-            camera, scale, attributes=("class",), lod_factor=self.lod_factor, point_size_px=self.point_size_px
-        )
+        known = b.selections.get(camera) if b is not None and b.scale == scale else None
+        view = known or self.tiles.levels_for_view(camera, scale, self._spacing_px())
+        if self._held is not None:
+            return self._from_memory(self._held, view)
+        if b is not None and b.scale == scale and all(t in b.offset for t in view.selection):
+            take = np.zeros(b.nodes, np.int64)
+            spacing = np.zeros(b.nodes, np.float32)
+            for tile, (sel, n) in view.selection.items():
+                take[b.offset[tile] + sel] = n
+                spacing[b.offset[tile] + sel] = view.spacing_m[tile]
+            mine = (b.rank < take[b.node]) & b.draw
+            xyz = b.xyz[mine]
+            planes = view.planes
+            inside = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else mine[:0]
+            chosen = np.flatnonzero(mine)[inside]
+            return ProbePoints(xyz[inside].astype(np.float32), spacing[b.node[chosen]], b.kept[chosen])
+        out = self.tiles.read_nodes(view.selection, ("class",))
         self.points_read += out.stats.points_read
         self.reads += 1
-        return out.xyz_m[~np.isin(out.attributes["class"], self.skip)].astype(np.float32)
+        cls = out.attributes["class"]
+        spacing = self.tiles.spacing_of(view)
+        planes = view.planes
+        keep = ~np.isin(cls, self.skip)
+        if len(out.xyz_m):
+            keep &= np.all(out.xyz_m @ planes[:, :3].T + planes[:, 3] >= 0, axis=1)
+        return ProbePoints(out.xyz_m[keep].astype(np.float32), spacing[keep], ~np.isin(cls[keep], self.ignored))
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         return self._coarse.nearest_distance(xyz)
@@ -102,8 +190,8 @@ class TilePointSource:
 @dataclass(frozen=True)
 class _Batch:
     """A prefetched read: its scale, each tile's first global node number and the node total, the
-    points (site-local float64), each point's global node and rank in its node, which are kept
-    (not a skipped class), and each probe's own node selection and frustum planes."""
+    points (site-local float64), each point's global node and rank in its node, which are drawn (not
+    a skipped class) and kept (not an ignored class), and each probe's own nodes."""
 
     scale: float
     offset: dict[str, int]
@@ -111,5 +199,6 @@ class _Batch:
     xyz: np.ndarray
     node: np.ndarray
     rank: np.ndarray
-    keep: np.ndarray
-    selections: dict[Camera, tuple[Selection, np.ndarray]]
+    draw: np.ndarray
+    kept: np.ndarray
+    selections: dict[Camera, ViewNodes]

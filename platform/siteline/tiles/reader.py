@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 import zarr
@@ -46,11 +47,13 @@ class ReadStats:
 class Points:
     """Points read from a scene's tiles: ``xyz_m`` (N, 3) float64 site-local metres (render them as
     float32: site-local float32 keeps millimetres), the requested attributes by name ((N,) or (N, C)
-    arrays in the store's dtypes), and what the read cost."""
+    arrays in the store's dtypes), what the read cost and, for a view's read, ``spacing_m`` (N,)
+    float32: the spacing in metres of the points read around each one (what a world splat covers)."""
 
     xyz_m: np.ndarray
     attributes: dict[str, np.ndarray]
     stats: ReadStats
+    spacing_m: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.xyz_m)
@@ -59,7 +62,8 @@ class Points:
         """The points where ``keep`` (a mask or indices) holds; ``stats.points_returned`` follows."""
         xyz = self.xyz_m[keep]
         stats = replace(self.stats, points_returned=len(xyz))
-        return Points(xyz, {k: v[keep] for k, v in self.attributes.items()}, stats)
+        spacing = None if self.spacing_m is None else self.spacing_m[keep]
+        return Points(xyz, {k: v[keep] for k, v in self.attributes.items()}, stats, spacing)
 
 
 def bounds_box(bounds: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -115,6 +119,43 @@ def _open(uri: str, what: str, fix: str) -> zarr.Group:
 
 # a view's per-tile choice: (indices into the tile's nodes, points to read of each)
 Selection = dict[str, tuple[np.ndarray, np.ndarray]]
+# a level whose next level holds at least this many times its points still resolves the surface
+# (each point its own cube): a surface's cubes are four times as many per level, a volume's eight
+_RESOLVED_GROWTH = 2.0
+_MIN_LEVEL_POINTS = 16
+
+
+def node_positions(starts: np.ndarray, take: np.ndarray) -> np.ndarray:
+    """(sum(take),) int64 positions in a tile's arrays of the first ``take[k]`` points of the nodes
+    starting at ``starts[k]``, node after node."""
+    return np.repeat(starts - np.r_[0, np.cumsum(take)[:-1]], take) + np.arange(int(take.sum()))
+
+
+class ViewNodes(NamedTuple):
+    """What a view reads: per tile, the nodes and how many points of each (``selection``); the
+    frustum's planes (6, 4); and per tile, per selected node, the spacing in metres of the points
+    read there (``spacing_m``: the level of detail's, or the data's own where they are sparser)."""
+
+    selection: Selection
+    planes: np.ndarray
+    spacing_m: dict[str, np.ndarray]
+
+
+def native_spacing_m(level_points: np.ndarray, spec: TileSpec) -> tuple[float, float] | None:
+    """A tile's own point spacing (metres) and surface area (m2) from its points per level, or None
+    when it holds too few: level L keeps one point of each cube of edge ``spec.spacing(L)`` that
+    still holds one, so a level that the next still outgrows (:data:`_RESOLVED_GROWTH`) has a point
+    in every cube the surface crosses, and ``points x edge**2`` is the surface's area; the spacing
+    is ``sqrt(area / points)`` over all the tile's points. The deepest such level is taken (the
+    finest cubes fit the surface best)."""
+    counts = np.asarray(level_points, dtype=np.float64)
+    total = counts.sum()
+    for level in range(len(counts) - 2, -1, -1):
+        c = counts[level]
+        if c >= _MIN_LEVEL_POINTS and counts[level + 1] >= _RESOLVED_GROWTH * c:
+            area = c * spec.spacing(level) ** 2
+            return math.sqrt(area / total), area
+    return None
 
 
 @dataclass(frozen=True)
@@ -195,6 +236,7 @@ class SceneTiles:
         self.level_totals = {
             t: np.pad(np.diff(v.below, axis=1).sum(axis=0), (0, 64))[:64] for t, v in self.by_tile.items()
         }
+        self.native_spacing = self._native_spacings()
         held = np.flatnonzero(nodes.level_counts.sum(axis=0)) if len(nodes) else np.zeros(1, np.int64)
         self._levels = held.astype(np.int64) if len(held) else np.zeros(1, np.int64)
         self._handles: dict[tuple[str, str], zarr.Array] = {}
@@ -202,6 +244,16 @@ class SceneTiles:
         self.cache_bytes = cache_bytes
         self._cache: OrderedDict[tuple[str, str, int], np.ndarray] = OrderedDict()
         self._cached = 0
+
+    def _native_spacings(self) -> dict[str, float]:
+        """Each tile's own point spacing in metres (:func:`native_spacing_m`); a tile too sparse to
+        tell takes the scene's (its tiles' area over their points), or the finest level's spacing."""
+        found = {t: native_spacing_m(v, self.spec) for t, v in self.level_totals.items()}
+        known = [(t, f) for t, f in found.items() if f is not None]
+        points = sum(float(self.level_totals[t].sum()) for t, _ in known)
+        area = sum(f[1] for _, f in known)
+        fallback = math.sqrt(area / points) if points else self.spec.min_spacing_m
+        return {t: (f[0] if f is not None else fallback) for t, f in found.items()}
 
     @classmethod
     def from_source(cls, source: TileSource, cache_bytes: int = 256 * 2**20) -> SceneTiles:
@@ -392,11 +444,12 @@ class SceneTiles:
 
     def levels_for_view(
         self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3
-    ) -> tuple[Selection, np.ndarray]:
+    ) -> ViewNodes:
         """Per tile met by the frustum of ``camera`` at ``scale``: ``(indices, take)``, the nodes to
         read (indices into ``by_tile[tile]``) and how many of each node's points, so that each node's
-        surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance; and
-        the frustum's planes.
+        surface is read at a spacing of ``spacing_px`` pixel footprints at its nearest distance; the
+        frustum's planes; and per selected node the spacing read there in metres, that spacing or
+        the tile's own (:attr:`native_spacing`) where the data are sparser.
 
         Levels coarser than that spacing are read whole. In a store whose node prefixes span their
         nodes (``spec.partial_levels``: any order but "input") the level that crosses it is read in
@@ -409,6 +462,7 @@ class SceneTiles:
         centre = cam.center
         f = min(cam.fx, cam.fy)
         out: Selection = {}
+        spacing: dict[str, np.ndarray] = {}
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
@@ -420,7 +474,8 @@ class SceneTiles:
             sel, take = self.node_takes(tile, inside, need)
             if len(sel):
                 out[tile] = (sel, take)
-        return out, planes
+                spacing[tile] = np.maximum(need[sel], self.native_spacing[tile])
+        return ViewNodes(out, planes, spacing)
 
     def node_takes(
         self, tile: str, candidates: np.ndarray, need_m: np.ndarray
@@ -463,8 +518,7 @@ class SceneTiles:
         plan: dict[str, tuple[int, np.ndarray | None]] = {}
         for tile, (sel, take) in selection.items():
             starts = self.by_tile[tile].start[sel]
-            idx = np.repeat(starts - np.r_[0, np.cumsum(take)[:-1]], take) + np.arange(int(take.sum()))
-            plan[tile] = (int((starts + take).max()), idx)
+            plan[tile] = (int((starts + take).max()), node_positions(starts, take))
         out = self._gather(plan, attributes)
         out.stats.levels = {t: self._deepest(t, sel, take) for t, (sel, take) in selection.items()}
         return out
@@ -494,20 +548,27 @@ class SceneTiles:
         order read whole levels, up to 4x more. Points outside the frustum are dropped
         (float64 test), so at full level the result is exactly the brute-force frustum selection."""
         if level == "auto":
-            selection, planes = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)
+            view = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)
         else:
-            selection, planes = self._frustum_nodes(camera, scale, level, near_m)
-        out = self.read_nodes(selection, attributes)
+            view = self._frustum_nodes(camera, scale, level, near_m)
+        out = replace(self.read_nodes(view.selection, attributes), spacing_m=self.spacing_of(view))
         xyz = out.xyz_m
+        planes = view.planes
         keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
         return out.select(keep)
 
-    def _frustum_nodes(
-        self, camera: Camera, scale: float, level: int | None, near_m: float
-    ) -> tuple[Selection, np.ndarray]:
+    @staticmethod
+    def spacing_of(view: ViewNodes) -> np.ndarray:
+        """(N,) float32 metres: the spacing of each point a read of ``view.selection`` returns, in
+        the read's order (tiles sorted, nodes as selected)."""
+        parts = [np.repeat(view.spacing_m[t], view.selection[t][1]) for t in sorted(view.selection)]
+        return np.concatenate(parts).astype(np.float32) if parts else np.zeros(0, np.float32)
+
+    def _frustum_nodes(self, camera: Camera, scale: float, level: int | None, near_m: float) -> ViewNodes:
         """Every node in the frustum up to ``level`` (all when None), whole."""
         planes = camera.scaled(scale).frustum_planes(near_m)
         selection: Selection = {}
+        spacing: dict[str, np.ndarray] = {}
         for tile, (tlo, thi) in self.tile_bounds.items():
             if not box_in_frustum(planes, tlo, thi):
                 continue
@@ -516,7 +577,9 @@ class SceneTiles:
             sel = np.flatnonzero(boxes_in_frustum(planes, nodes.lo, nodes.hi) & (take > 0))
             if len(sel):
                 selection[tile] = (sel, take[sel])
-        return selection, planes
+                floor = 0.0 if level is None else self.spec.spacing(level)
+                spacing[tile] = np.full(len(sel), max(floor, self.native_spacing[tile]))
+        return ViewNodes(selection, planes, spacing)
 
 
 def class_counts(tiles: SceneTiles) -> np.ndarray:

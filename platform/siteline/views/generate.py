@@ -14,7 +14,6 @@ from siteline.cameras import Camera
 from siteline.errors import ViewsError
 from siteline.fence import inside_fence
 from siteline.progress import no_step
-from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import coverage_of, render_points
 from siteline.tolerances import (
     LENGTH_TOL_M,
@@ -40,8 +39,9 @@ class NamedCamera:
 @dataclass(frozen=True)
 class SyntheticView:
     """One synthetic view: its parent real camera, the strategy key, the parameters that made it, the
-    camera (site-local), after rejection its coverage at the render scale (or why it was rejected),
-    and once sampled its index in the pair's sample."""
+    camera (site-local), after rejection its probe's coverage at the render scale and the share of
+    pixels its kept points cover (``probe_valid``: an upper bound of the view's valid share), or
+    why it was rejected, and once sampled its index in the pair's sample."""
 
     parent: str
     strategy: str
@@ -50,6 +50,7 @@ class SyntheticView:
     coverage: float | None = None
     rejected: str | None = None
     index: int | None = None
+    probe_valid: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -58,6 +59,7 @@ class SyntheticView:
             "strategy": self.strategy,
             "params": self.params,
             "coverage": self.coverage,
+            "probe_valid": self.probe_valid,
             "camera": self.camera.to_dict(),
         }
 
@@ -71,21 +73,101 @@ class SyntheticView:
             doc.get("coverage"),
             None,
             doc.get("index"),
+            doc.get("probe_valid"),
         )
+
+
+class Picker:
+    """The stratified order (:func:`stratified_order`) of the candidates that pass ``judge``, worked
+    out lazily: strata take turns in their hashed order, and on its turn a stratum's candidates are
+    judged in key order until one passes. The sequence is exactly ``stratified_order`` of every
+    passing candidate, but a candidate is judged (probed) only when its turn comes, so picking n
+    views costs about n / (the share that passes) probes, whatever the candidates.
+
+    ``judge`` returns the candidate with ``coverage`` and ``probe_valid`` set, and ``rejected`` when
+    it fails; ``batch`` is told the candidates a turn of every stratum will judge first (a source
+    may read them at once). ``rejected`` counts the verdicts so far, ``probed`` the candidates
+    judged."""
+
+    def __init__(
+        self,
+        views: Sequence[SyntheticView],
+        seed: int,
+        judge: Callable[[SyntheticView], SyntheticView],
+        batch: Callable[[list[SyntheticView]], None] = lambda vs: None,
+    ) -> None:
+        pools = _strata(views, seed)
+        self._pools = [pools[k] for k in sorted(pools, key=lambda k: (_key("siteline-stratum", seed, k), k))]
+        self._at = [0] * len(self._pools)
+        self._turn = 0
+        self._judge = judge
+        self._batch = batch
+        self.rejected: Counter[str] = Counter()
+        self.probed = 0
+
+    def _next_of(self, k: int) -> SyntheticView | None:
+        pool = self._pools[k]
+        while self._at[k] < len(pool):
+            v = self._judge(pool[self._at[k]])
+            self._at[k] += 1
+            self.probed += 1
+            if v.rejected is None:
+                return v
+            self.rejected[v.rejected] += 1
+        return None
+
+    def next(self) -> SyntheticView | None:
+        """The next passing candidate of the stratified order, or None when none is left."""
+        while any(self._at[k] < len(p) for k, p in enumerate(self._pools)):
+            k = self._turn
+            if k == 0:  # a new round: the strata's next candidates, read together
+                self._batch([p[a] for p, a in zip(self._pools, self._at, strict=True) if a < len(p)])
+            self._turn = (k + 1) % len(self._pools)
+            found = self._next_of(k)
+            if found is not None:
+                return found
+        return None
+
+    def take(self, n: int) -> list[SyntheticView]:
+        """The next ``n`` passing candidates (fewer when the candidates run out)."""
+        out: list[SyntheticView] = []
+        while len(out) < n:
+            v = self.next()
+            if v is None:
+                break
+            out.append(v)
+        return out
 
 
 @dataclass
 class ViewSet:
-    """The outcome of view generation: the sample, and counts of what was generated and rejected."""
+    """The outcome of view generation: the sample, the candidate count, what the cheap geometric
+    tests rejected (``rejected``) and the picker that drew the sample (``reserve``: its next views
+    replace views a later stage rejects, siteline.pairs: too few valid pixels; its ``rejected``
+    counts the probes' verdicts)."""
 
     views: list[SyntheticView]
     params: ViewParams
     ground: GroundPlane
     candidates: int
     rejected: dict[str, int] = field(default_factory=dict)
-    # kept candidates beyond the sample, in stratified order: replacements for views a later stage
-    # rejects (siteline.pairs: too few valid pixels)
-    reserve: list[SyntheticView] = field(default_factory=list)
+    reserve: Picker | None = None
+
+    def all_rejected(self) -> dict[str, int]:
+        """Every rejection so far by reason: the geometric tests' and the probes'."""
+        out = Counter(self.rejected)
+        if self.reserve is not None:
+            out.update(self.reserve.rejected)
+        return dict(sorted(out.items()))
+
+    @property
+    def probed(self) -> int:
+        """Candidates probed so far (the rest passed the geometric tests but were never needed)."""
+        return self.reserve.probed if self.reserve is not None else 0
+
+    def next_reserve(self) -> SyntheticView | None:
+        """The next view of the stratified order beyond those drawn (None when none is left)."""
+        return self.reserve.next() if self.reserve is not None else None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -93,7 +175,8 @@ class ViewSet:
             "sampler": SAMPLER_VERSION,
             "ground_plane": self.ground.to_dict(),
             "candidates": self.candidates,
-            "rejected": self.rejected,
+            "probed": self.probed,
+            "rejected": self.all_rejected(),
             "views": [v.to_dict() for v in self.views],
         }
 
@@ -104,11 +187,11 @@ def strategy_key(vertical_fraction: float, mirrored: bool, forward_fraction: flo
 
 def central_median_depth(camera: Camera, source: PointSource, params: ViewParams) -> float | None:
     """Median depth (metres) of the central image region, from a probe render; None if it is empty."""
-    r = render_points(
-        source.points_for_view(camera, params.depth_probe_scale),
-        camera,
-        RenderSettings(scale=params.depth_probe_scale, point_size_px=params.point_size_px),
-    )
+    probe = source.points_for_view(camera, params.depth_probe_scale)
+    settings = params.probe_settings(params.depth_probe_scale)
+    if probe.spacing_m is None:
+        settings = replace(settings, splat="fixed")
+    r = render_points(probe.xyz, camera, settings, spacing_m=probe.spacing_m)
     H, W = r.hit.shape
     fh, fw = max(1, int(round(H * params.central_fraction))), max(1, int(round(W * params.central_fraction)))
     top, left = (H - fh) // 2, (W - fw) // 2
@@ -173,7 +256,7 @@ def candidate_views(
     return out
 
 
-def reject(
+def reject_geometric(
     views: list[SyntheticView],
     ground: GroundPlane,
     fence_m: Sequence[Sequence[float]] | None,
@@ -181,11 +264,11 @@ def reject(
     params: ViewParams,
 ) -> list[SyntheticView]:
     """``views`` with ``rejected`` set on those underground, outside the fence after mirroring, within
-    ``clearance_m`` of a surface, under geometry, or below ``min_coverage``, and ``coverage`` on the
-    rest (views rejected before keep their reason).
+    ``clearance_m`` of a surface or under geometry (cheap tests on a coarse copy of the scene; views
+    rejected before keep their reason).
 
     Each threshold is compared with the tolerances of :mod:`siteline.tolerances`: a view on the fence,
-    at exactly ``clearance_m`` or ``min_height_m``, or at exactly ``min_coverage`` is kept."""
+    or at exactly ``clearance_m`` or ``min_height_m`` is kept."""
     live = [v for v in views if v.rejected is None]
     if not live:
         return list(views)
@@ -194,9 +277,7 @@ def reject(
     near = source.nearest_distance(centers)
     above = source.count_above(centers, params.overhead_radius_m)
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
-    settings = RenderSettings(scale=params.scale, point_size_px=params.point_size_px)
     judged: dict[int, SyntheticView] = {}
-    probed = []
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
         reason = (
             "underground" if not at_least(h, params.min_height_m, LENGTH_TOL_M)
@@ -207,14 +288,38 @@ def reject(
         )  # fmt: skip
         if reason is not None:
             judged[id(v)] = replace(v, rejected=reason)
-        else:
-            probed.append(v)
-    source.prefetch([v.camera for v in probed], params.scale)  # the probes that pass the cheap tests
-    for v in probed:
-        coverage = coverage_of(source.points_for_view(v.camera, params.scale), v.camera, settings)
-        low = not at_least(coverage, params.min_coverage, RATIO_TOL)
-        judged[id(v)] = replace(v, coverage=coverage, rejected="low_coverage" if low else None)
     return [judged.get(id(v), v) for v in views]
+
+
+def probe(view: SyntheticView, source: PointSource, params: ViewParams) -> SyntheticView:
+    """``view`` with its probe's ``coverage`` and ``probe_valid`` (the share of pixels kept points
+    cover) at the render scale, ``rejected`` when under ``min_coverage`` or ``min_valid`` (exactly
+    at a threshold passes: siteline.tolerances)."""
+    settings = params.probe_settings()
+    points = source.points_for_view(view.camera, params.scale)
+    if points.spacing_m is None:
+        settings = replace(settings, splat="fixed")
+    cov = coverage_of(points.xyz, view.camera, settings, spacing_m=points.spacing_m, kept=points.kept)
+    reason = (
+        "low_coverage" if not at_least(cov.hit, params.min_coverage, RATIO_TOL)
+        else "low_valid_probe" if not at_least(cov.kept, params.min_valid, RATIO_TOL)
+        else None
+    )  # fmt: skip
+    return replace(view, coverage=cov.hit, probe_valid=cov.kept, rejected=reason)
+
+
+def reject(
+    views: list[SyntheticView],
+    ground: GroundPlane,
+    fence_m: Sequence[Sequence[float]] | None,
+    source: PointSource,
+    params: ViewParams,
+) -> list[SyntheticView]:
+    """Every view judged: the geometric tests (:func:`reject_geometric`), then a probe of each that
+    passes them (:func:`probe`)."""
+    judged = reject_geometric(views, ground, fence_m, source, params)
+    source.prefetch([v.camera for v in judged if v.rejected is None], params.scale)
+    return [probe(v, source, params) if v.rejected is None else v for v in judged]
 
 
 def _key(*parts: object) -> int:
@@ -228,17 +333,22 @@ def candidate_key(seed: int, parent: str, strategy: str) -> int:
     return _key("siteline-view", seed, parent, strategy)
 
 
+def _strata(views: Sequence[SyntheticView], seed: int) -> dict[str, list[SyntheticView]]:
+    """The views by strategy stratum, each stratum ranked by :func:`candidate_key`."""
+    strata: dict[str, list[SyntheticView]] = defaultdict(list)
+    for v in views:
+        strata[v.strategy].append(v)
+    return {
+        k: sorted(vs, key=lambda v: (candidate_key(seed, v.parent, v.strategy), v.parent))
+        for k, vs in strata.items()
+    }
+
+
 def stratified_order(views: Sequence[SyntheticView], seed: int) -> list[SyntheticView]:
     """Every view, round-robin over strategy strata: members of a stratum ranked by
     :func:`candidate_key`, strata by a hash of the seed and their name. Any prefix of it is a
     stratified sample; the views after a prefix are its replacements, in order."""
-    strata: dict[str, list[SyntheticView]] = defaultdict(list)
-    for v in views:
-        strata[v.strategy].append(v)
-    pools = {
-        k: sorted(vs, key=lambda v: (candidate_key(seed, v.parent, v.strategy), v.parent))
-        for k, vs in strata.items()
-    }
+    pools = _strata(views, seed)
     key_order = sorted(pools, key=lambda k: (_key("siteline-stratum", seed, k), k))
     order: list[SyntheticView] = []
     depth = 0
@@ -273,7 +383,9 @@ def generate_views(
     progress: Callable[[int], None] = no_step,
 ) -> ViewSet:
     """Synthetic views of one scene (the later scene of a pair): candidates for every real camera,
-    rejection, then a seeded stratified sample of ``params.views``, indexed 0..n-1.
+    the geometric tests, then a seeded stratified sample of ``params.views`` of those that pass their
+    probe (:class:`Picker`: probed in the sample's order until enough pass), indexed 0..n-1.
+    ``progress`` gets 1 per real camera and per view drawn.
 
     Real camera poses are snapped first (siteline.tolerances), so the same site at any coordinate
     magnitude gives bit-identical views."""
@@ -290,10 +402,21 @@ def generate_views(
     candidates: list[SyntheticView] = []
     for parent in cams:
         cands = candidate_views(parent, ground, fence_m, depth_of, params)
-        candidates.extend(reject(cands, ground, fence_m, source, params))
+        candidates.extend(reject_geometric(cands, ground, fence_m, source, params))
         progress(1)
-    kept = [v for v in candidates if v.rejected is None]
-    order = stratified_order(kept, params.seed)
-    sample = [replace(v, index=i) for i, v in enumerate(key_sorted(order[: params.views], params.seed))]
+    survivors = [v for v in candidates if v.rejected is None]
+
+    def judge(v: SyntheticView) -> SyntheticView:
+        return probe(v, source, params)
+
+    picker = Picker(survivors, params.seed, judge, lambda vs: source.prefetch([v.camera for v in vs], params.scale))
+    drawn = []
+    for _ in range(params.views):
+        v = picker.next()
+        if v is None:
+            break
+        drawn.append(v)
+        progress(1)
+    sample = [replace(v, index=i) for i, v in enumerate(key_sorted(drawn, params.seed))]
     rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))
-    return ViewSet(sample, params, ground, len(candidates), rejected, order[params.views :])
+    return ViewSet(sample, params, ground, len(candidates), rejected, picker)

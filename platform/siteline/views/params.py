@@ -30,8 +30,11 @@ class ViewParams:
     overhead_radius_m: reject views with points above them within this horizontal radius (under a
     slab, inside a building).
     scale, min_coverage: reject views whose coverage at render scale ``scale`` is below min_coverage.
-    point_size_px: point size of the coverage and depth probes: the pair's, so a probe's coverage is
-    the real render's and a tiled source reads the density that point size needs.
+    min_valid: reject views whose probe shows less than this share of pixels of kept points (a class
+    that is not ignored, inside the fence): the pair's valid share can only be lower.
+    point_size_px, splat, splat_max_px: the splats of the coverage probes: the pair's, so a probe's
+    coverage is the real render's (before the gap fill) and a tiled source reads the density that
+    point size needs.
     views: views kept per pair (seeded sample, stratified by strategy). ``scale`` and ``views`` are the
     knobs of the same names in PairParams and RenderSettings.
     """
@@ -50,6 +53,9 @@ class ViewParams:
     views: int = 300
     seed: int = 0
     point_size_px: int = 1
+    min_valid: float = 0.0
+    splat: str = "fixed"
+    splat_max_px: int = 31
 
     def __post_init__(self) -> None:
         for name in ("vertical_fractions", "forward_fractions"):
@@ -66,15 +72,27 @@ class ViewParams:
             raise ViewsError(f"central_fraction {self.central_fraction} must lie in (0, 1].")
         if not 0 <= self.min_coverage <= 1:
             raise ViewsError(f"min_coverage {self.min_coverage} must lie in [0, 1].")
+        if not 0 <= self.min_valid <= 1:
+            raise ViewsError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if not isinstance(self.views, int) or self.views < 1:
             raise ViewsError(f"views must be at least 1, got {self.views}.")
         for name in ("clearance_m", "overhead_radius_m", "scale", "depth_probe_scale"):
             if not getattr(self, name) > 0:
                 raise ViewsError(f"{name} must be positive.")
         try:  # the renderer's rule for point sizes, one place
-            RenderSettings(scale=self.scale, point_size_px=self.point_size_px)
+            self.probe_settings()
         except RenderError as exc:
             raise ViewsError(str(exc)) from exc
+
+    def probe_settings(self, scale: float | None = None) -> RenderSettings:
+        """The render settings of a probe at ``scale`` (the view scale when None): the pair's splats,
+        no gap fill."""
+        return RenderSettings(
+            scale=self.scale if scale is None else scale,
+            point_size_px=self.point_size_px,
+            splat=self.splat,
+            splat_max_px=self.splat_max_px,
+        )
 
     @property
     def per_camera(self) -> int:

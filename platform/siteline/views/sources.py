@@ -4,7 +4,7 @@ store provides another)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -12,11 +12,21 @@ from scipy.spatial import cKDTree
 from siteline.cameras import Camera
 
 
+class ProbePoints(NamedTuple):
+    """What a probe render of one view draws: ``xyz`` (N, 3) float32 site-local metres; ``spacing_m``
+    (N,) float32 metres each point stands for (world splats; None: no level of detail, fixed
+    splats only); ``kept`` (N,) bool, a class that is not ignored (None: all)."""
+
+    xyz: np.ndarray
+    spacing_m: np.ndarray | None = None
+    kept: np.ndarray | None = None
+
+
 class PointSource(Protocol):
     """Site-local geometry of one scene."""
 
-    def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
-        """(N, 3) float32 site-local points a render of ``camera`` at ``scale`` needs."""
+    def points_for_view(self, camera: Camera, scale: float) -> ProbePoints:
+        """The points a render of ``camera`` at ``scale`` needs."""
 
     def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
         """Say that probes of ``cameras`` at ``scale`` come next (a source may read them at once)."""
@@ -29,15 +39,18 @@ class PointSource(Protocol):
 
 
 class ArrayPointSource:
-    """A whole (small) cloud held in memory: xyz (N, 3) float32 site-local metres."""
+    """A whole (small) cloud held in memory: xyz (N, 3) float32 site-local metres, with each point's
+    spacing in metres (world splats) and whether its class is kept, when known."""
 
-    def __init__(self, xyz: np.ndarray) -> None:
+    def __init__(self, xyz: np.ndarray, spacing_m: np.ndarray | None = None, kept: np.ndarray | None = None) -> None:
         self.xyz = np.ascontiguousarray(xyz, dtype=np.float32)
+        self.spacing_m = spacing_m
+        self.kept = kept
         self._tree3 = cKDTree(self.xyz) if len(self.xyz) else None
         self._tree2 = cKDTree(self.xyz[:, :2]) if len(self.xyz) else None
 
-    def points_for_view(self, camera: Camera, scale: float) -> np.ndarray:
-        return self.xyz
+    def points_for_view(self, camera: Camera, scale: float) -> ProbePoints:
+        return ProbePoints(self.xyz, self.spacing_m, self.kept)
 
     def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
         return None
