@@ -7,7 +7,12 @@ valid fraction, seconds per view, and the high/low ratios.
 The synthetic photos are 660 x 495 (1/8 of a Zenmuse L2 frame), so the release scale 1.0 used here
 renders 660 x 495 images: the paper's 706 x 510 at 1/8 of a 5645 x 4082 frame, within 9 % of its pixels.
 
-    python bench/paper_scale.py [--density 1000] [--views 300] [--scale 1.0] [--json out.json]
+With ``--splat world`` (the default) points are drawn as world splats and gaps filled (``--fill``);
+``--splat fixed --fill 0`` draws every point as a ``--point-size`` disk, as releases did before.
+Scale 2.0 renders 1320 x 990: the paper's 1/4 of a frame, twice its pixels per side.
+
+    python bench/paper_scale.py [--density 1000] [--views 300] [--scale 1.0] [--splat world]
+        [--fill 2] [--json out.json]
     make bench-scale
 """
 
@@ -71,9 +76,7 @@ def stage_ingest(work: Path) -> dict:
     return {"seconds": time.perf_counter() - t0}
 
 
-def stage_pair(
-    work: Path, views: int, scale: float, min_valid: float | None, point_size: int, lod_factor: float
-) -> dict:
+def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, knobs: dict) -> dict:
     from siteline.catalog import open_catalog
     from siteline.pairs import PairParams, process_pair
 
@@ -88,7 +91,7 @@ def stage_pair(
         last[task] = now
 
     extra = {} if min_valid is None else {"min_valid": min_valid}
-    params = PairParams(scale=scale, views=views, point_size_px=point_size, lod_factor=lod_factor, **extra)
+    params = PairParams(scale=scale, views=views, **knobs, **extra)
     t0 = time.perf_counter()
     out = process_pair(cat, settings, 1, params, progress=progress)
     total = time.perf_counter() - t0
@@ -116,6 +119,9 @@ def stage_pair(
         "valid_median": float(np.median([r["valid"] for r in recs])),
         "valid_min": float(min(r["valid"] for r in recs)),
         "ignore_fraction": float(1 - np.mean([r["valid"] for r in recs])),
+        "ignore_causes": {c: float(np.mean([r["ignore"].get(c, 0.0) for r in recs])) for c in recs[0]["ignore"]},
+        "filled": float(np.mean([r["filled"] for r in recs])),
+        "probed": summary.get("probed"),
         "image_px": [round(w * scale), round(h * scale)],
     }
 
@@ -127,14 +133,7 @@ def child(stage: str, work: str, args: list[str]) -> None:
     elif stage == "ingest":
         res = stage_ingest(work_p)
     else:
-        res = stage_pair(
-            work_p,
-            int(args[0]),
-            float(args[1]),
-            None if args[2] == "-" else float(args[2]),
-            int(args[3]),
-            float(args[4]),
-        )
+        res = stage_pair(work_p, int(args[0]), float(args[1]), None if args[2] == "-" else float(args[2]), json.loads(args[3]))
     res["peak_mib"] = _peak_mib()
     print("RESULT " + json.dumps(res))
 
@@ -157,9 +156,8 @@ def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
     out["synth"] = _run("synth", work, str(density))
     out["ingest_tile"] = _run("ingest", work)
     mv = "-" if args.min_valid is None else str(args.min_valid)
-    out["pair"] = _run(
-        "pair", work, str(args.views), str(args.scale), mv, str(args.point_size), str(args.lod_factor)
-    )
+    knobs = {"point_size_px": args.point_size, "lod_factor": args.lod_factor, "splat": args.splat, "fill_px": args.fill}
+    out["pair"] = _run("pair", work, str(args.views), str(args.scale), mv, json.dumps(knobs))
     return out
 
 
@@ -177,6 +175,8 @@ def main() -> None:
     )
     ap.add_argument("--point-size", type=int, default=3, help="px (3: every preset's)")
     ap.add_argument("--lod-factor", type=float, default=1.0)
+    ap.add_argument("--splat", choices=("world", "fixed"), default="world", help="how big a point is drawn")
+    ap.add_argument("--fill", type=int, default=2, help="gap fill radius, px (0: none)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="paper-scale-") as d:
@@ -203,8 +203,10 @@ def main() -> None:
             f"labels {p['labels_s']:.0f} s, views {p['views_s']:.0f} s ({p['candidates']} candidates), "
             f"renders {p['renders_s']:.0f} s = {p['seconds_per_view']:.2f} s/view for {p['views']} views at "
             f"{p['image_px'][0]}x{p['image_px'][1]}; {p['points_read_per_covered_px']:.2f} points read per "
-            f"covered pixel per scene; median coverage {p['coverage_median']:.2f}, median valid "
-            f"{p['valid_median']:.2f} (min {p['valid_min']:.2f}); rejected {p['rejected']}"
+            f"covered pixel per scene; median coverage {p['coverage_median']:.3f}, median valid "
+            f"{p['valid_median']:.3f} (min {p['valid_min']:.2f}); ignore {p['ignore_fraction']:.1%} "
+            f"({', '.join(f'{k} {v:.1%}' for k, v in p['ignore_causes'].items())}), filled {p['filled']:.1%}; "
+            f"{p['probed']} candidates probed, rejected {p['rejected']}"
         )
     print("dense / sparse: " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios.items()))
     if args.json:

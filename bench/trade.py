@@ -1,15 +1,17 @@
 """The speed/accuracy trade, measured end to end on a synthetic site with known truth.
 
-Sweeps render scale x point size x level-of-detail factor x label radius multiplier (and, for the 3D
-labels, the nearest-neighbour backend); for each setting: seconds, peak memory, points read, coverage,
-agreement of the 2D mask with the ground-truth change rendered through the same view (F1 and IoU of
-the changed class) and the 3D label accuracy. Writes trade.csv, trade.md and two plots with the
-Pareto front marked.
+Sweeps render scale x point size x splats (fixed disks, or world splats with the gap fill) x
+level-of-detail factor x label radius multiplier (and, for the 3D labels, the nearest-neighbour
+backend); for each setting: seconds, peak memory, points read, coverage, valid share (pixels the
+mask does not ignore), filled share, agreement of the 2D mask with the ground-truth change rendered
+through the same view (F1 and IoU of the changed class) and the 3D label accuracy. Writes trade.csv,
+trade.md and two plots with the Pareto front marked.
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import time
 import tracemalloc
@@ -45,6 +47,11 @@ class TradeGrid:
     lod_factors: tuple[float, ...] = (1.0, 2.0)
     radius_multipliers: tuple[float, ...] = (1.5, 2.5, 4.0)
     backends: tuple[str, ...] = ("pykdtree", "ckdtree")
+    splats: tuple[str, ...] = ("fixed", "world")
+
+
+# world splats fill gaps within this many pixels (the release default, siteline.pairs.PairParams)
+FILL_PX = 2
 
 
 # The grid at paper density (1000 points/m2): the preset scales, both point sizes, three LOD factors;
@@ -53,6 +60,11 @@ DENSE = TradeGrid(
     scales=(0.25, 0.125), lod_factors=(1.0, 1.41, 2.0), radius_multipliers=(2.5,), backends=("pykdtree",)
 )
 QUICK = TradeGrid(scales=(1.0, 0.25), lod_factors=(1.0,), radius_multipliers=(2.5,))
+# fixed disks against world splats in the paper's regime: the synthetic photos are 1/8 of a Zenmuse
+# L2 frame, so scale 1 renders the paper's 1/8 (660 x 495) and scale 2 its 1/4 (1320 x 990)
+SPLATS = TradeGrid(
+    scales=(2.0, 1.0), point_sizes=(1, 3), lod_factors=(1.0,), radius_multipliers=(2.5,), backends=("pykdtree",)
+)
 
 
 @dataclass
@@ -183,63 +195,70 @@ def run_trade(
         t[ignored[sc.cls]] = IGNORED
         truth_flag[name] = t
     rows = []
-    for scale in grid.scales:
-        for ps in grid.point_sizes:
-            for lod in grid.lod_factors:
-                for mult in grid.radius_multipliers:
-                    pred_flags = {"t1": flags[mult][0], "t2": flags[mult][1]}
-                    cm = np.zeros((2, 2), np.int64)
-                    cov, read, sec_total = [], 0, 0.0
-                    peak_total = 0.0
-                    for v in view_set.views:
+    settings = itertools.product(grid.scales, grid.point_sizes, grid.splats, grid.lod_factors, grid.radius_multipliers)
+    for scale, ps, splat, lod, mult in settings:
+        render = RenderSettings(scale=scale, point_size_px=ps, splat=splat, fill_px=FILL_PX if splat == "world" else 0)
+        pred_flags = {"t1": flags[mult][0], "t2": flags[mult][1]}
+        cm = np.zeros((2, 2), np.int64)
+        cov, valid_share, filled, read, sec_total = [], [], [], 0, 0.0
+        peak_total = 0.0
+        for v in view_set.views:
 
-                        def one(v=v, scale=scale, ps=ps, lod=lod, pred_flags=pred_flags):  # noqa: ANN202
-                            outs = {}
-                            n_read = 0
-                            for sc, name in ((a, "t1"), (b, "t2")):
-                                pts = sc.tiles.points_for_view(
-                                    v.camera, scale, ("gps_time",), lod_factor=lod, point_size_px=ps
-                                )
-                                n_read += pts.stats.points_read
-                                idx = pts.attributes["gps_time"].astype(np.int64)
-                                outs[name] = render_points(
-                                    pts.xyz_m.astype(np.float32),
-                                    v.camera,
-                                    RenderSettings(scale=scale, point_size_px=ps),
-                                    {"pred": pred_flags[name][idx], "truth": truth_flag[name][idx]},
-                                )
-                            return outs, n_read
+            def one(v=v, render=render, lod=lod, pred_flags=pred_flags):  # noqa: ANN202
+                outs = {}
+                n_read = 0
+                for sc, name in ((a, "t1"), (b, "t2")):
+                    pts = sc.tiles.points_for_view(
+                        v.camera, render.scale, ("gps_time",), lod_factor=lod,
+                        point_size_px=render.point_size_px,
+                    )  # fmt: skip
+                    n_read += pts.stats.points_read
+                    idx = pts.attributes["gps_time"].astype(np.int64)
+                    outs[name] = render_points(
+                        pts.xyz_m.astype(np.float32),
+                        v.camera,
+                        render,
+                        {"pred": pred_flags[name][idx], "truth": truth_flag[name][idx]},
+                        spacing_m=pts.spacing_m,
+                    )
+                return outs, n_read
 
-                        (outs, n_read), sec, peak = _measure(one)
-                        ra, rb = outs["t1"], outs["t2"]
-                        pm = pair_mask(ra.hit, ra.attributes["pred"], rb.hit, rb.attributes["pred"])
-                        tm = pair_mask(ra.hit, ra.attributes["truth"], rb.hit, rb.attributes["truth"])
-                        valid = (pm != 255) & (tm != 255)
-                        cm += confusion(torch_int(pm[valid]), torch_int(tm[valid]))
-                        cov.append(float((ra.hit & rb.hit).mean()))
-                        read += n_read
-                        sec_total += sec
-                        peak_total = max(peak_total, peak)
-                    s = scores(cm)
-                    r3 = next(
-                        r for r in rows3d if r["radius_multiplier"] == mult and r["backend"] == "pykdtree"
-                    )
-                    rows.append(
-                        {
-                            "scale": scale,
-                            "point_size_px": ps,
-                            "lod_factor": lod,
-                            "radius_multiplier": mult,
-                            "seconds_per_view": sec_total / len(view_set.views),
-                            "peak_mib": peak_total,
-                            "points_read_per_view": read / len(view_set.views),
-                            "coverage": float(np.mean(cov)),
-                            "f1_2d": s.f1,
-                            "iou_2d": s.iou_changed,
-                            "accuracy_3d": r3["accuracy_3d"],
-                            "f1_3d": r3["f1_3d"],
-                        }
-                    )
+            (outs, n_read), sec, peak = _measure(one)
+            ra, rb = outs["t1"], outs["t2"]
+            pm = pair_mask(ra.hit, ra.attributes["pred"], rb.hit, rb.attributes["pred"])
+            tm = pair_mask(ra.hit, ra.attributes["truth"], rb.hit, rb.attributes["truth"])
+            valid = (pm != 255) & (tm != 255)
+            cm += confusion(torch_int(pm[valid]), torch_int(tm[valid]))
+            cov.append(float((ra.hit & rb.hit).mean()))
+            valid_share.append(float((pm != 255).mean()))
+            filled.append(float((ra.filled | rb.filled).mean()) if ra.filled is not None else 0.0)
+            read += n_read
+            sec_total += sec
+            peak_total = max(peak_total, peak)
+        s = scores(cm)
+        r3 = next(
+            r for r in rows3d if r["radius_multiplier"] == mult and r["backend"] == "pykdtree"
+        )
+        rows.append(
+            {
+                "scale": scale,
+                "point_size_px": ps,
+                "splat": splat,
+                "lod_factor": lod,
+                "radius_multiplier": mult,
+                "seconds_per_view": sec_total / len(view_set.views),
+                "peak_mib": peak_total,
+                "points_read_per_view": read / len(view_set.views),
+                "coverage": float(np.mean(cov)),
+                "coverage_median": float(np.median(cov)),
+                "valid": float(np.mean(valid_share)),
+                "filled": float(np.mean(filled)),
+                "f1_2d": s.f1,
+                "iou_2d": s.iou_changed,
+                "accuracy_3d": r3["accuracy_3d"],
+                "f1_3d": r3["f1_3d"],
+            }
+        )
     say("renders measured")
     write_outputs(
         out_dir,
@@ -276,15 +295,15 @@ def write_outputs(out_dir: Path, rows: list[dict], rows3d: list[dict], meta: dic
         f"Synthetic site: {meta['points'][0]:,} / {meta['points'][1]:,} points ({meta['density_pts_m2']:g} points/m2, "
         f"median spacing {meta['spacing_m']:.3f} m), {meta['views']} views.",
         "",
-        "| scale | point px | LOD factor | radius x | s/view | points read/view | coverage | F1 2D | IoU 2D | acc 3D | Pareto |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scale | point px | splats | LOD factor | radius x | s/view | points read/view | coverage | valid | filled | F1 2D | IoU 2D | acc 3D | Pareto |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for i, r in enumerate(rows):
         mark = ("F1" if i in front_f1 else "") + (" cov" if i in front_cov else "")
         lines.append(
-            f"| {r['scale']:g} | {r['point_size_px']} | {r['lod_factor']:g} | {r['radius_multiplier']:g} | "
-            f"{r['seconds_per_view']:.3f} | {r['points_read_per_view']:,.0f} | {r['coverage']:.1%} | {r['f1_2d']:.3f} | "
-            f"{r['iou_2d']:.3f} | {r['accuracy_3d']:.4f} | {mark.strip()} |"
+            f"| {r['scale']:g} | {r['point_size_px']} | {r['splat']} | {r['lod_factor']:g} | {r['radius_multiplier']:g} | "
+            f"{r['seconds_per_view']:.3f} | {r['points_read_per_view']:,.0f} | {r['coverage']:.1%} | {r['valid']:.1%} | "
+            f"{r['filled']:.1%} | {r['f1_2d']:.3f} | {r['iou_2d']:.3f} | {r['accuracy_3d']:.4f} | {mark.strip()} |"
         )
     lines += [
         "",
@@ -307,15 +326,17 @@ def write_outputs(out_dir: Path, rows: list[dict], rows3d: list[dict], meta: dic
         ("f1_2d", front_f1, "seconds_vs_f1.png"),
     ):
         fig, ax = plt.subplots(figsize=(7, 4.5))
-        for ps, marker in ((1, "o"), (3, "s")):
-            sel = [r for r in rows if r["point_size_px"] == ps]
+        for (ps, splat), marker in (((1, "fixed"), "o"), ((3, "fixed"), "s"), ((1, "world"), "^"), ((3, "world"), "D")):
+            sel = [r for r in rows if r["point_size_px"] == ps and r["splat"] == splat]
+            if not sel:
+                continue
             sc = ax.scatter(
                 [r["seconds_per_view"] for r in sel],
                 [r[key] for r in sel],
                 c=[np.log2(r["scale"]) for r in sel],
                 marker=marker,
                 cmap="viridis",
-                label=f"{ps} px",
+                label=f"{ps} px {splat}",
                 alpha=0.8,
             )
         f = sorted(front, key=lambda i: costs[i])
@@ -339,7 +360,8 @@ if __name__ == "__main__":
     ap.add_argument("--out", type=Path, default=Path("trade"))
     ap.add_argument("--full", action="store_true", help="the whole grid (default: the quick one)")
     ap.add_argument("--dense", action="store_true", help="the paper-density grid (DENSE)")
+    ap.add_argument("--splats", action="store_true", help="fixed disks against world splats at 1/8 and 1/4 (SPLATS)")
     a = ap.parse_args()
-    g = TradeGrid() if a.full else DENSE if a.dense else QUICK
+    g = TradeGrid() if a.full else SPLATS if a.splats else DENSE if a.dense else QUICK
     run_trade(a.out, a.site_density, a.views, 0, g, progress=print)
     print((a.out / "trade.md").read_text())

@@ -4,3 +4,15 @@
 UNCHANGED = 0
 CHANGED = 1
 IGNORE = 255
+
+# why a pixel is IGNORE, in the order a pixel is put under the first that holds:
+# no_surface: neither scene has a point there, nor points around it (sky, the unscanned);
+# gap: a scene has no point there but points all around it (sparse points the splats and the gap
+#   fill left open: a 7 px closing of its render's hit mask fills it);
+# one_side: one scene shows a surface where the other has none (a hole in one render only);
+# outside_fence: a winning point lies outside the site fence;
+# ignored_class: a winning point is of an ignored class (noise, snow, ignore) inside the fence.
+IGNORE_CAUSES = ("no_surface", "gap", "one_side", "outside_fence", "ignored_class")
+# a release adds the padding it writes around the rendered image (siteline.release.layout), and
+# counts as unaccounted the ignore of outputs made before causes were recorded
+RELEASE_IGNORE_CAUSES = (*IGNORE_CAUSES, "padding", "unaccounted")

@@ -267,12 +267,20 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     b = render_pair_view(swapped, cam, full)
     assert np.array_equal(a.mask, b.mask) and (a.mask != 255).any()
     assert np.array_equal(a.a, b.b)
-    coarse = render_pair_view(forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0))
-    every = render_pair_view(
-        forward, cam, PairParams(scale=0.25, point_size_px=1, lod_factor=2.0, all_points=True)
-    )
+    # fixed disks: every point read covers at least what the level of detail covers
+    fixed = {"scale": 0.25, "point_size_px": 1, "lod_factor": 2.0, "splat": "fixed", "fill_px": 0}
+    coarse = render_pair_view(forward, cam, PairParams(**fixed))
+    every = render_pair_view(forward, cam, PairParams(**fixed, all_points=True))
     assert every.points_read > coarse.points_read  # --all-points: no level of detail
     assert every.coverage_a >= coarse.coverage_a
+    # world splats: a coarser read draws wider splats, covering what every point covers, give or
+    # take the silhouettes' width
+    world = {"scale": 0.25, "point_size_px": 1, "lod_factor": 2.0}
+    coarse_w = render_pair_view(forward, cam, PairParams(**world))
+    every_w = render_pair_view(forward, cam, PairParams(**world, all_points=True))
+    assert every_w.points_read > coarse_w.points_read
+    assert abs(every_w.coverage_a - coarse_w.coverage_a) < 0.05
+    assert coarse_w.coverage_a > coarse.coverage_a
 
 
 @pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it

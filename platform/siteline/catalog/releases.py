@@ -52,7 +52,8 @@ def release_item_counts(session: Session, release_id: int) -> dict[str, int]:
 
 def earlier_item_splits(session: Session, name: str, version: str) -> dict[tuple[int, int], str]:
     """(pair id, view index) -> split of every item of the latest version of ``name`` before
-    ``version`` (empty for a first version): what a new version keeps (siteline.release.splits)."""
+    ``version`` (empty for a first version), and ``left_out`` for the views it left out of every
+    split: what a new version keeps (siteline.release.splits)."""
     def semver(v: str) -> tuple[int, ...]:
         return tuple(int(x) for x in v.split("."))
 
@@ -63,7 +64,10 @@ def earlier_item_splits(session: Session, name: str, version: str) -> dict[tuple
     items = session.execute(
         sa.select(ReleaseItem.pair_id, ReleaseItem.item_id, ReleaseItem.split).where(ReleaseItem.release_id == latest.id)
     ).all()
-    return {(pid, int(item.rsplit("_v", 1)[1])): split for pid, item, split in items}
+    out = {(pid, int(item.rsplit("_v", 1)[1])): split for pid, item, split in items}
+    for pid, view in (latest.parameters or {}).get("left_out") or []:
+        out.setdefault((int(pid), int(view)), "left_out")
+    return out
 
 
 def release_item_files(session: Session, release_id: int) -> list[str]:
@@ -89,6 +93,8 @@ def release_record(session: Session, rel: Release) -> dict[str, Any]:
         # the change radius of each pair: a smaller change is labelled unchanged
         "smallest_change_m": (rel.parameters or {}).get("smallest_change_m"),
         "radius_ceiling_m": (rel.parameters or {}).get("radius_ceiling_m"),
+        # where the ignore pixels come from, by cause (releases built before causes were recorded: None)
+        "ignore": (rel.parameters or {}).get("ignore"),
     }
 
 

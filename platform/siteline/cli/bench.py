@@ -56,14 +56,22 @@ def trade(
         help="The grid for paper density (use with --site-density 1000): scales 1/4 and 1/8, point "
         "sizes 1 and 3, LOD 1, 1.41 and 2, radius x2.5, pykdtree.",
     ),
+    splats: bool = typer.Option(
+        False,
+        "--splats",
+        help="Fixed disks against world splats with the gap fill, at scales 1 and 2 of the synthetic "
+        "photos (1/8 and 1/4 of a Zenmuse L2 frame), point sizes 1 and 3, LOD 1, radius x2.5.",
+    ),
 ) -> None:
-    """Sweep scale x point size x level of detail x label radius x nearest-neighbour backend."""
+    """Sweep scale x point size x splats x level of detail x label radius x nearest-neighbour backend."""
     trade_module = _bench_trade()
     TradeGrid, run_trade = trade_module.TradeGrid, trade_module.run_trade  # noqa: N806
 
-    if quick and dense:
-        raise typer.BadParameter("choose --quick or --dense, not both.")
-    grid = trade_module.QUICK if quick else trade_module.DENSE if dense else TradeGrid()
+    if quick + dense + splats > 1:
+        raise typer.BadParameter("choose one of --quick, --dense and --splats.")
+    grid = (
+        trade_module.QUICK if quick else trade_module.DENSE if dense else trade_module.SPLATS if splats else TradeGrid()
+    )
     rows = run_trade(out, site_density, views, seed, grid, progress=lambda m: console.print(m))
     console.print((out / "trade.md").read_text())
     console.print(f"{len(rows)} settings measured; CSV, tables and plots in {out}")

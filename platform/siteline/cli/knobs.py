@@ -30,11 +30,14 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "preset": (str | None, typer.Option(None, "--preset", help="fast, balanced or exact (docs/performance.md).")),
     "scale": (str | None, typer.Option(None, "--scale", help="Render scale of the cameras' image size, or 'auto' (512 px long side).")),
     "point_size": (str | None, typer.Option(None, "--point-size", help="Point size in pixels (odd, 1-15), or 'auto' (from density).")),
-    "views": (int | None, typer.Option(None, "--views", help="Views per pair (default 300).")),
+    "views": (str | None, typer.Option(None, "--views", help="Views per pair, or 'auto' (the default: up to 300, as many as the cameras give).")),
     "radius": (str | None, typer.Option(None, "--radius", help="Change radius in metres, or 'auto' (2.5 x median spacing).")),
     "seed": (int | None, typer.Option(None, "--seed", help="Seed of view sampling and splits.")),
     "min_coverage": (float | None, typer.Option(None, "--min-coverage", help="Reject views covering less of the image (default 0.5).")),
-    "min_valid": (float | None, typer.Option(None, "--min-valid", help="Replace rendered views with fewer valid pixels (default 0.25).")),
+    "min_valid": (float | None, typer.Option(None, "--min-valid", help="Skip views whose probe shows fewer valid pixels, and replace rendered ones (default 0.7).")),
+    "splat": (str | None, typer.Option(None, "--splat", help="How big a point is drawn: world (its spacing seen from the camera, the default) or fixed (--point-size).")),
+    "splat_max": (int | None, typer.Option(None, "--splat-max", help="Largest world splat, pixels across (default 31).")),
+    "fill": (int | None, typer.Option(None, "--fill", help="Fill gaps from the surface around them within this many pixels (default 2; 0: none).")),
     "one_side_hole": (str | None, typer.Option(None, "--one-side-hole", help="Changed on one side, a hole on the other: ignore or changed.")),
     "all_points": (bool | None, typer.Option(None, "--all-points/--lod", help="Render every point (no level of detail; slower).")),
     "lod_factor": (float | None, typer.Option(None, "--lod-factor", help="Level of detail read per view (1 = half a drawn point).")),
@@ -53,12 +56,17 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
         pair["scale"] = _number(values["scale"], "--scale", float)
     if values.get("point_size") is not None:
         pair["point_size_px"] = _number(values["point_size"], "--point-size", int)
+    if values.get("views") is not None:
+        pair["views"] = _number(values["views"], "--views", int)
     if values.get("radius") is not None:
         radius = _number(values["radius"], "--radius", float)
         pair["radius_m"] = None if radius == AUTO else radius
-    for name in ("views", "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule"):
+    for name in ("seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule", "splat"):
         if values.get(name) is not None:
             pair[name] = values[name]
+    for name, knob in (("splat_max", "splat_max_px"), ("fill", "fill_px")):
+        if values.get(name) is not None:
+            pair[knob] = values[name]
     return ReleaseKnobs(
         values.get("preset"), pair, values.get("pad"), values.get("min_image_px"), values.get("radius_ceiling")
     )

@@ -88,7 +88,9 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
     plane = fit_ground_plane(ground.xyz_m[on_ground].astype(np.float32), seed=params.seed)
     names = {c.name for c in taxonomy.classes}
     skip = np.array([taxonomy.id_of(c) for c in ("snow", "noise") if c in names], dtype=np.uint8)
-    source = TilePointSource(t2, skip, lod_factor=params.lod_factor, point_size_px=params.point_size_px)
+    source = TilePointSource(
+        t2, skip, taxonomy.ignored_ids(), lod_factor=params.lod_factor, point_size_px=params.point_size_px
+    )
     cams = [NamedCamera(n, c) for n, c in plan.cameras]
     views = generate_views(
         cams,
@@ -96,16 +98,17 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
         plan.fence,
         source,
         params.view_params_spec(),
-        progress=lambda k: progress("views", k, len(cams)),
+        progress=lambda k: progress("views", k, len(cams) + params.views),
     )
     if not views.views:
         raise PairError(
-            f"pair {plan.pair_id}: every synthetic view was rejected ({views.rejected}); lower "
-            "--min-coverage or check the cameras."
+            f"pair {plan.pair_id}: every synthetic view was rejected ({views.all_rejected()}); lower "
+            "--min-coverage or --min-valid, or check the cameras."
         )
     log.info(
-        "pair %d: %d views of %d candidates (%d probe reads, %s points read)",
-        plan.pair_id, len(views.views), views.candidates, source.reads, f"{source.points_read:,}",
+        "pair %d: %d views of %d candidates, %d probed (%d reads, %s points read, %s)",
+        plan.pair_id, len(views.views), views.candidates, views.probed, source.reads, f"{source.points_read:,}",
+        "the scene held in memory" if source.in_memory else "read per batch of probes",
     )  # fmt: skip
     return views
 
@@ -116,34 +119,37 @@ def _render_all(
     """Render the sample into ``work``/A|B|label under temporary names; a view whose valid fraction
     is under ``min_valid`` is dropped and the next view of the stratified order rendered instead."""
     params = plan.params
-    queue, reserve = list(views.views), list(views.reserve)
-    rejected = dict(views.rejected)
+    queue = list(views.views)
+    low_valid = 0
     kept: list[tuple[SyntheticView, dict[str, Any]]] = []
     for sub in FOLDERS:
         (work / sub).mkdir(parents=True)
     while queue:
         v = queue.pop(0)
-        r = render_pair_view(scenes, v.camera, params, device, plan.colour)
+        r = render_pair_view(scenes, v.camera, params, device, plan.colour, plan.site.fence)
         low = not at_least(r.valid, params.min_valid, RATIO_TOL)
         if low:
-            rejected["low_valid"] = rejected.get("low_valid", 0) + 1
-            if reserve:
-                queue.append(reserve.pop(0))
+            low_valid += 1
+            replacement = views.next_reserve()
+            if replacement is not None:
+                queue.append(replacement)
         # the total grows by each replacement
-        progress("renders", 1, len(kept) + len(queue) + rejected.get("low_valid", 0) + (not low))
+        progress("renders", 1, len(kept) + len(queue) + low_valid + (not low))
         if low:
             continue
         tmp = f"tmp-{len(kept):05d}.png"
         for sub, image in zip(FOLDERS, (r.a, r.b, r.mask), strict=True):
             (work / sub / tmp).write_bytes(png_bytes(image))
         measured = {"coverage_a": r.coverage_a, "coverage_b": r.coverage_b, "valid": r.valid,
-                    "change_ratio": r.change_ratio, "points_read": r.points_read}  # fmt: skip
+                    "change_ratio": r.change_ratio, "points_read": r.points_read, "ignore": r.ignore,
+                    "filled": r.filled}  # fmt: skip
         kept.append((v, {"tmp": tmp} | measured))
     if not kept:
         raise PairError(
             f"pair {plan.pair_id}: every rendered view had less than {params.min_valid:.0%} valid pixels "
-            f"({rejected.get('low_valid', 0)} views); lower --min-valid or check the scenes' overlap."
+            f"({low_valid} views); lower --min-valid or check the scenes' overlap."
         )
+    rejected = views.all_rejected() | ({"low_valid": low_valid} if low_valid else {})
     return kept, dict(sorted(rejected.items()))
 
 
@@ -179,7 +185,7 @@ def execute_pair(
             "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.record,
             "ground_plane": views.ground.to_dict(), "fence": plan.fence_source, "colour": plan.colour.to_dict(),
             "change_rule": plan.change_rule.to_dict(),
-            "candidates": views.candidates, "rejected": rejected,
+            "candidates": views.candidates, "probed": views.probed, "rejected": rejected,
             "views": [r.to_dict() for r in records],
         }  # fmt: skip
         (work / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")

@@ -17,6 +17,7 @@ def output_of(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
         tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
         plan.params.to_dict(), doc.get("colour") or {"source": "rgb"}, doc.get("fence", "site fence"),
         ChangeRulePlan.from_dict(doc.get("change_rule")).to_dict(),
+        {k: doc[k] for k in ("candidates", "probed", "rejected") if k in doc},
     )  # fmt: skip
 
 

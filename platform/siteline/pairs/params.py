@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
@@ -17,16 +17,21 @@ from siteline.render.settings import RenderSettings
 from siteline.specs import parse_spec
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 
+# knobs view generation shares with the renders, set once on the pair parameters
+_SHARED_VIEW_KNOBS = ("scale", "views", "seed", "min_coverage", "min_valid", "point_size_px", "splat", "splat_max_px")
+
 
 @dataclass(frozen=True)
 class PairParams:
     """Every knob of pair processing, one name each, composed of the stages' own specs:
-    :meth:`render_settings` (``scale``, ``point_size_px``; DESIGN.md §6), :meth:`view_params_spec`
+    :meth:`render_settings` (``scale``, ``point_size_px``, ``splat``, ``splat_max_px``, ``fill_px``;
+    DESIGN.md §6, siteline.render.settings), :meth:`view_params_spec`
     (``scale``, ``views``, ``seed``, ``min_coverage``, ``point_size_px`` and any other ViewParams
     field in ``view_params``; §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
-    min_valid: reject a rendered view whose valid fraction (pixels neither ignored nor a hole in
-    either scene) is below this, and render the next view of the stratified order in its place
+    min_valid: reject a view whose valid fraction (pixels neither ignored nor a hole in either
+    scene) is below this: a candidate whose probe of the later scene already shows less is never
+    sampled, and a rendered view under it is replaced by the next view of the stratified order
     (``min_coverage`` judges one scene's coverage before rendering; this judges what the pair teaches).
     lod_factor: level of detail read per view (1 = points read at a spacing of half a drawn point,
     ``point_size_px / 2`` pixel footprints, which keeps coverage within a point of reading
@@ -54,13 +59,19 @@ class PairParams:
     lod_factor: float = 1.0
     seed: int = 0
     min_coverage: float = 0.5
-    min_valid: float = 0.25
+    min_valid: float = 0.7
     view_params: dict[str, Any] = field(default_factory=dict)
     one_side_hole: HoleRule = "ignore"
     all_points: bool = False
     sampler: str = SAMPLER_VERSION
     colour: str = "auto"
     change_rule: str = "auto"
+    splat: str = "world"
+    splat_max_px: int = 31
+    fill_px: int = 2
+
+    # what each knob added after the first release meant before it existed (a record without it)
+    BEFORE: ClassVar[dict[str, Any]] = {"splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25}
 
     def __post_init__(self) -> None:
         if self.sampler != SAMPLER_VERSION:
@@ -76,7 +87,7 @@ class PairParams:
             raise PairError(f"change rule {self.change_rule!r}: use one of {', '.join(CHANGE_RULES)}.")
         if self.one_side_hole not in HOLE_RULES:
             raise PairError(f"one_side_hole {self.one_side_hole!r}: use one of {HOLE_RULES}.")
-        clash = sorted(set(self.view_params) & {"scale", "views", "seed", "min_coverage", "point_size_px"})
+        clash = sorted(set(self.view_params) & set(_SHARED_VIEW_KNOBS))
         if clash:
             raise PairError(
                 f"view_params {clash}: set these knobs on the pair parameters themselves (one name each)."
@@ -88,7 +99,13 @@ class PairParams:
 
     def render_settings(self) -> RenderSettings:
         """The render knobs as the renderer's own spec."""
-        return RenderSettings(scale=self.scale, point_size_px=self.point_size_px)
+        return RenderSettings(
+            scale=self.scale,
+            point_size_px=self.point_size_px,
+            splat=self.splat,
+            splat_max_px=self.splat_max_px,
+            fill_px=self.fill_px,
+        )
 
     def view_params_spec(self) -> ViewParams:
         """The view-generation knobs as ViewParams (``view_params`` holds the less common ones)."""
@@ -97,7 +114,10 @@ class PairParams:
             "seed": self.seed,
             "scale": self.scale,
             "min_coverage": self.min_coverage,
+            "min_valid": self.min_valid,
             "point_size_px": self.point_size_px,
+            "splat": self.splat,
+            "splat_max_px": self.splat_max_px,
         }
         return ViewParams.from_dict({**base, **self.view_params})
 

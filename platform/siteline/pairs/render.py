@@ -3,20 +3,24 @@ mask (DESIGN.md §4, §6)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy import ndimage
 
 from siteline.cameras import Camera
 from siteline.codes import CHANGED as MASK_CHANGED
 from siteline.codes import IGNORE as MASK_IGNORE
+from siteline.codes import IGNORE_CAUSES
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError
+from siteline.fence import inside_fence
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.records.enums import HOLE_RULES
 from siteline.render.colour import ColourPlan
-from siteline.render.zbuffer import render_points
+from siteline.render.zbuffer import RenderResult, render_points
 from siteline.stores import join
 from siteline.tiles.reader import SceneTiles
 
@@ -24,12 +28,19 @@ if TYPE_CHECKING:
     from siteline.pairs.params import PairParams
 
 
+# a hole is a gap between points when a closing of the render's hit mask with a square of this
+# half-width fills it (a 7 px closing)
+GAP_PX = 3
+
+
 @dataclass
 class PairRender:
     """A view rendered on both scenes. a, b: (H, W, 3) uint8 (black where no point; see ``mask``).
     mask: (H, W) uint8 0 unchanged, 1 changed, 255 ignore (either render missed, or the winning point
-    is ignored). coverage_*: fractions of pixels hit; valid: fraction not ignored; change_ratio:
-    changed / valid."""
+    is ignored). coverage_*: fractions of pixels hit (drawn or filled); valid: fraction not ignored;
+    change_ratio: changed / valid; ignore: the share of the view's pixels ignored for each of
+    :data:`siteline.codes.IGNORE_CAUSES`; filled: the share of pixels whose point came from the gap fill in either
+    scene."""
 
     a: np.ndarray
     b: np.ndarray
@@ -39,6 +50,8 @@ class PairRender:
     valid: float
     change_ratio: float
     points_read: int
+    ignore: dict[str, float] = field(default_factory=dict)
+    filled: float = 0.0
 
 
 def pair_mask(
@@ -66,6 +79,51 @@ def pair_mask(
     return np.where(valid, np.where(changed, MASK_CHANGED, MASK_UNCHANGED), MASK_IGNORE).astype(np.uint8)
 
 
+def small_gaps(hit: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels without a point that a closing of ``hit`` with a (2 GAP_PX + 1)
+    square fills; beyond the image is empty, so a hole open to the image's edge is not a gap."""
+    size = 2 * GAP_PX + 1
+    dilated = ndimage.maximum_filter(hit, size=size, mode="constant", cval=0)
+    closed = ndimage.minimum_filter(dilated, size=size, mode="constant", cval=0)
+    return closed & ~hit
+
+
+def ignore_causes(
+    ra: RenderResult, rb: RenderResult, mask: np.ndarray, outside: np.ndarray
+) -> dict[str, float]:
+    """The share of the view's pixels that ``mask`` ignores for each of
+    :data:`siteline.codes.IGNORE_CAUSES`, each pixel under the first cause that holds. ra, rb: the two renders (``change`` attribute);
+    outside: (H, W) bool, a winning point lies outside the site fence."""
+    left = mask == MASK_IGNORE
+    gap = small_gaps(ra.hit) | small_gaps(rb.hit)
+    empty_a, empty_b = ~ra.hit, ~rb.hit
+    found = {
+        "gap": gap,
+        "no_surface": empty_a & empty_b,
+        "one_side": empty_a | empty_b,
+        "outside_fence": outside,
+        "ignored_class": np.ones_like(left),
+    }
+    out = {}
+    for cause in ("gap", "no_surface", "one_side", "outside_fence", "ignored_class"):
+        mine = left & found[cause]
+        out[cause] = float(mine.sum() / mask.size) if mask.size else 0.0
+        left &= ~mine
+    return {c: out[c] for c in IGNORE_CAUSES}
+
+
+def _outside(r: RenderResult, xyz_m: np.ndarray, fence: Sequence[Sequence[float]] | None) -> np.ndarray:
+    """(H, W) bool: pixels whose winning point of ``r`` is ignored and lies outside ``fence``."""
+    out = np.zeros(r.hit.shape, bool)
+    if fence is None:
+        return out
+    rows, cols = np.nonzero(r.hit & (r.attributes["change"] == IGNORED))
+    if len(rows):
+        away = ~inside_fence(xyz_m[r.index[rows, cols], :2], fence)
+        out[rows[away], cols[away]] = True
+    return out
+
+
 @dataclass(frozen=True)
 class LabelledPair:
     """The two scenes of a pair, each read with its change labels (attribute ``change``, from the
@@ -88,12 +146,16 @@ def render_pair_view(
     params: PairParams,
     device: str = "cpu",
     colour: ColourPlan = ColourPlan("rgb"),
+    fence: Sequence[Sequence[float]] | None = None,
 ) -> PairRender:
-    """Render ``camera`` on both scenes with ``params`` (scale, point size, level of detail or
-    ``all_points``, ``one_side_hole``: :func:`pair_mask`) in ``colour`` (the pair's RGB, intensity
-    or elevation: siteline.render.colour) and build the mask."""
+    """Render ``camera`` on both scenes with ``params`` (scale, point size, splats and gap fill,
+    level of detail or ``all_points``, ``one_side_hole``: :func:`pair_mask`) in ``colour`` (the
+    pair's RGB, intensity or elevation: siteline.render.colour), build the mask and say why each
+    ignored pixel is ignored (``fence``: the site's, site-local metres, which made points outside it
+    ignore; None when it has none)."""
     settings = params.render_settings()
     out = []
+    outside = []
     read = 0
     source = colour.attribute
     for side, tiles in ((1, pair.t1), (2, pair.t2)):
@@ -109,10 +171,13 @@ def render_pair_view(
         xyz = pts.xyz_m.astype(np.float32)  # site-local: float32 keeps millimetres here
         values = pts.attributes.pop(source) if source else None
         attrs = pts.attributes | {"rgb": colour.colours(side, pts.xyz_m, values)}
-        out.append(render_points(xyz, camera, settings, attrs, device=device))
+        r = render_points(xyz, camera, settings, attrs, device=device, spacing_m=pts.spacing_m)
+        out.append(r)
+        outside.append(_outside(r, pts.xyz_m, fence))
     ra, rb = out
     mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole)
     n_valid = int((mask != MASK_IGNORE).sum())
+    filled = (ra.filled | rb.filled) if ra.filled is not None and rb.filled is not None else None
     return PairRender(
         ra.rgb,
         rb.rgb,
@@ -122,4 +187,6 @@ def render_pair_view(
         n_valid / mask.size,
         float((mask == MASK_CHANGED).sum() / n_valid) if n_valid else 0.0,
         read,
+        ignore_causes(ra, rb, mask, outside[0] | outside[1]),
+        float(filled.mean()) if filled is not None and filled.size else 0.0,
     )

@@ -32,7 +32,9 @@ class RenderedView:
     parent real image, strategy key, strategy parameters, probe coverage, camera as
     ``schema/camera.schema.json``), its file name in A/, B/ and label/, and what the render found:
     coverage of each scene, valid fraction (neither ignored nor a hole), changed / valid, points read
-    from both scenes."""
+    from both scenes, the share of pixels ignored for each cause (siteline.codes.IGNORE_CAUSES;
+    empty for outputs made before causes were recorded), the share of pixels whose point came from
+    the gap fill, and the probe's valid share (an upper bound the view was chosen by)."""
 
     index: int
     parent: str
@@ -46,6 +48,9 @@ class RenderedView:
     valid: float
     change_ratio: float
     points_read: int
+    ignore: dict[str, float] = field(default_factory=dict)
+    filled: float = 0.0
+    probe_valid: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)} | {"camera": self.camera.to_dict()}
@@ -64,8 +69,9 @@ class PairOutput:
     checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
     label sets and tilings), the pair parameters (their JSON form), the colour the images show
     (siteline.render.colour.ColourPlan's JSON form; outputs made before it: RGB), the fence views
-    were judged against (the site's, or a scene's footprint) and the change rule of its labels
-    (siteline.labels.rule.ChangeRulePlan's JSON form)."""
+    were judged against (the site's, or a scene's footprint), the change rule of its labels
+    (siteline.labels.rule.ChangeRulePlan's JSON form) and how its views were drawn (``drawn``:
+    candidates, how many were probed, and the rejections by reason)."""
 
     pair_id: int
     t1: int
@@ -80,6 +86,7 @@ class PairOutput:
     colour: dict[str, Any] = field(default_factory=lambda: {"source": "rgb"})
     fence: str = "site fence"
     change_rule: dict[str, Any] = field(default_factory=lambda: {"rule": "semantic"})
+    drawn: dict[str, Any] = field(default_factory=dict)
 
     @property
     def view_count(self) -> int:

@@ -12,8 +12,11 @@ from siteline.records.enums import ReleaseStatus, Split
 @dataclass(frozen=True)
 class ReleaseItem:
     """One image pair of a release: its id, split, pair and view index, the view's strategy, coverage
-    (the smaller of the two renders'), change ratio and valid fraction, and its sizes in pixels
-    (width, height) as rendered and as stored (padded)."""
+    (the smaller of the two renders'), change ratio and valid fraction, its sizes in pixels (width,
+    height) as rendered and as stored (padded), the share of its rendered pixels ignored for each
+    cause (siteline.codes.IGNORE_CAUSES; empty for outputs made before causes were
+    recorded) and the share whose point came from the gap fill. Shares are of the rendered image:
+    ``valid`` and the causes add up to 1; the padding is ``padded_px`` less ``size_px``."""
 
     id: str
     split: Split
@@ -25,10 +28,16 @@ class ReleaseItem:
     valid: float
     size_px: tuple[int, int]
     padded_px: tuple[int, int]
+    ignore: Mapping[str, float] = field(default_factory=dict)
+    filled: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest's item."""
-        return asdict(self) | {"size_px": list(self.size_px), "padded_px": list(self.padded_px)}
+        return asdict(self) | {
+            "size_px": list(self.size_px),
+            "padded_px": list(self.padded_px),
+            "ignore": dict(self.ignore),
+        }
 
 
 @dataclass(frozen=True)

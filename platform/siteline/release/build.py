@@ -88,7 +88,7 @@ def _write_items(
             items.append(
                 ReleaseItem(
                     item_id, split, pid, v.index, v.strategy, min(v.coverage_a, v.coverage_b),  # type: ignore[arg-type]
-                    v.change_ratio, v.valid, (int(w), int(h)), (int(pw), int(ph)),
+                    v.change_ratio, v.valid, (int(w), int(h)), (int(pw), int(ph)), dict(v.ignore), v.filled,
                 )
             )  # fmt: skip
             progress("release images", 1, total)
@@ -101,7 +101,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
          "labels": o.labels, "colour_source": o.colour["source"], "colour": o.colour, "fence": o.fence,
-         "change_rule": o.change_rule}
+         "change_rule": o.change_rule, "views": {"made": len(o.views), "asked": o.params.get("views"), **o.drawn}}
         for o in (outputs[pid] for pid in sorted(outputs))
     ]  # fmt: skip
     return {
@@ -133,6 +133,12 @@ def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> 
         "smallest_change_m": {str(pid): outputs[pid].radius_m for pid in pairs},
         "radius_ceiling_m": params.radius_ceiling_m,
     }
+
+
+def _catalog_figures(stats: Mapping[str, Any]) -> dict[str, Any]:
+    """What the catalog records of a release's figures beside its parameters: where its ignore
+    pixels come from (``release show``)."""
+    return {"ignore": stats["ignore"]}
 
 
 def execute_build(
@@ -173,5 +179,6 @@ def execute_build(
     )
     return DraftRelease(
         plan.name, plan.version, str(plan.draft), manifest_sha, tuple(items), stats,
-        catalog_parameters(plan, outputs), {pid: o.digest for pid, o in outputs.items()},
+        catalog_parameters(plan, outputs) | _catalog_figures(stats) | {"left_out": [list(i) for i in sorted(split_plan.left_out)]},
+        {pid: o.digest for pid, o in outputs.items()},
     )  # fmt: skip

@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
+from siteline.records.registration import alignment_of
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M
 
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}
@@ -45,9 +47,43 @@ def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int 
     )
 
 
+def _shares(px: dict[str, float], total: float) -> dict[str, float]:
+    return {k: (v / total if total else 0.0) for k, v in px.items()}
+
+
+def ignore_breakdown(items: list[dict[str, Any]], ignored_px: dict[str, int]) -> dict[str, Any]:
+    """Where a release's ignore pixels come from: per cause (siteline.codes.RELEASE_IGNORE_CAUSES) the
+    share of all stored pixels and of the rendered ones, overall and per split, and the share of
+    rendered pixels whose point came from the gap fill. ``items``: the manifest's items (their
+    ``ignore`` shares of the rendered image, sizes, ``filled``); ``ignored_px``: per split, the ignore
+    pixels counted in its ``label_ignore/`` images, so what no item accounts for (outputs made before
+    causes were recorded) is ``unaccounted``."""
+
+    def tally(rows: list[dict[str, Any]], counted: int) -> dict[str, Any]:
+        rendered = sum(it["size_px"][0] * it["size_px"][1] for it in rows)
+        stored = sum(it["padded_px"][0] * it["padded_px"][1] for it in rows)
+        px = {c: sum((it.get("ignore") or {}).get(c, 0.0) * it["size_px"][0] * it["size_px"][1] for it in rows)
+              for c in IGNORE_CAUSES}  # fmt: skip
+        px["padding"] = float(stored - rendered)
+        px["unaccounted"] = max(0.0, counted - sum(px.values()))
+        filled = sum(it.get("filled", 0.0) * it["size_px"][0] * it["size_px"][1] for it in rows)
+        return {
+            "share": counted / stored if stored else 0.0,
+            "share_of_rendered": (counted - px["padding"]) / rendered if rendered else 0.0,
+            "causes": _shares(px, stored),
+            "causes_of_rendered": _shares({c: px[c] for c in RELEASE_IGNORE_CAUSES if c != "padding"}, rendered),
+            "filled_of_rendered": filled / rendered if rendered else 0.0,
+        }
+
+    out = tally(items, sum(ignored_px.values()))
+    splits = sorted({it["split"] for it in items})
+    out["per_split"] = {sp: tally([it for it in items if it["split"] == sp], ignored_px.get(sp, 0)) for sp in splits}
+    return out
+
+
 def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
-    """Pixel class balance per split (from ``label_ignore/``; padding counts as ignore), coverage and
-    per-pair change ratio."""
+    """Pixel class balance per split (from ``label_ignore/``; padding counts as ignore), coverage,
+    per-pair change ratio and where the ignore pixels come from (:func:`ignore_breakdown`)."""
     per_split: dict[str, dict[str, int]] = {}
     per_pair: dict[int, list[float]] = {}
     for it in items:
@@ -64,6 +100,7 @@ def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
         "coverage": {"mean": float(np.mean(cov)) if cov else 0.0, "min": float(np.min(cov)) if cov else 0.0},
         "per_pair_change_ratio": {str(k): float(np.mean(v)) for k, v in sorted(per_pair.items())},
         "images": len(items),
+        "ignore": ignore_breakdown(items, {k: v["ignore"] for k, v in per_split.items()}),
     }
 
 
@@ -124,23 +161,47 @@ def _layout_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
     ]
 
 
+_REJECTED_WORDS = {
+    "outside_fence": "outside the fence after mirroring", "underground": "underground",
+    "near_surface": "too near a surface", "under_geometry": "under geometry", "low_coverage": "too little coverage",
+    "low_valid_probe": "too few valid pixels in their probe", "low_valid": "too few valid pixels rendered",
+    "no_fence": "no fence to mirror across", "nothing_ahead": "nothing ahead to step towards",
+}  # fmt: skip
+
+
+def _views_text(q: dict[str, Any]) -> str:
+    """How many views a pair gave of those asked, and why not more."""
+    v = q["views"]
+    text = f"- pair {q['id']}: {v['made']} views of the {v['asked']} asked"
+    if "candidates" in v:
+        rejected = ", ".join(f"{n} {_REJECTED_WORDS.get(k, k)}" for k, n in sorted(v.get("rejected", {}).items()))
+        unprobed = v["candidates"] - sum(v.get("rejected", {}).values()) - v["made"]
+        text += f" from {v['candidates']} candidates ({rejected or 'none rejected'}"
+        text += f"; {unprobed} not needed)" if unprobed > 0 and v["made"] >= (v["asked"] or 0) else ")"
+    return text
+
+
 def _camera_lines(lin: dict[str, Any]) -> list[str]:
     """Where each scene's cameras came from, and each pair's colour and fence."""
     sources = {s["id"]: (s.get("registration") or {}).get("source", "unknown") for s in lin["scenes"]}
     lines = ["- cameras: " + ", ".join(f"scene {sid} {src}" for sid, src in sorted(sources.items()))]
+    for s in lin["scenes"]:
+        survey = (s.get("registration") or {}).get("survey")
+        if survey and survey.get("altitude_m"):
+            lines.append(
+                f"  - scene {s['id']}: {s['registration'].get('images', 0)} cameras planned over the "
+                f"{s['registration'].get('over', 'area')} at {survey['altitude_m']:g} m ({survey.get('altitude_why', 'given')})"
+            )
     if "planned" in sources.values():
         lines.append(
             "  (planned: no photos, so siteline planned survey cameras from the point cloud; views derive from "
             "them as from photo cameras)"
         )
     for s in lin["scenes"]:
-        a = (s.get("registration") or {}).get("alignment")
+        a = alignment_of(s.get("registration"))
         if a:
-            how = "applied" if a.get("applied") else "recorded, not applied"
-            lines.append(
-                f"- scene {s['id']} co-registered onto scene {a.get('against_scene')}: ICP moves it "
-                f"{a['translation_m']:.3f} m ({how}), residual on stable surfaces {a['residual_m']:.3f} m"
-            )
+            lines.append(f"- scene {s['id']} co-registered onto scene {a.against_scene}: {a.summary()}")
+    lines += [_views_text(q) for q in lin["pairs"] if q.get("views")]
     lines += [
         f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
         + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")
@@ -159,6 +220,57 @@ def _rule_text(rule: dict[str, Any] | None) -> str:
     if rule.get("differences"):
         text += ": " + "; ".join(rule["differences"])
     return text
+
+
+def _splat_text(p: dict[str, Any]) -> str:
+    """How points were drawn and gaps filled, in words."""
+    if p.get("splat", "fixed") == "fixed":
+        text = f"splats: fixed, every point a {p['point_size_px']} px disk"
+    else:
+        text = (
+            f"splats: sized by the world, a point's disk spans its spacing seen from the camera (at least "
+            f"{p['point_size_px']} px, at most {p.get('splat_max_px', 31)} px)"
+        )
+    fill = p.get("fill_px", 0)
+    return text + (
+        f"; gaps filled from the nearest point of the surface around them within {fill} px" if fill else "; no gap fill"
+    )
+
+
+_CAUSE_WORDS = {
+    "no_surface": "no surface in either scene (sky, beyond the scan)",
+    "gap": "a gap between points in one scene",
+    "one_side": "a surface in one scene only (a hole in the other render)",
+    "outside_fence": "a point outside the site fence",
+    "ignored_class": "a point of an ignored class (noise, snow, ignore)",
+    "padding": "padding to the stored size",
+    "unaccounted": "not accounted (outputs made before causes were recorded)",
+}
+
+
+def _ignore_lines(stats: dict[str, Any]) -> list[str]:
+    """Where the ignore pixels come from, a row per cause."""
+    ig = stats.get("ignore")
+    if not ig:
+        return []
+    rows = [
+        f"| {_CAUSE_WORDS[c]} | {ig['causes'].get(c, 0.0):.2%} | "
+        + (f"{ig['causes_of_rendered'][c]:.2%} |" if c in ig["causes_of_rendered"] else "- |")
+        for c in _CAUSE_WORDS
+        if ig["causes"].get(c, 0.0) > 0 or c in ("no_surface", "gap")
+    ]
+    return [
+        "## Where the ignore pixels come from",
+        "",
+        f"Ignore is {ig['share']:.2%} of all stored pixels and {ig['share_of_rendered']:.2%} of the rendered "
+        f"ones (padding aside). The gap fill gave {ig['filled_of_rendered']:.2%} of the rendered pixels the point of "
+        "the surface around them. Each item of `manifest.json` carries its own shares (`items[].ignore`).",
+        "",
+        "| cause | of all pixels | of rendered pixels |",
+        "|---|---|---|",
+        *rows,
+        "",
+    ]
 
 
 def _source_lines(lin: dict[str, Any]) -> list[str]:
@@ -187,7 +299,9 @@ def _source_lines(lin: dict[str, Any]) -> list[str]:
         "",
         f"- preset: {lin.get('preset') or 'none'}",
         f"- render scale {p['scale']}, point size {p['point_size_px']} px, level-of-detail factor {p['lod_factor']}",
-        f"- views per pair {p['views']}, seed {p['seed']}, minimum coverage {p['min_coverage']}",
+        "- " + _splat_text(p),
+        f"- views per pair {p['views']}, seed {p['seed']}, minimum coverage {p['min_coverage']}, minimum valid "
+        f"share {p.get('min_valid', 0.25)}",
         f"- change radius: {radius}",
         *_radius_lines(
             lin["pairs"], lin.get("release_params", {}).get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M)
@@ -205,9 +319,19 @@ def _split_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
     lines = ["## Splits", "", f"- rule: {rule['rule']}"]
     if "max_shared_footprint" in rule:
         lines.append(
-            f"- the largest share of a val or test view's footprint that train views also show: "
-            f"{rule['max_shared_footprint']:.0%}; train views left out for it: {rule.get('left_out', 0)}"
+            f"- the largest share of a val or test view's footprint that train views of the same pair also show: "
+            f"{rule['max_shared_footprint']:.0%} (target {rule.get('target_shared_footprint', 0.5):.0%}); views left "
+            f"out of every split for it: {rule.get('left_out', 0)} (they stay out in later versions)"
         )
+    turned = {p: a for p, a in (rule.get("band_direction_deg") or {}).items() if a}
+    if turned:
+        lines.append(
+            "- bands turned from the long axis so that val and test hold change: "
+            + ", ".join(f"pair {p} by {a:g} degrees" for p, a in turned.items())
+        )
+    empty = [s for s, c in (rule.get("changed_share") or {}).items() if c == 0.0]
+    if empty:
+        lines.append(f"- no changed pixels in {', '.join(empty)}: the pairs there show no change where their views look")
     lines.append("")
     for split in ("train", "val", "test"):
         s = stats["class_balance"].get(split)
@@ -260,5 +384,7 @@ def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
         "![samples: t1, t2, mask (green unchanged, red changed, white ignore)](montage.png)",
         "",
     ]
-    lines = head + _layout_lines(doc, stats) + _source_lines(doc["lineage"]) + _split_lines(doc, stats)
+    lines = (
+        head + _layout_lines(doc, stats) + _source_lines(doc["lineage"]) + _split_lines(doc, stats) + _ignore_lines(stats)
+    )
     return "\n".join(lines + _use_lines(doc))

@@ -23,7 +23,9 @@ from siteline.records.release import SiteSurvey
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M, ReleaseParams
 
 AUTO = "auto"
-AUTO_KNOBS = ("scale", "point_size_px")
+AUTO_KNOBS = ("scale", "point_size_px", "views")
+# views auto: up to this many per pair, as many as the cameras and the acceptance rules give
+AUTO_VIEWS = 300
 # knobs for which "auto" is a value of their own, resolved per pair (colour: siteline.render.colour;
 # change_rule: siteline.labels.rule)
 VALUE_AUTO_KNOBS = ("colour", "change_rule")
@@ -169,6 +171,9 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
         min_px = min_px if layer.min_image_px is None else layer.min_image_px
         ceiling = ceiling if layer.radius_ceiling_m is None else float(layer.radius_ceiling_m)
     derived: dict[str, str] = {}
+    if "views" in auto:
+        doc["views"] = AUTO_VIEWS
+        derived["views"] = f"auto: up to {AUTO_VIEWS} a pair, as many as its cameras and the acceptance rules give"
     if "scale" in auto:
         doc["scale"], derived["scale"] = auto_scale(survey)
     if "point_size_px" in auto:
@@ -200,16 +205,28 @@ def check_image_size(params: ReleaseParams, survey: SiteSurvey, what: str) -> No
 
 def disk_area_px(point_size_px: int) -> int:
     """The pixels one drawn point covers (the renderer's disk)."""
-    from siteline.render.zbuffer import disk_offsets
+    from siteline.render.splats import disk_offsets
 
     return len(disk_offsets(point_size_px))
 
 
-def expected_coverage(spacing_px: float, point_size_px: int) -> float:
+def drawn_diameter_px(spacing_px: float, pair: PairParams, point_size_px: int | None = None) -> int:
+    """The disk (pixels across) a point at ``spacing_px`` from its neighbours is drawn as: the point
+    size for fixed splats; for world splats its spacing times WORLD_SPLAT_FACTOR, within the point
+    size and ``splat_max_px`` (siteline.render.splats)."""
+    from siteline.render.settings import WORLD_SPLAT_FACTOR
+
+    size = pair.point_size_px if point_size_px is None else point_size_px
+    if pair.splat != "world":
+        return size
+    return int(min(pair.splat_max_px, max(size, math.ceil(WORLD_SPLAT_FACTOR * spacing_px))))
+
+
+def expected_coverage(spacing_px: float, diameter_px: int) -> float:
     """The share of a surface's pixels that points at a mean spacing of ``spacing_px`` pixels, drawn as
-    ``point_size_px`` disks, cover when they fall at random (1 - exp(-disk area / spacing_px**2)): a
+    ``diameter_px`` disks, cover when they fall at random (1 - exp(-disk area / spacing_px**2)): a
     lower bound for scanned surfaces, which are more even than random."""
-    return 1.0 - math.exp(-disk_area_px(point_size_px) / max(spacing_px, 1e-9) ** 2)
+    return 1.0 - math.exp(-disk_area_px(diameter_px) / max(spacing_px, 1e-9) ** 2)
 
 
 def check_coverage(params: ReleaseParams, survey: SiteSurvey, what: str) -> None:
@@ -222,10 +239,12 @@ def check_coverage(params: ReleaseParams, survey: SiteSurvey, what: str) -> None
         return
     spacing_m = 1.0 / math.sqrt(survey.min_density_pts_m2)
     spacing_px = min(spacing_m * c.fx * pair.scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras)
-    got = expected_coverage(spacing_px, pair.point_size_px)
+    got = expected_coverage(spacing_px, drawn_diameter_px(spacing_px, pair))
     if got >= pair.min_coverage:
         return
-    sizes = [p for p in range(1, 16, 2) if expected_coverage(spacing_px, p) >= pair.min_coverage]
+    sizes = [
+        p for p in range(1, 16, 2) if expected_coverage(spacing_px, drawn_diameter_px(spacing_px, pair, p)) >= pair.min_coverage
+    ]
     need = -math.log(1.0 - min(pair.min_coverage, 0.999))  # disk area / spacing_px**2 needed
     scale = math.floor(1000 * pair.scale * math.sqrt(disk_area_px(pair.point_size_px) / need) / spacing_px) / 1000
     long_side = min(max(c.width, c.height) for c in survey.cameras)
