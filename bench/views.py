@@ -1,9 +1,10 @@
 """View-generation benchmark on a real cloud (tests/data/real/autzen_trim.laz, 110k points, 1.9 points/m2,
-cameras planned from the cloud): seconds, candidates, probe reads and points read per candidate batch,
-at the cloud's density and at 4x (jittered copies), beside the previous way (a read and a full z-buffer
-render per probe) measured in the same run.
+cameras planned from the cloud): seconds (and per 100k points), candidates, candidates probed, reads and
+points read (against the cloud's points), at the cloud's density and at 4x (jittered copies); and the
+spread of pitch and height of the views drawn under the release defaults (world splats, min_valid 0.7)
+beside the rules releases used before (fixed disks, min_valid 0.25), measured in the same run.
 
-    python bench/views.py [--dense 4]
+    python bench/views.py [--dense 4] [--views 300]
 """
 
 from __future__ import annotations
@@ -44,7 +45,19 @@ def _epochs(out: Path, copies: int) -> tuple[Path, Path]:
     return paths[0], paths[1]
 
 
-def _views(home: Path, copies: int, old_way: bool) -> dict[str, float]:
+def spread(views: list, ground: object) -> dict[str, float]:
+    """Pitch (degrees below the horizon of the optical axis) and height above the ground plane (m) of
+    ``views``: 10th, 50th and 90th percentiles and standard deviation."""
+    pitch = np.array([np.degrees(np.arcsin(-v.camera.R[2, 2])) for v in views])
+    height = ground.height(np.array([v.camera.center for v in views])) if views else np.zeros(0)  # type: ignore[attr-defined]
+    out = {}
+    for name, vals in (("pitch_deg", pitch), ("height_m", height)):
+        p10, p50, p90 = np.percentile(vals, [10, 50, 90]) if len(vals) else (0.0, 0.0, 0.0)
+        out |= {f"{name}_p10": p10, f"{name}_p50": p50, f"{name}_p90": p90, f"{name}_std": float(np.std(vals))}
+    return out
+
+
+def _views(home: Path, copies: int, rules: dict, views: int) -> dict[str, float]:
     from datetime import UTC, datetime
 
     from siteline import pipeline
@@ -58,22 +71,23 @@ def _views(home: Path, copies: int, old_way: bool) -> dict[str, float]:
     from siteline.pairs import execute as pair_execute
     from siteline.pairs.plan import plan_pair
     from siteline.progress import no_progress
-    from siteline.render.zbuffer import render_points
     from siteline.site import make_site_spec
-    from siteline.views import generate
 
     settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
-    engine = make_engine(settings.database_url)
-    migrate.upgrade(engine)
-    engine.dispose()
-    cat = open_catalog(settings)
-    with cat.transaction() as s:
-        add_site(s, make_site_spec("autzen", "EPSG:32610", (493000.0, 4878000.0, 130.0), None))
-    for k, path in enumerate(_epochs(home, copies)):
-        opts = IngestOptions(captured_at=datetime(2020, 5, 1 + 10 * k, tzinfo=UTC))
-        pipeline.ingest(cat, settings, path, "autzen", opts, workers=2)
+    if not (home / "catalog.sqlite").exists():
+        engine = make_engine(settings.database_url)
+        migrate.upgrade(engine)
+        engine.dispose()
+        cat = open_catalog(settings)
+        with cat.transaction() as s:
+            add_site(s, make_site_spec("autzen", "EPSG:32610", (493000.0, 4878000.0, 130.0), None))
+        for k, path in enumerate(_epochs(home, copies)):
+            opts = IngestOptions(captured_at=datetime(2020, 5, 1 + 10 * k, tzinfo=UTC))
+            pipeline.ingest(cat, settings, path, "autzen", opts, workers=2)
+    else:
+        cat = open_catalog(settings)
     points = laspy.open(home / "e1.laz").header.point_count
-    params = PairParams(scale=0.1, point_size_px=5, views=300)
+    params = PairParams(scale=0.1, point_size_px=5, views=views, **rules)
     with cat.transaction() as s:
         plan = plan_pair(s, settings.store, 1, params)
     t2 = open_labelled(plan.t2.tiles, plan.t2.label_set)
@@ -84,51 +98,49 @@ def _views(home: Path, copies: int, old_way: bool) -> dict[str, float]:
             super().__init__(*a, **k)
             made.append(self)
 
-        def prefetch(self, cameras, scale) -> None:  # noqa: ANN001
-            if not old_way:
-                super().prefetch(cameras, scale)
-
-    real_coverage = generate.coverage_of
     pair_execute.TilePointSource = Recorded  # type: ignore[misc]
-    if old_way:
-        generate.coverage_of = lambda xyz, cam, st: render_points(xyz, cam, st).coverage  # type: ignore[assignment]
     try:
         t0 = time.perf_counter()
-        views = pair_execute.pair_views(plan, t2, no_progress)
+        drawn = pair_execute.pair_views(plan, t2, no_progress)
         seconds = time.perf_counter() - t0
     finally:
         pair_execute.TilePointSource = sources.TilePointSource  # type: ignore[misc]
-        generate.coverage_of = real_coverage
     cat.dispose()
     src = made[0]
-    batches = len(plan.cameras)
     return {
-        "points": points, "views": len(views.views), "candidates": views.candidates, "seconds": seconds,
-        "reads": src.reads, "points_read": src.points_read, "read_per_batch": src.points_read / batches / points,
+        "points": points, "views": len(drawn.views), "candidates": drawn.candidates, "probed": drawn.probed,
+        "seconds": seconds, "reads": src.reads, "points_read": src.points_read, "in_memory": src.in_memory,
+        **spread(drawn.views, drawn.ground),
     }  # fmt: skip
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--dense", type=int, default=4, help="copies of each point in the dense run")
+    ap.add_argument("--views", type=int, default=300, help="views asked per pair")
     args = ap.parse_args()
-    rows = []
-    for copies, old in ((1, True), (1, False), (args.dense, False)):
-        with tempfile.TemporaryDirectory() as d:
-            r = _views(Path(d), copies, old)
-        rows.append((copies, old, r))
-        print(
-            f"{'previous' if old else 'batched'} x{copies}: {r['points']:,} points, {r['candidates']} candidates -> "
-            f"{r['views']} views in {r['seconds']:.1f} s ({1000 * r['seconds'] / r['candidates']:.1f} ms a candidate), "
-            f"{r['reads']} probe reads, {r['points_read'] / 1e6:.1f}M points read "
-            f"({r['read_per_batch']:.2f} x the cloud per candidate batch)",
-            flush=True,
-        )
-    base, new, dense = (r for _, _, r in rows)
-    print(f"batched / previous at x1: time {new['seconds'] / base['seconds']:.2f}x, points read "
-          f"{new['points_read'] / base['points_read']:.2f}x")
-    print(f"x{args.dense} / x1 density (batched): time {dense['seconds'] / new['seconds']:.2f}x, points read "
-          f"{dense['points_read'] / new['points_read']:.2f}x, cloud {dense['points'] / new['points']:.2f}x")
+    now = {}  # the release defaults
+    before = {"splat": "fixed", "fill_px": 0, "min_valid": 0.25}  # the rules releases used before
+    rows = {}
+    with tempfile.TemporaryDirectory() as d1, tempfile.TemporaryDirectory() as d4:
+        for copies, home in ((1, Path(d1)), (args.dense, Path(d4))):
+            for name, rules in (("defaults", now), ("before", before)):
+                if copies > 1 and name == "before":
+                    continue
+                r = rows[(copies, name)] = _views(home, copies, rules, args.views)
+                print(
+                    f"x{copies} {name}: {r['points']:,} points, {r['candidates']} candidates, {r['probed']} probed -> "
+                    f"{r['views']} views in {r['seconds']:.1f} s ({100_000 * r['seconds'] / r['points']:.2f} s per "
+                    f"100k points), {r['reads']} reads, {r['points_read']:,} points read "
+                    f"({r['points_read'] / r['points']:.2f} x the cloud{', held in memory' if r['in_memory'] else ''}); "
+                    f"pitch p10/p50/p90 {r['pitch_deg_p10']:.0f}/{r['pitch_deg_p50']:.0f}/{r['pitch_deg_p90']:.0f} deg "
+                    f"(sd {r['pitch_deg_std']:.1f}), height {r['height_m_p10']:.0f}/{r['height_m_p50']:.0f}/"
+                    f"{r['height_m_p90']:.0f} m (sd {r['height_m_std']:.1f})",
+                    flush=True,
+                )
+    x1, x4 = rows[(1, "defaults")], rows[(args.dense, "defaults")]
+    print(f"x{args.dense} / x1 density: time {x4['seconds'] / x1['seconds']:.2f}x, points read "
+          f"{x4['points_read'] / x1['points_read']:.2f}x, cloud {x4['points'] / x1['points']:.2f}x")
 
 
 if __name__ == "__main__":

@@ -35,7 +35,8 @@ from siteline.release.plan import (
     check_release_name,
     check_view_count,
     choose_pairs,
-    pair_camera_counts,
+    pair_cameras,
+    refuse_pairs_without_cameras,
     release_params,
     semver,
 )
@@ -212,9 +213,11 @@ def release(
     if options.version is not None:
         semver(options.version)
     with catalog.transaction() as s:
-        params = release_params(s, site, knobs, f"release {name}")
         chosen = choose_pairs(s, site, pair_ids)
-        check_view_count(pair_camera_counts(s, chosen), params.pair, f"release {name}")
+        cameras = pair_cameras(s, chosen)
+        refuse_pairs_without_cameras(cameras, f"release {name}")
+        params = release_params(s, site, knobs, f"release {name}")
+        check_view_count(cameras, params.pair, f"release {name}", "views" in params.derived)
         for pid in chosen:  # stated before any pair is processed, not found in the masks afterwards
             rule = pair_change_rule(s, pid, params.pair.change_rule, label_sets)
             if rule.differences:

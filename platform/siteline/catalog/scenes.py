@@ -18,6 +18,7 @@ from siteline.catalog.models import LabelSet, Mission, Scene, Site
 from siteline.catalog.sites import site_name, site_of
 from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, TileError
+from siteline.records.registration import alignment_of
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneSummary
@@ -75,10 +76,10 @@ def scene_cameras(session: Session, scene_id: int) -> list[tuple[str, Camera]]:
 def scene_correction(scene: Scene) -> tuple[tuple[float, ...], ...] | None:
     """The co-registration ingest applied to a scene (4 x 4 site-local, previous scene from this one),
     or None when none was applied (siteline.register.check_alignment)."""
-    alignment = (scene.registration or {}).get("alignment") or {}
-    if not alignment.get("applied"):
+    alignment = alignment_of(scene.registration)
+    if alignment is None or not alignment.applied:
         return None
-    return tuple(tuple(float(v) for v in row) for row in alignment["correction"])
+    return alignment.correction
 
 
 def site_survey(session: Session, site: Site) -> SiteSurvey:
@@ -163,6 +164,10 @@ def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
         "colour": scan.colour if scan else None,
         "capture_time_source": stats.capture_time_source,
         "registration": scene.registration,
+        # the co-registration onto the previous scene in words (None for a first scene)
+        "alignment": (a.summary() if (a := alignment_of(scene.registration)) else None),
+        # how planned cameras were flown, and why at that altitude (None: photo cameras)
+        "survey": ((scene.registration or {}).get("survey")),
         "cameras": len(scene_cameras(s, scene.id)),
         "tile_store": scene.tile_store_uri,
         "tiles": nodes["tiles"],

@@ -90,7 +90,10 @@ def ingest(
         "zenmuse-l2", "--camera", help="Camera of planned cameras: zenmuse-l2, zenmuse-p1-35mm, or a JSON "
         "file of width, height, fx (fy, cx, cy) in pixels."
     ),
-    altitude_m: float = typer.Option(80.0, "--altitude", help="Planned cameras' height above the ground, metres."),
+    altitude_m: float | None = typer.Option(
+        None, "--altitude", help="Planned cameras' height above the ground, metres (default: chosen from the "
+        "cloud's density and area, 20-120 m)."
+    ),
     overlap: tuple[float, float] = typer.Option(
         (0.7, 0.6), "--overlap", help="Planned survey's forward and side overlap (0-0.95)."
     ),

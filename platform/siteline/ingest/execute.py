@@ -33,7 +33,9 @@ log = logging.getLogger(__name__)
 
 
 def sample_blob(sample: np.ndarray) -> tuple[bytes, str]:
-    """The ``.npy`` bytes of an alignment sample ((N, 3) float64 site-local) and their sha256."""
+    """The ``.npy`` bytes of a co-registration sample ((N, 4) float64: site-local x, y, z and the kind
+    of surface; samples stored before the kinds were kept are (N, 3) of stable surfaces) and their
+    sha256."""
     buf = io.BytesIO()
     np.save(buf, np.ascontiguousarray(sample, dtype=np.float64))
     data = buf.getvalue()
@@ -75,7 +77,11 @@ def execute_ingest(
     )
     if not cameras or opts.plan_cameras:
         survey = scan.survey_sample if scan.survey_sample is not None else np.zeros((0, 4))
-        cameras, registration, source = planned_cameras(survey, scan.footprint, plan.site, opts.survey, len(photos))
+        cameras, registration, source = planned_cameras(
+            survey, scan.footprint, plan.site, opts.survey, len(photos), scan.density_pts_m2
+        )
+        if not cameras:
+            log.warning("point cloud %s: %s; it is ingested and tiled all the same", root / las.path, registration["note"])
     when, when_source = capture_time(photos, entries, scan, root, opts.captured_at)
     if plan.scene_at(when) is not None:
         raise MissionError(
@@ -99,7 +105,7 @@ def execute_ingest(
         "mission %s: %s points, %d cameras (%s), captured %s (%s)",
         root.name, f"{scan.point_count:,}", len(cameras), source or "none", when.isoformat(), when_source,
     )  # fmt: skip
-    _, sample_sha = sample_blob(scan.stable_sample if scan.stable_sample is not None else np.zeros((0, 3)))
+    _, sample_sha = sample_blob(scan.stable_sample if scan.stable_sample is not None else np.zeros((0, 4)))
     return CheckedMission(
         plan.manifest, mission_name(entries, root), scan, las.sha256, cameras, source or "xmp", registration,
         when, when_source, sample_sha, opts.storage,
@@ -129,7 +135,10 @@ def corrected(
     """The scan's stable sample and footprint and the scene's cameras moved by a co-registration
     (4 x 4, site-local: previous scene from this one), as its tiles will be (siteline.pointpass.sitestream)."""
     prev_from_new = correction_rigid(correction)
-    sample = prev_from_new.apply(scan.stable_sample) if scan.stable_sample is not None else None
+    sample = None
+    if scan.stable_sample is not None:
+        sample = scan.stable_sample.copy()
+        sample[:, :3] = prev_from_new.apply(sample[:, :3])
     outline = None
     if scan.footprint is not None:
         ring = prev_from_new.apply(np.c_[np.asarray(scan.footprint, dtype=np.float64), np.zeros(len(scan.footprint))])

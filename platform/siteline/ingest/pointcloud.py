@@ -26,12 +26,24 @@ from siteline.pointpass.partition import (
 from siteline.pointpass.sitestream import SiteChunk, source_crs, source_transformer
 from siteline.pointpass.workers import start_pool
 from siteline.progress import no_step
-from siteline.records.scan import COLOUR_NAMES, STRETCH_PERCENTILES, ColourStats, LasScan, RgbContent
+from siteline.records.scan import (
+    COLOUR_NAMES,
+    SAMPLE_STABLE,
+    SAMPLE_STRUCTURE,
+    STRETCH_PERCENTILES,
+    ColourStats,
+    LasScan,
+    RgbContent,
+)
 from siteline.records.tiling import TileSpec
 from siteline.site import SiteSpec
 from siteline.taxonomy import detect_scheme
 
+# co-registration samples the stable surfaces (what point-to-plane ICP fixes first) and the structure
+# of classes that do not come and go (what fixes the directions flat ground leaves free); construction
+# classes (cranes, material, vehicles, workers, temporary works) change between epochs by design
 STABLE_CLASSES = ("ground", "building")
+STRUCTURE_CLASSES = ("vegetation", "unclassified")
 # the most points of the all-class sample a scan keeps (every k-th point of the file)
 SURVEY_SAMPLE_MAX = 50_000
 
@@ -87,18 +99,21 @@ def scan_las(
     progress(0, n_total)
     tr = source_transformer(path, site, src, z_unit)
     source = PassSource(str(path), site, crs_text(src), z_unit_of(src, z_unit), eight_bit)
-    stable_ids = np.array([site.taxonomy.id_of(c) for c in STABLE_CLASSES], dtype=np.uint8)
+    names = {c.name for c in site.taxonomy.classes}
+    kinds = np.zeros(256, np.uint8)
+    kinds[[site.taxonomy.id_of(c) for c in STRUCTURE_CLASSES if c in names]] = SAMPLE_STRUCTURE
+    kinds[[site.taxonomy.id_of(c) for c in STABLE_CLASSES]] = SAMPLE_STABLE
     keep_p = min(1.0, SAMPLE_MAX / max(n_total, 1))
     stride = max(1, -(-n_total // SURVEY_SAMPLE_MAX))
     ranges = point_ranges(n_total, workers)
     spec = TileSpec.for_site(site)
     folder = runs_into
     visitors = [
-        (_Totals(stable_ids, keep_p, (SAMPLE_SEED, k), eight_bit, ranges[k][0], stride),)
+        (_Totals(kinds, keep_p, (SAMPLE_SEED, k), eight_bit, ranges[k][0], stride),)
         + ((RunWriter(str(folder), f"run-{k:05d}.bin", spec.to_dict()),) if folder else ())
         for k in range(len(ranges))
     ]
-    t = _Totals(stable_ids, keep_p, (SAMPLE_SEED, 0), eight_bit, 0, stride)
+    t = _Totals(kinds, keep_p, (SAMPLE_SEED, 0), eight_bit, 0, stride)
     runs = []
     for done in read_file(source, n_total, visitors, workers, lambda _l, n, _t: progress(n)):
         t.merge(done[0])
@@ -119,15 +134,14 @@ class _Totals:
 
     def __init__(
         self,
-        stable_ids: np.ndarray,
+        kinds: np.ndarray,
         keep_p: float,
         seed: tuple[int, int],
         eight_bit: bool | None,
         first: int,
         stride: int,
     ) -> None:
-        self.stable_lut = np.zeros(256, bool)
-        self.stable_lut[stable_ids] = True
+        self.kinds = kinds  # per class id: 0 not sampled, STABLE or STRUCTURE
         self.keep_p = keep_p
         self.rng = np.random.default_rng(list(seed))
         self.hist = np.zeros(256, np.int64)
@@ -160,8 +174,10 @@ class _Totals:
             if len(finite):
                 self.tmin = min(self.tmin, float(finite.min()))
                 self.tmax = max(self.tmax, float(finite.max()))
-        stable = np.flatnonzero(self.stable_lut[cls])
-        self.samples.append(local[stable[self.rng.random(len(stable)) < self.keep_p]])
+        kind = self.kinds[cls]
+        sampled = np.flatnonzero(kind)
+        sampled = sampled[self.rng.random(len(sampled)) < self.keep_p]
+        self.samples.append(np.c_[local[sampled], kind[sampled]])
         take = np.arange(-self.index % self.stride, len(local), self.stride)
         self.survey.append(np.c_[local[take], chunk.intensity[take]])
         self.index += len(local)
@@ -233,6 +249,6 @@ def _scan(
         gps_time_standard=bool(int(header.global_encoding.gps_time_type)),
         colour_stats=t.colour_stats(survey),
         footprint=[list(v) for v in outline] if outline is not None else None,
-        stable_sample=np.concatenate(t.samples) if t.samples else np.zeros((0, 3)),
+        stable_sample=np.concatenate(t.samples) if t.samples else np.zeros((0, 4)),
         survey_sample=survey,
     )

@@ -32,6 +32,7 @@ from siteline.ingest.pointcloud import start_readers
 from siteline.pointpass.partition import PartitionCache
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
+from siteline.records.registration import alignment_of
 from siteline.records.runs import StageRun
 from siteline.records.scan import LasScan
 from siteline.stores import layout
@@ -105,11 +106,29 @@ def _store_and_record(
             ) from exc
         raise
     message = f"mission {checked.name} ingested as scene {ids.scene_id} of site {plan.site.name}"
+    notes = _notes(checked.registration)
+    if notes:
+        message += f" ({'; '.join(notes)})"
     log.info("%s; pairs %s", message, list(ids.pairs))
     return IngestResult(
         True, message, ids.mission_id, ids.scene_id, checked.manifest.sha256, len(checked.manifest.entries),
         checked.scan, checked.registration, list(ids.pairs),
     )  # fmt: skip
+
+
+def _notes(registration: dict[str, Any]) -> list[str]:
+    """What the one-line report of an ingest says beside it: a scene without cameras, and the
+    directions its co-registration could not check."""
+    notes = []
+    if registration.get("source") == "none" and registration.get("note"):
+        notes.append(str(registration["note"]))
+    alignment = alignment_of(registration)
+    if alignment is not None and alignment.free:
+        notes.append(
+            f"co-registration onto scene {alignment.against_scene} could not check {', '.join(alignment.free)}: "
+            f"too little in the scenes fixes {'it' if len(alignment.free) == 1 else 'them'}"
+        )
+    return notes
 
 
 def ingest_mission(
@@ -144,7 +163,8 @@ def ingest_mission(
         try:
             checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
             result = _store_and_record(catalog, settings, plan, checked, run, progress, staging)
-            if not (checked.registration.get("alignment") or {}).get("applied"):
+            aligned = alignment_of(checked.registration)
+            if aligned is None or not aligned.applied:
                 # the runs were cut before the co-registration: a corrected scene's tiles cut anew
                 cache.keep(runs, checked.las_sha256)
             return result

@@ -44,6 +44,11 @@ class ColourStats:
         return cls(doc["rgb"], (float(ir[0]), float(ir[1])) if ir else None, (float(z[0]), float(z[1])))
 
 
+# the kind of surface of each point of a co-registration sample (its fourth column): stable surfaces
+# fix what point-to-plane ICP can, structure the directions they leave free (siteline.register.icp)
+SAMPLE_STABLE, SAMPLE_STRUCTURE = 1, 2
+
+
 @dataclass(frozen=True)
 class LasScan:
     """What one pass over a LAS/LAZ file found. path: the file (relative to its mission once
@@ -55,7 +60,8 @@ class LasScan:
     whether the header's global encoding says GPS times are adjusted standard GPS time (absolute:
     seconds since the GPS epoch less 1e9) rather than seconds of the GPS week. footprint: the
     outline of the points (a fence ring, site-local metres; siteline.fence.footprint), or None.
-    stable_sample: (N, 3) float64 site-local points of stable classes for the alignment check;
+    stable_sample: (N, 4) float64 the co-registration sample: site-local x, y, z of points of stable
+    surfaces (4th column 1: ground, building) and of structure (2: vegetation, unclassified);
     survey_sample: (N, 4) x, y, z (site-local) and intensity of every k-th point of the file (both
     never persisted)."""
 

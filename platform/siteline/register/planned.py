@@ -20,24 +20,37 @@ from siteline.tolerances import POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM
 
 # a camera is planned only over data: at least this many sample points under its image's centre area
 MIN_POINTS_UNDER = 20
+# the auto altitude's bounds (metres above the ground): DJI's terrain-following mapping flights start
+# around 20 m, and 120 m is the ceiling of most drone regulations (EU open category, US Part 107's 400 ft)
+MIN_AUTO_ALTITUDE_M = 20.0
+MAX_AUTO_ALTITUDE_M = 120.0
+# the auto altitude puts neighbouring points this many pixels apart in images of the release's auto
+# scale (a 512 px long side, siteline.release.knobs.TARGET_LONG_SIDE_PX)
+AUTO_SPACING_PX = 2.0
+AUTO_LONG_SIDE_PX = 512
+# and lowers the flight (more, smaller images) until the nadir grid holds at least this many
+# cameras: each gives up to 32 candidate views, and about a third pass their probes
+MIN_NADIR_CAMERAS = 16
 
 
 @dataclass(frozen=True)
 class SurveyPlan:
     """How planned cameras are laid out. altitude_m: above the ground under each camera (the 10th
-    percentile of the sample's z around it); forward_overlap / side_overlap: of consecutive images on
-    a line and of neighbouring lines (0-1); oblique_pitch_deg: downward tilt of the oblique cameras
-    looking into the area from around its edge (0: no oblique pass)."""
+    percentile of the sample's z around it), or None to choose it from the scene (:func:`auto_altitude`);
+    forward_overlap / side_overlap: of consecutive images on a line and of neighbouring lines (0-1);
+    oblique_pitch_deg: downward tilt of the oblique cameras looking into the area from around its
+    edge (0: no oblique pass)."""
 
     camera: CameraModel = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
-    altitude_m: float = 80.0
+    altitude_m: float | None = None
     forward_overlap: float = 0.7
     side_overlap: float = 0.6
     oblique_pitch_deg: float = 45.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.altitude_m) and 5.0 <= self.altitude_m <= 1000.0):
-            raise RegistrationError(f"planned cameras: altitude {self.altitude_m} m must lie in [5, 1000].")
+        h = self.altitude_m
+        if h is not None and not (math.isfinite(h) and 5.0 <= h <= 1000.0):
+            raise RegistrationError(f"planned cameras: altitude {h} m must lie in [5, 1000].")
         for name in ("forward_overlap", "side_overlap"):
             v = getattr(self, name)
             if not 0.0 <= v <= 0.95:
@@ -54,6 +67,36 @@ class SurveyPlan:
             "oblique_pitch_deg": self.oblique_pitch_deg,
         }  # fmt: skip
 
+    def nadir_cameras(self, altitude_m: float, area_m2: float) -> float:
+        """About how many nadir cameras cover ``area_m2`` at ``altitude_m`` (the grid's cell is the
+        footprint less the overlaps)."""
+        across, along = self.camera.ground_footprint_m(altitude_m)
+        return area_m2 / (across * (1.0 - self.side_overlap) * along * (1.0 - self.forward_overlap))
+
+
+def auto_altitude(plan: SurveyPlan, density_pts_m2: float, area_m2: float) -> tuple[float, str]:
+    """The altitude (metres above the ground) planned cameras fly at when none is given, and why: the
+    one that puts neighbouring points :data:`AUTO_SPACING_PX` apart in images of the release's auto
+    scale (ground sample distance following the point spacing 1 / sqrt(density)), within
+    [:data:`MIN_AUTO_ALTITUDE_M`, :data:`MAX_AUTO_ALTITUDE_M`], then lowered until the nadir grid over
+    ``area_m2`` holds :data:`MIN_NADIR_CAMERAS` cameras (a small site is flown low, in more lines)."""
+    model = plan.camera
+    spacing = 1.0 / math.sqrt(max(density_pts_m2, 1e-9))
+    f_release = min(model.fx, model.fy) * AUTO_LONG_SIDE_PX / max(model.width, model.height)
+    wanted = spacing * f_release / AUTO_SPACING_PX
+    h = min(MAX_AUTO_ALTITUDE_M, max(MIN_AUTO_ALTITUDE_M, wanted))
+    why = (
+        f"auto: {wanted:.0f} m puts points {spacing:.3f} m apart ({density_pts_m2:.3g} points/m2) "
+        f"{AUTO_SPACING_PX:g} px apart at the release scale"
+    )
+    if h != wanted:
+        why += f", held to {h:.0f} m (flights from {MIN_AUTO_ALTITUDE_M:.0f} to {MAX_AUTO_ALTITUDE_M:.0f} m)"
+    if plan.nadir_cameras(h, area_m2) < MIN_NADIR_CAMERAS and h > MIN_AUTO_ALTITUDE_M:
+        # cameras grow as 1 / altitude**2
+        lower = max(MIN_AUTO_ALTITUDE_M, h * math.sqrt(plan.nadir_cameras(h, area_m2) / MIN_NADIR_CAMERAS))
+        why += f"; lowered to {lower:.0f} m for at least {MIN_NADIR_CAMERAS} nadir cameras over {area_m2:,.0f} m2"
+        h = lower
+    return float(round(h, 1)), why
 
 def _ground_z(sample: np.ndarray, xy: np.ndarray, radius_m: float) -> np.ndarray:
     """(K,) ground height under each (K, 2) position: the 10th percentile of the sample's z within
@@ -82,11 +125,14 @@ def plan_cameras(
     sample: np.ndarray, area: list[tuple[float, float]], plan: SurveyPlan
 ) -> dict[str, Camera]:
     """Survey cameras over ``area`` (a fence ring, site-local metres) from a (N, 3) site-local sample
-    of the scene: north-south lines of nadir images at ``plan.altitude_m`` above the local ground,
-    spaced by the image footprint less the overlaps, kept where the image's centre area holds data,
-    and an oblique camera at every other line position around the area's edge looking inward at
-    ``plan.oblique_pitch_deg`` below the horizontal. Names: ``planned-nadir-NNNN``,
-    ``planned-oblique-NNNN``. :class:`RegistrationError` when no camera lies over data."""
+    of the scene: north-south lines of nadir images at ``plan.altitude_m`` (set: :func:`auto_altitude`
+    chooses it) above the local ground, spaced by the image footprint less the overlaps, kept where
+    the image's centre area holds data, and an oblique camera at every other line position around
+    the area's edge looking inward at ``plan.oblique_pitch_deg`` below the horizontal. Names:
+    ``planned-nadir-NNNN``, ``planned-oblique-NNNN``. :class:`RegistrationError` when no camera lies
+    over data."""
+    if plan.altitude_m is None:
+        raise RegistrationError("planned cameras: no altitude (choose one with auto_altitude).")
     pts = np.asarray(sample, dtype=np.float64)
     model, h = plan.camera, plan.altitude_m
     across, along = model.ground_footprint_m(h)  # image width along x, height along y
@@ -117,7 +163,7 @@ def plan_cameras(
 def _obliques(pts: np.ndarray, poly: shapely.Polygon, plan: SurveyPlan, step_m: float) -> dict[str, Camera]:
     """Oblique cameras every ``step_m`` along the area's edge, each standing back from the edge so
     that it looks at the edge point at ``plan.oblique_pitch_deg``, aimed inward."""
-    model, h = plan.camera, plan.altitude_m
+    model, h = plan.camera, float(plan.altitude_m or 0.0)
     pitch = math.radians(plan.oblique_pitch_deg)
     back = h / math.tan(pitch)
     edge = poly.exterior

@@ -3,19 +3,21 @@ check that a new scene lines up with the previous one (DESIGN.md §3)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
 from siteline.cameras import Camera, distortion_record
 from siteline.errors import RegistrationError
 from siteline.photos import PhotoMeta
 from siteline.records.enums import CameraSource
+from siteline.records.scan import SAMPLE_STABLE, SAMPLE_STRUCTURE
 from siteline.register.georegister import georegister
-from siteline.register.icp import point_to_plane_icp
-from siteline.register.planned import SurveyPlan, plan_cameras
+from siteline.register.icp import register_samples
+from siteline.register.planned import SurveyPlan, auto_altitude, plan_cameras
 from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
 from siteline.site import SiteSpec
 
@@ -70,26 +72,38 @@ def planned_cameras(
     spec: SiteSpec,
     survey: SurveyPlan,
     photos: int,
-) -> tuple[dict[str, Camera], dict[str, Any], CameraSource]:
+    density_pts_m2: float,
+) -> tuple[dict[str, Camera], dict[str, Any], CameraSource | None]:
     """Cameras planned over the site's fence, or the scene's footprint when the site has none, from
-    the scene's (N, 3+) site-local sample; the registration record says how (``photos``: how many
-    photos the mission had, which the planned cameras replace)."""
+    the scene's (N, 3+) site-local sample at an altitude chosen from its ``density_pts_m2`` and area
+    unless ``survey`` sets one; the registration record says how and why (``photos``: how many
+    photos the mission had, which the planned cameras replace). A scene no survey can be planned
+    over (its points span no area, or no camera position lies over them) gets no cameras, and the
+    record says why (a release then refuses its pairs, naming the scene): it is still a scene."""
+    note = "cameras planned from the point cloud" + (
+        f" ({photos} photos not used)" if photos else " (LiDAR-only mission: no photos)"
+    )
     if spec.fence is not None:
         area, where = [(float(x), float(y)) for x, y in spec.fence], "site fence"
     elif footprint is not None:
         area, where = [(float(x), float(y)) for x, y in footprint], "scene footprint"
     else:
-        raise RegistrationError(
-            "planned cameras: the point cloud spans no area (its points lie on a line or a point) and "
-            "the site has no fence."
-        )
-    cams = plan_cameras(sample[:, :3], area, survey)
+        why = "its points span no area (they lie on a line or a point) and the site has no fence"
+        return {}, {"source": "none", "planned": False, "note": f"no cameras could be planned: {why}"}, None
+    area_m2 = float(shapely.Polygon(area).area)
+    altitude_why = "given (--altitude)"
+    if survey.altitude_m is None:
+        altitude, altitude_why = auto_altitude(survey, density_pts_m2, area_m2)
+        survey = replace(survey, altitude_m=altitude)
     record: dict[str, Any] = {
-        "source": "planned", "images": len(cams), "over": where, "survey": survey.to_dict(),
-        "note": "cameras planned from the point cloud" + (f" ({photos} photos not used)" if photos else
-                                                          " (LiDAR-only mission: no photos)"),
+        "source": "planned", "over": where, "survey": survey.to_dict() | {"altitude_why": altitude_why},
+        "note": note,
     }  # fmt: skip
-    return cams, record, "planned"
+    try:
+        cams = plan_cameras(sample[:, :3], area, survey)
+    except RegistrationError as exc:
+        return {}, record | {"source": "none", "planned": False, "images": 0, "note": f"no cameras: {exc}"}, None
+    return cams, record | {"images": len(cams)}, "planned"
 
 
 def check_alignment(
@@ -100,12 +114,17 @@ def check_alignment(
     policy: AlignmentPolicy,
     accept_misalignment: bool = False,
 ) -> dict[str, Any]:
-    """Align the new scene's stable-class sample (N, 3) site-local metres onto the previous scene's;
-    return the record: the correction (``prev_from_new``, 4 x 4), its figures, and ``applied`` when
-    ingest is to apply it (over ``policy.apply_above_m``). :class:`RegistrationError` when it breaks
-    ``policy`` and not ``accept_misalignment`` (a registration accepted so is recorded, not applied)."""
-    check = point_to_plane_icp(sample_new, sample_previous)
-    overlap = check.matched / max(len(sample_new), 1)
+    """Align the new scene's co-registration sample ((N, 4) site-local metres and kind of surface;
+    siteline.ingest.pointcloud; an (N, 3) sample of an older scene is all stable surfaces) onto the
+    previous scene's, direction by direction (siteline.register.icp.register_samples); return the
+    record: the correction (``prev_from_new``, 4 x 4), what fixed each direction, the residuals, and
+    ``applied`` when ingest is to apply it (over ``policy.apply_above_m``). :class:`RegistrationError`
+    when it breaks ``policy`` and not ``accept_misalignment`` (a registration accepted so is
+    recorded, not applied). Directions nothing fixes are never moved; the record names them."""
+    new_stable, new_structure = _kinds(sample_new)
+    old_stable, old_structure = _kinds(sample_previous)
+    check = register_samples(new_stable, old_stable, new_structure, old_structure)
+    overlap = check.matched / max(len(new_stable) if check.surfaces == "ground and building" else len(sample_new), 1)
     bad = (
         check.translation_m > policy.max_translation_m
         or overlap < policy.min_overlap
@@ -118,7 +137,7 @@ def check_alignment(
     record["apply_above_m"] = policy.apply_above_m
     if bad and not accept_misalignment:
         raise RegistrationError(
-            f"mission {mission} cannot be co-registered with scene {previous_scene}: ICP on ground and building "
+            f"mission {mission} cannot be co-registered with scene {previous_scene}: ICP on {check.surfaces} "
             f"moves it by {check.translation_m:.3f} m (at most {policy.max_translation_m} m is corrected: more "
             f"means a wrong CRS or datum) with residual {check.residual_m:.3f} m (limit {policy.max_residual_m} m), "
             f"{overlap:.0%} of its stable points overlap the previous scene (at least {policy.min_overlap:.0%} "
@@ -126,3 +145,11 @@ def check_alignment(
             "uncorrected. Nothing was ingested."
         )
     return record
+
+
+def _kinds(sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(stable surfaces, structure) points (M, 3) of a co-registration sample."""
+    pts = np.asarray(sample, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] < 4:
+        return pts.reshape(-1, 3), np.zeros((0, 3))
+    return pts[pts[:, 3] == SAMPLE_STABLE, :3], pts[pts[:, 3] == SAMPLE_STRUCTURE, :3]

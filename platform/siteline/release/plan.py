@@ -69,7 +69,8 @@ def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
         for sid, v in key["label_sets"].items()
         if sid in before and before[sid] != v
     ]
-    old_params = previous.get("params", {})
+    # a knob added since the previous version had the value it meant before it existed
+    old_params = PairParams.BEFORE | dict(previous.get("params", {}))
     out += [
         f"{k} {old_params.get(k)!r} -> {v!r}" for k, v in key["params"].items() if k in old_params and old_params[k] != v
     ]
@@ -93,24 +94,56 @@ def _only_added(previous: Mapping[str, Any], key: Mapping[str, Any], old_digests
     return all(old_digests.get(str(p)) == digests.get(str(p)) for p in old_pairs)
 
 
-def pair_camera_counts(session: Session, pair_ids: Sequence[int]) -> dict[int, int]:
-    """Each pair's later scene's camera count (views derive from them)."""
-    return {pid: len(scene_cameras(session, get_pair(session, pid).t2_scene_id)) for pid in pair_ids}
+def pair_cameras(session: Session, pair_ids: Sequence[int]) -> dict[int, PairCameras]:
+    """Each pair's later scene, its camera count (views derive from them) and, without cameras, why."""
+    out = {}
+    for pid in pair_ids:
+        scene = get_scene(session, get_pair(session, pid).t2_scene_id)
+        count = len(scene_cameras(session, scene.id))
+        out[pid] = PairCameras(scene.id, count, "" if count else str((scene.registration or {}).get("note", "")))
+    return out
 
 
-def check_view_count(cameras: Mapping[int, int], params: PairParams, what: str) -> None:
-    """Refuse ``what`` before any view is made when a pair's cameras (pair id -> count) cannot give
-    ``params.views`` candidates at all (each camera gives at most heights x {original, mirrored} x
-    forward steps), naming the most it could give and the ways past it."""
+@dataclass(frozen=True)
+class PairCameras:
+    """What a pair's views derive from: its later scene, that scene's camera count, and why it has
+    none when it has none (its registration's note)."""
+
+    scene_id: int
+    count: int
+    note: str = ""
+
+
+def refuse_pairs_without_cameras(cameras: Mapping[int, PairCameras], what: str) -> None:
+    """Refuse ``what`` when a pair's later scene has no cameras to derive views from, naming the
+    scene and why it has none."""
+    for pid, cams in sorted(cameras.items()):
+        if cams.count == 0:
+            raise ReleaseError(
+                f"{what}: pair {pid} gives no views: its later scene {cams.scene_id} has no cameras"
+                + (f" ({cams.note})" if cams.note else "")
+                + ". Ingest its mission with photos, or plan cameras over a fence that lies over its points "
+                "(`siteline site update --fence`, `siteline ingest --plan-cameras --altitude`). Nothing was made."
+            )
+
+
+def check_view_count(cameras: Mapping[int, PairCameras], params: PairParams, what: str, views_auto: bool) -> None:
+    """Refuse ``what`` before any view is made when a pair's later scene has no cameras (naming the
+    scene and why), or, unless the view count is auto (as many as the cameras give), when a pair's
+    cameras cannot give ``params.views`` candidates at all (each camera gives at most heights x
+    {original, mirrored} x forward steps), naming the most it could give and the ways past it."""
+    refuse_pairs_without_cameras(cameras, what)
     spec = params.view_params_spec()
     per_camera = len(spec.vertical_fractions) * (2 if spec.mirror else 1) * len(spec.forward_fractions)
-    for pid, n in sorted(cameras.items()):
+    for pid, cams in sorted(cameras.items()):
+        n = cams.count
         most = n * per_camera
-        if most < params.views:
+        if not views_auto and most < params.views:
             raise ReleaseError(
                 f"{what}: pair {pid} can give at most {most} candidate views ({n} cameras x "
-                f"{per_camera} each), fewer than --views {params.views}: lower --views, or plan more cameras "
-                "(`siteline ingest --plan-cameras` with a higher --overlap). Nothing was made."
+                f"{per_camera} each), fewer than --views {params.views}: lower --views, leave it auto (as many as "
+                "the cameras give), or plan more cameras (`siteline ingest --plan-cameras` with a higher --overlap). "
+                "Nothing was made."
             )
 
 
@@ -243,7 +276,7 @@ def plan_release(
         semver(version)
     chosen = choose_pairs(session, site_name, pair_ids)
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
-    check_view_count({p.pair_id: len(p.cameras) for p in pairs}, params.pair, f"release {name}")
+    check_view_count(pair_cameras(session, chosen), params.pair, f"release {name}", "views" in params.derived)
     key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
            "label_sets": used_label_sets(pairs)}  # fmt: skip
     digests = output_digests(pairs)
