@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import errno
+import re
 import shutil
 from pathlib import Path
 
 _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT}
 # what SQLite and PostgreSQL say (through SQLAlchemy) when their disk is full
 _FULL_TEXTS = ("database or disk is full", "no space left on device", "could not extend file")
+# a short write with no errno (numpy's tofile: "15321 requested and 8763 written"): the disk took
+# less than it was given, which on a local file system means it is full
+_SHORT_WRITE = re.compile(r"\b\d+ requested and \d+ written\b")
 
 
 def disk_full(exc: BaseException) -> bool:
@@ -19,7 +23,8 @@ def disk_full(exc: BaseException) -> bool:
         seen.add(id(cur))
         if isinstance(cur, OSError) and cur.errno in _FULL_ERRNOS:
             return True
-        if any(t in str(cur).lower() for t in _FULL_TEXTS):
+        text = str(cur).lower()
+        if any(t in text for t in _FULL_TEXTS) or _SHORT_WRITE.search(text):
             return True
         cur = cur.__cause__ or cur.__context__
     return False

@@ -106,6 +106,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rc = app(args=argv, standalone_mode=False)
     except SitelineError as exc:
+        from siteline.diskspace import disk_full, full_disk_message
+
+        if disk_full(exc):  # a store error on a full disk: one message and status for every full disk
+            err_console.print(Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True)
+            return 1
         err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
         return 1 if isinstance(exc, WorkerError) else 2  # a dead worker: the command ran and failed
     except typer.Exit as exc:
