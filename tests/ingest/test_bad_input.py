@@ -297,3 +297,54 @@ def test_non_finite_gps_times_never_reach_the_catalog(db_url, tmp_path) -> None:
     assert scan.gps_time_range == [1000.0, 2000.0]
     assert "Infinity" not in (raw if isinstance(raw, str) else json.dumps(raw))
     cat.dispose()
+
+
+@pytest.mark.parametrize("short", [2, 500, 9_999])
+def test_a_laz_whose_count_is_short_by_less_than_its_last_chunk_is_refused(cat, site_settings, tmp_path, short) -> None:
+    """autzen's last chunk holds 10,000 points; a header counting 2 to 9,999 fewer passed the chunk
+    table (a fixed-size table records no count per chunk) and lost them without a word. The last
+    chunk's bytes decode past the count: refused naming the file, at open and at ingest, nothing
+    written."""
+    from realdata import AUTZEN
+
+    from siteline.pointpass.lasio import open_las
+
+    path = _count_patched(AUTZEN, tmp_path / "m" / "cloud.laz", 110_000 - short)
+    with pytest.raises(PointCloudError, match="cloud.laz.*last LAZ chunk holds more than"):
+        open_las(path)
+    when = __import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC)
+    with pytest.raises(PointCloudError, match="cloud.laz.*last LAZ chunk holds more than"):
+        ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(captured_at=when, crs="EPSG:2994"), workers=2)
+    _assert_nothing_written(cat, site_settings)
+
+
+def _chunk_size_patched(src: Path, dest: Path, chunk_size: int, count: int | None = None) -> Path:
+    """``src`` (LAZ) with its laszip record's chunk size (bytes 12-15 of the record) set, and its header
+    count too when given."""
+    data = bytearray(src.read_bytes())
+    at = data.index(b"laszip encoded") - 2  # the VLR header: reserved (2), user id (16), record id, length, description (32)
+    record = at + 54
+    data[record + 12 : record + 16] = struct.pack("<I", chunk_size)
+    if count is not None:
+        data[107:111] = struct.pack("<I", count)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest.write_bytes(bytes(data))
+    return dest
+
+
+def test_a_forged_laz_chunk_size_is_refused_before_anything_is_allocated(tmp_path) -> None:
+    """A chunk size of 2^32 - 2 with a count inside the bound it implies made the decoder ask for
+    gigabytes (and print a Rust allocation failure): refused at open, in one line, in well under a
+    second, naming the file."""
+    import time
+
+    from realdata import AUTZEN
+
+    from siteline.pointpass.lasio import open_las
+
+    for count in (None, 2_000_000_000):
+        path = _chunk_size_patched(AUTZEN, tmp_path / f"c{count}" / "cloud.laz", 2**32 - 2, count)
+        t0 = time.perf_counter()
+        with pytest.raises(PointCloudError, match="cloud.laz.*(chunks of 4,294,967,294 points|forged)"):
+            open_las(path)
+        assert time.perf_counter() - t0 < 1.0

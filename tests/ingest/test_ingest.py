@@ -129,6 +129,17 @@ def test_xmp_poses_without_colmap_model(cat, site_settings, synth_site, tmp_path
             assert np.linalg.norm(cam.center - truth[name].center) < 0.01
 
 
+def settings_site_fence(settings):  # noqa: ANN001, ANN201
+    """The fence of the demo site of ``settings``' catalog."""
+    from siteline.catalog.sites import get_site, site_of
+
+    cat = open_catalog(settings)
+    with cat.transaction() as s:
+        fence = site_of(s, get_site(s, "demo").id).fence
+    cat.dispose()
+    return fence
+
+
 def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None:
     """No photos: the cameras are planned from the point cloud over the site's fence, recorded with
     their source, and every one stands over the data at the stated height above its ground."""
@@ -138,7 +149,13 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     cat = open_catalog(settings)
     r = ingest_mission(cat, settings, epoch_dirs(site)[0], "demo")
     assert r.created and r.registration["source"] == "planned"
-    assert r.registration["over"] == "site fence" and r.registration["survey"]["altitude_m"] == 80.0
+    survey = r.registration["survey"]
+    from siteline.fence import fence_area_m2
+    from siteline.register.planned import SurveyPlan, auto_altitude
+
+    # no --altitude: chosen from the cloud's density and the fence's area, and the reason recorded
+    altitude, why = auto_altitude(SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings)))
+    assert r.registration["over"] == "site fence" and survey["altitude_m"] == altitude and survey["altitude_why"] == why
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
         assert sc.capture_time.year == 2024  # from the raw folder name
@@ -149,12 +166,12 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     nadir = [c for n, c in cams if "nadir" in n]
     assert nadir and all(np.allclose(c.forward, [0, 0, -1], atol=1e-5) for c in nadir)
     for name, cam in cams:
-        # nadir cameras over the data (the grid is buffered by half a line spacing, 13.5 m here);
-        # obliques stand back from the edge so that they look at it at 45 degrees from 80 m
-        margin = 15.0 if "nadir" in name else 85.0
+        # nadir cameras over the data (the grid is buffered by half a line spacing); obliques stand
+        # back from the edge so that they look at it at 45 degrees from the altitude
+        margin = 15.0 if "nadir" in name else altitude + 5.0
         assert bounds[0][0] - margin <= cam.center[0] <= bounds[1][0] + margin, name
         assert bounds[0][1] - margin <= cam.center[1] <= bounds[1][1] + margin, name
-        assert 60.0 < cam.center[2] - bounds[0][2] < 140.0
+        assert 0.7 * altitude < cam.center[2] - bounds[0][2] < 1.75 * altitude
     # the same cloud and settings plan the same cameras (another home, the same mission)
     again = make_home(tmp_path / "again", site_dir=site)
     cat2 = open_catalog(again)

@@ -3,6 +3,8 @@ points into tile runs that the tile stage takes over (siteline.pointpass.partiti
 
 from __future__ import annotations
 
+import os
+
 import laspy
 import numpy as np
 import pytest
@@ -224,3 +226,69 @@ def test_workers_of_a_killed_parent_exit_within_seconds() -> None:
     while time.monotonic() < deadline and any(alive(p) for p in workers):
         time.sleep(0.2)
     assert not any(alive(p) for p in workers)
+
+
+SLOW_START = """
+import os, time
+if os.environ.get("SITELINE_TEST_SLOW_WORKER_START"):
+    time.sleep(4)  # a worker still importing (12-30 s on a loaded machine) when its parent dies
+"""
+PARENT_OF_SLOW_WORKERS = """
+import os, time
+os.environ["SITELINE_TEST_SLOW_WORKER_START"] = "1"  # for the workers only: this process has started
+from siteline.pointpass.workers import process_pool
+process_pool(2)
+print(os.getpid(), flush=True)
+time.sleep(60)
+"""
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                status = open(f"/proc/{entry}/status").read()  # noqa: SIM115
+            except OSError:
+                continue
+            if f"\nPPid:\t{pid}\n" in status:
+                out.append(int(entry))
+    return out
+
+
+def test_workers_whose_parent_dies_before_they_start_exit_too(tmp_path) -> None:
+    """kill -9 of an ingest while its pool workers are still importing: each worker takes the pid of
+    the process that spawned it as an argument, so once it starts it sees that parent gone (a
+    worker that read its parent's pid itself would read init's, and live on with the resource
+    tracker). Both are gone within seconds."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "sitecustomize.py").write_text(SLOW_START)
+    env = os.environ | {"PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", PARENT_OF_SLOW_WORKERS], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        parent = int(proc.stdout.readline())
+        deadline = time.monotonic() + 10.0
+        while len(_children(parent)) < 3 and time.monotonic() < deadline:  # two workers and the resource tracker
+            time.sleep(0.1)
+        children = _children(parent)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert len(children) >= 2
+
+    def alive(pid: int) -> bool:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return open(f"/proc/{pid}/status").read().find("State:\tZ") < 0
+
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline and any(alive(p) for p in children):
+        time.sleep(0.2)
+    assert not any(alive(p) for p in children), [p for p in children if alive(p)]

@@ -21,13 +21,15 @@ REAL = Path(__file__).resolve().parents[1] / "data" / "real"
 SITELINE = str(Path(sys.executable).parent / "siteline")
 WHEN = "2021-01-01T00:00:00Z"
 
-# file, the CRS it is in when it names none, the site's metric CRS; None: refused (what the line says)
+# file, the CRS it is in when it names none, the site's metric CRS; None: refused (what the line says).
+# The clouds spread over a square kilometre tile into hundreds of 50 m tiles: `make test-all` runs them
+WIDE = pytest.mark.slow
 FILES = [
     ("laspy_plane.laz", "EPSG:3857", "EPSG:3857", None),
-    ("laspy_simple.las", "EPSG:2992", "EPSG:32610", None),
-    ("laspy_autzen.las", None, "EPSG:32610", None),
+    pytest.param("laspy_simple.las", "EPSG:2992", "EPSG:32610", None, marks=WIDE),
+    pytest.param("laspy_autzen.las", None, "EPSG:32610", None, marks=WIDE),
     ("laspy_vegetation_1_3.las", "EPSG:3857", "EPSG:3857", None),
-    ("laspy_test1_4.las", None, "EPSG:32613", None),
+    pytest.param("laspy_test1_4.las", None, "EPSG:32613", None, marks=WIDE),
     ("laspy_simple1_3.las", "EPSG:3857", "EPSG:3857", "header counts 999 points but the file holds 1,001"),
 ]
 

@@ -80,7 +80,7 @@ def test_images_under_the_floor_are_refused_with_the_scale_that_would_do() -> No
     [
         ({"pair": {"views": 0}}, "views"),
         ({"pair": {"scale": "big"}}, "scale"),
-        ({"pair": {"views": "auto"}}, "may be 'auto'"),
+        ({"pair": {"lod_factor": "auto"}}, "may be 'auto'"),
         ({"pair": {"hue": 1}}, "unknown knob"),
         ({"preset": "turbo"}, "unknown preset"),
         ({"min_image_px": 0}, "min_image_px"),

@@ -192,3 +192,41 @@ def test_world_splats_of_no_points_render_empty() -> None:
     r = render_points(np.zeros((0, 3), np.float32), oblique_camera(), RenderSettings(splat="world", fill_px=2),
                       spacing_m=np.zeros(0, np.float32))  # fmt: skip
     assert not r.hit.any() and np.isnan(r.depth).all() and r.filled_share == 0.0
+
+
+@pytest.mark.parametrize("fill", [0, 2])
+def test_the_cpu_kernels_draw_what_the_tensor_code_draws(monkeypatch, fill) -> None:
+    """On the CPU the disks are drawn by compiled loops; the tensor code (what CUDA runs) gives the
+    same keys: the same winners, depths and coverage, fixed and world splats alike."""
+    import siteline.render.zbuffer as zb
+
+    xyz, rgb, cls = box_scene(4, 30_000)
+    spacing = local_spacing(xyz)
+    cam = oblique_camera(400, 300)
+    kept = cls != 2
+    for s in (RenderSettings(scale=1.0, point_size_px=3, fill_px=fill), RenderSettings(scale=1.0, splat="world", fill_px=fill)):
+        compiled = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb}, spacing_m=spacing)
+        cov = coverage_of(xyz.astype(np.float32), cam, s, spacing_m=spacing, kept=kept)
+        monkeypatch.setattr(zb, "CPU_KERNELS", False)
+        tensor = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb}, spacing_m=spacing)
+        assert coverage_of(xyz.astype(np.float32), cam, s, spacing_m=spacing, kept=kept) == cov
+        monkeypatch.setattr(zb, "CPU_KERNELS", True)
+        assert np.array_equal(compiled.index, tensor.index) and np.array_equal(compiled.filled, tensor.filled)
+        assert np.array_equal(compiled.depth, tensor.depth, equal_nan=True)
+
+
+def test_the_compiled_fill_fills_what_the_tensor_fill_fills() -> None:
+    """Random renders with gaps and see-through pixels: the CPU's compiled fill and the tensor fill
+    (what CUDA runs) fill the same pixels from the same points."""
+    import torch
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        h, w = (int(v) for v in rng.integers(5, 60, 2))
+        depth = np.where(rng.random((h, w)) < 0.8, rng.choice([10.0, 10.5, 30.0], (h, w)), np.nan)
+        index, d = _buffers(depth)
+        for r in (1, 2, 3):
+            a = fill_gaps(index.clone(), d.clone(), w, h, r, compiled=True)
+            b = fill_gaps(index.clone(), d.clone(), w, h, r, compiled=False)
+            assert torch.equal(a[0], b[0]) and torch.equal(a[2], b[2])
+            assert torch.equal(torch.where(a[0] >= 0, a[1], 0), torch.where(b[0] >= 0, b[1], 0))

@@ -99,7 +99,7 @@ def test_a_prefetched_batch_serves_each_probe_the_points_of_its_own_read(scenes)
     tiles, cams, _, _ = _inputs(cat)
     probes = [c.camera for c in cams[:6]]
     single, batched = TilePointSource(tiles, SKIP, memory_points=0), TilePointSource(tiles, SKIP, memory_points=0)
-    held = TilePointSource(tiles, SKIP)
+    held = TilePointSource(tiles, SKIP, whole_points=0)  # node prefixes from memory
     before = (single.reads, single.points_read, batched.points_read)
     own = [single.points_for_view(c, PARAMS.scale) for c in probes]
     batched.prefetch(probes, PARAMS.scale)

@@ -11,9 +11,10 @@ import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import Pair, Release, ReleaseItem, Scene
-from siteline.catalog.pairs import pair_view_ids
+from siteline.catalog.pairs import get_pair, pair_view_ids
+from siteline.catalog.sites import lock_site
 from siteline.catalog.stages import add_completed
-from siteline.errors import NotFoundError
+from siteline.errors import NotFoundError, ReleaseError
 from siteline.records.release import DraftRelease
 from siteline.records.runs import StageRun
 
@@ -124,12 +125,37 @@ def record_draft(session: Session, draft: DraftRelease, folders: tuple[str, ...]
     add_completed(session, run)
 
 
+def superseded_pairs(session: Session, rel: Release) -> list[int]:
+    """The pairs release ``rel`` was built from that a scene ingested between their scenes has
+    superseded since (they are no longer consecutive)."""
+    return [pid for pid in (rel.parameters or {}).get("pairs", []) if get_pair(session, pid).status == "superseded"]
+
+
+def refuse_superseded(session: Session, rel: Release) -> None:
+    """:class:`ReleaseError` when release ``rel`` was built from a pair superseded since."""
+    gone = superseded_pairs(session, rel)
+    if gone:
+        raise ReleaseError(
+            f"release {rel.name} {rel.version} was built from pair(s) {', '.join(map(str, gone))}, superseded since "
+            "(a scene was ingested between their scenes): its pairs are no longer consecutive. Build it "
+            "again (`siteline release build`); nothing was published."
+        )
+
+
 def record_published(
     session: Session, name: str, version: str, root: Path, run: StageRun
 ) -> tuple[int, str | None]:
     """Mark release ``name`` ``version`` published at ``root`` (the draft folder already renamed there)
-    and record the stage run; return its item count and manifest sha256."""
+    and record the stage run; return its item count and manifest sha256. The site's row is locked
+    first, as an ingest locks it to form its pairs, and the release refused if one of its pairs was
+    superseded meanwhile (an ingest that committed while the draft was checked and moved)."""
     rel = get_release(session, name, version)
+    pairs = (rel.parameters or {}).get("pairs", [])
+    if pairs:
+        lock_site(session, get_pair(session, pairs[0]).site_id)
+        session.expire_all()  # read the pairs as the lock leaves them
+        rel = get_release(session, name, version)
+    refuse_superseded(session, rel)
     rel.status = "published"
     rel.published_at = datetime.now(UTC)
     rel.root_uri = str(root)

@@ -8,22 +8,29 @@ from dataclasses import dataclass
 import numpy as np
 
 from siteline.cameras import Camera
-from siteline.tiles.reader import SceneTiles, Selection, ViewNodes, node_positions
+from siteline.tiles.reader import SceneTiles, ViewNodes, node_positions
 from siteline.views.sources import ArrayPointSource, ProbePoints
 
 # a scene of at most this many points is read once into memory (13 bytes a point: float32
 # site-local xyz and two flags) and every probe judged from there
 MEMORY_POINTS = 25_000_000
+# ... and one of at most this many gives every probe all its points (the renderer culls them): no
+# level of detail to work out per probe, which at this size costs more than drawing them
+WHOLE_POINTS = 1_000_000
 
 
 @dataclass(frozen=True)
 class _Held:
-    """One tile held in memory, in store order: xyz (n, 3) float32 site-local metres, ``draw`` (n,)
-    bool (not a skipped class), ``kept`` (n,) bool (not an ignored class)."""
+    """A scene held in memory, its tiles one after another in sorted order, each in store order:
+    xyz (N, 3) float32 site-local metres, ``draw`` (N,) bool (not a skipped class), ``kept`` (N,)
+    bool (not an ignored class), ``spacing`` (N,) float32 its tile's own spacing (metres), and
+    ``node_start`` (K,) where each node of ``SceneTiles.all_nodes`` begins."""
 
     xyz: np.ndarray
     draw: np.ndarray
     kept: np.ndarray
+    spacing: np.ndarray
+    node_start: np.ndarray
 
 
 class TilePointSource:
@@ -34,8 +41,9 @@ class TilePointSource:
     point's spacing (world splats) and whether its class is kept (not ``ignored_classes``).
 
     A scene of at most ``memory_points`` is read once, whole, and each probe takes its nodes'
-    prefixes from memory, so view generation reads the scene once whatever the candidates. A larger
-    one is read per batch: the probes of one parent camera together (:meth:`prefetch`), per node the
+    prefixes from memory (one of at most :data:`WHOLE_POINTS` gives every probe all its points, with
+    each tile's own spacing), so view generation reads the scene once whatever the candidates. A
+    larger one is read per batch: the probes of one parent camera together (:meth:`prefetch`), per node the
     longest prefix any of them needs, once, so a batch reads about its frusta's union once.
     Clearance and overhead checks use a coarse copy (``coarse_m``) of the solid geometry, whose size
     grows with the site's area, not its density. Airborne snow and noise (``skip_classes``) are
@@ -50,6 +58,7 @@ class TilePointSource:
         lod_factor: float = 1.0,
         point_size_px: int = 1,
         memory_points: int = MEMORY_POINTS,
+        whole_points: int = WHOLE_POINTS,
     ) -> None:
         self.tiles = tiles
         self.skip = np.asarray(skip_classes, dtype=np.uint8)
@@ -59,10 +68,14 @@ class TilePointSource:
         self.points_read = 0
         self.reads = 0
         self.probes = 0
-        self._held: dict[str, _Held] | None = None
+        self._held: _Held | None = None
+        self._whole: ProbePoints | None = None
         if tiles.point_count <= memory_points:
             self._held = self._hold()
-            self._coarse = ArrayPointSource(self._from_memory(self._held, self._coarse_selection(coarse_m)).xyz)
+            self._coarse = ArrayPointSource(self._from_memory(self._held, *self._coarse_selection(coarse_m)).xyz)
+            if tiles.point_count <= min(memory_points, whole_points):
+                h = self._held
+                self._whole = ProbePoints(h.xyz[h.draw], h.spacing[h.draw], h.kept[h.draw])
         else:
             read = tiles.points(resolution=coarse_m, attributes=("class",))
             self.points_read += read.stats.points_read
@@ -75,48 +88,50 @@ class TilePointSource:
         """Whether the whole scene is held in memory."""
         return self._held is not None
 
-    def _hold(self) -> dict[str, _Held]:
+    def _hold(self) -> _Held:
         """Every tile's points, read once."""
-        held = {}
-        for tile in sorted(self.tiles.by_tile):
+        xyz, cls, spacing, offset = [], [], [], {}
+        at = 0
+        for tile in self.tiles.all_nodes.tiles:
             out = self.tiles.read_tile(tile, ("class",))
-            cls = out.attributes["class"]
-            held[tile] = _Held(
-                out.xyz_m.astype(np.float32), ~np.isin(cls, self.skip), ~np.isin(cls, self.ignored)
-            )
+            offset[tile] = at
+            at += len(out.xyz_m)
+            xyz.append(out.xyz_m.astype(np.float32))
+            cls.append(out.attributes["class"])
+            spacing.append(np.full(len(out.xyz_m), self.tiles.native_spacing[tile], np.float32))
             self.points_read += out.stats.points_read
         self.reads += 1
-        return held
+        a = self.tiles.all_nodes
+        c = np.concatenate(cls) if cls else np.zeros(0, np.uint8)
+        starts = np.array([offset[t] for t in a.tiles], np.int64)[a.tile] + a.start if len(a.tile) else np.zeros(0, np.int64)
+        return _Held(
+            np.concatenate(xyz) if xyz else np.zeros((0, 3), np.float32), ~np.isin(c, self.skip), ~np.isin(c, self.ignored),
+            np.concatenate(spacing) if spacing else np.zeros(0, np.float32), starts,
+        )  # fmt: skip
 
-    def _coarse_selection(self, resolution_m: float) -> ViewNodes:
-        """Every node's prefix that gives ``resolution_m`` spacing (as ``SceneTiles.points``)."""
-        selection: Selection = {}
-        for tile, nodes in self.tiles.by_tile.items():
-            sel, take = self.tiles.node_takes(tile, np.ones(len(nodes), bool), np.full(len(nodes), resolution_m))
-            if len(sel):
-                selection[tile] = (sel, take)
-        return ViewNodes(selection, np.zeros((0, 4)), {t: np.full(len(v[0]), resolution_m) for t, v in selection.items()})
+    def _coarse_selection(self, resolution_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every node's prefix that gives ``resolution_m`` spacing (as ``SceneTiles.points``): the
+        nodes (positions into ``all_nodes``), how many points of each, their spacing."""
+        rows = np.arange(len(self.tiles.all_nodes.lo))
+        take = self.tiles.takes(rows, np.full(len(rows), resolution_m))
+        keep = take > 0
+        return rows[keep], take[keep], np.full(int(keep.sum()), resolution_m)
 
-    def _from_memory(self, held_tiles: dict[str, _Held], view: ViewNodes) -> ProbePoints:
-        """The points of ``view``'s selection from the tiles held in memory (skipped classes left
-        out), inside its planes."""
-        parts, spacing, kept = [], [], []
-        for tile in sorted(view.selection):
-            sel, take = view.selection[tile]
-            idx = node_positions(self.tiles.by_tile[tile].start[sel], take)
-            held = held_tiles[tile]
-            draw = held.draw[idx]
-            idx = idx[draw]
-            parts.append(held.xyz[idx])
-            kept.append(held.kept[idx])
-            spacing.append(np.repeat(view.spacing_m[tile], take)[draw].astype(np.float32))
-        if not parts:
-            return ProbePoints(np.zeros((0, 3), np.float32), np.zeros(0, np.float32), np.zeros(0, bool))
-        xyz, sp, kp = np.concatenate(parts), np.concatenate(spacing), np.concatenate(kept)
-        if len(view.planes):
-            inside = np.all(xyz @ view.planes[:, :3].T.astype(np.float32) + view.planes[:, 3].astype(np.float32) >= 0, axis=1)
-            xyz, sp, kp = xyz[inside], sp[inside], kp[inside]
-        return ProbePoints(xyz, sp, kp)
+    def _from_memory(
+        self, held: _Held, nodes: np.ndarray, take: np.ndarray, spacing: np.ndarray, planes: np.ndarray | None = None
+    ) -> ProbePoints:
+        """The first ``take`` points of ``nodes`` (positions into ``all_nodes``) from the scene held in
+        memory (skipped classes left out), each with the larger of ``spacing`` (its node's) and its
+        tile's own, inside ``planes`` when given."""
+        idx = node_positions(held.node_start[nodes], take)
+        sp = np.maximum(np.repeat(spacing, take).astype(np.float32), held.spacing[idx])
+        idx_draw = held.draw[idx]
+        idx, sp = idx[idx_draw], sp[idx_draw]
+        xyz = held.xyz[idx]
+        if planes is not None and len(xyz):
+            inside = np.all(xyz @ planes[:, :3].T.astype(np.float32) + planes[:, 3].astype(np.float32) >= 0, axis=1)
+            idx, xyz, sp = idx[inside], xyz[inside], sp[inside]
+        return ProbePoints(xyz, sp, held.kept[idx])
 
     def _spacing_px(self) -> float:
         return self.lod_factor * self.point_size_px / 2
@@ -152,11 +167,14 @@ class TilePointSource:
         class is kept: from memory, from the prefetched batch when it covers this probe's tiles,
         else read."""
         self.probes += 1
+        if self._whole is not None:  # the renderer culls what the frustum leaves out
+            return self._whole
+        if self._held is not None:
+            nodes, take, spacing, planes = self.tiles.view_nodes(camera, scale, self._spacing_px())
+            return self._from_memory(self._held, nodes, take, spacing, planes)
         b = self._batch
         known = b.selections.get(camera) if b is not None and b.scale == scale else None
         view = known or self.tiles.levels_for_view(camera, scale, self._spacing_px())
-        if self._held is not None:
-            return self._from_memory(self._held, view)
         if b is not None and b.scale == scale and all(t in b.offset for t in view.selection):
             take = np.zeros(b.nodes, np.int64)
             spacing = np.zeros(b.nodes, np.float32)

@@ -65,21 +65,24 @@ def exit_with_parent(parent: int, period_s: float = PARENT_CHECK_S) -> threading
 
     def watch() -> None:
         while True:
-            time.sleep(period_s)
             if os.getppid() != parent:
                 os._exit(1)
+            time.sleep(period_s)
 
     thread = threading.Thread(target=watch, name="siteline-parent-watch", daemon=True)
     thread.start()
     return thread
 
 
-def _start_worker() -> None:
+def _start_worker(parent: int) -> None:
+    """A worker's start-up: watch ``parent`` (the pid that spawned it, taken before the spawn: one
+    read here would be init's if the parent died while this worker was still importing), keep freed
+    memory, load the kernels."""
     import gc
 
+    exit_with_parent(parent)
     from siteline.pointpass.kernels import load
 
-    exit_with_parent(os.getppid())
     keep_freed_memory()
     load()
     gc.freeze()  # what start-up imported is never garbage: full collections no longer walk it
@@ -114,7 +117,8 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
         pool = _POOLS.get(workers)
         if pool is None:
             pool = ProcessPoolExecutor(
-                max_workers=workers, mp_context=get_context("spawn"), initializer=_start_worker
+                max_workers=workers, mp_context=get_context("spawn"), initializer=_start_worker,
+                initargs=(os.getpid(),),
             )
             with _worker_env():
                 for _ in range(workers):

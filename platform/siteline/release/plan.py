@@ -12,7 +12,7 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.labelsets import label_set_ref
 from siteline.catalog.pairs import get_pair, list_pairs
-from siteline.catalog.releases import earlier_item_splits, find_release, list_releases
+from siteline.catalog.releases import earlier_item_splits, find_release, list_releases, refuse_superseded
 from siteline.catalog.scenes import (
     get_scene,
     list_scenes,
@@ -340,13 +340,7 @@ def plan_publish(session: Session, settings: Settings, name: str, version: str) 
         raise ImmutableError(
             f"release {name} {version} is already published: a published version is never rewritten."
         )
-    gone = [pid for pid in (rel.parameters or {}).get("pairs", []) if get_pair(session, pid).status == "superseded"]
-    if gone:
-        raise ReleaseError(
-            f"release {name} {version} was built from pair(s) {', '.join(map(str, gone))}, superseded since "
-            "(a scene was ingested between their scenes): its pairs are no longer consecutive. Build it "
-            "again (`siteline release build`); nothing was published."
-        )
+    refuse_superseded(session, rel)
     return PublishPlan(
         name, version, paths.release_draft(settings.home, name, version),
         paths.release_published(settings.home, name, version), rel.manifest_sha256,

@@ -16,8 +16,10 @@ from __future__ import annotations
 import functools
 import math
 
+import numpy as np
 import torch
 
+from siteline.render import kernels
 from siteline.render.splats import disk
 
 SECTORS = 8
@@ -66,18 +68,25 @@ def _square_max(x: torch.Tensor, radius_px: int) -> torch.Tensor:
 
 
 def fill_gaps(
-    index: torch.Tensor, depth: torch.Tensor, width: int, height: int, radius_px: int
+    index: torch.Tensor, depth: torch.Tensor, width: int, height: int, radius_px: int, compiled: bool = True
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Fill the gaps of one render (see the module docstring).
 
     index: (H W,) int64 winning point per pixel, -1 where none; depth: (H W,) float32 metres, the
     winner's camera depth (ignored where no winner). Returns the new (index, depth) and (H W,) bool
-    ``filled``, the pixels that took a neighbour's point. Deterministic, on the tensors' device."""
+    ``filled``, the pixels that took a neighbour's point. Deterministic, on the tensors' device (on
+    the CPU by a compiled loop unless ``compiled`` is False: the same pixels)."""
     dev = index.device
     hit = index >= 0
     filled = torch.zeros_like(hit)
     if radius_px < 1 or not bool(hit.any()):
         return index, depth, filled
+    if dev.type == "cpu" and compiled:  # one compiled pass (siteline.render.kernels), the same pixels
+        index, depth = index.clone(), depth.clone().to(torch.float32)
+        ring = torch.tensor(_ring(radius_px), dtype=torch.int64).numpy()
+        table = np.array(_enclosed_table(), dtype=bool)
+        done = kernels.fill_gaps(index.numpy(), depth.numpy(), ring, table, np.float32(SAME_SURFACE), radius_px, width)
+        return index, depth, torch.from_numpy(done)
     inf = torch.tensor(float("inf"), dtype=torch.float32, device=dev)
     z = torch.where(hit, depth.to(torch.float32), inf).view(1, 1, height, width)
     near = -_square_max(-z, radius_px)

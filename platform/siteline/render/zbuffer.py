@@ -26,6 +26,7 @@ import torch
 
 from siteline.cameras import Camera
 from siteline.errors import RenderError
+from siteline.render import kernels
 from siteline.render.fill import fill_gaps
 from siteline.render.settings import RenderSettings
 from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels
@@ -109,17 +110,18 @@ def _projector(cam: Camera, settings: RenderSettings, dev: torch.device) -> Call
     inf fail every comparison, so they are invalid; nothing is cast yet)."""
     W, H = cam.width, cam.height
     dtype = _dtype(settings)
-    Rt = torch.as_tensor(cam.R.T, dtype=dtype, device=dev)
-    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)
+    R = torch.as_tensor(cam.R, dtype=dtype, device=dev)
+    tt = torch.as_tensor(cam.t, dtype=dtype, device=dev)[:, None]
     fx, fy, cx, cy = cam.fx, cam.fy, cam.cx, cam.cy
     margin = float((settings.splat_max_px if settings.splat == "world" else settings.point_size_px) // 2)
 
     def project(p: torch.Tensor) -> tuple:
-        c = torch.addmm(tt, p.to(dev, non_blocking=True).to(dtype), Rt)  # (M, 3) camera coordinates
-        z = c[:, 2]
+        # (3, M) camera coordinates: a (3, 3) x (3, M) product is several times faster than (M, 3) x (3, 3)
+        c = torch.addmm(tt, R, p.to(dev, non_blocking=True).to(dtype).T.contiguous())
+        z = c[2]
         inv_z = 1.0 / z
-        u = c[:, 0] * inv_z * fx + cx
-        v = c[:, 1] * inv_z * fy + cy
+        u = c[0] * inv_z * fx + cx
+        v = c[1] * inv_z * fy + cy
         valid = (z > settings.near_m) & (u >= -margin) & (u < W + margin) & (v >= -margin) & (v < H + margin)
         return valid, u, v, z
 
@@ -132,55 +134,54 @@ def _focal(cam: Camera) -> float:
     return float(max(cam.fx, cam.fy))
 
 
+# on the CPU, disks are drawn by compiled loops (siteline.render.kernels), which give exactly what the
+# tensor code below gives on any device (the tests turn them off to check that)
+CPU_KERNELS = True
 # a run of at least this many points of one disk diameter is drawn offset by offset (one scatter of
 # the whole run per pixel of the disk); shorter runs are drawn as one list of (point, pixel) pairs,
 # so many diameters cost a few calls, not one per offset of each
 BULK_POINTS = 1 << 15
 
 
-def _runs(diameters: torch.Tensor) -> tuple[torch.Tensor | None, list[tuple[int, int, int]]]:
-    """The order that sorts points by disk diameter (None when they share one) and the sorted
-    points' runs ``(diameter, start, stop)``."""
-    n = int(diameters.shape[0])
-    if n == 0:
-        return None, []
-    lo, hi = int(diameters.min()), int(diameters.max())
-    if lo == hi:
-        return None, [(lo, 0, n)]
-    ordered, order = torch.sort(diameters, stable=True)
-    values, counts = torch.unique_consecutive(ordered, return_counts=True)
-    ends = torch.cumsum(counts, 0)
-    return order, [(d, e - c, e) for d, c, e in zip(values.tolist(), counts.tolist(), ends.tolist(), strict=True)]
+def _groups(diameters: torch.Tensor) -> list[tuple[int, torch.Tensor | None]]:
+    """The points of each disk diameter: ``(diameter, positions)``, positions None when every point
+    shares the one diameter."""
+    if int(diameters.shape[0]) == 0:
+        return []
+    values = torch.nonzero(torch.bincount(diameters)).squeeze(1).tolist()  # diameters are small integers
+    if len(values) == 1:
+        return [(int(values[0]), None)]
+    return [(int(d), torch.nonzero(diameters == d).squeeze(1)) for d in values]
 
 
 def _disk_pixels(
-    ui: torch.Tensor,
-    vi: torch.Tensor,
-    diameters: torch.Tensor,
-    runs: list[tuple[int, int, int]],
-    cam: Camera,
-    max_diameter_px: int,
-) -> Iterator[tuple[slice | torch.Tensor, torch.Tensor, float | torch.Tensor]]:
-    """Every pixel of the disks of points sorted by diameter (``runs``: :func:`_runs`) as ``(which,
-    pixel, rho2)``: the points (a slice or positions), the flat pixel each covers (H W, the dump
-    slot, when off the image) and its squared distance in pixels from the point's pixel."""
+    ui: torch.Tensor, vi: torch.Tensor, diameters: torch.Tensor, cam: Camera, max_diameter_px: int
+) -> Iterator[tuple[torch.Tensor | None, torch.Tensor, float | torch.Tensor]]:
+    """Every pixel of every point's disk as ``(which, pixel, rho2)``: the points (positions, or None
+    for all), the flat pixel each covers (H W, the dump slot, when off the image) and its squared
+    distance in pixels from the point's own pixel."""
     W, H = cam.width, cam.height
 
     def flat(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
         return torch.where((u >= 0) & (u < W) & (v >= 0) & (v < H), v * W + u, W * H)
 
     short = []
-    for d, a, b in runs:
-        if b - a < BULK_POINTS:
-            short.append(torch.arange(a, b, device=ui.device))
+    for d, pos in _groups(diameters):
+        if pos is not None and len(pos) < BULK_POINTS:
+            short.append(pos)
             continue
+        gu, gv = (ui, vi) if pos is None else (ui[pos], vi[pos])
         for du, dv in disk_offsets(d):
-            yield slice(a, b), flat(ui[a:b] + du, vi[a:b] + dv), float(du * du + dv * dv)
+            yield pos, flat(gu + du, gv + dv), float(du * du + dv * dv)
     if short:
         pos = torch.cat(short)
         for point, du_t, dv_t, rho2_t in disk_pixels(diameters[pos], max_diameter_px):
             which = pos[point]
             yield which, flat(ui[which] + du_t, vi[which] + dv_t), rho2_t.to(torch.float32)
+
+
+def _take(values: torch.Tensor, which: torch.Tensor | None) -> torch.Tensor:
+    return values if which is None else values[which]
 
 
 def _splat(
@@ -223,14 +224,15 @@ def _splat(
         ui, vi, zs, index = ui[sel], vi[sel], z[sel].to(torch.float32), index[sel]
         chunk_spacing = spacing[start:stop][sel] if world and spacing is not None else None
         diameters = diameters_px(chunk_spacing, zs, _focal(cam), settings)
-        order, runs = _runs(diameters)
-        if order is not None:
-            ui, vi, zs, index, diameters = ui[order], vi[order], zs[order], index[order], diameters[order]
         # world disks rise to their world radius at the rim: (z / f) rho^2 / r metres
-        rise = zs / _focal(cam) / (diameters.to(torch.float32) / 2.0)
-        for which, pix, rho2 in _disk_pixels(ui, vi, diameters, runs, cam, settings.splat_max_px):
-            zk = zs[which] + rise[which] * rho2 if world else zs[which]
-            key = (zk.view(torch.int32).to(torch.int64) << 32) | index[which]
+        rise = zs / _focal(cam) / (diameters.to(torch.float32) / 2.0) if world else torch.zeros_like(zs)
+        if dev.type == "cpu" and CPU_KERNELS:  # one compiled pass over the points (siteline.render.kernels)
+            kernels.splat_nearest(ui.numpy(), vi.numpy(), zs.numpy(), diameters.numpy(), rise.numpy(), index.numpy(), zbuf.numpy(), W)
+            continue
+        for which, pix, rho2 in _disk_pixels(ui, vi, diameters, cam, settings.splat_max_px):
+            z_at = _take(zs, which)
+            zk = z_at + _take(rise, which) * rho2 if world and not (isinstance(rho2, float) and rho2 == 0) else z_at
+            key = (zk.view(torch.int32).to(torch.int64) << 32) | _take(index, which)
             zbuf.scatter_reduce_(0, pix, key, reduce="amin")
     return in_frustum
 
@@ -263,28 +265,57 @@ def coverage_of(
     W, H = cam.width, cam.height
     npix = W * H
     project = _projector(cam, settings, dev)
-    marks = torch.zeros(npix + 1, dtype=torch.uint8, device=dev)  # 0 none, 1 any point, 2 a kept point
+    hit = torch.zeros(npix + 1, dtype=torch.bool, device=dev)  # the last slot: off the image
+    hit_kept = torch.zeros(npix + 1, dtype=torch.bool, device=dev)
+    on_cpu = dev.type == "cpu" and CPU_KERNELS  # the disks are marked by a compiled loop there
+    hit_np, hit_kept_np = np.zeros((H, W), bool), np.zeros((H, W), bool)
     pts = _as_tensor(xyz)
     spacing = None if spacing_m is None else _as_tensor(spacing_m).to(dev)
     keep = None if kept is None else _as_tensor(kept).to(dev)
     for start in range(0, int(pts.shape[0]), settings.chunk_points):
         stop = start + settings.chunk_points
         valid, u, v, z = project(pts[start:stop])
-        sel = torch.nonzero(valid).squeeze(1)
-        ui, vi, zs = u[sel].floor_().to(torch.int64), v[sel].floor_().to(torch.int64), z[sel].to(torch.float32)
-        mark = torch.full(sel.shape, 2, dtype=torch.uint8, device=dev)
-        if keep is not None:
-            mark = 1 + keep[start:stop][sel].to(torch.uint8)
-        diameters = diameters_px(None if spacing is None else spacing[start:stop][sel], zs, _focal(cam), settings)
-        order, runs = _runs(diameters)
-        if order is not None:
-            ui, vi, mark, diameters = ui[order], vi[order], mark[order], diameters[order]
-        for which, pix, _ in _disk_pixels(ui, vi, diameters, runs, cam, settings.splat_max_px):
-            marks.scatter_reduce_(0, pix, mark[which], reduce="amax")
+        # no compaction: a point outside the frustum is sent off the image, where its disk lands nowhere
+        off = torch.tensor(-(2**40), dtype=torch.int64, device=dev)
+        ui = torch.where(valid, u.floor().to(torch.int64), off)
+        vi = torch.where(valid, v.floor().to(torch.int64), off)
+        zs = torch.where(valid, z, 0).to(torch.float32)
+        mine = None if keep is None else keep[start:stop]
+        diameters = diameters_px(None if spacing is None else spacing[start:stop], zs, _focal(cam), settings)
+        if on_cpu:
+            flags = np.ones(len(ui), bool) if mine is None else mine.numpy().astype(bool, copy=False)
+            kernels.mark_disks(ui.numpy(), vi.numpy(), diameters.numpy(), flags, hit_np, hit_kept_np)
+            continue
+        for which, pix, _ in _disk_pixels(ui, vi, diameters, cam, settings.splat_max_px):
+            hit[pix] = True
+            hit_kept[pix if mine is None else pix[_take(mine, which)]] = True
     if not npix:
         return Coverage(0.0, 0.0)
-    m = marks[:npix]
-    return Coverage(int((m > 0).sum()) / npix, int((m == 2).sum()) / npix)  # as numpy's mean of a mask
+    if on_cpu:
+        return Coverage(int(hit_np.sum()) / npix, int(hit_kept_np.sum()) / npix)
+    return Coverage(int(hit[:npix].sum()) / npix, int(hit_kept[:npix].sum()) / npix)  # as numpy's mean of a mask
+
+
+def central_depths(xyz: np.ndarray, camera: Camera, scale: float, fraction: float) -> np.ndarray:
+    """The depths (metres, float32) of the pixels of the central ``fraction`` of the image (width and
+    height) of a one-pixel render of ``xyz`` ((N, 3) float32 site-local) through ``camera`` at
+    ``scale``: the nearest point's depth where a point falls, nothing where none does. On the CPU
+    (view generation's depth probes)."""
+    settings = RenderSettings(scale=scale)
+    cam = camera.scaled(scale)
+    H, W = cam.height, cam.width
+    fh, fw = max(1, int(round(H * fraction))), max(1, int(round(W * fraction)))
+    top, left = (H - fh) // 2, (W - fw) // 2
+    out = np.full((fh, fw), np.inf, np.float32)
+    pts = _as_tensor(np.ascontiguousarray(xyz, dtype=np.float32))
+    project = _projector(cam, settings, torch.device("cpu"))
+    box = np.array([left, top, left + fw, top + fh], np.int64)
+    for start in range(0, int(pts.shape[0]), settings.chunk_points):
+        valid, u, v, z = project(pts[start : start + settings.chunk_points])
+        ui = torch.where(valid, u.floor(), -1.0).to(torch.int64).numpy()
+        vi = torch.where(valid, v.floor(), -1.0).to(torch.int64).numpy()
+        kernels.nearest_depths(ui, vi, z.to(torch.float32).numpy(), box, out)
+    return out[np.isfinite(out)]
 
 
 def _winners(zbuf: torch.Tensor, npix: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -360,7 +391,7 @@ def render_points(
     drawn = int((index >= 0).sum())
     filled = torch.zeros(npix, dtype=torch.bool, device=dev)
     if settings.fill_px:
-        index, depth, filled = fill_gaps(index, depth, cam.width, cam.height, settings.fill_px)
+        index, depth, filled = fill_gaps(index, depth, cam.width, cam.height, settings.fill_px, CPU_KERNELS)
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
     t_splat = time.perf_counter() - t0

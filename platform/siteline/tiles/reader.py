@@ -191,6 +191,45 @@ class TileNodes:
         return self.below[np.arange(len(self)), np.broadcast_to(cap, (len(self),))]
 
 
+@dataclass(frozen=True)
+class AllNodes:
+    """Every node of a scene in one set of arrays (tiles in sorted order, each tile's nodes in array
+    order), for choices made across all tiles at once: ``tile`` (K,) the position of its tile in
+    ``tiles``, ``index`` (K,) its index in ``by_tile[tile]``, bounds ``lo``/``hi`` (K, 3), ``level``,
+    ``count``, ``start`` (in its tile's arrays), ``below`` (K, levels + 1) as :class:`TileNodes`,
+    and per tile its points per level (T, 64) and their running sum."""
+
+    tiles: tuple[str, ...]
+    tile: np.ndarray
+    index: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    level: np.ndarray
+    count: np.ndarray
+    start: np.ndarray
+    below: np.ndarray
+    totals: np.ndarray
+    cum: np.ndarray
+
+    @classmethod
+    def of(cls, by_tile: Mapping[str, TileNodes], level_totals: Mapping[str, np.ndarray]) -> AllNodes:
+        tiles = tuple(sorted(by_tile))
+        parts = [by_tile[t] for t in tiles]
+        width = max((p.below.shape[1] for p in parts), default=1)
+
+        def cat(name: str) -> np.ndarray:
+            return np.concatenate([getattr(p, name) for p in parts]) if parts else np.zeros(0, np.int64)
+
+        below = np.concatenate([np.pad(p.below, ((0, 0), (0, width - p.below.shape[1])), mode="edge") for p in parts]) if parts else np.zeros((0, width), np.int64)
+        totals = np.array([level_totals[t] for t in tiles]) if tiles else np.zeros((0, 64))
+        return cls(
+            tiles, np.repeat(np.arange(len(tiles)), [len(p) for p in parts]),
+            np.concatenate([np.arange(len(p)) for p in parts]) if parts else np.zeros(0, np.int64),
+            cat("lo").reshape(-1, 3), cat("hi").reshape(-1, 3), cat("level"), cat("count"), cat("start"), below,
+            totals, np.cumsum(totals, axis=1),
+        )  # fmt: skip
+
+
 class SceneTiles:
     """A scene's tile store opened for reading, indexed by its node table. Reads return :class:`Points`
     (site-local float64 metres, from the int32 counts and the tile origins).
@@ -237,6 +276,7 @@ class SceneTiles:
             t: np.pad(np.diff(v.below, axis=1).sum(axis=0), (0, 64))[:64] for t, v in self.by_tile.items()
         }
         self.native_spacing = self._native_spacings()
+        self.all_nodes = AllNodes.of(self.by_tile, self.level_totals)
         held = np.flatnonzero(nodes.level_counts.sum(axis=0)) if len(nodes) else np.zeros(1, np.int64)
         self._levels = held.astype(np.int64) if len(held) else np.zeros(1, np.int64)
         self._handles: dict[tuple[str, str], zarr.Array] = {}
@@ -442,6 +482,26 @@ class SceneTiles:
             out = self.read({t: self.prefix(t) for t in tiles}, attributes)
         return out.select(in_bounds(out.xyz_m, bounds)) if bounds is not None else out
 
+    def view_nodes(
+        self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What a view of ``camera`` at ``scale`` reads, over all tiles at once: positions into
+        :attr:`all_nodes` of the nodes its frustum meets, how many points of each
+        (:meth:`levels_for_view`), each node's spacing read in metres, and the frustum's planes."""
+        cam = camera.scaled(scale)
+        planes = cam.frustum_planes(near_m)
+        a = self.all_nodes
+        if not len(a.lo):
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), planes
+        inside = boxes_in_frustum(planes, a.lo, a.hi)
+        centre = cam.center
+        dist = np.linalg.norm(np.maximum(np.maximum(a.lo - centre, 0.0), centre - a.hi), axis=1)
+        need = spacing_px * np.maximum(dist, near_m) / min(cam.fx, cam.fy)
+        take = self.takes(np.arange(len(a.lo)), need)
+        sel = np.flatnonzero(inside & (take > 0))
+        native = np.array([self.native_spacing[t] for t in a.tiles])[a.tile[sel]]
+        return sel, take[sel], np.maximum(need[sel], native), planes
+
     def levels_for_view(
         self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3
     ) -> ViewNodes:
@@ -457,25 +517,36 @@ class SceneTiles:
         with ``r = (spacing(a-1) / need)**2`` (a surface's density grows as 1 / spacing**2) and ``N``
         the tile's points per level, so the density read is what the footprint needs, whatever the
         data hold. Otherwise that level is read whole (1-4 points per footprint of a surface)."""
-        cam = camera.scaled(scale)
-        planes = cam.frustum_planes(near_m)
-        centre = cam.center
-        f = min(cam.fx, cam.fy)
+        sel, take, spacing, planes = self.view_nodes(camera, scale, spacing_px, near_m)
+        a = self.all_nodes
         out: Selection = {}
-        spacing: dict[str, np.ndarray] = {}
-        for tile, (tlo, thi) in self.tile_bounds.items():
-            if not box_in_frustum(planes, tlo, thi):
-                continue
-            nodes = self.by_tile[tile]
-            lo, hi = nodes.lo, nodes.hi
-            inside = boxes_in_frustum(planes, lo, hi)
-            dist = np.linalg.norm(np.maximum(np.maximum(lo - centre, 0.0), centre - hi), axis=1)
-            need = spacing_px * np.maximum(dist, near_m) / f
-            sel, take = self.node_takes(tile, inside, need)
-            if len(sel):
-                out[tile] = (sel, take)
-                spacing[tile] = np.maximum(need[sel], self.native_spacing[tile])
-        return ViewNodes(out, planes, spacing)
+        spaced: dict[str, np.ndarray] = {}
+        tiles = a.tile[sel]
+        for k in np.unique(tiles):
+            mine = tiles == k
+            out[a.tiles[k]] = (a.index[sel[mine]], take[mine])
+            spaced[a.tiles[k]] = spacing[mine]
+        return ViewNodes(out, planes, spaced)
+
+    def takes(self, rows: np.ndarray, need_m: np.ndarray) -> np.ndarray:
+        """How many points of each node ``rows`` (positions into :attr:`all_nodes`) to read for a
+        spacing of ``need_m`` metres each (:meth:`node_takes`, across tiles)."""
+        a = self.all_nodes
+        allowed = self.levels_for_resolutions(need_m)
+        below = a.below[rows]
+        k = np.arange(len(rows))
+        cap = np.minimum(allowed, below.shape[1] - 2)
+        whole = below[k, cap]
+        at = below[k, cap + 1] - whole
+        part = at.copy()
+        if self.spec.partial_levels:
+            edge = (allowed > 0) & (at > 0)
+            lv = allowed[edge]
+            t = a.tile[rows[edge]]
+            r = (self._spacing[lv - 1] / need_m[edge]) ** 2
+            frac = np.clip((r - 1.0) * a.cum[t, lv - 1] / np.maximum(a.totals[t, lv], 1), 0.0, 1.0)
+            part[edge] = np.maximum(np.ceil(frac * at[edge]).astype(np.int64), 1)
+        return np.where(allowed > a.level[rows], a.count[rows], whole + part)
 
     def node_takes(
         self, tile: str, candidates: np.ndarray, need_m: np.ndarray

@@ -14,7 +14,7 @@ from siteline.cameras import Camera
 from siteline.errors import ViewsError
 from siteline.fence import inside_fence
 from siteline.progress import no_step
-from siteline.render.zbuffer import coverage_of, render_points
+from siteline.render.zbuffer import central_depths, coverage_of
 from siteline.tolerances import (
     LENGTH_TOL_M,
     POSE_CENTER_QUANTUM_M,
@@ -186,17 +186,10 @@ def strategy_key(vertical_fraction: float, mirrored: bool, forward_fraction: flo
 
 
 def central_median_depth(camera: Camera, source: PointSource, params: ViewParams) -> float | None:
-    """Median depth (metres) of the central image region, from a probe render; None if it is empty."""
+    """Median depth (metres) of the central image region, from a probe render of one-pixel points
+    (the median needs depths, not closed surfaces); None if it is empty."""
     probe = source.points_for_view(camera, params.depth_probe_scale)
-    settings = params.probe_settings(params.depth_probe_scale)
-    if probe.spacing_m is None:
-        settings = replace(settings, splat="fixed")
-    r = render_points(probe.xyz, camera, settings, spacing_m=probe.spacing_m)
-    H, W = r.hit.shape
-    fh, fw = max(1, int(round(H * params.central_fraction))), max(1, int(round(W * params.central_fraction)))
-    top, left = (H - fh) // 2, (W - fw) // 2
-    d = r.depth[top : top + fh, left : left + fw]
-    d = d[np.isfinite(d)]
+    d = central_depths(probe.xyz, camera, params.depth_probe_scale, params.central_fraction)
     return float(np.median(d)) if d.size else None
 
 
@@ -296,7 +289,7 @@ def probe(view: SyntheticView, source: PointSource, params: ViewParams) -> Synth
     cover) at the render scale, ``rejected`` when under ``min_coverage`` or ``min_valid`` (exactly
     at a threshold passes: siteline.tolerances)."""
     settings = params.probe_settings()
-    points = source.points_for_view(view.camera, params.scale)
+    points = source.points_for_view(view.camera, params.probe_scale)
     if points.spacing_m is None:
         settings = replace(settings, splat="fixed")
     cov = coverage_of(points.xyz, view.camera, settings, spacing_m=points.spacing_m, kept=points.kept)
@@ -318,7 +311,7 @@ def reject(
     """Every view judged: the geometric tests (:func:`reject_geometric`), then a probe of each that
     passes them (:func:`probe`)."""
     judged = reject_geometric(views, ground, fence_m, source, params)
-    source.prefetch([v.camera for v in judged if v.rejected is None], params.scale)
+    source.prefetch([v.camera for v in judged if v.rejected is None], params.probe_scale)
     return [probe(v, source, params) if v.rejected is None else v for v in judged]
 
 
@@ -409,7 +402,7 @@ def generate_views(
     def judge(v: SyntheticView) -> SyntheticView:
         return probe(v, source, params)
 
-    picker = Picker(survivors, params.seed, judge, lambda vs: source.prefetch([v.camera for v in vs], params.scale))
+    picker = Picker(survivors, params.seed, judge, lambda vs: source.prefetch([v.camera for v in vs], params.probe_scale))
     drawn = []
     for _ in range(params.views):
         v = picker.next()

@@ -32,9 +32,12 @@ class ViewParams:
     scale, min_coverage: reject views whose coverage at render scale ``scale`` is below min_coverage.
     min_valid: reject views whose probe shows less than this share of pixels of kept points (a class
     that is not ignored, inside the fence): the pair's valid share can only be lower.
-    point_size_px, splat, splat_max_px: the splats of the coverage probes: the pair's, so a probe's
-    coverage is the real render's (before the gap fill) and a tiled source reads the density that
-    point size needs.
+    point_size_px, splat, splat_max_px: the renders' splats, which the coverage probes draw.
+    probe_factor: with world splats, coverage probes render at this fraction of ``scale`` (a
+    sixteenth of the pixels at 0.25), with point sizes scaled alike (at least 1 px): a probe then
+    costs about a sixteenth of a render, and since each splat spans its spacing whatever the pixel
+    size, its coverage and valid share stay within a few points of the render's. Fixed splats are
+    probed at the view scale (their coverage depends on the pixel size).
     views: views kept per pair (seeded sample, stratified by strategy). ``scale`` and ``views`` are the
     knobs of the same names in PairParams and RenderSettings.
     """
@@ -56,6 +59,7 @@ class ViewParams:
     min_valid: float = 0.0
     splat: str = "fixed"
     splat_max_px: int = 31
+    probe_factor: float = 0.25
 
     def __post_init__(self) -> None:
         for name in ("vertical_fractions", "forward_fractions"):
@@ -76,6 +80,8 @@ class ViewParams:
             raise ViewsError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if not isinstance(self.views, int) or self.views < 1:
             raise ViewsError(f"views must be at least 1, got {self.views}.")
+        if not 0 < self.probe_factor <= 1:
+            raise ViewsError(f"probe_factor {self.probe_factor} must lie in (0, 1].")
         for name in ("clearance_m", "overhead_radius_m", "scale", "depth_probe_scale"):
             if not getattr(self, name) > 0:
                 raise ViewsError(f"{name} must be positive.")
@@ -85,14 +91,21 @@ class ViewParams:
             raise ViewsError(str(exc)) from exc
 
     def probe_settings(self, scale: float | None = None) -> RenderSettings:
-        """The render settings of a probe at ``scale`` (the view scale when None): the pair's splats,
-        no gap fill."""
+        """The render settings of a probe at ``scale`` (the coverage probe's, ``probe_factor`` x the
+        view scale, when None): the renders' splats with their sizes scaled to the probe, no gap fill."""
+        factor = (self.probe_factor if self.splat == "world" else 1.0) if scale is None else scale / self.scale
+        size = max(1, int(self.point_size_px * factor) | 1) if self.splat == "world" else self.point_size_px
         return RenderSettings(
-            scale=self.scale if scale is None else scale,
-            point_size_px=self.point_size_px,
+            scale=self.scale * factor,
+            point_size_px=size,
             splat=self.splat,
-            splat_max_px=self.splat_max_px,
+            splat_max_px=max(size, math.ceil(self.splat_max_px * factor)),
         )
+
+    @property
+    def probe_scale(self) -> float:
+        """The scale coverage probes render at."""
+        return self.probe_settings().scale
 
     @property
     def per_camera(self) -> int:

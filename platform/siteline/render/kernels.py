@@ -1,0 +1,172 @@
+"""Compiled loops of the coverage and depth probes on the CPU: one pass over the points marks their
+disks, where a chain of torch calls would make a dozen passes over 100k-point arrays per probe (view
+generation runs about a thousand probes a pair). The projection and the disk diameters come from the
+renderer (siteline.render.zbuffer), so these give exactly what its render would cover."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from siteline.pointpass.kernels import kernel
+
+
+@kernel
+def mark_disks(
+    ui: np.ndarray, vi: np.ndarray, diameters: np.ndarray, kept: np.ndarray, hit: np.ndarray, hit_kept: np.ndarray
+) -> None:
+    """Mark in ``hit`` (H, W) bool every pixel the disk of each point covers (diameter ``diameters``
+    px, centred on pixel (``ui``, ``vi``), int64; points off the image mark nothing), and in
+    ``hit_kept`` those of points where ``kept``. A disk of diameter d covers the pixels whose centres
+    lie within d / 2 of its own (siteline.render.splats.disk_offsets)."""
+    h, w = hit.shape
+    for i in range(len(ui)):
+        d = diameters[i]
+        k = d // 2
+        r2 = (d / 2.0) ** 2
+        u0, v0 = ui[i], vi[i]
+        if u0 + k < 0 or u0 - k >= w or v0 + k < 0 or v0 - k >= h:
+            continue
+        for dv in range(-k, k + 1):
+            v = v0 + dv
+            if v < 0 or v >= h:
+                continue
+            for du in range(-k, k + 1):
+                u = u0 + du
+                if u < 0 or u >= w or du * du + dv * dv > r2:
+                    continue
+                hit[v, u] = True
+                if kept[i]:
+                    hit_kept[v, u] = True
+
+
+@kernel
+def nearest_depths(ui: np.ndarray, vi: np.ndarray, z: np.ndarray, box: np.ndarray, out: np.ndarray) -> None:
+    """Per pixel of the window ``box`` (x0, y0, x1, y1: columns x0..x1-1, rows y0..y1-1) the depth of
+    the nearest point that falls in it (one-pixel points), written into ``out`` (y1 - y0, x1 - x0)
+    float32, which starts at inf."""
+    x0, y0, x1, y1 = box[0], box[1], box[2], box[3]
+    for i in range(len(ui)):
+        u, v = ui[i], vi[i]
+        if x0 <= u < x1 and y0 <= v < y1 and z[i] < out[v - y0, u - x0]:
+            out[v - y0, u - x0] = z[i]
+
+
+@kernel
+def splat_nearest(
+    ui: np.ndarray,
+    vi: np.ndarray,
+    z: np.ndarray,
+    diameters: np.ndarray,
+    rise: np.ndarray,
+    index: np.ndarray,
+    zbuf: np.ndarray,
+    width: int,
+) -> None:
+    """Keep in ``zbuf`` ((H W + 1,) int64 keys, the last slot unused here) per pixel the smallest key
+    (float32 depth bits << 32 | point ``index``) of the disks that cover it: each point's disk of
+    ``diameters`` px centred on pixel (``ui``, ``vi``), its depth ``z`` (float32, metres, > 0) plus
+    ``rise`` x the pixel's squared distance from the centre (world splats' paraboloid; 0 for fixed
+    disks). The minimum does not depend on the order of the points: the result is the one a
+    ``scatter_reduce`` of the same keys gives, on any device."""
+    height = (len(zbuf) - 1) // width
+    scratch = np.empty(1, np.float32)
+    bits = scratch.view(np.int32)
+    for i in range(len(ui)):
+        d = diameters[i]
+        k = d // 2
+        r2 = (d / 2.0) ** 2
+        u0, v0 = ui[i], vi[i]
+        if u0 + k < 0 or u0 - k >= width or v0 + k < 0 or v0 - k >= height:
+            continue
+        low = np.int64(index[i])
+        for dv in range(-k, k + 1):
+            v = v0 + dv
+            if v < 0 or v >= height:
+                continue
+            for du in range(-k, k + 1):
+                u = u0 + du
+                q = du * du + dv * dv
+                if u < 0 or u >= width or q > r2:
+                    continue
+                scratch[0] = z[i] + rise[i] * np.float32(q)
+                key = (np.int64(bits[0]) << 32) | low
+                pix = v * width + u
+                if key < zbuf[pix]:
+                    zbuf[pix] = key
+
+
+@kernel
+def square_nearest(z: np.ndarray, hit: np.ndarray, radius: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel of (H W,) depths ``z`` (inf where ``hit`` is False): the nearest depth and whether any
+    pixel is hit in the (2 ``radius`` + 1) square around it (rows, then columns)."""
+    n = len(z)
+    height = n // width
+    rows_min = np.empty(n, np.float32)
+    rows_any = np.zeros(n, np.bool_)
+    for y in range(height):
+        for x in range(width):
+            m = np.float32(np.inf)
+            a = False
+            for dx in range(max(0, x - radius), min(width, x + radius + 1)):
+                m = min(m, z[y * width + dx])
+                a = a or hit[y * width + dx]
+            rows_min[y * width + x], rows_any[y * width + x] = m, a
+    near = np.empty(n, np.float32)
+    around = np.zeros(n, np.bool_)
+    for y in range(height):
+        for x in range(width):
+            m = np.float32(np.inf)
+            a = False
+            for dy in range(max(0, y - radius), min(height, y + radius + 1)):
+                m = min(m, rows_min[dy * width + x])
+                a = a or rows_any[dy * width + x]
+            near[y * width + x], around[y * width + x] = m, a
+    return near, around
+
+
+@kernel
+def fill_gaps(
+    index: np.ndarray,
+    depth: np.ndarray,
+    ring: np.ndarray,
+    enclosed: np.ndarray,
+    same_surface: np.float32,
+    radius: int,
+    width: int,
+) -> np.ndarray:
+    """The gap fill of siteline.render.fill, in one pass (see there): ``index`` (H W,) int64 winning
+    point per pixel (-1 none) and ``depth`` (H W,) float32 are changed in place; returns the (H W,)
+    bool pixels filled. ring: (M, 4) int64 rows (du, dv, squared distance, sector) of the offsets
+    within ``radius`` but the centre; enclosed: (256,) bool per set of occupied sectors."""
+    n = len(index)
+    height = n // width
+    hit = index >= 0
+    z = np.where(hit, depth, np.float32(np.inf)).astype(np.float32)
+    near, around = square_nearest(z, hit, radius, width)
+    out_index, out_depth = index.copy(), depth.copy()  # a fill reads the points drawn, never a filled one
+    filled = np.zeros(n, np.bool_)
+    widen = np.float32(1.0) + same_surface
+    for p in range(n):
+        if not ((not hit[p] and around[p]) or (hit[p] and z[p] > near[p] * widen)):
+            continue
+        x, y = p % width, p // width
+        front = np.float32(np.inf)
+        for k in range(len(ring)):
+            u, v = x + ring[k, 0], y + ring[k, 1]
+            if 0 <= u < width and 0 <= v < height:
+                front = min(front, z[v * width + u])
+        limit = front * widen
+        bits, best, best_key = 0, -1, np.int64(0)
+        for k in range(len(ring)):
+            u, v = x + ring[k, 0], y + ring[k, 1]
+            if 0 <= u < width and 0 <= v < height and z[v * width + u] <= limit:
+                q = v * width + u
+                bits |= 1 << ring[k, 3]
+                key = (ring[k, 2] << 32) | q
+                if best < 0 or key < best_key:
+                    best, best_key = q, key
+        if enclosed[bits] and ((not hit[p]) or z[p] > limit) and best >= 0:
+            out_index[p], out_depth[p], filled[p] = index[best], depth[best], True
+    index[:] = out_index
+    depth[:] = out_depth
+    return filled
