@@ -15,8 +15,9 @@ class ReleaseItem:
     (the smaller of the two renders'), change ratio and valid fraction, its sizes in pixels (width,
     height) as rendered and as stored (padded), the share of its rendered pixels ignored for each
     cause (siteline.codes.IGNORE_CAUSES; empty for outputs made before causes were
-    recorded) and the share whose point came from the gap fill. Shares are of the rendered image:
-    ``valid`` and the causes add up to 1; the padding is ``padded_px`` less ``size_px``."""
+    recorded) and the share whose point came from the gap fill, and the synthetic camera that saw it
+    (``schema/camera.schema.json``: site-local frame, metres; its size is ``size_px``). Shares are of the
+    rendered image: ``valid`` and the causes add up to 1; the padding is ``padded_px`` less ``size_px``."""
 
     id: str
     split: Split
@@ -30,14 +31,19 @@ class ReleaseItem:
     padded_px: tuple[int, int]
     ignore: Mapping[str, float] = field(default_factory=dict)
     filled: float = 0.0
+    camera: Mapping[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The manifest's item."""
-        return asdict(self) | {
+        """The manifest's item (no ``camera`` key where none is known)."""
+        doc = asdict(self) | {
             "size_px": list(self.size_px),
             "padded_px": list(self.padded_px),
             "ignore": dict(self.ignore),
+            "camera": dict(self.camera) if self.camera is not None else None,
         }
+        if doc["camera"] is None:
+            del doc["camera"]
+        return doc
 
 
 @dataclass(frozen=True)
