@@ -211,20 +211,27 @@ def export(
     profile: str = typer.Option(
         ...,
         "--profile",
-        help="opencd, torchgeo-levircd, torchgeo-levircdplus, changemamba, changeformer or torchange.",
+        help="opencd, torchgeo-levircd, torchgeo-levircdplus, changemamba, changeformer, torchange, or hf "
+        "(Hugging Face datasets: parquet shards and a dataset card).",
     ),
     out: Path = typer.Option(..., "--out", help="New folder for the export (outside the release)."),
     copy: bool = typer.Option(False, "--copy", help="Copy files instead of relative symlinks."),
+    license_id: str = typer.Option(
+        "other", "--license", help="hf: the dataset card's licence, a hub licence id (cc-by-4.0, mit, other...)."
+    ),
     as_json: bool = JsonOption,
 ) -> None:
-    """Lay a release out as one toolbox's stock loader expects; print the setting that honours ignore."""
+    """Lay a release out as one toolbox's stock loader expects (or as a Hugging Face dataset); print the
+    setting that honours ignore."""
     from siteline.release.export import export_release
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
     from siteline.stores import layout
 
-    result = export_release(root, profile, out, copy=copy, protected=layout.releases(settings().home))
+    result = export_release(
+        root, profile, out, copy=copy, protected=layout.releases(settings().home), license_id=license_id
+    )
     emit(
         as_json,
         result.to_dict(),
@@ -236,7 +243,11 @@ def export(
                 if any(k != v for k, v in result.split_map.items())
                 else ""
             )
-            + f"\nlabel/ is LEVIR-CD 0/255; the tool reads it as: {result.label_rule}."
+            + (
+                f"\n{result.label_rule}."
+                if profile == "hf"
+                else f"\nlabel/ is LEVIR-CD 0/255; the tool reads it as: {result.label_rule}."
+            )
             + f"\n{result.honour_ignore}."
             + (f"\nnote: {result.note}." if result.note else "")
         ),

@@ -188,9 +188,7 @@ class ExportResult:
         return dict(self.__dict__)
 
 
-def _check_export(
-    root: Path, profile: Profile, out: Path, doc: dict[str, Any], protected: Path | None
-) -> None:
+def _check_export(root: Path, out: Path, doc: dict[str, Any], protected: Path | None) -> None:
     """Refuse an export that could not be read or would write where it must not: inside a release
     (resolved, so a symlink or '..' cannot hide it), over a file or a non-empty folder."""
     real = Path(os.path.realpath(out))
@@ -254,20 +252,48 @@ def _write_files(planned: list[tuple[str, Path, Path]], out: Path, work: Path, c
             os.symlink(os.path.relpath(src, dest.parent), target)
 
 
+HF_PROFILE = "hf"
+HF_LOADER = "datasets.load_dataset(<out>): parquet shards data/<split>-*.parquet and README.md (the hub's card)"
+PROFILE_NAMES = (*PROFILES, HF_PROFILE)
+
+
+def _export_hf(root: Path, out: Path, doc: dict[str, Any], license_id: str) -> ExportResult:
+    from siteline.release.hub import HUB_SPLITS, export_hf
+
+    with publish_folder(out) as work:
+        shards = export_hf(root, doc, work, license_id)
+        result = ExportResult(
+            HF_PROFILE, str(out), sum(len(v) for v in shards.files.values()), shards.rows,
+            dict(HUB_SPLITS), "label holds 0 unchanged, 1 changed, 255 ignore (from label_ignore/)",
+            "ignore is carried: train with ignore_index=255 on the label field (or mask with the ignore field)",
+            f"load it with datasets.load_dataset({str(out)!r}); licence in the card: {license_id}",
+        )  # fmt: skip
+        record = result.to_dict() | {
+            "release": {"name": doc["name"], "version": doc["version"], "root": str(root)},
+            "tool": HF_LOADER, "links": "images copied into the parquet shards", "shards": shards.files,
+        }  # fmt: skip
+        (work / EXPORT_RECORD).write_text(json.dumps(record, indent=1) + "\n")
+    return result
+
+
 def export_release(
-    root: Path, profile_name: str, out: Path, copy: bool = False, protected: Path | None = None
-) -> ExportResult:
+    root: Path, profile_name: str, out: Path, copy: bool = False, protected: Path | None = None,
+    license_id: str = "other",
+) -> ExportResult:  # fmt: skip
     """Lay out the release at ``root`` for ``profile_name`` in the new folder ``out``: relative
     symlinks into the release (``copy``: copies; derived labels are written anew), list files, and
     ``siteline-export.json`` (with the file names given, stem -> item id); built beside ``out`` and
     renamed into place whole. ``out`` may not resolve inside the release or inside ``protected``
-    (the folder of every release)."""
-    if profile_name not in PROFILES:
-        raise ReleaseError(f"unknown export profile {profile_name!r}: use one of {', '.join(PROFILES)}.")
-    profile = PROFILES[profile_name]
+    (the folder of every release). The ``hf`` profile writes parquet shards and a dataset card
+    (licence ``license_id``, a hub licence id) instead of links."""
+    if profile_name not in PROFILE_NAMES:
+        raise ReleaseError(f"unknown export profile {profile_name!r}: use one of {', '.join(PROFILE_NAMES)}.")
     root, out = Path(root).resolve(), Path(out).absolute()
     doc = read_manifest(root)
-    _check_export(root, profile, out, doc, protected)
+    _check_export(root, out, doc, protected)
+    if profile_name == HF_PROFILE:
+        return _export_hf(root, out, doc, license_id)
+    profile = PROFILES[profile_name]
     planned, names, ids = _plan_files(root, profile, out, doc)
     profile.check_paths(out, [dest for source, _, dest in planned if source == "A"])
     result = ExportResult(

@@ -1,0 +1,94 @@
+"""The Hugging Face export read by the real ``datasets`` package, with no code of ours: every item's
+images equal to the release's, the label 0/1/255, splits and their sizes in the card's YAML header,
+shards cut by size, and the export run as a user runs it (the installed executable)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from PIL import Image
+
+from siteline.release import read_manifest, verify_files
+from siteline.release import hub
+from siteline.release.export import export_release
+
+datasets = pytest.importorskip("datasets")
+EXE = str(Path(sys.executable).with_name("siteline"))
+
+
+def _png(path: Path) -> np.ndarray:
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def _card(out: Path) -> dict:
+    text = (out / "README.md").read_text()
+    assert text.startswith("---\n")
+    return yaml.safe_load(text.split("---\n")[1])
+
+
+def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
+    _, _, pub = built
+    root = Path(pub.root)
+    doc = read_manifest(root)
+    out = tmp_path / "hf"
+    result = export_release(root, "hf", out, license_id="cc-by-4.0")
+    ds = datasets.load_dataset(str(out))
+    want = {hub.HUB_SPLITS[s]: sorted(it["id"] for it in doc["items"] if it["split"] == s) for s in hub.HUB_SPLITS}
+    assert {s: sorted(ds[s]["id"]) for s in ds} == {s: ids for s, ids in want.items() if ids}
+    assert result.splits == {s: len(ids) for s, ids in want.items() if ids}
+    items = {it["id"]: it for it in doc["items"]}
+    for split in ds:
+        for row in ds[split]:
+            it = items[row["id"]]
+            folder = root / it["split"]
+            assert np.array_equal(np.asarray(row["image_a"]), _png(folder / "A" / f"{it['id']}.png"))
+            assert np.array_equal(np.asarray(row["image_b"]), _png(folder / "B" / f"{it['id']}.png"))
+            label = np.asarray(row["label"])
+            assert np.array_equal(label, _png(folder / "label_ignore" / f"{it['id']}.png"))
+            assert set(np.unique(label)) <= {0, 1, 255}
+            assert np.array_equal(np.asarray(row["ignore"]) == 255, label == 255)
+            assert (row["split"], row["pair"], row["view"]) == (it["split"], it["pair"], it["view"])
+            assert row["valid"] == it["valid"] and (row["width"], row["height"]) == tuple(it["size_px"])
+            cam = it["camera"]
+            assert row["camera"]["fx"] == cam["fx"] and row["camera"]["rotation"] == cam["cam_from_world"]["rotation"]
+            assert row["ignore_causes"] == {c: pytest.approx(it["ignore"].get(c, 0.0)) for c in row["ignore_causes"]}
+    header = _card(out)
+    assert header["license"] == "cc-by-4.0" and header["task_categories"] == ["image-segmentation"]
+    assert {s["name"]: s["num_examples"] for s in header["dataset_info"]["splits"]} == result.splits
+    assert "iVISION-2DCD" in (out / "README.md").read_text() and (out / "montage.png").is_file()
+    assert not verify_files(root)  # the release is untouched
+
+
+def test_shards_are_cut_by_size_and_still_load(built, tmp_path, monkeypatch) -> None:
+    _, _, pub = built
+    root = Path(pub.root)
+    doc = read_manifest(root)
+    n_train = sum(it["split"] == "train" for it in doc["items"])
+    monkeypatch.setattr(hub, "SHARD_BYTES", 1)  # one item a shard
+    out = tmp_path / "hf"
+    export_release(root, "hf", out)
+    shards = sorted((out / "data").glob("train-*.parquet"))
+    assert len(shards) == n_train and shards[-1].name == f"train-{n_train - 1:05d}-of-{n_train:05d}.parquet"
+    assert datasets.load_dataset(str(out), split="train").num_rows == n_train
+
+
+def test_the_executable_exports_and_refuses_a_used_folder(built, tmp_path) -> None:
+    settings, _, pub = built
+    env = os.environ | {"SITELINE_HOME": str(settings.home), "SITELINE_DATABASE_URL": settings.database_url}
+    out = tmp_path / "hf"
+    argv = [EXE, "release", "export", "rel", pub.version, "--profile", "hf", "--out", str(out)]
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "0 unchanged, 1 changed, 255 ignore" in done.stdout and "load_dataset" in done.stdout
+    record = json.loads((out / "siteline-export.json").read_text())
+    assert record["profile"] == "hf" and record["shards"]["train"]
+    again = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 2 and "not empty" in again.stderr and "Traceback" not in again.stderr
