@@ -11,21 +11,26 @@ import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from siteline.catalog import Catalog
 from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion, plan_site_deletion
+from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.pairs import pair_ids_of_scene, scene_ids_of_pairs, unprocessed_pairs
 from siteline.catalog.scenes import needs_tiling
 from siteline.catalog.sites import get_site, imported_label_sets, site_spec
 from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings
-from siteline.errors import LabelSetError
+from siteline.errors import LabelSetError, ReleaseError
 from siteline.fence import validate_fence
 from siteline.ingest import IngestOptions, IngestResult, ingest_mission
+from siteline.labelsets.store import open_labelled
 from siteline.pairs.params import PairParams
 from siteline.pairs.plan import pair_change_rule
+from siteline.pairs.render import LabelledPair
 from siteline.pairs.stage import process_pair
 from siteline.pointpass import TilingResources
+from siteline.previews.cloud import PairCloud
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo, ReleaseOptions
@@ -41,6 +46,7 @@ from siteline.release.plan import (
     semver,
 )
 from siteline.release.stage import build_release
+from siteline.render.colour import ColourPlan
 from siteline.stores import layout
 from siteline.taxonomy import Taxonomy
 from siteline.tiles import TileOutcome, tile_scene
@@ -247,6 +253,41 @@ def release(
     }
     built = replace(options, pair_ids=chosen, label_sets=used)
     return build_release(catalog, settings, site, name, params, built, run_id, progress)
+
+
+def pair_cloud(catalog: Catalog, settings: Settings, doc: Mapping[str, Any], pair_id: int) -> PairCloud:
+    """Pair ``pair_id`` of the release whose manifest is ``doc``, opened for the 3D viewer: its scenes
+    as the release saw them (the label sets and change labels of its lineage), its colour, the site's
+    taxonomy and the release's items of the pair. :class:`ReleaseError` when the release has no such
+    pair, or the scenes were tiled again or their labels deleted since (the points no longer match)."""
+    lineage = doc["lineage"]
+    what = f"release {doc['name']} {doc['version']}"
+    pair = next((p for p in lineage["pairs"] if int(p["id"]) == pair_id), None)
+    if pair is None:
+        have = ", ".join(str(p["id"]) for p in lineage["pairs"])
+        raise ReleaseError(f"{what} has no pair {pair_id} (its pairs: {have}).")
+    scenes = {int(sc["id"]): sc for sc in lineage["scenes"]}
+    label_uri = str(pair["labels"]["uri"])
+    if not settings.store.is_complete(label_uri):
+        raise ReleaseError(f"{what}, pair {pair_id}: its change labels at {label_uri} are gone (deleted since).")
+    with catalog.transaction() as s:
+        opened = []
+        for key in ("t1", "t2"):
+            sid = int(pair[key])
+            source, ref = labelled_source(s, sid, int(pair["label_sets"][key]))
+            made = scenes.get(sid, {}).get("tile_checksum")
+            if made is not None and made != source.checksum:
+                raise ReleaseError(
+                    f"{what}, pair {pair_id}: scene {sid} was tiled again since the release was built; its points no "
+                    "longer match the release's labels."
+                )
+            opened.append(open_labelled(source, ref))
+        taxonomy = site_spec(get_site(s, lineage["sites"][0]["name"])).taxonomy
+    items = tuple(it for it in doc["items"] if int(it["pair"]) == pair_id)
+    return PairCloud(
+        pair_id, LabelledPair.with_labels(opened[0], opened[1], label_uri),
+        ColourPlan.from_dict(pair.get("colour") or {"source": pair.get("colour_source", "rgb")}), taxonomy, items,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -204,6 +204,30 @@ def repair(
     )
 
 
+@app.command("browse")
+def browse(
+    name: str = typer.Argument(...),
+    version: str = typer.Argument(...),
+    out: Path | None = typer.Option(
+        None, "--out", help="HTML file (or folder) to write (default: <version>.html beside the release's folder)."
+    ),
+    as_json: bool = JsonOption,
+) -> None:
+    """Write the release browser (draft or published) as one HTML page beside the release: a grid of
+    its items with filters, each item's A and B under a swipe with its mask. Open it from the disk;
+    `siteline previews serve` serves the same page with the 3D viewer at /browse/NAME/VERSION/."""
+    from siteline.previews.browser import write_browser
+
+    with catalog() as cat, cat.transaction() as s:
+        root, status = release_location(s, name, version)
+    page = write_browser(root, out, status)
+    emit(
+        as_json,
+        {"name": name, "version": version, "status": status, "page": str(page)},
+        lambda: console.print(f"release browser of {name} {version} ({status}): {page.as_uri()}"),
+    )
+
+
 @app.command("export")
 def export(
     name: str = typer.Argument(...),

@@ -1,23 +1,79 @@
-"""The read-only HTTP route for previews: ``/previews/...`` and ``/releases/...`` under SITELINE_HOME
-(published releases only: drafts and temporary folders are hidden), GET and HEAD only, nothing
-outside those two folders whatever the path or a symlink says."""
+"""The read-only HTTP server of previews and releases: ``/previews/...`` and ``/releases/...`` under
+SITELINE_HOME (published releases only: drafts and temporary folders are hidden); the release
+browser ``/browse/<name>/<version>/`` (its images under ``files/``) and the 3D pair viewer
+``/3d/<name>/<version>/<pair>/`` (its plan ``plan.json`` and point chunks ``t1/<k>.bin``) of any
+release the catalog knows, draft or published; the pages' scripts under ``/static/``. GET and HEAD
+only, nothing outside those folders whatever the path or a symlink says."""
 
 from __future__ import annotations
 
 import html
 import http.server
 import io
+import json
 import logging
+import mimetypes
 import os
+import re
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote, unquote, urlsplit
+from urllib.parse import parse_qs, quote, unquote, urlsplit
 
+from siteline.errors import SitelineError
+from siteline.previews.browser import browser_page
+from siteline.previews.cloud import DEFAULT_BUDGET, CloudPlan, PairCloud
+from siteline.release.manifest import read_manifest
 from siteline.stores import layout
 
 log = logging.getLogger(__name__)
 SERVED = ("previews", "releases")
+STATIC = "/static"
+# the largest point budget a viewer may ask for
+MAX_BUDGET = 20_000_000
+# how many pairs' plans (open readers and their node plans) the server keeps
+OPEN_PAIRS = 4
+_ROUTE = re.compile(r"^/(browse|3d)/([^/]+)/([^/]+)/(.*)$")
+
+
+@dataclass(frozen=True)
+class ReleaseAccess:
+    """How the server reaches releases beyond the published folders: ``locate(name, version)`` ->
+    (release folder, status) (the catalog's ``release_location``), and ``open_pair(manifest,
+    pair_id)`` -> the pair opened for the 3D viewer (``siteline.pipeline.pair_cloud``)."""
+
+    locate: Callable[[str, str], tuple[Path, str]]
+    open_pair: Callable[[dict[str, Any], int], PairCloud]
+
+
+class _Plans:
+    """The plans of the pairs viewed last (at most :data:`OPEN_PAIRS`), each made once however many
+    requests ask for it at the same time."""
+
+    def __init__(self) -> None:
+        self._plans: OrderedDict[tuple[Any, ...], CloudPlan] = OrderedDict()
+        self._locks: dict[tuple[Any, ...], threading.Lock] = {}
+        self._guard = threading.Lock()
+
+    def get(self, key: tuple[Any, ...], make: Callable[[], CloudPlan]) -> CloudPlan:
+        with self._guard:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            with self._guard:
+                if key in self._plans:
+                    self._plans.move_to_end(key)
+                    return self._plans[key]
+            plan = make()
+            with self._guard:
+                self._plans[key] = plan
+                while len(self._plans) > OPEN_PAIRS:
+                    self._plans.popitem(last=False)
+            return plan
 
 
 def _allowed(home: Path, url_path: str) -> Path | None:
@@ -34,23 +90,153 @@ def _allowed(home: Path, url_path: str) -> Path | None:
     return target
 
 
+def _inside(root: Path, rel: str) -> Path | None:
+    """``root/rel`` when ``rel`` names a file that lies inside ``root`` (no hidden part, no way out)."""
+    parts = [p for p in rel.split("/") if p]
+    if not parts or any(p.startswith(".") for p in parts):
+        return None
+    target = root.joinpath(*parts)
+    real, top = os.path.realpath(target), os.path.realpath(root)
+    return target if real.startswith(top + os.sep) and os.path.isfile(real) else None
+
+
 class PreviewHandler(http.server.SimpleHTTPRequestHandler):
-    """GET and HEAD of files under the served folders; every other method is refused (501)."""
+    """GET and HEAD of files under the served folders and of the browser's and viewer's routes;
+    every other method is refused (501)."""
 
     home: Path
 
-    def __init__(self, *args: Any, home: Path, **kwargs: Any) -> None:
+    def __init__(
+        self, *args: Any, home: Path, access: ReleaseAccess | None = None, plans: _Plans | None = None, **kwargs: Any
+    ) -> None:
         self.home = home
+        self.access = access
+        self.plans = plans or _Plans()
         super().__init__(*args, directory=str(home), **kwargs)
 
+    def _send(self, body: bytes, content_type: str, status: int = 200, cache: bool = False) -> io.BytesIO:
+        self.send_response(status)
+        self.send_header("Content-Type", content_type)
+        self.send_header("Content-Length", str(len(body)))
+        if cache:
+            self.send_header("Cache-Control", "public, max-age=86400")
+        self.end_headers()
+        return io.BytesIO(body)
+
+    def _text(self, status: int, message: str) -> io.BytesIO:
+        """A refusal in words (plain text: the viewer's script shows it)."""
+        return self._send((message + "\n").encode(), "text/plain; charset=utf-8", status)
+
+    def _locate(self, name: str, version: str) -> tuple[Path, str]:
+        """The folder and status of release ``name`` ``version``: from the catalog when the server has
+        one, else a published release under SITELINE_HOME. LookupError when there is none."""
+        if self.access is not None:
+            return self.access.locate(name, version)
+        root = layout.releases(self.home) / name / version
+        if not (root / "manifest.json").is_file() or any(p.startswith(".") for p in (name, version)):
+            raise LookupError(f"no published release {name} {version} under {layout.releases(self.home)}")
+        return root, "published"
+
+    def _index(self) -> io.BytesIO:
+        """The home page: every published release with its browser and its pairs' 3D views."""
+        rows = []
+        top = layout.releases(self.home)
+        for name in sorted(n for n in os.listdir(top) if not n.startswith(".")) if top.is_dir() else []:
+            for version in sorted(v for v in os.listdir(top / name) if not v.startswith(".") and (top / name / v).is_dir()):
+                try:
+                    pairs = [int(p["id"]) for p in read_manifest(top / name / version)["lineage"]["pairs"]]
+                except (SitelineError, KeyError, ValueError, OSError):
+                    continue
+                base = f"{quote(name)}/{quote(version)}"
+                views = " ".join(f'<a href="/3d/{base}/{p}/">pair {p}</a>' for p in pairs)
+                rows.append(
+                    f'<li>{html.escape(name)} {html.escape(version)}: <a href="/browse/{base}/">browse</a>'
+                    f' &middot; 3D: {views} &middot; <a href="/releases/{base}/">files</a></li>'
+                )
+        body = (
+            "<html><head><title>siteline previews</title></head><body><h1>siteline</h1><h2>releases</h2>"
+            f"<ul>{''.join(rows) or '<li>none published yet</li>'}</ul>"
+            '<p><a href="/releases/">release files</a> &middot; <a href="/previews/">pair previews</a></p></body></html>'
+        )
+        return self._send(body.encode(), "text/html; charset=utf-8")
+
+    def _static(self, rel: str) -> io.BytesIO:
+        parts = [p for p in rel.split("/") if p]
+        if not parts or any(p.startswith(".") for p in parts):
+            return self._text(404, "no such file")
+        node = files("siteline.previews").joinpath("static", *parts)
+        if not node.is_file():
+            return self._text(404, "no such file")
+        kind = mimetypes.guess_type(parts[-1])[0] or "application/octet-stream"
+        if parts[-1].endswith(".js"):
+            kind = "text/javascript; charset=utf-8"
+        return self._send(node.read_bytes(), kind, cache=True)
+
+    def _release_route(self, kind: str, name: str, version: str, rest: str) -> io.BytesIO:
+        try:
+            root, status = self._locate(name, version)
+            doc = read_manifest(root)
+        except (LookupError, SitelineError) as exc:
+            return self._text(404, str(exc))
+        base = f"/{kind}/{quote(name)}/{quote(version)}"
+        browse = f"/browse/{quote(name)}/{quote(version)}/"
+        if kind == "browse":
+            if rest == "":
+                page = browser_page(doc, f"{base}/files", f"/3d/{quote(name)}/{quote(version)}", status)
+                return self._send(page.encode(), "text/html; charset=utf-8")
+            if rest.startswith("files/") and (path := _inside(root, rest[len("files/"):])) is not None:
+                kind_ = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
+                return self._send(path.read_bytes(), kind_, cache=status == "published")
+            return self._text(404, f"release {name} {version} has no {rest}")
+        head, _, tail = rest.partition("/")
+        if not head.isdigit():
+            return self._text(404, f"/3d/{name}/{version}/<pair>/: the pair is a number, not {head!r}")
+        pair = int(head)
+        if tail == "":
+            page = _viewer_page(f"{name} {version} ({status}): pair {pair} in 3D", f"{base}/{pair}")
+            return self._send(page.encode(), "text/html; charset=utf-8")
+        if self.access is None:
+            return self._text(503, "the 3D viewer reads the scenes through the catalog: run `siteline previews serve`.")
+        query = parse_qs(urlsplit(self.path).query)
+        try:
+            budget = int(query.get("budget", [DEFAULT_BUDGET])[0])
+        except ValueError:
+            return self._text(400, "budget: a number of points")
+        if not 1000 <= budget <= MAX_BUDGET:
+            return self._text(400, f"budget: between 1000 and {MAX_BUDGET} points, not {budget}")
+        try:
+            plan = self.plans.get(
+                (str(root), doc.get("created"), pair, budget), lambda: self.access.open_pair(doc, pair).plan(budget)  # type: ignore[union-attr]
+            )
+        except SitelineError as exc:
+            return self._text(404, str(exc))
+        if tail == "plan.json":
+            return self._send(json.dumps(plan.to_dict(browse)).encode(), "application/json")
+        m = re.fullmatch(r"t([12])/(\d+)\.bin", tail)
+        if m is None:
+            return self._text(404, f"pair {pair} in 3D has no {tail}")
+        try:
+            data = plan.chunk(int(m[1]), int(m[2]))
+        except IndexError as exc:
+            return self._text(404, str(exc))
+        return self._send(data, "application/octet-stream", cache=status == "published")
+
     def send_head(self) -> io.BufferedIOBase | io.BytesIO | None:  # type: ignore[override]
-        if self.path in ("/", ""):
-            body = b'<html><body><a href="/releases/">releases</a> <a href="/previews/">previews</a></body></html>'
-            self.send_response(200)
-            self.send_header("Content-Type", "text/html; charset=utf-8")
-            self.send_header("Content-Length", str(len(body)))
-            self.end_headers()
-            return io.BytesIO(body)
+        path = unquote(urlsplit(self.path).path)
+        if path in ("/", ""):
+            return self._index()
+        if path == "/favicon.ico":
+            return self._send(b"", "image/x-icon", 204)
+        if path.startswith(STATIC + "/"):
+            return self._static(path[len(STATIC) + 1:])
+        if (m := _ROUTE.match(path)) is not None:
+            try:
+                return self._release_route(*m.groups())
+            except Exception as exc:  # a page's request must get an answer, and the log the cause
+                log.exception("previews: %s failed", self.path)
+                return self._text(500, f"{type(exc).__name__}: {exc}")
+        if path in ("/browse", "/3d") or path.startswith(("/browse/", "/3d/")):
+            return self._text(404, f"{path}: use /browse/<name>/<version>/ or /3d/<name>/<version>/<pair>/")
         if _allowed(self.home, self.path) is None:
             self.send_error(404, "not a preview or a published release file")
             return None
@@ -80,8 +266,19 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         log.debug("%s " + format, self.address_string(), *args)
 
 
-def make_server(home: Path, host: str, port: int) -> http.server.ThreadingHTTPServer:
-    """A server of ``home``'s previews and published releases on ``host``:``port`` (not started)."""
+def _viewer_page(title: str, base: str) -> str:
+    template = files("siteline.previews").joinpath("static/viewer.html").read_text()
+    return template.replace("{{TITLE}}", html.escape(title)).replace("{{BASE}}", base).replace("{{STATIC}}", STATIC)
+
+
+def make_server(
+    home: Path, host: str, port: int, access: ReleaseAccess | None = None
+) -> http.server.ThreadingHTTPServer:
+    """A server of ``home``'s previews and releases on ``host``:``port`` (not started); ``access``:
+    how to reach drafts and the scenes behind a release (None: published releases, no 3D viewer)."""
     layout.previews(home).mkdir(parents=True, exist_ok=True)
     layout.releases(home).mkdir(parents=True, exist_ok=True)
-    return http.server.ThreadingHTTPServer((host, port), partial(PreviewHandler, home=Path(home)))
+    handler = partial(PreviewHandler, home=Path(home), access=access, plans=_Plans())
+    server = http.server.ThreadingHTTPServer((host, port), handler)
+    server.daemon_threads = True
+    return server

@@ -64,6 +64,18 @@ class ColourPlan:
             "why": self.why,
         }
 
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> ColourPlan:
+        """From :meth:`to_dict`'s form (a pair's or a release lineage's ``colour``)."""
+        source = doc.get("source", "rgb")
+        if source not in get_args(ColourSource):
+            raise PairError(f"colour source {source!r}: use one of {', '.join(get_args(ColourSource))}.")
+
+        def bounds(v: Any) -> tuple[float, float] | None:
+            return (float(v[0]), float(v[1])) if v else None
+
+        return cls(source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")))
+
 
 def _rgb_state(stats: ColourStats | None) -> str:
     return "varies" if stats is None else stats.rgb  # scanned before colour was judged: its RGB

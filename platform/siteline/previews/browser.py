@@ -1,0 +1,103 @@
+"""The release browser: one self-contained HTML page (``static/browser.html``, the items inline) that
+shows a release's items in a lazily drawn grid with filters, and each item's A and B side by side or
+under a swipe with its mask over either. The same page is served by the preview server for a
+published release (``/browse/<name>/<version>/``) and written as a file beside a release, draft or
+published, whose images it loads by relative paths (``siteline release browse``)."""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+from importlib.resources import files
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from siteline.errors import ReleaseError
+from siteline.release.manifest import read_manifest
+
+COLUMNS = (
+    "id", "split", "pair", "view", "strategy", "coverage", "valid", "change_ratio", "filled", "size", "padded",
+    "ignore", "camera",
+)  # fmt: skip
+
+
+def camera_figures(camera: dict[str, Any]) -> dict[str, Any]:
+    """What a person reads of a synthetic camera (``schema/camera.schema.json``): its centre in
+    site-local metres, heading (degrees clockwise from site north, +y), down-tilt (degrees below the
+    horizon, 90 = nadir), focal length (pixels) and horizontal field of view (degrees)."""
+    r = np.asarray(camera["cam_from_world"]["rotation"], dtype=np.float64)
+    t = np.asarray(camera["cam_from_world"]["translation"], dtype=np.float64)
+    centre = -r.T @ t
+    axis = r[2]  # the optical axis (camera +z) in the site frame
+    heading = math.degrees(math.atan2(axis[0], axis[1])) % 360.0
+    tilt = math.degrees(math.asin(max(-1.0, min(1.0, -axis[2]))))
+    hfov = math.degrees(2 * math.atan(camera["width"] / (2 * camera["fx"])))
+    return {
+        "centre": [round(float(v), 4) for v in centre],
+        "heading": round(heading, 2),
+        "tilt": round(tilt, 2),
+        "fx": round(float(camera["fx"]), 3),
+        "hfov": round(hfov, 2),
+    }
+
+
+def browser_data(doc: dict[str, Any], images: str, viewer: str | None) -> dict[str, Any]:
+    """The page's data: the items as rows of :data:`COLUMNS` (compact: 5,000 items are ~1.5 MB),
+    where the images are (``images``: a URL or a path relative to the page, the release's root) and
+    the 3D viewer's base URL for the release's pairs (None where no server is behind the page)."""
+    rows = []
+    for it in sorted(doc["items"], key=lambda it: it["id"]):
+        cam = it.get("camera")
+        rows.append([
+            it["id"], it["split"], it["pair"], it["view"], it["strategy"], round(it["coverage"], 5),
+            round(it["valid"], 5), round(it["change_ratio"], 5), round(it.get("filled", 0.0), 5),
+            it["size_px"], it.get("padded_px", it["size_px"]),
+            {k: round(v, 5) for k, v in it.get("ignore", {}).items()}, camera_figures(cam) if cam else None,
+        ])  # fmt: skip
+    return {
+        "name": doc["name"], "version": doc["version"], "images": images.rstrip("/"), "viewer": viewer,
+        "columns": list(COLUMNS), "rows": rows,
+    }  # fmt: skip
+
+
+def browser_page(doc: dict[str, Any], images: str, viewer: str | None = None, status: str = "published") -> str:
+    """The release browser of manifest ``doc`` as one HTML page (:func:`browser_data`)."""
+    template = files("siteline.previews").joinpath("static/browser.html").read_text()
+    data = json.dumps(browser_data(doc, images, viewer), separators=(",", ":"))
+    title = f"{doc['name']} {doc['version']} ({status}): {len(doc['items'])} items"
+    # inside <script>: no '</' may end the element early
+    return template.replace("{{TITLE}}", html.escape(title)).replace("{{DATA}}", data.replace("</", "<\\/"))
+
+
+def default_page_path(root: Path) -> Path:
+    """Where ``siteline release browse`` writes a release's page by default: beside the release's
+    folder, never inside it (``<releases>/<name>/<version>.html``; a draft's beside the draft)."""
+    return root.parent / f"{root.name}.html"
+
+
+def write_browser(root: Path, out: Path | None = None, status: str = "published") -> Path:
+    """Write the browser of the release at ``root`` to the HTML file ``out`` (default
+    :func:`default_page_path`), its images addressed relative to ``out``'s folder so the page opens
+    from the disk (file://) or wherever the two are served together. Written whole (a temporary
+    file renamed into place). :class:`ReleaseError` when ``out`` lies inside the release."""
+    root = Path(root).resolve()
+    out = Path(out).absolute() if out is not None else default_page_path(root)
+    if Path(os.path.realpath(out)).is_relative_to(root):
+        raise ReleaseError(f"{out} is inside the release {root}: a release is never written into; choose a path beside it.")
+    if out.is_dir():
+        out = out / f"{root.parent.name}-{root.name}.html"
+    doc = read_manifest(root)
+    images = Path(os.path.relpath(root, out.parent)).as_posix()
+    page = browser_page(doc, images, None, status)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
+    try:
+        tmp.write_text(page)
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return out
