@@ -15,8 +15,7 @@ import pytest
 import yaml
 from PIL import Image
 
-from siteline.release import read_manifest, verify_files
-from siteline.release import hub
+from siteline.release import hub, read_manifest, verify_files
 from siteline.release.export import export_release
 
 datasets = pytest.importorskip("datasets")
