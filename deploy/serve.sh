@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Start the siteline service: the Prefect server (UI on http://127.0.0.1:4200), the siteline deployments,
 # their concurrency limits and crash-recovery automations (deploy/service.py), a worker, the read-only
-# preview server the UI loads images from (http://127.0.0.1:4201), and the upload watcher. The worker,
-# the preview server and the watcher are restarted when they die. Stop everything with Ctrl-C.
+# preview server the UI loads images from, with the release browser and 3D viewer (http://127.0.0.1:4201),
+# the reporter that writes on a crashed run's page why it stopped (deploy/reporter.py), and the upload
+# watcher. The worker, the preview server, the reporter and the watcher are restarted when they die. Stop everything with Ctrl-C.
 #
 #   SITELINE_HOME       catalog and stores (default ./serve-home)
 #   SITELINE_WATCH_DIR  folder to drop mission uploads into (default $SITELINE_HOME/uploads)
@@ -28,7 +29,8 @@ export PREFECT_HOME="${PREFECT_HOME:-$SITELINE_HOME/prefect}"
 export PREFECT_API_URL="${PREFECT_API_URL:-http://127.0.0.1:$PREFECT_PORT/api}"
 export PREFECT_UI_API_URL="$PREFECT_API_URL"
 export PREFECT_SERVER_ANALYTICS_ENABLED=false
-# the library's log lines reach the run logs; heartbeats let a dead run be detected (deploy/service.py)
+# the library's log lines reach the run logs; heartbeats let a dead run be detected (deploy/service.py:
+# no heartbeat for 50 s marks it crashed: Prefect allows 30 s at least) and deploy/reporter.py says so on its page
 export PREFECT_LOGGING_EXTRA_LOGGERS=siteline
 export PREFECT_FLOWS_HEARTBEAT_FREQUENCY=30
 # pairs processed at once across all runs (a Prefect concurrency limit), and the threads each may use:
@@ -81,6 +83,7 @@ fi
 "$BIN/python" deploy/service.py --pair-slots "$SITELINE_PAIR_SLOTS"
 supervise prefect-worker "$BIN/prefect" worker start --pool siteline-process --name siteline-worker
 supervise previews "$BIN/siteline" previews serve
+supervise reporter "$BIN/python" deploy/reporter.py
 supervise watcher "$BIN/siteline" watch "$SITELINE_WATCH_DIR" --site "$SITELINE_SITE" \
   --stable-seconds "${SITELINE_STABLE_SECONDS:-10}"
 echo "UI: ${PREFECT_API_URL%/api}   previews: $SITELINE_PREVIEW_URL   logs: $LOGS"

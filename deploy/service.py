@@ -5,7 +5,7 @@ flows hold, and the two automations that recover from killed processes without a
     python deploy/service.py [--pair-slots N]
 
 Recovery: a flow run of a siteline deployment whose heartbeats (PREFECT_FLOWS_HEARTBEAT_FREQUENCY=30,
-set by serve.sh) stop for HEARTBEAT_GRACE_S is marked Crashed; a crashed siteline run is rescheduled
+set by serve.sh) stop for HEARTBEAT_GRACE_S is marked Crashed (deploy/reporter.py then says so on its page); a crashed siteline run is rescheduled
 (AwaitingRetry) at most MAX_ATTEMPTS - 1 times, and a worker picks it up again; the flows reuse every
 finished output, so a retry redoes only what the killed attempt had not finished.
 """
@@ -24,7 +24,9 @@ from prefect.events.schemas.events import ResourceSpecification
 
 TAG = "siteline"  # every siteline deployment's runs carry it (prefect.yaml)
 PAIR_SLOTS, RELEASE_SLOTS = "siteline-pairs", "siteline-release"
-HEARTBEAT_GRACE_S = 100  # three missed 30 s heartbeats and a margin
+# a 30 s heartbeat (the least Prefect allows) missed, and 20 s of margin for a loaded machine: a run is
+# known dead 20-50 s after its death
+HEARTBEAT_GRACE_S = 50
 MAX_ATTEMPTS = 3
 SITELINE_RUNS = {"prefect.resource.role": "tag", "prefect.resource.id": f"prefect.tag.{TAG}"}
 

@@ -163,7 +163,7 @@ def release_dashboards(settings: Settings, site: str, info: ReleaseInfo) -> None
     create_image_artifact(url, key=slug("montage", site, info.name),
                           description=f"{info.name} {info.version}: t1 | t2 | mask samples")  # fmt: skip
     create_markdown_artifact(
-        release_markdown(info, doc, url),
+        release_markdown(info, doc, url, settings.preview_url),
         key=slug("release", site, info.name),
         description=f"release {info.name} {info.version} ({info.status}): {info.reason}",
     )

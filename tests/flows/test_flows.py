@@ -326,3 +326,53 @@ def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, 
             assert bool(traced) == isinstance(exc, KeyError), [r.getMessage() for r in traced]
     finally:
         logging.getLogger("prefect").removeHandler(handler)
+
+
+def test_a_crashed_run_says_why_on_its_own_page(harness) -> None:
+    """deploy/reporter.py: a siteline run marked Crashed (as the heartbeat automation marks it) and
+    rescheduled gets a markdown artifact that says why, and its progress bar says where it stopped;
+    a second look repeats nothing."""
+    import time as _time
+    from datetime import UTC, datetime, timedelta
+
+    from prefect import flow
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.actions import ArtifactCreate
+    from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterFlowRunId
+    from prefect.states import Crashed, Running, Scheduled
+
+    sys.path.insert(0, str(FLOWS.parent / "deploy"))
+    import reporter
+
+    @flow(name="siteline-probe")
+    def probe() -> None:  # never run: its run is driven by hand
+        return None
+
+    with get_client(sync_client=True) as client:
+        run = client.create_flow_run(probe, tags=["siteline"], name="scene-9-labels-v2")
+        other = client.create_flow_run(probe, tags=["elsewhere"], name="not-ours")
+        bar = client.create_artifact(ArtifactCreate(key=f"progress-x-{str(run.id)[:8]}", type="progress", data=42.0,
+                                                    flow_run_id=run.id, description="pair 1: renders 3 of 6"))  # fmt: skip
+        why = "no heartbeat for 40 s: its process or machine died"
+        for rid in (run.id, other.id):
+            client.set_flow_run_state(rid, Running(), force=True)
+            client.set_flow_run_state(rid, Crashed(message=why), force=True)
+            client.set_flow_run_state(rid, Scheduled(name="AwaitingRetry", message="rescheduled"), force=True)
+        since = datetime.now(UTC) - timedelta(minutes=5)
+        done: set[str] = set()
+        reported: list[str] = []
+        t0 = _time.monotonic()
+        while _time.monotonic() - t0 < 60 and "AwaitingRetry" not in str(reported):
+            got = reporter.report(client, since, done)
+            reported += [f"{n}:{s}" for n in got for s in ("AwaitingRetry",)]
+            _time.sleep(1)
+        assert reported and all(r.startswith("scene-9-labels-v2") for r in reported), reported
+        arts = client.read_artifacts(artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[run.id])))
+        text = max((a for a in arts if a.key == f"why-{run.id}"), key=lambda a: a.created).data
+        assert "Why scene-9-labels-v2 stopped" in text and why in text and "rescheduled (attempt" in text
+        assert "42 % done (pair 1: renders 3 of 6)" in text
+        progress = next(a for a in arts if a.id == bar.id)
+        assert progress.description.startswith("stopped at 42 %: rescheduled after a crash: "), progress.description
+        # nothing new: nothing written again, also by a reporter that starts afresh
+        assert reporter.report(client, since, done) == [] and reporter.report(client, since, set()) == []
+        assert not [a for a in client.read_artifacts(artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[other.id]))) if a.key and a.key.startswith("why-")]

@@ -136,11 +136,14 @@ class PairCloud:
 
     def plan(self, budget: int = DEFAULT_BUDGET) -> CloudPlan:
         """What the viewer fetches for a budget of ``budget`` points over both scenes."""
-        sides = (self.scenes.t1, self.scenes.t2)
-        chunks = tuple(chunk_plan(t, budget // 2) for t in sides)
-        lo = np.min([t.all_nodes.lo.min(axis=0) for t in sides if len(t.all_nodes.lo)], axis=0)
-        hi = np.max([t.all_nodes.hi.max(axis=0) for t in sides if len(t.all_nodes.hi)], axis=0)
-        return CloudPlan(self, chunks, (lo + hi) / 2, hi - lo, tuple(budget_takes(t, budget // 2)[1] for t in sides))
+        t1, t2 = self.scenes.t1, self.scenes.t2
+        lo = np.min([t.all_nodes.lo.min(axis=0) for t in (t1, t2) if len(t.all_nodes.lo)], axis=0)
+        hi = np.max([t.all_nodes.hi.max(axis=0) for t in (t1, t2) if len(t.all_nodes.hi)], axis=0)
+        half = budget // 2
+        return CloudPlan(
+            self, (chunk_plan(t1, half), chunk_plan(t2, half)), (lo + hi) / 2, hi - lo,
+            (budget_takes(t1, half)[1], budget_takes(t2, half)[1]),
+        )  # fmt: skip
 
     def side(self, side: int) -> SceneTiles:
         return self.scenes.t1 if side == 1 else self.scenes.t2

@@ -4,10 +4,24 @@ of the data (images, why a version exists, sizes, coverage, valid fractions, whe
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
+from urllib.parse import quote
 
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo
+
+
+@dataclass(frozen=True)
+class RunEvent:
+    """A state a service run entered: when (UTC), its name (Crashed, AwaitingRetry...), its message
+    and the run's attempt count then."""
+
+    when: datetime
+    state: str
+    message: str
+    run_count: int
 
 
 def _spread(values: Sequence[float]) -> str:
@@ -25,8 +39,9 @@ def _sizes(items: Sequence[Mapping[str, Any]]) -> str:
     return text
 
 
-def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str) -> str:
-    """The release artifact: montage, why this version, where it is, sizes and figures, its pairs,
+def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str, preview_url: str | None = None) -> str:
+    """The release artifact: montage, links to its browser and each pair in 3D on the preview server
+    at ``preview_url`` (None: none), why this version, where it is, sizes and figures, its pairs,
     label sets and class balance (``doc``: the release's manifest)."""
     items = doc.get("items", [])
     lineage = doc.get("lineage", {})
@@ -38,6 +53,7 @@ def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str
         "",
         f"![montage of {info.name} {info.version}: t1 | t2 | mask (green unchanged, red changed, white ignore)]({montage_url})",
         "",
+        *_see_links(info, doc, preview_url),
         "| figure | value |",
         "|---|---|",
         f"| why this version | {info.reason or lineage.get('version_reason', '-')} |",
@@ -67,6 +83,49 @@ def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str
     balance = doc.get("stats", {}).get("class_balance", {})
     lines += ["", "## Class balance (pixels)", "", "| split | changed | unchanged | ignore |", "|---|---|---|---|"]
     lines += [f"| {k} | {v['changed']:,} | {v['unchanged']:,} | {v['ignore']:,} |" for k, v in balance.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _see_links(info: ReleaseInfo, doc: Mapping[str, Any], preview_url: str | None) -> list[str]:
+    """Links to the release browser and to each pair in 3D (``siteline previews serve``)."""
+    if not preview_url:
+        return []
+    base = f"{preview_url.rstrip('/')}"
+    release = f"{quote(info.name)}/{quote(info.version)}"
+    pairs = " ".join(f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.get("lineage", {}).get("pairs", []))
+    return [f"**See it:** [browse every item]({base}/browse/{release}/) (A | B swipe, mask, filters) · in 3D, change in red: {pairs}", ""]
+
+
+def stopped_markdown(run_name: str, events: Sequence[RunEvent], progress: str | None, max_attempts: int) -> str:
+    """Why a run stopped, in words, for its own page: each crash (when, what the state says: for
+    a dead process or machine, its missing heartbeats), whether it was rescheduled and which attempt
+    comes next, and how far the progress bar had come (``progress``: its description)."""
+    crashes = [e for e in events if e.state == "Crashed"]
+    last = crashes[-1] if crashes else events[-1]
+    retried = any(e.state == "AwaitingRetry" and e.when >= last.when for e in events)
+    attempt = max(e.run_count for e in events)
+    lines = [
+        f"# Why {run_name} stopped",
+        "",
+        f"At {last.when:%H:%M:%S} UTC ({last.when:%Y-%m-%d}) the run stopped: **{last.message or last.state}**.",
+    ]
+    if "heartbeat" in (last.message or ""):
+        lines.append(
+            "The process running it stopped reporting: it was killed, ran out of memory, or its machine "
+            "went down. Nothing it had finished is lost."
+        )
+    if retried:
+        lines.append(
+            f"It was rescheduled (attempt {attempt + 1} of {max_attempts}): a worker picks it up again, and the "
+            "pipeline reuses every finished output (tiles, labels, views, renders), so the retry redoes only "
+            "what this attempt had not finished."
+        )
+    elif attempt >= max_attempts:
+        lines.append(f"It crashed {attempt} times, the most the service retries: run it again by hand once the cause is fixed.")
+    if progress:
+        lines.append(f"Where it was: {progress}.")
+    lines += ["", "| time (UTC) | state | attempt | message |", "|---|---|---|---|"]
+    lines += [f"| {e.when:%H:%M:%S} | {e.state} | {e.run_count} | {e.message or '-'} |" for e in events]
     return "\n".join(lines) + "\n"
 
 
