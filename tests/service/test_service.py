@@ -105,6 +105,12 @@ class Service:
 
         return [pid for pid, line in cmd.items() if marker in line and descends(pid)]
 
+    def artifacts(self, key: str) -> list[dict]:
+        r = httpx.post(f"{self.api}/artifacts/filter", json={"artifacts": {"key": {"any_": [key]}}, "sort": "CREATED_DESC"},
+                       timeout=30)  # fmt: skip
+        r.raise_for_status()
+        return r.json()
+
     def versions(self) -> list[str]:
         root = self.home / "releases" / "demo-cd"
         return sorted(p.name for p in root.iterdir() if (p / "manifest.json").is_file()) if root.is_dir() else []
@@ -140,6 +146,35 @@ def _scene_run(svc: Service, name: str) -> dict:
 def _rendering(svc: Service, name: str) -> None:
     run = _scene_run(svc, name)
     _until(f"{name} to be rendering", lambda: "views" in svc.logs(run["id"]) or "renders" in svc.logs(run["id"]), 300, 1.0)
+
+
+def _screenshots(svc: Service, run_id: str, why_id: str, tmp_path: Path) -> None:
+    """The crashed run's why-artifact in the UI, the release browser and a pair in 3D, looked at in
+    headless Chromium (Playwright, when installed): the texts and images are there; screenshots under
+    SITELINE_SCREENSHOTS (docs/images when set so) for the docs."""
+    sync = pytest.importorskip("playwright.sync_api")
+    out = Path(os.environ.get("SITELINE_SCREENSHOTS", tmp_path / "shots"))
+    out.mkdir(parents=True, exist_ok=True)
+    ui = svc.api.removesuffix("/api")
+    with sync.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"),
+                                    args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])  # fmt: skip
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(f"{ui}/artifacts/artifact/{why_id}")
+        page.get_by_text("Why scene-1-labels-v3 stopped").first.wait_for(timeout=60_000)
+        page.get_by_text("no heartbeat", exact=False).first.wait_for(timeout=10_000)
+        page.screenshot(path=out / "service-why.png")
+        page.goto(f"{ui}/runs/flow-run/{run_id}?tab=Artifacts")
+        page.wait_for_timeout(5000)
+        page.screenshot(path=out / "service-run-artifacts.png")
+        for name, url in (("browser.png", f"{svc.preview}/browse/demo-cd/4.0.0/"),
+                          ("viewer-3d.png", f"{svc.preview}/3d/demo-cd/4.0.0/1/")):  # fmt: skip
+            page.goto(url)
+            page.wait_for_function("document.body.dataset.ready || document.body.dataset.error", timeout=120_000)
+            assert page.evaluate("document.body.dataset.error") is None
+            page.wait_for_timeout(1000)
+            page.screenshot(path=out / name)
+        browser.close()
 
 
 def test_the_service(tmp_path, synth_site) -> None:
@@ -204,11 +239,17 @@ def test_the_service(tmp_path, synth_site) -> None:
         fix = _corrected(svc, 1, tmp_path, 3)
         assert svc.siteline("labels", "import", "1", str(fix)).returncode == 0
         _rendering(svc, "scene-1-labels-v3")
+        victim = _scene_run(svc, "scene-1-labels-v3")["id"]
         t0 = time.monotonic()
         for pid in svc.processes("prefect worker start") + svc.processes("prefect.engine"):
             os.kill(pid, signal.SIGKILL)
-        _until("release 4.0.0 after the machine failure", lambda: "4.0.0" in svc.versions(), 900, 5.0)
+        # the run's own page says why within a minute: deploy/reporter.py's artifact on the run
+        why = _until("the run's why-artifact", lambda: svc.artifacts(f"why-{victim}"), 180, 1.0)
+        figures["worker and flow killed -> why on the run's page (s)"] = time.monotonic() - t0
+        assert "no heartbeat" in why[0]["data"] and "stopped" in why[0]["data"], why[0]["data"]
+        _until("release 4.0.0 after the machine failure", lambda: "4.0.0" in svc.versions(), 900, 2.0)
         figures["worker and flow killed -> 4.0.0 (s)"] = time.monotonic() - t0
+        assert figures["worker and flow killed -> why on the run's page (s)"] < 60, figures
         # crash detection (heartbeats) and a slot lease that a dead holder cannot renew: minutes, not ten
         assert figures["worker and flow killed -> 4.0.0 (s)"] < 180, figures
         run = _until("the rescheduled run to complete",
@@ -233,6 +274,13 @@ def test_the_service(tmp_path, synth_site) -> None:
         assert "Release demo-cd 4.0.0 (published)" in page.stdout and f'src="{montage}"' in page.stdout
         got = httpx.get(montage, timeout=30)
         assert got.status_code == 200 and got.content[:8] == b"\x89PNG\r\n\x1a\n"
+        # the release artifact links its browser and its pairs in 3D, which the service's preview server serves
+        browse = f"{svc.preview}/browse/demo-cd/4.0.0/"
+        assert f'href="{browse}"' in page.stdout and f'href="{svc.preview}/3d/demo-cd/4.0.0/1/"' in page.stdout
+        assert httpx.get(browse, timeout=30).status_code == 200
+        plan = httpx.get(f"{svc.preview}/3d/demo-cd/4.0.0/1/plan.json", timeout=120).json()
+        assert plan["points"]["t1"] > 0 and plan["cameras"]
+        _screenshots(svc, victim, svc.artifacts(f"why-{victim}")[0]["id"], tmp_path)
     finally:
         print("\n".join(f"{k}: {v:.0f}" for k, v in figures.items()))
         svc.stop()
