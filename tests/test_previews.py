@@ -78,3 +78,21 @@ def test_the_release_artifact_says_why_where_and_how_big() -> None:
     assert "515 x 386 px (stored padded to 544 x 416)" in md and "0.78 (auto: 512 px" in md
     assert "| valid fraction | mean 0.45 (min 0.30, max 0.60) |" in md
     assert "| 1 | 1 -> 2 | v2, v1 | 2 | 0.380 |" in md and "| 1 | 2024-11-27 | v2 | import x.las |" in md
+    # with the preview server's address: links to the release browser and to each pair in 3D
+    md = release_markdown(info, doc, "http://h:4201/releases/r/2.0.0/montage.png", "http://h:4201")
+    assert "[browse every item](http://h:4201/browse/r/2.0.0/)" in md and "[pair 1](http://h:4201/3d/r/2.0.0/1/)" in md
+
+
+def test_a_stopped_run_says_why_in_words() -> None:
+    from datetime import UTC, datetime
+
+    from siteline.previews.markdown import RunEvent, stopped_markdown
+
+    at = datetime(2026, 11, 27, 5, 12, 36, tzinfo=UTC)
+    why = "no heartbeat for 50 s: its process or machine died"
+    md = stopped_markdown("scene-1-labels-v3", [RunEvent(at, "Crashed", why, 1), RunEvent(at, "AwaitingRetry", "", 1)],
+                          "40 % done (pair 1: renders 3 of 6)", 3)  # fmt: skip
+    assert md.startswith("# Why scene-1-labels-v3 stopped") and f"**{why}**" in md and "went down" in md
+    assert "rescheduled (attempt 2 of 3)" in md and "Where it was: 40 % done (pair 1: renders 3 of 6)." in md
+    md = stopped_markdown("r", [RunEvent(at, "Crashed", "Flow run infrastructure exited with status -9", 3)], None, 3)
+    assert "crashed 3 times, the most the service retries" in md and "rescheduled" not in md and "went down" not in md

@@ -304,3 +304,18 @@ def test_viewer_draws_change_in_red_and_green_in_chromium(chromium, server) -> N
     page.wait_for_timeout(300)
     px = _scene_pixels(page)
     assert ((px[..., 0] > 180) & (px[..., 1] < 80) & (px[..., 2] < 80)).sum() == 0
+
+
+def test_clicking_a_camera_opens_its_item_in_the_browser(chromium, server) -> None:
+    page = _open(chromium, server + "/3d/rel/1.0.0/2/", (1100, 700))
+    plan = json.loads(_get(server + "/3d/rel/1.0.0/2/plan.json")[1])
+    panel = page.evaluate("document.getElementById('panel').getBoundingClientRect().right")
+    # a camera in sight, not under the panel
+    spots = {c["item"]: page.evaluate(f"window.siteline3d.cameraAt('{c['item']}')") for c in plan["cameras"]}
+    item, at = next((i, p) for i, p in spots.items() if p and panel + 10 < p["x"] < 1090 and 10 < p["y"] < 690)
+    with page.context.expect_page() as opened:
+        page.mouse.click(at["x"], at["y"])
+    shown = opened.value
+    shown.wait_for_function("document.body.dataset.ready")
+    assert shown.url.endswith(f"/browse/rel/1.0.0/#item={item}")
+    assert shown.locator("#d-title").inner_text().startswith(item) and shown.locator("#detail").is_visible()
