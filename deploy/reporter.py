@@ -10,8 +10,8 @@ repeats nothing already reported.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import re
-import sys
 import time
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -27,10 +27,19 @@ from prefect.client.schemas.filters import (
 )
 from prefect.events.filters import EventFilter, EventNameFilter, EventOccurredFilter, EventRelatedFilter
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from service import MAX_ATTEMPTS, TAG  # noqa: E402
+from siteline.previews.markdown import RunEvent, stopped_markdown
 
-from siteline.previews.markdown import RunEvent, stopped_markdown  # noqa: E402
+
+def _service():  # noqa: ANN202 (the module)
+    """deploy/service.py, loaded by its path (a module named ``service`` may be another on sys.path)."""
+    spec = importlib.util.spec_from_file_location("siteline_deploy_service", Path(__file__).resolve().with_name("service.py"))
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+_SERVICE = _service()
+MAX_ATTEMPTS, TAG = _SERVICE.MAX_ATTEMPTS, _SERVICE.TAG
 
 WATCHED = ("prefect.flow-run.Crashed", "prefect.flow-run.AwaitingRetry")
 LOOK_BACK = timedelta(hours=6)
