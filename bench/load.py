@@ -3,12 +3,12 @@ load explains? (issue: builds that crawl under load)
 
 Runs the work of one release build of a real cloud (tests/data/real/autzen_trim.laz against a later
 epoch of it: the pair's labels, view generation and 40 renders) in a child process, first on an idle
-machine and then beside N processes that spin on the CPU, for each torch thread setting, and prints the
+machine and then beside N processes that spin on the CPU, for each torch thread setting (torch's default, siteline's adaptive choice, one), and prints the
 slowdown beside the fair share: with N busy single-threaded processes on C cores, a job of T threads
 gets about C T / (N + T) cores where it had min(C, T), so it should take min(C, T) (N + T) / (C T) as
 long.
 
-    python bench/load.py [--busy 2 6] [--threads auto 1 2]
+    python bench/load.py [--busy 2 6] [--threads auto adaptive 1]
 """
 
 from __future__ import annotations
@@ -65,8 +65,11 @@ def _work(home: Path, threads: str) -> dict[str, float]:
     this process)."""
     import torch
 
-    if threads != "auto":
+    from siteline.render.threads import CpuThreads
+
+    if threads not in ("auto", "adaptive"):
         torch.set_num_threads(int(threads))
+    governor = CpuThreads("cpu" if threads == "adaptive" else "none")
     from siteline.catalog import open_catalog
     from siteline.config import Settings, sqlite_url
     from siteline.labelsets.store import open_labelled
@@ -85,14 +88,16 @@ def _work(home: Path, threads: str) -> dict[str, float]:
     t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
     labels = ex.pair_labels(plan, t1, t2, settings.store, no_progress)
     t_labels = time.perf_counter()
-    views = ex.pair_views(plan, t2, no_progress)
+    views = ex.pair_views(plan, t2, no_progress, governor)
     t_views = time.perf_counter()
     pair = LabelledPair.with_labels(t1, t2, labels.uri)
     for v in views.views[:40]:
+        governor()
         render_pair_view(pair, v.camera, plan.params, "cpu", plan.colour, plan.site.fence)
     t_end = time.perf_counter()
     return {"labels_s": t_labels - t0, "views_s": t_views - t_labels, "renders_s": t_end - t_views,
-            "total_s": t_end - t0, "torch_threads": torch.get_num_threads()}  # fmt: skip
+            "total_s": t_end - t0, "torch_threads": governor.cap,
+            "chosen": sorted(set(governor.chosen))}  # fmt: skip
 
 
 def _child(home: str, threads: str) -> None:
@@ -119,7 +124,8 @@ def main() -> None:
         return
     ap = argparse.ArgumentParser()
     ap.add_argument("--busy", type=int, nargs="+", default=[2, 6])
-    ap.add_argument("--threads", nargs="+", default=["auto", "1"])
+    ap.add_argument("--threads", nargs="+", default=["auto", "adaptive", "1"],
+                    help="torch threads: auto (torch's default, fixed), adaptive (siteline's: the cores the load leaves), or a number")
     args = ap.parse_args()
     cores = os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as d:
@@ -130,14 +136,16 @@ def main() -> None:
             idle = _run(home, threads, 0)
             t = int(idle["torch_threads"])
             print(f"{threads} torch threads ({t}), idle: labels {idle['labels_s']:.1f} s, views {idle['views_s']:.1f} s, "
-                  f"40 renders {idle['renders_s']:.1f} s, total {idle['total_s']:.1f} s", flush=True)  # fmt: skip
+                  f"40 renders {idle['renders_s']:.1f} s, total {idle['total_s']:.1f} s"
+                  + (f"; threads chosen {idle['chosen']}" if idle["chosen"] else ""), flush=True)  # fmt: skip
             for n in args.busy:
                 loaded = _run(home, threads, n)
                 fair = min(cores, t) * (n + t) / (cores * t)
                 ratio = loaded["total_s"] / idle["total_s"]
                 print(f"  beside {n} busy processes (load {n + t} on {cores} cores): total {loaded['total_s']:.1f} s = "
                       f"{ratio:.2f}x idle, fair share {fair:.2f}x: {ratio / fair:.2f}x of what the load explains "
-                      f"(views {loaded['views_s'] / idle['views_s']:.2f}x, renders {loaded['renders_s'] / idle['renders_s']:.2f}x)",
+                      f"(views {loaded['views_s'] / idle['views_s']:.2f}x, renders {loaded['renders_s'] / idle['renders_s']:.2f}x)"
+                      + (f"; threads chosen {loaded['chosen']}" if loaded["chosen"] else ""),
                       flush=True)  # fmt: skip
 
 

@@ -97,7 +97,7 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, kn
     total = time.perf_counter() - t0
     cat.dispose()
     summary = json.loads((Path(out.root) / "summary.json").read_text())
-    recs = out.views
+    recs = [v.to_dict() for v in out.views]
     w, h = recs[0]["camera"]["width"], recs[0]["camera"]["height"]
     px = w * scale * h * scale
     covered = np.array([(r["coverage_a"] + r["coverage_b"]) * px for r in recs])

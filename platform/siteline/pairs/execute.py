@@ -24,6 +24,7 @@ from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput, RenderedView
 from siteline.render.outputs import png_bytes
+from siteline.render.threads import CpuThreads
 from siteline.stores import Store, layout, move
 from siteline.tiles.reader import SceneTiles
 from siteline.tolerances import RATIO_TOL, at_least
@@ -73,9 +74,11 @@ def pair_labels(
     return PairLabels(radius, uri, record | {"radius": info})
 
 
-def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
+def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None) -> ViewSet:
     """Synthetic views of the later scene (DESIGN.md §5): probes read its tiles at the pair's point
-    size; :class:`PairError` when it has no cameras or every candidate is rejected."""
+    size, torch's threads following the machine's load (``threads``; a new one when None);
+    :class:`PairError` when it has no cameras or every candidate is rejected."""
+    threads = threads or CpuThreads()
     if not plan.cameras:
         raise PairError(
             f"pair {plan.pair_id}: the later scene {plan.t2.id} has no cameras to derive views from "
@@ -92,13 +95,18 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
         t2, skip, taxonomy.ignored_ids(), lod_factor=params.lod_factor, point_size_px=params.point_size_px
     )
     cams = [NamedCamera(n, c) for n, c in plan.cameras]
+
+    def step(k: int) -> None:
+        threads()
+        progress("views", k, len(cams) + params.views)
+
     views = generate_views(
         cams,
         plane,
         plan.fence,
         source,
         params.view_params_spec(),
-        progress=lambda k: progress("views", k, len(cams) + params.views),
+        progress=step,
     )
     if not views.views:
         raise PairError(
@@ -116,8 +124,19 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress) -> ViewSet:
 def _render_all(
     plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress
 ) -> tuple[list[tuple[SyntheticView, dict[str, Any]]], dict[str, int]]:
-    """Render the sample into ``work``/A|B|label under temporary names; a view whose valid fraction
-    is under ``min_valid`` is dropped and the next view of the stratified order rendered instead."""
+    """Render the sample into ``work``/A|B|label under temporary names, torch's CPU threads following
+    the machine's load; a view whose valid fraction is under ``min_valid`` is dropped and the next
+    view of the stratified order rendered instead."""
+    threads = CpuThreads(device)
+    try:
+        return _render_queue(plan, scenes, views, work, device, progress, threads)
+    finally:
+        threads.restore()
+
+
+def _render_queue(
+    plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress, threads: CpuThreads
+) -> tuple[list[tuple[SyntheticView, dict[str, Any]]], dict[str, int]]:
     params = plan.params
     queue = list(views.views)
     low_valid = 0
@@ -126,6 +145,7 @@ def _render_all(
         (work / sub).mkdir(parents=True)
     while queue:
         v = queue.pop(0)
+        threads()
         r = render_pair_view(scenes, v.camera, params, device, plan.colour, plan.site.fence)
         low = not at_least(r.valid, params.min_valid, RATIO_TOL)
         if low:
@@ -176,7 +196,11 @@ def execute_pair(
     t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
     labels = pair_labels(plan, t1, t2, store, progress)
     scenes = LabelledPair.with_labels(t1, t2, labels.uri)
-    views = pair_views(plan, t2, progress)
+    threads = CpuThreads()
+    try:
+        views = pair_views(plan, t2, progress, threads)
+    finally:
+        threads.restore()
     with store.publish(plan.root) as work:
         kept, rejected = _render_all(plan, scenes, views, work, device, progress)
         records = _index(kept, work, plan.params.seed)
