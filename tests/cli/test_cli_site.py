@@ -169,6 +169,7 @@ def test_database_url_override(home, capsys, postgres_url, monkeypatch) -> None:
     assert not (home / "catalog.sqlite").exists()
 
 
+@pytest.mark.slow  # 27 s: the whole demo twice (`make demo` runs it too); `make test-all` runs it
 @pytest.mark.e2e
 def test_demo_runs_and_is_rerunnable(home, capsys) -> None:
     # two epochs (one pair) and two training steps: every stage of `make demo`, at half its cost

@@ -112,6 +112,7 @@ def topo(tmp_path_factory):
     cat.dispose()
 
 
+@pytest.mark.slow  # 23 s: a site built, released and rebuilt; `make test-all` runs it
 def test_a_wrong_taxonomy_is_fixed_with_site_update(topo, tmp_path) -> None:
     """ASPRS 9 (water) went to ground under the default taxonomy; a taxonomy with a water class makes
     site version 2, tiles both scenes again (label set 1 follows), and a release names the version."""

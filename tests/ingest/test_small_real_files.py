@@ -90,6 +90,7 @@ def test_a_small_real_file_ingests_and_exports_back_or_is_refused_naming_it(
     assert d.max() <= 0.0011 * np.sqrt(3) and len(np.unique(j)) == len(want) - _duplicates(want)
 
 
+@pytest.mark.slow  # 14 s: two real-file ingests and a release attempt; `make test-all` runs it
 def test_a_scene_no_survey_covers_ingests_and_a_release_refuses_naming_it(tmp_path) -> None:
     home = tmp_path / "home"
     _run(home, "init")

@@ -151,6 +151,7 @@ def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
     assert "ABOVE the radius ceiling of 0.50 m" in readme
 
 
+@pytest.mark.slow  # 16 s: two more ingests of the real cloud; `make test-all` runs it
 def test_codes_the_taxonomy_does_not_map_are_refused_or_ignored(autzen, tmp_path) -> None:
     """A file with codes the site taxonomy lacks (29: reserved by ASPRS) is refused, exit 2, naming the
     codes, their points and the scheme; nothing is added. --unmapped-codes ignore takes it, its
@@ -194,6 +195,7 @@ def test_infeasible_settings_are_refused_before_any_view(autzen) -> None:
     assert "can give at most" in r.stderr and "fewer than --views 5000" in r.stderr
 
 
+@pytest.mark.slow  # 29 s: a second real cloud ingested and released twice; `make test-all` runs it
 def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
     c = centre_xy(TOPOGRAPHY)
     change = {"removed_box": (c[0] - 60, c[1] - 60, c[0] - 20, c[1] - 20),
