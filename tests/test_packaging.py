@@ -1,4 +1,5 @@
-"""A non-editable install carries the contracts' schemas and the catalog migrations."""
+"""A non-editable install carries the contracts' schemas, the catalog migrations and the preview pages
+with their vendored three.js."""
 
 from __future__ import annotations
 
@@ -20,6 +21,10 @@ engine = make_engine("sqlite:///" + {target!r} + "/catalog.sqlite")
 upgrade(engine)
 assert "release" in sa.inspect(engine).get_table_names()
 assert default_taxonomy().classes
+from importlib.resources import files
+static = files("siteline.previews").joinpath("static")
+assert static.joinpath("browser.html").is_file() and static.joinpath("viewer.html").is_file()
+assert static.joinpath("three", "three.module.js").is_file() and static.joinpath("three", "LICENSE").is_file()
 """
 
 
