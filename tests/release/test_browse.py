@@ -319,3 +319,15 @@ def test_clicking_a_camera_opens_its_item_in_the_browser(chromium, server) -> No
     shown.wait_for_function("document.body.dataset.ready")
     assert shown.url.endswith(f"/browse/rel/1.0.0/#item={item}")
     assert shown.locator("#d-title").inner_text().startswith(item) and shown.locator("#detail").is_visible()
+
+
+def test_chunks_read_from_many_threads_at_once_are_whole(built) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    _, cloud = _cloud(built, 2)
+    plan = cloud.plan(budget=40_000)
+    jobs = [(s, k) for s in (1, 2) for k in range(len(plan.chunks[s - 1]))] * 3
+    with ThreadPoolExecutor(8) as pool:
+        got = list(pool.map(lambda job: plan.chunk(*job), jobs))
+    alone = {job: plan.chunk(*job) for job in set(jobs)}
+    assert all(data == alone[job] for job, data in zip(jobs, got, strict=True))

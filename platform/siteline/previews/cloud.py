@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -160,12 +161,18 @@ class CloudPlan:
     centre: np.ndarray
     extent: np.ndarray
     levels: tuple[int, int]
+    # a scene's reader keeps a cache of decoded chunks: one read of it at a time (a page asks for several)
+    _reading: tuple[threading.Lock, threading.Lock] = field(
+        default_factory=lambda: (threading.Lock(), threading.Lock()), repr=False, compare=False
+    )
 
     def chunk(self, side: int, k: int) -> bytes:
-        """Chunk ``k`` of scene ``side`` (1 or 2), packed (:func:`encode_chunk`); IndexError when none."""
+        """Chunk ``k`` of scene ``side`` (1 or 2), packed (:func:`encode_chunk`); IndexError when none.
+        Safe to call from several threads."""
         if side not in (1, 2) or not 0 <= k < len(self.chunks[side - 1]):
             raise IndexError(f"scene t{side} has no chunk {k}")
-        return encode_chunk(self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre)
+        with self._reading[side - 1]:
+            return encode_chunk(self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre)
 
     def to_dict(self, browser: str | None) -> dict[str, Any]:
         """The viewer's plan (JSON): chunk counts and sizes, the centre, the classes, and each camera
