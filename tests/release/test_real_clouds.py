@@ -243,3 +243,46 @@ def test_black_colour_is_refused_at_build_never_published(tmp_path) -> None:
     assert r.returncode == 2 and "blank images" in r.stderr and "--colour intensity" in r.stderr
     assert not (home / "releases" / "black-cd" / ".drafts" / "1.0.0").exists()
     _ok(home, "release", "build", "--site", "black", "--name", "black-cd", "--views", "2", "--colour", "intensity")
+
+
+def _small_dense_site(path: Path, density: float = 400.0, seed: int = 0) -> Path:
+    """A 40 x 32 m scan at ``density`` points/m2 (UTM 18N): rough ground (class 2) with colour and a
+    6 x 6 m, 4 m high building (class 6), as a pilot's low flight over a small plot gives."""
+    import laspy
+
+    rng = np.random.default_rng(seed)
+    x0, y0 = 445_100.0, 5_030_100.0
+    n = int(40 * 32 * density)
+    xy = rng.uniform((0, 0), (40, 32), (n, 2))
+    z = 80.0 + 0.05 * rng.standard_normal(n)
+    cls = np.full(n, 2, np.uint8)
+    roof = (np.abs(xy[:, 0] - 12) < 3) & (np.abs(xy[:, 1] - 16) < 3)
+    z[roof] += 4.0
+    cls[roof] = 6
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = np.array([0.001] * 3), np.array([x0, y0, 0.0])
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xy[:, 0] + x0, xy[:, 1] + y0, z
+    las.classification = cls
+    shade = (96 + 64 * np.sin(xy[:, 0] / 3.0) * np.cos(xy[:, 1] / 4.0) + 20 * rng.random(n)).astype(np.uint16)
+    las.red, las.green, las.blue = shade * 256, (shade + 30) * 256, (shade // 2) * 256
+    las.gps_time = np.linspace(0.0, 600.0, n)
+    las.write(path)
+    return path
+
+
+@pytest.mark.slow  # ~2 min: two 512k-point ingests and a release with every default; `make test-all` runs it
+def test_a_small_dense_site_gets_a_release_with_defaults(tmp_path) -> None:
+    src = _small_dense_site(tmp_path / "plot.las")
+    home = _site(tmp_path, "plot", src, "EPSG:32618", (445_100.0, 5_030_100.0, 80.0),
+                 {"removed_box": (445_125.0, 5_030_105.0, 445_131.0, 5_030_111.0),
+                  "built_box": (445_125.0, 5_030_105.0, 445_131.0, 5_030_111.0, 3.0)},
+                 dates=("2024-05-01T10:00:00Z", "2024-05-15T10:00:00Z"))  # fmt: skip
+    scene = json.loads(_ok(home, "scene", "show", "2", "--json"))
+    survey = scene["registration"]["survey"]
+    assert survey["altitude_m"] < 80.0 and scene["cameras"] >= 16  # flown low enough for its views
+    r = _run(home, "release", "build", "--site", "plot", "--name", "plot-cd", "--publish")
+    assert r.returncode == 0, r.stderr
+    manifest = json.loads((home / "releases" / "plot-cd" / "1.0.0" / "manifest.json").read_text())
+    assert len(manifest["items"]) >= 30 and {it["split"] for it in manifest["items"]} == {"train", "val", "test"}
+    assert max(it["change_ratio"] for it in manifest["items"]) > 0.01

@@ -44,3 +44,19 @@ def test_three_pairs_or_more_split_by_whole_pairs() -> None:
     per_pair = {p: {sp for (q, _), sp in plan.of.items() if q == p} for p in views}
     assert all(len(s) == 1 for s in per_pair.values())
     assert set(Counter(next(iter(s)) for s in per_pair.values())) == {"train", "val", "test"}
+
+
+def test_a_view_held_out_of_train_stays_out_over_three_versions() -> None:
+    from siteline.release.splits import LEFT_OUT
+
+    views = {1: [_view(i, 20.0 * i, height=120.0) for i in range(40)]}  # wide discs: neighbours share ground
+    plan = assign_splits(views, seed=0)
+    held = set(plan.left_out)
+    assert held and "max_shared_footprint" in plan.rule
+    for version, new_pair in ((2, 2), (3, 3)):  # each later version adds a pair
+        previous = dict(plan.of) | dict.fromkeys(plan.left_out, LEFT_OUT)
+        views = views | {new_pair: [_view(i, 20.0 * i, height=120.0) for i in range(40)]}  # the same ground again
+        plan = assign_splits(views, seed=0, previous=previous)
+        assert held <= set(plan.left_out) and not held & set(plan.of), f"version {version}"
+        assert all(plan.of[item] == split for item, split in previous.items() if split != LEFT_OUT)
+        assert "max_shared_footprint" in plan.rule  # every version states the figure
