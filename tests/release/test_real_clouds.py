@@ -271,13 +271,13 @@ def _small_dense_site(path: Path, density: float = 400.0, seed: int = 0) -> Path
     return path
 
 
-@pytest.mark.slow  # ~2 min: two 512k-point ingests and a release with every default; `make test-all` runs it
+@pytest.mark.slow  # 2-4 min: two 512k-point ingests and a release with every default; `make test-all` runs it
 def test_a_small_dense_site_gets_a_release_with_defaults(tmp_path) -> None:
     src = _small_dense_site(tmp_path / "plot.las")
     home = _site(tmp_path, "plot", src, "EPSG:32618", (445_100.0, 5_030_100.0, 80.0),
                  {"removed_box": (445_125.0, 5_030_105.0, 445_131.0, 5_030_111.0),
                   "built_box": (445_125.0, 5_030_105.0, 445_131.0, 5_030_111.0, 3.0)},
-                 dates=("2024-05-01T10:00:00Z", "2024-05-15T10:00:00Z"))  # fmt: skip
+                 dates=("2024-05-01T10:00:00Z", "2024-05-15T10:00:00Z"), ingest=("--crs", "EPSG:32618"))  # fmt: skip
     scene = json.loads(_ok(home, "scene", "show", "2", "--json"))
     survey = scene["registration"]["survey"]
     assert survey["altitude_m"] < 80.0 and scene["cameras"] >= 16  # flown low enough for its views
