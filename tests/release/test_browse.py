@@ -203,10 +203,11 @@ def _fake_release(root: Path, n: int, size: tuple[int, int] = (40, 30)) -> dict:
 
 @pytest.fixture(scope="module")
 def chromium():
-    if not CHROMIUM.exists():
+    if not CHROMIUM.exists():  # a system package: `make test-all` installs it, `make test` may not have it
         pytest.skip("Debian's chromium is not installed (make test-all installs it)")
-    sync = pytest.importorskip("playwright.sync_api")
-    with sync.sync_playwright() as p:
+    from playwright.sync_api import sync_playwright  # a dev dependency
+
+    with sync_playwright() as p:
         browser = p.chromium.launch(
             executable_path=str(CHROMIUM),
             args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"],

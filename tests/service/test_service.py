@@ -152,11 +152,12 @@ def _screenshots(svc: Service, run_id: str, why_id: str, tmp_path: Path) -> None
     """The crashed run's why-artifact in the UI, the release browser and a pair in 3D, looked at in
     headless Chromium (Playwright, when installed): the texts and images are there; screenshots under
     SITELINE_SCREENSHOTS (docs/images when set so) for the docs."""
-    sync = pytest.importorskip("playwright.sync_api")
+    from playwright.sync_api import sync_playwright  # a dev dependency
+
     out = Path(os.environ.get("SITELINE_SCREENSHOTS", tmp_path / "shots"))
     out.mkdir(parents=True, exist_ok=True)
     ui = svc.api.removesuffix("/api")
-    with sync.sync_playwright() as p:
+    with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=shutil.which("chromium"),
                                     args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])  # fmt: skip
         page = browser.new_page(viewport={"width": 1400, "height": 900})

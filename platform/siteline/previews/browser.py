@@ -18,6 +18,7 @@ import numpy as np
 
 from siteline.errors import ReleaseError
 from siteline.release.manifest import read_manifest
+from siteline.stores import atomic_file
 
 COLUMNS = (
     "id", "split", "pair", "view", "strategy", "coverage", "valid", "change_ratio", "filled", "size", "padded",
@@ -83,7 +84,7 @@ def write_browser(root: Path, out: Path | None = None, status: str = "published"
     """Write the browser of the release at ``root`` to the HTML file ``out`` (default
     :func:`default_page_path`), its images addressed relative to ``out``'s folder so the page opens
     from the disk (file://) or wherever the two are served together. Written whole (a temporary
-    file renamed into place). :class:`ReleaseError` when ``out`` lies inside the release."""
+    file renamed into place, siteline.stores.atomic_file). :class:`ReleaseError` when ``out`` lies inside the release."""
     root = Path(root).resolve()
     out = Path(out).absolute() if out is not None else default_page_path(root)
     if Path(os.path.realpath(out)).is_relative_to(root):
@@ -94,10 +95,6 @@ def write_browser(root: Path, out: Path | None = None, status: str = "published"
     images = Path(os.path.relpath(root, out.parent)).as_posix()
     page = browser_page(doc, images, None, status)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
-    try:
+    with atomic_file(out) as tmp:
         tmp.write_text(page)
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
     return out

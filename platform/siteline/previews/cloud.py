@@ -60,10 +60,9 @@ def budget_takes(tiles: SceneTiles, budget: int) -> tuple[np.ndarray, int]:
     return take, max(whole - 1, 0)
 
 
-def chunk_plan(tiles: SceneTiles, budget: int, chunk_points: int = CHUNK_POINTS) -> list[CloudChunk]:
-    """The scene's points under ``budget`` (:func:`budget_takes`) as chunks of at most about
-    ``chunk_points``, each within one tile, tile by tile."""
-    take, _ = budget_takes(tiles, budget)
+def chunk_plan(tiles: SceneTiles, take: np.ndarray, chunk_points: int = CHUNK_POINTS) -> list[CloudChunk]:
+    """The first ``take`` points of each node of ``tiles.all_nodes`` (:func:`budget_takes`) as chunks
+    of at most about ``chunk_points``, each within one tile, tile by tile."""
     a = tiles.all_nodes
     chunks: list[CloudChunk] = []
     for t, tile in enumerate(a.tiles):
@@ -140,11 +139,10 @@ class PairCloud:
         t1, t2 = self.scenes.t1, self.scenes.t2
         lo = np.min([t.all_nodes.lo.min(axis=0) for t in (t1, t2) if len(t.all_nodes.lo)], axis=0)
         hi = np.max([t.all_nodes.hi.max(axis=0) for t in (t1, t2) if len(t.all_nodes.hi)], axis=0)
-        half = budget // 2
+        (take1, level1), (take2, level2) = (budget_takes(t, budget // 2) for t in (t1, t2))
         return CloudPlan(
-            self, (chunk_plan(t1, half), chunk_plan(t2, half)), (lo + hi) / 2, hi - lo,
-            (budget_takes(t1, half)[1], budget_takes(t2, half)[1]),
-        )  # fmt: skip
+            self, (chunk_plan(t1, take1), chunk_plan(t2, take2)), (lo + hi) / 2, hi - lo, (level1, level2)
+        )
 
     def side(self, side: int) -> SceneTiles:
         return self.scenes.t1 if side == 1 else self.scenes.t2

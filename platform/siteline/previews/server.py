@@ -90,6 +90,34 @@ def _allowed(home: Path, url_path: str) -> Path | None:
     return target
 
 
+class _Manifests:
+    """The manifests read last (at most :data:`OPEN_PAIRS` x 2), each read again only when its file
+    changes: a page asks for dozens of chunks, and a release of 5,000 items has a manifest of megabytes."""
+
+    def __init__(self) -> None:
+        self._docs: OrderedDict[Path, tuple[tuple[int, int], dict[str, Any]]] = OrderedDict()
+        self._guard = threading.Lock()
+
+    def read(self, root: Path) -> dict[str, Any]:
+        """``read_manifest(root)``, from memory when the file is the one read before."""
+        try:
+            st = (root / "manifest.json").stat()
+            stamp = (st.st_mtime_ns, st.st_size)
+        except OSError:
+            return read_manifest(root)  # says what is wrong
+        with self._guard:
+            hit = self._docs.get(root)
+            if hit is not None and hit[0] == stamp:
+                self._docs.move_to_end(root)
+                return hit[1]
+        doc = read_manifest(root)
+        with self._guard:
+            self._docs[root] = (stamp, doc)
+            while len(self._docs) > 2 * OPEN_PAIRS:
+                self._docs.popitem(last=False)
+        return doc
+
+
 def _inside(root: Path, rel: str) -> Path | None:
     """``root/rel`` when ``rel`` names a file that lies inside ``root`` (no hidden part, no way out)."""
     parts = [p for p in rel.split("/") if p]
@@ -107,11 +135,13 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
     home: Path
 
     def __init__(
-        self, *args: Any, home: Path, access: ReleaseAccess | None = None, plans: _Plans | None = None, **kwargs: Any
-    ) -> None:
+        self, *args: Any, home: Path, access: ReleaseAccess | None = None, plans: _Plans | None = None,
+        manifests: _Manifests | None = None, **kwargs: Any,
+    ) -> None:  # fmt: skip
         self.home = home
         self.access = access
         self.plans = plans or _Plans()
+        self.manifests = manifests or _Manifests()
         super().__init__(*args, directory=str(home), **kwargs)
 
     def _send(self, body: bytes, content_type: str, status: int = 200, cache: bool = False) -> io.BytesIO:
@@ -144,7 +174,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         for name in sorted(n for n in os.listdir(top) if not n.startswith(".")) if top.is_dir() else []:
             for version in sorted(v for v in os.listdir(top / name) if not v.startswith(".") and (top / name / v).is_dir()):
                 try:
-                    pairs = [int(p["id"]) for p in read_manifest(top / name / version)["lineage"]["pairs"]]
+                    pairs = [int(p["id"]) for p in self.manifests.read(top / name / version)["lineage"]["pairs"]]
                 except (SitelineError, KeyError, ValueError, OSError):
                     continue
                 base = f"{quote(name)}/{quote(version)}"
@@ -175,7 +205,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
     def _release_route(self, kind: str, name: str, version: str, rest: str) -> io.BytesIO:
         try:
             root, status = self._locate(name, version)
-            doc = read_manifest(root)
+            doc = self.manifests.read(root)
         except (LookupError, SitelineError) as exc:
             return self._text(404, str(exc))
         base = f"/{kind}/{quote(name)}/{quote(version)}"
@@ -278,7 +308,7 @@ def make_server(
     how to reach drafts and the scenes behind a release (None: published releases, no 3D viewer)."""
     layout.previews(home).mkdir(parents=True, exist_ok=True)
     layout.releases(home).mkdir(parents=True, exist_ok=True)
-    handler = partial(PreviewHandler, home=Path(home), access=access, plans=_Plans())
+    handler = partial(PreviewHandler, home=Path(home), access=access, plans=_Plans(), manifests=_Manifests())
     server = http.server.ThreadingHTTPServer((host, port), handler)
     server.daemon_threads = True
     return server
