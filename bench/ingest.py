@@ -90,9 +90,10 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         from siteline.catalog.engine import make_engine
         from siteline.catalog.sites import add_site
         from siteline.config import Settings, sqlite_url
-        from siteline.ingest import IngestOptions, ingest_mission
-        from siteline.site import make_site_spec
-        from siteline.tiles import tile_scene
+        from siteline.ingest.options import IngestOptions
+        from siteline.ingest.stage import ingest_mission
+        from siteline.site.spec import make_site_spec
+        from siteline.tiles.stage import tile_scene
 
         home = Path(tempfile.mkdtemp())
         settings = Settings(home, sqlite_url(home / "c.sqlite"), tile_batch_points=batch_points)

@@ -43,8 +43,8 @@ def _prepare(home: Path) -> None:
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.config import Settings, sqlite_url
-    from siteline.ingest import IngestOptions
-    from siteline.site import make_site_spec
+    from siteline.ingest.options import IngestOptions
+    from siteline.site.spec import make_site_spec
 
     c = centre_xy(AUTZEN)
     later = later_epoch(AUTZEN, home / "later.laz", removed_box=(c[0] - 150, c[1] - 150, c[0] - 50, c[1] - 50), days=300)
@@ -73,8 +73,8 @@ def _work(home: Path, threads: str) -> dict[str, float]:
     from siteline.catalog import open_catalog
     from siteline.config import Settings, sqlite_url
     from siteline.labelsets.store import open_labelled
-    from siteline.pairs import PairParams
     from siteline.pairs import execute as ex
+    from siteline.pairs.params import PairParams
     from siteline.pairs.plan import plan_pair
     from siteline.pairs.render import LabelledPair, render_pair_view
     from siteline.progress import no_progress

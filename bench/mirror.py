@@ -27,9 +27,9 @@ def main() -> None:
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.config import Settings, sqlite_url
-    from siteline.fence import load_fence_geojson
-    from siteline.pairs import PairParams
-    from siteline.site import make_site_spec
+    from siteline.pairs.params import PairParams
+    from siteline.site.fence import load_fence_geojson
+    from siteline.site.spec import make_site_spec
     from siteline.synth import SynthConfig, write_site
 
     with tempfile.TemporaryDirectory() as tmp:

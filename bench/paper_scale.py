@@ -55,8 +55,8 @@ def stage_ingest(work: Path) -> dict:
     from siteline.catalog import migrate, open_catalog
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
-    from siteline.fence import load_fence_geojson
-    from siteline.site import make_site_spec
+    from siteline.site.fence import load_fence_geojson
+    from siteline.site.spec import make_site_spec
     from siteline.synth import SynthConfig
 
     settings = _settings(work)
@@ -78,7 +78,8 @@ def stage_ingest(work: Path) -> dict:
 
 def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, knobs: dict) -> dict:
     from siteline.catalog import open_catalog
-    from siteline.pairs import PairParams, process_pair
+    from siteline.pairs.params import PairParams
+    from siteline.pairs.stage import process_pair
 
     settings = _settings(work)
     cat = open_catalog(settings)

@@ -30,14 +30,16 @@ def main() -> None:
         "--demo", action="store_true", help="also time `siteline demo` end to end in a fresh home"
     )
     args = ap.parse_args()
-    from siteline.cameras import Camera
-    from siteline.fence import load_fence_geojson
-    from siteline.labels import change_flags, write_labels
-    from siteline.pairs import LabelledPair, PairParams
-    from siteline.pairs.render import render_pair_view
-    from siteline.site import make_site_spec
+    from siteline.camera.pinhole import Camera
+    from siteline.labels.change import change_flags
+    from siteline.labels.store import write_labels
+    from siteline.pairs.params import PairParams
+    from siteline.pairs.render import LabelledPair, render_pair_view
+    from siteline.site.fence import load_fence_geojson
+    from siteline.site.spec import make_site_spec
     from siteline.synth import LAS_RELPATH, SynthConfig, write_site
-    from siteline.tiles import SceneTiles, write_tiles
+    from siteline.tiles.reader import SceneTiles
+    from siteline.tiles.writer import write_tiles
 
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)

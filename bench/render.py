@@ -20,8 +20,9 @@ import time
 import numpy as np
 import torch
 
-from siteline.cameras import Camera
-from siteline.render import RenderSettings, render_points
+from siteline.camera.pinhole import Camera
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
 
 W, H, FX = 5645, 4082, 4000.0
 ALT_M = 80.0

@@ -53,10 +53,12 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     from sitehelpers import epoch_dirs, make_home
 
     from siteline.catalog import open_catalog
-    from siteline.ingest import ingest_mission
-    from siteline.pairs import PairParams, process_pair
-    from siteline.release import ReleaseParams, build_release
-    from siteline.tiles import tile_scene
+    from siteline.ingest.stage import ingest_mission
+    from siteline.pairs.params import PairParams
+    from siteline.pairs.stage import process_pair
+    from siteline.release.params import ReleaseParams
+    from siteline.release.stage import build_release
+    from siteline.tiles.stage import tile_scene
 
     settings = make_home(root, site_dir=site_dir, store_url=store_url)
     settings.store.ensure()

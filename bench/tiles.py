@@ -29,8 +29,8 @@ def child(mode: str, path: str, out: str) -> None:
     import laspy
     import pyproj
 
-    from siteline.site import make_site_spec
-    from siteline.tiles import write_tiles
+    from siteline.site.spec import make_site_spec
+    from siteline.tiles.writer import write_tiles
 
     t = time.perf_counter()
     if mode == "read":
@@ -111,10 +111,13 @@ def view_read(points: int) -> None:
     (whole levels, as stores written before shuffled nodes); read throughput."""
     import pyproj
 
-    from siteline.cameras import Camera
-    from siteline.render import RenderSettings, render_points
-    from siteline.site import make_site_spec
-    from siteline.tiles import SceneTiles, TileSpec, write_tiles
+    from siteline.camera.pinhole import Camera
+    from siteline.records.tiling import TileSpec
+    from siteline.render.settings import RenderSettings
+    from siteline.render.zbuffer import render_points
+    from siteline.site.spec import make_site_spec
+    from siteline.tiles.reader import SceneTiles
+    from siteline.tiles.writer import write_tiles
 
     with tempfile.TemporaryDirectory() as d:
         las = Path(d) / "c.las"

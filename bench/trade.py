@@ -24,20 +24,23 @@ import laspy
 import numpy as np
 import pyproj
 
-from siteline.cameras import Camera
-from siteline.fence import inside_fence, load_fence_geojson
+from siteline.camera.pinhole import Camera
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
-from siteline.metrics import confusion, scores
 from siteline.pairs.render import pair_mask
 from siteline.pairs.sources import TilePointSource
 from siteline.pointpass import TilingResources
-from siteline.render import RenderSettings, render_points
-from siteline.site import SiteSpec, make_site_spec
+from siteline.release.metrics import confusion, scores
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
+from siteline.site.fence import inside_fence, load_fence_geojson
+from siteline.site.spec import SiteSpec, make_site_spec
+from siteline.site.taxonomy import default_taxonomy
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
-from siteline.taxonomy import default_taxonomy
-from siteline.tiles import SceneTiles, write_tiles
-from siteline.tiles.writer import TileInput
-from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import TileInput, write_tiles
+from siteline.views.generate import NamedCamera, generate_views
+from siteline.views.ground import fit_ground_plane
+from siteline.views.params import ViewParams
 
 
 @dataclass(frozen=True)
@@ -50,7 +53,7 @@ class TradeGrid:
     splats: tuple[str, ...] = ("fixed", "world")
 
 
-# world splats fill gaps within this many pixels (the release default, siteline.pairs.PairParams)
+# world splats fill gaps within this many pixels (the release default, siteline.pairs.params.PairParams)
 FILL_PX = 2
 
 

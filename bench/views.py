@@ -65,13 +65,14 @@ def _views(home: Path, copies: int, rules: dict, views: int) -> dict[str, float]
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.config import Settings, sqlite_url
-    from siteline.ingest import IngestOptions
+    from siteline.ingest.options import IngestOptions
     from siteline.labelsets.store import open_labelled
-    from siteline.pairs import PairParams, sources
     from siteline.pairs import execute as pair_execute
+    from siteline.pairs import sources
+    from siteline.pairs.params import PairParams
     from siteline.pairs.plan import plan_pair
     from siteline.progress import no_progress
-    from siteline.site import make_site_spec
+    from siteline.site.spec import make_site_spec
 
     settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
     if not (home / "catalog.sqlite").exists():

@@ -42,9 +42,8 @@ from siteline.catalog.pairs import pair_ids_of_scene, site_name_of_pair  # noqa:
 from siteline.catalog.scenes import site_name_of_scene  # noqa: E402
 from siteline.catalog.stages import record_failure  # noqa: E402
 from siteline.config import Settings, load_settings  # noqa: E402
-from siteline.diskspace import disk_full, full_disk_message  # noqa: E402
 from siteline.errors import SitelineError, StoreError  # noqa: E402
-from siteline.ingest import IngestOptions  # noqa: E402
+from siteline.ingest.options import IngestOptions  # noqa: E402
 from siteline.pairs.params import PairParams  # noqa: E402
 from siteline.pointpass import TilingResources  # noqa: E402
 from siteline.records.pairs import PairOutput  # noqa: E402
@@ -52,6 +51,7 @@ from siteline.records.release import ReleaseInfo, ReleaseOptions  # noqa: E402
 from siteline.records.runs import StageRun  # noqa: E402
 from siteline.release.knobs import ReleaseKnobs  # noqa: E402
 from siteline.stores import join  # noqa: E402
+from siteline.stores.diskspace import disk_full, full_disk_message  # noqa: E402
 
 # the library's INFO lines (views, renders, releases) reach the run logs: PREFECT_LOGGING_EXTRA_LOGGERS=siteline
 # gives the logger Prefect's handlers, this its level
@@ -323,7 +323,7 @@ def ingest_mission_flow(
         return sid
     emit_event(
         "siteline.scene.registered",
-        resource={"prefect.resource.id": f"siteline.scene.{sid}", "siteline.site": site},
+        resource={"prefect.resource.id": f"siteline.scene.{sid}", "siteline.site.spec": site},
         payload={"scene_id": sid, "site": site, "pairs": pairs},
     )
     get_run_logger().info("scene %d announced: pairs %s to process", sid, pairs)

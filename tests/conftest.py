@@ -151,8 +151,8 @@ def scenes(tmp_path_factory, synth_site):
     from sitehelpers import epoch_dirs, make_home
 
     from siteline.catalog import open_catalog
-    from siteline.ingest import ingest_mission
-    from siteline.tiles import tile_scene
+    from siteline.ingest.stage import ingest_mission
+    from siteline.tiles.stage import tile_scene
 
     settings = make_home(tmp_path_factory.mktemp("scenes"), site_dir=synth_site)
     cat = open_catalog(settings)

@@ -16,9 +16,9 @@ from siteline.catalog import migrate, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
-from siteline.fence import load_fence_geojson
 from siteline.pointpass import TilingResources
-from siteline.site import make_site_spec
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import make_site_spec
 from siteline.synth import SynthConfig
 
 SYNTH = SynthConfig(epochs=3, density_pts_m2=3.0, seed=21)
@@ -121,8 +121,8 @@ def node_order_key(counts: np.ndarray) -> np.ndarray:
 def ingest_and_tile(cat, settings: Settings, missions: list[Path], site: str = "demo") -> list[int]:  # noqa: ANN001
     """Ingest and tile each mission folder in turn (the library's stages, as a service would); their
     scene ids."""
-    from siteline.ingest import ingest_mission
-    from siteline.tiles import tile_scene
+    from siteline.ingest.stage import ingest_mission
+    from siteline.tiles.stage import tile_scene
 
     ids = []
     for m in missions:

@@ -58,9 +58,9 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
     from siteline.catalog import open_catalog
     from siteline.catalog.labelsets import label_sets, labelled_source
     from siteline.catalog.missions import list_missions
-    from siteline.ingest import ingest_mission
-    from siteline.labelsets import open_labelled
+    from siteline.ingest.stage import ingest_mission
     from siteline.labelsets.export import export_label_set
+    from siteline.labelsets.store import open_labelled
     from siteline.stores import open_store
 
     settings = make_home(tmp_path, db_url, race_site)

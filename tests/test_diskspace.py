@@ -10,7 +10,7 @@ import sqlite3
 import pytest
 import sqlalchemy as sa
 
-from siteline.diskspace import disk_full, full_disk_message
+from siteline.stores.diskspace import disk_full, full_disk_message
 
 
 def _raised_from(cause: BaseException) -> RuntimeError:

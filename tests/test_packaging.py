@@ -12,10 +12,10 @@ REPO = Path(__file__).resolve().parents[1]
 CHECK = """
 import siteline, sqlalchemy as sa
 assert siteline.__file__.startswith({target!r}), siteline.__file__
-from siteline.schemas import load_schema
+from siteline.schema import load_schema
 from siteline.catalog.engine import make_engine
 from siteline.catalog.migrate import upgrade
-from siteline.taxonomy import default_taxonomy
+from siteline.site.taxonomy import default_taxonomy
 assert load_schema("release.schema.json")["title"]
 engine = make_engine("sqlite:///" + {target!r} + "/catalog.sqlite")
 upgrade(engine)

@@ -7,10 +7,10 @@ import json
 import pytest
 
 from siteline.errors import PairError, RenderError, ViewsError
-from siteline.pairs import PairParams
+from siteline.pairs.params import PairParams
 from siteline.release.params import ReleaseParams
-from siteline.render import RenderSettings
-from siteline.views import ViewParams
+from siteline.render.settings import RenderSettings
+from siteline.views.params import ViewParams
 
 
 def test_pair_params_are_composed_of_the_stages_specs() -> None:

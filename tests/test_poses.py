@@ -12,11 +12,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from siteline.cameras import Camera
-from siteline.dji import cam_from_world_rotation, gimbal_angles, grid_convergence_deg
+from siteline.camera.dji import cam_from_world_rotation, gimbal_angles, grid_convergence_deg
+from siteline.camera.photos import read_photo_meta
+from siteline.camera.pinhole import Camera
+from siteline.camera.poses import Rigid, Sim3
 from siteline.errors import CameraError, GeometryError
-from siteline.photos import read_photo_meta
-from siteline.poses import Rigid, Sim3
 from siteline.tiles.layout import dequantise, quantise
 
 REAL_PHOTO = Path(__file__).resolve().parent / "data" / "DJI_H20T.jpg"

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from siteline.crs import parse_crs, site_from_crs
 from siteline.errors import CRSError, GeometryError, SchemaError, SiteError
-from siteline.fence import inside_fence, load_fence_geojson, nearest_segment, validate_fence
-from siteline.site import SiteSpec, make_site_spec
-from siteline.taxonomy import default_taxonomy, load_taxonomy
+from siteline.site.crs import parse_crs, site_from_crs
+from siteline.site.fence import inside_fence, load_fence_geojson, nearest_segment, validate_fence
+from siteline.site.spec import SiteSpec, make_site_spec
+from siteline.site.taxonomy import default_taxonomy, load_taxonomy
 
 SQUARE = [(0, 0), (100, 0), (100, 80), (0, 80), (0, 0)]
 
@@ -140,7 +140,7 @@ def test_footprint_follows_the_data() -> None:
     import numpy as np
     import shapely
 
-    from siteline.fence import footprint, inside_fence
+    from siteline.site.fence import footprint, inside_fence
 
     rng = np.random.default_rng(0)
     pts = rng.uniform(0, 100, (20_000, 2))

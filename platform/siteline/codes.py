@@ -1,5 +1,5 @@
 """Change codes, the one definition (DESIGN.md §4): per point (3D labels) and per pixel (2D masks,
-``label_ignore/`` in releases, ``siteline.metrics``)."""
+``label_ignore/`` in releases, ``siteline.release.metrics``)."""
 
 UNCHANGED = 0
 CHANGED = 1

@@ -22,8 +22,8 @@ from siteline.catalog.sites import get_site, imported_label_sets, site_spec
 from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings
 from siteline.errors import LabelSetError, ReleaseError
-from siteline.fence import validate_fence
-from siteline.ingest import IngestOptions, IngestResult, ingest_mission
+from siteline.ingest.options import IngestOptions
+from siteline.ingest.stage import IngestResult, ingest_mission
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.params import PairParams
 from siteline.pairs.plan import pair_change_rule
@@ -47,9 +47,10 @@ from siteline.release.plan import (
 )
 from siteline.release.stage import build_release
 from siteline.render.colour import ColourPlan
+from siteline.site.fence import validate_fence
+from siteline.site.taxonomy import Taxonomy
 from siteline.stores import layout
-from siteline.taxonomy import Taxonomy
-from siteline.tiles import TileOutcome, tile_scene
+from siteline.tiles.stage import TileOutcome, tile_scene
 
 log = logging.getLogger(__name__)
 
@@ -128,8 +129,8 @@ def redefine_site(
     did. A re-tiling cut short is finished by the next ``release build`` (a scene tiled under an
     earlier version is tiled again before its pairs); a carried file that cannot be imported (a
     class the new taxonomy lacks) is named, to import with ``--taxonomy-map``."""
-    from siteline.labelsets import ImportOptions, import_labels
     from siteline.labelsets.export import export_corrections
+    from siteline.labelsets.stage import ImportOptions, import_labels
 
     ring = None
     if fence is not None:

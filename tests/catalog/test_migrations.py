@@ -11,7 +11,7 @@ from siteline.catalog import Base, migrate, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site, list_sites
 from siteline.errors import RevisionMismatchError
-from siteline.site import make_site_spec
+from siteline.site.spec import make_site_spec
 
 
 def _diff(engine: sa.Engine) -> list:

@@ -11,7 +11,7 @@ from siteline.catalog import open_catalog
 from siteline.catalog.models import Mission, Release, ReleaseItem, Scene, Site, StageRun
 from siteline.catalog.sites import add_site, get_site, site_spec
 from siteline.errors import ImmutableError, SiteError, SiteNotFoundError
-from siteline.site import make_site_spec
+from siteline.site.spec import make_site_spec
 
 T0 = datetime(2024, 11, 27, 15, 0, tzinfo=UTC)
 

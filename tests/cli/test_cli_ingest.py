@@ -41,7 +41,7 @@ def test_xmp_variants_old_namespace_and_misspelling(tmp_path) -> None:
     import numpy as np
     from PIL import Image
 
-    from siteline.photos import read_photo_meta
+    from siteline.camera.photos import read_photo_meta
 
     xmp = (
         b'<x:xmpmeta xmlns:x="adobe:ns:meta/"><rdf:RDF xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#">'

@@ -14,10 +14,10 @@ import pytest
 from sitehelpers import SYNTH, epoch_dirs, make_home, run_cli
 
 from siteline.catalog import open_catalog
-from siteline.ingest import ingest_mission
+from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources
-from siteline.release import read_manifest
-from siteline.tiles import tile_scene
+from siteline.release.manifest import read_manifest
+from siteline.tiles.stage import tile_scene
 
 EXE = str(Path(sys.executable).with_name("siteline"))
 

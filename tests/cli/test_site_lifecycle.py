@@ -22,13 +22,13 @@ from siteline.catalog import migrate, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
-from siteline.ingest import IngestOptions
-from siteline.labelsets import import_labels
+from siteline.ingest.options import IngestOptions
 from siteline.labelsets.export import export_label_set
+from siteline.labelsets.stage import import_labels
 from siteline.records.release import ReleaseOptions
 from siteline.register.planned import SurveyPlan
 from siteline.release.knobs import ReleaseKnobs
-from siteline.site import make_site_spec
+from siteline.site.spec import make_site_spec
 
 EXE = Path(sys.executable).parent / "siteline"
 ORIGIN = (273500.0, 5274500.0, 800.0)

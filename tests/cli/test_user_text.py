@@ -19,8 +19,8 @@ def test_a_path_with_markup_is_printed_not_parsed(capsys, home) -> None:
 
 
 def test_a_note_with_markup_and_escapes_stays_readable(capsys, scenes, tmp_path, monkeypatch) -> None:
-    from siteline.labelsets import ImportOptions, import_labels
     from siteline.labelsets.export import export_label_set
+    from siteline.labelsets.stage import ImportOptions, import_labels
 
     settings, cat = scenes
     export_label_set(cat, 2, tmp_path / "s2.las")

@@ -7,19 +7,21 @@ import numpy as np
 import pyproj
 import pytest
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import PointCloudError, RegistrationError, ViewsError
-from siteline.labels import CHANGED, IGNORED, change_flags
+from siteline.labels.change import CHANGED, IGNORED, change_flags
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.register.georegister import check_spread
 from siteline.register.icp import point_to_plane_icp
-from siteline.render import RenderSettings, render_georeferenced, render_points
-from siteline.site import make_site_spec
-from siteline.taxonomy import default_taxonomy
-from siteline.tiles import SceneTiles, write_tiles
-from siteline.tiles.writer import TileInput
-from siteline.views import fit_ground_plane
+from siteline.render.georef import render_georeferenced
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
+from siteline.site.spec import make_site_spec
+from siteline.site.taxonomy import default_taxonomy
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import TileInput, write_tiles
+from siteline.views.ground import fit_ground_plane
 
 IGN = default_taxonomy().ignored_lut()
 EXTREME_ORIGINS = [

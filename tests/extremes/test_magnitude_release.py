@@ -15,14 +15,14 @@ from siteline.catalog import migrate, open_catalog
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
-from siteline.fence import load_fence_geojson
-from siteline.ingest import ingest_mission
-from siteline.pairs import PairParams
+from siteline.ingest.stage import ingest_mission
+from siteline.pairs.params import PairParams
 from siteline.pointpass import TilingResources
 from siteline.release.knobs import ReleaseKnobs
-from siteline.site import make_site_spec
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import make_site_spec
 from siteline.synth import SynthConfig, write_site
-from siteline.tiles import tile_scene
+from siteline.tiles.stage import tile_scene
 
 ORIGINS = {"small": (1000.0, 2000.0, 80.0), "large": (-8_400_000.0, 5_600_000.0, 80.0)}
 PARAMS = PairParams(scale=0.125, views=12, seed=0, min_coverage=0.3)

@@ -132,8 +132,8 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
 
     from siteline.cli.labels import imported_event
     from siteline.cli.watch import post_events
-    from siteline.labelsets import import_labels
     from siteline.labelsets.export import export_label_set
+    from siteline.labelsets.stage import import_labels
 
     cat = open_catalog(settings)
     export_label_set(cat, 1, tmp_path / "s1.las")
@@ -165,7 +165,7 @@ def test_retry_then_success_and_permanent_failure_recorded(
     from siteline.catalog import open_catalog
     from siteline.catalog.models import Scene
     from siteline.catalog.stages import stage_runs
-    from siteline.ingest import ingest_mission
+    from siteline.ingest.stage import ingest_mission
 
     settings = _home(tmp_path, small_site, monkeypatch)
     cat = open_catalog(settings)
@@ -222,7 +222,7 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
     from prefect_dask import DaskTaskRunner
 
     from siteline.catalog import open_catalog
-    from siteline.ingest import ingest_mission
+    from siteline.ingest.stage import ingest_mission
     from siteline.stores import open_store
 
     results = {}
@@ -293,7 +293,7 @@ def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, 
     import siteline.pipeline as tiles_pkg
     from siteline.catalog import open_catalog
     from siteline.errors import TileError
-    from siteline.ingest import ingest_mission
+    from siteline.ingest.stage import ingest_mission
 
     settings = _home(tmp_path, small_site, monkeypatch)
     cat = open_catalog(settings)

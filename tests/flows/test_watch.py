@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from siteline.cli.watch import UPLOADED, upload_event
-from siteline.watch import MARKER, UploadWatcher
+from siteline.ingest.watch import MARKER, UploadWatcher
 
 
 def _announce(w: UploadWatcher, now: float) -> list[Path]:
@@ -110,4 +110,4 @@ def test_labels_imported_event_matches_the_deployment_trigger() -> None:
         "scene_id": "{{ event.payload.scene_id }}",
         "reason": "labels v{{ event.payload.version }}",  # the run says why it ran (issue 24)
     }
-    assert ev["payload"]["scene_id"] == 3 and ev["payload"]["version"] == 2 and ev["resource"]["siteline.site"] == "demo"
+    assert ev["payload"]["scene_id"] == 3 and ev["payload"]["version"] == 2 and ev["resource"]["siteline.site.spec"] == "demo"

@@ -8,9 +8,9 @@ from sitehelpers import epoch_dirs, make_home
 from siteline.catalog import open_catalog
 from siteline.catalog.pairs import list_pairs, pair_ids_of_scene
 from siteline.catalog.sites import get_site
-from siteline.ingest import ingest_mission
+from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources
-from siteline.tiles import tile_scene
+from siteline.tiles.stage import tile_scene
 
 
 def _home(tmp_path, synth_site, order: list[int], name: str):

@@ -25,7 +25,8 @@ from siteline.errors import (
     RegistrationError,
     SiteNotFoundError,
 )
-from siteline.ingest import IngestOptions, ingest_mission
+from siteline.ingest.options import IngestOptions
+from siteline.ingest.stage import ingest_mission
 from siteline.pointpass.lasio import write_las
 from siteline.synth import LAS_RELPATH
 

@@ -11,7 +11,8 @@ import pytest
 from sitehelpers import run_cli
 
 from siteline.errors import MissionError
-from siteline.ingest import IngestOptions, ingest_mission
+from siteline.ingest.options import IngestOptions
+from siteline.ingest.stage import ingest_mission
 from siteline.pointpass.lasio import write_las
 
 # LAS 1.x header: file creation day of year at byte 90, year at byte 92 (both uint16)

@@ -10,12 +10,12 @@ import sqlalchemy as sa
 from sitehelpers import copy_mission, make_home
 
 from siteline import pipeline
-from siteline.cameras import Camera, undistorted_pinhole
+from siteline.camera.photos import PhotoMeta
+from siteline.camera.pinhole import Camera, undistorted_pinhole
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Scene, View
 from siteline.catalog.scenes import scene_cameras
-from siteline.pairs import PairParams
-from siteline.photos import PhotoMeta
+from siteline.pairs.params import PairParams
 from siteline.register.xmp import camera_from_photo, dewarp_camera
 
 DISTORTED = {

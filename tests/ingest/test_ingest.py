@@ -14,18 +14,19 @@ import pytest
 import sqlalchemy as sa
 from sitehelpers import copy_mission, epoch_dirs, make_home
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Mission, Pair, Scene
 from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics, tile_source
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
-from siteline.ingest import IngestOptions, ingest_mission
+from siteline.ingest.options import IngestOptions
+from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
-from siteline.tiles import tile_scene
+from siteline.tiles.stage import tile_scene
 
 # a bare LAS without an absolute GPS time cannot tell its capture time: the tests give it
 DATED = IngestOptions(captured_at=datetime(2024, 6, 1, 12, tzinfo=UTC))
@@ -150,8 +151,8 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     r = ingest_mission(cat, settings, epoch_dirs(site)[0], "demo")
     assert r.created and r.registration["source"] == "planned"
     survey = r.registration["survey"]
-    from siteline.fence import fence_area_m2
     from siteline.register.planned import SurveyPlan, auto_altitude
+    from siteline.site.fence import fence_area_m2
 
     # no --altitude: chosen from the cloud's density and the fence's area, and the reason recorded
     altitude, why = auto_altitude(SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings)))

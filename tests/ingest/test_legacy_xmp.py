@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from siteline.photos import read_photo_meta
+from siteline.camera.photos import read_photo_meta
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "data"))
 from legacy_dji import legacy_photo  # noqa: E402

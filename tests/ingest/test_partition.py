@@ -11,14 +11,14 @@ import pytest
 from sitehelpers import copy_mission, epoch_dirs
 
 from siteline.errors import RegistrationError
-from siteline.ingest import ingest_mission
 from siteline.ingest.pointcloud import scan_las
+from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources, partition, schema
 from siteline.pointpass.lasio import write_las
-from siteline.site import make_site_spec
+from siteline.site.spec import make_site_spec
 from siteline.stores import layout
 from siteline.synth import LAS_RELPATH
-from siteline.tiles import tile_scene
+from siteline.tiles.stage import tile_scene
 
 
 def _kept(settings) -> list[str]:
@@ -90,8 +90,8 @@ def test_the_batch_setting_reaches_the_tile_stage(cat, site_settings, synth_site
 
     from siteline.config import load_settings
     from siteline.errors import ConfigError
-    from siteline.ingest import ingest_mission
-    from siteline.tiles import tile_scene
+    from siteline.ingest.stage import ingest_mission
+    from siteline.tiles.stage import tile_scene
 
     assert load_settings({"SITELINE_TILE_BATCH_POINTS": "1_000"}).tile_batch_points == 1000
     with pytest.raises(ConfigError, match="SITELINE_TILE_BATCH_POINTS"):

@@ -8,8 +8,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from siteline.records.registration import Alignment
-from siteline.register import AlignmentPolicy, check_alignment
 from siteline.register.icp import STRUCTURE, SURFACES, register_samples
+from siteline.register.scene import AlignmentPolicy, check_alignment
 
 SHIFT = np.array([1.2, -0.8, 0.3])
 TURN = Rotation.from_euler("z", 0.2, degrees=True).as_matrix()

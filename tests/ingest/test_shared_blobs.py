@@ -17,9 +17,9 @@ import siteline.ingest.stage as stage
 from siteline.catalog import open_catalog
 from siteline.catalog.models import MissionFile, Scene
 from siteline.catalog.sites import add_site
-from siteline.fence import load_fence_geojson
-from siteline.ingest import ingest_mission
-from siteline.site import make_site_spec
+from siteline.ingest.stage import ingest_mission
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import make_site_spec
 from siteline.stores import layout
 
 WAIT_S = 60.0

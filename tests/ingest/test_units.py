@@ -12,8 +12,8 @@ import pyproj
 import pytest
 from sitehelpers import run_cli
 
-from siteline.crs import parse_z_unit, z_unit_of
 from siteline.errors import CRSError
+from siteline.site.crs import parse_z_unit, z_unit_of
 
 OREGON_FT = "EPSG:2994"  # NAD83(HARN) / Oregon GIC Lambert (ft), the CRS of laspy's autzen sample
 OREGON_FT_COMPOUND = "EPSG:2994+6360"  # ... + NAVD88 height (ftUS)
@@ -154,7 +154,7 @@ def test_a_feet_wkt_site_crs_is_refused_briefly_naming_the_utm_zone_of_the_origi
     from realdata import AUTZEN
 
     from siteline.errors import CRSError
-    from siteline.site import make_site_spec
+    from siteline.site.spec import make_site_spec
 
     wkt = laspy.read(AUTZEN).header.parse_crs().to_wkt()
     with pytest.raises(CRSError) as err:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.labels import change_flags
+from siteline.labels.change import change_flags
 
 
 def test_unclassified_points_change_by_geometry_only() -> None:
     """ASPRS 0/1 'unclassified' (a geometry_only class): a counterpart of any kept class within the
     radius makes it unchanged, none makes it changed; other classes still compare classes."""
-    from siteline.taxonomy import default_taxonomy
+    from siteline.site.taxonomy import default_taxonomy
 
     tax = default_taxonomy()
     unc, ground, building = (tax.id_of(n) for n in ("unclassified", "ground", "building"))

@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from siteline.labels import CHANGED, change_flags
-from siteline.labels.change import median_spacing
+from siteline.labels.change import CHANGED, change_flags, median_spacing
 from siteline.labels.params import expected_false_change
-from siteline.pairs import PairParams
-from siteline.taxonomy import default_taxonomy
+from siteline.pairs.params import PairParams
+from siteline.site.taxonomy import default_taxonomy
 
 
 def _surface(rng: np.random.Generator, n: int, side_m: float) -> np.ndarray:

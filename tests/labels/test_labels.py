@@ -10,12 +10,13 @@ import pytest
 from scipy.spatial import cKDTree
 from sitehelpers import SYNTH, epoch_dirs
 
-from siteline.labels import CHANGED, IGNORED, UNCHANGED, change_flags, write_labels
+from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags
+from siteline.labels.store import write_labels
 from siteline.pointpass import TilingResources
+from siteline.site.taxonomy import default_taxonomy
 from siteline.synth import LAS_RELPATH
-from siteline.taxonomy import default_taxonomy
-from siteline.tiles import SceneTiles, write_tiles
-from siteline.tiles.writer import TileInput
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import TileInput, write_tiles
 
 TAX = default_taxonomy()
 IGN = TAX.ignored_lut()
@@ -67,8 +68,8 @@ def test_edge_cases() -> None:
 def _site_tiles(tmp_path, synth_site, index, origin=SYNTH.origin, name="s"):
     import pyproj
 
-    from siteline.fence import load_fence_geojson
-    from siteline.site import make_site_spec
+    from siteline.site.fence import load_fence_geojson
+    from siteline.site.spec import make_site_spec
 
     ring = load_fence_geojson(synth_site / "fence.geojson", SYNTH.origin)
     site = make_site_spec("s", SYNTH.crs, origin, [*ring, ring[0]])
@@ -102,7 +103,7 @@ def _truth(site, index, key):
 
 def _local(site, index):
     """Site-local points and site classes as ingest makes them (taxonomy, outside the fence -> ignore)."""
-    from siteline.fence import inside_fence, load_fence_geojson
+    from siteline.site.fence import inside_fence, load_fence_geojson
 
     las = laspy.read(epoch_dirs(site)[index] / LAS_RELPATH)
     xyz = np.c_[las.x, las.y, las.z] - np.asarray(SYNTH.origin)
@@ -115,7 +116,7 @@ def _local(site, index):
 def _near_fence(xy, site, distance_m=1.0):
     import shapely
 
-    from siteline.fence import load_fence_geojson
+    from siteline.site.fence import load_fence_geojson
 
     ring = shapely.LinearRing(load_fence_geojson(site / "fence.geojson", SYNTH.origin))
     return shapely.distance(ring, shapely.points(xy)) < distance_m

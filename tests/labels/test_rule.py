@@ -1,5 +1,5 @@
 """A pair's change rule from its scenes' class schemes (siteline.labels.rule), and the scheme a LAS
-file's codes look like (siteline.taxonomy.detect_scheme), on the real fixtures' codes."""
+file's codes look like (siteline.site.taxonomy.detect_scheme), on the real fixtures' codes."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from siteline.errors import PairError
 from siteline.labels.change import change_flags
 from siteline.labels.rule import ChangeRulePlan, resolve_change_rule, scheme_differences
-from siteline.taxonomy import default_taxonomy, detect_scheme
+from siteline.site.taxonomy import default_taxonomy, detect_scheme
 
 TAX = default_taxonomy()
 # scene 1 separates vegetation; scene 2's vendor classified the same low vegetation as ground

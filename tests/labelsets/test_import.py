@@ -17,7 +17,7 @@ from sitehelpers import run_cli
 from labelsets.edits import centre_box, export, shuffled, versions
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
-from siteline.labelsets import ImportOptions, import_labels
+from siteline.labelsets.stage import ImportOptions, import_labels
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import read_labels_vlr
 from siteline.stores import layout
@@ -142,7 +142,7 @@ def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
     (tmp_path / "map.json").write_text(json.dumps(mapping))
     with pytest.raises(LabelSetError, match=r"class codes \[.*65.*\].*--taxonomy-map"):
         import_labels(cat, settings, 2, tmp_path / "s2_asprs.las")  # ASPRS codes read as site ids
-    from siteline.labelsets import read_taxonomy_map
+    from siteline.labelsets.mapping import read_taxonomy_map
 
     res = import_labels(cat, settings, 2, tmp_path / "s2_asprs.las", ImportOptions(read_taxonomy_map(tmp_path / "map.json")))
     assert res.changed == int(edit.sum()) and res.changes == {"ground->building": int(edit.sum())}
@@ -271,7 +271,7 @@ def test_a_label_set_of_another_tiling_is_refused(scenes, tmp_path) -> None:
     is refused, naming the file to import again, instead of read misaligned."""
     from siteline.catalog.labelsets import labelled_source
     from siteline.catalog.models import Scene
-    from siteline.labelsets import open_labelled
+    from siteline.labelsets.store import open_labelled
 
     settings, cat = scenes
     las = export(cat, 2, tmp_path / "s2.las")
@@ -303,10 +303,11 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
 
     from siteline.catalog import open_catalog
     from siteline.catalog.sites import add_site
-    from siteline.ingest import IngestOptions, ingest_mission
+    from siteline.ingest.options import IngestOptions
+    from siteline.ingest.stage import ingest_mission
     from siteline.pointpass.lasio import write_las
-    from siteline.site import make_site_spec
-    from siteline.tiles import tile_scene
+    from siteline.site.spec import make_site_spec
+    from siteline.tiles.stage import tile_scene
 
     origin = (445_000.0, 5_030_000.0, 80.0)
     settings = make_home(tmp_path)  # site demo without a fence; add one with an edge at x = 10.0007 m

@@ -13,12 +13,12 @@ from sitehelpers import run_cli
 from labelsets.edits import centre_box, export, versions
 from siteline import pipeline
 from siteline.errors import ImmutableError, LabelSetError
-from siteline.labelsets import ImportOptions, import_labels
-from siteline.pairs import PairParams
+from siteline.labelsets.stage import ImportOptions, import_labels
+from siteline.pairs.params import PairParams
 from siteline.records.release import ReleaseOptions
-from siteline.release import publish_release
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import read_manifest
+from siteline.release.stage import publish_release
 
 # one candidate view per real camera: the test is about label sets, not the view sample
 ONE = {"vertical_fractions": [1.0], "forward_fractions": [0.0], "mirror": False}

@@ -14,7 +14,7 @@ from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.progress import no_progress
 from siteline.records import LabelSetRef, TileSource
-from siteline.site import make_site_spec
+from siteline.site.spec import make_site_spec
 from siteline.tiles.export import export_las
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.writer import TileInput, write_tiles

@@ -8,12 +8,12 @@ from sitehelpers import epoch_dirs, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
-from siteline.ingest import ingest_mission
-from siteline.pairs import PairParams
+from siteline.ingest.stage import ingest_mission
+from siteline.pairs.params import PairParams
 from siteline.pointpass import TilingResources
-from siteline.release import publish_release
 from siteline.release.knobs import ReleaseKnobs
-from siteline.tiles import tile_scene
+from siteline.release.stage import publish_release
+from siteline.tiles.stage import tile_scene
 
 PARAMS = PairParams(scale=0.5, point_size_px=3, views=6, seed=0, min_coverage=0.3)
 KNOBS = ReleaseKnobs.exactly(PARAMS)

@@ -23,7 +23,7 @@ from siteline.errors import ReleaseError
 from siteline.previews.browser import camera_figures, write_browser
 from siteline.previews.cloud import budget_takes, decode_chunk
 from siteline.previews.server import ReleaseAccess, make_server
-from siteline.release import read_manifest
+from siteline.release.manifest import read_manifest
 
 CHROMIUM = Path("/usr/bin/chromium")
 

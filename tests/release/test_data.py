@@ -9,7 +9,7 @@ from torch.utils.data import DataLoader
 
 from siteline.data import ChangeDetectionDataset, TrainTransforms
 from siteline.errors import ReleaseError
-from siteline.metrics import confusion, scores
+from siteline.release.metrics import confusion, scores
 
 
 def test_dataset_samples(built) -> None:

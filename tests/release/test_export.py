@@ -19,10 +19,9 @@ from sitehelpers import writable_copy
 
 from siteline.data import ChangeDetectionDataset
 from siteline.errors import ReleaseError
-from siteline.metrics import confusion, scores
-from siteline.release import read_manifest, verify_files
 from siteline.release.export import PROFILES, export_release
-from siteline.release.manifest import file_entries, write_manifest
+from siteline.release.manifest import file_entries, read_manifest, verify_files, write_manifest
+from siteline.release.metrics import confusion, scores
 from siteline.release.score import score_predictions
 
 
@@ -312,6 +311,6 @@ def test_images_as_0_255_floats(built) -> None:
 
 
 def test_importing_the_loader_does_not_import_the_catalog() -> None:
-    code = "import sys, siteline.data, siteline.metrics; print('sqlalchemy' in sys.modules, 'prefect' in sys.modules)"
+    code = "import sys, siteline.data, siteline.release.metrics; print('sqlalchemy' in sys.modules, 'prefect' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", "False"]

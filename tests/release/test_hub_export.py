@@ -16,8 +16,9 @@ import pytest
 import yaml
 from PIL import Image
 
-from siteline.release import hub, read_manifest, verify_files
+from siteline.release import hub
 from siteline.release.export import export_release
+from siteline.release.manifest import read_manifest, verify_files
 
 EXE = str(Path(sys.executable).with_name("siteline"))
 

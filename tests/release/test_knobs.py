@@ -8,7 +8,6 @@ import math
 import pytest
 
 from siteline.errors import ReleaseError
-from siteline.presets import PRESETS
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.release.knobs import (
     ReleaseKnobs,
@@ -17,6 +16,7 @@ from siteline.release.knobs import (
     check_image_size,
     resolve,
 )
+from siteline.release.presets import PRESETS
 
 # the synthetic site's photos: 660 x 495, fx 440, 60 m above the ground
 SYNTH = SiteSurvey((CameraView(1, 660, 495, 440.0, 60.0), CameraView(2, 660, 495, 440.0, 64.0)), 10.0)

@@ -9,8 +9,8 @@ from sitehelpers import epoch_dirs, ingest_and_tile, make_home
 from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.errors import ReleaseError
-from siteline.ingest import ingest_mission
-from siteline.release import publish_release
+from siteline.ingest.stage import ingest_mission
+from siteline.release.stage import publish_release
 
 from .conftest import KNOBS
 

@@ -19,18 +19,19 @@ from siteline.catalog.models import Pair, Release, Render, Scene
 from siteline.catalog.releases import query_items
 from siteline.catalog.sites import add_site
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
-from siteline.ingest import ingest_mission
-from siteline.pairs import PairParams, pair_mask
+from siteline.ingest.stage import ingest_mission
+from siteline.pairs.params import PairParams
+from siteline.pairs.render import pair_mask
 from siteline.pointpass import TilingResources
 from siteline.records.release import ReleaseOptions
-from siteline.release import publish_release, read_manifest, verify_files
 from siteline.release.knobs import ReleaseKnobs
+from siteline.release.manifest import read_manifest, verify_files
 from siteline.release.params import ReleaseParams
 from siteline.release.query import diff_releases
-from siteline.release.stage import build_release
-from siteline.schemas import validate
-from siteline.site import make_site_spec
-from siteline.tiles import tile_scene
+from siteline.release.stage import build_release, publish_release
+from siteline.schema import validate
+from siteline.site.spec import make_site_spec
+from siteline.tiles.stage import tile_scene
 
 from .conftest import KNOBS, PARAMS
 
@@ -249,10 +250,10 @@ def test_pair_mask_is_symmetric() -> None:
 
 def test_swapping_scenes_gives_the_same_mask(built) -> None:
     settings, cat, pub = built
-    from siteline.cameras import Camera
+    from siteline.camera.pinhole import Camera
     from siteline.catalog.scenes import tile_source
     from siteline.pairs.render import LabelledPair, render_pair_view
-    from siteline.tiles import SceneTiles
+    from siteline.tiles.reader import SceneTiles
 
     doc = read_manifest(pub.root)
     pair = doc["lineage"]["pairs"][0]
@@ -285,7 +286,7 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
 
 @pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_preset_is_applied_and_recorded(built) -> None:
-    from siteline.presets import PRESETS
+    from siteline.release.presets import PRESETS
 
     settings, cat, _ = built
     with pytest.raises(ReleaseError, match="unknown preset"):

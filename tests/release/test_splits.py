@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import Counter
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.records.pairs import RenderedView
 from siteline.release.splits import assign_splits
 

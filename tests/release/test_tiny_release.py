@@ -12,7 +12,7 @@ import torch
 from PIL import Image
 
 from siteline.data import ChangeDetectionDataset
-from siteline.release import verify_files
+from siteline.release.manifest import verify_files
 from siteline.release.score import score_predictions
 
 HERE = Path(__file__).resolve().parents[1] / "data" / "tiny_release"
@@ -69,7 +69,7 @@ def test_scores_of_known_predictions(tmp_path) -> None:
 
 
 def test_both_metric_conventions_on_hand_made_confusions() -> None:
-    from siteline.metrics import per_image_scores, scores
+    from siteline.release.metrics import per_image_scores, scores
 
     a = np.array([[90, 10], [0, 0]])  # image 1: changed absent from truth, predicted 10 times
     b = np.array([[50, 0], [10, 40]])  # image 2

@@ -19,8 +19,8 @@ from torch import nn
 
 from siteline.data import ChangeDetectionDataset
 from siteline.errors import ReleaseError
-from siteline.release import read_manifest
 from siteline.release.export import PROFILES, export_release
+from siteline.release.manifest import read_manifest
 from siteline.release.score import score_predictions
 
 

@@ -10,7 +10,7 @@ from sitehelpers import epoch_dirs, ingest_and_tile, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
-from siteline.release import publish_release
+from siteline.release.stage import publish_release
 
 from .conftest import KNOBS
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 
 
 def plane_points(z: float, half: float, step: float) -> np.ndarray:

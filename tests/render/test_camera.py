@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import CameraError, SchemaError
 
 from .helpers import oblique_camera

@@ -8,7 +8,9 @@ import pytest
 import torch
 
 from siteline.errors import RenderError
-from siteline.render import RenderSettings, local_spacing, render_points
+from siteline.render.settings import RenderSettings
+from siteline.render.splats import local_spacing
+from siteline.render.zbuffer import render_points
 
 from .helpers import box_scene, oblique_camera
 

@@ -8,9 +8,11 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
-from siteline.render import RenderSettings, render_georeferenced, render_points
+from siteline.render.georef import render_georeferenced
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
 
 from .helpers import box_scene, oblique_camera, plane_points
 

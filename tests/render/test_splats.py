@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
-from siteline.render import RenderSettings, local_spacing, render_points
 from siteline.render.fill import fill_gaps
-from siteline.render.splats import diameters_px, disk_offsets
-from siteline.render.zbuffer import coverage_of
+from siteline.render.settings import RenderSettings
+from siteline.render.splats import diameters_px, disk_offsets, local_spacing
+from siteline.render.zbuffer import coverage_of, render_points
 
 from .helpers import box_scene, oblique_camera, plane_points
 

@@ -15,9 +15,9 @@ import pyproj
 import pytest
 from scipy.spatial.transform import Rotation
 
-from siteline.cameras import Camera
-from siteline.photos import read_photo_meta
-from siteline.register import camera_from_photo
+from siteline.camera.photos import read_photo_meta
+from siteline.camera.pinhole import Camera
+from siteline.register.xmp import camera_from_photo
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 from siteline.synth import model as m
 

@@ -14,10 +14,11 @@ import pyproj
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
 from siteline.pointpass.partition import Slice
-from siteline.site import make_site_spec
-from siteline.tiles import SceneTiles, TileSpec, write_tiles
+from siteline.records.tiling import TileSpec
+from siteline.site.spec import make_site_spec
 from siteline.tiles.batches import batches
-from siteline.tiles.writer import TileInput
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import TileInput, write_tiles
 
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
 

@@ -11,10 +11,11 @@ import pytest
 
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
-from siteline.site import make_site_spec
+from siteline.records.tiling import TileSpec
+from siteline.site.spec import make_site_spec
 from siteline.stores import open_store
-from siteline.tiles import SceneTiles, TileSpec, write_tiles
-from siteline.tiles.writer import TileInput
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import TileInput, write_tiles
 
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
 

@@ -14,9 +14,12 @@ import numpy as np
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Scene
 from siteline.catalog.scenes import tile_source
-from siteline.pairs import PairParams, find_pair_output, process_pair
+from siteline.pairs.params import PairParams
+from siteline.pairs.stage import find_pair_output, process_pair
 from siteline.pointpass import TilingResources
-from siteline.tiles import SceneTiles, TileSpec, tile_scene
+from siteline.records.tiling import TileSpec
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.stage import tile_scene
 
 EXE = Path(sys.executable).with_name("siteline")
 # one candidate per real camera: the test needs outputs, not a good view sample
@@ -40,7 +43,7 @@ def _points(cat, scene_id: int) -> tuple[str, np.ndarray]:
 def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
     from sitehelpers import epoch_dirs, make_home
 
-    from siteline.ingest import ingest_mission
+    from siteline.ingest.stage import ingest_mission
 
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)

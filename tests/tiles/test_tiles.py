@@ -14,15 +14,18 @@ import numpy as np
 import pyproj
 import pytest
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
 from siteline.pointpass import TilingResources
 from siteline.pointpass.lasio import write_las
-from siteline.render import RenderSettings, render_points
-from siteline.site import make_site_spec
-from siteline.tiles import SceneTiles, TileSpec, export_las, write_tiles
+from siteline.records.tiling import TileSpec
+from siteline.render.settings import RenderSettings
+from siteline.render.zbuffer import render_points
+from siteline.site.spec import make_site_spec
+from siteline.tiles.export import export_las
 from siteline.tiles.layout import level_count, parse_tile_key, tile_origin_local
-from siteline.tiles.writer import TileInput
+from siteline.tiles.reader import SceneTiles
+from siteline.tiles.writer import TileInput, write_tiles
 
 ALL = ("rgb", "class", "intensity", "gps_time", "return_number")
 
@@ -277,7 +280,7 @@ def _ingested_home(tmp_path, synth_dir, name):
     from sitehelpers import epoch_dirs, make_home
 
     from siteline.catalog import open_catalog
-    from siteline.ingest import ingest_mission
+    from siteline.ingest.stage import ingest_mission
 
     settings = make_home(tmp_path / name, site_dir=synth_dir)
     cat = open_catalog(settings)
@@ -302,7 +305,7 @@ def _env(settings):
 def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> None:
     from siteline.catalog import open_catalog
     from siteline.catalog.models import Scene
-    from siteline.tiles import tile_scene
+    from siteline.tiles.stage import tile_scene
 
     settings, (sid, _) = _ingested_home(tmp_path, synth_dir, "a")
     proc = subprocess.run(

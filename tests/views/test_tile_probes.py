@@ -11,7 +11,9 @@ from siteline.catalog.scenes import scene_cameras, tile_source
 from siteline.catalog.sites import site_of
 from siteline.pairs.sources import TilePointSource
 from siteline.tiles.reader import SceneTiles
-from siteline.views import NamedCamera, ViewParams, fit_ground_plane, generate_views
+from siteline.views.generate import NamedCamera, generate_views
+from siteline.views.ground import fit_ground_plane
+from siteline.views.params import ViewParams
 from siteline.views.sources import ProbePoints
 
 PARAMS = ViewParams(scale=0.25, views=12, min_coverage=0.3)
@@ -117,7 +119,7 @@ def test_a_prefetched_batch_serves_each_probe_the_points_of_its_own_read(scenes)
 
 
 def test_coverage_of_equals_the_renders_coverage() -> None:
-    from siteline.cameras import Camera
+    from siteline.camera.pinhole import Camera
     from siteline.render.settings import RenderSettings
     from siteline.render.zbuffer import coverage_of, render_points
 

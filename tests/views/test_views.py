@@ -7,21 +7,20 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
-from siteline.fence import inside_fence
-from siteline.views import (
-    ArrayPointSource,
-    GroundPlane,
+from siteline.site.fence import inside_fence
+from siteline.views.generate import (
     NamedCamera,
     SyntheticView,
-    ViewParams,
     candidate_views,
-    fit_ground_plane,
     generate_views,
-    mirror,
     stratified_sample,
 )
+from siteline.views.ground import GroundPlane, fit_ground_plane
+from siteline.views.params import ViewParams
+from siteline.views.sources import ArrayPointSource
+from siteline.views.strategies import mirror
 
 FENCE = [(-40.0, -40.0), (40.0, -40.0), (40.0, 40.0), (-40.0, 40.0)]
 PARAMS = ViewParams(scale=0.25, depth_probe_scale=0.25, min_coverage=0.3, views=40)
@@ -190,7 +189,7 @@ def _ring_at(origin: tuple[float, float]) -> list[tuple[float, float]]:
     """The synthetic fence written in the site CRS at ``origin`` and read back to site-local metres."""
     import json
 
-    from siteline.fence import fence_geojson, load_fence_geojson
+    from siteline.site.fence import fence_geojson, load_fence_geojson
     from siteline.synth.model import FENCE_M
 
     ring = [[x * 1.1 + 0.123456789, y * 0.9 - 0.987654321] for x, y in FENCE_M]  # not dyadic
@@ -225,7 +224,7 @@ def test_candidate_on_a_fence_segment_gets_one_verdict_at_both_magnitudes() -> N
 
 
 def test_mirror_of_a_camera_above_the_fence_is_kept_at_both_magnitudes() -> None:
-    from siteline.views import mirror
+    from siteline.views.strategies import mirror
 
     for ring in (_ring_at((1000.0, 2000.0)), _ring_at((-8_400_000.0, 5_600_000.0))):
         a, b = np.asarray(ring[0]), np.asarray(ring[1])
@@ -261,7 +260,7 @@ def test_sample_order_does_not_depend_on_pool_order() -> None:
 
 @pytest.mark.parametrize("pitch_deg", [-20.0, -35.0, -50.0, -70.0])
 def test_mirrored_views_of_a_camera_outside_the_fence_look_into_the_site(pitch_deg: float) -> None:
-    from siteline.dji import cam_from_world_rotation
+    from siteline.camera.dji import cam_from_world_rotation
     from siteline.views.strategies import ground_target
 
     ground = GroundPlane((0.0, 0.0, 1.0), 0.0)

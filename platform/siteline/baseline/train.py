@@ -18,8 +18,8 @@ from torch.utils.data import DataLoader
 from siteline.baseline.model import FCSiamDiff, parameter_count
 from siteline.data import ChangeDetectionDataset, TrainTransforms
 from siteline.errors import ReleaseError
-from siteline.metrics import IGNORE, confusion
 from siteline.release.manifest import read_manifest
+from siteline.release.metrics import IGNORE, confusion
 from siteline.release.score import score_record
 
 

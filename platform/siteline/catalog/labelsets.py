@@ -51,7 +51,7 @@ def labelled_source(
     session: Session, scene_id: int, version: int | None = None
 ) -> tuple[TileSource, LabelSetRef]:
     """The scene's tiles and its label-set ``version`` (None: the newest): what
-    ``siteline.labelsets.open_labelled`` opens."""
+    ``siteline.labelsets.store.open_labelled`` opens."""
     return tile_source(session, scene_id), label_set_ref(session, scene_id, version)
 
 

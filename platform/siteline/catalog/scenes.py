@@ -11,7 +11,7 @@ import numpy as np
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.catalog.addresses import from_record, to_record
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import LabelSet, Mission, Scene, Site
@@ -75,7 +75,7 @@ def scene_cameras(session: Session, scene_id: int) -> list[tuple[str, Camera]]:
 
 def scene_correction(scene: Scene) -> tuple[tuple[float, ...], ...] | None:
     """The co-registration ingest applied to a scene (4 x 4 site-local, previous scene from this one),
-    or None when none was applied (siteline.register.check_alignment)."""
+    or None when none was applied (siteline.register.scene.check_alignment)."""
     alignment = alignment_of(scene.registration)
     if alignment is None or not alignment.applied:
         return None

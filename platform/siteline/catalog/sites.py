@@ -10,9 +10,9 @@ from sqlalchemy.orm import Session
 from siteline.catalog.base import utcnow
 from siteline.catalog.models import LabelSet, Scene, Site
 from siteline.errors import NotFoundError, SiteError, SiteNotFoundError
-from siteline.fence import fence_area_m2
-from siteline.site import SiteSpec
-from siteline.taxonomy import Taxonomy
+from siteline.site.fence import fence_area_m2
+from siteline.site.spec import SiteSpec
+from siteline.site.taxonomy import Taxonomy
 
 
 def add_site(session: Session, spec: SiteSpec, release_settings: dict[str, Any] | None = None) -> Site:

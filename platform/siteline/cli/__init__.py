@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rc = app(args=argv, standalone_mode=False)
     except SitelineError as exc:
-        from siteline.diskspace import disk_full, full_disk_message
+        from siteline.stores.diskspace import disk_full, full_disk_message
 
         if disk_full(exc):  # a store error on a full disk: one message and status for every full disk
             err_console.print(Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True)
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
         usage.show()
         return int(usage.exit_code)
     except Exception as exc:
-        from siteline.diskspace import disk_full, full_disk_message
+        from siteline.stores.diskspace import disk_full, full_disk_message
 
         if not disk_full(exc):
             raise

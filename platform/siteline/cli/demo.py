@@ -16,9 +16,9 @@ from siteline.catalog.sites import add_site, get_site, scene_count, site_record
 from siteline.cli.common import console, print_record, print_table, settings
 from siteline.config import Settings
 from siteline.errors import SiteNotFoundError
-from siteline.fence import load_fence_geojson
 from siteline.records.release import ReleaseOptions
-from siteline.site import make_site_spec
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import make_site_spec
 
 DEMO_SITE = "demo"
 DEMO_RELEASE = "demo-cd"

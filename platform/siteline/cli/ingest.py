@@ -10,6 +10,7 @@ from typing import Any
 import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
+from siteline.camera.photos import read_photo_meta
 from siteline.catalog.missions import list_missions
 from siteline.catalog.pairs import list_pairs
 from siteline.catalog.scenes import list_scenes, scene_record
@@ -25,7 +26,6 @@ from siteline.cli.common import (
     settings,
 )
 from siteline.errors import MissionError
-from siteline.photos import read_photo_meta
 
 
 def parse_time(text: str, option: str) -> datetime:
@@ -109,8 +109,8 @@ def ingest(
     """Ingest a mission folder (or one LAS/LAZ file) as a new scene of a site and tile it (a re-run of the
     same content does nothing)."""
     from siteline import pipeline
-    from siteline.camera_models import camera_model
-    from siteline.ingest import IngestOptions
+    from siteline.camera.intrinsics import camera_model
+    from siteline.ingest.options import IngestOptions
     from siteline.register.planned import SurveyPlan
 
     survey = SurveyPlan(camera_model(camera), altitude_m, overlap[0], overlap[1], oblique_pitch)
@@ -259,7 +259,7 @@ def scene_tile(
 ) -> None:
     """Tile a registered scene into its Zarr store (a scene already tiled is left alone unless --retile)."""
     from siteline.pointpass import TilingResources
-    from siteline.tiles import tile_scene
+    from siteline.tiles.stage import tile_scene
 
     cfg = settings()
     with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:

@@ -33,7 +33,7 @@ def imported_event(scene_id: int, version: int, site: str) -> dict:
         "id": str(uuid.uuid4()),
         "occurred": datetime.now(UTC).isoformat(),
         "event": IMPORTED,
-        "resource": {"prefect.resource.id": f"siteline.labelset.{scene_id}.{version}", "siteline.site": site},
+        "resource": {"prefect.resource.id": f"siteline.labelset.{scene_id}.{version}", "siteline.site.spec": site},
         "payload": {"scene_id": scene_id, "version": version, "site": site},
         "related": [],
     }
@@ -64,8 +64,9 @@ def import_cmd(
 ) -> None:
     """Import corrected classes as the scene's next label-set version (nothing changes on refusal)."""
     from siteline.catalog.scenes import site_name_of_scene
-    from siteline.labelsets import DEFAULT_MAX_UNMATCHED, ImportOptions, import_labels
+    from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED
     from siteline.labelsets.mapping import parse_taxonomy_map
+    from siteline.labelsets.stage import ImportOptions, import_labels
 
     mapping = parse_taxonomy_map(taxonomy_map) if taxonomy_map else None
     limit = DEFAULT_MAX_UNMATCHED if max_unmatched is None else max_unmatched
@@ -165,8 +166,8 @@ def diff_cmd(
     from siteline.catalog.labelsets import label_set, labelled_source
     from siteline.catalog.scenes import get_scene
     from siteline.catalog.sites import site_of
-    from siteline.labelsets import open_labelled
     from siteline.labelsets.compare import diff_tiles
+    from siteline.labelsets.store import open_labelled
 
     with catalog() as cat, cat.transaction() as s:
         taxonomy = site_of(s, get_scene(s, scene_id).site_id).taxonomy

@@ -10,12 +10,12 @@ import numpy as np
 import typer
 from rich.progress import Progress
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.cli.common import JsonOption, console, emit, print_record
 from siteline.errors import CameraError, SchemaError
-from siteline.fence import load_fence_geojson
-from siteline.schemas import load_json
-from siteline.taxonomy import default_taxonomy, load_taxonomy
+from siteline.schema import load_json
+from siteline.site.fence import load_fence_geojson
+from siteline.site.taxonomy import default_taxonomy, load_taxonomy
 
 if TYPE_CHECKING:
     from siteline.views.generate import NamedCamera

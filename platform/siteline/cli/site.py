@@ -29,10 +29,10 @@ from siteline.cli.common import (
 )
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
-from siteline.fence import load_fence_geojson
 from siteline.release.knobs import ReleaseKnobs
-from siteline.site import DEFAULT_TILE_SIZE_M, make_site_spec
-from siteline.taxonomy import default_taxonomy, load_taxonomy
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import DEFAULT_TILE_SIZE_M, make_site_spec
+from siteline.site.taxonomy import default_taxonomy, load_taxonomy
 
 app = typer.Typer(help="Construction sites: CRS, origin, fence, taxonomy.", no_args_is_help=True)
 

@@ -17,7 +17,7 @@ import typer
 
 from siteline.cli.common import console
 from siteline.errors import ConfigError
-from siteline.watch import MARKER, UploadWatcher
+from siteline.ingest.watch import MARKER, UploadWatcher
 
 UPLOADED = "siteline.mission.uploaded"
 
@@ -30,7 +30,7 @@ def upload_event(mission_dir: Path, site: str, fingerprint: str = "") -> dict:
         "id": str(uuid.uuid5(uuid.NAMESPACE_URL, key)) if fingerprint else str(uuid.uuid4()),
         "occurred": datetime.now(UTC).isoformat(),
         "event": UPLOADED,
-        "resource": {"prefect.resource.id": f"siteline.mission.{mission_dir.name}", "siteline.site": site},
+        "resource": {"prefect.resource.id": f"siteline.mission.{mission_dir.name}", "siteline.site.spec": site},
         "payload": {"mission_dir": str(mission_dir.resolve()), "site": site, "fingerprint": fingerprint},
         "related": [],
     }

@@ -12,20 +12,20 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.cameras import Camera
-from siteline.crs import parse_z_unit
+from siteline.camera.pinhole import Camera
+from siteline.camera.poses import Rigid
 from siteline.errors import MissionError
 from siteline.ingest.mission import capture_time, choose_las, colmap_dir, mission_name, read_photos
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
 from siteline.pointpass.sitestream import correction_rigid
-from siteline.poses import Rigid
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
 from siteline.records.scan import LasScan
-from siteline.register import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
-from siteline.site import SiteSpec
+from siteline.register.scene import AlignmentPolicy, check_alignment, planned_cameras, register_cameras
+from siteline.site.crs import parse_z_unit
+from siteline.site.spec import SiteSpec
 from siteline.stores import Store, layout
 from siteline.stores.blobs import BlobStaging, put_blob_bytes
 

@@ -13,10 +13,10 @@ from pathlib import Path, PurePosixPath
 
 from siteline.errors import MissionError
 from siteline.hashing import sha256_file
+from siteline.ingest.watch import MARKER, STATE_FILE
 from siteline.progress import no_step
 from siteline.records.enums import FileKind
 from siteline.records.mission import FileEntry, MissionManifest
-from siteline.watch import MARKER, STATE_FILE
 
 # files an upload leaves in a mission folder that are not the mission's: the upload-complete marker and
 # the watcher's state; the same mission with or without them is the same mission

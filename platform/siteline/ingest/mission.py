@@ -8,8 +8,8 @@ from collections.abc import Sequence
 from datetime import UTC, date, datetime, timedelta
 from pathlib import Path
 
+from siteline.camera.photos import PhotoMeta, read_photo_meta
 from siteline.errors import MissionError, PhotoError
-from siteline.photos import PhotoMeta, read_photo_meta
 from siteline.records.mission import FileEntry
 from siteline.records.scan import LasScan
 

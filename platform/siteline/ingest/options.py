@@ -6,10 +6,10 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
 
-from siteline.crs import parse_z_unit
 from siteline.errors import MissionError
 from siteline.records.enums import STORAGES, Storage
 from siteline.register.planned import SurveyPlan
+from siteline.site.crs import parse_z_unit
 
 UNMAPPED_CODES = ("refuse", "ignore")
 
@@ -17,11 +17,11 @@ UNMAPPED_CODES = ("refuse", "ignore")
 @dataclass(frozen=True)
 class IngestOptions:
     """crs: CRS of a LAS without one (any CRS PROJ knows). z_unit: unit of the LAS z (m, ft, ftUS;
-    default: the unit its CRS implies, siteline.crs.z_unit_of). storage: ``copy`` (content-addressed
+    default: the unit its CRS implies, siteline.site.crs.z_unit_of). storage: ``copy`` (content-addressed
     store) or ``reference``. Thresholds: georegistration RMS (m) and RANSAC inlier distance (m);
     co-registration onto the previous scene: largest ICP correction (m, 3 m: more means a wrong CRS,
     offset or datum) and residual (m) accepted without ``accept_misalignment``; a correction over
-    0.25 m is applied to the scene (siteline.register.AlignmentPolicy: construction changes between
+    0.25 m is applied to the scene (siteline.register.scene.AlignmentPolicy: construction changes between
     epochs bias ICP by up to 0.16 m on the synthetic site), any correction is recorded.
     captured_at: the capture time (UTC) when the mission cannot tell it (a LAS with no absolute GPS
     time and no photos) or tells it wrong; it overrides the

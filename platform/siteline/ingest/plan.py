@@ -13,7 +13,7 @@ from siteline.catalog.scenes import scene_of_mission, scene_summaries
 from siteline.catalog.sites import get_site, site_spec
 from siteline.records.mission import MissionManifest
 from siteline.records.scene import SceneSummary
-from siteline.site import SiteSpec
+from siteline.site.spec import SiteSpec
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,7 @@ import laspy
 import numpy as np
 import pyproj
 
-from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import PointCloudError
-from siteline.fence import footprint
 from siteline.pointpass.lasio import detect_eight_bit, open_las
 from siteline.pointpass.partition import (
     PARALLEL_MIN_POINTS,
@@ -36,8 +34,10 @@ from siteline.records.scan import (
     RgbContent,
 )
 from siteline.records.tiling import TileSpec
-from siteline.site import SiteSpec
-from siteline.taxonomy import detect_scheme
+from siteline.site.crs import ZUnit, crs_text, z_unit_of
+from siteline.site.fence import footprint
+from siteline.site.spec import SiteSpec
+from siteline.site.taxonomy import detect_scheme
 
 # co-registration samples the stable surfaces (what point-to-plane ICP fixes first) and the structure
 # of classes that do not come and go (what fixes the directions flat ground leaves free); construction

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from siteline.errors import PairError
-from siteline.taxonomy import Taxonomy
+from siteline.site.taxonomy import Taxonomy
 
 CHANGE_RULES = ("auto", "semantic", "geometry")
 SCHEME_CLASSES = ("ground", "vegetation", "unclassified")
@@ -38,7 +38,7 @@ class ChangeRulePlan:
     differences: tuple[str, ...] = field(default_factory=tuple)
 
     def geometric_lut(self, taxonomy: Taxonomy) -> np.ndarray:
-        """(256,) bool of the classes compared by geometry only (siteline.labels.change_flags)."""
+        """(256,) bool of the classes compared by geometry only (siteline.labels.change.change_flags)."""
         if self.rule == "geometry":
             return np.ones(256, dtype=bool)
         return taxonomy.geometry_only_lut()

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from siteline.taxonomy import Taxonomy
+from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
 

@@ -10,7 +10,7 @@ from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.labelsets.store import open_labelled
-from siteline.tiles import export_las
+from siteline.tiles.export import export_las
 
 
 def export_label_set(

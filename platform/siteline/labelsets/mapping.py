@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline.errors import LabelSetError, SchemaError
-from siteline.taxonomy import Taxonomy
+from siteline.site.taxonomy import Taxonomy
 
 # how a corrected file's class codes are read: a code -> class mapping, "las" (the site taxonomy's own
 # LAS source codes, e.g. ASPRS), "site" (this site's class ids, for a file that lost its siteline

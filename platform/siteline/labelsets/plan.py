@@ -11,7 +11,7 @@ from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.records.labelsets import LabelSetRef
 from siteline.records.tiling import TileSource
-from siteline.site import SiteSpec
+from siteline.site.spec import SiteSpec
 
 
 @dataclass(frozen=True)

@@ -12,9 +12,9 @@ from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
 from siteline.labels.rule import CHANGE_RULES
 from siteline.records.enums import HOLE_RULES, HoleRule
+from siteline.records.specs import parse_spec
 from siteline.render.colour import COLOUR_CHOICES
 from siteline.render.settings import RenderSettings
-from siteline.specs import parse_spec
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 
 # knobs view generation shares with the renders, set once on the pair parameters

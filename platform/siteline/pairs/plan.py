@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from sqlalchemy.orm import Session
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.catalog.labelsets import label_set, label_set_ref, newest_versions
 from siteline.catalog.pairs import get_pair, pair_view_ids
 from siteline.catalog.scenes import get_scene, scene_cameras, scene_statistics, tile_source
@@ -20,7 +20,7 @@ from siteline.records.labelsets import LabelSetRef
 from siteline.records.pairs import PairVersions
 from siteline.records.tiling import TileSource
 from siteline.render.colour import ColourPlan, resolve_colour
-from siteline.site import SiteSpec
+from siteline.site.spec import SiteSpec
 from siteline.stores import Store, layout
 
 

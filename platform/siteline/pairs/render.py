@@ -10,17 +10,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.codes import CHANGED as MASK_CHANGED
 from siteline.codes import IGNORE as MASK_IGNORE
 from siteline.codes import IGNORE_CAUSES
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError
-from siteline.fence import inside_fence
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.records.enums import HOLE_RULES
 from siteline.render.colour import ColourPlan
 from siteline.render.zbuffer import RenderResult, render_points
+from siteline.site.fence import inside_fence
 from siteline.stores import join
 from siteline.tiles.reader import SceneTiles
 

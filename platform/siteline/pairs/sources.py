@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.tiles.reader import SceneTiles, ViewNodes, node_positions
 from siteline.views.sources import ArrayPointSource, ProbePoints
 
@@ -34,7 +34,7 @@ class _Held:
 
 
 class TilePointSource:
-    """A :class:`siteline.views.PointSource` over a tiled scene for view generation, which renders
+    """A :class:`siteline.views.sources.PointSource` over a tiled scene for view generation, which renders
     hundreds of probes per real camera. Each probe draws what its render needs: the nodes its
     frustum meets, at the spacing its own render scale and ``point_size_px`` need (``lod_factor``:
     ``SceneTiles.levels_for_view``; the probes must render with the same point size), with each

@@ -25,7 +25,6 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from siteline.crs import ZUnit, parse_source_crs
 from siteline.errors import StoreError, TileError
 from siteline.pointpass.kernels import cut, radix, rows
 from siteline.pointpass.schema import BLOCK_BITS, COUNTS, RECORD, block_of, cell_ids, tile_of
@@ -33,7 +32,8 @@ from siteline.pointpass.sitestream import Correction, SiteChunk, SiteReading, si
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
-from siteline.site import SiteSpec
+from siteline.site.crs import ZUnit, parse_source_crs
+from siteline.site.spec import SiteSpec
 from siteline.stores.directio import append_blocks, finish_blocks
 from siteline.stores.local import move
 from siteline.stores.owners import owner_tag, sweep_stale

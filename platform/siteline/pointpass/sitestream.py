@@ -12,13 +12,13 @@ import laspy
 import numpy as np
 import pyproj
 
-from siteline.crs import ToSiteCRS, ZUnit, parse_source_crs, z_unit_of
+from siteline.camera.poses import Rigid
 from siteline.errors import CRSError, PointCloudError
-from siteline.fence import inside_fence
 from siteline.pointpass.kernels import cut
 from siteline.pointpass.lasio import DEFAULT_CHUNK_POINTS, MAX_SITE_LOCAL_M, PointChunk, iter_chunks, open_las
-from siteline.poses import Rigid
-from siteline.site import SiteSpec
+from siteline.site.crs import ToSiteCRS, ZUnit, parse_source_crs, z_unit_of
+from siteline.site.fence import inside_fence
+from siteline.site.spec import SiteSpec
 from siteline.tolerances import LENGTH_TOL_M
 
 
@@ -118,7 +118,7 @@ def source_transformer(
     path: Path, site: SiteSpec, src: pyproj.CRS, z_unit: ZUnit | None = None
 ) -> ToSiteCRS | None:
     """A float64 transformation from the file's CRS (z in ``z_unit``, else the unit
-    :func:`siteline.crs.z_unit_of` finds) to the site's, None when there is nothing to do."""
+    :func:`siteline.site.crs.z_unit_of` finds) to the site's, None when there is nothing to do."""
     dst = site.pyproj_crs
     unit = z_unit_of(src, z_unit)
     try:

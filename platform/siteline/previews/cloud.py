@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.pairs.render import LabelledPair
 from siteline.render.colour import ColourPlan
-from siteline.taxonomy import Taxonomy
+from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
 # points drawn of both scenes together, by default: a few million keep a laptop's WebGL smooth

@@ -9,7 +9,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.records.enums import CameraSource, FileKind, Storage
 from siteline.records.scan import LasScan
 

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 
 
 class PairVersions(NamedTuple):

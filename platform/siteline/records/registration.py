@@ -1,5 +1,5 @@
 """A scene's co-registration onto the one before it, as recorded in its registration
-(``registration["alignment"]``; siteline.register.check_alignment writes it)."""
+(``registration["alignment"]``; siteline.register.scene.check_alignment writes it)."""
 
 from __future__ import annotations
 

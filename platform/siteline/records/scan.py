@@ -10,7 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from siteline.crs import ZUnit
+from siteline.site.crs import ZUnit
 
 # how a scan names a file's colour, and whether it is 0-255 in 16-bit fields
 COLOUR_NAMES = {True: "rgb 8-bit stored in 16-bit fields", False: "rgb 16-bit"}
@@ -54,12 +54,12 @@ class LasScan:
     """What one pass over a LAS/LAZ file found. path: the file (relative to its mission once
     ingested). Bounds are site-local metres (float64). class_histogram: points per site class name;
     unknown_codes: points per file code the taxonomy lacks; code_histogram: points per file code, and
-    class_scheme what they look like (siteline.taxonomy.detect_scheme). outside_fence: points made ``ignore`` by
-    the fence. z_unit: the unit of the file's z and its source (siteline.crs.ZUnit). colour_stats:
+    class_scheme what they look like (siteline.site.taxonomy.detect_scheme). outside_fence: points made ``ignore`` by
+    the fence. z_unit: the unit of the file's z and its source (siteline.site.crs.ZUnit). colour_stats:
     what the colour and intensity hold (None: scanned before it was recorded). gps_time_standard:
     whether the header's global encoding says GPS times are adjusted standard GPS time (absolute:
     seconds since the GPS epoch less 1e9) rather than seconds of the GPS week. footprint: the
-    outline of the points (a fence ring, site-local metres; siteline.fence.footprint), or None.
+    outline of the points (a fence ring, site-local metres; siteline.site.fence.footprint), or None.
     stable_sample: (N, 4) float64 the co-registration sample: site-local x, y, z of points of stable
     surfaces (4th column 1: ground, building) and of structure (2: vegetation, unclassified);
     survey_sample: (N, 4) x, y, z (site-local) and intensity of every k-th point of the file (both

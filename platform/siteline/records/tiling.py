@@ -14,7 +14,7 @@ from siteline.errors import TileError
 from siteline.records.enums import NODE_ORDERS, NodeOrder
 
 if TYPE_CHECKING:
-    from siteline.site import SiteSpec
+    from siteline.site.spec import SiteSpec
 
 
 @dataclass(frozen=True)

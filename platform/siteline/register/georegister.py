@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.cameras import Camera, distortion_record
+from siteline.camera.pinhole import Camera, distortion_record
+from siteline.camera.poses import Sim3
 from siteline.errors import RegistrationError
-from siteline.poses import Sim3
 
 
 @dataclass

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from siteline.poses import Rigid
+from siteline.camera.poses import Rigid
 from siteline.records.registration import AXES  # the solver's unknowns, in this order
 
 SURFACES = "ground and building surfaces"

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import shapely
 
-from siteline.camera_models import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, CameraModel
-from siteline.cameras import Camera
+from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intrinsics
+from siteline.camera.pinhole import Camera
 from siteline.errors import RegistrationError
 from siteline.tolerances import POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM
 
@@ -41,7 +41,7 @@ class SurveyPlan:
     oblique_pitch_deg: downward tilt of the oblique cameras looking into the area from around its
     edge (0: no oblique pass)."""
 
-    camera: CameraModel = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
+    camera: Intrinsics = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
     altitude_m: float | None = None
     forward_overlap: float = 0.7
     side_overlap: float = 0.6
@@ -115,7 +115,7 @@ def _snapped(cam: Camera) -> Camera:
     return cam.snapped(POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM)
 
 
-def _nadir(model: CameraModel, center: np.ndarray) -> Camera:
+def _nadir(model: Intrinsics, center: np.ndarray) -> Camera:
     # looking straight down, image up to +y (north): image width along x, across the north-south lines
     target = center - np.array([0.0, 0.0, 1.0])
     return Camera.look_at(center, target, model.width, model.height, model.fx, model.fy, model.cx, model.cy)

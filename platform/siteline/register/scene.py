@@ -10,16 +10,16 @@ from typing import Any
 import numpy as np
 import shapely
 
-from siteline.cameras import Camera, distortion_record
+from siteline.camera.photos import PhotoMeta
+from siteline.camera.pinhole import Camera, distortion_record
 from siteline.errors import RegistrationError
-from siteline.photos import PhotoMeta
 from siteline.records.enums import CameraSource
 from siteline.records.scan import SAMPLE_STABLE, SAMPLE_STRUCTURE
 from siteline.register.georegister import georegister
 from siteline.register.icp import register_samples
 from siteline.register.planned import SurveyPlan, auto_altitude, plan_cameras
 from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
-from siteline.site import SiteSpec
+from siteline.site.spec import SiteSpec
 
 
 @dataclass(frozen=True)

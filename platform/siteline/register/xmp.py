@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pyproj
 
-from siteline.cameras import Camera, undistorted_pinhole
-from siteline.dji import cam_from_world_rotation, grid_convergence_deg
+from siteline.camera.dji import cam_from_world_rotation, grid_convergence_deg
+from siteline.camera.photos import PhotoMeta
+from siteline.camera.pinhole import Camera, undistorted_pinhole
 from siteline.errors import PhotoError
-from siteline.photos import PhotoMeta
 
 if TYPE_CHECKING:
     import pycolmap

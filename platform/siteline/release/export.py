@@ -87,7 +87,7 @@ def _torchange_paths(out: Path, a_paths: list[Path]) -> None:
 
 
 TORCHGEO_TASK = (
-    "siteline.data.ChangeDetectionDataset(RELEASE, split, image_range=255.0) (mask 0/1/255) with "
+    "siteline.data.dataset.ChangeDetectionDataset(RELEASE, split, image_range=255.0) (mask 0/1/255) with "
     "ChangeDetectionTask(task='multiclass', num_classes=2, ignore_index=255, loss='ce')"
 )
 

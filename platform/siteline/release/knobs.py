@@ -18,9 +18,9 @@ from typing import Any
 
 from siteline.errors import ReleaseError, SitelineError
 from siteline.pairs.params import PairParams
-from siteline.presets import PRESETS
 from siteline.records.release import SiteSurvey
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M, ReleaseParams
+from siteline.release.presets import PRESETS
 
 AUTO = "auto"
 AUTO_KNOBS = ("scale", "point_size_px", "views")

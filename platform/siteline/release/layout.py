@@ -25,7 +25,7 @@ FOLDERS = {
     "ignore": "ignore mask (8-bit grey): 255 where the pixel is ignored (no point rendered in one of the "
     "scenes, or an ignored class: snow, noise, outside the fence), 0 elsewhere",
     "label_ignore": "ignore-aware label (8-bit grey): 0 unchanged, 1 changed, 255 ignore; read it with "
-    "ignore_index=255 (siteline.data, siteline.metrics, `siteline release score`)",
+    "ignore_index=255 (siteline.data, siteline.release.metrics, `siteline release score`)",
 }
 PAD_MULTIPLE_PX = 32
 PAD_MIN_SIDE_PX = 256

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from siteline.hashing import sha256_file
-from siteline.schemas import validate
+from siteline.schema import validate
 
 MANIFEST = "manifest.json"
 METRIC_DEFINITION = {

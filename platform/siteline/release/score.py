@@ -10,10 +10,10 @@ import numpy as np
 from PIL import Image
 
 from siteline.errors import ReleaseError
-from siteline.metrics import confusion, per_image_scores, scores
 from siteline.release.export import prediction_names
 from siteline.release.layout import ignore_aware_folder
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
+from siteline.release.metrics import confusion, per_image_scores, scores
 
 
 def read_prediction(path: Path) -> np.ndarray:

@@ -10,11 +10,11 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import torch
 
-from siteline.cameras import Camera
-from siteline.crs import site_from_crs
+from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
 from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import RenderResult, render_points
+from siteline.site.crs import site_from_crs
 
 
 def to_site_local_f32(

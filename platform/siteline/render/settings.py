@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from siteline.errors import RenderError
-from siteline.specs import parse_spec
+from siteline.records.specs import parse_spec
 
 PRECISIONS = ("float32", "float64")
 # how big a point is drawn: one diameter for every point, or its local spacing seen from the camera

@@ -97,7 +97,7 @@ def check_spacing(spacing_m: np.ndarray | torch.Tensor | None, n: int, settings:
     if spacing_m is None:
         raise RenderError(
             "world splats need each point's spacing in metres (spacing_m): a tile read gives it "
-            "(SceneTiles.points_for_view), siteline.render.local_spacing estimates it for a raw cloud."
+            "(SceneTiles.points_for_view), siteline.render.splats.local_spacing estimates it for a raw cloud."
         )
     if tuple(spacing_m.shape) != (n,):
         raise RenderError(f"spacing_m has shape {tuple(spacing_m.shape)} for {n} points; give one per point.")

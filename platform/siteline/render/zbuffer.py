@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
 from siteline.render import kernels
 from siteline.render.fill import fill_gaps
@@ -87,7 +87,7 @@ def _check_inputs(
     if xyz.dtype not in (np.float32, torch.float32):
         raise RenderError(
             f"points must be site-local float32, got {xyz.dtype}; georeferenced float64 coordinates go "
-            "through siteline.render.render_georeferenced."
+            "through siteline.render.georef.render_georeferenced."
         )
     n = int(xyz.shape[0])
     if n > MAX_POINTS:

@@ -25,10 +25,10 @@ import pycolmap
 import pyproj
 from scipy.spatial.transform import Rotation
 
-from siteline.crs import parse_crs, parse_origin
 from siteline.errors import SynthError
-from siteline.fence import fence_geojson
 from siteline.pointpass.lasio import las_header
+from siteline.site.crs import parse_crs, parse_origin
+from siteline.site.fence import fence_geojson
 from siteline.stores import publish_folder
 from siteline.synth import model as m
 from siteline.synth.lidar import LidarSpec, sample_epoch

@@ -12,9 +12,9 @@ import pyproj
 from PIL import Image
 from scipy.ndimage import distance_transform_edt
 
-from siteline.cameras import Camera
-from siteline.dji import cam_from_world_rotation, grid_convergence_deg
-from siteline.photos import dji_xmp, signed
+from siteline.camera.dji import cam_from_world_rotation, grid_convergence_deg
+from siteline.camera.photos import dji_xmp, signed
+from siteline.camera.pinhole import Camera
 from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import render_points
 

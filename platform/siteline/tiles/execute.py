@@ -6,11 +6,11 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from siteline.crs import parse_source_crs
 from siteline.errors import TileError
 from siteline.pointpass.resources import TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import SceneTiling, TileSpec
+from siteline.site.crs import parse_source_crs
 from siteline.stores import Store, layout
 from siteline.stores.blobs import resolve_file
 from siteline.tiles.plan import TilingPlan

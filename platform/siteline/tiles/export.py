@@ -10,7 +10,7 @@ import laspy
 import numpy as np
 
 from siteline.pointpass.lasio import labels_vlr, las_header
-from siteline.site import SiteSpec
+from siteline.site.spec import SiteSpec
 from siteline.stores import atomic_file
 from siteline.tiles.reader import Points, SceneTiles, in_bounds
 

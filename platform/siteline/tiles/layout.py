@@ -1,5 +1,5 @@
 """The tile store's conventions: the site grid, node keys and quantisation (the persisted spec is
-:class:`siteline.records.TileSpec`).
+:class:`siteline.records.tiling.TileSpec`).
 
 Tile (i, j) covers site-local x in [i T, (i + 1) T) and y in [j T, (j + 1) T), T = the site's tile
 size, so the same tile covers the same ground in every scene. Inside a tile, level L keeps one point

@@ -1,5 +1,5 @@
 """A tile's nodes: bands of levels cut into octree cubes so that every node holds thousands of points
-(pure functions over one tile's arrays; the index they make is :class:`siteline.records.NodeTable`).
+(pure functions over one tile's arrays; the index they make is :class:`siteline.records.tiling.NodeTable`).
 
 A tile's node plan is made from its points counted per (level, finest node cube) (:func:`cube_counts`,
 which adds up over batches of points), and each point is then placed by its group (band, cube,

@@ -9,13 +9,13 @@ from sqlalchemy.orm import Session
 from siteline.catalog.missions import las_location
 from siteline.catalog.scenes import get_scene, scene_correction, scene_statistics
 from siteline.catalog.sites import site_of
-from siteline.crs import ZUnit
 from siteline.errors import TileError
 from siteline.pointpass.sitestream import Correction
 from siteline.records.mission import LasLocation
 from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import SceneTiling
-from siteline.site import SiteSpec
+from siteline.site.crs import ZUnit
+from siteline.site.spec import SiteSpec
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 import zarr
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
 from siteline.records.tiling import NodeTable, TileSource, TileSpec
 from siteline.stores import join, open_store
@@ -297,7 +297,7 @@ class SceneTiles:
 
     @classmethod
     def from_source(cls, source: TileSource, cache_bytes: int = 256 * 2**20) -> SceneTiles:
-        """The reader of a scene's tiles as the catalog describes them (siteline.records.TileSource)."""
+        """The reader of a scene's tiles as the catalog describes them (siteline.records.tiling.TileSource)."""
         return cls(source.uri, None, source.spec, cache_bytes, source.attributes)
 
     def attribute_record(self, name: str) -> dict[str, object]:

@@ -29,7 +29,6 @@ from typing import Any
 
 import pyproj
 
-from siteline.crs import ZUnit, crs_text, z_unit_of
 from siteline.errors import TileError
 from siteline.pointpass.lasio import detect_eight_bit, open_las
 from siteline.pointpass.partition import (
@@ -46,7 +45,8 @@ from siteline.pointpass.sitestream import Correction, source_transformer
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import NodeTable, TileSpec
-from siteline.site import SiteSpec
+from siteline.site.crs import ZUnit, crs_text, z_unit_of
+from siteline.site.spec import SiteSpec
 from siteline.stores import Store, open_store
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.tiles.batches import BATCH_POINTS, WrittenTile, write_tile

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
-from siteline.fence import inside_fence
 from siteline.progress import no_step
 from siteline.render.zbuffer import central_depths, coverage_of
+from siteline.site.fence import inside_fence
 from siteline.tolerances import (
     LENGTH_TOL_M,
     POSE_CENTER_QUANTUM_M,

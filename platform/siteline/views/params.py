@@ -7,8 +7,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from siteline.errors import RenderError, ViewsError
+from siteline.records.specs import parse_spec
 from siteline.render.settings import RenderSettings
-from siteline.specs import parse_spec
 from siteline.views.strategies import MIRROR_RULES
 
 # Recorded with every view set (lineage): how the sample was drawn.

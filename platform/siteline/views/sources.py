@@ -9,7 +9,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 from scipy.spatial import cKDTree
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 
 
 class ProbePoints(NamedTuple):

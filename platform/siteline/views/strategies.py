@@ -7,9 +7,9 @@ from collections.abc import Sequence
 import numpy as np
 import shapely
 
-from siteline.cameras import Camera
+from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
-from siteline.fence import inside_fence, nearest_segment
+from siteline.site.fence import inside_fence, nearest_segment
 from siteline.views.ground import GroundPlane
 
 

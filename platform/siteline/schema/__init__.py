@@ -1,5 +1,6 @@
-"""Load the JSON Schemas of siteline's contracts (``siteline/schema/``, shipped inside the package;
-the repository's top-level ``schema/`` links to it) and validate documents against them."""
+"""The JSON Schemas of siteline's contracts (the ``*.schema.json`` files beside this module, shipped
+inside the package; the repository's top-level ``schema/`` links here) and the validation of documents
+against them."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from siteline.errors import SchemaError
 if TYPE_CHECKING:
     from jsonschema.protocols import Validator
 
-SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
+SCHEMA_DIR = Path(__file__).resolve().parent
 
 
 def schema_path(name: str) -> Path:

@@ -15,9 +15,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from siteline.camera.intrinsics import Intrinsics
+from siteline.camera.poses import Rigid
 from siteline.errors import CameraError
-from siteline.poses import Rigid
-from siteline.schemas import validate
+from siteline.schema import validate
 from siteline.tolerances import snap
 
 if TYPE_CHECKING:
@@ -65,6 +66,11 @@ class Camera:
             raise CameraError("camera pose has non-finite values.")
         if np.abs(R @ R.T - np.eye(3)).max() > ORTHONORMAL_TOL or np.linalg.det(R) < 0:
             raise CameraError("camera rotation is not a proper rotation (orthonormal, det +1).")
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """Size and intrinsics (pixels) without the pose."""
+        return Intrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
 
     # -- construction ------------------------------------------------------------------------
     @classmethod
@@ -151,7 +157,7 @@ class Camera:
     def from_rigid(
         cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float, cam_from_world: Rigid
     ) -> Camera:
-        """From intrinsics (pixels) and a ``cam_from_world`` :class:`siteline.poses.Rigid`."""
+        """From intrinsics (pixels) and a ``cam_from_world`` :class:`siteline.camera.poses.Rigid`."""
         if cam_from_world.name != "cam_from_world":
             raise CameraError(f"a camera pose must be cam_from_world, got {cam_from_world.name}.")
         return cls.from_pose(width, height, fx, fy, cx, cy, cam_from_world.R, cam_from_world.t)

@@ -1,5 +1,6 @@
-"""Named capture cameras (intrinsics only) that planned survey cameras take: DJI Zenmuse sensors from
-DESIGN.md's facts, or a camera file the user gives."""
+"""A pinhole camera's intrinsics (the one record of them: ``Camera.intrinsics`` gives a posed camera's)
+and the named capture cameras planned survey cameras take: DJI Zenmuse sensors from DESIGN.md's
+facts, or a camera file the user gives."""
 
 from __future__ import annotations
 
@@ -13,16 +14,17 @@ from siteline.errors import CameraError
 
 
 @dataclass(frozen=True)
-class CameraModel:
-    """A pinhole camera's intrinsics: size (pixels), focal lengths and principal point (pixels)."""
+class Intrinsics:
+    """A pinhole camera's intrinsics: image size, focal lengths and principal point (pixels), and the
+    name of the capture camera they describe ("" for a camera of no name)."""
 
-    name: str
     width: int
     height: int
     fx: float
     fy: float
     cx: float
     cy: float
+    name: str = ""
 
     def __post_init__(self) -> None:
         values = (self.width, self.height, self.fx, self.fy, self.cx, self.cy)
@@ -35,23 +37,23 @@ class CameraModel:
         return altitude_m * self.width / self.fx, altitude_m * self.height / self.fy
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {"name": self.name} | {k: v for k, v in asdict(self).items() if k != "name"}
 
 
-def _centred(name: str, width: int, height: int, f: float) -> CameraModel:
-    return CameraModel(name, width, height, f, f, width / 2.0, height / 2.0)
+def _centred(name: str, width: int, height: int, f: float) -> Intrinsics:
+    return Intrinsics(width, height, f, f, width / 2.0, height / 2.0, name)
 
 
 # Zenmuse L2 RGB: 4/3" 5280 x 3956, 24 mm equivalent (the synthetic missions' sensor, siteline.synth);
 # Zenmuse P1 with its 35 mm lens: full frame 8192 x 5460 at 4.4 um pixels (35 mm / 4.4 um)
-CAMERA_MODELS: dict[str, CameraModel] = {
+CAMERA_MODELS: dict[str, Intrinsics] = {
     "zenmuse-l2": _centred("zenmuse-l2", 5280, 3956, 3520.0),
     "zenmuse-p1-35mm": _centred("zenmuse-p1-35mm", 8192, 5460, 7955.0),
 }
 DEFAULT_CAMERA_MODEL = "zenmuse-l2"
 
 
-def camera_model(name_or_file: str) -> CameraModel:
+def camera_model(name_or_file: str) -> Intrinsics:
     """A named model (``zenmuse-l2``, ``zenmuse-p1-35mm``) or a JSON file of ``width``, ``height``,
     ``fx`` and optionally ``fy``, ``cx``, ``cy`` (pixels); :class:`CameraError` naming what is wrong."""
     if name_or_file in CAMERA_MODELS:
@@ -71,4 +73,4 @@ def camera_model(name_or_file: str) -> CameraModel:
             f"camera file {path}: expected JSON with width, height, fx (and optionally fy, cx, cy) in "
             f"pixels ({exc})."
         ) from exc
-    return CameraModel(path.name, width, height, fx, fy, cx, cy)
+    return Intrinsics(width, height, fx, fy, cx, cy, path.name)

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from siteline.errors import SchemaError
-from siteline.schemas import SCHEMA_DIR, load_json, validate
+from siteline.schema import SCHEMA_DIR, load_json, validate
 
 DEFAULT_TAXONOMY_PATH = SCHEMA_DIR / "taxonomy.default.json"
 

@@ -9,11 +9,11 @@ from typing import Any
 
 import pyproj
 
-from siteline.crs import crs_text, parse_crs, parse_origin
 from siteline.errors import SiteError
-from siteline.fence import validate_fence
-from siteline.schemas import validate
-from siteline.taxonomy import Taxonomy, default_taxonomy
+from siteline.schema import validate
+from siteline.site.crs import crs_text, parse_crs, parse_origin
+from siteline.site.fence import validate_fence
+from siteline.site.taxonomy import Taxonomy, default_taxonomy
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")  # used with fullmatch: no trailing newline
 DEFAULT_TILE_SIZE_M = 50.0
