@@ -23,6 +23,7 @@ from siteline.config import Settings
 from siteline.previews.images import pair_samples, url_of
 from siteline.previews.markdown import pair_markdown, release_markdown
 from siteline.records.pairs import PairOutput
+from siteline.records.registration import Registration
 from siteline.records.release import ReleaseInfo
 from siteline.release.manifest import read_manifest
 
@@ -122,11 +123,12 @@ def ingest_dashboards(site: str, mission: str, res: dict[str, Any]) -> None:
     scan, tiles = res.get("scan") or {}, res.get("tiles") or {}
     if not scan:
         return
+    reg = Registration.from_dict(res["registration"])
     stats = {
         "points": scan.get("point_count"), "density_pts_m2": round(scan.get("density_pts_m2", 0), 2),
         "classes": scan.get("class_histogram"), "unknown_codes": scan.get("unknown_codes"),
-        "registration": res["registration"].get("source"), "rms_m": res["registration"].get("rms_m"),
-        "alignment_m": (res["registration"].get("alignment") or {}).get("translation_m"),
+        "registration": reg.source, "rms_m": reg.rms_m,
+        "alignment_m": reg.alignment.translation_m if reg.alignment else None,
         "tiles": tiles.get("tiles"), "bytes_per_point": tiles.get("bytes_per_point"),
     }  # fmt: skip
     create_table_artifact(

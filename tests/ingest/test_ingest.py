@@ -60,7 +60,7 @@ def test_two_epochs_become_two_scenes_and_a_pair(cat, site_settings, synth_site)
 
 def test_georegistration_recovers_true_poses(cat, site_settings, synth_site) -> None:
     r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
-    assert r.registration["source"] == "colmap" and r.registration["rms_m"] < 0.01
+    assert r.registration.source == "colmap" and (r.registration.rms_m or 1) < 0.01
     truth = _truth_cameras(synth_site, 0)
     with cat.transaction() as s:
         cams = dict(scene_cameras(s, r.scene_id))
@@ -123,7 +123,7 @@ def test_xmp_poses_without_colmap_model(cat, site_settings, synth_site, tmp_path
     mission = copy_mission(synth_site, 0, tmp_path)
     shutil.rmtree(mission / "colmap")
     r = ingest_mission(cat, site_settings, mission, "demo")
-    assert r.registration["source"] == "xmp"
+    assert r.registration.source == "xmp"
     truth = _truth_cameras(synth_site, 0)
     with cat.transaction() as s:
         for name, cam in scene_cameras(s, r.scene_id):
@@ -149,21 +149,21 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     settings = make_home(tmp_path, site_dir=site)
     cat = open_catalog(settings)
     r = ingest_mission(cat, settings, epoch_dirs(site)[0], "demo")
-    assert r.created and r.registration["source"] == "planned"
-    survey = r.registration["survey"]
+    assert r.created and r.registration.source == "planned"
+    survey = r.registration.to_dict()["survey"]
     from siteline.register.planned import SurveyPlan, auto_altitude
     from siteline.site.fence import fence_area_m2
 
     # no --altitude: chosen from the cloud's density and the fence's area, and the reason recorded
     altitude, why = auto_altitude(SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings)))
-    assert r.registration["over"] == "site fence" and survey["altitude_m"] == altitude and survey["altitude_why"] == why
+    assert r.registration.over == "site fence" and survey["altitude_m"] == altitude and survey["altitude_why"] == why
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
         assert sc.capture_time.year == 2024  # from the raw folder name
         cams = scene_cameras(s, sc.id)
         sources = {c.source for c in s.query(CameraRow).filter_by(scene_id=sc.id)}
         bounds = scene_statistics(sc).scan.bounds_min, scene_statistics(sc).scan.bounds_max
-    assert len(cams) == r.registration["images"] > 10 and sources == {"planned"}
+    assert len(cams) == r.registration.images > 10 and sources == {"planned"}
     nadir = [c for n, c in cams if "nadir" in n]
     assert nadir and all(np.allclose(c.forward, [0, 0, -1], atol=1e-5) for c in nadir)
     for name, cam in cams:
@@ -251,8 +251,8 @@ def test_a_scene_a_metre_off_is_co_registered_and_corrected(cat, site_settings, 
 
     r0 = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
     r = ingest_mission(cat, site_settings, _dropped(synth_site, tmp_path, 1.0), "demo")
-    a = r.registration["alignment"]
-    assert a["applied"] and 0.95 < a["translation_m"] < 1.05 and a["residual_m"] < 0.05
+    a = r.registration.alignment
+    assert a is not None and a.applied and 0.95 < a.translation_m < 1.05 and a.residual_m < 0.05
     for sid in (r0.scene_id, r.scene_id):
         tile_scene(cat, site_settings, sid, resources=TilingResources(workers=1))
     with cat.transaction() as s:
@@ -271,7 +271,8 @@ def test_a_scene_metres_off_is_refused_unless_accepted_then_recorded_not_applied
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Scene.id))).scalar_one() == 1
     r = ingest_mission(cat, site_settings, mission, "demo", IngestOptions(accept_misalignment=True))
-    assert r.registration["alignment"]["accepted"] and not r.registration["alignment"]["applied"]
+    a = r.registration.alignment
+    assert a is not None and a.accepted and not a.applied
 
 
 def test_concurrent_ingests_into_postgresql_both_land(tmp_path, synth_site, postgres_url) -> None:

@@ -63,7 +63,7 @@ def test_flat_ground_alone_reports_the_free_directions() -> None:
     assert sorted(res.free) == ["x", "y", "yaw"]
     # the free directions are left at zero: only z was moved (0.3 m), nothing claimed across
     assert res.translation_m == pytest.approx(0.3, abs=0.02)
-    text = Alignment.from_dict(res.to_dict() | {"against_scene": 1, "applied": True}).summary()
+    text = Alignment(1, res.translation_m, res.rotation_deg, True, res.residual_m, res.residual_xy_m, dict(res.axes)).summary()
     assert "yaw, x, y NOT CHECKED" in text and "m across" not in text
 
 
@@ -83,8 +83,8 @@ def test_the_ingest_check_splits_the_sample_by_kind_and_applies_the_correction()
         return np.r_[np.c_[g, np.ones(len(g))], np.c_[t, np.full(len(t), 2.0)]]
 
     record = check_alignment(sample(_moved(g2), _moved(t2)), sample(g1, t1), 1, "m2", AlignmentPolicy())
-    assert record["applied"] and not record["free"]
-    assert _error_m(record["correction"], PROBES) < 0.1
+    assert record.applied and not record.free
+    assert _error_m(record.correction, PROBES) < 0.1
     # an older scene's sample of stable surfaces only (N, 3): its free directions are named
     old = check_alignment(sample(_moved(g2), _moved(t2)), g1, 1, "m2", AlignmentPolicy())
-    assert sorted(old["free"]) == ["x", "y", "yaw"]
+    assert sorted(old.free) == ["x", "y", "yaw"]

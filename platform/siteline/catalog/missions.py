@@ -63,7 +63,7 @@ def record_ingest(session: Session, site_id: int, checked: CheckedMission, run: 
     scan = checked.scan
     scene = Scene(
         site_id=site.id, mission_id=mission.id, capture_time=checked.capture_time, point_count=scan.point_count,
-        bounds={"min": scan.bounds_min, "max": scan.bounds_max}, registration=checked.registration,
+        bounds={"min": scan.bounds_min, "max": scan.bounds_max}, registration=checked.registration.to_dict(),
         statistics=stats.to_json(), status="registered",
     )  # fmt: skip
     session.add(scene)

@@ -18,7 +18,7 @@ from siteline.catalog.models import LabelSet, Mission, Scene, Site
 from siteline.catalog.sites import site_name, site_of
 from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, TileError
-from siteline.records.registration import alignment_of
+from siteline.records.registration import Registration
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneSummary
@@ -73,10 +73,15 @@ def scene_cameras(session: Session, scene_id: int) -> list[tuple[str, Camera]]:
     ]
 
 
+def scene_registration(scene: Scene) -> Registration:
+    """The scene's registration record (how its cameras were found, its co-registration)."""
+    return Registration.from_dict(scene.registration)
+
+
 def scene_correction(scene: Scene) -> tuple[tuple[float, ...], ...] | None:
     """The co-registration ingest applied to a scene (4 x 4 site-local, previous scene from this one),
     or None when none was applied (siteline.register.scene.check_alignment)."""
-    alignment = alignment_of(scene.registration)
+    alignment = scene_registration(scene).alignment
     if alignment is None or not alignment.applied:
         return None
     return alignment.correction
@@ -140,6 +145,20 @@ def mission_of_scene(session: Session, scene_id: int) -> Mission:
     return mission
 
 
+def scene_rows(s: Session, site: Site) -> list[dict[str, Any]]:
+    """The site's scenes in capture order as plain values (for the CLI's list): id, capture time,
+    points, status, mission, camera source and the co-registration's translation (m)."""
+    rows = []
+    for scene in list_scenes(s, site):
+        reg = scene_registration(scene)
+        rows.append({
+            "id": scene.id, "capture_time": scene.capture_time, "points": scene.point_count,
+            "status": scene.status, "mission_id": scene.mission_id, "registration": reg.source,
+            "alignment_m": reg.alignment.translation_m if reg.alignment else None,
+        })  # fmt: skip
+    return rows
+
+
 def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
     """Scene ``scene_id`` as plain values: statistics, registration, tiles, label sets (for the CLI)."""
     scene = get_scene(s, scene_id)
@@ -163,11 +182,11 @@ def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
         "z_unit": scan.z_unit.to_dict() if scan and scan.z_unit else None,
         "colour": scan.colour if scan else None,
         "capture_time_source": stats.capture_time_source,
-        "registration": scene.registration,
+        "registration": (reg := scene_registration(scene)).to_dict(),
         # the co-registration onto the previous scene in words (None for a first scene)
-        "alignment": (a.summary() if (a := alignment_of(scene.registration)) else None),
+        "alignment": reg.alignment.summary() if reg.alignment else None,
         # how planned cameras were flown, and why at that altitude (None: photo cameras)
-        "survey": ((scene.registration or {}).get("survey")),
+        "survey": reg.to_dict().get("survey"),
         "cameras": len(scene_cameras(s, scene.id)),
         "tile_store": scene.tile_store_uri,
         "tiles": nodes["tiles"],

@@ -13,7 +13,7 @@ from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeR
 from siteline.camera.photos import read_photo_meta
 from siteline.catalog.missions import list_missions
 from siteline.catalog.pairs import list_pairs
-from siteline.catalog.scenes import list_scenes, scene_record
+from siteline.catalog.scenes import scene_record, scene_rows
 from siteline.catalog.sites import get_site
 from siteline.cli.common import (
     JsonOption,
@@ -145,7 +145,7 @@ def ingest(
             result.message
             if not result.created
             else f"{result.message}: {result.scan.point_count if result.scan else 0:,} points, "
-            f"{result.registration.get('images', 0)} {result.registration.get('source')} cameras, "
+            f"{result.registration.images or 0} {result.registration.source} cameras, "
             f"pairs {result.pairs}"
         ),
     )
@@ -192,18 +192,7 @@ def scene_list(
     """List the scenes of a site in capture order, and its pairs."""
     with catalog() as cat, cat.transaction() as s:
         st = get_site(s, site)
-        records: list[dict[str, Any]] = [
-            {
-                "id": sc.id,
-                "capture_time": sc.capture_time,
-                "points": sc.point_count,
-                "status": sc.status,
-                "mission_id": sc.mission_id,
-                "registration": (sc.registration or {}).get("source"),
-                "alignment_m": ((sc.registration or {}).get("alignment") or {}).get("translation_m"),
-            }
-            for sc in list_scenes(s, st)
-        ]
+        records = scene_rows(s, st)
         pairs = [{"id": p.id, "t1": p.t1_scene_id, "t2": p.t2_scene_id} for p in list_pairs(s, st)]
 
     def human() -> None:

@@ -81,7 +81,7 @@ def execute_ingest(
             survey, scan.footprint, plan.site, opts.survey, len(photos), scan.density_pts_m2
         )
         if not cameras:
-            log.warning("point cloud %s: %s; it is ingested and tiled all the same", root / las.path, registration["note"])
+            log.warning("point cloud %s: %s; it is ingested and tiled all the same", root / las.path, registration.note)
     when, when_source = capture_time(photos, entries, scan, root, opts.captured_at)
     if plan.scene_at(when) is not None:
         raise MissionError(
@@ -92,14 +92,13 @@ def execute_ingest(
     sample = load_sample(store, before.statistics.stable_sample_sha256) if before is not None else None
     if before is not None and sample is not None and scan.stable_sample is not None:
         policy = AlignmentPolicy(opts.max_alignment_translation_m, opts.max_alignment_residual_m)
-        registration["alignment"] = check_alignment(
-            scan.stable_sample, sample, before.id, root.name, policy, opts.accept_misalignment
-        )
-        if registration["alignment"]["applied"]:
-            scan, cameras = corrected(scan, cameras, registration["alignment"]["correction"])
+        alignment = check_alignment(scan.stable_sample, sample, before.id, root.name, policy, opts.accept_misalignment)
+        registration = registration.aligned(alignment)
+        if alignment.applied:
+            scan, cameras = corrected(scan, cameras, alignment.correction)
             log.info(
                 "mission %s: co-registered onto scene %d, moved by %.3f m (residual %.3f m)", root.name,
-                before.id, registration["alignment"]["translation_m"], registration["alignment"]["residual_m"],
+                before.id, alignment.translation_m, alignment.residual_m,
             )  # fmt: skip
     log.info(
         "mission %s: %s points, %d cameras (%s), captured %s (%s)",
@@ -130,7 +129,7 @@ def check_codes(scan: LasScan, path: Path, site: SiteSpec, unmapped: str) -> Non
 
 
 def corrected(
-    scan: LasScan, cameras: dict[str, Camera], correction: list[list[float]]
+    scan: LasScan, cameras: dict[str, Camera], correction: tuple[tuple[float, ...], ...]
 ) -> tuple[LasScan, dict[str, Camera]]:
     """The scan's stable sample and footprint and the scene's cameras moved by a co-registration
     (4 x 4, site-local: previous scene from this one), as its tiles will be (siteline.pointpass.sitestream)."""

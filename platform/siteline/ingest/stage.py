@@ -32,7 +32,7 @@ from siteline.ingest.pointcloud import start_readers
 from siteline.pointpass.partition import PartitionCache
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
-from siteline.records.registration import alignment_of
+from siteline.records.registration import Registration
 from siteline.records.runs import StageRun
 from siteline.records.scan import LasScan
 from siteline.stores import layout
@@ -56,12 +56,12 @@ class IngestResult:
     manifest_sha256: str
     files: int = 0
     scan: LasScan | None = None
-    registration: dict[str, Any] = field(default_factory=dict)
+    registration: Registration = field(default_factory=lambda: Registration("unknown"))
     pairs: list[int] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         doc = {f.name: getattr(self, f.name) for f in fields(self)}
-        return doc | {"scan": self.scan.to_dict() if self.scan is not None else {}}
+        return doc | {"scan": self.scan.to_dict() if self.scan is not None else {}, "registration": self.registration.to_dict()}
 
 
 def _already(plan: IngestPlan) -> IngestResult:
@@ -116,13 +116,13 @@ def _store_and_record(
     )  # fmt: skip
 
 
-def _notes(registration: dict[str, Any]) -> list[str]:
+def _notes(registration: Registration) -> list[str]:
     """What the one-line report of an ingest says beside it: a scene without cameras, and the
     directions its co-registration could not check."""
     notes = []
-    if registration.get("source") == "none" and registration.get("note"):
-        notes.append(str(registration["note"]))
-    alignment = alignment_of(registration)
+    if registration.source == "none" and registration.note:
+        notes.append(registration.note)
+    alignment = registration.alignment
     if alignment is not None and alignment.free:
         notes.append(
             f"co-registration onto scene {alignment.against_scene} could not check {', '.join(alignment.free)}: "
@@ -163,7 +163,7 @@ def ingest_mission(
         try:
             checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
             result = _store_and_record(catalog, settings, plan, checked, run, progress, staging)
-            aligned = alignment_of(checked.registration)
+            aligned = checked.registration.alignment
             if aligned is None or not aligned.applied:
                 # the runs were cut before the co-registration: a corrected scene's tiles cut anew
                 cache.keep(runs, checked.las_sha256)

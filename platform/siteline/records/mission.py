@@ -11,6 +11,7 @@ from typing import Any
 
 from siteline.camera.pinhole import Camera
 from siteline.records.enums import CameraSource, FileKind, Storage
+from siteline.records.registration import Registration
 from siteline.records.scan import LasScan
 
 
@@ -51,7 +52,7 @@ class CheckedMission:
     las_sha256: str
     cameras: Mapping[str, Camera]
     camera_source: CameraSource
-    registration: dict[str, Any]
+    registration: Registration
     capture_time: datetime
     capture_time_source: str
     sample_sha256: str

@@ -1,11 +1,17 @@
-"""A scene's co-registration onto the one before it, as recorded in its registration
-(``registration["alignment"]``; siteline.register.scene.check_alignment writes it)."""
+"""A scene's registration record: how its cameras were found (COLMAP georegistration, DJI XMP poses,
+planned from its points, or none), the survey planned cameras were laid out by, and its
+co-registration onto the scene before it (siteline.register writes it; the catalog's
+``scene.registration`` column holds its JSON form, read and written only through :class:`Registration`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
+
+from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intrinsics
+from siteline.errors import RegistrationError
 
 # the six directions of a rigid correction
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -14,11 +20,15 @@ AXES = ("roll", "pitch", "yaw", "x", "y", "z")
 @dataclass(frozen=True)
 class Alignment:
     """How a scene lines up with the previous one. against_scene: that scene's id. translation_m /
-    rotation_deg: the correction found; applied: whether ingest moved the scene by it. residual_m:
-    RMS point-to-plane distance on the stable surfaces; residual_xy_m: RMS horizontal distance on the
-    structure (None where none was matched). axes: per direction, what fixed it, or None when nothing
-    did (recorded before directions were told apart: empty). correction: the 4 x 4 matrix
-    (previous scene from this one, site-local metres)."""
+    rotation_deg: the correction found; applied: whether ingest moved the scene by it (it does over
+    ``apply_above_m``); accepted: within the alignment policy (or accepted by the user). residual_m:
+    RMS point-to-plane distance on the stable surfaces; residual_xy_m / residual_z_m: RMS horizontal
+    and vertical distance on the structure (None where none was matched). axes: per direction, what
+    fixed it, or None when nothing did (empty for records made before directions were told apart).
+    correction: the 4 x 4 matrix (previous scene from this one, site-local metres; its frames named in
+    ``correction_frames``). matched / structure_matched: point pairs of each kind; surfaces: which
+    stable surfaces were matched; overlap: the share of the sample that overlapped the previous scene;
+    degenerate: some direction stayed free; iterations: ICP's."""
 
     against_scene: int | None
     translation_m: float
@@ -29,20 +39,34 @@ class Alignment:
     axes: Mapping[str, str | None] = field(default_factory=dict)
     correction: tuple[tuple[float, ...], ...] = ()
     accepted: bool = True
+    residual_z_m: float | None = None
+    correction_frames: str | None = None
+    matched: int | None = None
+    structure_matched: int | None = None
+    surfaces: str | None = None
+    degenerate: bool | None = None
+    iterations: int | None = None
+    overlap: float | None = None
+    apply_above_m: float | None = None
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> Alignment:
+        names = {f.name for f in fields(cls)}
+        values = {k: v for k, v in doc.items() if k in names}
+        values["correction"] = tuple(tuple(float(v) for v in row) for row in doc.get("correction") or ())
+        values["axes"] = dict(doc.get("axes") or {})
         return cls(
-            doc.get("against_scene"),
-            float(doc.get("translation_m", 0.0)),
-            float(doc.get("rotation_deg", 0.0)),
-            bool(doc.get("applied", False)),
-            float(doc.get("residual_m", float("inf"))),
-            doc.get("residual_xy_m"),
-            dict(doc.get("axes") or {}),
-            tuple(tuple(float(v) for v in row) for row in doc.get("correction") or ()),
-            bool(doc.get("accepted", True)),
+            **{"against_scene": None, "translation_m": 0.0, "rotation_deg": 0.0, "applied": False,
+               "residual_m": float("inf")} | values  # fmt: skip
         )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (None-valued optional fields left out; ``free`` named for readers)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["correction"] = [list(row) for row in self.correction]
+        out["axes"] = dict(self.axes)
+        out = {k: v for k, v in out.items() if v is not None or k in ("against_scene", "residual_xy_m", "residual_z_m")}
+        return out | ({"free": self.free} if self.axes else {})
 
     @property
     def free(self) -> list[str]:
@@ -70,7 +94,114 @@ class Alignment:
         return text
 
 
-def alignment_of(registration: Mapping[str, Any] | None) -> Alignment | None:
-    """The co-registration of a scene's registration record, None when it has none (a first scene)."""
-    doc = (registration or {}).get("alignment")
-    return Alignment.from_dict(doc) if doc else None
+@dataclass(frozen=True)
+class SurveyPlan:
+    """How planned cameras are laid out. altitude_m: above the ground under each camera (the 10th
+    percentile of the sample's z around it), or None to choose it from the scene (:func:`siteline.register.planned.auto_altitude`);
+    forward_overlap / side_overlap: of consecutive images on a line and of neighbouring lines (0-1);
+    oblique_pitch_deg: downward tilt of the oblique cameras looking into the area from around its
+    edge (0: no oblique pass)."""
+
+    camera: Intrinsics = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
+    altitude_m: float | None = None
+    forward_overlap: float = 0.7
+    side_overlap: float = 0.6
+    oblique_pitch_deg: float = 45.0
+
+    def __post_init__(self) -> None:
+        h = self.altitude_m
+        if h is not None and not (math.isfinite(h) and 5.0 <= h <= 1000.0):
+            raise RegistrationError(f"planned cameras: altitude {h} m must lie in [5, 1000].")
+        for name in ("forward_overlap", "side_overlap"):
+            v = getattr(self, name)
+            if not 0.0 <= v <= 0.95:
+                raise RegistrationError(f"planned cameras: {name} {v} must lie in [0, 0.95].")
+        if not 0.0 <= self.oblique_pitch_deg < 90.0:
+            raise RegistrationError(
+                f"planned cameras: oblique pitch {self.oblique_pitch_deg} must lie in [0, 90) degrees."
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "camera": self.camera.to_dict(), "altitude_m": self.altitude_m,
+            "forward_overlap": self.forward_overlap, "side_overlap": self.side_overlap,
+            "oblique_pitch_deg": self.oblique_pitch_deg,
+        }  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> SurveyPlan:
+        cam = dict(doc["camera"])
+        camera = Intrinsics(**{k: cam[k] for k in ("width", "height", "fx", "fy", "cx", "cy")}, name=cam.get("name", ""))
+        return cls(
+            camera, doc.get("altitude_m"), float(doc["forward_overlap"]), float(doc["side_overlap"]),
+            float(doc["oblique_pitch_deg"]),
+        )  # fmt: skip
+
+    def nadir_cameras(self, altitude_m: float, area_m2: float) -> float:
+        """About how many nadir cameras cover ``area_m2`` at ``altitude_m`` (the grid's cell is the
+        footprint less the overlaps)."""
+        across, along = self.camera.ground_footprint_m(altitude_m)
+        return area_m2 / (across * (1.0 - self.side_overlap) * along * (1.0 - self.forward_overlap))
+
+
+@dataclass(frozen=True)
+class Registration:
+    """How a scene's cameras were found and how it lines up with the scene before it.
+
+    source: ``colmap``, ``xmp``, ``planned`` or ``none``; images: how many cameras it gave; note: why
+    (a LiDAR-only mission, cameras planned, or why none could be); planned: False where planning was
+    tried and gave none. Planned cameras: over (``site fence`` or ``scene footprint``), the survey and
+    why its altitude (``altitude_why``). XMP and COLMAP: camera_models, the distortion each undistorted
+    camera came from (pycolmap's model name and parameters, by image). COLMAP: site_from_model (the
+    Sim3: scale, 3 x 3 rotation, translation in site-local metres), residuals_m (per image, metres)
+    and their rms_m. alignment: the co-registration onto the previous scene (None for a first scene)."""
+
+    source: str
+    images: int | None = None
+    note: str | None = None
+    planned: bool | None = None
+    over: str | None = None
+    survey: SurveyPlan | None = None
+    altitude_why: str | None = None
+    camera_models: Mapping[str, Mapping[str, Any] | None] | None = None
+    site_from_model: Mapping[str, Any] | None = None
+    residuals_m: Mapping[str, float] | None = None
+    rms_m: float | None = None
+    alignment: Alignment | None = None
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any] | None) -> Registration:
+        """From the catalog's JSON form; an empty record (a scene made before registration was
+        recorded) reads as source ``unknown``."""
+        doc = dict(doc or {})
+        survey = doc.pop("survey", None)
+        why = survey.get("altitude_why") if survey else None
+        alignment = doc.pop("alignment", None)
+        names = {f.name for f in fields(cls)} - {"survey", "alignment", "altitude_why"}
+        return cls(
+            **{"source": "unknown"} | {k: v for k, v in doc.items() if k in names},
+            survey=SurveyPlan.from_dict(survey) if survey else None, altitude_why=why,
+            alignment=Alignment.from_dict(alignment) if alignment else None,
+        )  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form the catalog keeps (fields that do not apply left out)."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None or f.name == "altitude_why":
+                continue
+            if f.name == "survey":
+                value = value.to_dict() | ({"altitude_why": self.altitude_why} if self.altitude_why else {})
+            elif f.name == "alignment":
+                value = value.to_dict()
+            out[f.name] = value
+        return out
+
+    def aligned(self, alignment: Alignment) -> Registration:
+        """This record with its co-registration."""
+        return replace(self, alignment=alignment)
+
+    def none_because(self) -> str:
+        """Why the scene has no cameras (its note), or ""."""
+        return self.note or ""

@@ -11,6 +11,7 @@ import numpy as np
 from siteline.camera.pinhole import Camera, distortion_record
 from siteline.camera.poses import Sim3
 from siteline.errors import RegistrationError
+from siteline.records.registration import Registration
 
 
 @dataclass
@@ -29,19 +30,20 @@ class Georegistration:
         r = np.array(list(self.residuals_m.values()))
         return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
 
-    def to_dict(self) -> dict:
-        return {
-            "source": "colmap",
-            "site_from_model": {
+    def record(self) -> Registration:
+        """The scene's registration record of it."""
+        return Registration(
+            "colmap",
+            images=len(self.residuals_m),
+            camera_models=self.camera_models,
+            residuals_m=self.residuals_m,
+            rms_m=self.rms_m,
+            site_from_model={
                 "scale": float(self.site_from_model.scale),
                 "rotation": self.site_from_model.R.tolist(),
                 "translation": self.site_from_model.t.tolist(),
             },
-            "camera_models": self.camera_models,
-            "residuals_m": self.residuals_m,
-            "rms_m": self.rms_m,
-            "images": len(self.residuals_m),
-        }
+        )
 
 
 def check_spread(names: list[str], locations: np.ndarray, where: str, min_images: int = 3) -> None:

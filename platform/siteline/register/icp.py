@@ -64,24 +64,6 @@ class AlignmentCheck:
         """The directions nothing fixed."""
         return [a for a in AXES if self.axes.get(a) is None]
 
-    def to_dict(self) -> dict:
-        return {
-            "residual_m": self.residual_m,
-            "residual_xy_m": self.residual_xy_m,
-            "residual_z_m": self.residual_z_m,
-            "translation_m": self.translation_m,
-            "rotation_deg": self.rotation_deg,
-            "correction": self.correction,
-            "correction_frames": self.prev_from_new.name,
-            "matched": self.matched,
-            "structure_matched": self.structure_matched,
-            "surfaces": self.surfaces,
-            "degenerate": self.degenerate,
-            "axes": dict(self.axes),
-            "free": self.free,
-            "iterations": self.iterations,
-        }
-
 
 def _normals(tree: cKDTree, pts: np.ndarray, k: int = 24) -> np.ndarray:
     _, idx = tree.query(pts, k=min(k, len(pts)), workers=-1)

@@ -7,15 +7,14 @@ are snapped to the pose quanta)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import shapely
 
-from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intrinsics
+from siteline.camera.intrinsics import Intrinsics
 from siteline.camera.pinhole import Camera
 from siteline.errors import RegistrationError
+from siteline.records.registration import SurveyPlan
 from siteline.tolerances import POSE_CENTER_QUANTUM_M, POSE_ROTATION_QUANTUM
 
 # a camera is planned only over data: at least this many sample points under its image's centre area
@@ -31,47 +30,6 @@ AUTO_LONG_SIDE_PX = 512
 # and lowers the flight (more, smaller images) until the nadir grid holds at least this many
 # cameras: each gives up to 32 candidate views, and about a third pass their probes
 MIN_NADIR_CAMERAS = 16
-
-
-@dataclass(frozen=True)
-class SurveyPlan:
-    """How planned cameras are laid out. altitude_m: above the ground under each camera (the 10th
-    percentile of the sample's z around it), or None to choose it from the scene (:func:`auto_altitude`);
-    forward_overlap / side_overlap: of consecutive images on a line and of neighbouring lines (0-1);
-    oblique_pitch_deg: downward tilt of the oblique cameras looking into the area from around its
-    edge (0: no oblique pass)."""
-
-    camera: Intrinsics = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
-    altitude_m: float | None = None
-    forward_overlap: float = 0.7
-    side_overlap: float = 0.6
-    oblique_pitch_deg: float = 45.0
-
-    def __post_init__(self) -> None:
-        h = self.altitude_m
-        if h is not None and not (math.isfinite(h) and 5.0 <= h <= 1000.0):
-            raise RegistrationError(f"planned cameras: altitude {h} m must lie in [5, 1000].")
-        for name in ("forward_overlap", "side_overlap"):
-            v = getattr(self, name)
-            if not 0.0 <= v <= 0.95:
-                raise RegistrationError(f"planned cameras: {name} {v} must lie in [0, 0.95].")
-        if not 0.0 <= self.oblique_pitch_deg < 90.0:
-            raise RegistrationError(
-                f"planned cameras: oblique pitch {self.oblique_pitch_deg} must lie in [0, 90) degrees."
-            )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "camera": self.camera.to_dict(), "altitude_m": self.altitude_m,
-            "forward_overlap": self.forward_overlap, "side_overlap": self.side_overlap,
-            "oblique_pitch_deg": self.oblique_pitch_deg,
-        }  # fmt: skip
-
-    def nadir_cameras(self, altitude_m: float, area_m2: float) -> float:
-        """About how many nadir cameras cover ``area_m2`` at ``altitude_m`` (the grid's cell is the
-        footprint less the overlaps)."""
-        across, along = self.camera.ground_footprint_m(altitude_m)
-        return area_m2 / (across * (1.0 - self.side_overlap) * along * (1.0 - self.forward_overlap))
 
 
 def auto_altitude(plan: SurveyPlan, density_pts_m2: float, area_m2: float) -> tuple[float, str]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import shapely
@@ -14,10 +13,11 @@ from siteline.camera.photos import PhotoMeta
 from siteline.camera.pinhole import Camera, distortion_record
 from siteline.errors import RegistrationError
 from siteline.records.enums import CameraSource
+from siteline.records.registration import Alignment, Registration, SurveyPlan
 from siteline.records.scan import SAMPLE_STABLE, SAMPLE_STRUCTURE
 from siteline.register.georegister import georegister
 from siteline.register.icp import register_samples
-from siteline.register.planned import SurveyPlan, auto_altitude, plan_cameras
+from siteline.register.planned import auto_altitude, plan_cameras
 from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
 from siteline.site.spec import SiteSpec
 
@@ -44,26 +44,24 @@ def register_cameras(
     spec: SiteSpec,
     ransac_max_error_m: float,
     max_rms_m: float,
-) -> tuple[dict[str, Camera], dict[str, Any], CameraSource | None]:
+) -> tuple[dict[str, Camera], Registration, CameraSource | None]:
     """Cameras by image name (site-local), the registration record, and the camera source: a COLMAP
     model georegistered by a Sim3 to the photos' RTK positions, else the photos' XMP poses."""
     if not photos:
-        return {}, {"source": "none", "note": "LiDAR-only mission: no photos"}, None
+        return {}, Registration("none", note="LiDAR-only mission: no photos"), None
     crs = spec.pyproj_crs
     origin = np.asarray(spec.origin, dtype=np.float64)
     by_name = {Path(p).name: m for p, m in photos.items()}
     if model is not None:
         locations = {name: photo_center_crs(m, crs) - origin for name, m in by_name.items()}
         reg = georegister(model, locations, max_error_m=ransac_max_error_m, max_rms_m=max_rms_m)
-        return reg.cameras, reg.to_dict(), "colmap"
+        return reg.cameras, reg.record(), "colmap"
     cams = {name: camera_from_photo(m, crs, spec.origin) for name, m in by_name.items()}
-    record: dict[str, Any] = {"source": "xmp", "images": len(cams)}
     models = {
         name: distortion_record(c) for name, m in by_name.items() if (c := dewarp_camera(m)) is not None
     }
-    if models:
-        record["camera_models"] = models  # the DewarpData distortion each undistorted camera came from
-    return cams, record, "xmp"
+    # the DewarpData distortion each undistorted camera came from
+    return cams, Registration("xmp", images=len(cams), camera_models=models or None), "xmp"
 
 
 def planned_cameras(
@@ -73,7 +71,7 @@ def planned_cameras(
     survey: SurveyPlan,
     photos: int,
     density_pts_m2: float,
-) -> tuple[dict[str, Camera], dict[str, Any], CameraSource | None]:
+) -> tuple[dict[str, Camera], Registration, CameraSource | None]:
     """Cameras planned over the site's fence, or the scene's footprint when the site has none, from
     the scene's (N, 3+) site-local sample at an altitude chosen from its ``density_pts_m2`` and area
     unless ``survey`` sets one; the registration record says how and why (``photos``: how many
@@ -89,21 +87,18 @@ def planned_cameras(
         area, where = [(float(x), float(y)) for x, y in footprint], "scene footprint"
     else:
         why = "its points span no area (they lie on a line or a point) and the site has no fence"
-        return {}, {"source": "none", "planned": False, "note": f"no cameras could be planned: {why}"}, None
+        return {}, Registration("none", planned=False, note=f"no cameras could be planned: {why}"), None
     area_m2 = float(shapely.Polygon(area).area)
     altitude_why = "given (--altitude)"
     if survey.altitude_m is None:
         altitude, altitude_why = auto_altitude(survey, density_pts_m2, area_m2)
         survey = replace(survey, altitude_m=altitude)
-    record: dict[str, Any] = {
-        "source": "planned", "over": where, "survey": survey.to_dict() | {"altitude_why": altitude_why},
-        "note": note,
-    }  # fmt: skip
+    record = Registration("planned", note=note, over=where, survey=survey, altitude_why=altitude_why)
     try:
         cams = plan_cameras(sample[:, :3], area, survey)
     except RegistrationError as exc:
-        return {}, record | {"source": "none", "planned": False, "images": 0, "note": f"no cameras: {exc}"}, None
-    return cams, record | {"images": len(cams)}, "planned"
+        return {}, replace(record, source="none", planned=False, images=0, note=f"no cameras: {exc}"), None
+    return cams, replace(record, images=len(cams)), "planned"
 
 
 def check_alignment(
@@ -113,7 +108,7 @@ def check_alignment(
     mission: str,
     policy: AlignmentPolicy,
     accept_misalignment: bool = False,
-) -> dict[str, Any]:
+) -> Alignment:
     """Align the new scene's co-registration sample ((N, 4) site-local metres and kind of surface;
     siteline.ingest.pointcloud; an (N, 3) sample of an older scene is all stable surfaces) onto the
     previous scene's, direction by direction (siteline.register.icp.register_samples); return the
@@ -131,10 +126,15 @@ def check_alignment(
         or not np.isfinite(check.residual_m)
         or check.residual_m > policy.max_residual_m
     )
-    record = check.to_dict() | {"against_scene": previous_scene, "overlap": overlap}
-    record["accepted"] = not bad or accept_misalignment
-    record["applied"] = bool(not bad and check.translation_m > policy.apply_above_m)
-    record["apply_above_m"] = policy.apply_above_m
+    record = Alignment(
+        previous_scene, check.translation_m, check.rotation_deg,
+        applied=bool(not bad and check.translation_m > policy.apply_above_m), residual_m=check.residual_m,
+        residual_xy_m=check.residual_xy_m, axes=dict(check.axes),
+        correction=tuple(tuple(row) for row in check.correction), accepted=not bad or accept_misalignment,
+        residual_z_m=check.residual_z_m, correction_frames=check.prev_from_new.name, matched=check.matched,
+        structure_matched=check.structure_matched, surfaces=check.surfaces, degenerate=check.degenerate,
+        iterations=check.iterations, overlap=overlap, apply_above_m=policy.apply_above_m,
+    )  # fmt: skip
     if bad and not accept_misalignment:
         raise RegistrationError(
             f"mission {mission} cannot be co-registered with scene {previous_scene}: ICP on {check.surfaces} "

@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
-from siteline.records.registration import alignment_of
+from siteline.records.registration import Registration
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M
 
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}
@@ -183,24 +183,23 @@ def _views_text(q: dict[str, Any]) -> str:
 
 def _camera_lines(lin: dict[str, Any]) -> list[str]:
     """Where each scene's cameras came from, and each pair's colour and fence."""
-    sources = {s["id"]: (s.get("registration") or {}).get("source", "unknown") for s in lin["scenes"]}
+    regs = {s["id"]: Registration.from_dict(s.get("registration")) for s in lin["scenes"]}
+    sources = {sid: r.source for sid, r in regs.items()}
     lines = ["- cameras: " + ", ".join(f"scene {sid} {src}" for sid, src in sorted(sources.items()))]
-    for s in lin["scenes"]:
-        survey = (s.get("registration") or {}).get("survey")
-        if survey and survey.get("altitude_m"):
+    for sid, r in regs.items():
+        if r.survey is not None and r.survey.altitude_m:
             lines.append(
-                f"  - scene {s['id']}: {s['registration'].get('images', 0)} cameras planned over the "
-                f"{s['registration'].get('over', 'area')} at {survey['altitude_m']:g} m ({survey.get('altitude_why', 'given')})"
+                f"  - scene {sid}: {r.images or 0} cameras planned over the {r.over or 'area'} at "
+                f"{r.survey.altitude_m:g} m ({r.altitude_why or 'given'})"
             )
     if "planned" in sources.values():
         lines.append(
             "  (planned: no photos, so siteline planned survey cameras from the point cloud; views derive from "
             "them as from photo cameras)"
         )
-    for s in lin["scenes"]:
-        a = alignment_of(s.get("registration"))
-        if a:
-            lines.append(f"- scene {s['id']} co-registered onto scene {a.against_scene}: {a.summary()}")
+    for sid, r in regs.items():
+        if (a := r.alignment) is not None:
+            lines.append(f"- scene {sid} co-registered onto scene {a.against_scene}: {a.summary()}")
     lines += [_views_text(q) for q in lin["pairs"] if q.get("views")]
     lines += [
         f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"

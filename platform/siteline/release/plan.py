@@ -18,6 +18,7 @@ from siteline.catalog.scenes import (
     list_scenes,
     mission_of_scene,
     scene_cameras,
+    scene_registration,
     scene_statistics,
     site_survey,
 )
@@ -100,7 +101,7 @@ def pair_cameras(session: Session, pair_ids: Sequence[int]) -> dict[int, PairCam
     for pid in pair_ids:
         scene = get_scene(session, get_pair(session, pid).t2_scene_id)
         count = len(scene_cameras(session, scene.id))
-        out[pid] = PairCameras(scene.id, count, "" if count else str((scene.registration or {}).get("note", "")))
+        out[pid] = PairCameras(scene.id, count, "" if count else scene_registration(scene).none_because())
     return out
 
 
@@ -232,7 +233,7 @@ def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[dict[str,
                 "id": scene.id, "capture_time": scene.capture_time.isoformat(),
                 "mission_manifest_sha256": mission_of_scene(session, sid).manifest_sha256,
                 "label_set_version": labels.version, "label_set_source": labels.source,
-                "label_set_sha256": labels.source_sha256, "registration": scene.registration,
+                "label_set_sha256": labels.source_sha256, "registration": scene_registration(scene).to_dict(),
                 "tile_checksum": tiling.checksum if tiling is not None else None,
             }
         )  # fmt: skip
