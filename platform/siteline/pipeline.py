@@ -62,6 +62,19 @@ class Ingested:
     ingest: IngestResult
     tiles: TileOutcome | None
 
+    def to_dict(self) -> dict[str, Any]:
+        """The ingest's record with the tiling's (``tiles``: None when nothing was tiled)."""
+        tiling = self.tiles.tiling if self.tiles is not None else None
+        return self.ingest.to_dict() | {"tiles": tiling.to_dict() if tiling is not None else None}
+
+    def summary(self) -> str:
+        """One line: what happened, and for a new scene its points, cameras and pairs."""
+        r = self.ingest
+        if not r.created:
+            return r.message
+        points = r.scan.point_count if r.scan else 0
+        return f"{r.message}: {points:,} points, {r.registration.images or 0} {r.registration.source} cameras, pairs {r.pairs}"
+
 
 def ingest(
     catalog: Catalog,

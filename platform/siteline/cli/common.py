@@ -103,6 +103,24 @@ def emit(as_json: bool, data: Any, human: Callable[[], None]) -> None:
         human()
 
 
+@contextmanager
+def progress_bars(hidden: bool, amounts: str = "") -> Iterator[Progress]:
+    """Rich progress bars on the console while the block runs (none when ``hidden``, e.g. ``--json``),
+    as a :class:`siteline.progress.Progress`; ``amounts``: ``bytes`` or ``count`` shows the amount
+    done beside each bar (and the time left)."""
+    from rich import progress as rp
+
+    columns: list[Any] = [rp.TextColumn("{task.description}"), rp.BarColumn()]
+    if not amounts:
+        columns = list(rp.Progress.get_default_columns())
+    elif amounts == "bytes":
+        columns += [rp.DownloadColumn(binary_units=True), rp.TimeRemainingColumn()]
+    elif amounts == "count":
+        columns += [rp.TextColumn("{task.completed:,}"), rp.TimeRemainingColumn()]
+    with rp.Progress(*columns, console=console, transient=True, disable=hidden) as bar:
+        yield bar_progress(bar)
+
+
 def bar_progress(bar: Any) -> Progress:
     """A :class:`siteline.progress.Progress` drawing one rich bar per task on ``bar``."""
     tasks: dict[str, int] = {}

@@ -27,6 +27,18 @@ DEMO_RELEASE = "demo-cd"
 DEMO_SETTINGS = {"pair": {"views": 24, "seed": 0}}
 
 
+def _catalog_at_head(cfg: Settings) -> None:
+    """Create the home and bring its catalog to the newest revision."""
+    from siteline.catalog import migrate  # alembic: only for commands that migrate
+
+    cfg.home.mkdir(parents=True, exist_ok=True)
+    engine = make_engine(cfg.database_url)
+    migrate.upgrade(engine, roots=store_roots(cfg))
+    engine.dispose()
+    console.rule("1. catalog")
+    console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}")
+
+
 def _site(
     cat: Catalog, site_name: str, synth_dir: Path, origin: tuple[float, float, float], crs: str
 ) -> None:
@@ -77,17 +89,11 @@ def demo(
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""
     from siteline import pipeline
-    from siteline.catalog import migrate  # alembic: only for commands that migrate
     from siteline.synth import SynthConfig, write_site
 
     t_start = time.perf_counter()
     cfg = settings()
-    cfg.home.mkdir(parents=True, exist_ok=True)
-    engine = make_engine(cfg.database_url)
-    migrate.upgrade(engine, roots=store_roots(cfg))
-    engine.dispose()
-    console.rule("1. catalog")
-    console.print(f"home {cfg.home}; catalog at revision {migrate.head_revision()}")
+    _catalog_at_head(cfg)
     console.rule("2. synthetic site")
     synth_dir, synth = cfg.home / "synthetic-site", SynthConfig(epochs=epochs)
     if not (synth_dir / "truth" / "site.json").exists():
@@ -104,13 +110,9 @@ def demo(
         root, version = _release(cat, cfg, site_name)
         stats = json.loads((root / "stats.json").read_text())
         print_table(
-            f"release {DEMO_RELEASE} {version} at {root}",
-            ["split", "images", "changed", "unchanged", "ignore"],
-            [
-                [k, v["images"], v["changed"], v["unchanged"], v["ignore"]]
-                for k, v in stats["class_balance"].items()
-            ],
-        )
+            f"release {DEMO_RELEASE} {version} at {root}", ["split", "images", "changed", "unchanged", "ignore"],
+            [[k, v["images"], v["changed"], v["unchanged"], v["ignore"]] for k, v in stats["class_balance"].items()],
+        )  # fmt: skip
         with cat.transaction() as s:
             manifest_sha = get_release(s, DEMO_RELEASE, version).manifest_sha256
         console.print(f"manifest sha256 {manifest_sha}; datasheet {root / 'README.md'}")

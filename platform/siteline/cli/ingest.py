@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
 from siteline.camera.photos import read_photo_meta
 from siteline.catalog.missions import list_missions
@@ -17,12 +16,12 @@ from siteline.catalog.scenes import scene_record, scene_rows
 from siteline.catalog.sites import get_site
 from siteline.cli.common import (
     JsonOption,
-    bar_progress,
     catalog,
     console,
     emit,
     print_record,
     print_table,
+    progress_bars,
     settings,
 )
 from siteline.errors import MissionError
@@ -125,30 +124,9 @@ def ingest(
         max_georegistration_rms_m=max_rms_m,
         unmapped_codes=unmapped_codes,
     )
-    cfg = settings()
-    columns = [
-        TextColumn("{task.description}"),
-        BarColumn(),
-        DownloadColumn(binary_units=True),
-        TimeRemainingColumn(),
-    ]
-    with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
-        done = pipeline.ingest(cat, cfg, mission_dir, site, opts, workers=workers, progress=bar_progress(bar))
-    result = done.ingest
-    tiling = done.tiles.tiling if done.tiles is not None else None
-    record = result.to_dict()
-    record["tiles"] = tiling.to_dict() if tiling is not None else None
-    emit(
-        as_json,
-        record,
-        lambda: console.print(
-            result.message
-            if not result.created
-            else f"{result.message}: {result.scan.point_count if result.scan else 0:,} points, "
-            f"{result.registration.images or 0} {result.registration.source} cameras, "
-            f"pairs {result.pairs}"
-        ),
-    )
+    with catalog() as cat, progress_bars(as_json, "bytes") as bars:
+        done = pipeline.ingest(cat, settings(), mission_dir, site, opts, workers=workers, progress=bars)
+    emit(as_json, done.to_dict(), lambda: console.print(done.summary()))
 
 
 @mission_app.command("list")
@@ -251,9 +229,9 @@ def scene_tile(
     from siteline.tiles.stage import tile_scene
 
     cfg = settings()
-    with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
+    with catalog() as cat, progress_bars(as_json) as bars:
         done = tile_scene(
-                cat, cfg, scene_id, resources=TilingResources(workers), progress=bar_progress(bar), retile=retile
+                cat, cfg, scene_id, resources=TilingResources(workers), progress=bars, retile=retile
             )
     emit(
         as_json,

@@ -8,16 +8,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from siteline.cli.common import (
     JsonOption,
-    bar_progress,
     catalog,
     console,
     emit,
     print_record,
     print_table,
+    progress_bars,
     settings,
 )
 
@@ -70,14 +69,8 @@ def import_cmd(
 
     mapping = parse_taxonomy_map(taxonomy_map) if taxonomy_map else None
     limit = DEFAULT_MAX_UNMATCHED if max_unmatched is None else max_unmatched
-    columns = (
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed:,}"),
-        TimeRemainingColumn(),
-    )
-    with catalog() as cat, Progress(*columns, console=console, transient=True, disable=as_json) as bar:
-        result = import_labels(cat, settings(), scene_id, file, ImportOptions(mapping, note, limit), bar_progress(bar))
+    with catalog() as cat, progress_bars(as_json, "count") as bars:
+        result = import_labels(cat, settings(), scene_id, file, ImportOptions(mapping, note, limit), bars)
         with cat.transaction() as s:
             site = site_name_of_scene(s, scene_id)
     announced = None

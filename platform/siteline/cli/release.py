@@ -6,7 +6,6 @@ from datetime import datetime
 from pathlib import Path
 
 import typer
-from rich.progress import Progress
 
 from siteline.catalog.releases import (
     get_release,
@@ -18,12 +17,12 @@ from siteline.catalog.releases import (
 )
 from siteline.cli.common import (
     JsonOption,
-    bar_progress,
     catalog,
     console,
     emit,
     print_record,
     print_table,
+    progress_bars,
     settings,
 )
 from siteline.cli.knobs import with_knob_options
@@ -73,9 +72,9 @@ def build(
     datasheet. Nothing is built when the latest version already has these inputs."""
     from siteline import pipeline
 
-    with catalog() as cat, Progress(console=console, transient=True, disable=as_json) as bar:
+    with catalog() as cat, progress_bars(as_json) as bars:
         options = ReleaseOptions(pairs or None, version, parse_label_sets(label_set or []), publish, device)
-        info = pipeline.release(cat, settings(), site, name, knobs, options, progress=bar_progress(bar))
+        info = pipeline.release(cat, settings(), site, name, knobs, options, progress=bars)
     emit(as_json, info.to_dict(), lambda: console.print(build_message(info)))
 
 
@@ -367,6 +366,8 @@ def train_cmd(
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
+    from rich.progress import Progress
+
     with Progress(console=console, transient=True, disable=as_json) as bar:
         task = bar.add_task("training", total=None)
         config = TrainConfig(epochs=epochs, max_iters=max_iters, crop=crop, device=device, workers=workers)

@@ -8,10 +8,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
-from rich.progress import Progress
 
 from siteline.camera.pinhole import Camera
-from siteline.cli.common import JsonOption, console, emit, print_record
+from siteline.cli.common import JsonOption, emit, print_record, progress_bars
 from siteline.errors import CameraError, SchemaError
 from siteline.schema import load_json
 from siteline.site.fence import load_fence_geojson
@@ -140,9 +139,9 @@ def views_generate(
     is_ground = lut[cloud.classification] == tax.id_of("ground")
     plane = fit_ground_plane(cloud.xyz[is_ground], seed=seed)
     source = ArrayPointSource(cloud.xyz)
-    with Progress(console=console, transient=True) as bar:
-        task = bar.add_task("generating views", total=len(real))
-        result = generate_views(real, plane, fence_m, source, params, progress=lambda k: bar.advance(task, k))
+    with progress_bars(False) as bars:
+        bars("generating views", 0, len(real))
+        result = generate_views(real, plane, fence_m, source, params, progress=lambda k: bars("generating views", k, None))
     doc = result.to_dict()
     doc["origin"] = list(origin)
     out.parent.mkdir(parents=True, exist_ok=True)

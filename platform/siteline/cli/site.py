@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.progress import Progress
 from sqlalchemy.orm import Session
 
 from siteline.catalog.sites import (
@@ -19,12 +18,12 @@ from siteline.catalog.sites import (
 )
 from siteline.cli.common import (
     JsonOption,
-    bar_progress,
     catalog,
     console,
     emit,
     print_record,
     print_table,
+    progress_bars,
     settings,
 )
 from siteline.cli.knobs import with_knob_options
@@ -150,9 +149,9 @@ def update(
         if redefine:
             from siteline import pipeline
 
-            with Progress(console=console, transient=True, disable=as_json) as bar:
+            with progress_bars(as_json) as bars:
                 version, tiled = pipeline.redefine_site(
-                    cat, settings(), name, tax, ring, no_fence, workers, bar_progress(bar)
+                    cat, settings(), name, tax, ring, no_fence, workers, bars
                 )
             lines += [f"site {name} is at version {version}", *(t.message for t in tiled)]
         with cat.transaction() as session:

@@ -6,9 +6,8 @@ import time
 from pathlib import Path
 
 import typer
-from rich.progress import Progress
 
-from siteline.cli.common import JsonOption, console, emit, print_table
+from siteline.cli.common import JsonOption, emit, print_table, progress_bars
 
 app = typer.Typer(help="Synthetic construction sites with ground truth.", no_args_is_help=True)
 
@@ -53,9 +52,9 @@ def site(
         colmap=not no_photos,
     )
     t0 = time.perf_counter()
-    with Progress(console=console, transient=True, disable=as_json) as bar:
-        task = bar.add_task("generating epochs", total=epochs)
-        summaries = write_site(out, cfg, progress=lambda name: bar.advance(task))
+    with progress_bars(as_json) as bars:
+        bars("generating epochs", 0, epochs)
+        summaries = write_site(out, cfg, progress=lambda name: bars("generating epochs", 1, None))
     seconds = time.perf_counter() - t0
     records = [
         {"epoch": s.name, "time": s.time, "points": s.points, "photos": s.photos, "mission": s.mission_dir}

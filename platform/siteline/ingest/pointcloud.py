@@ -7,12 +7,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-import laspy
 import numpy as np
 import pyproj
 
 from siteline.errors import PointCloudError
-from siteline.pointpass.lasio import detect_eight_bit, open_las
+from siteline.pointpass.lasio import LasHeaderFacts, detect_eight_bit, header_facts, open_las
 from siteline.pointpass.partition import (
     PARALLEL_MIN_POINTS,
     Partition,
@@ -92,8 +91,8 @@ def scan_las(
     before reading and the points read as they go."""
     path = Path(path)
     with open_las(path) as reader:
-        header = reader.header
-        n_total = int(header.point_count)
+        header = header_facts(reader.header)
+        n_total = int(reader.header.point_count)
         src = source_crs(path, crs_override, reader)
         eight_bit = detect_eight_bit(reader, path) if n_total else None
     progress(0, n_total)
@@ -212,7 +211,7 @@ class _Totals:
 
 def _scan(
     path: Path,
-    header: laspy.LasHeader,
+    header: LasHeaderFacts,
     site: SiteSpec,
     src: pyproj.CRS,
     tr: object,
@@ -239,14 +238,14 @@ def _scan(
         outside_fence=t.outside,
         colour=t.colour,
         density_pts_m2=t.count / area,
-        version=f"{header.version.major}.{header.version.minor}",
-        point_format=int(header.point_format.id),
-        scale=[float(v) for v in header.scales],
-        offset=[float(v) for v in header.offsets],
+        version=header.version,
+        point_format=header.point_format,
+        scale=header.scales,
+        offset=header.offsets,
         gps_time_range=[t.tmin, t.tmax] if np.isfinite(t.tmin) else None,
         z_unit=z_unit_of(src, z_unit),
         creation_date=day.isoformat() if day is not None else None,
-        gps_time_standard=bool(int(header.global_encoding.gps_time_type)),
+        gps_time_standard=header.gps_time_standard,
         colour_stats=t.colour_stats(survey),
         footprint=[list(v) for v in outline] if outline is not None else None,
         stable_sample=np.concatenate(t.samples) if t.samples else np.zeros((0, 4)),

@@ -10,6 +10,7 @@ from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.labelsets.store import open_labelled
+from siteline.pointpass.lasio import write_changed_classes
 from siteline.tiles.export import export_las
 
 
@@ -43,20 +44,12 @@ def export_corrections(catalog: Catalog, scene_id: int, version: int, out: Path,
     (the corrections an import made), with that version's classes and siteline record; return how
     many. Both versions are exported beside ``out`` and read in step, chunk by chunk (the same tiles,
     the same point order), so memory stays bounded by ``chunk``."""
-    import laspy
-    import numpy as np
-
     first, corrected = out.with_name(f".{out.stem}.v1.laz"), out.with_name(f".{out.stem}.v{version}.laz")
     n = 0
     try:
         export_label_set(catalog, scene_id, first, 1)
         export_label_set(catalog, scene_id, corrected, version)
-        with laspy.open(first) as a, laspy.open(corrected) as b, laspy.open(out, mode="w", header=b.header) as w:
-            for pa, pb in zip(a.chunk_iterator(chunk), b.chunk_iterator(chunk), strict=True):
-                changed = np.asarray(pa.classification) != np.asarray(pb.classification)
-                if changed.any():
-                    w.write_points(pb[changed])
-                    n += int(changed.sum())
+        n = write_changed_classes(first, corrected, out, chunk)
     finally:
         first.unlink(missing_ok=True)
         corrected.unlink(missing_ok=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from datetime import date
 from pathlib import Path
 from typing import Any
 
@@ -331,8 +332,13 @@ def las_header(
     scale: float = 0.001,
     point_format: int = 3,
     version: str = "1.2",
+    *,
+    created: date | None = None,
+    software: tuple[str, str] | None = None,
+    vlrs: Sequence[laspy.VLR] = (),
 ) -> laspy.LasHeader:
-    """A LAS header with ``scale`` on every axis, an offset near ``xyz_min`` and the CRS record."""
+    """A LAS header with ``scale`` on every axis, an offset near ``xyz_min``, the CRS record, and
+    optionally a creation date, (system identifier, generating software) and extra VLRs."""
     import pyproj
 
     header = laspy.LasHeader(point_format=point_format, version=version)
@@ -340,16 +346,22 @@ def las_header(
     header.offsets = las_offset(xyz_min, scale)
     if crs_text:
         header.add_crs(pyproj.CRS.from_user_input(crs_text))
+    if created is not None:
+        header.creation_date = created
+    if software is not None:
+        header.system_identifier, header.generating_software = software
+    header.vlrs.extend(vlrs)
     return header
 
 
-FIELDS = ("rgb", "classification", "intensity", "gps_time", "return_number")  # what fill_record sets
+# what fill_record sets
+FIELDS = ("rgb", "classification", "intensity", "gps_time", "return_number", "number_of_returns")
 
 
 def fill_record(record: laspy.ScaleAwarePointRecord, xyz_crs: np.ndarray, fields: Mapping[str, Any]) -> None:
     """Set a point record's fields from float64 georeferenced coordinates and ``fields`` (any of
     :data:`FIELDS`, None or absent: left zero). Colour (N, 3) 0-255 is written as 16-bit (value *
-    257), as LAS expects; ``return_number`` sets ``number_of_returns`` too."""
+    257), as LAS expects; ``number_of_returns`` absent: at least the return number (never 0)."""
     unknown = set(fields) - set(FIELDS)
     if unknown:
         raise PointCloudError(f"fields {sorted(unknown)} are not LAS fields siteline writes ({', '.join(FIELDS)}).")
@@ -360,12 +372,34 @@ def fill_record(record: laspy.ScaleAwarePointRecord, xyz_crs: np.ndarray, fields
     if rgb is not None:
         rgb16 = np.asarray(rgb).astype(np.uint16) * 257
         record.red, record.green, record.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    for name in ("classification", "intensity", "gps_time"):
+    for name in ("classification", "intensity", "gps_time", "number_of_returns"):
         if fields.get(name) is not None:
             setattr(record, name, fields[name])
     if return_number is not None:
         record.return_number = return_number
-        record.number_of_returns = np.maximum(return_number, 1)
+        if fields.get("number_of_returns") is None:
+            record.number_of_returns = np.maximum(return_number, 1)
+
+
+class LasWriter:
+    """A LAS/LAZ file (by extension) written chunk by chunk under ``header``
+    (:func:`las_header`): each chunk is float64 georeferenced coordinates and :data:`FIELDS`."""
+
+    def __init__(self, path: Path, header: laspy.LasHeader) -> None:
+        self.header = header
+        self._writer = laspy.open(path, mode="w", header=header)
+
+    def write(self, xyz_crs: np.ndarray, **fields: np.ndarray | None) -> None:
+        """Append ``len(xyz_crs)`` points."""
+        record = laspy.ScaleAwarePointRecord.zeros(len(xyz_crs), header=self.header)
+        fill_record(record, np.asarray(xyz_crs, dtype=np.float64), fields)
+        self._writer.write_points(record)
+
+    def __enter__(self) -> LasWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._writer.close()
 
 
 def write_las(
@@ -376,11 +410,45 @@ def write_las(
     return_number)."""
     xyz = np.asarray(xyz_crs, dtype=np.float64)
     header = las_header(crs, xyz.min(axis=0) if len(xyz) else np.zeros(3), scale)
-    record = laspy.ScaleAwarePointRecord.zeros(len(xyz), header=header)
-    fill_record(record, xyz, fields)
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with laspy.open(path, mode="w", header=header) as writer:
-        writer.write_points(record)
+    with LasWriter(path, header) as writer:
+        writer.write(xyz, **fields)
+
+
+def write_changed_classes(first: Path, second: Path, out: Path, chunk: int = 1_000_000) -> int:
+    """Write to ``out`` (under ``second``'s header) the points of ``second`` whose classification
+    differs from the same point of ``first`` (two files of the same points in the same order, read in
+    step ``chunk`` points at a time); return how many."""
+    n = 0
+    with laspy.open(first) as a, laspy.open(second) as b, laspy.open(out, mode="w", header=b.header) as w:
+        for pa, pb in zip(a.chunk_iterator(chunk), b.chunk_iterator(chunk), strict=True):
+            changed = np.asarray(pa.classification) != np.asarray(pb.classification)
+            if changed.any():
+                w.write_points(pb[changed])
+                n += int(changed.sum())
+    return n
+
+
+@dataclass(frozen=True)
+class LasHeaderFacts:
+    """What a scan records of a file's header: LAS version ("1.4"), point format id, scales and
+    offsets (per axis), creation date, and whether GPS times are standard (adjusted) GPS time."""
+
+    version: str
+    point_format: int
+    scales: list[float]
+    offsets: list[float]
+    creation_date: date | None
+    gps_time_standard: bool
+
+
+def header_facts(header: laspy.LasHeader) -> LasHeaderFacts:
+    """The :class:`LasHeaderFacts` of a header."""
+    return LasHeaderFacts(
+        f"{header.version.major}.{header.version.minor}", int(header.point_format.id),
+        [float(v) for v in header.scales], [float(v) for v in header.offsets], header.creation_date,
+        bool(int(header.global_encoding.gps_time_type)),
+    )  # fmt: skip
 
 
 LABELS_VLR_USER = "siteline"

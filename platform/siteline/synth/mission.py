@@ -19,14 +19,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import laspy
 import numpy as np
 import pycolmap
 import pyproj
 from scipy.spatial.transform import Rotation
 
 from siteline.errors import SynthError
-from siteline.pointpass.lasio import las_header
+from siteline.pointpass.lasio import LasWriter, las_header
 from siteline.site.crs import parse_crs, parse_origin
 from siteline.site.fence import fence_geojson
 from siteline.stores import publish_folder
@@ -88,15 +87,15 @@ def _write_las(
     subsample (site-local float32 xyz, rgb)."""
     origin = np.asarray(cfg.origin)
     x0, _, y0, _ = m.TERRAIN_M
-    header = las_header(cfg.crs, origin + np.array([x0, y0, -20.0]), 0.001, 3, "1.2")
-    header.creation_date = site.epochs[e].time.date()
-    header.system_identifier = "siteline synth"
-    header.generating_software = "DJI Terra (simulated by siteline)"
+    header = las_header(
+        cfg.crs, origin + np.array([x0, y0, -20.0]), 0.001, 3, "1.2", created=site.epochs[e].time.date(),
+        software=("siteline synth", "DJI Terra (simulated by siteline)"),
+    )  # fmt: skip
     keep_p = min(1.0, PHOTO_DENSITY_PTS_M2 / cfg.density_pts_m2)
     photo_xyz, photo_rgb = [], []
     n = 0
     with (
-        laspy.open(path, mode="w", header=header) as writer,
+        LasWriter(path, header) as writer,
         NpyAppender(truth_dir / "object_id.npy", np.int32) as oid,
         NpyAppender(truth_dir / "changed_since_previous.npy", bool) as since,
         NpyAppender(truth_dir / "changed_until_next.npy", bool) as until,
@@ -105,17 +104,11 @@ def _write_las(
         NpyAppender(truth_dir / "margin_next_m.npy", np.float32) as mnext,
     ):
         for chunk in sample_epoch(site, e, spec):
-            rec = laspy.ScaleAwarePointRecord.zeros(len(chunk.xyz), header=header)
-            geo = chunk.xyz + origin
-            rec.x, rec.y, rec.z = geo[:, 0], geo[:, 1], geo[:, 2]
-            rgb16 = chunk.rgb.astype(np.uint16) * 257
-            rec.red, rec.green, rec.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-            rec.classification = chunk.las_class
-            rec.intensity = chunk.intensity
-            rec.gps_time = chunk.gps_time
-            rec.return_number = chunk.return_number
-            rec.number_of_returns = chunk.number_of_returns
-            writer.write_points(rec)
+            writer.write(
+                chunk.xyz + origin, rgb=chunk.rgb, classification=chunk.las_class, intensity=chunk.intensity,
+                gps_time=chunk.gps_time, return_number=chunk.return_number,
+                number_of_returns=chunk.number_of_returns,
+            )  # fmt: skip
             oid.append(chunk.object_id)
             since.append(chunk.changed_since_previous)
             until.append(chunk.changed_until_next)

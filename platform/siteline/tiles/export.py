@@ -6,13 +6,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import laspy
 import numpy as np
 
-from siteline.pointpass.lasio import labels_vlr, las_header
+from siteline.pointpass.lasio import LasWriter, labels_vlr, las_header
 from siteline.site.spec import SiteSpec
 from siteline.stores import atomic_file
-from siteline.tiles.reader import Points, SceneTiles, in_bounds
+from siteline.tiles.reader import SceneTiles, in_bounds
 
 ATTRS = ("rgb", "class", "intensity", "gps_time", "return_number")
 
@@ -32,33 +31,21 @@ def export_las(
     mean (site, scene, label-set version, taxonomy), written as a siteline VLR. Tiles are read and
     written one at a time; returns the point count."""
     lo = tiles.nodes.lo.min(axis=0) + np.asarray(site.origin)
-    header = las_header(site.crs, lo, scale=tiles.spec.quantum_m, point_format=7, version="1.4")
-    if labels is not None:
-        header.vlrs.append(labels_vlr(labels))
+    vlrs = [labels_vlr(labels)] if labels is not None else []
+    header = las_header(site.crs, lo, scale=tiles.spec.quantum_m, point_format=7, version="1.4", vlrs=vlrs)
     n = 0
     origin = np.asarray(site.origin, dtype=np.float64)
-    with atomic_file(out) as tmp, laspy.open(tmp, mode="w", header=header) as writer:
+    with atomic_file(out) as tmp, LasWriter(tmp, header) as writer:
         for tile in sorted(tiles.by_tile):
             data = tiles.read_tile(tile, ATTRS, level)
             if bounds is not None:
                 data = data.select(in_bounds(data.xyz_m, bounds))
             if not len(data):
                 continue
-            writer.write_points(_record(data, header, origin))
+            a = data.attributes  # classes are site class ids (point format 7 holds 0-255)
+            writer.write(
+                data.xyz_m + origin, rgb=a["rgb"], classification=a["class"], intensity=a["intensity"],
+                gps_time=a["gps_time"], return_number=a["return_number"],
+            )  # fmt: skip
             n += len(data)
     return n
-
-
-def _record(data: Points, header: laspy.LasHeader, origin: np.ndarray) -> laspy.ScaleAwarePointRecord:
-    """A LAS point record of ``data`` in the site CRS (float64 site-local + origin: never float32)."""
-    rec = laspy.ScaleAwarePointRecord.zeros(len(data), header=header)
-    geo = data.xyz_m + origin
-    rec.x, rec.y, rec.z = geo[:, 0], geo[:, 1], geo[:, 2]
-    a = data.attributes
-    rgb16 = a["rgb"].astype(np.uint16) * 257
-    rec.red, rec.green, rec.blue = rgb16[:, 0], rgb16[:, 1], rgb16[:, 2]
-    rec.classification = a["class"]  # site class ids (point format 7 holds 0-255)
-    rec.intensity = a["intensity"]
-    rec.gps_time = a["gps_time"]
-    rec.return_number = a["return_number"]
-    return rec
