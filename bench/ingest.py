@@ -92,7 +92,10 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         from siteline.config import Settings, sqlite_url
         from siteline.ingest.options import IngestOptions
         from siteline.ingest.stage import ingest_mission
-        from siteline.site.spec import make_site_spec
+        try:
+            from siteline.site.spec import make_site_spec
+        except ImportError:  # --tree: a checkout from before the site package (siteline.site was a module)
+            from siteline.site import make_site_spec  # type: ignore[attr-defined,no-redef]
         from siteline.tiles.stage import tile_scene
 
         home = Path(tempfile.mkdtemp())
@@ -120,6 +123,7 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
             "bytes_per_point": tiling.bytes_per_point,
             "nodes": tiling.nodes,
             "tiles": tiling.tiles,
+            "checksum": tiling.checksum,
         }
         cat.dispose()
         shutil.rmtree(home, ignore_errors=True)  # the stored copy, tiles and catalog of the run
@@ -133,11 +137,14 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
     print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))
 
 
-def run(mode: str, path: Path, workers: int, batch_points: int, half_m: float) -> dict:
+def run(mode: str, path: Path, workers: int, batch_points: int, half_m: float, tree: str | None = None) -> dict:
+    """One measurement in its own process; ``tree``: a siteline checkout whose library it runs."""
+    env = os.environ | ({"PYTHONPATH": str(Path(tree) / "platform")} if tree else {})
     out = subprocess.run(
         [sys.executable, __file__, "--child", mode, str(path), str(workers), str(batch_points), str(half_m)],
         capture_output=True,
         text=True,
+        env=env,
     )
     if out.returncode:
         raise SystemExit(f"{mode} of {path} failed:\n{out.stderr[-3000:]}")
@@ -155,13 +162,18 @@ def main() -> None:
     ap.add_argument("--scene", type=int, default=0, help="one scene of this many points instead")
     ap.add_argument("--scene-area-m2", type=float, default=32_300.0)
     ap.add_argument("--formats", default="laz,las")
+    ap.add_argument(
+        "--tree", action="append", default=[],
+        help="NAME=DIR: also ingest each file with the siteline library of checkout DIR (e.g. before a refactor); "
+        "prints each tree's speed against this one's and whether their tile-store checksums agree",
+    )  # fmt: skip
     ap.add_argument("--child", nargs=5, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         child(args.child[0], args.child[1], int(args.child[2]), int(args.child[3]), float(args.child[4]))
         return
     cores = args.workers
-    rows = []
+    rows, others = [], []
     cases = (
         [(args.scene, args.scene_area_m2**0.5 / 2)]
         if args.scene
@@ -178,6 +190,8 @@ def main() -> None:
                 if ext == "laz":
                     laz_bpp = path.stat().st_size / n
                 plain = run("read", path, cores, args.batch_points, half_m)
+                for name, tree in [tuple(s.split("=", 1)) for s in args.tree]:
+                    others.append((n, ext, name, run("ingest", path, cores, args.batch_points, half_m, tree)))
                 ours = run("ingest", path, cores, args.batch_points, half_m)
                 rows.append((n, half_m, ext, plain, ours, laz_bpp))
                 path.unlink()
@@ -212,6 +226,15 @@ def main() -> None:
         print(
             f"{ext.upper()} {args.large / args.small:.0f}x the density: peak memory {peak:.2f}x, "
             f"nodes {large['nodes'] / small['nodes']:.2f}x"
+        )
+
+    for n, ext, name, other in others:
+        ours = next(o for m, _, e, _, o, _ in rows if m == n and e == ext)
+        mine, theirs = ours["ingest_s"] + ours["tile_s"], other["ingest_s"] + other["tile_s"]
+        same = "equal" if ours["checksum"] == other["checksum"] else "DIFFER"
+        print(
+            f"{n / 1e6:.1f}M {ext.upper()}: this tree ingest+tile {mine:.1f} s, {name} {theirs:.1f} s "
+            f"({mine / theirs:.2f}x); tile-store checksums {same} ({ours['checksum'][:16]})"
         )
 
 

@@ -256,3 +256,26 @@ def test_a_tile_worker_imports_neither_the_catalog_nor_the_renderer() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_engine_surface_is_what_architecture_names_and_laspy_stays_inside() -> None:
+    """``siteline.pointpass`` exports exactly the surface docs/ARCHITECTURE.md lists; no module outside
+    the engine imports laspy or a kernel of the pass, and ingest and tiling each call ``pass_file`` once."""
+    import re
+
+    import siteline.pointpass as engine
+
+    doc = (PACKAGE.parents[1] / "docs" / "ARCHITECTURE.md").read_text()
+    para = doc[doc.index("The engine's surface") :].split("\n\n")[0]
+    listed = set(re.findall(r"`([A-Za-z_]+)`", para.split("):", 1)[1].split(".")[0]))
+    assert listed == set(engine.__all__), (sorted(listed), sorted(engine.__all__))
+    outside = []
+    for path, tree in _modules():
+        if path.relative_to(PACKAGE).parts[0] == "pointpass":
+            continue
+        for name in _imports(tree):
+            if name.split(".")[0] == "laspy":
+                outside.append(f"{_rel(path)} imports laspy")
+    assert not outside, outside
+    for stage in ("ingest/pointcloud.py", "tiles/writer.py"):
+        assert (PACKAGE / stage).read_text().count("pass_file(") == 1, stage

@@ -11,15 +11,8 @@ import numpy as np
 import pyproj
 
 from siteline.errors import PointCloudError
+from siteline.pointpass import PARALLEL_MIN_POINTS, PassSource, pass_file
 from siteline.pointpass.lasio import LasHeaderFacts, detect_eight_bit, header_facts, open_las
-from siteline.pointpass.partition import (
-    PARALLEL_MIN_POINTS,
-    Partition,
-    PassSource,
-    RunWriter,
-    point_ranges,
-    read_file,
-)
 from siteline.pointpass.sitestream import SiteChunk, source_crs, source_transformer
 from siteline.pointpass.workers import start_pool
 from siteline.progress import no_step
@@ -104,25 +97,20 @@ def scan_las(
     kinds[[site.taxonomy.id_of(c) for c in STABLE_CLASSES]] = SAMPLE_STABLE
     keep_p = min(1.0, SAMPLE_MAX / max(n_total, 1))
     stride = max(1, -(-n_total // SURVEY_SAMPLE_MAX))
-    ranges = point_ranges(n_total, workers)
     spec = TileSpec.for_site(site)
-    folder = runs_into
-    visitors = [
-        (_Totals(kinds, keep_p, (SAMPLE_SEED, k), eight_bit, ranges[k][0], stride),)
-        + ((RunWriter(str(folder), f"run-{k:05d}.bin", spec.to_dict()),) if folder else ())
-        for k in range(len(ranges))
-    ]
+    done = pass_file(
+        source, n_total, workers, lambda k, start: (_Totals(kinds, keep_p, (SAMPLE_SEED, k), eight_bit, start, stride),),
+        runs_into, spec, lambda _l, n, _t: progress(n),
+    )  # fmt: skip
     t = _Totals(kinds, keep_p, (SAMPLE_SEED, 0), eight_bit, 0, stride)
-    runs = []
-    for done in read_file(source, n_total, visitors, workers, lambda _l, n, _t: progress(n)):
-        t.merge(done[0])
-        runs += [v.run() for v in done[1:]]
+    for (totals,) in done.visited:
+        t.merge(totals)
     if t.count != n_total:
         raise PointCloudError(
             f"point cloud {path}: header says {n_total} points but {t.count} were read (truncated?)."
         )
-    if folder is not None:
-        Partition(folder, tuple(runs)).save(source.made_from(spec))
+    if done.partition is not None:
+        done.partition.save(source.made_from(spec))
     if t.count == 0:
         raise PointCloudError(f"point cloud {path} holds no points.")
     return _scan(path, header, site, src, tr, z_unit, t)

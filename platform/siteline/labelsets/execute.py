@@ -31,13 +31,14 @@ from siteline.labelsets.match import match_points, point_keys
 from siteline.labelsets.plan import ImportPlan
 from siteline.labelsets.store import open_labelled, write_tile_classes
 from siteline.pointpass.lasio import open_las, read_labels_vlr
+from siteline.pointpass.schema import quantise
 from siteline.pointpass.sitestream import SiteReading, file_crs, site_chunks, source_transformer
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.site.spec import SiteSpec
 from siteline.stores import Store, layout
 from siteline.stores.owners import owner_tag, sweep_stale
-from siteline.tiles.layout import parse_tile_key, quantise, tile_index, tile_key, tile_origin_local
+from siteline.tiles.layout import parse_tile_key, tile_index, tile_key, tile_origin_local
 from siteline.tiles.reader import SceneTiles
 
 log = logging.getLogger(__name__)

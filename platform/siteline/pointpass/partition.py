@@ -18,7 +18,7 @@ import json
 import os
 import shutil
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple, Protocol
@@ -115,13 +115,13 @@ class Run:
 def block_edge(spec: TileSpec) -> int:
     """The edge of a tile's blocks in quanta: a level-0 cube's (the tile when a level-0 cube is
     larger, or when a tile would need more than 256 blocks a side)."""
-    tile_q = int(round(spec.tile_size_m / spec.quantum_m))
+    tile_q = spec.tile_quanta
     edge = max(int(round(spec.level0_spacing_m / spec.quantum_m)), 1)
     return tile_q if edge >= tile_q or -(-tile_q // edge) > 1 << (BLOCK_BITS // 2) else edge
 
 
 def blocks_per_side(spec: TileSpec) -> int:
-    tile_q = int(round(spec.tile_size_m / spec.quantum_m))
+    tile_q = spec.tile_quanta
     return -(-tile_q // block_edge(spec))
 
 
@@ -167,13 +167,13 @@ class RunWriter:
 
     folder: str
     name: str
-    spec: dict[str, Any]
+    spec: TileSpec
     rows: list[np.ndarray] = field(default_factory=list)
     written: int = 0
     tail: bytes = b""
 
     def add(self, sc: SiteChunk) -> None:
-        rec, rows = chunk_records(sc, TileSpec.from_dict(self.spec))
+        rec, rows = chunk_records(sc, self.spec)
         at = self.written * RECORD.itemsize - len(self.tail)
         self.tail = append_blocks(self._path, at, self.tail, rec.view(np.uint8).data)
         rows[:, 1] += self.written
@@ -241,6 +241,43 @@ def read_file(
     ):
         progress(label, b - a, total)
         yield done
+
+
+@dataclass(frozen=True)
+class PassResult:
+    """What one pass over a file gave: each point range's own visitors, in range order, and the
+    partition of its points into tile runs (None when none was asked for)."""
+
+    visited: list[tuple[Any, ...]]
+    partition: Partition | None
+
+
+def pass_file(
+    source: PassSource,
+    total: int,
+    workers: int,
+    visitors: Callable[[int, int], tuple[Any, ...]] = lambda k, start: (),
+    runs_into: Path | None = None,
+    spec: TileSpec | None = None,
+    progress: Progress = no_progress,
+    label: str = "reading points",
+) -> PassResult:
+    """The engine's entry: one pass over the ``total`` points of ``source`` in parallel point ranges
+    over ``workers`` processes. ``visitors(k, start)`` makes range k's own chunk visitors (its first
+    point is ``start``); ``runs_into``: an empty local folder where the same pass cuts the points into
+    tile runs on ``spec``'s grid (None: the site's default)."""
+    ranges = point_ranges(total, workers)
+    spec = spec or TileSpec.for_site(source.site)
+    sets = [
+        visitors(k, start) + ((RunWriter(str(runs_into), f"run-{k:05d}.bin", spec),) if runs_into else ())
+        for k, (start, _) in enumerate(ranges)
+    ]
+    own = len(sets[0]) - (runs_into is not None) if sets else 0
+    visited, runs = [], []
+    for done in read_file(source, total, sets, workers, progress, label):
+        visited.append(done[:own])
+        runs += [v.run() for v in done[own:]]
+    return PassResult(visited, Partition(runs_into, tuple(runs)) if runs_into is not None else None)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from siteline.errors import TileError
+
 # the stored arrays of a tile, as one record: int32 quanta from the tile origin, then the attributes
 COUNTS = "xyz_counts"
 RECORD = np.dtype(
@@ -58,3 +60,49 @@ def tile_of(cell: int) -> tuple[int, int]:
 def block_of(cell: int) -> int:
     """The block (inside its tile) of a cell id."""
     return cell & ((1 << BLOCK_BITS) - 1)
+
+
+def pack_cube(x: np.ndarray, y: np.ndarray, z: np.ndarray, d: int | np.ndarray) -> np.ndarray:
+    """Cubes (x, y, z) at octree depth ``d`` packed z, y, x row-major: ``z << 2d | y << d | x``."""
+    return z << (2 * d) | y << d | x
+
+
+def unpack_cube(cube: np.ndarray, d: int | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (x, y, z) of cubes packed at depth ``d`` by :func:`pack_cube`."""
+    mask = (1 << d) - 1
+    return cube & mask, (cube >> d) & mask, cube >> (2 * d)
+
+
+def split_cube_count_key(key: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
+    """(level (M,), finest cube (M, 3) x, y, z) of cube-count keys at depth ``top``."""
+    x, y, z = unpack_cube(key & ((1 << LEVEL_SHIFT) - 1), top)
+    return key >> LEVEL_SHIFT, np.c_[x, y, z - Z_OFFSET]
+
+
+def group_key(band: np.ndarray, cube: np.ndarray, level: np.ndarray, cube_bits: int) -> np.ndarray:
+    """Packed (band, cube, level) group keys: ``(band << cube_bits | cube) << LEVEL_BITS | level``."""
+    return (band << cube_bits | cube) << LEVEL_BITS | level
+
+
+def split_group_key(key: np.ndarray, cube_bits: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(band, cube, level) of group keys (:func:`group_key`)."""
+    band_cube = key >> LEVEL_BITS
+    return band_cube >> cube_bits, band_cube & ((1 << cube_bits) - 1), key & ((1 << LEVEL_BITS) - 1)
+
+
+def group_node(key: np.ndarray) -> np.ndarray:
+    """The (band, cube) part of group keys: keys that share it are one node."""
+    return key >> LEVEL_BITS
+
+
+def quantise(local: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
+    """int32 counts of ``quantum_m`` of site-local float64 points relative to ``origin_local``."""
+    q = np.rint((np.asarray(local, dtype=np.float64) - origin_local) / quantum_m)
+    if np.abs(q).max(initial=0) >= 2**31 - 1:
+        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
+    return q.astype(np.int32)
+
+
+def dequantise(counts: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
+    """Site-local float64 points of int32 counts (the one place raw counts become metres)."""
+    return np.asarray(origin_local, dtype=np.float64) + counts.astype(np.float64) * quantum_m

@@ -81,6 +81,11 @@ class TileSpec:
         return 2.0 ** math.floor(math.log2(self.tile_size_m / 8.0 / self.quantum_m)) * self.quantum_m
 
     @property
+    def tile_quanta(self) -> int:
+        """The tile's edge in quanta."""
+        return int(round(self.tile_size_m / self.quantum_m))
+
+    @property
     def partial_levels(self) -> bool:
         """Whether every prefix of a node's level is spread over the node (a view may read part)."""
         return self.node_order != "input"

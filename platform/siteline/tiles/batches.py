@@ -36,14 +36,13 @@ from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.errors import TileError
 from siteline.pointpass.kernels import rows as row_kernels
 from siteline.pointpass.partition import Slice
-from siteline.pointpass.schema import RECORD
+from siteline.pointpass.schema import RECORD, dequantise
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.stores import open_store
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
-    dequantise,
     level_count,
     parse_tile_key,
     tile_origin_local,
@@ -303,7 +302,7 @@ def write_tile(
     key: str,
     parts: list[Slice],
     group_path: str,
-    spec_doc: dict,
+    spec: TileSpec,
     seed: int,
     scratch: str | None,
     batch_points: int,
@@ -316,7 +315,6 @@ def write_tile(
 
     from zarr.core.sync import sync
 
-    spec = TileSpec.from_dict(spec_doc)
     seed = tile_seed(key, seed)
     groups = batches(parts, batch_points)
     z0 = min(p.zmin for p in parts)

@@ -20,7 +20,6 @@ import math
 
 import numpy as np
 
-from siteline.errors import TileError
 from siteline.pointpass.schema import ATTRIBUTES as ATTRIBUTES
 from siteline.pointpass.schema import COUNTS as COUNTS  # the name tiles store their positions under
 from siteline.records.tiling import TileSpec
@@ -49,19 +48,6 @@ def parse_tile_key(key: str) -> tuple[int, int]:
 def tile_origin_local(i: int, j: int, tile_size_m: float) -> np.ndarray:
     """Site-local float64 origin of tile (i, j)."""
     return np.array([i * tile_size_m, j * tile_size_m, 0.0])
-
-
-def quantise(local: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
-    """int32 counts of ``quantum_m`` of site-local float64 points relative to ``origin_local``."""
-    q = np.rint((np.asarray(local, dtype=np.float64) - origin_local) / quantum_m)
-    if np.abs(q).max(initial=0) >= 2**31 - 1:
-        raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
-    return q.astype(np.int32)
-
-
-def dequantise(counts: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
-    """Site-local float64 points of int32 counts (the one place raw counts become metres)."""
-    return np.asarray(origin_local, dtype=np.float64) + counts.astype(np.float64) * quantum_m
 
 
 def level_count(spec: TileSpec) -> int:

@@ -29,9 +29,14 @@ import numpy as np
 
 from siteline.errors import TileError
 from siteline.pointpass.kernels import nodes as node_kernels
-from siteline.pointpass.schema import LEVEL_BITS as _LEVEL_BITS
-from siteline.pointpass.schema import LEVEL_SHIFT as _CUBE_KEY_BITS
-from siteline.pointpass.schema import Z_OFFSET as _Z_OFFSET
+from siteline.pointpass.schema import (
+    group_key,
+    group_node,
+    pack_cube,
+    split_cube_count_key,
+    split_group_key,
+    unpack_cube,
+)
 from siteline.records.tiling import NodeTable, TileSpec
 
 _CUBE_BITS = 30
@@ -58,7 +63,7 @@ def _fine_edge(spec: TileSpec) -> int:
     """The edge in quanta of the cubes at depth ``spec.max_node_depth``: depth d splits the tile into
     2**d x 2**d columns from its origin, z cut with the same edge from z = 0 (x and y clamped into
     the tile, so a point rounded onto its far edge stays in the last cube)."""
-    return max(int(round(spec.tile_size_m / spec.quantum_m)) >> spec.max_node_depth, 1)
+    return max(spec.tile_quanta >> spec.max_node_depth, 1)
 
 
 def cube_counts(counts: np.ndarray, levels: np.ndarray, spec: TileSpec) -> np.ndarray:
@@ -91,12 +96,12 @@ def _depths(band: np.ndarray, fine: np.ndarray, totals: np.ndarray, spec: TileSp
     band, fine: (M,) each occupied (band, finest cube (x, y, z) packed as in :func:`cube_counts`)."""
     top = spec.max_node_depth
     out = np.zeros(len(totals), np.int64)
-    x, y, z = fine & ((1 << top) - 1), (fine >> top) & ((1 << top) - 1), fine >> (2 * top)
+    x, y, z = unpack_cube(fine, top)
     for b in range(len(totals)):
         mine = band == b
         for d in range(top, 0, -1):
             s = top - d
-            held = len(np.unique((z[mine] >> s) << (2 * d) | (y[mine] >> s) << d | (x[mine] >> s)))
+            held = len(np.unique(pack_cube(x[mine] >> s, y[mine] >> s, z[mine] >> s, d)))
             if totals[b] >= spec.node_points * held:
                 out[b] = d
                 break
@@ -190,7 +195,7 @@ class NodePlan:
 def _cube(d: np.ndarray, cubes: np.ndarray, spec: TileSpec, z0: int) -> np.ndarray:
     """Each finest cube's cube at depth ``d``: z, y, x row-major at that depth, z counted from z0."""
     shift = spec.max_node_depth - d
-    return ((cubes[:, 2] >> shift) - z0) << (2 * d) | (cubes[:, 1] >> shift) << d | (cubes[:, 0] >> shift)
+    return pack_cube(cubes[:, 0] >> shift, cubes[:, 1] >> shift, (cubes[:, 2] >> shift) - z0, d)
 
 
 def _group_key(
@@ -203,15 +208,13 @@ def _group_key(
     cube_bits: int,
 ) -> np.ndarray:
     """Packed (band, cube at depth ``d``, level): the order of a tile's arrays."""
-    return (band << cube_bits | _cube(d, cubes, spec, z0)) << _LEVEL_BITS | levels.astype(np.int64)
+    return group_key(band, _cube(d, cubes, spec, z0), levels.astype(np.int64), cube_bits)
 
 
 def plan_nodes(rows: np.ndarray, spec: TileSpec, n_levels: int, seed: int) -> NodePlan:
     """The node plan of a tile from its (level, finest cube) point counts (:func:`cube_counts`)."""
     top = spec.max_node_depth
-    level = rows[:, 0] >> _CUBE_KEY_BITS
-    fine = rows[:, 0] & ((1 << _CUBE_KEY_BITS) - 1)
-    cubes = np.c_[fine & ((1 << top) - 1), (fine >> top) & ((1 << top) - 1), (fine >> (2 * top)) - _Z_OFFSET]
+    level, cubes = split_cube_count_key(rows[:, 0], top)
     per_level = np.bincount(level, weights=rows[:, 1], minlength=n_levels).astype(np.int64)
     spans = bands(per_level, spec.node_points)
     band_of_level = np.zeros(max(n_levels, len(per_level)), np.int64)
@@ -219,7 +222,7 @@ def plan_nodes(rows: np.ndarray, spec: TileSpec, n_levels: int, seed: int) -> No
         band_of_level[f : last + 1] = b
     band = band_of_level[level]
     totals = np.array([per_level[f : last + 1].sum() for f, last in spans])
-    packed = (cubes[:, 2] - cubes[:, 2].min(initial=0)) << (2 * top) | cubes[:, 1] << top | cubes[:, 0]
+    packed = pack_cube(cubes[:, 0], cubes[:, 1], cubes[:, 2] - cubes[:, 2].min(initial=0), top)
     depth_of_band = _depths(band, packed, totals, spec)
     d = depth_of_band[band]
     z0 = int((cubes[:, 2] >> (top - d)).min(initial=0))
@@ -241,7 +244,7 @@ def _with_nodes(
     ``band_of_level``)."""
     key, count = groups[:, 0], groups[:, 1]
     start = np.r_[0, np.cumsum(count)[:-1]].astype(np.int64) if len(count) else np.zeros(0, np.int64)
-    band_cube = key >> _LEVEL_BITS
+    band_cube = group_node(key)
     head = (
         np.r_[0, np.flatnonzero(band_cube[1:] != band_cube[:-1]) + 1] if len(key) else np.zeros(0, np.int64)
     )
@@ -249,11 +252,11 @@ def _with_nodes(
     new[head] = True
     node = np.cumsum(new) - 1
     lc = np.zeros((len(head), len(band_of_level)), np.int64)
-    np.add.at(lc, (node, key & ((1 << _LEVEL_BITS) - 1)), count)
-    nb = band_cube[head] >> cube_bits
+    np.add.at(lc, (node, split_group_key(key, cube_bits)[2]), count)
+    nb, nc, _ = split_group_key(key[head], cube_bits)
     nd = depth_of_band[nb]
-    nc = band_cube[head] & ((1 << cube_bits) - 1)
-    cell = np.stack([nc & ((1 << nd) - 1), (nc >> nd) & ((1 << nd) - 1), (nc >> (2 * nd)) + z0], axis=1)
+    cx, cy, cz = unpack_cube(nc, nd)
+    cell = np.stack([cx, cy, cz + z0], axis=1)
     span = np.array(spans, np.uint8).reshape(-1, 2)[nb]
     return NodePlan(
         key, start, count, band_of_level, depth_of_band, z0, cube_bits, seed, spec.node_order,

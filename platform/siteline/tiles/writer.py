@@ -30,17 +30,8 @@ from typing import Any
 import pyproj
 
 from siteline.errors import TileError
+from siteline.pointpass import PARALLEL_MIN_POINTS, Partition, PassSource, Slice, TilingResources, pass_file
 from siteline.pointpass.lasio import detect_eight_bit, open_las
-from siteline.pointpass.partition import (
-    PARALLEL_MIN_POINTS,
-    Partition,
-    PassSource,
-    RunWriter,
-    Slice,
-    point_ranges,
-    read_file,
-)
-from siteline.pointpass.resources import TilingResources
 from siteline.pointpass.sitestream import Correction, source_transformer
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
@@ -90,12 +81,8 @@ def _partition(
     source: PassSource, total: int, spec: TileSpec, folder: Path, workers: int, progress: Progress
 ) -> Partition:
     """Cut the file into tile runs in ``folder`` (in parallel ranges with a pool)."""
-    ranges = point_ranges(total, workers)
-    writers = [(RunWriter(str(folder), f"run-{k:05d}.bin", spec.to_dict()),) for k in range(len(ranges))]
-    runs = tuple(
-        done[0].run() for done in read_file(source, total, writers, workers, progress, "partitioning")
-    )
-    return Partition(folder, runs)
+    done = pass_file(source, total, workers, runs_into=folder, spec=spec, progress=progress, label="partitioning")
+    return done.partition if done.partition is not None else Partition(folder, ())
 
 
 def _write_all(
@@ -114,7 +101,7 @@ def _write_all(
     n = len(keys)
     results = []
     for res in pool_map(
-        pool, write_tile, keys, [parts[k] for k in keys], [str(out)] * n, [spec.to_dict()] * n, [seed] * n,
+        pool, write_tile, keys, [parts[k] for k in keys], [str(out)] * n, [spec] * n, [seed] * n,
         [scratch] * n, [batch_points] * n,
     ):  # fmt: skip
         results.append(res)

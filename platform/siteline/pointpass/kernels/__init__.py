@@ -3,10 +3,8 @@ functions over arrays, no siteline imports beyond the record schema).
 
 numpy runs a pipeline of whole-array passes, each a trip through memory; a kernel fuses them into one
 loop over the points. Each is compiled on its first call and cached on disk beside its module, so a
-worker process loads it instead of compiling again. Importing a kernel module imports numba (0.24-0.34 s
-here, measured 2026-11-26; laspy, which every LAS reader imports, costs 0.25 s): the lazy loader this
-package had before saved that only for commands that import a LAS module and never read a chunk, so
-it went. ``NUMBA_DISABLE_JIT=1`` runs them as plain Python (slow; for a debugger).
+worker process loads it instead of compiling again. Importing a kernel module imports numba (its cost is
+in docs/ARCHITECTURE.md). ``NUMBA_DISABLE_JIT=1`` runs them as plain Python (slow; for a debugger).
 """
 
 from __future__ import annotations
