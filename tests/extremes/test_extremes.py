@@ -169,8 +169,8 @@ def test_flat_scene_icp_is_finite_and_flagged() -> None:
     assert abs(np.array(res.correction)[2, 3] + 0.07) < 0.01  # the constrained direction is right
     empty = point_to_plane_icp(np.zeros((0, 3)), flat)
     assert empty.degenerate and empty.residual_m == np.inf and empty.matched == 0
-    # too few points to align: the record (what a scene's registration keeps) is still written
-    assert empty.to_dict()["correction"] == np.eye(4).tolist() and empty.to_dict()["matched"] == 0
+    # too few points to align: the correction is the identity and nothing matched
+    assert empty.correction == np.eye(4).tolist() and empty.matched == 0
 
 
 def test_content_seed_ignores_the_origins_last_bits() -> None:

@@ -77,7 +77,7 @@ _WRITE = textwrap.dedent(
     from siteline.tiles.batches import write_tile
     from siteline.tiles.layout import tile_key
     import zarr
-    folder, out, budget, spec = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3]), json.loads(sys.argv[4])
+    folder, out, budget, spec = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3]), TileSpec.from_dict(json.loads(sys.argv[4]))
     def status(field):
         return int(next(l.split()[1] for l in open("/proc/self/status") if l.startswith(field)))
     for k, store in enumerate((out + ".warm", out)):  # the first loads the kernels and zarr

@@ -262,7 +262,7 @@ KILL_SCRIPT = textwrap.dedent("""
     from siteline.catalog import open_catalog
     from siteline.config import load_settings
     from siteline.pointpass import TilingResources
-    from siteline.tiles import tile_scene
+    from siteline.tiles.stage import tile_scene
     real = w.write_tile
     done = []
     def dying(*a, **k):
@@ -335,7 +335,7 @@ def test_two_processes_tile_two_scenes_at_once(tmp_path, synth_dir) -> None:
     settings, ids = _ingested_home(tmp_path, synth_dir, "c")
     code = (
         "import sys\nfrom siteline.catalog import open_catalog\nfrom siteline.config import load_settings\n"
-        "from siteline.tiles import tile_scene\nfrom siteline.pointpass import TilingResources\ns = load_settings()\n"
+        "from siteline.tiles.stage import tile_scene\nfrom siteline.pointpass import TilingResources\ns = load_settings()\n"
         "tile_scene(open_catalog(s), s, int(sys.argv[1]), resources=TilingResources(workers=1))\n"
     )
     procs = [subprocess.Popen([sys.executable, "-c", code, str(i)], env=_env(settings)) for i in ids]
