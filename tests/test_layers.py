@@ -276,6 +276,9 @@ def test_the_engine_surface_is_what_architecture_names_and_laspy_stays_inside() 
         for name in _imports(tree):
             if name.split(".")[0] == "laspy":
                 outside.append(f"{_rel(path)} imports laspy")
+            parts = name.split(".")
+            if parts[:2] == ["siteline", "pointpass"] and len(parts) > 2 and parts[2] in {"kernels", "schema", "partition", "lod", "nodes"}:
+                outside.append(f"{_rel(path)} imports {name}: use the engine's front, siteline.pointpass")
     assert not outside, outside
     for stage in ("ingest/pointcloud.py", "tiles/writer.py"):
         assert (PACKAGE / stage).read_text().count("pass_file(") == 1, stage

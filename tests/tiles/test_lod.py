@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from siteline.pointpass import lod
 from siteline.records.tiling import TileSpec
-from siteline.tiles import lod
-from siteline.tiles.layout import level_count
 
 
 @pytest.mark.parametrize("n", [1, 2, 17, 5_000, 60_000])
@@ -22,7 +21,7 @@ def test_nested_levels_equal_the_level_by_level_definition(n: int) -> None:
     counts = np.c_[xy, z].astype(np.int32)
     order = np.random.default_rng(3).permutation(n)
     got = lod.assign_levels(counts, spec, order)
-    last = level_count(spec) - 1
+    last = spec.level_count - 1
     pts = counts.astype(np.int64)
     pts[:, 2] -= pts[:, 2].min()
     want = lod._assign_by_sorting(pts, order, lod._cell_counts(spec, last), last, np.full(n, 255, np.uint8))

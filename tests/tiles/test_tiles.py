@@ -23,7 +23,7 @@ from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import render_points
 from siteline.site.spec import make_site_spec
 from siteline.tiles.export import export_las
-from siteline.tiles.layout import level_count, parse_tile_key, tile_origin_local
+from siteline.tiles.layout import parse_tile_key, tile_origin_local
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.writer import TileInput, write_tiles
 
@@ -86,7 +86,7 @@ def test_levels_partition_points_and_are_uniform(tmp_path) -> None:
     spec = TileSpec(tile_size_m=50.0, node_points=256)  # small nodes: bands cut into cubes at this size
     _, result, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=spec)
     assert result.nodes.points == result.points == 40_000 and tiles.point_count == 40_000
-    last_level = level_count(spec) - 1
+    last_level = spec.level_count - 1
     for tile, nodes in tiles.by_tile.items():
         data = tiles.read({tile: tiles.prefix(tile)}, ("gps_time",))
         assert len(np.unique(data.attributes["gps_time"])) == len(

@@ -29,7 +29,7 @@ from siteline.ingest.inventory import mission_manifest
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
 from siteline.ingest.pointcloud import start_readers
-from siteline.pointpass.partition import PartitionCache
+from siteline.pointpass import PartitionCache
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission
 from siteline.records.registration import Registration

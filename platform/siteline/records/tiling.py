@@ -26,7 +26,7 @@ class TileSpec:
     tiles, so every level's cube is a whole number of quanta and nests in the level above).
     min_spacing_m: the last level takes every remaining point once the
     spacing would fall below this. node_points: the points a node holds at least where the tile has
-    them (levels are banded and bands cut into cubes to reach it, siteline.tiles.nodes): the index
+    them (levels are banded and bands cut into cubes to reach it, siteline.pointpass.nodes): the index
     grows with points / node_points; smaller nodes cull views more finely at the cost of more rows.
     max_node_depth: the deepest octree depth that splits a band into nodes (6: cubes of T / 64,
     0.78 m for 50 m tiles; a band takes the deepest depth whose cubes still average node_points, so
@@ -81,6 +81,12 @@ class TileSpec:
         return 2.0 ** math.floor(math.log2(self.tile_size_m / 8.0 / self.quantum_m)) * self.quantum_m
 
     @property
+    def level_count(self) -> int:
+        """Levels before the spacing falls below ``min_spacing_m`` (the last one takes the rest)."""
+        n = int(math.floor(math.log2(self.level0_spacing_m / self.min_spacing_m))) + 1
+        return max(1, min(self.max_levels, n))
+
+    @property
     def tile_quanta(self) -> int:
         """The tile's edge in quanta."""
         return int(round(self.tile_size_m / self.quantum_m))
@@ -119,7 +125,7 @@ NODE_COLUMNS: dict[str, tuple[str, int]] = {
 
 @dataclass(frozen=True, eq=False)
 class NodeTable:
-    """A scene's node index, one row per node, as columns (siteline.tiles.nodes).
+    """A scene's node index, one row per node, as columns (siteline.pointpass.nodes).
 
     A node is the levels ``first_level..level`` (a band) inside one octree cube ``cell`` at ``depth``
     of tile ``tiles[tile]`` (depth -1: the whole tile), one contiguous range ``start``/``count`` of the

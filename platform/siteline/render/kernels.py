@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.pointpass.kernels import kernel
+from siteline.pointpass import kernel
 
 
 @kernel

@@ -2,8 +2,8 @@
 
 A tile's points come from the partition as slices of its blocks (columns of its level-0 cubes,
 siteline.pointpass.partition). Levels are decided inside level-0 cubes with ranks seeded per block
-(:func:`siteline.tiles.lod.block_ranks`), and the node plan adds up per-cube counts
-(:func:`siteline.tiles.nodes.cube_counts`), so a tile of more than ``batch_points`` points is handled
+(:func:`siteline.pointpass.lod.block_ranks`), and the node plan adds up per-cube counts
+(:func:`siteline.pointpass.nodes.cube_counts`), so a tile of more than ``batch_points`` points is handled
 in batches of whole blocks:
 
 1. per batch: gather its records (the next batch is read from the run files while this one is
@@ -12,7 +12,7 @@ in batches of whole blocks:
 3. per batch again: gather, place each point (its group's next slot), scatter the records into the
    worker's scratch file (one per worker, overwritten tile after tile) in array order;
 4. the scratch file is written to the Zarr arrays shard by shard, each shard's groups read whole
-   and put in node order (:meth:`siteline.tiles.nodes.NodePlan.node_order`).
+   and put in node order (:meth:`siteline.pointpass.nodes.NodePlan.node_order`).
 
 A tile that fits one batch does the same in memory. Memory is thus set by ``batch_points`` (the
 batch worked on and the one read ahead), not by density, and the arrays are the same whatever the
@@ -34,21 +34,28 @@ import numpy as np
 
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.errors import TileError
-from siteline.pointpass.kernels import rows as row_kernels
-from siteline.pointpass.partition import Slice
-from siteline.pointpass.schema import RECORD, dequantise
+from siteline.pointpass import (
+    RECORD,
+    NodePlan,
+    Slice,
+    add_cube_counts,
+    assign_levels,
+    block_ranks,
+    cube_counts,
+    dequantise,
+    plan_nodes,
+    scatter_rows,
+    split_records,
+)
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.stores import open_store
 from siteline.tiles.codecs import array_codecs, round_trips, time_scale
 from siteline.tiles.layout import (
     ATTRIBUTES,
     COUNTS,
-    level_count,
     parse_tile_key,
     tile_origin_local,
 )
-from siteline.tiles.lod import assign_levels, block_ranks
-from siteline.tiles.nodes import NodePlan, add_cube_counts, cube_counts, plan_nodes
 
 # a tile of more points than this is levelled and ordered a batch of blocks at a time (about 200
 # bytes a point at the peak; SITELINE_TILE_BATCH_POINTS, docs/performance.md)
@@ -149,12 +156,12 @@ def _in_memory(
 ) -> tuple[NodePlan, Columns, float | None]:
     rec = _gather(parts)
     levels = _levels(rec, parts, spec, seed, z0)
-    plan = plan_nodes(cube_counts(rec[COUNTS], levels, spec), spec, level_count(spec), seed ^ 0x5EED)
+    plan = plan_nodes(cube_counts(rec[COUNTS], levels, spec), spec, spec.level_count, seed ^ 0x5EED)
     seen = np.zeros(len(plan.key), np.int64)
     where = plan.place(rec[COUNTS], levels, spec, seen)
     _check_placed(key, plan, seen)
     placed = np.empty(len(rec), RECORD)
-    row_kernels.scatter_rows(_bytes(placed), _bytes(rec), where)
+    scatter_rows(_bytes(placed), _bytes(rec), where)
     return plan, _in_node_order(plan, lambda a, b: placed[a:b]), time_scale(placed["gps_time"])
 
 
@@ -177,7 +184,7 @@ def _columns(rec: np.ndarray, order: np.ndarray) -> dict[str, np.ndarray]:
         name: buf[a : a + m * dtype.itemsize].view(dtype.base).reshape(m, *dtype.shape)
         for name, dtype, a in zip(ATTRIBUTES, _DTYPES, np.r_[0, ends[:-1]], strict=True)
     }
-    row_kernels.split_records(rec, order, *cols.values())
+    split_records(rec, order, *cols.values())
     return cols
 
 
@@ -219,7 +226,7 @@ def _out_of_core(
         np.save(scratch / f"{key}.levels-{k}.npy", levels)
         counted.append(cube_counts(rec[COUNTS], levels, spec))
         scales.append(time_scale(rec["gps_time"]))
-    plan = plan_nodes(add_cube_counts(counted), spec, level_count(spec), seed ^ 0x5EED)
+    plan = plan_nodes(add_cube_counts(counted), spec, spec.level_count, seed ^ 0x5EED)
     scale = _scale(scales)
     sorted_path = _placed_file(placed, plan.points * RECORD.itemsize)
     seen = np.zeros(len(plan.key), np.int64)
@@ -229,7 +236,7 @@ def _out_of_core(
         if scale is not None and not round_trips(rec["gps_time"], scale):
             scale = None
         out = np.memmap(sorted_path, dtype=np.uint8, mode="r+", shape=(plan.points, RECORD.itemsize))
-        row_kernels.scatter_rows(out, _bytes(rec), where)
+        scatter_rows(out, _bytes(rec), where)
         del out  # unmapped (not flushed: a scratch file): its pages leave this process
         os.unlink(scratch / f"{key}.levels-{k}.npy")
 

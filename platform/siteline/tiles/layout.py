@@ -5,7 +5,7 @@ Tile (i, j) covers site-local x in [i T, (i + 1) T) and y in [j T, (j + 1) T), T
 size, so the same tile covers the same ground in every scene. Inside a tile, level L keeps one point
 per occupied cube of edge ``root_spacing_m / 2**L`` among the points no earlier level kept (an
 additive level of detail). A node is a band of levels inside one cube of the tile's octree, sized to
-hold thousands of points (siteline.tiles.nodes): the tile's arrays are sorted by (band, cube, level),
+hold thousands of points (siteline.pointpass.nodes): the tile's arrays are sorted by (band, cube, level),
 so every node is one contiguous range whose coarser levels come first; inside a level the points are
 in ``TileSpec.node_order`` (by default sorted by the bit-reversed Morton code of their low bits), so that every
 prefix of the level spans the node and a view can read a level in part (a continuous level of detail). The node index
@@ -16,13 +16,10 @@ plus (i T, j T, 0)).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from siteline.pointpass.schema import ATTRIBUTES as ATTRIBUTES
-from siteline.pointpass.schema import COUNTS as COUNTS  # the name tiles store their positions under
-from siteline.records.tiling import TileSpec
+from siteline.pointpass import ATTRIBUTES as ATTRIBUTES
+from siteline.pointpass import COUNTS as COUNTS  # the name tiles store their positions under
 
 # Stored arrays per tile. Positions are stored as ``xyz_counts`` (int32 quanta from the tile origin)
 # and come back from reads as ``xyz_m`` (site-local metres): the two never share a name. Stores
@@ -48,9 +45,3 @@ def parse_tile_key(key: str) -> tuple[int, int]:
 def tile_origin_local(i: int, j: int, tile_size_m: float) -> np.ndarray:
     """Site-local float64 origin of tile (i, j)."""
     return np.array([i * tile_size_m, j * tile_size_m, 0.0])
-
-
-def level_count(spec: TileSpec) -> int:
-    """Levels before the spacing falls below ``min_spacing_m`` (the last one takes the rest)."""
-    n = int(math.floor(math.log2(spec.level0_spacing_m / spec.min_spacing_m))) + 1
-    return max(1, min(spec.max_levels, n))

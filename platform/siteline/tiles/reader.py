@@ -14,7 +14,7 @@ import zarr
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
-from siteline.pointpass.schema import dequantise
+from siteline.pointpass import dequantise
 from siteline.records.tiling import NodeTable, TileSource, TileSpec
 from siteline.stores import join, open_store
 from siteline.tiles import codecs as _codecs  # noqa: F401  (quiets zarr's warning on the codecs it reads)

@@ -5,8 +5,8 @@ Two phases, both spread over worker processes (``workers``):
 1. **Partition** (siteline.pointpass.partition): the file's points cut into tile runs in parallel ranges. Ingest
    keeps the partition its scan made (the same pass), so tiling right after ingest skips this phase;
    otherwise it runs here.
-2. **Write**: each tile gathers its slices of every run, is levelled (siteline.tiles.lod), ordered
-   into nodes (siteline.tiles.nodes) and written shard by shard by one worker, a batch of its
+2. **Write**: each tile gathers its slices of every run, is levelled (siteline.pointpass.lod), ordered
+   into nodes (siteline.pointpass.nodes) and written shard by shard by one worker, a batch of its
    blocks at a time when it is large (siteline.tiles.batches; concurrent partial-shard writes lose
    data, zarr-python issue 3682).
 

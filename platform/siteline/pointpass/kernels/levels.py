@@ -1,4 +1,4 @@
-"""Kernels of the level-of-detail assignment inside nested cubes (siteline.tiles.lod)."""
+"""Kernels of the level-of-detail assignment inside nested cubes (siteline.pointpass.lod)."""
 
 from __future__ import annotations
 

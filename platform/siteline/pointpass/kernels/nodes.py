@@ -1,5 +1,5 @@
 """Kernels of a tile's node plan: counting points per (level, finest cube) and placing each point
-in its group's seeded slot (siteline.tiles.nodes)."""
+in its group's seeded slot (siteline.pointpass.nodes)."""
 
 from __future__ import annotations
 

@@ -7,7 +7,6 @@ import numpy as np
 from siteline.pointpass.kernels import levels as levels_kernels
 from siteline.pointpass.kernels import radix
 from siteline.records.tiling import TileSpec
-from siteline.tiles.layout import level_count
 
 
 def _cell_counts(spec: TileSpec, levels: int) -> list[int]:
@@ -48,7 +47,7 @@ def assign_levels(counts: np.ndarray, spec: TileSpec, order: np.ndarray, z0: int
     levels = np.full(n, 255, dtype=np.uint8)
     if n == 0:
         return levels
-    last = level_count(spec) - 1
+    last = spec.level_count - 1
     if last == 0:
         levels[:] = 0
         return levels
