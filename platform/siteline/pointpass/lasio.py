@@ -279,46 +279,6 @@ def _eight_bit(*channels: np.ndarray) -> bool:
     return max(int(c.max(initial=0)) for c in channels) <= 255
 
 
-@dataclass
-class SiteLocalCloud:
-    """A whole (small) cloud in the site-local frame. xyz: (N, 3) float32 metres; rgb (N, 3) uint8 or
-    None; classification (N,) uint8 source codes."""
-
-    xyz: np.ndarray
-    rgb: np.ndarray | None
-    classification: np.ndarray
-
-
-def read_site_local(
-    path: Path, origin: Sequence[float], chunk_points: int = DEFAULT_CHUNK_POINTS
-) -> SiteLocalCloud:
-    """Read a LAS/LAZ file whole into site-local float32 (for renders and tools on small clouds).
-
-    Raises :class:`PointCloudError` when a coordinate is not finite or lands further than
-    ``MAX_SITE_LOCAL_M`` from the origin (float32 would silently lose precision).
-    """
-    xyzs, rgbs, classes = [], [], []
-    o = np.asarray(origin, dtype=np.float64)
-    for chunk in iter_chunks(path, chunk_points):
-        local = chunk.xyz_crs - o
-        if not np.isfinite(local).all():
-            raise PointCloudError(f"point cloud {path} holds non-finite coordinates.")
-        far = np.abs(local).max(initial=0.0)
-        if far > MAX_SITE_LOCAL_M:
-            raise PointCloudError(
-                f"point cloud {path} has points {far:.0f} m from the origin {tuple(o.tolist())}; give the site origin "
-                "(e.g. --origin X Y Z near the data): float32 would lose precision there."
-            )
-        xyzs.append(local.astype(np.float32))
-        classes.append(chunk.classification)
-        if chunk.rgb is not None:
-            rgbs.append(chunk.rgb)
-    xyz = np.concatenate(xyzs) if xyzs else np.zeros((0, 3), np.float32)
-    cls = np.concatenate(classes) if classes else np.zeros(0, np.uint8)
-    rgb = np.concatenate(rgbs) if rgbs else None
-    return SiteLocalCloud(xyz=xyz, rgb=rgb, classification=cls)
-
-
 def las_offset(xyz_min: np.ndarray, scale: float) -> np.ndarray:
     """A LAS offset near the data: the minimum rounded down to a multiple of 1000 scale units, so
     |coordinate - offset| stays far below 2^31 x scale (DESIGN.md §2)."""

@@ -154,26 +154,24 @@ class SiteReading:
     fence_tol_m: float = LENGTH_TOL_M
 
 
-def site_chunks(
+def local_chunks(
     path: Path,
-    site: SiteSpec,
+    origin: Sequence[float],
     tr: ToSiteCRS | None,
     how: SiteReading = SiteReading(),
     reader: laspy.LasReader | None = None,
-) -> Iterator[SiteChunk]:
-    """Stream a LAS/LAZ file into the site frame: float64 transform to the site CRS, subtraction of the
-    origin, refusal of non-finite or absurd coordinates, taxonomy mapping, fence -> ignore; ``how``:
-    :class:`SiteReading`. ``reader``: the file already opened."""
-    class_lut, correction, fence_tol_m = how.class_lut, how.correction, how.fence_tol_m
-    tax = site.taxonomy
-    lut, known = class_lut if class_lut is not None else tax.code_lut("las")
-    origin = np.asarray(site.origin, dtype=np.float64)
-    corrected = None if correction is None else correction_rigid(correction)
+) -> Iterator[tuple[np.ndarray, PointChunk, np.ndarray, np.ndarray]]:
+    """The one way a LAS/LAZ file becomes site-local: per chunk, the float64 transform to the site CRS
+    (``tr``; None: the file is in it), the origin subtracted, the co-registration applied, and
+    non-finite or absurd coordinates (over ``MAX_SITE_LOCAL_M`` from the origin) refused naming the
+    file. Yields (site-local (N, 3) float64 metres, the chunk, its low and high corner)."""
+    o = np.asarray(origin, dtype=np.float64)
+    corrected = None if how.correction is None else correction_rigid(how.correction)
     for chunk in iter_chunks(path, how.chunk_points, how.eight_bit, reader=reader, start=how.start, stop=how.stop):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)
-        local = xyz - origin
+        local = xyz - o
         if corrected is not None:
             local = corrected.apply(local)
         lo, hi, bad = cut.bounds(local)
@@ -184,9 +182,26 @@ def site_chunks(
         far = float(np.abs(np.r_[lo, hi]).max(initial=0.0)) if len(local) else 0.0
         if far > MAX_SITE_LOCAL_M:
             raise PointCloudError(
-                f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(origin.tolist())} (limit "
-                f"{MAX_SITE_LOCAL_M:,.0f} m): wrong site, wrong CRS or corrupt coordinates."
+                f"point cloud {path}: points lie {far:,.0f} m from the site origin {tuple(o.tolist())} (limit "
+                f"{MAX_SITE_LOCAL_M:,.0f} m): wrong site or origin (--origin), wrong CRS or corrupt coordinates."
             )
+        yield local, chunk, lo, hi
+
+
+def site_chunks(
+    path: Path,
+    site: SiteSpec,
+    tr: ToSiteCRS | None,
+    how: SiteReading = SiteReading(),
+    reader: laspy.LasReader | None = None,
+) -> Iterator[SiteChunk]:
+    """Stream a LAS/LAZ file into the site frame (:func:`local_chunks`), with the taxonomy mapping and
+    points outside the fence made ignore; ``how``: :class:`SiteReading`. ``reader``: the file already
+    opened."""
+    class_lut, fence_tol_m = how.class_lut, how.fence_tol_m
+    tax = site.taxonomy
+    lut, known = class_lut if class_lut is not None else tax.code_lut("las")
+    for local, chunk, lo, hi in local_chunks(path, site.origin, tr, how, reader):
         codes = chunk.classification
         cls = lut[codes]
         outside = np.zeros(len(cls), dtype=bool)
@@ -194,3 +209,28 @@ def site_chunks(
             outside = ~inside_fence(local[:, :2], site.fence, tol_m=fence_tol_m, box=(lo[0], lo[1], hi[0], hi[1]))
             cls = np.where(outside, tax.ignore_id, cls)
         yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside, lo, hi)
+
+
+@dataclass(frozen=True)
+class SiteLocalCloud:
+    """A whole (small) cloud in the site-local frame. xyz: (N, 3) float32 metres; rgb (N, 3) uint8 or
+    None; classification (N,) uint8 source codes."""
+
+    xyz: np.ndarray
+    rgb: np.ndarray | None
+    classification: np.ndarray
+
+
+def read_site_local(path: Path, origin: Sequence[float]) -> SiteLocalCloud:
+    """Read a LAS/LAZ file whole into site-local float32 (for renders and tools on small clouds) by
+    :func:`local_chunks`, its coordinates taken in the site CRS."""
+    xyzs, rgbs, classes = [], [], []
+    for local, chunk, _, _ in local_chunks(path, origin, None):
+        xyzs.append(local.astype(np.float32))
+        classes.append(chunk.classification)
+        if chunk.rgb is not None:
+            rgbs.append(chunk.rgb)
+    xyz = np.concatenate(xyzs) if xyzs else np.zeros((0, 3), np.float32)
+    cls = np.concatenate(classes) if classes else np.zeros(0, np.uint8)
+    rgb = np.concatenate(rgbs) if rgbs else None
+    return SiteLocalCloud(xyz=xyz, rgb=rgb, classification=cls)
