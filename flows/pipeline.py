@@ -421,6 +421,6 @@ def _summary(out: PairOutput) -> dict[str, Any]:
     """A pair's outputs as a flow returns them: ids, views, radius, 3D label counts, where they are."""
     return {
         "pair": out.pair_id, "t1": out.t1, "t2": out.t2, "views": len(out.views), "root": out.root,
-        "radius_m": out.radius_m, "labels": out.labels.get("counts"),
+        "radius_m": out.radius_m, "labels": {k: dict(v) for k, v in out.labels.counts.items()},
         "masks": [join(out.root, "label", v.file) for v in out.views],
     }  # fmt: skip

@@ -32,7 +32,7 @@ from siteline.pairs.stage import process_pair
 from siteline.pointpass import TilingResources
 from siteline.previews.cloud import PairCloud
 from siteline.progress import Progress, no_progress
-from siteline.records.pairs import PairOutput
+from siteline.records.pairs import ColourPlan, PairOutput
 from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
@@ -46,7 +46,6 @@ from siteline.release.plan import (
     semver,
 )
 from siteline.release.stage import build_release
-from siteline.render.colour import ColourPlan
 from siteline.site.fence import validate_fence
 from siteline.site.taxonomy import Taxonomy
 from siteline.stores import layout
@@ -252,7 +251,8 @@ def release(
     outputs = process_pairs(catalog, settings, chosen, params.pair, progress, options.device, run_id, label_sets)
     for out in outputs.values():
         if out.radius_m > params.radius_ceiling_m:
-            spacing = max((out.labels.get("radius") or {}).get("median_spacing_m", {}).values(), default=float("nan"))
+            radius = out.labels.radius
+            spacing = max(radius.median_spacing_m.values(), default=float("nan")) if radius else float("nan")
             log.warning(
                 "release %s, pair %d: change radius %.2f m (the sparser scene's points lie %.2f m apart) is above "
                 "the radius ceiling %.2f m: a change smaller than %.2f m is labelled unchanged. Survey denser, or "

@@ -8,7 +8,8 @@ import pytest
 
 from siteline.errors import PairError
 from siteline.labels.change import change_flags
-from siteline.labels.rule import ChangeRulePlan, resolve_change_rule, scheme_differences
+from siteline.labels.rule import resolve_change_rule, scheme_differences
+from siteline.records.pairs import ChangeRulePlan
 from siteline.site.taxonomy import default_taxonomy, detect_scheme
 
 TAX = default_taxonomy()

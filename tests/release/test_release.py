@@ -360,5 +360,6 @@ def test_reused_change_labels_record_their_points(built) -> None:
         plan = plan_pair(s, settings.store, 1, PARAMS)
     t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
     labels = pair_labels(plan, t1, t2, settings.store, no_progress)  # the store exists: reused
-    counts = labels.record["counts"]
-    assert labels.record["points"] == sum(n for side in counts.values() for n in side.values()) > 0
+    counts = labels.counts
+    assert labels.points == sum(n for side in counts.values() for n in side.values()) > 0
+    assert labels.seconds is None and labels.radius is not None  # reused: no time taken, radius recorded

@@ -5,14 +5,14 @@ from __future__ import annotations
 from collections import Counter
 
 from siteline.camera.pinhole import Camera
-from siteline.records.pairs import RenderedView
+from siteline.records.pairs import RenderedView, ViewStrategy
 from siteline.release.splits import assign_splits
 
 
 def _view(index: int, x: float, y: float = 0.0, height: float = 50.0) -> RenderedView:
     """A nadir view ``height`` m up: a disc of radius height x 250 / 600 (21 m at 50 m)."""
     cam = Camera.look_at([x, y, height], [x, y, 0.0], 200, 150, 300.0)
-    return RenderedView(index, "img", "v1-orig-f0", {"central_depth_m": height}, 0.9, cam,
+    return RenderedView(index, "img", "v1-orig-f0", ViewStrategy(1.0, False, 0.0, central_depth_m=height), 0.9, cam,
                         f"{index:04d}.png", 0.9, 0.9, 0.8, 0.1, 1000)  # fmt: skip
 
 

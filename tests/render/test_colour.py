@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from siteline.errors import PairError
+from siteline.records.pairs import ColourPlan
 from siteline.records.scan import ColourStats
-from siteline.render.colour import ColourPlan, resolve_colour
+from siteline.render.colour import resolve_colour
 
 RGB = ColourStats("varies", (5.0, 200.0), (-2.0, 30.0))
 NO_RGB = ColourStats("absent", (10.0, 1400.0), (0.0, 40.0))

@@ -10,6 +10,7 @@ import pytest
 from siteline.catalog.scenes import scene_cameras, tile_source
 from siteline.catalog.sites import site_of
 from siteline.pairs.sources import TilePointSource
+from siteline.records.pairs import ViewStrategy
 from siteline.tiles.reader import SceneTiles
 from siteline.views.generate import NamedCamera, generate_views
 from siteline.views.ground import fit_ground_plane
@@ -88,7 +89,7 @@ def test_tiled_probes_keep_the_whole_cloud_views(scenes) -> None:
 def test_stratified_order_prefixes_are_the_samples(n) -> None:
     from siteline.views.generate import SyntheticView, key_sorted, stratified_order, stratified_sample
 
-    views = [SyntheticView(f"img{i % 7}", f"s{i % 3}", {}, None) for i in range(30)]  # no geometry needed
+    views = [SyntheticView(f"img{i % 7}", f"s{i % 3}", ViewStrategy(1.0, False, 0.0), None) for i in range(30)]  # no geometry needed
     order = stratified_order(views, seed=3)
     assert len(order) == 30 and len({id(v) for v in order}) == 30
     assert stratified_sample(views, n, seed=3) == key_sorted(order[:n], seed=3)

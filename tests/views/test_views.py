@@ -9,6 +9,7 @@ import pytest
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
+from siteline.records.pairs import ViewStrategy
 from siteline.site.fence import inside_fence
 from siteline.views.generate import (
     NamedCamera,
@@ -97,9 +98,9 @@ def test_vertical_heights_are_fractions_of_the_real_height() -> None:
     cands = candidate_views(cam, plane, FENCE, lambda c: 30.0, ViewParams())
     h0 = plane.height(cam.camera.center)
     for v in cands:
-        if not v.params["mirrored"] and v.params["forward_fraction"] == 0:
+        if not v.params.mirrored and v.params.forward_fraction == 0:
             assert plane.height(v.camera.center) == pytest.approx(
-                v.params["vertical_fraction"] * h0, abs=1e-9
+                v.params.vertical_fraction * h0, abs=1e-9
             )
             assert np.allclose(v.camera.R, cam.camera.R)
 
@@ -118,11 +119,11 @@ def test_generated_views_are_valid_seeded_and_recorded() -> None:
         assert plane.height(v.camera.center) >= PARAMS.min_height_m
         assert source.nearest_distance(v.camera.center[None])[0] >= PARAMS.clearance_m
         assert v.coverage is not None and v.coverage >= PARAMS.min_coverage
-        if v.params["mirrored"]:
+        if v.params.mirrored:
             assert inside_fence(v.camera.center[None, :2], FENCE)[0]
         again = SyntheticView.from_dict(v.to_dict())
         assert again.camera == v.camera and again.parent == v.parent
-    assert {v.params["mirrored"] for v in a.views} == {False, True}
+    assert {v.params.mirrored for v in a.views} == {False, True}
     c = generate_views(
         _real_cameras(),
         plane,
@@ -165,7 +166,7 @@ def test_views_under_geometry_and_underground_are_rejected() -> None:
 
 
 def _fake(strategy: str, i: int) -> SyntheticView:
-    return SyntheticView(f"p{i}", strategy, {}, Camera.look_at((0, 0, 10), (0, 0, 0), 4, 4, 2.0))
+    return SyntheticView(f"p{i}", strategy, ViewStrategy(1.0, False, 0.0), Camera.look_at((0, 0, 10), (0, 0, 0), 4, 4, 2.0))
 
 
 def test_sample_is_stratified() -> None:
@@ -237,7 +238,7 @@ def test_mirror_of_a_camera_above_the_fence_is_kept_at_both_magnitudes() -> None
 def test_removing_one_candidate_changes_at_most_one_sampled_view() -> None:
     strategies_ = [f"v{v}-{m}-f{f}" for v in (1, 0.5) for m in ("orig", "mirror") for f in (0, 0.5)]
     pool = [
-        SyntheticView(f"IMG_{p:04d}.JPG", s, {}, _fake(s, p).camera) for p in range(12) for s in strategies_
+        SyntheticView(f"IMG_{p:04d}.JPG", s, ViewStrategy(1.0, False, 0.0), _fake(s, p).camera) for p in range(12) for s in strategies_
     ]
     ident = [(v.parent, v.strategy) for v in pool]
     for n in (10, 40, 90):
@@ -283,9 +284,9 @@ def test_mirrored_views_of_a_camera_outside_the_fence_look_into_the_site(pitch_d
 def test_mirror_rule_is_recorded_in_the_view_parameters() -> None:
     cams = _real_cameras()[:1]
     cands = candidate_views(cams[0], GroundPlane((0.0, 0.0, 1.0), 0.0), FENCE, lambda c: 30.0, ViewParams())
-    rules = {v.params["mirror_rule"] for v in cands if v.params["mirrored"]}
+    rules = {v.params.mirror_rule for v in cands if v.params.mirrored}
     assert rules == {"aim-site"}
-    assert {v.params["mirror_rule"] for v in cands if not v.params["mirrored"]} == {None}
+    assert {v.params.mirror_rule for v in cands if not v.params.mirrored} == {None}
     assert ViewParams(mirror_rule="reflect").to_dict()["mirror_rule"] == "reflect"
     with pytest.raises(ViewsError, match="mirror_rule"):
         ViewParams(mirror_rule="sideways")

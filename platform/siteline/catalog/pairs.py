@@ -50,7 +50,7 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
     pair.radius_m = output.radius_m
     if pair.status != "superseded":  # a superseded pair stays out of new releases
         pair.status = "processed"
-    labels = dict(output.labels) | ({"uri": to_record(output.labels["uri"])} if "uri" in output.labels else {})
+    labels = output.labels.to_dict() | {"uri": to_record(output.labels.uri)}
     pair.parameters = {**(pair.parameters or {}), digest: {"params": params, "labels": labels}}
     session.execute(sa.delete(View).where(View.pair_id == pair.id, View.param_digest == digest))
     cams = dict(
@@ -61,7 +61,7 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
     for rec in output.views:
         view = View(
             pair_id=pair.id, param_digest=digest, index=rec.index, strategy=rec.strategy,
-            parent_camera_id=cams.get(rec.parent), parameters=rec.params, camera=rec.camera.to_dict(),
+            parent_camera_id=cams.get(rec.parent), parameters=rec.params.to_dict(), camera=rec.camera.to_dict(),
         )  # fmt: skip
         session.add(view)
         session.flush()

@@ -11,12 +11,9 @@ and are not judged.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any
-
-import numpy as np
 
 from siteline.errors import PairError
+from siteline.records.pairs import ChangeRulePlan
 from siteline.site.taxonomy import Taxonomy
 
 CHANGE_RULES = ("auto", "semantic", "geometry")
@@ -24,34 +21,6 @@ SCHEME_CLASSES = ("ground", "vegetation", "unclassified")
 # a scheme class is present in a scene above this share of its kept points, absent below the other
 PRESENT_SHARE = 0.01
 ABSENT_SHARE = 0.0005
-
-
-@dataclass(frozen=True)
-class ChangeRulePlan:
-    """The rule a pair's change labels use: ``semantic`` (a point is changed when its nearest
-    counterpart has another class, DESIGN.md §4) or ``geometry`` (changed only when it has no
-    counterpart of a kept class within the radius, whatever the classes); ``why`` says how it was
-    chosen, ``differences`` how the two scenes' schemes differ."""
-
-    rule: str = "semantic"
-    why: str = ""
-    differences: tuple[str, ...] = field(default_factory=tuple)
-
-    def geometric_lut(self, taxonomy: Taxonomy) -> np.ndarray:
-        """(256,) bool of the classes compared by geometry only (siteline.labels.change.change_flags)."""
-        if self.rule == "geometry":
-            return np.ones(256, dtype=bool)
-        return taxonomy.geometry_only_lut()
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"rule": self.rule, "why": self.why, "differences": list(self.differences)}
-
-    @classmethod
-    def from_dict(cls, doc: Mapping[str, Any] | None) -> ChangeRulePlan:
-        """From the JSON form; outputs made before the rule was recorded used the semantic rule."""
-        if not doc:
-            return cls("semantic", "made before the change rule was recorded")
-        return cls(str(doc["rule"]), str(doc.get("why", "")), tuple(doc.get("differences", ())))
 
 
 def _shares(histogram: Mapping[str, int], taxonomy: Taxonomy) -> dict[str, float]:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import hashlib
 import shutil
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ import zarr
 
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
+from siteline.records.pairs import ChangeLabels, RadiusChoice
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
@@ -22,22 +22,9 @@ from siteline.tiles.reader import SceneTiles
 SIDES = ("t1", "t2")
 
 
-@dataclass
-class LabelResult:
-    uri: str
-    radius_m: float
-    counts: dict[str, dict[str, int]]
-    checksum: str
-    seconds: float
-    points: int
-
-    def to_dict(self) -> dict:
-        return self.__dict__.copy()
-
-
 def auto_radius(
     a: SceneTiles, b: SceneTiles, multiplier: float = 2.5, max_points: int = 200_000
-) -> tuple[float, dict]:
+) -> tuple[float, RadiusChoice]:
     """``multiplier`` x the median nearest-neighbour spacing of the sparser scene (DESIGN.md §4),
     measured on the full-density points of each scene's most populated tile."""
     spacing = {}
@@ -45,7 +32,7 @@ def auto_radius(
         tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t))
         spacing[name] = median_spacing(tiles.read_tile(tile, ()).xyz_m, max_points)
     sparse = max(spacing.values())
-    return multiplier * sparse, {"median_spacing_m": spacing, "multiplier": multiplier}
+    return multiplier * sparse, RadiusChoice(spacing, multiplier)
 
 
 class _Decoded:
@@ -135,7 +122,7 @@ def write_labels(
     ignored: np.ndarray,
     out: Path,
     geometric: np.ndarray | None = None,
-) -> LabelResult:
+) -> ChangeLabels:
     """Compute both directions in one pass over the site grid (each tile of each scene against the
     other scene's points in the tile's grid cell widened by ``radius_m``) into the new Zarr group
     ``out`` (removed again on an error; publish it through ``siteline.stores.Store.publish`` for
@@ -183,4 +170,4 @@ def write_labels(
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
-    return LabelResult(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)
+    return ChangeLabels(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)

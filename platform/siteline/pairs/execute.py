@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,7 @@ from siteline.pairs.plan import PairPlan
 from siteline.pairs.render import LabelledPair, render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
-from siteline.records.pairs import PairOutput, RenderedView
+from siteline.records.pairs import ChangeLabels, PairOutput, RenderedView
 from siteline.render.outputs import png_bytes
 from siteline.render.threads import CpuThreads
 from siteline.stores import Store, layout, move
@@ -35,19 +35,9 @@ log = logging.getLogger(__name__)
 FOLDERS = ("A", "B", "label")
 
 
-@dataclass(frozen=True)
-class PairLabels:
-    """A pair's 3D change labels: the radius (metres), the label store's address, and its record
-    (counts, checksum, radius details: median spacings, multiplier, expected false change)."""
-
-    radius_m: float
-    uri: str
-    record: dict[str, Any]
-
-
 def pair_labels(
     plan: PairPlan, t1: SceneTiles, t2: SceneTiles, store: Store, progress: Progress
-) -> PairLabels:
+) -> ChangeLabels:
     """The pair's change labels at its radius (given, or ``radius_multiplier`` x the sparser scene's
     median spacing), reused from the store when they are there, else computed and published."""
     label_params = plan.params.label_params()
@@ -55,23 +45,21 @@ def pair_labels(
     radius = auto
     if label_params.radius_m is not None:
         radius = label_params.radius_m
-        info = info | {"given": True, "multiplier": radius / (auto / label_params.radius_multiplier)}
+        info = replace(info, given=True, multiplier=radius / (auto / label_params.radius_multiplier))
     # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
-    info["expected_false_change"] = expected_false_change(info["multiplier"])
+    info = replace(info, expected_false_change=expected_false_change(info.multiplier))
     uri = layout.pair_labels(store, plan.pair_id, plan.versions, radius, plan.change_rule.rule)
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
-        record: dict[str, Any] = dict(store.open_group(uri).attrs) | {"uri": uri}
-        counts: dict[str, dict[str, int]] = record["counts"]
-        record.setdefault("points", sum(n for side in counts.values() for n in side.values()))
+        labels = ChangeLabels.from_dict(dict(store.open_group(uri).attrs) | {"uri": uri})
     else:
         progress("labels", 0, None)
         taxonomy = plan.site.taxonomy
         with store.publish(uri) as work:
-            record = write_labels(
+            labels = write_labels(
                 t1, t2, radius, taxonomy.ignored_lut(), work, geometric=plan.change_rule.geometric_lut(taxonomy)
-            ).to_dict() | {"uri": uri}
+            )
     log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
-    return PairLabels(radius, uri, record | {"radius": info})
+    return replace(labels, uri=uri, radius=info)
 
 
 def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None) -> ViewSet:
@@ -206,7 +194,7 @@ def execute_pair(
         records = _index(kept, work, plan.params.seed)
         summary = {
             "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
-            "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.record,
+            "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.to_dict(),
             "ground_plane": views.ground.to_dict(), "fence": plan.fence_source, "colour": plan.colour.to_dict(),
             "change_rule": plan.change_rule.to_dict(),
             "candidates": views.candidates, "probed": views.probed, "rejected": rejected,

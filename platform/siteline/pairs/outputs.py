@@ -5,19 +5,17 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from siteline.labels.rule import ChangeRulePlan
 from siteline.pairs.plan import PairPlan
-from siteline.records.pairs import PairOutput, RenderedView
+from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, PairOutput, RenderedView
 from siteline.stores import Store, join
 
 
 def output_of(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
     return PairOutput(
         plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
-        tuple(RenderedView.from_dict(v) for v in doc["views"]), doc["labels"], plan.versions, plan.digest,
-        plan.params.to_dict(), doc.get("colour") or {"source": "rgb"}, doc.get("fence", "site fence"),
-        ChangeRulePlan.from_dict(doc.get("change_rule")).to_dict(),
-        {k: doc[k] for k in ("candidates", "probed", "rejected") if k in doc},
+        tuple(RenderedView.from_dict(v) for v in doc["views"]), ChangeLabels.from_dict(doc["labels"]), plan.versions,
+        plan.digest, plan.params.to_dict(), ColourPlan.from_dict(doc.get("colour") or {"source": "rgb"}),
+        doc.get("fence", "site fence"), ChangeRulePlan.from_dict(doc.get("change_rule")), Drawn.from_dict(doc),
     )  # fmt: skip
 
 

@@ -12,8 +12,8 @@ from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
 from siteline.labels.rule import CHANGE_RULES
 from siteline.records.enums import HOLE_RULES, HoleRule
+from siteline.records.pairs import COLOUR_CHOICES
 from siteline.records.specs import parse_spec
-from siteline.render.colour import COLOUR_CHOICES
 from siteline.render.settings import RenderSettings
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 

@@ -14,12 +14,12 @@ from siteline.catalog.pairs import get_pair, pair_view_ids
 from siteline.catalog.scenes import get_scene, scene_cameras, scene_statistics, tile_source
 from siteline.catalog.sites import site_of
 from siteline.errors import PairError
-from siteline.labels.rule import ChangeRulePlan, resolve_change_rule
+from siteline.labels.rule import resolve_change_rule
 from siteline.pairs.params import PairParams
 from siteline.records.labelsets import LabelSetRef
-from siteline.records.pairs import PairVersions
+from siteline.records.pairs import ChangeRulePlan, ColourPlan, PairVersions
 from siteline.records.tiling import TileSource
-from siteline.render.colour import ColourPlan, resolve_colour
+from siteline.render.colour import resolve_colour
 from siteline.site.spec import SiteSpec
 from siteline.stores import Store, layout
 

@@ -18,7 +18,7 @@ from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.records.enums import HOLE_RULES
-from siteline.render.colour import ColourPlan
+from siteline.records.pairs import ColourPlan
 from siteline.render.zbuffer import RenderResult, render_points
 from siteline.site.fence import inside_fence
 from siteline.stores import join

@@ -14,7 +14,7 @@ import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.pairs.render import LabelledPair
-from siteline.render.colour import ColourPlan
+from siteline.records.pairs import ColourPlan
 from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 

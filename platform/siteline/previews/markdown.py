@@ -131,7 +131,7 @@ def stopped_markdown(run_name: str, events: Sequence[RunEvent], progress: str | 
 
 def pair_markdown(out: PairOutput, samples_url: str, shown: int) -> str:
     """The pair artifact: its first views as t1 | t2 | mask, and a row per view."""
-    counts = out.labels.get("counts", {})
+    counts = {k: dict(v) for k, v in out.labels.counts.items()}
     lines = [
         f"# Pair {out.pair_id}: scene {out.t1} -> scene {out.t2}",
         "",

@@ -5,9 +5,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple, get_args
+
+import numpy as np
 
 from siteline.camera.pinhole import Camera
+from siteline.errors import PairError
+from siteline.site.taxonomy import Taxonomy
 
 
 class PairVersions(NamedTuple):
@@ -27,6 +31,34 @@ class PairVersions(NamedTuple):
 
 
 @dataclass(frozen=True)
+class ViewStrategy:
+    """How a synthetic view was made from its parent camera (DESIGN.md §5): lowered to
+    ``vertical_fraction`` of its height, ``mirrored`` across the fence segment ``mirror_segment_m``
+    ((x, y) ends, site-local metres) by ``mirror_rule``, then stepped ``forward_fraction`` of the
+    central depth ``central_depth_m`` (``forward_m`` metres; None where the view could not be made)."""
+
+    vertical_fraction: float
+    mirrored: bool
+    forward_fraction: float
+    mirror_segment_m: tuple[tuple[float, float], tuple[float, float]] | None = None
+    mirror_rule: str | None = None
+    central_depth_m: float | None = None
+    forward_m: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> ViewStrategy:
+        seg = doc.get("mirror_segment_m")
+        segment = ((float(seg[0][0]), float(seg[0][1])), (float(seg[1][0]), float(seg[1][1]))) if seg else None
+        return cls(
+            float(doc["vertical_fraction"]), bool(doc["mirrored"]), float(doc["forward_fraction"]), segment,
+            doc.get("mirror_rule"), doc.get("central_depth_m"), doc.get("forward_m"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
 class RenderedView:
     """One view of a pair rendered on both scenes: the synthetic camera (index in the pair's sample,
     parent real image, strategy key, strategy parameters, probe coverage, camera as
@@ -39,7 +71,7 @@ class RenderedView:
     index: int
     parent: str
     strategy: str
-    params: dict[str, Any]
+    params: ViewStrategy
     coverage: float | None
     camera: Camera
     file: str
@@ -53,13 +85,192 @@ class RenderedView:
     probe_valid: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {f.name: getattr(self, f.name) for f in fields(self)} | {"camera": self.camera.to_dict()}
+        return {f.name: getattr(self, f.name) for f in fields(self)} | {
+            "params": self.params.to_dict(), "camera": self.camera.to_dict()
+        }
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> RenderedView:
         names = {f.name for f in fields(cls)}
         values = {k: v for k, v in doc.items() if k in names}
-        return cls(**values | {"camera": Camera.from_dict(doc["camera"])})
+        return cls(**values | {"params": ViewStrategy.from_dict(doc["params"]), "camera": Camera.from_dict(doc["camera"])})
+
+
+ColourChoice = Literal["auto", "rgb", "intensity", "elevation"]
+ColourSource = Literal["rgb", "intensity", "elevation"]
+COLOUR_CHOICES: tuple[str, ...] = get_args(ColourChoice)
+# the elevation ramp: low -> high, five stops of viridis (perceptually uniform, readable in grey)
+RAMP = np.array(
+    [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64
+)
+
+
+@dataclass(frozen=True)
+class ColourPlan:
+    """A pair's colour: ``source``, and for intensity each scene's (low, high) stretch, for elevation
+    the pair's (low, high) site-local z stretch (metres) used for both scenes; ``why`` says how
+    ``auto`` chose."""
+
+    source: ColourSource
+    stretch_t1: tuple[float, float] | None = None
+    stretch_t2: tuple[float, float] | None = None
+    why: str = ""
+
+    @property
+    def attribute(self) -> str | None:
+        """The tile attribute the colour is made from (None: from the points' z)."""
+        return {"rgb": "rgb", "intensity": "intensity", "elevation": None}[self.source]
+
+    def colours(self, side: int, xyz: np.ndarray, values: np.ndarray | None) -> np.ndarray:
+        """(N, 3) uint8 colour of scene ``side`` (1 or 2)'s points: their RGB, or their ``values``
+        (intensity) or z stretched between this plan's bounds."""
+        if self.source == "rgb":
+            if values is None:
+                raise PairError("an RGB colour plan needs the points' rgb.")
+            return values
+        lo, hi = (self.stretch_t1 if side == 1 else self.stretch_t2) or (0.0, 1.0)
+        data = np.asarray(values if self.source == "intensity" else xyz[:, 2], dtype=np.float64)
+        t = np.clip((data - lo) / max(hi - lo, 1e-9), 0.0, 1.0) if len(data) else data
+        if self.source == "intensity":
+            grey = np.rint(t * 255.0).astype(np.uint8)
+            return np.repeat(grey[:, None], 3, axis=1)
+        pos = t * (len(RAMP) - 1)
+        return np.rint(
+            np.stack([np.interp(pos, np.arange(len(RAMP)), RAMP[:, c]) for c in range(3)], axis=1)
+        ).astype(np.uint8)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "source": self.source,
+            "stretch_t1": list(self.stretch_t1) if self.stretch_t1 else None,
+            "stretch_t2": list(self.stretch_t2) if self.stretch_t2 else None,
+            "why": self.why,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any]) -> ColourPlan:
+        """From :meth:`to_dict`'s form (a pair's or a release lineage's ``colour``)."""
+        source = doc.get("source", "rgb")
+        if source not in get_args(ColourSource):
+            raise PairError(f"colour source {source!r}: use one of {', '.join(get_args(ColourSource))}.")
+
+        def bounds(v: Any) -> tuple[float, float] | None:
+            return (float(v[0]), float(v[1])) if v else None
+
+        return cls(source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")))
+
+
+@dataclass(frozen=True)
+class ChangeRulePlan:
+    """The rule a pair's change labels use: ``semantic`` (a point is changed when its nearest
+    counterpart has another class, DESIGN.md §4) or ``geometry`` (changed only when it has no
+    counterpart of a kept class within the radius, whatever the classes); ``why`` says how it was
+    chosen, ``differences`` how the two scenes' schemes differ."""
+
+    rule: str = "semantic"
+    why: str = ""
+    differences: tuple[str, ...] = field(default_factory=tuple)
+
+    def geometric_lut(self, taxonomy: Taxonomy) -> np.ndarray:
+        """(256,) bool of the classes compared by geometry only (siteline.labels.change.change_flags)."""
+        if self.rule == "geometry":
+            return np.ones(256, dtype=bool)
+        return taxonomy.geometry_only_lut()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"rule": self.rule, "why": self.why, "differences": list(self.differences)}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any] | None) -> ChangeRulePlan:
+        """From the JSON form; outputs made before the rule was recorded used the semantic rule."""
+        if not doc:
+            return cls("semantic", "made before the change rule was recorded")
+        return cls(str(doc["rule"]), str(doc.get("why", "")), tuple(doc.get("differences", ())))
+
+
+@dataclass(frozen=True)
+class RadiusChoice:
+    """How a pair's change radius was chosen: each scene's median point spacing (metres, ``t1``/``t2``),
+    the multiplier of the sparser one's, whether the radius was given (the multiplier is then what it
+    amounts to), and the expected false change on unchanged surfaces at that multiplier (siteline.labels.params)."""
+
+    median_spacing_m: Mapping[str, float]
+    multiplier: float
+    given: bool = False
+    expected_false_change: Mapping[str, float | str] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        doc: dict[str, Any] = {"median_spacing_m": dict(self.median_spacing_m), "multiplier": self.multiplier}
+        if self.given:
+            doc["given"] = True
+        if self.expected_false_change is not None:
+            doc["expected_false_change"] = dict(self.expected_false_change)
+        return doc
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> RadiusChoice:
+        return cls(
+            dict(doc.get("median_spacing_m") or {}), float(doc.get("multiplier", float("nan"))),
+            bool(doc.get("given", False)), doc.get("expected_false_change"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ChangeLabels:
+    """A pair's 3D change labels: the label store's address, the radius (metres), the points of each
+    scene (``t1``, ``t2``) by label (``unchanged``, ``changed``, ``ignored``), the store's checksum, the
+    seconds they took (None: made by an earlier run), their points, and how the radius was chosen."""
+
+    uri: str
+    radius_m: float
+    counts: Mapping[str, Mapping[str, int]]
+    checksum: str
+    seconds: float | None
+    points: int
+    radius: RadiusChoice | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        doc: dict[str, Any] = {"uri": self.uri, "radius_m": self.radius_m, "counts": {k: dict(v) for k, v in self.counts.items()},
+                               "checksum": self.checksum}  # fmt: skip
+        if self.seconds is not None:
+            doc["seconds"] = self.seconds
+        doc["points"] = self.points
+        if self.radius is not None:
+            doc["radius"] = self.radius.to_dict()
+        return doc
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> ChangeLabels:
+        counts = {k: dict(v) for k, v in (doc.get("counts") or {}).items()}
+        points = doc.get("points")
+        return cls(
+            str(doc.get("uri", "")), float(doc["radius_m"]), counts, str(doc.get("checksum", "")), doc.get("seconds"),
+            int(points) if points is not None else sum(n for side in counts.values() for n in side.values()),
+            RadiusChoice.from_dict(doc["radius"]) if doc.get("radius") else None,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Drawn:
+    """How a pair's views were drawn: candidates made, how many were probed (None: not recorded), and
+    the rejected candidates by reason."""
+
+    candidates: int
+    probed: int | None
+    rejected: Mapping[str, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        doc: dict[str, Any] = {"candidates": self.candidates}
+        if self.probed is not None:
+            doc["probed"] = self.probed
+        return doc | {"rejected": dict(self.rejected)}
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> Drawn | None:
+        """From a pair summary's ``candidates``, ``probed`` and ``rejected``; None when it has none."""
+        if "candidates" not in doc:
+            return None
+        return cls(int(doc["candidates"]), doc.get("probed"), dict(doc.get("rejected") or {}))
 
 
 @dataclass(frozen=True)
@@ -68,10 +279,8 @@ class PairOutput:
     (metres), the rendered views in index order, the 3D label record (store address, counts,
     checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
     label sets and tilings), the pair parameters (their JSON form), the colour the images show
-    (siteline.render.colour.ColourPlan's JSON form; outputs made before it: RGB), the fence views
-    were judged against (the site's, or a scene's footprint), the change rule of its labels
-    (siteline.labels.rule.ChangeRulePlan's JSON form) and how its views were drawn (``drawn``:
-    candidates, how many were probed, and the rejections by reason)."""
+    (outputs made before it: RGB), the fence views were judged against (the site's, or a scene's
+    footprint), the change rule of its labels and how its views were drawn (None: not recorded)."""
 
     pair_id: int
     t1: int
@@ -79,14 +288,14 @@ class PairOutput:
     radius_m: float
     root: str
     views: tuple[RenderedView, ...]
-    labels: dict[str, Any]
+    labels: ChangeLabels
     versions: PairVersions
     digest: str
     params: dict[str, Any]
-    colour: dict[str, Any] = field(default_factory=lambda: {"source": "rgb"})
+    colour: ColourPlan = ColourPlan("rgb")
     fence: str = "site fence"
-    change_rule: dict[str, Any] = field(default_factory=lambda: {"rule": "semantic"})
-    drawn: dict[str, Any] = field(default_factory=dict)
+    change_rule: ChangeRulePlan = ChangeRulePlan()
+    drawn: Drawn | None = None
 
     @property
     def view_count(self) -> int:

@@ -47,7 +47,7 @@ def _refuse_blank(blank: Mapping[int, int], outputs: Mapping[int, PairOutput]) -
     """:class:`ReleaseError` naming the pairs with blank A or B images (pair id -> views)."""
     if blank:
         worst = ", ".join(
-            f"pair {pid}: {n} of {len(outputs[pid].views)} views (colour from {outputs[pid].colour['source']})"
+            f"pair {pid}: {n} of {len(outputs[pid].views)} views (colour from {outputs[pid].colour.source})"
             for pid, n in sorted(blank.items())
         )
         raise ReleaseError(
@@ -101,8 +101,9 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
     params = plan.params
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
-         "labels": o.labels, "colour_source": o.colour["source"], "colour": o.colour, "fence": o.fence,
-         "change_rule": o.change_rule, "views": {"made": len(o.views), "asked": o.params.get("views"), **o.drawn}}
+         "labels": o.labels.to_dict(), "colour_source": o.colour.source, "colour": o.colour.to_dict(), "fence": o.fence,
+         "change_rule": o.change_rule.to_dict(),
+         "views": {"made": len(o.views), "asked": o.params.get("views"), **(o.drawn.to_dict() if o.drawn else {})}}
         for o in (outputs[pid] for pid in sorted(outputs))
     ]  # fmt: skip
     return {

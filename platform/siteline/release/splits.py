@@ -88,7 +88,7 @@ def split_pairs(
 def footprint_disc(view: RenderedView) -> tuple[np.ndarray, float]:
     """(anchor xy, radius m) of a view's ground footprint as a disc (module docstring)."""
     cam = view.camera
-    depth = float(view.params.get("central_depth_m") or 0.0) or max(float(cam.center[2]), 1.0)
+    depth = float(view.params.central_depth_m or 0.0) or max(float(cam.center[2]), 1.0)
     anchor = cam.center + cam.forward * depth
     radius = depth * math.hypot(cam.width, cam.height) / (2.0 * cam.fx)
     return anchor[:2], radius

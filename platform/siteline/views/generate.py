@@ -13,6 +13,7 @@ import numpy as np
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
 from siteline.progress import no_step
+from siteline.records.pairs import ViewStrategy
 from siteline.render.zbuffer import central_depths, coverage_of
 from siteline.site.fence import inside_fence
 from siteline.tolerances import (
@@ -45,7 +46,7 @@ class SyntheticView:
 
     parent: str
     strategy: str
-    params: dict[str, Any]
+    params: ViewStrategy
     camera: Camera
     coverage: float | None = None
     rejected: str | None = None
@@ -57,7 +58,7 @@ class SyntheticView:
             "index": self.index,
             "parent": self.parent,
             "strategy": self.strategy,
-            "params": self.params,
+            "params": self.params.to_dict(),
             "coverage": self.coverage,
             "probe_valid": self.probe_valid,
             "camera": self.camera.to_dict(),
@@ -68,7 +69,7 @@ class SyntheticView:
         return cls(
             doc["parent"],
             doc["strategy"],
-            doc["params"],
+            ViewStrategy.from_dict(doc["params"]),
             Camera.from_dict(doc["camera"]),
             doc.get("coverage"),
             None,
@@ -219,31 +220,24 @@ def candidate_views(
                     cam_m, segment = strategies.mirror(cam_v, fence_m, ground, params.mirror_rule)
             depth = depth_of(cam_m) if cam_m is not None else None
             for ff in params.forward_fractions:
-                base = {
-                    "vertical_fraction": vf,
-                    "mirrored": mirrored,
-                    "forward_fraction": ff,
-                    "mirror_segment_m": segment,
-                    "mirror_rule": params.mirror_rule if mirrored else None,
-                    "central_depth_m": depth,
-                }
+                base = ViewStrategy(vf, mirrored, ff, segment, params.mirror_rule if mirrored else None, depth)
                 key = strategy_key(vf, mirrored, ff)
                 if cam_m is None:
                     out.append(
-                        SyntheticView(parent.name, key, base | {"forward_m": None}, cam_v, rejected=reason)
+                        SyntheticView(parent.name, key, base, cam_v, rejected=reason)
                     )
                     continue
                 if depth is None and ff > 0:
                     out.append(
                         SyntheticView(
-                            parent.name, key, base | {"forward_m": None}, cam_m, rejected="nothing_ahead"
+                            parent.name, key, base, cam_m, rejected="nothing_ahead"
                         )
                     )
                     continue
                 step = ff * (depth or 0.0)
                 out.append(
                     SyntheticView(
-                        parent.name, key, base | {"forward_m": step}, strategies.forward(cam_m, step)
+                        parent.name, key, replace(base, forward_m=step), strategies.forward(cam_m, step)
                     )
                 )
     return out
@@ -274,7 +268,7 @@ def reject_geometric(
     for v, h, dist, up, ins in zip(live, heights, near, above, inside, strict=True):
         reason = (
             "underground" if not at_least(h, params.min_height_m, LENGTH_TOL_M)
-            else "outside_fence" if v.params["mirrored"] and not ins
+            else "outside_fence" if v.params.mirrored and not ins
             else "near_surface" if not at_least(dist, params.clearance_m, LENGTH_TOL_M)
             else "under_geometry" if up > 0
             else None
