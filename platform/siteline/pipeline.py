@@ -46,6 +46,7 @@ from siteline.release.plan import (
     semver,
 )
 from siteline.release.stage import build_release
+from siteline.schema import JsonObject
 from siteline.site.fence import validate_fence
 from siteline.site.taxonomy import Taxonomy
 from siteline.stores import layout
@@ -61,7 +62,7 @@ class Ingested:
     ingest: IngestResult
     tiles: TileOutcome | None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """The ingest's record with the tiling's (``tiles``: None when nothing was tiled)."""
         tiling = self.tiles.tiling if self.tiles is not None else None
         return self.ingest.to_dict() | {"tiles": tiling.to_dict() if tiling is not None else None}

@@ -9,7 +9,6 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -21,6 +20,7 @@ from siteline.errors import ReleaseError
 from siteline.release.manifest import read_manifest
 from siteline.release.metrics import IGNORE, confusion
 from siteline.release.score import score_record
+from siteline.schema import JsonObject
 
 
 def class_weights(root: Path, split: str = "train") -> torch.Tensor:
@@ -59,7 +59,7 @@ def train(
     out_dir: Path,
     config: TrainConfig = TrainConfig(),
     progress: Callable[[int, int, float], None] | None = None,
-) -> dict[str, Any]:
+) -> JsonObject:
     """Train on the release's train split with ``config``; write ``model.pt`` and ``train_log.json``
     into ``out_dir``."""
     epochs, max_iters, batch_size, lr = config.epochs, config.max_iters, config.batch_size, config.lr
@@ -134,7 +134,7 @@ def train(
 @torch.no_grad()
 def evaluate(
     root: Path, checkpoint: Path, out_json: Path, split: str = "test", device: str = "cpu"
-) -> dict[str, Any]:
+) -> JsonObject:
     """Predict every image of ``split`` (padded to a multiple of 16), accumulate one confusion matrix,
     and write the scores with the release's manifest hash and the metric definition."""
     ckpt = torch.load(checkpoint, map_location=device, weights_only=True)

@@ -8,9 +8,9 @@ import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
 
 from siteline.errors import CameraError
+from siteline.schema import JsonObject
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class Intrinsics:
         width across the flight line, height along it)."""
         return altitude_m * self.width / self.fx, altitude_m * self.height / self.fy
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"name": self.name} | {k: v for k, v in asdict(self).items() if k != "name"}
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -18,7 +18,7 @@ import numpy.typing as npt
 from siteline.camera.intrinsics import Intrinsics
 from siteline.camera.poses import Rigid
 from siteline.errors import CameraError
-from siteline.schema import validate
+from siteline.schema import JsonObject, validate
 from siteline.tolerances import snap
 
 if TYPE_CHECKING:
@@ -275,7 +275,7 @@ class Camera:
             cam_from_world.translation,
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """JSON form (``schema/camera.schema.json``); floats round-trip exactly."""
         return {
             "model": "PINHOLE",
@@ -292,7 +292,7 @@ class Camera:
         }
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any], source: str = "camera") -> Camera:
+    def from_dict(cls, doc: JsonObject, source: str = "camera") -> Camera:
         validate(doc, "camera.schema.json", source)
         pose = doc["cam_from_world"]
         try:
@@ -339,7 +339,7 @@ def undistorted_pinhole(camera: pycolmap.Camera) -> pycolmap.Camera:
     return out
 
 
-def distortion_record(camera: pycolmap.Camera) -> dict[str, Any] | None:
+def distortion_record(camera: pycolmap.Camera) -> JsonObject | None:
     """What the catalog records of a distorted camera: its model, size and parameters, and the
     undistorted pinhole renders use; None for a pinhole camera."""
     name = model_name(camera)

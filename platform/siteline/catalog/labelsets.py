@@ -3,8 +3,6 @@ classes). Functions take a session and never commit: the caller owns the transac
 
 from __future__ import annotations
 
-from typing import Any
-
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
@@ -15,6 +13,7 @@ from siteline.errors import LabelSetError
 from siteline.records.labelsets import LabelSetImport, LabelSetRef
 from siteline.records.runs import StageRun
 from siteline.records.tiling import TileSource
+from siteline.schema import JsonObject
 
 
 def label_sets(session: Session, scene_id: int) -> list[LabelSet]:
@@ -79,7 +78,7 @@ def record_label_set(session: Session, result: LabelSetImport, run: StageRun) ->
     return row
 
 
-def label_set_record(row: LabelSet) -> dict[str, Any]:
+def label_set_record(row: LabelSet) -> JsonObject:
     """A label-set row as plain values (for the CLI and the lineage)."""
     return {
         "scene": row.scene_id,

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
@@ -17,6 +16,7 @@ from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, ReleaseError
 from siteline.records.release import DraftRelease
 from siteline.records.runs import StageRun
+from siteline.schema import JsonObject
 
 
 def find_release(session: Session, name: str, version: str) -> Release | None:
@@ -77,7 +77,7 @@ def release_item_files(session: Session, release_id: int) -> list[str]:
     return sorted(path for files in rows for path in files.values())
 
 
-def release_record(session: Session, rel: Release) -> dict[str, Any]:
+def release_record(session: Session, rel: Release) -> JsonObject:
     items = release_item_counts(session, rel.id)
     return {
         "name": rel.name,

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 from datetime import datetime
-from typing import Any
 
 import numpy as np
 import sqlalchemy as sa
@@ -23,6 +22,7 @@ from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneSummary
 from siteline.records.tiling import SceneTiling, TileSource
+from siteline.schema import JsonObject
 
 
 def get_scene(session: Session, scene_id: int) -> Scene:
@@ -145,7 +145,7 @@ def mission_of_scene(session: Session, scene_id: int) -> Mission:
     return mission
 
 
-def scene_rows(s: Session, site: Site) -> list[dict[str, Any]]:
+def scene_rows(s: Session, site: Site) -> list[JsonObject]:
     """The site's scenes in capture order as plain values (for the CLI's list): id, capture time,
     points, status, mission, camera source and the co-registration's translation (m)."""
     rows = []
@@ -159,7 +159,7 @@ def scene_rows(s: Session, site: Site) -> list[dict[str, Any]]:
     return rows
 
 
-def scene_record(s: Session, scene_id: int) -> dict[str, Any]:
+def scene_record(s: Session, scene_id: int) -> JsonObject:
     """Scene ``scene_id`` as plain values: statistics, registration, tiles, label sets (for the CLI)."""
     scene = get_scene(s, scene_id)
     nodes = node_summary(scene)

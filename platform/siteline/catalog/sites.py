@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.base import utcnow
 from siteline.catalog.models import LabelSet, Scene, Site
 from siteline.errors import NotFoundError, SiteError, SiteNotFoundError
+from siteline.schema import JsonObject
 from siteline.site.fence import fence_area_m2
 from siteline.site.spec import SiteSpec
 from siteline.site.taxonomy import Taxonomy
 
 
-def add_site(session: Session, spec: SiteSpec, release_settings: dict[str, Any] | None = None) -> Site:
+def add_site(session: Session, spec: SiteSpec, release_settings: JsonObject | None = None) -> Site:
     """Insert a validated site (with its release settings, siteline.release.knobs, validated by the
     caller); :class:`SiteError` if the name is taken."""
     if session.execute(sa.select(Site.id).where(Site.name == spec.name)).first() is not None:
@@ -48,7 +47,7 @@ def get_site(session: Session, name: str) -> Site:
     return site
 
 
-def set_release_settings(session: Session, name: str, release_settings: dict[str, Any]) -> Site:
+def set_release_settings(session: Session, name: str, release_settings: JsonObject) -> Site:
     """Store the site's release settings (validated by the caller: siteline.release.knobs)."""
     site = get_site(session, name)
     site.release_settings = dict(release_settings)
@@ -132,7 +131,7 @@ def site_of(session: Session, site_id: int) -> SiteSpec:
     return site_spec(site)
 
 
-def site_record(site: Site, scenes: int) -> dict[str, Any]:
+def site_record(site: Site, scenes: int) -> JsonObject:
     """A site row as plain values (for the CLI): CRS, origin, fence and its area, classes, scenes."""
     spec = site_spec(site)
     return {

@@ -13,13 +13,13 @@ before a mission is hashed and ``mission:<sha256>`` after, ``scene:<id>``, ``pai
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
 from siteline.catalog.models import StageRun as StageRunRow
 from siteline.records.runs import StageRun
+from siteline.schema import JsonObject
 
 
 def _row(run: StageRun, status: str, error: BaseException | None = None) -> StageRunRow:
@@ -50,7 +50,7 @@ def record_failure(session: Session, run: StageRun, error: BaseException) -> int
 
 def stage_runs(
     session: Session, subject: str | None = None, stage: str | None = None
-) -> list[dict[str, Any]]:
+) -> list[JsonObject]:
     """Stage runs (optionally of one subject or stage), oldest first, as dicts."""
     q = sa.select(StageRunRow).order_by(StageRunRow.started_at, StageRunRow.id)
     if subject:

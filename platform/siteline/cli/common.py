@@ -18,6 +18,7 @@ from rich.table import Table
 from siteline.catalog import Catalog, open_catalog
 from siteline.config import Settings, load_settings
 from siteline.progress import Progress
+from siteline.schema import JsonObject
 
 _CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
 
@@ -83,7 +84,7 @@ def print_table(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]
     console.print(table)
 
 
-def print_record(title: str, record: dict[str, Any]) -> None:
+def print_record(title: str, record: JsonObject) -> None:
     table = Table(title=title, show_header=False)
     table.add_column("field", style="bold")
     table.add_column("value")

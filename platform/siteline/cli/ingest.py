@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import asdict
 from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 import typer
 
@@ -25,6 +24,7 @@ from siteline.cli.common import (
     settings,
 )
 from siteline.errors import MissionError
+from siteline.schema import JsonObject
 
 
 def parse_time(text: str, option: str) -> datetime:
@@ -136,7 +136,7 @@ def mission_list(
     """List ingested missions."""
     with catalog() as cat, cat.transaction() as s:
         rows = list_missions(s, get_site(s, site) if site else None)
-        records: list[dict[str, Any]] = [
+        records: list[JsonObject] = [
             {
                 "id": m.id,
                 "site_id": m.site_id,

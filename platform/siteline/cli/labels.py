@@ -168,9 +168,7 @@ def diff_cmd(
         older = label_set(s, scene_id, v1 if v1 is not None else (newer.parent_version or newer.version))
         (source, ref_a), (_, ref_b) = (labelled_source(s, scene_id, r.version) for r in (older, newer))
     va, vb = ref_a.version, ref_b.version
-    record = {"scene": scene_id, "from": va, "to": vb} | diff_tiles(
-        open_labelled(source, ref_a), open_labelled(source, ref_b), taxonomy
-    )
+    record = {"scene": scene_id, "from": va, "to": vb, **diff_tiles(open_labelled(source, ref_a), open_labelled(source, ref_b), taxonomy)}
 
     def human() -> None:
         console.print(

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import typer
 from sqlalchemy.orm import Session
@@ -29,6 +28,7 @@ from siteline.cli.common import (
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
 from siteline.release.knobs import ReleaseKnobs
+from siteline.schema import JsonObject
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import DEFAULT_TILE_SIZE_M, make_site_spec
 from siteline.site.taxonomy import default_taxonomy, load_taxonomy
@@ -179,7 +179,7 @@ def delete(
     emit(as_json, asdict(done), lambda: console.print(done.message(f"site {name}")))
 
 
-def _release_now(session: Session, name: str) -> dict[str, Any] | str:
+def _release_now(session: Session, name: str) -> JsonObject | str:
     """The knobs a release of the site built now would use (auto ones worked out), or why none can."""
     from siteline.release.plan import release_params
 

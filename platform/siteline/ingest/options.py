@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any
 
 from siteline.errors import MissionError
 from siteline.records.enums import STORAGES, Storage
 from siteline.register.planned import SurveyPlan
+from siteline.schema import JsonObject
 from siteline.site.crs import parse_z_unit
 
 UNMAPPED_CODES = ("refuse", "ignore")
@@ -56,7 +56,7 @@ class IngestOptions:
         if self.storage not in STORAGES:
             raise MissionError(f"storage must be 'copy' or 'reference', got {self.storage!r}.")
 
-    def record(self, site: str) -> dict[str, Any]:
+    def record(self, site: str) -> JsonObject:
         """What the stage run records of these options."""
         return {
             "site": site,

@@ -15,7 +15,6 @@ import logging
 import shutil
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
 
 import sqlalchemy as sa
 
@@ -35,6 +34,7 @@ from siteline.records.mission import CheckedMission
 from siteline.records.registration import Registration
 from siteline.records.runs import StageRun
 from siteline.records.scan import LasScan
+from siteline.schema import JsonObject
 from siteline.stores import layout
 from siteline.stores.blobs import BlobStaging, remove_blobs
 
@@ -59,7 +59,7 @@ class IngestResult:
     registration: Registration = field(default_factory=lambda: Registration("unknown"))
     pairs: list[int] = field(default_factory=list)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         doc = {f.name: getattr(self, f.name) for f in fields(self)}
         return doc | {"scan": self.scan.to_dict() if self.scan is not None else {}, "registration": self.registration.to_dict()}
 

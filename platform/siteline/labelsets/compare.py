@@ -3,10 +3,9 @@ read of a scene under two versions."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
+from siteline.schema import JsonObject
 from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
@@ -34,7 +33,7 @@ def histogram(counts: np.ndarray, taxonomy: Taxonomy) -> dict[str, int]:
     return {names.get(int(i), str(int(i))): int(per_id[i]) for i in np.nonzero(per_id)[0]}
 
 
-def diff_tiles(a: SceneTiles, b: SceneTiles, taxonomy: Taxonomy) -> dict[str, Any]:
+def diff_tiles(a: SceneTiles, b: SceneTiles, taxonomy: Taxonomy) -> JsonObject:
     """How the classes of one scene's tiles under two label sets differ, read tile by tile: points,
     changed points, changed points per ``"old->new"`` class pair and both class histograms."""
     counts = np.zeros((256, 256), dtype=np.int64)

@@ -9,7 +9,6 @@ import json
 import logging
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -111,7 +110,7 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuT
 
 def _render_all(
     plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress
-) -> tuple[list[tuple[SyntheticView, dict[str, Any]]], dict[str, int]]:
+) -> tuple[list[tuple[SyntheticView, RenderedView]], dict[str, int]]:
     """Render the sample into ``work``/A|B|label under temporary names, torch's CPU threads following
     the machine's load; a view whose valid fraction is under ``min_valid`` is dropped and the next
     view of the stratified order rendered instead."""
@@ -124,11 +123,11 @@ def _render_all(
 
 def _render_queue(
     plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress, threads: CpuThreads
-) -> tuple[list[tuple[SyntheticView, dict[str, Any]]], dict[str, int]]:
+) -> tuple[list[tuple[SyntheticView, RenderedView]], dict[str, int]]:
     params = plan.params
     queue = list(views.views)
     low_valid = 0
-    kept: list[tuple[SyntheticView, dict[str, Any]]] = []
+    kept: list[tuple[SyntheticView, RenderedView]] = []
     for sub in FOLDERS:
         (work / sub).mkdir(parents=True)
     while queue:
@@ -148,10 +147,10 @@ def _render_queue(
         tmp = f"tmp-{len(kept):05d}.png"
         for sub, image in zip(FOLDERS, (r.a, r.b, r.mask), strict=True):
             (work / sub / tmp).write_bytes(png_bytes(image))
-        measured = {"coverage_a": r.coverage_a, "coverage_b": r.coverage_b, "valid": r.valid,
-                    "change_ratio": r.change_ratio, "points_read": r.points_read, "ignore": r.ignore,
-                    "filled": r.filled}  # fmt: skip
-        kept.append((v, {"tmp": tmp} | measured))
+        kept.append((v, RenderedView(
+            -1, v.parent, v.strategy, v.params, v.coverage, v.camera, tmp, r.coverage_a, r.coverage_b, r.valid,
+            r.change_ratio, r.points_read, r.ignore, r.filled, v.probe_valid,
+        )))  # fmt: skip
     if not kept:
         raise PairError(
             f"pair {plan.pair_id}: every rendered view had less than {params.min_valid:.0%} valid pixels "
@@ -161,18 +160,17 @@ def _render_queue(
     return kept, dict(sorted(rejected.items()))
 
 
-def _index(kept: list[tuple[SyntheticView, dict[str, Any]]], work: Path, seed: int) -> list[RenderedView]:
+def _index(kept: list[tuple[SyntheticView, RenderedView]], work: Path, seed: int) -> list[RenderedView]:
     """The kept views in key order, indexed 0..n-1 (an order that does not depend on the pool), their
     files renamed to ``<index>.png``."""
     by_view = {id(v): rec for v, rec in kept}
     out = []
     for i, v in enumerate(key_sorted([v for v, _ in kept], seed)):
-        rec = dict(by_view[id(v)])
+        rec = by_view[id(v)]
         name = f"{i:04d}.png"
-        tmp = rec.pop("tmp")
         for sub in FOLDERS:
-            move(work / sub / tmp, work / sub / name)
-        out.append(RenderedView.from_dict(replace(v, index=i).to_dict() | {"file": name} | rec))
+            move(work / sub / rec.file, work / sub / name)
+        out.append(replace(rec, index=i, file=name))
     return out
 
 

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import json
-from typing import Any
 
 from siteline.pairs.plan import PairPlan
 from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, PairOutput, RenderedView
+from siteline.schema import JsonObject
 from siteline.stores import Store, join
 
 
-def output_of(plan: PairPlan, doc: dict[str, Any]) -> PairOutput:
+def output_of(plan: PairPlan, doc: JsonObject) -> PairOutput:
     return PairOutput(
         plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
         tuple(RenderedView.from_dict(v) for v in doc["views"]), ChangeLabels.from_dict(doc["labels"]), plan.versions,

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
@@ -15,6 +16,7 @@ from siteline.records.enums import HOLE_RULES, HoleRule
 from siteline.records.pairs import COLOUR_CHOICES
 from siteline.records.specs import parse_spec
 from siteline.render.settings import RenderSettings
+from siteline.schema import JsonObject
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 
 # knobs view generation shares with the renders, set once on the pair parameters
@@ -60,7 +62,7 @@ class PairParams:
     seed: int = 0
     min_coverage: float = 0.5
     min_valid: float = 0.7
-    view_params: dict[str, Any] = field(default_factory=dict)
+    view_params: JsonObject = field(default_factory=dict)
     one_side_hole: HoleRule = "ignore"
     all_points: bool = False
     sampler: str = SAMPLER_VERSION
@@ -71,7 +73,7 @@ class PairParams:
     fill_px: int = 2
 
     # what each knob added after the first release meant before it existed (a record without it)
-    BEFORE: ClassVar[dict[str, Any]] = {"splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25}
+    BEFORE: ClassVar[Mapping[str, object]] = {"splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25}
 
     def __post_init__(self) -> None:
         if self.sampler != SAMPLER_VERSION:
@@ -125,11 +127,11 @@ class PairParams:
         """The change-label knobs as LabelParams."""
         return LabelParams(self.radius_m, self.radius_multiplier)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> PairParams:
+    def from_dict(cls, doc: JsonObject) -> PairParams:
         """From the JSON form; PairError names an unknown key or a wrongly typed value."""
         return cls(**parse_spec(cls, doc, "pair parameters", PairError))
 

@@ -12,12 +12,12 @@ import math
 import os
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from siteline.errors import ReleaseError
 from siteline.release.manifest import read_manifest
+from siteline.schema import JsonObject
 from siteline.stores import atomic_file
 
 COLUMNS = (
@@ -26,7 +26,7 @@ COLUMNS = (
 )  # fmt: skip
 
 
-def camera_figures(camera: dict[str, Any]) -> dict[str, Any]:
+def camera_figures(camera: JsonObject) -> JsonObject:
     """What a person reads of a synthetic camera (``schema/camera.schema.json``): its centre in
     site-local metres, heading (degrees clockwise from site north, +y), down-tilt (degrees below the
     horizon, 90 = nadir), focal length (pixels) and horizontal field of view (degrees)."""
@@ -46,7 +46,7 @@ def camera_figures(camera: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def browser_data(doc: dict[str, Any], images: str, viewer: str | None) -> dict[str, Any]:
+def browser_data(doc: JsonObject, images: str, viewer: str | None) -> JsonObject:
     """The page's data: the items as rows of :data:`COLUMNS` (compact: 5,000 items are ~1.5 MB),
     where the images are (``images``: a URL or a path relative to the page, the release's root) and
     the 3D viewer's base URL for the release's pairs (None where no server is behind the page)."""
@@ -65,7 +65,7 @@ def browser_data(doc: dict[str, Any], images: str, viewer: str | None) -> dict[s
     }  # fmt: skip
 
 
-def browser_page(doc: dict[str, Any], images: str, viewer: str | None = None, status: str = "published") -> str:
+def browser_page(doc: JsonObject, images: str, viewer: str | None = None, status: str = "published") -> str:
     """The release browser of manifest ``doc`` as one HTML page (:func:`browser_data`)."""
     template = files("siteline.previews").joinpath("static/browser.html").read_text()
     data = json.dumps(browser_data(doc, images, viewer), separators=(",", ":"))

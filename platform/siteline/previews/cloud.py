@@ -8,13 +8,13 @@ import math
 import struct
 import threading
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.pairs.render import LabelledPair
 from siteline.records.pairs import ColourPlan
+from siteline.schema import JsonObject
 from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
@@ -132,7 +132,7 @@ class PairCloud:
     scenes: LabelledPair
     colour: ColourPlan
     taxonomy: Taxonomy
-    items: tuple[dict[str, Any], ...]
+    items: tuple[JsonObject, ...]
 
     def plan(self, budget: int = DEFAULT_BUDGET) -> CloudPlan:
         """What the viewer fetches for a budget of ``budget`` points over both scenes."""
@@ -172,7 +172,7 @@ class CloudPlan:
         with self._reading[side - 1]:
             return encode_chunk(self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre)
 
-    def to_dict(self, browser: str | None) -> dict[str, Any]:
+    def to_dict(self, browser: str | None) -> JsonObject:
         """The viewer's plan (JSON): chunk counts and sizes, the centre, the classes, and each camera
         of the pair's items as a frustum relative to the centre (depth: 6 % of the scenes' extent),
         with the URL of its item in the release browser (``browser``: the page's URL; None: none)."""

@@ -29,6 +29,7 @@ from siteline.errors import SitelineError
 from siteline.previews.browser import browser_page
 from siteline.previews.cloud import DEFAULT_BUDGET, CloudPlan, PairCloud
 from siteline.release.manifest import read_manifest
+from siteline.schema import JsonObject
 from siteline.stores import layout
 
 log = logging.getLogger(__name__)
@@ -48,7 +49,7 @@ class ReleaseAccess:
     pair_id)`` -> the pair opened for the 3D viewer (``siteline.pipeline.pair_cloud``)."""
 
     locate: Callable[[str, str], tuple[Path, str]]
-    open_pair: Callable[[dict[str, Any], int], PairCloud]
+    open_pair: Callable[[JsonObject, int], PairCloud]
 
 
 class _Plans:
@@ -95,10 +96,10 @@ class _Manifests:
     changes: a page asks for dozens of chunks, and a release of 5,000 items has a manifest of megabytes."""
 
     def __init__(self) -> None:
-        self._docs: OrderedDict[Path, tuple[tuple[int, int], dict[str, Any]]] = OrderedDict()
+        self._docs: OrderedDict[Path, tuple[tuple[int, int], JsonObject]] = OrderedDict()
         self._guard = threading.Lock()
 
-    def read(self, root: Path) -> dict[str, Any]:
+    def read(self, root: Path) -> JsonObject:
         """``read_manifest(root)``, from memory when the file is the one read before."""
         try:
             st = (root / "manifest.json").stat()

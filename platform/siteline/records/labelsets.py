@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Any
+
+from siteline.schema import JsonObject
 
 
 @dataclass(frozen=True)
@@ -37,10 +38,10 @@ class LabelSetImport:
     max_unmatched: float = 0.001
     merged_from: int | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return asdict(self)
 
-    def details(self) -> dict[str, Any]:
+    def details(self) -> JsonObject:
         """What the catalog keeps of the match (``label_set.details``)."""
         keep = ("file", "points_in_file", "matched", "unmatched", "duplicated", "untouched", "changes", "key",
                 "merged_from")  # fmt: skip

@@ -7,12 +7,12 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 from siteline.camera.pinhole import Camera
 from siteline.records.enums import CameraSource, FileKind, Storage
 from siteline.records.registration import Registration
 from siteline.records.scan import LasScan
+from siteline.schema import JsonObject
 
 
 @dataclass(frozen=True)
@@ -24,7 +24,7 @@ class FileEntry:
     sha256: str
     kind: FileKind
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return asdict(self)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import PairError
+from siteline.schema import JsonObject
 from siteline.site.taxonomy import Taxonomy
 
 
@@ -45,7 +46,7 @@ class ViewStrategy:
     central_depth_m: float | None = None
     forward_m: float | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
@@ -84,7 +85,7 @@ class RenderedView:
     filled: float = 0.0
     probe_valid: float | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {f.name: getattr(self, f.name) for f in fields(self)} | {
             "params": self.params.to_dict(), "camera": self.camera.to_dict()
         }
@@ -139,7 +140,7 @@ class ColourPlan:
             np.stack([np.interp(pos, np.arange(len(RAMP)), RAMP[:, c]) for c in range(3)], axis=1)
         ).astype(np.uint8)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {
             "source": self.source,
             "stretch_t1": list(self.stretch_t1) if self.stretch_t1 else None,
@@ -148,7 +149,7 @@ class ColourPlan:
         }
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> ColourPlan:
+    def from_dict(cls, doc: JsonObject) -> ColourPlan:
         """From :meth:`to_dict`'s form (a pair's or a release lineage's ``colour``)."""
         source = doc.get("source", "rgb")
         if source not in get_args(ColourSource):
@@ -177,7 +178,7 @@ class ChangeRulePlan:
             return np.ones(256, dtype=bool)
         return taxonomy.geometry_only_lut()
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"rule": self.rule, "why": self.why, "differences": list(self.differences)}
 
     @classmethod
@@ -199,8 +200,8 @@ class RadiusChoice:
     given: bool = False
     expected_false_change: Mapping[str, float | str] | None = None
 
-    def to_dict(self) -> dict[str, Any]:
-        doc: dict[str, Any] = {"median_spacing_m": dict(self.median_spacing_m), "multiplier": self.multiplier}
+    def to_dict(self) -> JsonObject:
+        doc: JsonObject = {"median_spacing_m": dict(self.median_spacing_m), "multiplier": self.multiplier}
         if self.given:
             doc["given"] = True
         if self.expected_false_change is not None:
@@ -229,8 +230,8 @@ class ChangeLabels:
     points: int
     radius: RadiusChoice | None = None
 
-    def to_dict(self) -> dict[str, Any]:
-        doc: dict[str, Any] = {"uri": self.uri, "radius_m": self.radius_m, "counts": {k: dict(v) for k, v in self.counts.items()},
+    def to_dict(self) -> JsonObject:
+        doc: JsonObject = {"uri": self.uri, "radius_m": self.radius_m, "counts": {k: dict(v) for k, v in self.counts.items()},
                                "checksum": self.checksum}  # fmt: skip
         if self.seconds is not None:
             doc["seconds"] = self.seconds
@@ -259,8 +260,8 @@ class Drawn:
     probed: int | None
     rejected: Mapping[str, int]
 
-    def to_dict(self) -> dict[str, Any]:
-        doc: dict[str, Any] = {"candidates": self.candidates}
+    def to_dict(self) -> JsonObject:
+        doc: JsonObject = {"candidates": self.candidates}
         if self.probed is not None:
             doc["probed"] = self.probed
         return doc | {"rejected": dict(self.rejected)}
@@ -291,7 +292,7 @@ class PairOutput:
     labels: ChangeLabels
     versions: PairVersions
     digest: str
-    params: dict[str, Any]
+    params: JsonObject
     colour: ColourPlan = ColourPlan("rgb")
     fence: str = "site fence"
     change_rule: ChangeRulePlan = ChangeRulePlan()

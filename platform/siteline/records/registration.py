@@ -12,6 +12,7 @@ from typing import Any
 
 from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intrinsics
 from siteline.errors import RegistrationError
+from siteline.schema import JsonObject
 
 # the six directions of a rigid correction
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -60,7 +61,7 @@ class Alignment:
                "residual_m": float("inf")} | values  # fmt: skip
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """The JSON form (None-valued optional fields left out; ``free`` named for readers)."""
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["correction"] = [list(row) for row in self.correction]
@@ -121,7 +122,7 @@ class SurveyPlan:
                 f"planned cameras: oblique pitch {self.oblique_pitch_deg} must lie in [0, 90) degrees."
             )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {
             "camera": self.camera.to_dict(), "altitude_m": self.altitude_m,
             "forward_overlap": self.forward_overlap, "side_overlap": self.side_overlap,
@@ -184,9 +185,9 @@ class Registration:
             alignment=Alignment.from_dict(alignment) if alignment else None,
         )  # fmt: skip
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """The JSON form the catalog keeps (fields that do not apply left out)."""
-        out: dict[str, Any] = {}
+        out: JsonObject = {}
         for f in fields(self):
             value = getattr(self, f.name)
             if value is None or f.name == "altitude_why":

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from siteline.records.enums import ReleaseStatus, Split
+from siteline.schema import JsonObject
 
 
 @dataclass(frozen=True)
@@ -33,7 +34,7 @@ class ReleaseItem:
     filled: float = 0.0
     camera: Mapping[str, Any] | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """The manifest's item (no ``camera`` key where none is known)."""
         doc = asdict(self) | {
             "size_px": list(self.size_px),
@@ -56,8 +57,8 @@ class DraftRelease:
     root: str
     manifest_sha256: str
     items: tuple[ReleaseItem, ...]
-    stats: dict[str, Any]
-    parameters: dict[str, Any]
+    stats: JsonObject
+    parameters: JsonObject
     digests: Mapping[int, str] = field(default_factory=dict)
 
 
@@ -87,11 +88,11 @@ class ReleaseInfo:
     root: str
     items: int
     manifest_sha256: str | None
-    stats: dict[str, Any]
+    stats: JsonObject
     reason: str = ""
     up_to_date: bool = False
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return asdict(self)
 
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any
+
+from siteline.schema import JsonObject
 
 
 @dataclass(frozen=True)
@@ -15,6 +16,6 @@ class StageRun:
 
     stage: str
     subject: str
-    parameters: dict[str, Any] = field(default_factory=dict)
+    parameters: JsonObject = field(default_factory=dict)
     started: datetime = field(default_factory=lambda: datetime.now(UTC))
     run_id: str | None = None

@@ -9,6 +9,7 @@ from typing import Any
 
 from siteline.records.scan import LasScan
 from siteline.records.tiling import SceneTiling
+from siteline.schema import JsonObject
 
 # keys the ingest adds beside the scan's own fields
 _INGEST_KEYS = ("las_file", "las_sha256", "stable_sample_sha256", "photos", "cameras")
@@ -37,8 +38,8 @@ class SceneStatistics:
     def with_tiling(self, tiling: SceneTiling) -> SceneStatistics:
         return replace(self, tiling=tiling)
 
-    def to_json(self) -> dict[str, Any]:
-        doc: dict[str, Any] = self.scan.to_dict() if self.scan is not None else {}
+    def to_json(self) -> JsonObject:
+        doc: JsonObject = self.scan.to_dict() if self.scan is not None else {}
         doc |= {k: getattr(self, k) for k in _INGEST_KEYS}
         if self.capture_time_source is not None:
             doc["capture_time_source"] = self.capture_time_source

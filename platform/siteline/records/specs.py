@@ -8,9 +8,10 @@ from dataclasses import MISSING, fields
 from typing import Any
 
 from siteline.errors import SitelineError
+from siteline.schema import JsonObject
 
 
-def parse_spec(cls: type, doc: Any, what: str, error: type[SitelineError]) -> dict[str, Any]:
+def parse_spec(cls: type, doc: Any, what: str, error: type[SitelineError]) -> JsonObject:
     """``doc`` as keyword arguments of the dataclass ``cls``: :class:`error` names ``what`` and the
     fix when it is not an object, holds unknown keys, or a value has the wrong type for its field
     (judged by the field's default: bool, int, float, str)."""

@@ -25,6 +25,7 @@ from siteline.release import datasheet, layout
 from siteline.release.manifest import METRIC_DEFINITION, file_entries, write_manifest
 from siteline.release.plan import ReleasePlan
 from siteline.release.splits import assign_splits
+from siteline.schema import JsonObject
 from siteline.stores import join, open_store, publish_folder
 
 log = logging.getLogger(__name__)
@@ -97,7 +98,7 @@ def _write_items(
     return items
 
 
-def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, Any]:
+def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject:
     params = plan.params
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
@@ -118,7 +119,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, 
     }
 
 
-def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> dict[str, Any]:
+def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject:
     """What the catalog records of a release's parameters (``release.parameters``), with the
     smallest change each pair resolves (its change radius, metres)."""
     params = plan.params
@@ -137,7 +138,7 @@ def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> 
     }
 
 
-def _catalog_figures(stats: Mapping[str, Any]) -> dict[str, Any]:
+def _catalog_figures(stats: Mapping[str, Any]) -> JsonObject:
     """What the catalog records of a release's figures beside its parameters: where its ignore
     pixels come from (``release show``)."""
     return {"ignore": stats["ignore"]}

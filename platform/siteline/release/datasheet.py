@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -11,6 +10,7 @@ from PIL import Image
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
 from siteline.records.registration import Registration
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M
+from siteline.schema import JsonObject
 
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}
 
@@ -32,10 +32,10 @@ def triplet_grid(triplets: list[tuple[np.ndarray, np.ndarray, np.ndarray]], widt
     return img.resize((width, max(1, int(img.height * width / img.width))), Image.Resampling.NEAREST)
 
 
-def montage(root: Path, items: list[dict[str, Any]], count: int = 6, width: int = 1200) -> Image.Image:
+def montage(root: Path, items: list[JsonObject], count: int = 6, width: int = 1200) -> Image.Image:
     """Rows of (t1, t2, mask) for ``count`` sample items of the release at ``root``."""
 
-    def rgb(sub: str, it: dict[str, Any]) -> np.ndarray:
+    def rgb(sub: str, it: JsonObject) -> np.ndarray:
         return np.asarray(Image.open(root / it["split"] / sub / f"{it['id']}.png").convert("RGB"))
 
     return triplet_grid(
@@ -51,7 +51,7 @@ def _shares(px: dict[str, float], total: float) -> dict[str, float]:
     return {k: (v / total if total else 0.0) for k, v in px.items()}
 
 
-def ignore_breakdown(items: list[dict[str, Any]], ignored_px: dict[str, int]) -> dict[str, Any]:
+def ignore_breakdown(items: list[JsonObject], ignored_px: dict[str, int]) -> JsonObject:
     """Where a release's ignore pixels come from: per cause (siteline.codes.RELEASE_IGNORE_CAUSES) the
     share of all stored pixels and of the rendered ones, overall and per split, and the share of
     rendered pixels whose point came from the gap fill. ``items``: the manifest's items (their
@@ -59,7 +59,7 @@ def ignore_breakdown(items: list[dict[str, Any]], ignored_px: dict[str, int]) ->
     pixels counted in its ``label_ignore/`` images, so what no item accounts for (outputs made before
     causes were recorded) is ``unaccounted``."""
 
-    def tally(rows: list[dict[str, Any]], counted: int) -> dict[str, Any]:
+    def tally(rows: list[JsonObject], counted: int) -> JsonObject:
         rendered = sum(it["size_px"][0] * it["size_px"][1] for it in rows)
         stored = sum(it["padded_px"][0] * it["padded_px"][1] for it in rows)
         px = {c: sum((it.get("ignore") or {}).get(c, 0.0) * it["size_px"][0] * it["size_px"][1] for it in rows)
@@ -81,7 +81,7 @@ def ignore_breakdown(items: list[dict[str, Any]], ignored_px: dict[str, int]) ->
     return out
 
 
-def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
+def statistics(root: Path, items: list[JsonObject]) -> JsonObject:
     """Pixel class balance per split (from ``label_ignore/``; padding counts as ignore), coverage,
     per-pair change ratio and where the ignore pixels come from (:func:`ignore_breakdown`)."""
     per_split: dict[str, dict[str, int]] = {}
@@ -104,7 +104,7 @@ def statistics(root: Path, items: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def _radius_lines(pairs: list[dict[str, Any]], ceiling: float) -> list[str]:
+def _radius_lines(pairs: list[JsonObject], ceiling: float) -> list[str]:
     """One line per pair: its radius, the false change it implies on unchanged surfaces and, when it
     is above the release's radius ceiling (metres), that it is."""
     out = []
@@ -122,13 +122,13 @@ def _radius_lines(pairs: list[dict[str, Any]], ceiling: float) -> list[str]:
     return out
 
 
-def _ignore_share(stats: dict[str, Any]) -> float:
+def _ignore_share(stats: JsonObject) -> float:
     s = stats["class_balance"].values()
     total = sum(v["unchanged"] + v["changed"] + v["ignore"] for v in s)
     return sum(v["ignore"] for v in s) / max(total, 1)
 
 
-def _layout_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
+def _layout_lines(doc: JsonObject, stats: JsonObject) -> list[str]:
     padding = doc["layout"]["padding"]
     return [
         "## Layout (format 2: LEVIR-CD, with the ignore information beside it)",
@@ -169,7 +169,7 @@ _REJECTED_WORDS = {
 }  # fmt: skip
 
 
-def _views_text(q: dict[str, Any]) -> str:
+def _views_text(q: JsonObject) -> str:
     """How many views a pair gave of those asked, and why not more."""
     v = q["views"]
     text = f"- pair {q['id']}: {v['made']} views of the {v['asked']} asked"
@@ -181,7 +181,7 @@ def _views_text(q: dict[str, Any]) -> str:
     return text
 
 
-def _camera_lines(lin: dict[str, Any]) -> list[str]:
+def _camera_lines(lin: JsonObject) -> list[str]:
     """Where each scene's cameras came from, and each pair's colour and fence."""
     regs = {s["id"]: Registration.from_dict(s.get("registration")) for s in lin["scenes"]}
     sources = {sid: r.source for sid, r in regs.items()}
@@ -211,7 +211,7 @@ def _camera_lines(lin: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _rule_text(rule: dict[str, Any] | None) -> str:
+def _rule_text(rule: JsonObject | None) -> str:
     """How a pair's change labels treat classes, and why (outputs made before it: semantic)."""
     if not rule:
         return ", change rule semantic"
@@ -221,7 +221,7 @@ def _rule_text(rule: dict[str, Any] | None) -> str:
     return text
 
 
-def _splat_text(p: dict[str, Any]) -> str:
+def _splat_text(p: JsonObject) -> str:
     """How points were drawn and gaps filled, in words."""
     if p.get("splat", "fixed") == "fixed":
         text = f"splats: fixed, every point a {p['point_size_px']} px disk"
@@ -247,7 +247,7 @@ _CAUSE_WORDS = {
 }
 
 
-def _ignore_lines(stats: dict[str, Any]) -> list[str]:
+def _ignore_lines(stats: JsonObject) -> list[str]:
     """Where the ignore pixels come from, a row per cause."""
     ig = stats.get("ignore")
     if not ig:
@@ -272,7 +272,7 @@ def _ignore_lines(stats: dict[str, Any]) -> list[str]:
     ]
 
 
-def _source_lines(lin: dict[str, Any]) -> list[str]:
+def _source_lines(lin: JsonObject) -> list[str]:
     p = lin["parameters"]
     radius = (
         f"auto ({p['radius_multiplier']} x median spacing)" if p["radius_m"] is None else f"{p['radius_m']} m"
@@ -313,7 +313,7 @@ def _source_lines(lin: dict[str, Any]) -> list[str]:
     ]
 
 
-def _split_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
+def _split_lines(doc: JsonObject, stats: JsonObject) -> list[str]:
     rule = doc.get("split_rule") or {"rule": "whole pairs, seeded"}
     lines = ["## Splits", "", f"- rule: {rule['rule']}"]
     if "max_shared_footprint" in rule:
@@ -345,7 +345,7 @@ def _split_lines(doc: dict[str, Any], stats: dict[str, Any]) -> list[str]:
     return [*lines, "", f"Mean coverage (both renders hit) {stats['coverage']['mean']:.2%}.", ""]
 
 
-def _use_lines(doc: dict[str, Any]) -> list[str]:
+def _use_lines(doc: JsonObject) -> list[str]:
     return [
         "## Use",
         "",
@@ -368,7 +368,7 @@ def _use_lines(doc: dict[str, Any]) -> list[str]:
     ]
 
 
-def datasheet(doc: dict[str, Any], stats: dict[str, Any]) -> str:
+def datasheet(doc: JsonObject, stats: JsonObject) -> str:
     """README.md of a release: what it is, where it comes from, how it was made, how to use it."""
     head = [
         f"# {doc['name']} {doc['version']}",

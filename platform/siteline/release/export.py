@@ -15,7 +15,6 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -23,6 +22,7 @@ from PIL import Image
 from siteline.errors import ReleaseError
 from siteline.release.layout import manifest_format
 from siteline.release.manifest import SAFE_ITEM_ID, read_manifest
+from siteline.schema import JsonObject
 from siteline.stores import publish_folder
 
 SPLITS = ("train", "val", "test")
@@ -184,11 +184,11 @@ class ExportResult:
     note: str = ""
     names: dict[str, str] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return dict(self.__dict__)
 
 
-def _check_export(root: Path, out: Path, doc: dict[str, Any], protected: Path | None) -> None:
+def _check_export(root: Path, out: Path, doc: JsonObject, protected: Path | None) -> None:
     """Refuse an export that could not be read or would write where it must not: inside a release
     (resolved, so a symlink or '..' cannot hide it), over a file or a non-empty folder."""
     real = Path(os.path.realpath(out))
@@ -218,7 +218,7 @@ def _check_export(root: Path, out: Path, doc: dict[str, Any], protected: Path | 
 
 
 def _plan_files(
-    root: Path, profile: Profile, out: Path, doc: dict[str, Any]
+    root: Path, profile: Profile, out: Path, doc: JsonObject
 ) -> tuple[list[tuple[str, Path, Path]], dict[str, list[str]], dict[str, str]]:
     """(source, release file, export path) for every file, the stems per tool split, and stem -> item id."""
     split_map = dict(profile.split_map)
@@ -257,7 +257,7 @@ HF_LOADER = "datasets.load_dataset(<out>): parquet shards data/<split>-*.parquet
 PROFILE_NAMES = (*PROFILES, HF_PROFILE)
 
 
-def _export_hf(root: Path, out: Path, doc: dict[str, Any], license_id: str) -> ExportResult:
+def _export_hf(root: Path, out: Path, doc: JsonObject, license_id: str) -> ExportResult:
     from siteline.release.hub import HUB_SPLITS, export_hf
 
     with publish_folder(out) as work:

@@ -17,6 +17,7 @@ from typing import Any
 
 from siteline.codes import IGNORE_CAUSES
 from siteline.errors import ReleaseError
+from siteline.schema import JsonObject
 
 HUB_SPLITS = {"train": "train", "val": "validation", "test": "test"}
 SHARD_BYTES = 256 * 2**20  # images per shard, bytes: the hub's viewer and streaming like 100-500 MB files
@@ -69,7 +70,7 @@ def features() -> Any:
     )
 
 
-def _row(root: Path, it: dict[str, Any]) -> dict[str, Any]:
+def _row(root: Path, it: JsonObject) -> JsonObject:
     images = {}
     for name, folder in IMAGE_FOLDERS.items():
         path = root / it["split"] / folder / f"{it['id']}.png"
@@ -87,9 +88,9 @@ def _row(root: Path, it: dict[str, Any]) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _shards(root: Path, items: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+def _shards(root: Path, items: list[JsonObject]) -> list[list[JsonObject]]:
     """Items cut into shards of at most SHARD_BYTES of images (at least one item each)."""
-    shards: list[list[dict[str, Any]]] = []
+    shards: list[list[JsonObject]] = []
     size = SHARD_BYTES
     for it in items:
         item_bytes = sum((root / it["split"] / f / f"{it['id']}.png").stat().st_size for f in IMAGE_FOLDERS.values())
@@ -120,7 +121,7 @@ class Shards:
     file_bytes: int
 
 
-def write_shards(root: Path, doc: dict[str, Any], work: Path) -> Shards:
+def write_shards(root: Path, doc: JsonObject, work: Path) -> Shards:
     """The parquet shards of every split in ``work/data/``."""
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -145,7 +146,7 @@ def write_shards(root: Path, doc: dict[str, Any], work: Path) -> Shards:
     return Shards(written, rows, num_bytes, file_bytes)
 
 
-def card(doc: dict[str, Any], shards: Shards, license_id: str, datasheet: str) -> str:
+def card(doc: JsonObject, shards: Shards, license_id: str, datasheet: str) -> str:
     """README.md of the export: the hub's YAML header (licence, task, sizes, splits and their files,
     features), how to load it, what the fields hold, the citation, then the release's own datasheet."""
     from huggingface_hub import DatasetCardData
@@ -210,7 +211,7 @@ def card(doc: dict[str, Any], shards: Shards, license_id: str, datasheet: str) -
     return f"---\n{data.to_yaml()}\n---\n\n" + "\n".join(body) + "\n"
 
 
-def export_hf(root: Path, doc: dict[str, Any], work: Path, license_id: str) -> Shards:
+def export_hf(root: Path, doc: JsonObject, work: Path, license_id: str) -> Shards:
     """Write the hub export of the release at ``root`` (manifest ``doc``) into the new folder ``work``:
     parquet shards and README.md (the release's montage copied beside it)."""
     shards = write_shards(root, doc, work)

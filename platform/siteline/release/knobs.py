@@ -21,6 +21,7 @@ from siteline.pairs.params import PairParams
 from siteline.records.release import SiteSurvey
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M, ReleaseParams
 from siteline.release.presets import PRESETS
+from siteline.schema import JsonObject
 
 AUTO = "auto"
 AUTO_KNOBS = ("scale", "point_size_px", "views")
@@ -96,9 +97,9 @@ class ReleaseKnobs:
                 raise ReleaseError(f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, {', '.join(_RELEASE_KEYS)}.")
         return ReleaseKnobs.from_dict(doc)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         """Only what is set (the site's JSON)."""
-        doc: dict[str, Any] = {"pair": dict(self.pair)} if self.pair else {}
+        doc: JsonObject = {"pair": dict(self.pair)} if self.pair else {}
         for name in _RELEASE_KEYS:
             if getattr(self, name) is not None:
                 doc[name] = getattr(self, name)

@@ -7,12 +7,11 @@ it. Pure functions over arrays; the release builder does the I/O.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from siteline.codes import CHANGED, IGNORE
 from siteline.errors import ReleaseError
+from siteline.schema import JsonObject
 
 FORMAT = 2
 FORMAT_1 = "siteline-release/1"
@@ -33,7 +32,7 @@ PAD_MIN_SIDE_PX = 256
 PAD_FILL = {"A": 0, "B": 0, "label": 0, "ignore": 255, "label_ignore": IGNORE}
 
 
-def manifest_format(doc: dict[str, Any]) -> int:
+def manifest_format(doc: JsonObject) -> int:
     """1 or 2: the format of a release manifest."""
     fmt = doc.get("format")
     if fmt == FORMAT_1:
@@ -43,7 +42,7 @@ def manifest_format(doc: dict[str, Any]) -> int:
     raise ReleaseError(f"release {doc.get('name')} {doc.get('version')}: unknown format {fmt!r}.")
 
 
-def ignore_aware_folder(doc: dict[str, Any]) -> str:
+def ignore_aware_folder(doc: JsonObject) -> str:
     """The folder holding 0/1/255 labels: ``label_ignore`` (format 2) or ``label`` (format 1)."""
     return "label_ignore" if manifest_format(doc) == 2 else "label"
 
@@ -97,7 +96,7 @@ def item_images(a: np.ndarray, b: np.ndarray, mask: np.ndarray, padded: bool) ->
     return out
 
 
-def layout_record(padded: bool) -> dict[str, Any]:
+def layout_record(padded: bool) -> JsonObject:
     """What the manifest says about the layout: the folders and the padding rule."""
     return {
         "folders": FOLDERS,

@@ -7,10 +7,9 @@ import json
 import re
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from siteline.hashing import sha256_file
-from siteline.schema import validate
+from siteline.schema import JsonObject, validate
 
 MANIFEST = "manifest.json"
 METRIC_DEFINITION = {
@@ -31,7 +30,7 @@ METRIC_DEFINITION = {
 }
 
 
-def file_entries(root: Path) -> list[dict[str, Any]]:
+def file_entries(root: Path) -> list[JsonObject]:
     """Every file under ``root`` except the manifest: POSIX path, size, sha256, sorted by path."""
     out = []
     for p in sorted(root.rglob("*")):
@@ -42,7 +41,7 @@ def file_entries(root: Path) -> list[dict[str, Any]]:
     return out
 
 
-def write_manifest(root: Path, doc: dict[str, Any]) -> str:
+def write_manifest(root: Path, doc: JsonObject) -> str:
     """Validate and write ``manifest.json``; return its sha256."""
     validate(doc, "release.schema.json", f"manifest of {root}")
     data = (json.dumps(doc, indent=1, sort_keys=False) + "\n").encode()
@@ -50,7 +49,7 @@ def write_manifest(root: Path, doc: dict[str, Any]) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def read_manifest(root: Path) -> dict[str, Any]:
+def read_manifest(root: Path) -> JsonObject:
     from siteline.errors import ReleaseError
 
     path = Path(root) / MANIFEST

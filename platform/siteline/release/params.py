@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 from siteline.errors import ReleaseError
 from siteline.pairs.params import PairParams
 from siteline.release.layout import FORMAT
+from siteline.schema import JsonObject
 
 # the change radius above which a build warns: a pair then labels smaller changes unchanged
 DEFAULT_RADIUS_CEILING_M = 1.0
@@ -39,8 +39,8 @@ class ReleaseParams:
         if not isinstance(self.pad, bool):
             raise ReleaseError(f"pad must be true or false, got {self.pad!r}.")
 
-    def to_dict(self) -> dict[str, Any]:
-        doc: dict[str, Any] = {
+    def to_dict(self) -> JsonObject:
+        doc: JsonObject = {
             "pair": self.pair.to_dict(), "preset": self.preset, "pad": self.pad, "format": self.format,
             "min_image_px": self.min_image_px, "derived": dict(self.derived),
         }  # fmt: skip
@@ -49,7 +49,7 @@ class ReleaseParams:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> ReleaseParams:
+    def from_dict(cls, doc: JsonObject) -> ReleaseParams:
         unknown = sorted(set(doc) - {"pair", "preset", "pad", "format", "min_image_px", "derived", "radius_ceiling_m"})
         if unknown:
             raise ReleaseError(f"release parameters: unknown key(s) {unknown}.")

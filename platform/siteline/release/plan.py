@@ -30,6 +30,7 @@ from siteline.pairs.plan import PairPlan, plan_pair
 from siteline.release import layout
 from siteline.release.knobs import ReleaseKnobs, check_coverage, check_image_size, resolve
 from siteline.release.params import ReleaseParams
+from siteline.schema import JsonObject
 from siteline.stores import layout as paths
 
 RELEASE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}")
@@ -219,7 +220,7 @@ def output_digests(pairs: Sequence[PairPlan]) -> dict[str, str]:
     return {str(p.pair_id): p.digest for p in pairs}
 
 
-def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[dict[str, Any]]:
+def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[JsonObject]:
     """The lineage record of every scene the pairs join: capture time, mission, label set, registration
     and tile checksum."""
     out = []
@@ -248,13 +249,13 @@ class ReleasePlan:
     earlier version's items (which this one keeps: siteline.release.splits)."""
 
     site_name: str
-    site_lineage: dict[str, Any]
+    site_lineage: JsonObject
     name: str
     version: str
     params: ReleaseParams
     pairs: tuple[PairPlan, ...]
-    scenes: tuple[dict[str, Any], ...]
-    lineage_key: dict[str, Any]
+    scenes: tuple[JsonObject, ...]
+    lineage_key: JsonObject
     draft: Path
     reason: str
     up_to_date: str | None

@@ -9,9 +9,10 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.releases import get_release
 from siteline.release.manifest import read_manifest
+from siteline.schema import JsonObject
 
 
-def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
+def _flat(d: Any, prefix: str = "") -> JsonObject:
     if isinstance(d, dict):
         out = {}
         for k, v in d.items():
@@ -20,7 +21,7 @@ def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
     return {prefix: d}
 
 
-def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, Any]:
+def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
     """Pairs, parameters, label sets (each scene's label-set version; each pair's change labels) and
     files that differ between two versions."""
     a, b = get_release(session, name, v1), get_release(session, name, v2)

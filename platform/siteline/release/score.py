@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -14,6 +13,7 @@ from siteline.release.export import prediction_names
 from siteline.release.layout import ignore_aware_folder
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
 from siteline.release.metrics import confusion, per_image_scores, scores
+from siteline.schema import JsonObject
 
 
 def read_prediction(path: Path) -> np.ndarray:
@@ -33,7 +33,7 @@ def read_prediction(path: Path) -> np.ndarray:
     )
 
 
-def find_predictions(pred_dir: Path, split: str, items: list[dict[str, Any]]) -> dict[str, Path]:
+def find_predictions(pred_dir: Path, split: str, items: list[JsonObject]) -> dict[str, Path]:
     """Item id -> its prediction file: ``<id>.png`` or the name any export profile gave the item
     (``test_<id>.png`` for TorchGeo, the lower-cased id for torchange). ReleaseError names the
     missing ones."""
@@ -63,7 +63,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def score_predictions(
     root: Path, split: str, pred_dir: Path, pred_size: tuple[int, int] | None = None
-) -> dict[str, Any]:
+) -> JsonObject:
     """Scores of the prediction PNGs in ``pred_dir`` against ``split`` of the release at ``root``.
 
     Every item of the split needs a prediction (:func:`find_predictions`) of the stored (padded)
@@ -108,7 +108,7 @@ def _sized(
     return np.asarray(back, dtype=np.int64)
 
 
-def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> dict[str, Any]:
+def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> JsonObject:
     """The results of scoring ``split`` of the release at ``root`` from each image's 2x2 confusion
     matrix: the release and its manifest hash, the metric definition, the split's confusion matrix,
     the split-level scores and the paper's per-image ones (the same record for every scorer)."""

@@ -21,12 +21,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import shapely
 
 from siteline.records.pairs import RenderedView
+from siteline.schema import JsonObject
 
 SPLITS = ("train", "val", "test")
 # an item an earlier version left out of every split (it stays out)
@@ -45,7 +45,7 @@ class SplitPlan:
 
     of: dict[Item, str]
     left_out: tuple[Item, ...] = ()
-    rule: dict[str, Any] = field(default_factory=dict)
+    rule: JsonObject = field(default_factory=dict)
 
     def stated(self, views: Mapping[int, Sequence[RenderedView]]) -> SplitPlan:
         """This plan with its rule stating the largest share of a val or test view's footprint that

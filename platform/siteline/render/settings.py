@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
 
 from siteline.errors import RenderError
 from siteline.records.specs import parse_spec
+from siteline.schema import JsonObject
 
 PRECISIONS = ("float32", "float64")
 # how big a point is drawn: one diameter for every point, or its local spacing seen from the camera
@@ -67,10 +67,10 @@ class RenderSettings:
         if not isinstance(f, int) or isinstance(f, bool) or not 0 <= f <= MAX_FILL_PX:
             raise RenderError(f"fill_px {f!r} must be an integer from 0 to {MAX_FILL_PX}.")
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> RenderSettings:
+    def from_dict(cls, doc: JsonObject) -> RenderSettings:
         """From the JSON form; RenderError names an unknown key or a wrongly typed value."""
         return cls(**parse_spec(cls, doc, "render settings", RenderError))

@@ -1,6 +1,6 @@
-"""The JSON Schemas of siteline's contracts (the ``*.schema.json`` files beside this module, shipped
-inside the package; the repository's top-level ``schema/`` links here) and the validation of documents
-against them."""
+"""JSON documents: the JSON Schemas of siteline's contracts (the ``*.schema.json`` files beside this
+module, shipped inside the package; the repository's top-level ``schema/`` links here), the validation
+of documents against them, and :data:`JsonObject`, the type of a JSON object."""
 
 from __future__ import annotations
 
@@ -16,6 +16,11 @@ if TYPE_CHECKING:
 
 SCHEMA_DIR = Path(__file__).resolve().parent
 
+JsonObject = dict[str, Any]
+"""A JSON object: a record's JSON form (its ``to_dict``, what its ``from_dict`` reads), a file read or
+written as JSON (a manifest, a pair's summary, stats), a catalog JSON column, a store's attributes,
+or a command's ``--json`` record. What crosses between stages is a typed record, not one of these."""
+
 
 def schema_path(name: str) -> Path:
     """Path of ``schema/<name>`` (e.g. ``site.schema.json``)."""
@@ -28,7 +33,7 @@ def schema_path(name: str) -> Path:
 
 
 @cache
-def load_schema(name: str) -> dict[str, Any]:
+def load_schema(name: str) -> JsonObject:
     """The parsed schema ``schema/<name>``, with its ``$ref``s resolvable against ``schema/``."""
     return json.loads(schema_path(name).read_text())
 

@@ -9,13 +9,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pyproj
 from pyproj.exceptions import CRSError as PyprojCRSError
 
 from siteline.errors import CRSError, GeometryError
+from siteline.schema import JsonObject
 
 # A site origin further than this from the CRS' own origin is almost certainly a unit or axis mistake.
 MAX_ABS_COORDINATE_M = 1.0e8
@@ -120,11 +120,11 @@ class ZUnit:
     metres: float
     source: str
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {"name": self.name, "metres": self.metres, "source": self.source}
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> ZUnit:
+    def from_dict(cls, doc: JsonObject) -> ZUnit:
         return cls(str(doc["name"]), float(doc["metres"]), str(doc["source"]))
 
 

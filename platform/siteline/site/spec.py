@@ -5,12 +5,11 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import pyproj
 
 from siteline.errors import SiteError
-from siteline.schema import validate
+from siteline.schema import JsonObject, validate
 from siteline.site.crs import crs_text, parse_crs, parse_origin
 from siteline.site.fence import validate_fence
 from siteline.site.taxonomy import Taxonomy, default_taxonomy
@@ -42,7 +41,7 @@ class SiteSpec:
     def pyproj_crs(self) -> pyproj.CRS:
         return parse_crs(self.crs)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         fence = None
         if self.fence is not None:
             fence = [list(v) for v in self.fence] + [list(self.fence[0])]
@@ -56,7 +55,7 @@ class SiteSpec:
         }
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any], source: str = "site config") -> SiteSpec:
+    def from_dict(cls, doc: JsonObject, source: str = "site config") -> SiteSpec:
         validate(doc, "site.schema.json", source)
         return make_site_spec(
             doc["name"],

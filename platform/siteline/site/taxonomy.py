@@ -5,12 +5,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from siteline.errors import SchemaError
-from siteline.schema import SCHEMA_DIR, load_json, validate
+from siteline.schema import SCHEMA_DIR, JsonObject, load_json, validate
 
 DEFAULT_TAXONOMY_PATH = SCHEMA_DIR / "taxonomy.default.json"
 
@@ -138,7 +137,7 @@ class Taxonomy:
             known[int(code)] = True
         return lut, known
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {
             "name": self.name,
             "classes": [
@@ -154,7 +153,7 @@ class Taxonomy:
         }
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any], source: str = "taxonomy") -> Taxonomy:
+    def from_dict(cls, doc: JsonObject, source: str = "taxonomy") -> Taxonomy:
         """Validate ``doc`` against ``schema/taxonomy.schema.json`` and build the taxonomy."""
         validate(doc, "taxonomy.schema.json", source)
         try:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from siteline.pointpass.lasio import LasWriter, labels_vlr, las_header
+from siteline.schema import JsonObject
 from siteline.site.spec import SiteSpec
 from siteline.stores import atomic_file
 from siteline.tiles.reader import SceneTiles, in_bounds
@@ -22,7 +22,7 @@ def export_las(
     out: Path,
     bounds: Sequence[float] | None = None,
     level: int | None = None,
-    labels: dict[str, Any] | None = None,
+    labels: JsonObject | None = None,
 ) -> int:
     """Write the scene's points (in ``bounds``, up to ``level``) to ``out`` (.las or .laz by suffix):
     LAS 1.4 point format 7, classification = site class ids (of the label set attached to ``tiles``),

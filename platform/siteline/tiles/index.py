@@ -4,14 +4,13 @@ root attributes; :func:`read_index` still reads them."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import zarr
 from zarr.codecs import BloscCodec, BloscShuffle
 
 from siteline.errors import TileError
 from siteline.records.tiling import NodeTable, TileSpec
+from siteline.schema import JsonObject
 
 FORMAT_VERSION = 2
 
@@ -31,7 +30,7 @@ def write_index(root: zarr.Group, nodes: NodeTable) -> None:
             arr[...] = values
 
 
-def read_index(root: zarr.Group, attrs: dict[str, Any], spec: TileSpec, uri: str) -> NodeTable:
+def read_index(root: zarr.Group, attrs: JsonObject, spec: TileSpec, uri: str) -> NodeTable:
     """The node index of the store ``root`` (attributes ``attrs``) at ``uri``."""
     version = int(attrs.get("siteline_tiles", 0) or 0)
     if version >= 2:

@@ -6,7 +6,6 @@ import hashlib
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
@@ -15,6 +14,7 @@ from siteline.errors import ViewsError
 from siteline.progress import no_step
 from siteline.records.pairs import ViewStrategy
 from siteline.render.zbuffer import central_depths, coverage_of
+from siteline.schema import JsonObject
 from siteline.site.fence import inside_fence
 from siteline.tolerances import (
     LENGTH_TOL_M,
@@ -53,7 +53,7 @@ class SyntheticView:
     index: int | None = None
     probe_valid: float | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {
             "index": self.index,
             "parent": self.parent,
@@ -65,7 +65,7 @@ class SyntheticView:
         }
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> SyntheticView:
+    def from_dict(cls, doc: JsonObject) -> SyntheticView:
         return cls(
             doc["parent"],
             doc["strategy"],
@@ -170,7 +170,7 @@ class ViewSet:
         """The next view of the stratified order beyond those drawn (None when none is left)."""
         return self.reserve.next() if self.reserve is not None else None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         return {
             "params": self.params.to_dict(),
             "sampler": SAMPLER_VERSION,

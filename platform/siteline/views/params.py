@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
 
 from siteline.errors import RenderError, ViewsError
 from siteline.records.specs import parse_spec
 from siteline.render.settings import RenderSettings
+from siteline.schema import JsonObject
 from siteline.views.strategies import MIRROR_RULES
 
 # Recorded with every view set (lineage): how the sample was drawn.
@@ -112,14 +112,14 @@ class ViewParams:
         """Candidate views per real camera before rejection."""
         return len(self.vertical_fractions) * (2 if self.mirror else 1) * len(self.forward_fractions)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JsonObject:
         d = asdict(self)
         d["vertical_fractions"] = list(self.vertical_fractions)
         d["forward_fractions"] = list(self.forward_fractions)
         return d
 
     @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> ViewParams:
+    def from_dict(cls, doc: JsonObject) -> ViewParams:
         """From the JSON form; ViewsError names an unknown key or a wrongly typed value."""
         doc = parse_spec(cls, doc, "view parameters", ViewsError)
         for key in ("vertical_fractions", "forward_fractions"):
