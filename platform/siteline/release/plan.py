@@ -72,7 +72,7 @@ def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
         if sid in before and before[sid] != v
     ]
     # a knob added since the previous version had the value it meant before it existed
-    old_params = PairParams.BEFORE | dict(previous.get("params", {}))
+    old_params = {**PairParams.BEFORE, **previous.get("params", {})}
     out += [
         f"{k} {old_params.get(k)!r} -> {v!r}" for k, v in key["params"].items() if k in old_params and old_params[k] != v
     ]
