@@ -18,7 +18,7 @@ from siteline.camera.pinhole import Camera
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Mission, Pair, Scene
-from siteline.catalog.scenes import list_scenes, scene_cameras, scene_statistics, tile_source
+from siteline.catalog.scenes import get_scene, list_scenes, scene_cameras, tile_source
 from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
 from siteline.ingest.options import IngestOptions
@@ -51,7 +51,8 @@ def test_two_epochs_become_two_scenes_and_a_pair(cat, site_settings, synth_site)
         pair = s.execute(sa.select(Pair)).scalar_one()
         assert (pair.t1_scene_id, pair.t2_scene_id) == (r0.scene_id, r1.scene_id)
         assert scenes[0].capture_time < scenes[1].capture_time
-        assert scenes[1].registration["alignment"]["translation_m"] < 0.5
+        alignment = scenes[1].registration.alignment
+        assert alignment is not None and alignment.translation_m < 0.5
     again = ingest_mission(cat, site_settings, e0, "demo")
     assert not again.created and "nothing new" in again.message and again.scene_id == r0.scene_id
     with cat.transaction() as s:
@@ -158,11 +159,11 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     altitude, why = auto_altitude(SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings)))
     assert r.registration.over == "site fence" and survey["altitude_m"] == altitude and survey["altitude_why"] == why
     with cat.transaction() as s:
-        sc = s.get(Scene, r.scene_id)
+        sc = get_scene(s, r.scene_id)
         assert sc.capture_time.year == 2024  # from the raw folder name
         cams = scene_cameras(s, sc.id)
         sources = {c.source for c in s.query(CameraRow).filter_by(scene_id=sc.id)}
-        bounds = scene_statistics(sc).scan.bounds_min, scene_statistics(sc).scan.bounds_max
+        bounds = sc.statistics.scan.bounds_min, sc.statistics.scan.bounds_max
     assert len(cams) == r.registration.images > 10 and sources == {"planned"}
     nadir = [c for n, c in cams if "nadir" in n]
     assert nadir and all(np.allclose(c.forward, [0, 0, -1], atol=1e-5) for c in nadir)

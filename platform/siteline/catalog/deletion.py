@@ -10,7 +10,7 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Release, ReleaseItem, Scene, Site
 from siteline.catalog.pairs import ensure_pair
-from siteline.catalog.scenes import get_scene, neighbours, scene_statistics
+from siteline.catalog.scenes import neighbours, scene_row, scene_statistics
 from siteline.catalog.sites import get_site
 from siteline.errors import ImmutableError
 
@@ -73,7 +73,7 @@ def _blobs_left(session: Session, scenes: list[Scene]) -> list[str]:
 def plan_deletion(session: Session, scene_ids: list[int], what: str, site: str | None = None) -> Deletion:
     """What deleting the scenes ``scene_ids`` (``what`` names them for messages) removes;
     :class:`ImmutableError` when a published release was built on one of their pairs."""
-    scenes = [get_scene(session, sid) for sid in scene_ids]
+    scenes = [scene_row(session, sid) for sid in scene_ids]
     pairs = _pairs_of(session, scene_ids)
     releases = _releases_of(session, pairs) if pairs else []
     published = [f"{r.name} {r.version}" for r in releases if r.status == "published"]

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
 from siteline.catalog.pairs import ensure_pair, supersede_pair
-from siteline.catalog.scenes import add_cameras, get_scene, neighbours, scene_at, scene_statistics
+from siteline.catalog.scenes import add_cameras, neighbours, scene_at, scene_row, scene_statistics
 from siteline.catalog.sites import lock_site
 from siteline.catalog.stages import add_completed
 from siteline.errors import MissionError, TileError
@@ -131,7 +131,7 @@ def blobs_in_use(session: Session, shas: list[str]) -> set[str]:
 
 def las_location(session: Session, scene_id: int) -> LasLocation:
     """Where scene ``scene_id``'s point cloud is kept; :class:`TileError` when its mission records none."""
-    scene = get_scene(session, scene_id)
+    scene = scene_row(session, scene_id)
     stats = scene_statistics(scene)
     mission = session.get(Mission, scene.mission_id)
     row = mission_file(session, scene.mission_id, stats.las_file)

@@ -20,24 +20,45 @@ from siteline.errors import NotFoundError, TileError
 from siteline.records.registration import Registration
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
-from siteline.records.scene import SceneStatistics, SceneSummary
+from siteline.records.scene import SceneStatistics, SceneView
 from siteline.records.tiling import SceneTiling, TileSource
 from siteline.schema import JsonObject
 
 
-def get_scene(session: Session, scene_id: int) -> Scene:
+def scene_row(session: Session, scene_id: int) -> Scene:
+    """The ORM row of scene ``scene_id`` (for the catalog's own writes); :class:`NotFoundError` naming
+    the command that lists scenes when there is none."""
     scene = session.get(Scene, scene_id)
     if scene is None:
         raise NotFoundError(f"no scene with id {scene_id}; see `siteline scene list --site NAME`.")
     return scene
 
 
-def list_scenes(session: Session, site: Site) -> list[Scene]:
+def scene_rows_of(session: Session, site: Site) -> list[Scene]:
+    """The ORM rows of the site's scenes in capture order (for the catalog's own writes)."""
     return list(
         session.execute(
             sa.select(Scene).where(Scene.site_id == site.id).order_by(Scene.capture_time)
         ).scalars()
     )
+
+
+def view_of(scene: Scene) -> SceneView:
+    """What the catalog hands out of a scene row."""
+    return SceneView(
+        scene.id, scene.site_id, scene.mission_id, scene.capture_time, scene.point_count, scene.status,
+        scene_registration(scene), scene_statistics(scene), scene.tile_store_uri,
+    )  # fmt: skip
+
+
+def get_scene(session: Session, scene_id: int) -> SceneView:
+    """Scene ``scene_id``; :class:`NotFoundError` naming the command that lists scenes when there is none."""
+    return view_of(scene_row(session, scene_id))
+
+
+def list_scenes(session: Session, site: Site) -> list[SceneView]:
+    """The site's scenes in capture order."""
+    return [view_of(sc) for sc in scene_rows_of(session, site)]
 
 
 def scene_at(session: Session, site: Site, capture_time: datetime) -> Scene | None:
@@ -78,21 +99,12 @@ def scene_registration(scene: Scene) -> Registration:
     return Registration.from_dict(scene.registration)
 
 
-def scene_correction(scene: Scene) -> tuple[tuple[float, ...], ...] | None:
-    """The co-registration ingest applied to a scene (4 x 4 site-local, previous scene from this one),
-    or None when none was applied (siteline.register.scene.check_alignment)."""
-    alignment = scene_registration(scene).alignment
-    if alignment is None or not alignment.applied:
-        return None
-    return alignment.correction
-
-
 def site_survey(session: Session, site: Site) -> SiteSurvey:
     """The site's registered cameras (size, focal length, height above their scene's lowest point)
     and its sparsest scene's density: what auto release settings are derived from."""
     cameras: list[CameraView] = []
     densities: list[float] = []
-    for scene in list_scenes(session, site):
+    for scene in scene_rows_of(session, site):
         scan = scene_statistics(scene).scan
         if scan is None:
             continue
@@ -126,7 +138,7 @@ def add_cameras(session: Session, scene_id: int, cameras: dict[str, Camera], sou
 
 def site_name_of_scene(session: Session, scene_id: int) -> str:
     """The name of the site of scene ``scene_id``; :class:`NotFoundError` when there is none."""
-    return site_name(session, get_scene(session, scene_id).site_id)
+    return site_name(session, scene_row(session, scene_id).site_id)
 
 
 def node_summary(scene: Scene) -> dict[str, int]:
@@ -139,17 +151,17 @@ def node_summary(scene: Scene) -> dict[str, int]:
 
 def mission_of_scene(session: Session, scene_id: int) -> Mission:
     """The mission scene ``scene_id`` was made from."""
-    mission = session.get(Mission, get_scene(session, scene_id).mission_id)
+    mission = session.get(Mission, scene_row(session, scene_id).mission_id)
     if mission is None:
         raise NotFoundError(f"scene {scene_id} has no mission.")
     return mission
 
 
-def scene_rows(s: Session, site: Site) -> list[JsonObject]:
+def scene_table(s: Session, site: Site) -> list[JsonObject]:
     """The site's scenes in capture order as plain values (for the CLI's list): id, capture time,
     points, status, mission, camera source and the co-registration's translation (m)."""
     rows = []
-    for scene in list_scenes(s, site):
+    for scene in scene_rows_of(s, site):
         reg = scene_registration(scene)
         rows.append({
             "id": scene.id, "capture_time": scene.capture_time, "points": scene.point_count,
@@ -161,7 +173,7 @@ def scene_rows(s: Session, site: Site) -> list[JsonObject]:
 
 def scene_record(s: Session, scene_id: int) -> JsonObject:
     """Scene ``scene_id`` as plain values: statistics, registration, tiles, label sets (for the CLI)."""
-    scene = get_scene(s, scene_id)
+    scene = scene_row(s, scene_id)
     nodes = node_summary(scene)
     stats = scene_statistics(scene)
     scan = stats.scan
@@ -216,18 +228,10 @@ def scene_statistics(scene: Scene) -> SceneStatistics:
     return stats.with_tiling(replace(stats.tiling, uri=from_record(stats.tiling.uri)))
 
 
-def scene_summaries(session: Session, site: Site) -> tuple[SceneSummary, ...]:
-    """The site's scenes in capture order, as records."""
-    return tuple(
-        SceneSummary(sc.id, sc.capture_time, sc.status, scene_statistics(sc))
-        for sc in list_scenes(session, site)
-    )
-
-
 def tile_source(session: Session, scene_id: int) -> TileSource:
     """What a reader needs to open scene ``scene_id``'s tiles; :class:`TileError` naming the command
     when the scene is not tiled."""
-    scene = get_scene(session, scene_id)
+    scene = scene_row(session, scene_id)
     tiling = scene_statistics(scene).tiling
     if scene.status != "tiled" or not scene.tile_store_uri or tiling is None:
         raise TileError(f"scene {scene_id} is not tiled yet: run `siteline scene tile {scene_id}`.")
@@ -241,7 +245,7 @@ def record_tiling(
     scene's status and tiling statistics, and the stage run; with ``counts`` ((256,) points per class
     id of a re-tiling, whose classes may be mapped anew), the class histogram of the scan and of
     label set 1, which the store holds."""
-    scene = get_scene(session, scene_id)
+    scene = scene_row(session, scene_id)
     scene.tile_store_uri = tiling.uri
     scene.status = "tiled"
     stats = scene_statistics(scene).with_tiling(replace(tiling, uri=to_record(tiling.uri)))
@@ -260,7 +264,7 @@ def record_tiling(
 
 def needs_tiling(session: Session, scene_id: int) -> bool:
     """Whether the scene is not tiled, or was tiled under an earlier version of its site."""
-    scene = get_scene(session, scene_id)
+    scene = scene_row(session, scene_id)
     tiling = scene_statistics(scene).tiling
     site = session.get(Site, scene.site_id)
     if scene.status != "tiled" or tiling is None or site is None:

@@ -11,7 +11,7 @@ import typer
 from siteline.camera.photos import read_photo_meta
 from siteline.catalog.missions import list_missions
 from siteline.catalog.pairs import list_pairs
-from siteline.catalog.scenes import scene_record, scene_rows
+from siteline.catalog.scenes import scene_record, scene_table
 from siteline.catalog.sites import get_site
 from siteline.cli.common import (
     JsonOption,
@@ -170,7 +170,7 @@ def scene_list(
     """List the scenes of a site in capture order, and its pairs."""
     with catalog() as cat, cat.transaction() as s:
         st = get_site(s, site)
-        records = scene_rows(s, st)
+        records = scene_table(s, st)
         pairs = [{"id": p.id, "t1": p.t1_scene_id, "t2": p.t2_scene_id} for p in list_pairs(s, st)]
 
     def human() -> None:

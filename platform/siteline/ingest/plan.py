@@ -9,10 +9,10 @@ from datetime import datetime
 from sqlalchemy.orm import Session
 
 from siteline.catalog.missions import mission_by_manifest
-from siteline.catalog.scenes import scene_of_mission, scene_summaries
+from siteline.catalog.scenes import list_scenes, scene_of_mission
 from siteline.catalog.sites import get_site, site_spec
 from siteline.records.mission import MissionManifest
-from siteline.records.scene import SceneSummary
+from siteline.records.scene import SceneView
 from siteline.site.spec import SiteSpec
 
 
@@ -34,12 +34,12 @@ class IngestPlan:
     site: SiteSpec
     manifest: MissionManifest
     existing: ExistingMission | None
-    scenes: tuple[SceneSummary, ...]
+    scenes: tuple[SceneView, ...]
 
-    def scene_at(self, when: datetime) -> SceneSummary | None:
+    def scene_at(self, when: datetime) -> SceneView | None:
         return next((sc for sc in self.scenes if sc.capture_time == when), None)
 
-    def scene_before(self, when: datetime) -> SceneSummary | None:
+    def scene_before(self, when: datetime) -> SceneView | None:
         """The site's scene captured last before ``when``."""
         earlier = [sc for sc in self.scenes if sc.capture_time < when]
         return max(earlier, key=lambda sc: sc.capture_time) if earlier else None
@@ -54,4 +54,4 @@ def plan_ingest(session: Session, site_name: str, manifest: MissionManifest) -> 
     if existing is not None:
         scene = scene_of_mission(session, existing.id)
         found = ExistingMission(existing.id, scene.id if scene is not None else None)
-    return IngestPlan(site.id, site_spec(site), manifest, found, scene_summaries(session, site))
+    return IngestPlan(site.id, site_spec(site), manifest, found, tuple(list_scenes(session, site)))

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session
 from siteline.camera.pinhole import Camera
 from siteline.catalog.labelsets import label_set, label_set_ref, newest_versions
 from siteline.catalog.pairs import get_pair, pair_view_ids
-from siteline.catalog.scenes import get_scene, scene_cameras, scene_statistics, tile_source
+from siteline.catalog.scenes import get_scene, scene_cameras, tile_source
 from siteline.catalog.sites import site_of
 from siteline.errors import PairError
 from siteline.labels.rule import resolve_change_rule
@@ -89,7 +89,7 @@ def _pair_scene(session: Session, pair_id: int, scene_id: int, version: int | No
             f"pair {pair_id}: scene {scene_id} is not tiled: run `siteline scene tile {scene_id}` "
             "(or `siteline release build`, which tiles and processes what it needs)."
         )
-    tiling = scene_statistics(scene).tiling
+    tiling = scene.statistics.tiling
     site_version = site_of(session, scene.site_id).version
     if tiling is not None and tiling.site_version != site_version:
         raise PairError(
@@ -145,7 +145,7 @@ def plan_pair(
     digest = output_digest(
         params, (t1.label_set.version, t2.label_set.version), (t1.generation, t2.generation), rule.rule
     )
-    scans = [scene_statistics(get_scene(session, sid)).scan for sid in ids]
+    scans = [get_scene(session, sid).statistics.scan for sid in ids]
     colour = resolve_colour(
         params.colour, *((sid, sc.colour_stats if sc else None) for sid, sc in zip(ids, scans, strict=True))
     )

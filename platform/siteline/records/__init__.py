@@ -20,7 +20,7 @@ from siteline.records.pairs import PairOutput, PairVersions, RenderedView
 from siteline.records.release import DraftRelease, ReleaseInfo, ReleaseItem
 from siteline.records.runs import StageRun
 from siteline.records.scan import LasScan
-from siteline.records.scene import SceneStatistics, SceneSummary
+from siteline.records.scene import SceneStatistics, SceneView
 from siteline.records.tiling import NodeTable, SceneTiling, TileSource, TileSpec
 
 __all__ = [
@@ -47,7 +47,7 @@ __all__ = [
     "RenderedView",
     "SceneStatistics",
     "SceneStatus",
-    "SceneSummary",
+    "SceneView",
     "SceneTiling",
     "Split",
     "StageRun",

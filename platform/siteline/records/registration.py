@@ -199,6 +199,13 @@ class Registration:
             out[f.name] = value
         return out
 
+    @property
+    def correction(self) -> tuple[tuple[float, ...], ...] | None:
+        """The co-registration ingest applied to the scene (4 x 4 site-local, previous scene from
+        this one), None when none was applied."""
+        a = self.alignment
+        return a.correction if a is not None and a.applied else None
+
     def aligned(self, alignment: Alignment) -> Registration:
         """This record with its co-registration."""
         return replace(self, alignment=alignment)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Any
 
+from siteline.records.registration import Registration
 from siteline.records.scan import LasScan
 from siteline.records.tiling import SceneTiling
 from siteline.schema import JsonObject
@@ -64,10 +65,16 @@ class SceneStatistics:
 
 
 @dataclass(frozen=True)
-class SceneSummary:
-    """A scene as a stage plans with it: id, capture time (UTC), status, statistics."""
+class SceneView:
+    """A scene as the catalog hands it out: its id, site and mission, capture time (UTC), points,
+    status, registration record, statistics, and its tile store's address (None: not tiled)."""
 
     id: int
+    site_id: int
+    mission_id: int
     capture_time: datetime
+    point_count: int
     status: str
+    registration: Registration
     statistics: SceneStatistics
+    tile_store_uri: str | None = None

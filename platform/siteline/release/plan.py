@@ -18,8 +18,6 @@ from siteline.catalog.scenes import (
     list_scenes,
     mission_of_scene,
     scene_cameras,
-    scene_registration,
-    scene_statistics,
     site_survey,
 )
 from siteline.catalog.sites import get_site, site_of
@@ -102,7 +100,7 @@ def pair_cameras(session: Session, pair_ids: Sequence[int]) -> dict[int, PairCam
     for pid in pair_ids:
         scene = get_scene(session, get_pair(session, pid).t2_scene_id)
         count = len(scene_cameras(session, scene.id))
-        out[pid] = PairCameras(scene.id, count, "" if count else scene_registration(scene).none_because())
+        out[pid] = PairCameras(scene.id, count, "" if count else scene.registration.none_because())
     return out
 
 
@@ -228,13 +226,13 @@ def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[JsonObjec
         scene = get_scene(session, sid)
         version = next(sc.label_set.version for p in pairs for sc in (p.t1, p.t2) if sc.id == sid)
         labels = label_set_ref(session, sid, version)
-        tiling = scene_statistics(scene).tiling
+        tiling = scene.statistics.tiling
         out.append(
             {
                 "id": scene.id, "capture_time": scene.capture_time.isoformat(),
                 "mission_manifest_sha256": mission_of_scene(session, sid).manifest_sha256,
                 "label_set_version": labels.version, "label_set_source": labels.source,
-                "label_set_sha256": labels.source_sha256, "registration": scene_registration(scene).to_dict(),
+                "label_set_sha256": labels.source_sha256, "registration": scene.registration.to_dict(),
                 "tile_checksum": tiling.checksum if tiling is not None else None,
             }
         )  # fmt: skip

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from sqlalchemy.orm import Session
 
 from siteline.catalog.missions import las_location
-from siteline.catalog.scenes import get_scene, scene_correction, scene_statistics
+from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.errors import TileError
 from siteline.pointpass.sitestream import Correction
@@ -64,7 +64,7 @@ class TilingPlan:
 def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
     """The plan of tiling scene ``scene_id`` (one transaction, no I/O beyond it)."""
     scene = get_scene(session, scene_id)
-    stats = scene_statistics(scene)
+    stats = scene.statistics
     if stats.scan is None:
         raise TileError(f"scene {scene_id} records no point cloud scan: ingest its mission again.")
     return TilingPlan(
@@ -77,5 +77,5 @@ def plan_tiling(session: Session, scene_id: int) -> TilingPlan:
         current=stats.tiling,
         seed=stats.scan.content_seed(),
         eight_bit=EIGHT_BIT.get(stats.scan.colour),
-        correction=scene_correction(scene),
+        correction=scene.registration.correction,
     )
