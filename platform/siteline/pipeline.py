@@ -18,7 +18,7 @@ from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion
 from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.pairs import pair_ids_of_scene, scene_ids_of_pairs, unprocessed_pairs
 from siteline.catalog.scenes import needs_tiling
-from siteline.catalog.sites import get_site, imported_label_sets, site_spec
+from siteline.catalog.sites import get_site, imported_label_sets
 from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings
 from siteline.errors import LabelSetError, ReleaseError
@@ -150,7 +150,7 @@ def redefine_site(
         ring = [list(v) for v in validate_fence(fence, source=f"site {site} fence")]
     with catalog.transaction() as s:
         carry = imported_label_sets(s, site)
-        old = site_spec(get_site(s, site))
+        old = get_site(s, site).spec
     folder = settings.home / "exports" / f"{site}-v{old.version}"
     files = {}
     for sid, version in sorted(carry.items()):
@@ -160,7 +160,7 @@ def redefine_site(
             files.pop(sid).unlink(missing_ok=True)
     with catalog.transaction() as s:
         row, scene_ids = redefine_catalog_site(s, site, taxonomy, ring, clear_fence)
-        version, now = row.version, site_spec(row)
+        version, now = row.spec.version, row.spec
     log.info("site %s is at version %d: tiling its %d scenes again", site, version, len(scene_ids))
     outcomes = tile_scenes(catalog, settings, scene_ids, TilingResources(workers), progress=progress)
     kept = {c.name for c in now.taxonomy.classes}  # a class the new taxonomy dropped is named by the import
@@ -297,7 +297,7 @@ def pair_cloud(catalog: Catalog, settings: Settings, doc: Mapping[str, Any], pai
                     "longer match the release's labels."
                 )
             opened.append(open_labelled(source, ref))
-        taxonomy = site_spec(get_site(s, lineage["sites"][0]["name"])).taxonomy
+        taxonomy = get_site(s, lineage["sites"][0]["name"]).spec.taxonomy
     items = tuple(it for it in doc["items"] if int(it["pair"]) == pair_id)
     return PairCloud(
         pair_id, LabelledPair.with_labels(opened[0], opened[1], label_uri),

@@ -9,7 +9,7 @@ import sqlalchemy as sa
 
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Mission, Release, ReleaseItem, Scene, Site, StageRun
-from siteline.catalog.sites import add_site, get_site, site_spec
+from siteline.catalog.sites import add_site, get_site
 from siteline.errors import ImmutableError, SiteError, SiteNotFoundError
 from siteline.site.spec import make_site_spec
 
@@ -52,10 +52,9 @@ def test_site_round_trips_float64_origin_and_taxonomy(cat) -> None:
         _site(s)
     with cat.transaction() as s:
         site = get_site(s, "s")
-        assert site.origin == (445000.123456789, 5030000.987654321, 80.5)
-        spec = site_spec(site)
-        assert spec.taxonomy.id_of("crane") == 3
-        assert site.created_at.tzinfo is not None
+        assert site.spec.origin == (445000.123456789, 5030000.987654321, 80.5)
+        assert site.spec.taxonomy.id_of("crane") == 3
+        assert site.created_at is not None and site.created_at.tzinfo is not None
 
 
 def test_duplicate_site_name_is_refused_and_nothing_written(cat) -> None:

@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session
 from siteline.catalog.models import LabelSet, Mission, MissionFile, Pair, Release, ReleaseItem, Scene, Site
 from siteline.catalog.pairs import ensure_pair
 from siteline.catalog.scenes import neighbours, scene_row, scene_statistics
-from siteline.catalog.sites import get_site
+from siteline.catalog.sites import site_row
 from siteline.errors import ImmutableError
 
 
@@ -99,7 +99,7 @@ def plan_scene_deletion(session: Session, scene_id: int) -> Deletion:
 
 
 def plan_site_deletion(session: Session, name: str) -> Deletion:
-    site = get_site(session, name)
+    site = site_row(session, name)
     ids = list(session.execute(sa.select(Scene.id).where(Scene.site_id == site.id).order_by(Scene.id)).scalars())
     return plan_deletion(session, ids, f"site {name}", name)
 
@@ -140,6 +140,6 @@ def delete_rows(session: Session, deletion: Deletion) -> list[int]:
                 pair.status = "new" if pair.status == "superseded" else pair.status
                 repaired.append(pair.id)
     if deletion.site is not None:
-        session.delete(get_site(session, deletion.site))
+        session.delete(site_row(session, deletion.site))
     session.flush()
     return repaired

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
-from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene, Site
+from siteline.catalog.models import LabelSet, Mission, MissionFile, Scene
 from siteline.catalog.pairs import ensure_pair, supersede_pair
 from siteline.catalog.scenes import add_cameras, neighbours, scene_at, scene_row, scene_statistics
 from siteline.catalog.sites import lock_site
@@ -18,6 +18,7 @@ from siteline.errors import MissionError, TileError
 from siteline.records.mission import CheckedMission, LasLocation
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics
+from siteline.records.site import SiteKey
 
 
 @dataclass(frozen=True)
@@ -105,7 +106,7 @@ def mission_files(session: Session, mission_id: int) -> list[MissionFile]:
     )
 
 
-def list_missions(session: Session, site: Site | None = None) -> list[Mission]:
+def list_missions(session: Session, site: SiteKey | None = None) -> list[Mission]:
     q = sa.select(Mission).order_by(Mission.received_at, Mission.id)
     if site is not None:
         q = q.where(Mission.site_id == site.id)

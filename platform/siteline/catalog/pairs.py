@@ -14,6 +14,7 @@ from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError
 from siteline.records.pairs import PairOutput
 from siteline.records.runs import StageRun
+from siteline.records.site import SiteKey
 from siteline.stores import join
 
 
@@ -90,7 +91,7 @@ def ensure_pair(session: Session, site: Site, t1: Scene, t2: Scene) -> Pair:
     return pair
 
 
-def list_pairs(session: Session, site: Site) -> list[Pair]:
+def list_pairs(session: Session, site: SiteKey) -> list[Pair]:
     """The site's pairs of consecutive scenes, in capture order (superseded pairs left out)."""
     t1 = sa.orm.aliased(Scene)
     return list(

@@ -21,6 +21,7 @@ from siteline.records.registration import Registration
 from siteline.records.release import CameraView, SiteSurvey
 from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneView
+from siteline.records.site import SiteKey
 from siteline.records.tiling import SceneTiling, TileSource
 from siteline.schema import JsonObject
 
@@ -34,7 +35,7 @@ def scene_row(session: Session, scene_id: int) -> Scene:
     return scene
 
 
-def scene_rows_of(session: Session, site: Site) -> list[Scene]:
+def scene_rows_of(session: Session, site: SiteKey) -> list[Scene]:
     """The ORM rows of the site's scenes in capture order (for the catalog's own writes)."""
     return list(
         session.execute(
@@ -56,7 +57,7 @@ def get_scene(session: Session, scene_id: int) -> SceneView:
     return view_of(scene_row(session, scene_id))
 
 
-def list_scenes(session: Session, site: Site) -> list[SceneView]:
+def list_scenes(session: Session, site: SiteKey) -> list[SceneView]:
     """The site's scenes in capture order."""
     return [view_of(sc) for sc in scene_rows_of(session, site)]
 
@@ -99,7 +100,7 @@ def scene_registration(scene: Scene) -> Registration:
     return Registration.from_dict(scene.registration)
 
 
-def site_survey(session: Session, site: Site) -> SiteSurvey:
+def site_survey(session: Session, site: SiteKey) -> SiteSurvey:
     """The site's registered cameras (size, focal length, height above their scene's lowest point)
     and its sparsest scene's density: what auto release settings are derived from."""
     cameras: list[CameraView] = []
@@ -157,7 +158,7 @@ def mission_of_scene(session: Session, scene_id: int) -> Mission:
     return mission
 
 
-def scene_table(s: Session, site: Site) -> list[JsonObject]:
+def scene_table(s: Session, site: SiteKey) -> list[JsonObject]:
     """The site's scenes in capture order as plain values (for the CLI's list): id, capture time,
     points, status, mission, camera source and the co-registration's translation (m)."""
     rows = []

@@ -8,13 +8,14 @@ from sqlalchemy.orm import Session
 from siteline.catalog.base import utcnow
 from siteline.catalog.models import LabelSet, Scene, Site
 from siteline.errors import NotFoundError, SiteError, SiteNotFoundError
+from siteline.records.site import SiteKey, SiteView
 from siteline.schema import JsonObject
 from siteline.site.fence import fence_area_m2
 from siteline.site.spec import SiteSpec
 from siteline.site.taxonomy import Taxonomy
 
 
-def add_site(session: Session, spec: SiteSpec, release_settings: JsonObject | None = None) -> Site:
+def add_site(session: Session, spec: SiteSpec, release_settings: JsonObject | None = None) -> SiteView:
     """Insert a validated site (with its release settings, siteline.release.knobs, validated by the
     caller); :class:`SiteError` if the name is taken."""
     if session.execute(sa.select(Site.id).where(Site.name == spec.name)).first() is not None:
@@ -33,10 +34,12 @@ def add_site(session: Session, spec: SiteSpec, release_settings: JsonObject | No
     )
     session.add(row)
     session.flush()
-    return row
+    return site_view(row)
 
 
-def get_site(session: Session, name: str) -> Site:
+def site_row(session: Session, name: str) -> Site:
+    """The ORM row of site ``name`` (for the catalog's own writes); :class:`SiteNotFoundError` naming
+    the known sites when there is none."""
     site = session.execute(sa.select(Site).where(Site.name == name)).scalar_one_or_none()
     if site is None:
         names = session.execute(sa.select(Site.name).order_by(Site.name)).scalars().all()
@@ -47,24 +50,24 @@ def get_site(session: Session, name: str) -> Site:
     return site
 
 
-def set_release_settings(session: Session, name: str, release_settings: JsonObject) -> Site:
+def set_release_settings(session: Session, name: str, release_settings: JsonObject) -> SiteView:
     """Store the site's release settings (validated by the caller: siteline.release.knobs)."""
-    site = get_site(session, name)
+    site = site_row(session, name)
     site.release_settings = dict(release_settings)
     session.flush()
-    return site
+    return site_view(site)
 
 
 def redefine_site(
     session: Session, name: str, taxonomy: Taxonomy | None, fence: list[list[float]] | None, clear_fence: bool
-) -> tuple[Site, list[int]]:
+) -> tuple[SiteView, list[int]]:
     """Record site ``name``'s next version with ``taxonomy`` and/or ``fence`` (an open ring, site-local
     metres; ``clear_fence``: none) replacing the current ones, which go to its history; return it
     and its scenes (each to be tiled again). Refused, nothing changed, when a scene holds class codes
     the new taxonomy does not map."""
     site = session.execute(sa.select(Site).where(Site.name == name).with_for_update()).scalar_one_or_none()
     if site is None:
-        get_site(session, name)  # names the known sites
+        site_row(session, name)  # names the known sites
         raise SiteNotFoundError(f"unknown site {name!r}.")
     if taxonomy is None and fence is None and not clear_fence:
         raise SiteError(f"site {name}: give --taxonomy, --fence or --no-fence to change.")
@@ -89,13 +92,13 @@ def redefine_site(
         site.fence = fence
     site.version = (site.version or 1) + 1
     session.flush()
-    return site, [sc.id for sc in scenes]
+    return site_view(site), [sc.id for sc in scenes]
 
 
 def imported_label_sets(session: Session, name: str) -> dict[int, int]:
     """Scene id -> its newest imported label-set version (above 1), for the scenes of site ``name``
     that have one."""
-    site = get_site(session, name)
+    site = site_row(session, name)
     rows = session.execute(
         sa.select(LabelSet.scene_id, sa.func.max(LabelSet.version))
         .join(Scene, Scene.id == LabelSet.scene_id)
@@ -105,8 +108,19 @@ def imported_label_sets(session: Session, name: str) -> dict[int, int]:
     return {int(sid): int(v) for sid, v in rows}
 
 
-def list_sites(session: Session) -> list[Site]:
-    return list(session.execute(sa.select(Site).order_by(Site.name)).scalars())
+def list_sites(session: Session) -> list[SiteView]:
+    """Every site, by name."""
+    return [site_view(s) for s in session.execute(sa.select(Site).order_by(Site.name)).scalars()]
+
+
+def get_site(session: Session, name: str) -> SiteView:
+    """Site ``name``; :class:`SiteNotFoundError` naming the known sites when there is none."""
+    return site_view(site_row(session, name))
+
+
+def site_view(site: Site) -> SiteView:
+    """What the catalog hands out of a site row."""
+    return SiteView(site.id, site_spec(site), dict(site.release_settings or {}), site.created_at)
 
 
 def site_spec(site: Site) -> SiteSpec:
@@ -131,26 +145,26 @@ def site_of(session: Session, site_id: int) -> SiteSpec:
     return site_spec(site)
 
 
-def site_record(site: Site, scenes: int) -> JsonObject:
-    """A site row as plain values (for the CLI): CRS, origin, fence and its area, classes, scenes."""
-    spec = site_spec(site)
+def site_record(site: SiteView, scenes: int) -> JsonObject:
+    """A site as plain values (for the CLI): CRS, origin, fence and its area, classes, scenes."""
+    spec = site.spec
     return {
-        "name": site.name,
-        "crs": site.crs,
-        "origin": list(site.origin),
+        "name": spec.name,
+        "crs": spec.crs,
+        "origin": list(spec.origin),
         "fence_m": [list(v) for v in spec.fence] if spec.fence else None,
         "fence_area_m2": fence_area_m2(spec.fence) if spec.fence else None,
-        "version": site.version or 1,
+        "version": spec.version,
         "taxonomy": spec.taxonomy.name,
         "classes": {c.name: c.id for c in spec.taxonomy.classes},
-        "tile_size_m": site.tile_size_m,
-        "release_settings": dict(site.release_settings or {}),
+        "tile_size_m": spec.tile_size_m,
+        "release_settings": dict(site.release_settings),
         "scenes": scenes,
         "created_at": site.created_at,
     }
 
 
-def scene_count(session: Session, site: Site) -> int:
+def scene_count(session: Session, site: SiteKey) -> int:
     return session.execute(sa.select(sa.func.count(Scene.id)).where(Scene.site_id == site.id)).scalar_one()
 
 

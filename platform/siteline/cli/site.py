@@ -137,7 +137,7 @@ def update(
     with catalog() as cat:
         with cat.transaction() as session:
             site = get_site(session, name)
-            origin = site.origin
+            origin = site.spec.origin
             stored = ReleaseKnobs.from_dict(site.release_settings, f"site {name} release settings")
             new = stored.updated(knobs, unset or ())
             set_release_settings(session, name, new.to_dict())

@@ -10,7 +10,7 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.missions import mission_by_manifest
 from siteline.catalog.scenes import list_scenes, scene_of_mission
-from siteline.catalog.sites import get_site, site_spec
+from siteline.catalog.sites import get_site
 from siteline.records.mission import MissionManifest
 from siteline.records.scene import SceneView
 from siteline.site.spec import SiteSpec
@@ -54,4 +54,4 @@ def plan_ingest(session: Session, site_name: str, manifest: MissionManifest) -> 
     if existing is not None:
         scene = scene_of_mission(session, existing.id)
         found = ExistingMission(existing.id, scene.id if scene is not None else None)
-    return IngestPlan(site.id, site_spec(site), manifest, found, tuple(list_scenes(session, site)))
+    return IngestPlan(site.id, site.spec, manifest, found, tuple(list_scenes(session, site)))

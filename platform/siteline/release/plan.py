@@ -293,9 +293,10 @@ def plan_release(
             "version. Nothing was written."
         )
     semver(version)
-    site = get_site(session, site_name)
-    record = {"name": site.name, "crs": site.crs, "origin": list(site.origin), "fence_m": site.fence,
-              "version": site.version or 1, "taxonomy": site.taxonomy["name"]}  # fmt: skip
+    spec = get_site(session, site_name).spec
+    record = {"name": spec.name, "crs": spec.crs, "origin": list(spec.origin),
+              "fence_m": [list(v) for v in spec.fence] if spec.fence is not None else None,
+              "version": spec.version, "taxonomy": spec.taxonomy.name}  # fmt: skip
     return ReleasePlan(
         site_name, record, name, version, params, pairs, tuple(scene_lineage(session, pairs)), key,
         paths.release_draft(settings.home, name, version), reason, up_to_date,
