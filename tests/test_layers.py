@@ -282,3 +282,17 @@ def test_the_engine_surface_is_what_architecture_names_and_laspy_stays_inside() 
     assert not outside, outside
     for stage in ("ingest/pointcloud.py", "tiles/writer.py"):
         assert (PACKAGE / stage).read_text().count("pass_file(") == 1, stage
+
+
+def test_scene_and_site_rows_stay_inside_the_catalog() -> None:
+    """Outside ``siteline/catalog/`` a scene or site is a record (SceneView, SiteView): the functions
+    that hand out or read ORM rows of them are not imported there."""
+    rows = {"scene_row", "scene_rows_of", "site_row", "scene_statistics", "scene_registration", "site_spec"}
+    bad = []
+    for path, tree in _modules():
+        if path.relative_to(PACKAGE).parts[0] == "catalog":
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("siteline.catalog"):
+                bad += [f"{_rel(path)} imports {a.name}" for a in node.names if a.name in rows]
+    assert not bad, bad
