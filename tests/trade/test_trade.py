@@ -25,7 +25,8 @@ def test_bench_trade_quick_run(tmp_path, capsys) -> None:
     )
     assert code == 0
     rows = list(csv.DictReader(open(tmp_path / "t" / "trade.csv")))
-    assert len(rows) == 4  # 2 scales x 2 point sizes
+    assert len(rows) == 8  # 2 scales x 2 point sizes x (fixed disks, world splats)
+    assert {r["splat"] for r in rows} == {"fixed", "world"}
     for r in rows:
         assert 0.0 <= float(r["coverage"]) <= 1.0 and 0.0 <= float(r["f1_2d"]) <= 1.0
         assert float(r["seconds_per_view"]) > 0 and float(r["points_read_per_view"]) > 0
