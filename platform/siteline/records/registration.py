@@ -209,7 +209,3 @@ class Registration:
     def aligned(self, alignment: Alignment) -> Registration:
         """This record with its co-registration."""
         return replace(self, alignment=alignment)
-
-    def none_because(self) -> str:
-        """Why the scene has no cameras (its note), or ""."""
-        return self.note or ""

@@ -100,7 +100,7 @@ def pair_cameras(session: Session, pair_ids: Sequence[int]) -> dict[int, PairCam
     for pid in pair_ids:
         scene = get_scene(session, get_pair(session, pid).t2_scene_id)
         count = len(scene_cameras(session, scene.id))
-        out[pid] = PairCameras(scene.id, count, "" if count else scene.registration.none_because())
+        out[pid] = PairCameras(scene.id, count, "" if count else scene.registration.note or "")
     return out
 
 
