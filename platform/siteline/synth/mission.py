@@ -55,6 +55,7 @@ class SynthConfig:
     mission_name: str = "sitelinedemo"
     photos: bool = True
     colmap: bool = True
+    layout: str = "site"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.density_pts_m2) and 0.1 <= self.density_pts_m2 <= 10_000):
@@ -252,6 +253,7 @@ def write_site(
         n_epochs=cfg.epochs,
         snow_epochs=cfg.snow_epochs,
         projection_error_epochs=cfg.projection_error_epochs,
+        layout=cfg.layout,
     )
     spec = LidarSpec(density_pts_m2=cfg.density_pts_m2)
     fence = [list(v) for v in m.FENCE_M]

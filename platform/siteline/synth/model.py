@@ -32,6 +32,11 @@ CRANE_BASE_M = (5.0, 28.0)
 CRANE_HEIGHT_M = 42.0
 SLOPE = (0.01, 0.005)
 FIRST_EPOCH = datetime(2024, 11, 27, 15, 0, tzinfo=UTC)
+# "site": the construction site above; "boxes": the analytic box scene (box_scene)
+LAYOUTS = ("site", "boxes")
+BOX_MAST_M = (0.0, 5.0)
+BOX_JIB_HEIGHT_M = 18.0
+BOX_JIB_LENGTH_M = 24.0
 EPOCH_DAYS = (0, 26, 53, 79, 105)
 
 
@@ -64,11 +69,14 @@ class SiteModel:
     n_epochs: int = 4
     snow_epochs: tuple[int, ...] = (2,)
     projection_error_epochs: tuple[int, ...] = (1,)
+    layout: str = "site"
     epochs: list[EpochSpec] = field(init=False)
 
     def __post_init__(self) -> None:
         if not 1 <= self.n_epochs <= 12:
             raise SynthError(f"epochs must be between 1 and 12, got {self.n_epochs}.")
+        if self.layout not in LAYOUTS:
+            raise SynthError(f"layout {self.layout!r}: use one of {', '.join(LAYOUTS)}.")
         rng = np.random.default_rng(self.seed)
         pile_sites = 4
         self.epochs = []
@@ -97,6 +105,8 @@ class SiteModel:
 
     def primitives(self, e: int) -> list[Primitive]:
         """Every surface of epoch ``e``."""
+        if self.layout == "boxes":
+            return box_scene(e)
         ep = self.epochs[e]
         out: list[Primitive] = []
         x0, x1, y0, y1 = TERRAIN_M
@@ -370,6 +380,40 @@ class SiteModel:
 
     def jib_ground_footprint(self, e: int) -> tuple[np.ndarray, np.ndarray, float]:
         """Centre (2,), direction (2,) and length (m) of the jib projected onto the ground."""
+        if self.layout == "boxes":
+            a = math.radians(30.0 + 60.0 * e)
+            d = np.array([math.cos(a), math.sin(a)])
+            return np.array(BOX_MAST_M) + d * BOX_JIB_LENGTH_M / 2, d, BOX_JIB_LENGTH_M
         a = math.radians(self.epochs[e].jib_deg)
         d = np.array([math.cos(a), math.sin(a)])
         return np.array(CRANE_BASE_M) + d * 25.0, d, 50.0
+
+
+def box_scene(e: int) -> list[Primitive]:
+    """Epoch ``e`` of the analytic box scene: boxes on flat ground, every change known in closed form.
+
+    Kept in every epoch: flat ground over the terrain, a shed (6 x 4 x 3 m) and a mast (1.5 m square,
+    18 m). A 24 m jib (1 m square) on the mast turns 60 degrees an epoch; a container (12 x 2.5 x
+    2.6 m) stands in even epochs and a block (4 x 4 x 3 m) in odd ones; a pole (0.4 m wide, 4 m)
+    moves 6 m east an epoch: a thin beam that turns and a thin post that moves."""
+    mx, my = BOX_MAST_M
+    a = math.radians(30.0 + 60.0 * e)
+    jib_c = (mx + math.cos(a) * BOX_JIB_LENGTH_M / 2, my + math.sin(a) * BOX_JIB_LENGTH_M / 2, BOX_JIB_HEIGHT_M)
+    pole_x = -20.0 + 6.0 * (e % 4)
+    out = [
+        Primitive("ground", "v1", 1, GROUND, "terrain", (TERRAIN_M, (0.0, 0.0), None, None), (120, 100, 80), True),
+        Primitive("shed", "v1", 10, TEMPORARY, "box", ((25.0, 22.0, 0.0), (6.0, 4.0, 3.0), 0.3), (90, 110, 160), True),
+        Primitive("mast", "v1", 20, CRANE, "box", ((mx, my, 0.0), (1.5, 1.5, BOX_JIB_HEIGHT_M), 0.0), (220, 40, 30)),
+        Primitive("jib", f"{math.degrees(a) % 360:.1f}", 21, CRANE, "box", (jib_c, (BOX_JIB_LENGTH_M, 1.0, 1.0), a),
+                  (230, 50, 35), True),
+        Primitive("pole", f"x={pole_x:g}", 30, TEMPORARY, "cylinder", (pole_x, -30.0, 0.0, 0.2, 4.0), (250, 200, 30)),
+    ]  # fmt: skip
+    if e % 2 == 0:
+        out.append(
+            Primitive("container", "v1", 40, MATERIAL, "box", ((-30.0, 20.0, 0.0), (12.0, 2.5, 2.6), 0.0), (40, 120, 160), True)
+        )  # fmt: skip
+    else:
+        out.append(
+            Primitive("block", "v1", 50, BUILDING, "box", ((30.0, -20.0, 0.0), (4.0, 4.0, 3.0), 0.0), (170, 170, 165), True)
+        )  # fmt: skip
+    return out

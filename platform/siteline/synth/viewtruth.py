@@ -1,0 +1,178 @@
+"""The change truth of a view, ray-cast from the synthetic site's analytic surfaces, and a mask scored
+against it (precision, recall and F1 of changed, boundary F-score, each changed object's recall,
+false-change specks).
+
+A pixel is *changed* where the surface its ray meets first in either epoch is absent from the other
+epoch (absent: no surface with the same key and signature, siteline.synth.primitives.Primitive);
+*ignore* where either ray meets a surface of an ignored class or outside the fence, or where a ray
+meets nothing and the other meets a surface that did not change; else *unchanged*. Nothing here
+comes from siteline.render, so what the renderer gets wrong counts against the mask.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from siteline.camera.pinhole import Camera
+from siteline.codes import CHANGED, IGNORE, UNCHANGED
+from siteline.errors import SynthError
+from siteline.site.fence import inside_fence
+from siteline.synth.primitives import Primitive
+from siteline.synth.raycast import MISS, SurfaceHits, cast
+
+# a false-change component under this many pixels is a speck
+SPECK_PX = 30
+# the boundary F-score's tolerance (pixels)
+BOUNDARY_PX = 2
+
+
+@dataclass(frozen=True)
+class ViewTruth:
+    """mask: (H, W) uint8 0 unchanged, 1 changed, 255 ignore. changed_object: (H, W) int64, the
+    object id of the changed surface a changed pixel sees (the first epoch's when both changed), -1
+    elsewhere. names: object id -> a readable name (``<key prefix>#<id>``)."""
+
+    mask: np.ndarray
+    changed_object: np.ndarray
+    names: dict[int, str]
+
+
+def _object_names(prims: Iterable[Primitive]) -> dict[int, str]:
+    return {p.object_id: f"{p.key.split(':')[0]}#{p.object_id}" for p in prims}
+
+
+def _side(hits: SurfaceHits, other: set[tuple[str, str]], ignored: Collection[int], fence: Sequence | None) -> tuple:
+    """Per pixel of one epoch's hits: (hit, changed, not usable, object id)."""
+    prims = hits.primitives
+    present = np.array([(p.key, p.signature) in other for p in prims] + [True])  # last slot: a miss
+    ign = np.array([p.las_class in ignored for p in prims] + [False])
+    obj = np.array([p.object_id for p in prims] + [-1], dtype=np.int64)
+    which = np.where(hits.which == MISS, len(prims), hits.which)
+    hit = hits.which != MISS
+    bad = ign[which]
+    if fence is not None and hit.any():
+        pts = hits.points[hit]
+        out = np.zeros(hit.shape, bool)
+        out[hit] = ~inside_fence(pts[:, :2], fence)
+        bad |= out
+    return hit, hit & ~present[which], bad, obj[which]
+
+
+def view_truth(
+    camera: Camera,
+    first: Sequence[Primitive],
+    second: Sequence[Primitive],
+    ignored_classes: Collection[int] = (),
+    fence: Sequence[Sequence[float]] | None = None,
+) -> ViewTruth:
+    """The truth of ``camera`` (at the render scale) between the epochs whose surfaces are ``first``
+    and ``second``. ignored_classes: LAS codes of surfaces the taxonomy ignores; fence: site-local
+    ring (metres), None for none."""
+    if not first or not second:
+        raise SynthError("a view's truth needs the surfaces of both epochs.")
+    ha, hb = cast(camera, first), cast(camera, second)
+    keys_a = {(p.key, p.signature) for p in first}
+    keys_b = {(p.key, p.signature) for p in second}
+    hit_a, changed_a, bad_a, obj_a = _side(ha, keys_b, ignored_classes, fence)
+    hit_b, changed_b, bad_b, obj_b = _side(hb, keys_a, ignored_classes, fence)
+    changed = changed_a | changed_b
+    ignore = bad_a | bad_b | (~changed & ~(hit_a & hit_b))
+    mask = np.where(ignore, IGNORE, np.where(changed, CHANGED, UNCHANGED)).astype(np.uint8)
+    obj = np.where(mask == CHANGED, np.where(changed_a, obj_a, obj_b), -1)
+    return ViewTruth(mask, obj, _object_names(first) | _object_names(second))
+
+
+def _boundary(region: np.ndarray) -> np.ndarray:
+    return region & ~ndimage.binary_erosion(region, structure=np.ones((3, 3), bool), border_value=0)
+
+
+@dataclass
+class MaskScore:
+    """A mask's agreement with the truth, summed over views, on the pixels both label (neither 255).
+
+    tp, fp, fn, tn: changed-class confusion. boundary: [predicted boundary pixels within
+    BOUNDARY_PX of a true one, predicted boundary pixels, true boundary pixels within BOUNDARY_PX of a
+    predicted one, true boundary pixels]. objects: object name -> [changed pixels found, changed
+    pixels]. specks: per view, the false-changed components under SPECK_PX pixels. scored: pixels
+    both label; pixels: every pixel."""
+
+    tp: int = 0
+    fp: int = 0
+    fn: int = 0
+    tn: int = 0
+    boundary: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
+    objects: dict[str, list[int]] = field(default_factory=dict)
+    specks: list[int] = field(default_factory=list)
+    scored: int = 0
+    pixels: int = 0
+
+    def add(self, predicted: np.ndarray, truth: ViewTruth) -> None:
+        """Score one view's mask (H, W) 0/1/255 against its truth."""
+        if predicted.shape != truth.mask.shape:
+            raise SynthError(f"mask of {predicted.shape} px scored against a truth of {truth.mask.shape} px.")
+        both = (predicted != IGNORE) & (truth.mask != IGNORE)
+        p, t = both & (predicted == CHANGED), both & (truth.mask == CHANGED)
+        self.tp += int((p & t).sum())
+        self.fp += int((p & ~t).sum())
+        self.fn += int((~p & t).sum())
+        self.tn += int((both & ~p & ~t).sum())
+        self.scored += int(both.sum())
+        self.pixels += int(predicted.size)
+        bp, bt = _boundary(p), _boundary(t)
+        near_t = ndimage.distance_transform_edt(~bt) <= BOUNDARY_PX if bt.any() else np.zeros_like(bt)
+        near_p = ndimage.distance_transform_edt(~bp) <= BOUNDARY_PX if bp.any() else np.zeros_like(bp)
+        self.boundary[0] += int((bp & near_t).sum())
+        self.boundary[1] += int(bp.sum())
+        self.boundary[2] += int((bt & near_p).sum())
+        self.boundary[3] += int(bt.sum())
+        for oid in np.unique(truth.changed_object[t]):
+            name = truth.names.get(int(oid), f"object#{int(oid)}")
+            mine = t & (truth.changed_object == oid)
+            got = self.objects.setdefault(name, [0, 0])
+            got[0] += int((mine & p).sum())
+            got[1] += int(mine.sum())
+        labels, n = ndimage.label(p & ~t, structure=np.ones((3, 3), bool))
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+        self.specks.append(int((sizes < SPECK_PX).sum()))
+
+    @property
+    def precision(self) -> float:
+        return self.tp / (self.tp + self.fp) if self.tp + self.fp else float("nan")
+
+    @property
+    def recall(self) -> float:
+        return self.tp / (self.tp + self.fn) if self.tp + self.fn else float("nan")
+
+    @property
+    def f1(self) -> float:
+        d = 2 * self.tp + self.fp + self.fn
+        return 2 * self.tp / d if d else float("nan")
+
+    @property
+    def boundary_f(self) -> float:
+        bp, np_, bt, nt = self.boundary
+        p = bp / np_ if np_ else 0.0
+        r = bt / nt if nt else 0.0
+        return 2 * p * r / (p + r) if p + r else 0.0
+
+    def object_recall(self, min_pixels: int = 1) -> dict[str, float]:
+        """Recall of each changed object seen on at least ``min_pixels`` scored pixels."""
+        return {k: v[0] / v[1] for k, v in sorted(self.objects.items()) if v[1] >= min_pixels}
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "precision": self.precision,
+            "recall": self.recall,
+            "f1": self.f1,
+            "boundary_f": self.boundary_f,
+            "object_recall": self.object_recall(),
+            "specks_median": float(np.median(self.specks)) if self.specks else float("nan"),
+            "specks_max": max(self.specks, default=0),
+            "views": len(self.specks),
+            "scored_share": self.scored / self.pixels if self.pixels else float("nan"),
+            "confusion": {"tp": self.tp, "fp": self.fp, "fn": self.fn, "tn": self.tn},
+        }
