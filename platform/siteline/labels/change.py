@@ -1,6 +1,28 @@
-"""3D change between two scenes (DESIGN.md §4): pure functions over site-local arrays."""
+"""3D change between two scenes (DESIGN.md §4): pure functions over site-local arrays.
+
+Two rules, one call (:func:`change_flags`):
+
+- *nearest* (DESIGN.md §4 as first written): a point is changed when the other scene has no kept
+  point within the radius r. On an unchanged surface sampled at random, 2^(-k^2) of the points (k =
+  r / median spacing; 1.3 % at the default 2.5) find no neighbour by chance and are flagged.
+- *surface* (the default, :class:`SurfaceTest`): a point the nearest rule flags is looked at again
+  against the other scene's local surface: its ``neighbours`` nearest kept points within the search
+  radius (``search_multiplier`` x r). Fewer than 3 there: changed (nothing there). Else a plane is
+  fitted to them (least squares), and the point is unchanged when its distance along the plane's
+  normal is within the level of detection, ``lod_sigmas`` x the neighbours' RMS residual to their
+  plane (their roughness) and never under ``lod_floor_m`` (range noise and registration error), as
+  M3C2 judges a distance against roughness; its class is then compared with its nearest neighbour's
+  as before. A point with nothing of the other scene around it is changed only when the other
+  scene saw through where it is: it holds points below it within the search radius in plan (the
+  ground under a jib that turned away). When the other scene's points there all lie above it, that
+  scene could not see the place (the ground in a jib's scan shadow) and the point is unchanged: the
+  change, if any, is the other scene's to show. What it cannot see: a surface that moved along itself, or by less than the level of
+  detection; a change within r of an unchanged surface of the same class.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,6 +54,72 @@ def nearest(
     raise LabelError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
 
 
+@dataclass(frozen=True)
+class SurfaceTest:
+    """How the surface rule looks again at a point the nearest rule flags (module docstring):
+    ``search_m`` the other scene's neighbourhood radius (metres), ``neighbours`` how many of its
+    points to fit a plane to, the level of detection ``lod_sigmas`` x their RMS residual, at least
+    ``lod_floor_m`` metres."""
+
+    search_m: float
+    neighbours: int = 12
+    lod_sigmas: float = 4.0
+    lod_floor_m: float = 0.05
+
+
+def plane_distances(
+    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each query point: its distance (metres) along the normal of the plane fitted to its
+    ``test.neighbours`` nearest points of ``b_xyz`` within ``test.search_m`` (inf where fewer than 3
+    lie there), the level of detection there (metres) and the index of its nearest point (len(b_xyz)
+    where none). Site-local coordinates; the fit is in float64 about the neighbours' mean."""
+    from pykdtree.kdtree import KDTree
+
+    k = max(3, min(test.neighbours, len(b_xyz)))
+    tree = KDTree(np.ascontiguousarray(b_xyz, dtype=np.float32))
+    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=test.search_m)
+    d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
+    valid = d <= test.search_m
+    count = valid.sum(axis=1)
+    dist = np.full(len(q_xyz), np.inf)
+    lod = np.full(len(q_xyz), test.lod_floor_m)
+    ok = np.flatnonzero(count >= 3)
+    if len(ok):
+        w = valid[ok].astype(np.float64)
+        pts = np.asarray(b_xyz, np.float64)[np.where(valid[ok], i[ok], 0)]  # (m, k, 3)
+        n = w.sum(axis=1)
+        mean = (pts * w[..., None]).sum(axis=1) / n[:, None]
+        centred = (pts - mean[:, None, :]) * w[..., None]
+        cov = np.einsum("mki,mkj->mij", centred, centred) / n[:, None, None]
+        vals, vecs = np.linalg.eigh(cov)  # ascending: the first vector is the plane's normal
+        normal = vecs[:, :, 0]
+        dist[ok] = np.abs(np.einsum("mi,mi->m", np.asarray(q_xyz, np.float64)[ok] - mean, normal))
+        lod[ok] = np.maximum(test.lod_floor_m, test.lod_sigmas * np.sqrt(np.clip(vals[:, 0], 0.0, None)))
+    first = np.where(valid[:, 0], i[:, 0], len(b_xyz))
+    return dist, lod, first
+
+
+# points of the other scene looked at in plan around a point with nothing around it in 3D
+COLUMN_POINTS = 24
+
+
+def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -> np.ndarray:
+    """(M,) bool: the query points the other scene (``b_xyz``) could not have seen from above: its
+    points within ``test.search_m`` in plan (up to COLUMN_POINTS nearest) all lie more than the
+    level-of-detection floor above the point, and there is at least one."""
+    from pykdtree.kdtree import KDTree
+
+    k = max(1, min(COLUMN_POINTS, len(b_xyz)))
+    tree = KDTree(np.ascontiguousarray(np.asarray(b_xyz)[:, :2], dtype=np.float32))
+    d, i = tree.query(np.ascontiguousarray(np.asarray(q_xyz)[:, :2], dtype=np.float32), k=k, distance_upper_bound=test.search_m)
+    d, i = np.asarray(d).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
+    valid = d <= test.search_m
+    z = np.asarray(b_xyz, np.float64)[np.where(valid, i, 0), 2]
+    above = z > np.asarray(q_xyz, np.float64)[:, 2:3] + test.lod_floor_m
+    return valid.any(axis=1) & (above | ~valid).all(axis=1)
+
+
 def change_flags(
     a_xyz: np.ndarray,
     a_cls: np.ndarray,
@@ -41,12 +129,14 @@ def change_flags(
     ignored: np.ndarray,
     backend: str = "pykdtree",
     geometric: np.ndarray | None = None,
+    surface: SurfaceTest | None = None,
 ) -> np.ndarray:
     """Change of each point of A against B, (N,) uint8: 0 unchanged, 1 changed, 255 ignored.
 
     a_xyz (N, 3), b_xyz (M, 3): site-local metres (float32 or float64). a_cls, b_cls: uint8 site
     classes. ignored: (256,) bool lookup of ignored classes. A point of A is ignored when its class
-    is; otherwise changed when B has no point of a non-ignored class within ``radius_m``, or when the
+    is; otherwise changed when B has no point of a non-ignored class within ``radius_m`` (with
+    ``surface``, when it is not on B's local surface either: the module docstring), or when the
     nearest such point has another class, unless either class is compared by geometry only
     (``geometric``: (256,) bool lookup, e.g. "unclassified"; all True: a class-agnostic rule).
     """
@@ -58,13 +148,29 @@ def change_flags(
     if not b_keep.any():
         out[live] = CHANGED
         return out
-    dist, idx = nearest(b_xyz[b_keep], a_xyz[live], radius_m, backend)
+    b_kept = b_xyz[b_keep]
+    dist, idx = nearest(b_kept, a_xyz[live], radius_m, backend)
     found = np.isfinite(dist)
+    if surface is not None and not found.all():
+        again = np.flatnonzero(~found)
+        d, lod, first = plane_distances(b_kept, a_xyz[live][again], surface)
+        on = d <= lod
+        found[again[on]] = True
+        idx[again[on]] = first[on]
+        alone = np.flatnonzero(~np.isfinite(d))
+        if len(alone):
+            unseen = hidden_from_other(b_kept, a_xyz[live][again[alone]], surface)
+            # nothing to compare with: unchanged from this side, whatever the classes say
+            seen_not = again[alone[unseen]]
+            found[seen_not] = True
+            idx[seen_not] = -1
     same = np.zeros(len(dist), dtype=bool)
-    b_near, a_live = b_cls[b_keep][idx[found]], a_cls[live][found]
-    same[found] = b_near == a_live
+    compared = found & (idx >= 0)
+    b_near, a_live = b_cls[b_keep][idx[compared]], a_cls[live][compared]
+    same[compared] = b_near == a_live
     if geometric is not None:
-        same[found] |= geometric[b_near] | geometric[a_live]
+        same[compared] |= geometric[b_near] | geometric[a_live]
+    same[found & (idx < 0)] = True
     out[live] = np.where(same, UNCHANGED, CHANGED)
     return out
 

@@ -6,17 +6,35 @@ import math
 from dataclasses import dataclass
 
 from siteline.errors import LabelError
+from siteline.labels.change import SurfaceTest
+
+LABEL_RULES = ("surface", "nearest")
+# the surface rule's search radius, in change radii (siteline.labels.change.SurfaceTest)
+SEARCH_MULTIPLIER = 2.0
 
 
 @dataclass(frozen=True)
 class LabelParams:
     """radius_m: change radius in metres, or None for ``radius_multiplier`` x the median
-    nearest-neighbour spacing of the sparser scene."""
+    nearest-neighbour spacing of the sparser scene. rule: ``surface`` (a point the nearest-neighbour
+    test flags is looked at again against the other scene's local surface) or ``nearest`` (the
+    nearest-neighbour test alone; siteline.labels.change). min_region_points: changed regions of
+    fewer points are taken back to unchanged (siteline.labels.regions; 1 keeps every point)."""
 
     radius_m: float | None = None
     radius_multiplier: float = 2.5
+    rule: str = "surface"
+    min_region_points: int = 1
+
+    def surface_test(self, radius_m: float) -> SurfaceTest | None:
+        """The surface rule's test at the change radius ``radius_m`` (None for the nearest rule)."""
+        return SurfaceTest(search_m=SEARCH_MULTIPLIER * radius_m) if self.rule == "surface" else None
 
     def __post_init__(self) -> None:
+        if self.rule not in LABEL_RULES:
+            raise LabelError(f"label rule {self.rule!r}: use one of {', '.join(LABEL_RULES)}.")
+        if not (isinstance(self.min_region_points, int) and 1 <= self.min_region_points <= 100_000):
+            raise LabelError(f"min_region_points {self.min_region_points!r} must be a whole number from 1 to 100000.")
         if self.radius_m is not None and not (
             isinstance(self.radius_m, int | float) and math.isfinite(self.radius_m) and self.radius_m > 0
         ):

@@ -13,7 +13,8 @@ import numpy as np
 import zarr
 
 from siteline.errors import LabelError
-from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
+from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, SurfaceTest, change_flags, median_spacing
+from siteline.labels.regions import small_regions
 from siteline.records.pairs import ChangeLabels, RadiusChoice
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import parse_tile_key
@@ -122,13 +123,18 @@ def write_labels(
     ignored: np.ndarray,
     out: Path,
     geometric: np.ndarray | None = None,
+    surface: SurfaceTest | None = None,
+    min_region_points: int = 1,
 ) -> ChangeLabels:
     """Compute both directions in one pass over the site grid (each tile of each scene against the
-    other scene's points in the tile's grid cell widened by ``radius_m``) into the new Zarr group
-    ``out`` (removed again on an error; publish it through ``siteline.stores.Store.publish`` for
-    all-or-nothing). Each tile of each scene is read and decoded once; decoded tiles live until the
-    columns of tiles that need them for a halo are done (at most three columns per scene).
-    ``ignored`` and ``geometric``: the taxonomy's lookups (siteline.labels.change.change_flags)."""
+    other scene's points in the tile's grid cell widened by ``radius_m``, or by the surface test's
+    search radius) into the new Zarr group ``out`` (removed again on an error; publish it through
+    ``siteline.stores.Store.publish`` for all-or-nothing). Each tile of each scene is read and
+    decoded once; decoded tiles live until the columns of tiles that need them for a halo are done
+    (at most three columns per scene). ``ignored``, ``geometric`` and ``surface``: the rule
+    (siteline.labels.change.change_flags); then changed regions of fewer than ``min_region_points``
+    points are taken back to unchanged, each scene's changed points linked across its whole grid
+    (siteline.labels.regions). The flags of both scenes are held (a byte a point) until written."""
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
@@ -138,25 +144,34 @@ def write_labels(
     out.parent.mkdir(parents=True, exist_ok=True)
     import zarr
 
+    halo_m = max(radius_m, surface.search_m if surface is not None else 0.0)
     try:
         root = zarr.open_group(str(out), mode="w")
-        sides = {"t1": (t1, _Decoded(t1, radius_m)), "t2": (t2, _Decoded(t2, radius_m))}
+        sides = {"t1": (t1, _Decoded(t1, halo_m)), "t2": (t2, _Decoded(t2, halo_m))}
         other = {"t1": "t2", "t2": "t1"}
-        groups = {side: root.require_group(side).require_group("tiles") for side in sides}
-        counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
-        digests: dict[str, dict[str, str]] = {side: {} for side in sides}
-        n_total = 0
+        flags_of: dict[str, dict[str, np.ndarray]] = {side: {} for side in sides}
+        changed_xyz: dict[str, list[np.ndarray]] = {side: [] for side in sides}
         grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
         for ij in grid:
             for dec in (sides["t1"][1], sides["t2"][1]):
                 dec.release_before(ij[0])
-            for side, (tiles, dec) in sides.items():
+            for side, (_, dec) in sides.items():
                 mine = dec.get(ij)
                 if mine is None:
                     continue
                 their_xyz, their_cls = sides[other[side]][1].halo(ij)
-                flags = change_flags(mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, geometric=geometric)
-                tile = dec.keys[ij]
+                flags = change_flags(
+                    mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, geometric=geometric, surface=surface
+                )
+                flags_of[side][dec.keys[ij]] = flags
+                changed_xyz[side].append(mine[0][flags == CHANGED])
+        taken_back = {side: _drop_small_regions(flags_of[side], changed_xyz[side], radius_m, min_region_points) for side in sides}
+        groups = {side: root.require_group(side).require_group("tiles") for side in sides}
+        counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
+        digests: dict[str, dict[str, str]] = {side: {} for side in sides}
+        n_total = 0
+        for side, (tiles, _) in sides.items():
+            for tile, flags in flags_of[side].items():
                 _write_flags(groups[side], tile, flags, tiles.spec)
                 digests[side][tile] = hashlib.sha256(flags.tobytes()).hexdigest()
                 _count(flags, counts[side])
@@ -166,8 +181,27 @@ def write_labels(
             for side, dg in digests.items()
         }
         checksum = hashlib.sha256(f"{h['t1']}:{h['t2']}".encode()).hexdigest()
-        root.attrs.update({"radius_m": radius_m, "counts": counts, "checksum": checksum, "points": n_total})
+        root.attrs.update(
+            {"radius_m": radius_m, "counts": counts, "checksum": checksum, "points": n_total, "small_regions": taken_back}
+        )
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
         raise
     return ChangeLabels(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)
+
+
+def _drop_small_regions(
+    flags: dict[str, np.ndarray], changed: list[np.ndarray], cell_m: float, min_points: int
+) -> int:
+    """Take the changed points of regions under ``min_points`` points back to unchanged in ``flags``
+    (tile -> flags, in the order ``changed`` holds each tile's changed points); return how many."""
+    if min_points <= 1 or not changed:
+        return 0
+    small = small_regions(np.concatenate(changed), cell_m, min_points)
+    start = 0
+    for tile_flags in flags.values():
+        where = np.flatnonzero(tile_flags == CHANGED)
+        mine = small[start : start + len(where)]
+        tile_flags[where[mine]] = UNCHANGED
+        start += len(where)
+    return int(small.sum())

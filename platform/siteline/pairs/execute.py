@@ -47,7 +47,9 @@ def pair_labels(
         info = replace(info, given=True, multiplier=radius / (auto / label_params.radius_multiplier))
     # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
     info = replace(info, expected_false_change=expected_false_change(info.multiplier))
-    uri = layout.pair_labels(store, plan.pair_id, plan.versions, radius, plan.change_rule.rule)
+    uri = layout.pair_labels(
+        store, plan.pair_id, plan.versions, radius, plan.change_rule.rule, label_params.rule, label_params.min_region_points
+    )
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
         labels = ChangeLabels.from_dict(dict(store.open_group(uri).attrs) | {"uri": uri})
     else:
@@ -55,8 +57,9 @@ def pair_labels(
         taxonomy = plan.site.taxonomy
         with store.publish(uri) as work:
             labels = write_labels(
-                t1, t2, radius, taxonomy.ignored_lut(), work, geometric=plan.change_rule.geometric_lut(taxonomy)
-            )
+                t1, t2, radius, taxonomy.ignored_lut(), work, geometric=plan.change_rule.geometric_lut(taxonomy),
+                surface=label_params.surface_test(radius), min_region_points=label_params.min_region_points,
+            )  # fmt: skip
     log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
     return replace(labels, uri=uri, radius=info)
 

@@ -19,6 +19,8 @@ from siteline.render.settings import RenderSettings
 from siteline.schema import JsonObject
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 
+# changed regions of fewer points are taken back to unchanged (siteline.labels.regions)
+MIN_REGION_POINTS = 8
 # knobs view generation shares with the renders, set once on the pair parameters
 _SHARED_VIEW_KNOBS = ("scale", "views", "seed", "min_coverage", "min_valid", "point_size_px", "splat", "splat_max_px")
 
@@ -71,9 +73,14 @@ class PairParams:
     splat: str = "world"
     splat_max_px: int = 31
     fill_px: int = 2
+    label_rule: str = "surface"
+    min_region_points: int = MIN_REGION_POINTS
 
     # what each knob added after the first release meant before it existed (a record without it)
-    BEFORE: ClassVar[Mapping[str, object]] = {"splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25}
+    BEFORE: ClassVar[Mapping[str, object]] = {
+        "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
+        "min_region_points": 1,
+    }  # fmt: skip
 
     def __post_init__(self) -> None:
         if self.sampler != SAMPLER_VERSION:
@@ -125,7 +132,7 @@ class PairParams:
 
     def label_params(self) -> LabelParams:
         """The change-label knobs as LabelParams."""
-        return LabelParams(self.radius_m, self.radius_multiplier)
+        return LabelParams(self.radius_m, self.radius_multiplier, self.label_rule, self.min_region_points)
 
     def to_dict(self) -> JsonObject:
         return asdict(self)

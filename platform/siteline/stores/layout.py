@@ -41,12 +41,21 @@ def label_set(store: Store, scene_id: int, version: int) -> str:
 
 
 def pair_labels(
-    store: Store, pair_id: int, versions: tuple[int, int], radius_m: float, rule: str = "semantic"
+    store: Store,
+    pair_id: int,
+    versions: tuple[int, int],
+    radius_m: float,
+    rule: str = "semantic",
+    label_rule: str = "nearest",
+    min_region_points: int = 1,
 ) -> str:
     """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
-    by the change ``rule`` (siteline.labels.rule)."""
+    by the change ``rule`` (siteline.labels.rule), the ``label_rule`` and the smallest region kept
+    (siteline.labels.params; the nearest rule keeping every point names no suffix, as before both)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"
+    by += "" if label_rule == "nearest" else f"-{label_rule}"
+    by += "" if min_region_points <= 1 else f"-m{min_region_points}"
     return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um{by}.zarr")
 
 

@@ -1,0 +1,111 @@
+"""The surface rule and the region filter: unchanged surfaces sampled at random do not speckle, real
+changes (a box removed, a thin beam moved, a slab lowered) are found, scan shadows are not change."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from siteline.labels.change import (
+    CHANGED,
+    UNCHANGED,
+    SurfaceTest,
+    change_flags,
+    hidden_from_other,
+    median_spacing,
+)
+from siteline.labels.params import LabelParams
+from siteline.labels.regions import region_sizes, small_regions
+from siteline.site.taxonomy import default_taxonomy
+
+TAX = default_taxonomy()
+IGN = TAX.ignored_lut()
+GROUND = TAX.id_of("ground")
+CRANE = TAX.id_of("crane")
+
+
+def plane(rng: np.random.Generator, n: int, size: float = 20.0, z: float = 0.0, noise: float = 0.02) -> np.ndarray:
+    xy = rng.uniform(0, size, (n, 2))
+    return np.c_[xy, z + rng.normal(0, noise, n)]
+
+
+def beam(rng: np.random.Generator, n: int, x0: float, y0: float, length: float, z: float) -> np.ndarray:
+    """The top of a 0.5 m wide beam along x."""
+    return np.c_[rng.uniform(x0, x0 + length, n), rng.uniform(y0, y0 + 0.5, n), np.full(n, z)]
+
+
+def flags(a: np.ndarray, ac: np.ndarray, b: np.ndarray, bc: np.ndarray, r: float, surface: bool) -> np.ndarray:
+    test = SurfaceTest(search_m=2 * r) if surface else None
+    return change_flags(a, ac, b, bc, r, IGN, surface=test)
+
+
+def test_unchanged_random_surfaces_speckle_under_the_nearest_rule_and_not_under_the_surface_rule():
+    rng = np.random.default_rng(0)
+    a, b = plane(rng, 40_000), plane(rng, 40_000)  # 100 points/m2, two independent samplings
+    cls = np.full(len(a), GROUND, np.uint8)
+    r = 2.5 * max(median_spacing(a), median_spacing(b))
+    nearest = flags(a, cls, b, cls, r, surface=False)
+    surface = flags(a, cls, b, cls, r, surface=True)
+    # about 2^-k^2 at k = 2.5 (less here: the range noise widens the measured spacing)
+    assert 0.002 < (nearest == CHANGED).mean() < 0.03
+    assert (surface == CHANGED).mean() < (nearest == CHANGED).mean() / 20
+
+
+def test_the_surface_rule_finds_a_removed_box_a_moved_beam_and_a_lowered_slab():
+    rng = np.random.default_rng(1)
+    ground_a, ground_b = plane(rng, 20_000), plane(rng, 20_000)
+    box_top = np.c_[rng.uniform(5, 8, 900), rng.uniform(5, 8, 900), np.full(900, 2.5)]  # removed
+    beam_a, beam_b = beam(rng, 1000, 2, 14, 10, 6.0), beam(rng, 1000, 2, 16, 10, 6.0)  # moved 2 m
+    slab_a = np.c_[rng.uniform(12, 18, 3600), rng.uniform(2, 8, 3600), np.full(3600, 1.0)]
+    slab_b = np.c_[rng.uniform(12, 18, 3600), rng.uniform(2, 8, 3600), np.full(3600, 0.7)]  # 30 cm lower
+    a = np.concatenate([ground_a, box_top, beam_a, slab_a])
+    b = np.concatenate([ground_b, beam_b, slab_b])
+    ac, bc = np.full(len(a), GROUND, np.uint8), np.full(len(b), GROUND, np.uint8)
+    ac[len(ground_a) + 900 : len(ground_a) + 1900] = CRANE
+    bc[len(ground_b) : len(ground_b) + 1000] = CRANE
+    r = 0.25
+    fa = flags(a, ac, b, bc, r, surface=True)
+    n0 = len(ground_a)
+    assert (fa[n0 : n0 + 900] == CHANGED).mean() > 0.99  # the box's top: nothing there in B
+    assert (fa[n0 + 900 : n0 + 1900] == CHANGED).mean() > 0.99  # the beam moved away
+    assert (fa[n0 + 1900 :] == CHANGED).mean() > 0.99  # the slab is 0.3 m off B's slab
+    # ground far from every change stays unchanged
+    far = (ground_a[:, 0] > 1) & (ground_a[:, 0] < 4) & (ground_a[:, 1] < 12)
+    assert (fa[:n0][far] == UNCHANGED).all()
+
+
+def test_a_point_the_other_scan_could_not_see_is_not_change():
+    # B's ground under A's beam: A scanned the beam above it, not the ground
+    rng = np.random.default_rng(2)
+    under = np.c_[rng.uniform(5, 6, 200), rng.uniform(5, 6, 200), np.zeros(200)]
+    a_beam = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, 10.0)]
+    test = SurfaceTest(search_m=0.5)
+    assert hidden_from_other(a_beam, under, test).all()
+    # the same points with A's ground under them as well: A saw through, they are not hidden
+    a_ground = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, -3.0)]
+    assert not hidden_from_other(np.concatenate([a_beam, a_ground]), under, test).any()
+    b_flags = flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, surface=True)
+    assert (b_flags == UNCHANGED).all()
+    assert (flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, False) == CHANGED).all()
+
+
+def test_regions_link_touching_cells_and_count_points():
+    rng = np.random.default_rng(3)
+    patch = np.c_[rng.uniform(0, 2, 400), rng.uniform(0, 2, 400), np.zeros(400)]
+    singles = np.array([[10.0, 10.0, 0.0], [20.0, 0.0, 0.0], [20.3, 0.0, 0.0]])
+    sizes = region_sizes(np.concatenate([patch, singles]), 0.25)
+    assert (sizes[:400] == 400).all()
+    assert sizes[400:].tolist() == [1, 2, 2]  # the last two touch (0.3 m apart, cells of 0.25 m)
+    small = small_regions(np.concatenate([patch, singles]), 0.25, 3)
+    assert small.tolist() == [False] * 400 + [True, True, True]
+    assert not small_regions(singles, 0.25, 1).any()
+    assert region_sizes(np.zeros((0, 3)), 0.25).tolist() == []
+
+
+def test_label_params_refuse_unknown_rules_and_regions():
+    assert LabelParams().surface_test(0.3) == SurfaceTest(search_m=0.6)
+    assert LabelParams(rule="nearest").surface_test(0.3) is None
+    with pytest.raises(Exception, match="label rule"):
+        LabelParams(rule="m3c2")
+    with pytest.raises(Exception, match="min_region_points"):
+        LabelParams(min_region_points=0)
