@@ -25,7 +25,7 @@ import numpy as np
 import pyproj
 
 from siteline.camera.pinhole import Camera
-from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags, median_spacing
+from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, Matching, change_flags, median_spacing
 from siteline.pairs.render import pair_mask
 from siteline.pairs.sources import TilePointSource
 from siteline.pointpass import TilingResources
@@ -156,8 +156,8 @@ def run_trade(
         for backend in grid.backends:
             (fa, fb), sec, peak = _measure(
                 lambda r=r, backend=backend: (
-                    change_flags(a.xyz, a.cls, b.xyz, b.cls, r, ignored, backend),
-                    change_flags(b.xyz, b.cls, a.xyz, a.cls, r, ignored, backend),
+                    change_flags(a.xyz, a.cls, b.xyz, b.cls, r, ignored, Matching(backend)),
+                    change_flags(b.xyz, b.cls, a.xyz, a.cls, r, ignored, Matching(backend)),
                 )
             )
             flags[mult] = (fa, fb)

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 from sitehelpers import SYNTH, epoch_dirs
 
-from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, change_flags
+from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, Matching, change_flags
 from siteline.labels.store import write_labels
 from siteline.pointpass import TilingResources
 from siteline.site.taxonomy import default_taxonomy
@@ -46,7 +46,7 @@ def test_change_flags_equal_brute_force_on_small_scenes() -> None:
     bc[:50] = 4  # the same place, another class
     for r in (0.05, 0.3):
         for backend in ("pykdtree", "ckdtree"):
-            assert np.array_equal(change_flags(a, ac, b, bc, r, IGN, backend), _brute(a, ac, b, bc, r))
+            assert np.array_equal(change_flags(a, ac, b, bc, r, IGN, Matching(backend)), _brute(a, ac, b, bc, r))
 
 
 def test_edge_cases() -> None:

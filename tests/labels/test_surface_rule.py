@@ -9,6 +9,7 @@ import pytest
 from siteline.labels.change import (
     CHANGED,
     UNCHANGED,
+    Matching,
     SurfaceTest,
     change_flags,
     hidden_from_other,
@@ -36,7 +37,7 @@ def beam(rng: np.random.Generator, n: int, x0: float, y0: float, length: float, 
 
 def flags(a: np.ndarray, ac: np.ndarray, b: np.ndarray, bc: np.ndarray, r: float, surface: bool) -> np.ndarray:
     test = SurfaceTest(search_m=2 * r) if surface else None
-    return change_flags(a, ac, b, bc, r, IGN, surface=test)
+    return change_flags(a, ac, b, bc, r, IGN, Matching(surface=test))
 
 
 def test_unchanged_random_surfaces_speckle_under_the_nearest_rule_and_not_under_the_surface_rule():

@@ -7,17 +7,19 @@ Two rules, one call (:func:`change_flags`):
   r / median spacing; 1.3 % at the default 2.5) find no neighbour by chance and are flagged.
 - *surface* (the default, :class:`SurfaceTest`): a point the nearest rule flags is looked at again
   against the other scene's local surface: its ``neighbours`` nearest kept points within the search
-  radius (``search_multiplier`` x r). Fewer than 3 there: changed (nothing there). Else a plane is
+  radius (SEARCH_MULTIPLIER x r, siteline.labels.params). Fewer than 3 there: see below. Else a plane is
   fitted to them (least squares), and the point is unchanged when its distance along the plane's
   normal is within the level of detection, ``lod_sigmas`` x the neighbours' RMS residual to their
   plane (their roughness) and never under ``lod_floor_m`` (range noise and registration error), as
   M3C2 judges a distance against roughness; its class is then compared with its nearest neighbour's
-  as before. A point with nothing of the other scene around it is changed only when the other
-  scene saw through where it is: it holds points below it within the search radius in plan (the
-  ground under a jib that turned away). When the other scene's points there all lie above it, that
-  scene could not see the place (the ground in a jib's scan shadow) and the point is unchanged: the
-  change, if any, is the other scene's to show. What it cannot see: a surface that moved along itself, or by less than the level of
-  detection; a change within r of an unchanged surface of the same class.
+  as before. A point with nothing of the other scene around it is changed when the other scene
+  saw through where it is: its lowest point in the point's cell of a plan grid of the search radius
+  lies below it (the ground under a jib that turned away). When all of them lie above it, that
+  scene could not see the place from above (the ground in a jib's scan shadow) and the point is
+  unchanged: the change, if any, is the other scene's to show. What it cannot see: a surface that
+  moved along itself or by less than the level of detection; a change within r of an unchanged
+  surface of the same class; and it takes for change a wall or mast face one scan saw and the
+  other's scan shadow hid (the other scene's ground below it shows through in plan).
 """
 
 from __future__ import annotations
@@ -100,24 +102,32 @@ def plane_distances(
     return dist, lod, first
 
 
-# points of the other scene looked at in plan around a point with nothing around it in 3D
-COLUMN_POINTS = 24
-
-
 def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -> np.ndarray:
-    """(M,) bool: the query points the other scene (``b_xyz``) could not have seen from above: its
-    points within ``test.search_m`` in plan (up to COLUMN_POINTS nearest) all lie more than the
-    level-of-detection floor above the point, and there is at least one."""
-    from pykdtree.kdtree import KDTree
+    """(M,) bool: the query points the other scene (``b_xyz``) could not have seen from above: in
+    the query's cell of a plan grid of ``test.search_m`` the other scene has points, and its lowest
+    lies more than the level-of-detection floor above the query point."""
+    cell = test.search_m
+    b_ij = np.floor(np.asarray(b_xyz, np.float64)[:, :2] / cell).astype(np.int64)
+    q_ij = np.floor(np.asarray(q_xyz, np.float64)[:, :2] / cell).astype(np.int64)
+    lo = np.minimum(b_ij.min(axis=0), q_ij.min(axis=0))
+    span = np.maximum(b_ij.max(axis=0), q_ij.max(axis=0)) - lo + 1
+    b_key = (b_ij[:, 0] - lo[0]) * span[1] + (b_ij[:, 1] - lo[1])
+    q_key = (q_ij[:, 0] - lo[0]) * span[1] + (q_ij[:, 1] - lo[1])
+    order = np.argsort(b_key, kind="stable")
+    keys, starts = np.unique(b_key[order], return_index=True)
+    lowest = np.minimum.reduceat(np.asarray(b_xyz, np.float64)[order, 2], starts)
+    at = np.clip(np.searchsorted(keys, q_key), 0, len(keys) - 1)
+    has = keys[at] == q_key
+    return has & (lowest[at] > np.asarray(q_xyz, np.float64)[:, 2] + test.lod_floor_m)
 
-    k = max(1, min(COLUMN_POINTS, len(b_xyz)))
-    tree = KDTree(np.ascontiguousarray(np.asarray(b_xyz)[:, :2], dtype=np.float32))
-    d, i = tree.query(np.ascontiguousarray(np.asarray(q_xyz)[:, :2], dtype=np.float32), k=k, distance_upper_bound=test.search_m)
-    d, i = np.asarray(d).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
-    valid = d <= test.search_m
-    z = np.asarray(b_xyz, np.float64)[np.where(valid, i, 0), 2]
-    above = z > np.asarray(q_xyz, np.float64)[:, 2:3] + test.lod_floor_m
-    return valid.any(axis=1) & (above | ~valid).all(axis=1)
+
+@dataclass(frozen=True)
+class Matching:
+    """How a point looks for its match in the other scene: the nearest-neighbour ``backend``
+    (:data:`NN_BACKENDS`) and, for the surface rule, the :class:`SurfaceTest` (None: the nearest rule)."""
+
+    backend: str = "pykdtree"
+    surface: SurfaceTest | None = None
 
 
 def change_flags(
@@ -127,16 +137,15 @@ def change_flags(
     b_cls: np.ndarray,
     radius_m: float,
     ignored: np.ndarray,
-    backend: str = "pykdtree",
+    matching: Matching = Matching(),
     geometric: np.ndarray | None = None,
-    surface: SurfaceTest | None = None,
 ) -> np.ndarray:
     """Change of each point of A against B, (N,) uint8: 0 unchanged, 1 changed, 255 ignored.
 
     a_xyz (N, 3), b_xyz (M, 3): site-local metres (float32 or float64). a_cls, b_cls: uint8 site
     classes. ignored: (256,) bool lookup of ignored classes. A point of A is ignored when its class
     is; otherwise changed when B has no point of a non-ignored class within ``radius_m`` (with
-    ``surface``, when it is not on B's local surface either: the module docstring), or when the
+    ``matching.surface``, when it is not on B's local surface either: the module docstring), or when the
     nearest such point has another class, unless either class is compared by geometry only
     (``geometric``: (256,) bool lookup, e.g. "unclassified"; all True: a class-agnostic rule).
     """
@@ -149,8 +158,9 @@ def change_flags(
         out[live] = CHANGED
         return out
     b_kept = b_xyz[b_keep]
-    dist, idx = nearest(b_kept, a_xyz[live], radius_m, backend)
+    dist, idx = nearest(b_kept, a_xyz[live], radius_m, matching.backend)
     found = np.isfinite(dist)
+    surface = matching.surface
     if surface is not None and not found.all():
         again = np.flatnonzero(~found)
         d, lod, first = plane_distances(b_kept, a_xyz[live][again], surface)

@@ -1,7 +1,8 @@
 """Spatial coherence of 3D change: a change is a region, not a point.
 
 Changed points are linked when they fall in the same or touching cells (26-neighbourhood) of a grid
-of ``cell_m`` (the change radius: points of one changed surface lie closer than that), and a region
+of ``cell_m`` (twice the change radius in the label stage: points of one changed surface lie closer
+than that, even on a thin, sparsely scanned one), and a region
 of fewer than ``min_points`` points is taken back to unchanged: what the rules flag by chance on an
 unchanged surface is a scatter of single points, a real change a connected surface. The smallest
 change kept is therefore ``min_points`` points (``min_points`` / density square metres of surface).

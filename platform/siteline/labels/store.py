@@ -13,7 +13,15 @@ import numpy as np
 import zarr
 
 from siteline.errors import LabelError
-from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, SurfaceTest, change_flags, median_spacing
+from siteline.labels.change import (
+    CHANGED,
+    IGNORED,
+    UNCHANGED,
+    Matching,
+    SurfaceTest,
+    change_flags,
+    median_spacing,
+)
 from siteline.labels.regions import small_regions
 from siteline.records.pairs import ChangeLabels, RadiusChoice
 from siteline.records.tiling import TileSpec
@@ -21,6 +29,10 @@ from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
 
 SIDES = ("t1", "t2")
+# changed points are linked into regions through touching cells of this many change radii: at 10
+# points/m2 cells of 2 r keep 99.8 % of the truly changed points of the synthetic site (thin formwork
+# included) where cells of r keep 97 %, and still take back 43 % of the false ones
+REGION_CELL_RADII = 2.0
 
 
 def auto_radius(
@@ -134,7 +146,7 @@ def write_labels(
     (at most three columns per scene). ``ignored``, ``geometric`` and ``surface``: the rule
     (siteline.labels.change.change_flags); then changed regions of fewer than ``min_region_points``
     points are taken back to unchanged, each scene's changed points linked across its whole grid
-    (siteline.labels.regions). The flags of both scenes are held (a byte a point) until written."""
+    (siteline.labels.regions, linked through cells of REGION_CELL_RADII x r). The flags of both scenes are held (a byte a point) until written."""
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
@@ -161,11 +173,12 @@ def write_labels(
                     continue
                 their_xyz, their_cls = sides[other[side]][1].halo(ij)
                 flags = change_flags(
-                    mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, geometric=geometric, surface=surface
+                    mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, Matching(surface=surface), geometric
                 )
                 flags_of[side][dec.keys[ij]] = flags
                 changed_xyz[side].append(mine[0][flags == CHANGED])
-        taken_back = {side: _drop_small_regions(flags_of[side], changed_xyz[side], radius_m, min_region_points) for side in sides}
+        cell = REGION_CELL_RADII * radius_m
+        taken_back = {side: _drop_small_regions(flags_of[side], changed_xyz[side], cell, min_region_points) for side in sides}
         groups = {side: root.require_group(side).require_group("tiles") for side in sides}
         counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
         digests: dict[str, dict[str, str]] = {side: {} for side in sides}

@@ -8,6 +8,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
+from siteline.labels.accuracy import accuracy_text
 from siteline.records.registration import Registration
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M
 from siteline.schema import JsonObject
@@ -104,19 +105,34 @@ def statistics(root: Path, items: list[JsonObject]) -> JsonObject:
     }
 
 
-def _radius_lines(pairs: list[JsonObject], ceiling: float) -> list[str]:
-    """One line per pair: its radius, the false change it implies on unchanged surfaces and, when it
-    is above the release's radius ceiling (metres), that it is."""
+def _radius_lines(pairs: list[JsonObject], ceiling: float, params: JsonObject) -> list[str]:
+    """One line per pair: its radius, the false change it implies on unchanged surfaces, what its
+    rule measured against analytic truth (siteline.labels.accuracy) and, when it is above the
+    release's radius ceiling (metres), that it is."""
+    rule = params.get("label_rule", "nearest")
+    regions = int(params.get("min_region_points", 1))
     out = []
     for q in pairs:
         info = (q.get("labels") or {}).get("radius") or {}
         fc = info.get("expected_false_change")
-        if fc:
+        spacing = max((info.get("median_spacing_m") or {}).values(), default=float("nan"))
+        measured = accuracy_text(rule, regions, spacing)
+        if fc and rule == "surface":
+            out.append(
+                f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
+                f"neighbour test flags {fc['per_direction']:.2%} of unchanged surfaces per direction (2^(-k^2)), and "
+                "the surface rule keeps only those off the other scene's local surface by more than its level of "
+                f"detection; changed regions under {regions} points are taken back"
+                + (f"; {measured}" if measured else "")
+                + (f"; ABOVE the radius ceiling of {ceiling:.2f} m" if q["radius_m"] > ceiling else "")
+            )
+        elif fc:
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing: expected false "
                 f"change on unchanged surfaces {fc['per_direction']:.2%} per direction, {fc['union']:.2%} in the "
                 f"mask (2^(-k^2) per direction); the smallest change it resolves is {q['radius_m']:.2f} m (a "
                 "surface that moved less, or a new object nearer than that to an old surface, is unchanged)"
+                + (f"; {measured}" if measured else "")
                 + (f"; ABOVE the radius ceiling of {ceiling:.2f} m" if q["radius_m"] > ceiling else "")
             )
     return out
@@ -303,8 +319,10 @@ def _source_lines(lin: JsonObject) -> list[str]:
         f"share {p.get('min_valid', 0.25)}",
         f"- change radius: {radius}",
         *_radius_lines(
-            lin["pairs"], lin.get("release_params", {}).get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M)
+            lin["pairs"], lin.get("release_params", {}).get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), p
         ),
+        f"- change labels: the {p.get('label_rule', 'nearest')} rule (siteline.labels.change), changed regions under "
+        f"{p.get('min_region_points', 1)} points taken back (siteline.labels.regions)",
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
         f"**{p.get('one_side_hole', 'ignore')}**; change is the union (OR) of the two directions.",
