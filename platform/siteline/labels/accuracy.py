@@ -28,9 +28,9 @@ class Measured:
 # bench/truth.py, 2026-11-28, this 2-core machine (one run each; docs/performance.md)
 MEASURED: tuple[Measured, ...] = (
     Measured("synthetic site", 10, "nearest", 1, 0.931, 0.971, 0.951, 294),
-    Measured("synthetic site", 10, "surface", 8, 0.975, 0.948, 0.961, 20),
+    Measured("synthetic site", 10, "surface", 8, 0.969, 0.964, 0.966, 24),
     Measured("box scene", 40, "nearest", 1, 0.474, 0.926, 0.628, 666),
-    Measured("box scene", 40, "surface", 8, 0.816, 0.896, 0.854, 7),
+    Measured("box scene", 40, "surface", 8, 0.792, 0.911, 0.848, 10),
 )
 
 
