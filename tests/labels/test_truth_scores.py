@@ -1,0 +1,78 @@
+"""The change labels measured the way a user meets them: the analytic box scene through the pipeline
+with the release defaults, its masks scored against the ray-cast truth (bench/truth.py in small)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from siteline import pipeline
+from siteline.catalog import migrate, open_catalog
+from siteline.catalog.engine import make_engine
+from siteline.catalog.pairs import pair_ids_of_scene
+from siteline.catalog.scenes import list_scenes
+from siteline.catalog.sites import add_site, get_site
+from siteline.config import Settings, sqlite_url
+from siteline.labels.accuracy import accuracy_text, density_of_spacing, measured_for
+from siteline.release.datasheet import _radius_lines
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import make_site_spec
+from siteline.synth import SynthConfig, write_site
+from siteline.synth.scoring import score_pair
+
+
+@pytest.mark.slow  # about a minute: a 2-epoch scene ingested and its pair processed twice
+def test_surface_labels_beat_the_nearest_rule_against_analytic_truth(tmp_path: Path) -> None:
+    cfg = SynthConfig(epochs=2, density_pts_m2=20.0, seed=0, snow_epochs=(), projection_error_epochs=(), layout="boxes")
+    site_dir = tmp_path / "site"
+    write_site(site_dir, cfg)
+    settings = Settings(home=tmp_path / "home", database_url=sqlite_url(tmp_path / "home" / "catalog.sqlite"))
+    settings.home.mkdir()
+    engine = make_engine(settings.database_url)
+    migrate.upgrade(engine)
+    engine.dispose()
+    ring = load_fence_geojson(site_dir / "fence.geojson", cfg.origin)
+    cat = open_catalog(settings)
+    try:
+        with cat.transaction() as s:
+            add_site(s, make_site_spec("boxes", cfg.crs, cfg.origin, [*ring, ring[0]]), {"pair": {"views": 6}})
+        for e in json.loads((site_dir / "truth" / "site.json").read_text())["epochs"]:
+            pipeline.ingest(cat, settings, site_dir / e["mission_dir"], "boxes")
+        with cat.transaction() as s:
+            pid = pair_ids_of_scene(s, list_scenes(s, get_site(s, "boxes"))[-1].id)[0]
+        base = pipeline.release_parameters(cat, "boxes").pair
+        assert (base.label_rule, base.min_region_points) == ("surface", 8)
+        scores = {}
+        for name, params in (("default", base), ("nearest", replace(base, label_rule="nearest", min_region_points=1))):
+            out = pipeline.process_pairs(cat, settings, [pid], params)[pid]
+            scores[name] = score_pair(settings.store, out.root, site_dir, (0, 1))
+    finally:
+        cat.dispose()
+    new, old = scores["default"], scores["nearest"]
+    specks = sorted(new.specks)[len(new.specks) // 2], sorted(old.specks)[len(old.specks) // 2]
+    assert specks[0] * 5 < specks[1], specks
+    assert new.precision > old.precision + 0.1, (new.precision, old.precision)
+    assert new.recall > 0.8
+    # every changed object is found, the thin jib and pole included
+    assert set(new.object_recall(200)) >= {"jib#21", "block#50"}
+    assert min(new.object_recall(200).values()) > 0.7, new.object_recall(200)
+
+
+def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
+    assert density_of_spacing(0.1487) == pytest.approx(9.98, abs=0.05)
+    assert measured_for("surface", 8, 0.15).density == 10  # the synthetic site
+    assert measured_for("surface", 8, 0.07).density == 40  # the box scene
+    assert measured_for("surface", 3, 0.15) is None
+    text = accuracy_text("surface", 8, 0.15)
+    assert "precision 0.97" in text and "synthetic site at 10 points/m2" in text
+    pair = {"id": 1, "radius_m": 0.37, "labels": {"radius": {
+        "median_spacing_m": {"t1": 0.15, "t2": 0.148}, "multiplier": 2.5,
+        "expected_false_change": {"multiplier": 2.5, "per_direction": 0.0131, "union": 0.026},
+    }}}  # fmt: skip
+    [line] = _radius_lines([pair], 1.0, {"label_rule": "surface", "min_region_points": 8})
+    assert "surface rule" in line and "regions under 8 points" in line and "measured against analytic truth" in line
+    [old] = _radius_lines([pair], 1.0, {})
+    assert "2^(-k^2) per direction" in old and "nearest" not in old.split(";")[0]
