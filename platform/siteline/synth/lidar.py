@@ -10,10 +10,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import minimum_filter
 
 from siteline.synth import model as m
-from siteline.synth.primitives import SAMPLE, Primitive
+from siteline.synth.primitives import SAMPLE, Primitive, _box_faces
 
 GPS_EPOCH_UNIX_S = 315964800.0  # 1980-01-06T00:00:00Z
 SECONDS_PER_WEEK = 604800.0
@@ -31,11 +30,6 @@ class LidarSpec:
     line_spacing_m: float = 40.0
     speed_m_s: float = 8.0
     chunk_points: int = 500_000
-    occluder_density_pts_m2: float = 20.0
-    occluder_cell_m: float = 0.5
-    oblique_cell_m: float = 0.25
-    visibility_tolerance_m: float = 0.3
-    min_tolerance_m: float = 0.12
     oblique_tilts_deg: tuple[float, ...] = (35.0, 60.0)
 
 
@@ -83,56 +77,77 @@ def directions(tilts_deg: tuple[float, ...]) -> list[np.ndarray]:
     return out
 
 
-class OcclusionBuffers:
-    """Orthographic depth buffers along a few directions, built from a coarse sampling of every
-    surface; a point is visible if it is within tolerance of the nearest surface in its cell along
-    at least one direction. The tolerance shrinks with the tilt (a surface 0.5 m under a slab must
-    stay hidden at grazing angles); oblique buffers use finer cells so walls keep their points. Each cell
-    takes the nearest depth of its 3x3 neighbourhood, so a sampling gap never lets a hidden point through."""
+def _bounds(prim: Primitive) -> np.ndarray:
+    """(8, 3) corners of a box that holds ``prim``'s surface (site-local metres)."""
+    if prim.kind == "terrain":
+        rect, slope, pit, _ = prim.params
+        x0, x1, y0, y1 = rect
+        corners = np.array([[x, y] for x in (x0, x1) for y in (y0, y1)])
+        z = corners @ np.asarray(slope, np.float64)
+        lo, hi = z.min() - (pit[4] if pit is not None else 0.0), z.max()
+        return np.array([[x, y, zz] for x in (x0, x1) for y in (y0, y1) for zz in (lo, hi)])
+    if prim.kind == "quad":
+        o, u, v = (np.asarray(a, np.float64) for a in prim.params)
+        c = np.array([o, o + u, o + v, o + u + v])
+    elif prim.kind == "box":
+        c = np.concatenate([np.array([f[0], f[0] + f[1], f[0] + f[2], f[0] + f[1] + f[2]]) for f in _box_faces(*prim.params)])
+    elif prim.kind in ("cylinder", "cone"):
+        cx, cy, z0, r, h = prim.params
+        c = np.array([[cx + sx * r, cy + sy * r, z] for sx in (-1, 1) for sy in (-1, 1) for z in (z0, z0 + h)])
+    else:  # sphere
+        cx, cy, cz, r = prim.params
+        c = np.array([[cx + sx * r, cy + sy * r, cz + sz * r] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    lo, hi = c.min(axis=0), c.max(axis=0)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
-    def __init__(self, prims: list[Primitive], spec: LidarSpec, seed: int) -> None:
-        self.spec = spec
-        rng = np.random.default_rng(seed)
-        pts = np.concatenate(
-            [
-                SAMPLE[p.kind](int(rng.poisson(spec.occluder_density_pts_m2 * p.area_m2())), rng, *p.params)
-                for p in prims
-            ]
-        )
-        self.buffers = []
-        for k, d in enumerate(directions(spec.oblique_tilts_deg)):
-            cell = spec.occluder_cell_m if k == 0 else spec.oblique_cell_m
-            tol = max(spec.min_tolerance_m, spec.visibility_tolerance_m * float(-d[2]))
-            e1 = np.cross(d, [0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.cross(d, [1.0, 0.0, 0.0])
-            e1 /= np.linalg.norm(e1)
-            e2 = np.cross(d, e1)
-            a, b, depth = pts @ e1, pts @ e2, pts @ d
-            lo = np.array([a.min(), b.min()]) - 2 * cell
-            shape = (int((a.max() - lo[0]) / cell) + 4, int((b.max() - lo[1]) / cell) + 4)
-            buf = np.full(shape, np.inf)
-            ia = ((a - lo[0]) / cell).astype(np.int64)
-            ib = ((b - lo[1]) / cell).astype(np.int64)
-            np.minimum.at(buf, (ia, ib), depth)
-            # a cell may hold a far sample and miss the near surface by chance: compare with the
-            # nearest depth around it (fine cells keep the spread small on walls)
-            buf = minimum_filter(buf, size=3, mode="nearest")
-            self.buffers.append((d, e1, e2, lo, buf, cell, tol))
+
+# a surface met nearer than this along the way to the sensor is the point's own (metres)
+SELF_M = 1e-4
+
+
+class Visibility:
+    """Which sampled points a flight sees: a point is seen along a scan direction when the ray from it
+    towards the sensor meets no surface of the epoch (exact ray casting, siteline.synth.raycast),
+    and seen when it is seen along at least one direction (nadir and four azimuths per oblique
+    tilt). Each surface is tested only against the points in its shadow along the direction (its
+    bounding box projected), so the cost grows with the points, not with points x surfaces."""
+
+    def __init__(self, prims: list[Primitive], spec: LidarSpec) -> None:
+        self.prims = prims
+        self.dirs = directions(spec.oblique_tilts_deg)
+        self.corners = [_bounds(p) for p in prims]
 
     def visible(self, xyz: np.ndarray) -> np.ndarray:
         """(N,) bool: seen along at least one direction."""
         out = np.zeros(len(xyz), bool)
-        for k in range(len(self.buffers)):
-            out |= self._seen(xyz, k)
+        for k in range(len(self.dirs)):
+            left = np.flatnonzero(~out)
+            if not len(left):
+                break
+            out[left[self._seen(xyz[left], k)]] = True
         return out
 
     def visible_from_above(self, xyz: np.ndarray) -> np.ndarray:
         return self._seen(xyz, 0)
 
     def _seen(self, xyz: np.ndarray, k: int) -> np.ndarray:
-        d, e1, e2, lo, buf, cell, tol = self.buffers[k]
-        ia = np.clip(((xyz @ e1 - lo[0]) / cell).astype(np.int64), 0, buf.shape[0] - 1)
-        ib = np.clip(((xyz @ e2 - lo[1]) / cell).astype(np.int64), 0, buf.shape[1] - 1)
-        return xyz @ d <= buf[ia, ib] + tol
+        from siteline.synth.raycast import distances
+
+        d = self.dirs[k]
+        e1 = np.cross(d, [0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.cross(d, [1.0, 0.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(d, e1)
+        a, b, depth = xyz @ e1, xyz @ e2, xyz @ d
+        blocked = np.zeros(len(xyz), bool)
+        for prim, corners in zip(self.prims, self.corners, strict=True):
+            ca, cb, cd = corners @ e1, corners @ e2, corners @ d
+            near = (a >= ca.min()) & (a <= ca.max()) & (b >= cb.min()) & (b <= cb.max()) & (depth > cd.min())
+            idx = np.flatnonzero(near & ~blocked)
+            if not len(idx):
+                continue
+            t = distances(xyz[idx], np.broadcast_to(-d, (len(idx), 3)), prim)
+            blocked[idx[np.isfinite(t) & (t > SELF_M)]] = True
+        return ~blocked
 
 
 def flight_lines_y(spec: LidarSpec) -> np.ndarray:
@@ -196,7 +211,7 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
     next_by_key = {p.key: p for p in next_prims} if next_prims else None
     cache_prev: dict = {}
     cache_next: dict = {}
-    occ = OcclusionBuffers(prims, spec, seed=site.seed * 1000 + e * 7 + 1)
+    occ = Visibility(prims, spec)
     t0 = gps_week_seconds(ep.time.timestamp())
     base_seed = site.seed * 100_003 + e * 1009
     jib_c, jib_d, jib_len = site.jib_ground_footprint(e)
@@ -226,10 +241,10 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
 
 def _finish(
     xyz: np.ndarray, prim: Primitive, rng: np.random.Generator, spec: LidarSpec, t0: float, ep: m.EpochSpec,
-    seen: tuple[OcclusionBuffers, tuple[np.ndarray, np.ndarray, float]] | None, changed: tuple[bool, bool],
+    seen: tuple[Visibility, tuple[np.ndarray, np.ndarray, float]] | None, changed: tuple[bool, bool],
 ) -> EpochChunk:  # fmt: skip
     """A primitive's sampled points as a LiDAR chunk: times, range noise, colour, returns,
-    intensity; ``seen``: the epoch's occlusion buffers and the crane jib's ground footprint (snow on
+    intensity; ``seen``: the epoch's visibility (siteline.synth.lidar.Visibility) and the crane jib's ground footprint (snow on
     what is seen from above, the jib's projection error smeared on the ground; None: neither);
     ``changed``: whether the surface changed since the previous epoch and until the next."""
     n = len(xyz)

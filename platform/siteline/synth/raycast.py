@@ -59,7 +59,7 @@ def _quad(o: np.ndarray, d: np.ndarray, origin: Vec, u: Vec, v: Vec) -> np.ndarr
     n = np.cross(eu, ev)
     denom = d @ n
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = ((p0 - o) @ n) / denom
+        t = (p0 @ n - o @ n) / denom
         hit = o + t[:, None] * d - p0
         # coordinates in the (u, v) basis through its Gram matrix (u, v need not be orthogonal)
         g = np.array([[eu @ eu, eu @ ev], [eu @ ev, ev @ ev]])
@@ -91,19 +91,19 @@ def _nearest_root(a: np.ndarray, b: np.ndarray, c: np.ndarray, keep: Callable[[n
 
 
 def _cylinder(o: np.ndarray, d: np.ndarray, cx: float, cy: float, z0: float, r: float, h: float) -> np.ndarray:
-    ox, oy = o[0] - cx, o[1] - cy
+    ox, oy = o[:, 0] - cx, o[:, 1] - cy
     a = d[:, 0] ** 2 + d[:, 1] ** 2
     b = 2 * (ox * d[:, 0] + oy * d[:, 1])
-    c = np.full(len(d), ox * ox + oy * oy - r * r)
+    c = ox * ox + oy * oy - r * r
 
     def within(t: np.ndarray) -> np.ndarray:
-        z = o[2] + t * d[:, 2]
+        z = o[:, 2] + t * d[:, 2]
         return (z >= z0) & (z <= z0 + h)
 
     side = _nearest_root(a, b, c, within)
     with np.errstate(divide="ignore", invalid="ignore"):
-        tt = (z0 + h - o[2]) / d[:, 2]
-        x, y = o[0] + tt * d[:, 0] - cx, o[1] + tt * d[:, 1] - cy
+        tt = (z0 + h - o[:, 2]) / d[:, 2]
+        x, y = o[:, 0] + tt * d[:, 0] - cx, o[:, 1] + tt * d[:, 1] - cy
     top = np.where(np.isfinite(tt) & (tt > NEAR_M) & (x * x + y * y <= r * r), tt, np.inf)
     return np.minimum(side, top)
 
@@ -111,13 +111,13 @@ def _cylinder(o: np.ndarray, d: np.ndarray, cx: float, cy: float, z0: float, r: 
 def _cone(o: np.ndarray, d: np.ndarray, cx: float, cy: float, z0: float, r: float, h: float) -> np.ndarray:
     # (x - cx)^2 + (y - cy)^2 = k^2 (apex_z - z)^2, k = r / h, z in [z0, z0 + h]
     k2 = (r / h) ** 2
-    ox, oy, oz = o[0] - cx, o[1] - cy, o[2] - (z0 + h)
+    ox, oy, oz = o[:, 0] - cx, o[:, 1] - cy, o[:, 2] - (z0 + h)
     a = d[:, 0] ** 2 + d[:, 1] ** 2 - k2 * d[:, 2] ** 2
     b = 2 * (ox * d[:, 0] + oy * d[:, 1] - k2 * oz * d[:, 2])
-    c = np.full(len(d), ox * ox + oy * oy - k2 * oz * oz)
+    c = ox * ox + oy * oy - k2 * oz * oz
 
     def within(t: np.ndarray) -> np.ndarray:
-        z = o[2] + t * d[:, 2]
+        z = o[:, 2] + t * d[:, 2]
         return (z >= z0) & (z <= z0 + h)
 
     return _nearest_root(a, b, c, within)
@@ -125,8 +125,8 @@ def _cone(o: np.ndarray, d: np.ndarray, cx: float, cy: float, z0: float, r: floa
 
 def _sphere(o: np.ndarray, d: np.ndarray, cx: float, cy: float, cz: float, r: float) -> np.ndarray:
     oc = o - np.array([cx, cy, cz])
-    b = 2 * (d @ oc)
-    c = np.full(len(d), oc @ oc - r * r)
+    b = 2 * np.einsum("ij,ij->i", d, oc)
+    c = np.einsum("ij,ij->i", oc, oc) - r * r
     return _nearest_root(np.ones(len(d)), b, c, lambda t: np.ones(len(t), bool))
 
 
@@ -161,9 +161,9 @@ def _terrain(
     for a, b, c in _terrain_pieces(slope, pit):
         denom = d[:, 2] - a * d[:, 0] - b * d[:, 1]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = (a * o[0] + b * o[1] + c - o[2]) / denom
-            x, y = o[0] + t * d[:, 0], o[1] + t * d[:, 1]
-            z = o[2] + t * d[:, 2]
+            t = (a * o[:, 0] + b * o[:, 1] + c - o[:, 2]) / denom
+            x, y = o[:, 0] + t * d[:, 0], o[:, 1] + t * d[:, 1]
+            z = o[:, 2] + t * d[:, 2]
         ok = np.isfinite(t) & (t > NEAR_M) & (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
         if exclude is not None:
             ex0, ex1, ey0, ey1 = exclude
@@ -185,12 +185,19 @@ _CAST: dict[str, Callable[..., np.ndarray]] = {
 }
 
 
-def ray_distances(rays: Rays, prim: Primitive) -> np.ndarray:
-    """(H W,) float64 distance (metres) along each ray to ``prim``'s surface, inf where it misses."""
+def distances(origins: np.ndarray, dirs: np.ndarray, prim: Primitive) -> np.ndarray:
+    """(N,) float64 distance (metres) along each ray (``origins`` and unit ``dirs``, (N, 3) site-local)
+    to ``prim``'s surface, inf where it misses (or meets it nearer than NEAR_M)."""
     cast = _CAST.get(prim.kind)
     if cast is None:
         raise SynthError(f"surface {prim.key!r}: no ray caster for kind {prim.kind!r}.")
-    return cast(rays.origin, rays.dirs, *prim.params)
+    return cast(np.asarray(origins, np.float64), np.asarray(dirs, np.float64), *prim.params)
+
+
+def ray_distances(rays: Rays, prim: Primitive) -> np.ndarray:
+    """(H W,) float64 distance (metres) along each of a camera's rays to ``prim``'s surface, inf
+    where it misses."""
+    return distances(np.broadcast_to(rays.origin, rays.dirs.shape), rays.dirs, prim)
 
 
 @dataclass(frozen=True)
