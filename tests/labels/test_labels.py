@@ -143,6 +143,10 @@ def test_labels_agree_with_synthetic_truth(synth_site, pair) -> None:
         # changes that moved a surface by more than the radius (smaller ones are below the method's
         # resolution: the truth's margin says by how much each changed point moved)
         detectable = live & t_mine & (m_mine > r)
+        # ... and not within r of an unchanged surface of the other scene (a new wall against a kept
+        # column: the rule's stated blind spot, siteline.labels.change)
+        kept = cKDTree(xo[~t_other])
+        detectable &= ~(kept.query(x, distance_upper_bound=r)[0] < np.inf)
         assert detectable.sum() > 100
         assert (flags[detectable] == CHANGED).mean() >= 0.98
 

@@ -36,6 +36,7 @@ from siteline.synth.truth import NpyAppender
 
 RAW_EXTENSIONS = ("LDR", "IMU", "RTK", "CLC", "CLI", "RTS", "RTL", "RTB", "SIG", "LDRT", "RPT", "RPOS")
 LAS_RELPATH = Path("lidars/terra_las/cloud_merged.las")
+LAS_SCALE_M = 0.001
 # photos are rendered from a subsample no denser than this (bounded memory at any LiDAR density)
 PHOTO_DENSITY_PTS_M2 = 40.0
 
@@ -89,7 +90,7 @@ def _write_las(
     origin = np.asarray(cfg.origin)
     x0, _, y0, _ = m.TERRAIN_M
     header = las_header(
-        cfg.crs, origin + np.array([x0, y0, -20.0]), 0.001, 3, "1.2", created=site.epochs[e].time.date(),
+        cfg.crs, origin + np.array([x0, y0, -20.0]), LAS_SCALE_M, 3, "1.2", created=site.epochs[e].time.date(),
         software=("siteline synth", "DJI Terra (simulated by siteline)"),
     )  # fmt: skip
     keep_p = min(1.0, PHOTO_DENSITY_PTS_M2 / cfg.density_pts_m2)
@@ -105,6 +106,10 @@ def _write_las(
         NpyAppender(truth_dir / "margin_next_m.npy", np.float32) as mnext,
     ):
         for chunk in sample_epoch(site, e, spec):
+            # on the LAS's millimetre grid in site-local metres first, so the stored integers are the
+            # same at any origin (adding a large origin and rounding there would move a point lying
+            # within float64's rounding of a half millimetre to one side or the other)
+            chunk.xyz = np.round(chunk.xyz / LAS_SCALE_M) * LAS_SCALE_M
             writer.write(
                 chunk.xyz + origin, rgb=chunk.rgb, classification=chunk.las_class, intensity=chunk.intensity,
                 gps_time=chunk.gps_time, return_number=chunk.return_number,
