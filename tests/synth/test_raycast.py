@@ -169,3 +169,20 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     assert s.fp == 101
     assert s.object_recall()["removed#2"] == pytest.approx(0.5, abs=0.05)
     assert 0 < s.boundary_f < 1
+
+
+def test_a_surface_that_hardly_moved_is_not_changed_where_it_did_not():
+    # a pit deepened from 2 to 4 m: its floor moved 2 m, the rim of its ramps by less than 5 cm
+    rect = (-10.0, 10.0, -10.0, 10.0)
+    before = Primitive("pit", "d2", 2, 2, "terrain", (rect, (0.0, 0.0), (*rect, 2.0), None), (0, 0, 0))
+    after = Primitive("pit", "d4", 2, 2, "terrain", (rect, (0.0, 0.0), (*rect, 4.0), None), (0, 0, 0))
+    rim = ground(100.0, exclude=rect)
+    cam = nadir(30.0, 201)
+    truth = view_truth(cam, [rim, before], [rim, after])
+    hits = cast(cam, [rim, before])
+    x = np.abs(hits.points[..., 0])
+    y = np.abs(hits.points[..., 1])
+    edge = 10.0 - np.maximum(x, y)  # metres inside the pit's edge: the change there is edge x 1 m
+    assert (truth.mask[(hits.which == 1) & (edge > 0.1)] == CHANGED).all()
+    assert (truth.mask[(hits.which == 1) & (edge < 0.04)] == UNCHANGED).all()
+    assert (truth.mask[hits.which == 0] == UNCHANGED).all()

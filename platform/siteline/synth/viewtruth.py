@@ -3,7 +3,9 @@ against it (precision, recall and F1 of changed, boundary F-score, each changed 
 false-change specks).
 
 A pixel is *changed* where the surface its ray meets first in either epoch is absent from the other
-epoch (absent: no surface with the same key and signature, siteline.synth.primitives.Primitive);
+epoch (absent: no surface with the same key and signature, siteline.synth.primitives.Primitive),
+unless the other epoch's version of that surface (same key) crosses the ray within RESOLUTION_M of
+the hit (the rim of a pit that deepened has hardly moved);
 *ignore* where either ray meets a surface of an ignored class or outside the fence, or where a ray
 meets nothing and the other meets a surface that did not change; else *unchanged*. Nothing here
 comes from siteline.render, so what the renderer gets wrong counts against the mask.
@@ -22,8 +24,11 @@ from siteline.codes import CHANGED, IGNORE, UNCHANGED
 from siteline.errors import SynthError
 from siteline.site.fence import inside_fence
 from siteline.synth.primitives import Primitive
-from siteline.synth.raycast import MISS, SurfaceHits, cast
+from siteline.synth.raycast import MISS, SurfaceHits, camera_rays, cast, distances
 
+# a surface whose other version (same key, other signature) crosses the ray this close to the hit
+# (metres along the ray) is not changed there: the labels' level-of-detection floor
+RESOLUTION_M = 0.05
 # a false-change component under this many pixels is a speck
 SPECK_PX = 30
 # the boundary F-score's tolerance (pixels)
@@ -45,10 +50,13 @@ def _object_names(prims: Iterable[Primitive]) -> dict[int, str]:
     return {p.object_id: f"{p.key.split(':')[0]}#{p.object_id}" for p in prims}
 
 
-def _side(hits: SurfaceHits, other: set[tuple[str, str]], ignored: Collection[int], fence: Sequence | None) -> tuple:
+def _side(
+    hits: SurfaceHits, camera: Camera, other: Sequence[Primitive], ignored: Collection[int], fence: Sequence | None
+) -> tuple:
     """Per pixel of one epoch's hits: (hit, changed, not usable, object id)."""
     prims = hits.primitives
-    present = np.array([(p.key, p.signature) in other for p in prims] + [True])  # last slot: a miss
+    keys = {(p.key, p.signature) for p in other}
+    present = np.array([(p.key, p.signature) in keys for p in prims] + [True])  # last slot: a miss
     ign = np.array([p.las_class in ignored for p in prims] + [False])
     obj = np.array([p.object_id for p in prims] + [-1], dtype=np.int64)
     which = np.where(hits.which == MISS, len(prims), hits.which)
@@ -59,7 +67,21 @@ def _side(hits: SurfaceHits, other: set[tuple[str, str]], ignored: Collection[in
         out = np.zeros(hit.shape, bool)
         out[hit] = ~inside_fence(pts[:, :2], fence)
         bad |= out
-    return hit, hit & ~present[which], bad, obj[which]
+    changed = hit & ~present[which]
+    versions = {p.key: p for p in other}
+    if changed.any():
+        rays = camera_rays(camera)
+        flat = changed.ravel()
+        for i, prim in enumerate(prims):
+            moved = versions.get(prim.key)
+            if moved is None or present[i]:
+                continue
+            px = np.flatnonzero(flat & (hits.which.ravel() == i))
+            if len(px):
+                t = distances(np.broadcast_to(rays.origin, (len(px), 3)), rays.dirs[px], moved)
+                flat[px[np.abs(t - hits.distance.ravel()[px]) <= RESOLUTION_M]] = False
+        changed = flat.reshape(changed.shape)
+    return hit, changed, bad, obj[which]
 
 
 def view_truth(
@@ -75,10 +97,8 @@ def view_truth(
     if not first or not second:
         raise SynthError("a view's truth needs the surfaces of both epochs.")
     ha, hb = cast(camera, first), cast(camera, second)
-    keys_a = {(p.key, p.signature) for p in first}
-    keys_b = {(p.key, p.signature) for p in second}
-    hit_a, changed_a, bad_a, obj_a = _side(ha, keys_b, ignored_classes, fence)
-    hit_b, changed_b, bad_b, obj_b = _side(hb, keys_a, ignored_classes, fence)
+    hit_a, changed_a, bad_a, obj_a = _side(ha, camera, second, ignored_classes, fence)
+    hit_b, changed_b, bad_b, obj_b = _side(hb, camera, first, ignored_classes, fence)
     changed = changed_a | changed_b
     ignore = bad_a | bad_b | (~changed & ~(hit_a & hit_b))
     mask = np.where(ignore, IGNORE, np.where(changed, CHANGED, UNCHANGED)).astype(np.uint8)
