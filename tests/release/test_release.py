@@ -238,6 +238,34 @@ def test_query_by_change_ratio_and_dates(built) -> None:
     assert none == []
 
 
+def test_items_say_how_much_of_their_change_shows_and_query_by_it(built) -> None:
+    _, cat, pub = built
+    doc = read_manifest(pub.root)
+    by_id = {it["id"]: it for it in doc["items"]}
+    measured = [it for it in doc["items"] if "change_visible" in it]
+    assert measured and all(0.0 <= it["change_visible"] <= 1.0 for it in measured)
+    assert all(it["change_ratio"] == 0 for it in doc["items"] if "change_visible" not in it)
+    cut = sorted(it["change_visible"] for it in measured)[len(measured) // 2]
+    with cat.transaction() as s:
+        rows = query_items(s, "rel", "1.0.0", min_change_visible=cut)
+    assert rows and all(r["change_visible"] >= cut for r in rows)
+    assert {r["id"] for r in rows} == {i for i, it in by_id.items() if it.get("change_visible", -1) >= cut}
+
+
+def test_change_visibility_counts_changed_pixels_that_look_different() -> None:
+    from siteline.pairs.render import change_visibility
+
+    a = np.full((4, 5, 3), 100, np.uint8)
+    b = a.copy()
+    mask = np.zeros((4, 5), np.uint8)
+    assert change_visibility(a, b, mask) is None
+    mask[:2] = 1  # 10 changed pixels, all looking alike: a slab that gained a floor
+    assert change_visibility(a, b, mask) == 0.0
+    b[0, :, 1] = 200  # 5 of them now differ in one channel
+    b[3, :] = 0  # a difference where nothing changed does not count
+    assert change_visibility(a, b, mask) == 0.5
+
+
 def test_pair_mask_is_symmetric() -> None:
     rng = np.random.default_rng(0)
     hit_a, hit_b = rng.random((20, 30)) < 0.9, rng.random((20, 30)) < 0.9

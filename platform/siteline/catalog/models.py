@@ -256,6 +256,9 @@ class ReleaseItem(Base):
     split: Mapped[str] = mapped_column(sa.String(8))
     coverage: Mapped[float] = mapped_column(Float64)
     change_ratio: Mapped[float] = mapped_column(Float64)
+    # the share of its changed pixels whose colour differs between A and B; None: nothing changed, or
+    # built before it was measured (siteline.pairs.render.change_visibility)
+    change_visible: Mapped[float | None] = mapped_column(Float64, nullable=True)
     files: Mapped[dict[str, str]] = mapped_column(sa.JSON, default=dict)
 
 

@@ -118,7 +118,7 @@ def record_draft(session: Session, draft: DraftRelease, folders: tuple[str, ...]
         session.add(
             ReleaseItem(
                 release_id=rel.id, item_id=it.id, pair_id=it.pair, view_id=view_ids[it.pair].get(it.view),
-                split=it.split, coverage=it.coverage, change_ratio=it.change_ratio,
+                split=it.split, coverage=it.coverage, change_ratio=it.change_ratio, change_visible=it.change_visible,
                 files={sub: f"{it.split}/{sub}/{it.id}.png" for sub in folders},
             )
         )  # fmt: skip
@@ -185,9 +185,11 @@ def query_items(
     split: str | None = None,
     since: datetime | None = None,
     until: datetime | None = None,
+    min_change_visible: float | None = None,
 ) -> list[dict]:
-    """Items of a release with a change ratio above a threshold, of a split, or whose pair's scenes
-    were captured in [since, until]."""
+    """Items of a release with a change ratio above a threshold, of a split, whose pair's scenes
+    were captured in [since, until], or whose changed pixels show their change at least
+    ``min_change_visible`` (items with nothing changed, or not measured, are left out then)."""
     rel = get_release(session, name, version)
     t1 = sa.orm.aliased(Scene)
     t2 = sa.orm.aliased(Scene)
@@ -201,6 +203,8 @@ def query_items(
     )
     if min_change_ratio is not None:
         q = q.where(ReleaseItem.change_ratio > min_change_ratio)
+    if min_change_visible is not None:
+        q = q.where(ReleaseItem.change_visible >= min_change_visible)
     if split is not None:
         q = q.where(ReleaseItem.split == split)
     if since is not None:
@@ -213,6 +217,7 @@ def query_items(
             "split": it.split,
             "pair": it.pair_id,
             "change_ratio": it.change_ratio,
+            "change_visible": it.change_visible,
             "coverage": it.coverage,
             "t1_time": a,
             "t2_time": b,

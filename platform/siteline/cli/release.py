@@ -330,6 +330,11 @@ def query(
     until: datetime | None = typer.Option(
         None, "--until", help="Pairs whose t2 was captured on or before (ISO date)."
     ),
+    min_change_visible: float | None = typer.Option(
+        None, "--min-change-visible",
+        help="Only views whose changed pixels show their change at least this much (the share whose colour "
+        "differs between A and B); views with nothing changed are left out.",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Query a release's views from the catalog."""
@@ -338,14 +343,18 @@ def query(
     since = since.replace(tzinfo=since.tzinfo or UTC) if since else None
     until = until.replace(tzinfo=until.tzinfo or UTC) if until else None
     with catalog() as cat, cat.transaction() as s:
-        rows = query_items(s, name, version, min_change_ratio, split, since, until)
+        rows = query_items(s, name, version, min_change_ratio, split, since, until, min_change_visible)
     emit(
         as_json,
         rows,
         lambda: print_table(
             f"{name} {version}: {len(rows)} views",
-            ["id", "split", "pair", "change ratio"],
-            [[r["id"], r["split"], r["pair"], f"{r['change_ratio']:.3f}"] for r in rows],
+            ["id", "split", "pair", "change ratio", "change visible"],
+            [
+                [r["id"], r["split"], r["pair"], f"{r['change_ratio']:.3f}",
+                 "-" if r["change_visible"] is None else f"{r['change_visible']:.2f}"]
+                for r in rows
+            ],  # fmt: skip
         ),
     )
 

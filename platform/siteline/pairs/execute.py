@@ -152,7 +152,7 @@ def _render_queue(
             (work / sub / tmp).write_bytes(png_bytes(image))
         kept.append((v, RenderedView(
             -1, v.parent, v.strategy, v.params, v.coverage, v.camera, tmp, r.coverage_a, r.coverage_b, r.valid,
-            r.change_ratio, r.points_read, r.ignore, r.filled, v.probe_valid,
+            r.change_ratio, r.points_read, r.ignore, r.filled, v.probe_valid, r.change_visible,
         )))  # fmt: skip
     if not kept:
         raise PairError(

@@ -40,7 +40,7 @@ class PairRender:
     is ignored). coverage_*: fractions of pixels hit (drawn or filled); valid: fraction not ignored;
     change_ratio: changed / valid; ignore: the share of the view's pixels ignored for each of
     :data:`siteline.codes.IGNORE_CAUSES`; filled: the share of pixels whose point came from the gap fill in either
-    scene."""
+    scene; change_visible: :func:`change_visibility` (None: nothing changed)."""
 
     a: np.ndarray
     b: np.ndarray
@@ -52,6 +52,24 @@ class PairRender:
     points_read: int
     ignore: dict[str, float] = field(default_factory=dict)
     filled: float = 0.0
+    change_visible: float | None = None
+
+
+# a changed pixel shows its change when A and B differ there by more than this (of 255) in a channel
+VISIBLE_DIFFERENCE = 24
+
+
+def change_visibility(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float | None:
+    """The share of ``mask``'s changed pixels where the images ``a`` and ``b`` ((H, W, 3) uint8) differ
+    by more than VISIBLE_DIFFERENCE in some channel: how much of the change a person (or a model) can
+    see in the pair; None when nothing changed. A slab that gained a floor, seen close, is all changed
+    and shows nothing: near 0."""
+    changed = mask == MASK_CHANGED
+    n = int(changed.sum())
+    if not n:
+        return None
+    diff = np.abs(a[changed].astype(np.int16) - b[changed].astype(np.int16)).max(axis=1)
+    return float((diff > VISIBLE_DIFFERENCE).sum() / n)
 
 
 def pair_mask(
@@ -189,4 +207,5 @@ def render_pair_view(
         read,
         ignore_causes(ra, rb, mask, outside[0] | outside[1]),
         float(filled.mean()) if filled is not None and filled.size else 0.0,
+        change_visibility(ra.rgb, rb.rgb, mask),
     )

@@ -22,7 +22,7 @@ from siteline.stores import atomic_file
 
 COLUMNS = (
     "id", "split", "pair", "view", "strategy", "coverage", "valid", "change_ratio", "filled", "size", "padded",
-    "ignore", "camera",
+    "ignore", "camera", "change_visible",
 )  # fmt: skip
 
 
@@ -58,6 +58,7 @@ def browser_data(doc: JsonObject, images: str, viewer: str | None) -> JsonObject
             round(it["valid"], 5), round(it["change_ratio"], 5), round(it.get("filled", 0.0), 5),
             it["size_px"], it.get("padded_px", it["size_px"]),
             {k: round(v, 5) for k, v in it.get("ignore", {}).items()}, camera_figures(cam) if cam else None,
+            round(it["change_visible"], 5) if it.get("change_visible") is not None else None,
         ])  # fmt: skip
     return {
         "name": doc["name"], "version": doc["version"], "images": images.rstrip("/"), "viewer": viewer,

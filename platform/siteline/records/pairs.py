@@ -67,7 +67,9 @@ class RenderedView:
     coverage of each scene, valid fraction (neither ignored nor a hole), changed / valid, points read
     from both scenes, the share of pixels ignored for each cause (siteline.codes.IGNORE_CAUSES;
     empty for outputs made before causes were recorded), the share of pixels whose point came from
-    the gap fill, and the probe's valid share (an upper bound the view was chosen by)."""
+    the gap fill, and the probe's valid share (an upper bound the view was chosen by), and the share of its changed pixels
+whose colour differs between A and B (siteline.pairs.render.change_visibility; None: nothing
+changed, or made before it was measured)."""
 
     index: int
     parent: str
@@ -84,6 +86,7 @@ class RenderedView:
     ignore: dict[str, float] = field(default_factory=dict)
     filled: float = 0.0
     probe_valid: float | None = None
+    change_visible: float | None = None
 
     def to_dict(self) -> JsonObject:
         return {f.name: getattr(self, f.name) for f in fields(self)} | {

@@ -18,7 +18,9 @@ class ReleaseItem:
     cause (siteline.codes.IGNORE_CAUSES; empty for outputs made before causes were
     recorded) and the share whose point came from the gap fill, and the synthetic camera that saw it
     (``schema/camera.schema.json``: site-local frame, metres; its size is ``size_px``). Shares are of the
-    rendered image: ``valid`` and the causes add up to 1; the padding is ``padded_px`` less ``size_px``."""
+    rendered image: ``valid`` and the causes add up to 1; the padding is ``padded_px`` less ``size_px``.
+    change_visible: the share of its changed pixels whose colour differs between A and B (None:
+    nothing changed, or not measured; no key then)."""
 
     id: str
     split: Split
@@ -33,6 +35,7 @@ class ReleaseItem:
     ignore: Mapping[str, float] = field(default_factory=dict)
     filled: float = 0.0
     camera: Mapping[str, Any] | None = None
+    change_visible: float | None = None
 
     def to_dict(self) -> JsonObject:
         """The manifest's item (no ``camera`` key where none is known)."""
@@ -42,8 +45,9 @@ class ReleaseItem:
             "ignore": dict(self.ignore),
             "camera": dict(self.camera) if self.camera is not None else None,
         }
-        if doc["camera"] is None:
-            del doc["camera"]
+        for key in ("camera", "change_visible"):
+            if doc[key] is None:
+                del doc[key]
         return doc
 
 

@@ -90,7 +90,7 @@ def _write_items(
                 ReleaseItem(
                     item_id, split, pid, v.index, v.strategy, min(v.coverage_a, v.coverage_b),  # type: ignore[arg-type]
                     v.change_ratio, v.valid, (int(w), int(h)), (int(pw), int(ph)), dict(v.ignore), v.filled,
-                    v.camera.to_dict(),
+                    v.camera.to_dict(), v.change_visible,
                 )
             )  # fmt: skip
             progress("release images", 1, total)
