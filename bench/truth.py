@@ -38,12 +38,13 @@ SITE = "truth"
 def _home(out: Path, cfg: SynthConfig, site_dir: Path, views: int) -> Settings:
     home = out / "home"
     settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
-    if (home / "catalog.sqlite").exists():
-        return settings
-    home.mkdir(parents=True)
+    made = (home / "catalog.sqlite").exists()
+    home.mkdir(parents=True, exist_ok=True)
     engine = make_engine(settings.database_url)
     migrate.upgrade(engine)
     engine.dispose()
+    if made:
+        return settings
     ring = load_fence_geojson(site_dir / "fence.geojson", cfg.origin)
     cat = open_catalog(settings)
     with cat.transaction() as s:
@@ -124,7 +125,8 @@ def main() -> None:
         print(
             f"{name:>12}: P {row['precision']:.3f} R {row['recall']:.3f} F1 {row['f1']:.3f} "
             f"boundary F {row['boundary_f']:.3f} specks/view median {row['specks_median']:.0f} "
-            f"(max {row['specks_max']}), labels {row['label_seconds']:.1f} s, pair {seconds:.0f} s; {objects}"
+            f"(max {row['specks_max']}), scored {row['scored_share']:.1%} of pixels, labels {row['label_seconds']:.1f} s, "
+            f"pair {seconds:.0f} s; {objects}"
         )
     cat.dispose()
     (out / "scores.json").write_text(json.dumps(rows, indent=1) + "\n")
