@@ -69,9 +69,11 @@ def main() -> None:
         )  # fmt: skip
         d, unc = m3c2.run()
         lod = unc["lodetection"]
-        # no correspondence along the normal (NaN): nothing of t2 there, changed as the nearest rule says
-        changed = np.where(np.isfinite(d), np.abs(d) > np.maximum(lod, 0.05), True)
-        rows.append(_score(f"py4dgeo M3C2 (cylinder {cyl:.2f} m)", changed, truth, time.perf_counter() - t))
+        seconds = time.perf_counter() - t
+        moved = np.isfinite(d) & (np.abs(d) > np.maximum(lod, 0.05))
+        # no correspondence along the normal (NaN): nothing of t2 there (changed), or unknown (not)
+        rows.append(_score(f"M3C2 cyl {cyl:.2f} m, NaN changed", moved | ~np.isfinite(d), truth, seconds))
+        rows.append(_score(f"M3C2 cyl {cyl:.2f} m, NaN unchanged", moved, truth, seconds))
     (args.out / "m3c2.json").write_text(json.dumps(rows, indent=1) + "\n")
 
 

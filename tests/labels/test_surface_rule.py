@@ -110,3 +110,20 @@ def test_label_params_refuse_unknown_rules_and_regions():
         LabelParams(rule="m3c2")
     with pytest.raises(Exception, match="min_region_points"):
         LabelParams(min_region_points=0)
+
+
+def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
+    from siteline.errors import PairError
+    from siteline.pairs.params import PairParams
+
+    base = PairParams()
+    assert (base.label_rule, base.min_region_points, base.splat_factor) == ("surface", 8, 2.0)
+    with pytest.raises(PairError, match="label rule 'm3c2'"):
+        PairParams.from_dict({"label_rule": "m3c2"})
+    with pytest.raises(PairError, match="splat_factor"):
+        PairParams(splat_factor=0.1)
+    # the label knobs name other outputs; the splat factor at its default keeps the key of before
+    assert PairParams(label_rule="nearest").digest() != base.digest()
+    assert PairParams(splat_factor=1.5).digest() != base.digest()
+    assert PairParams(splat_factor=1.5).render_settings().splat_factor == 1.5
+    assert PairParams(splat_factor=1.5).view_params_spec().probe_settings().splat_factor == 1.5

@@ -38,6 +38,9 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "splat": (str | None, typer.Option(None, "--splat", help="How big a point is drawn: world (its spacing seen from the camera, the default) or fixed (--point-size).")),
     "splat_max": (int | None, typer.Option(None, "--splat-max", help="Largest world splat, pixels across (default 31).")),
     "fill": (int | None, typer.Option(None, "--fill", help="Fill gaps from the surface around them within this many pixels (default 2; 0: none).")),
+    "splat_factor": (float | None, typer.Option(None, "--splat-factor", help="World splat diameter in point spacings (default 2): smaller draws edges nearer to where surfaces end, with more holes (docs/performance.md).")),
+    "label_rule": (str | None, typer.Option(None, "--label-rule", help="3D change rule: surface (the default: a flagged point is checked against the other scene's local surface) or nearest (nearest neighbour alone).")),
+    "min_region_points": (int | None, typer.Option(None, "--min-region", help="Changed regions of fewer points are taken back to unchanged (default 8; 1 keeps every point).")),
     "one_side_hole": (str | None, typer.Option(None, "--one-side-hole", help="Changed on one side, a hole on the other: ignore or changed.")),
     "all_points": (bool | None, typer.Option(None, "--all-points/--lod", help="Render every point (no level of detail; slower).")),
     "lod_factor": (float | None, typer.Option(None, "--lod-factor", help="Level of detail read per view (1 = half a drawn point).")),
@@ -61,7 +64,10 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
     if values.get("radius") is not None:
         radius = _number(values["radius"], "--radius", float)
         pair["radius_m"] = None if radius == AUTO else radius
-    for name in ("seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule", "splat"):
+    for name in (
+        "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule", "splat",
+        "splat_factor", "label_rule", "min_region_points",
+    ):  # fmt: skip
         if values.get(name) is not None:
             pair[name] = values[name]
     for name, knob in (("splat_max", "splat_max_px"), ("fill", "fill_px")):

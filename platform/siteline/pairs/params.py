@@ -15,14 +15,16 @@ from siteline.labels.rule import CHANGE_RULES
 from siteline.records.enums import HOLE_RULES, HoleRule
 from siteline.records.pairs import COLOUR_CHOICES
 from siteline.records.specs import parse_spec
-from siteline.render.settings import RenderSettings
+from siteline.render.settings import WORLD_SPLAT_FACTOR, RenderSettings
 from siteline.schema import JsonObject
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 
 # changed regions of fewer points are taken back to unchanged (siteline.labels.regions)
 MIN_REGION_POINTS = 8
 # knobs view generation shares with the renders, set once on the pair parameters
-_SHARED_VIEW_KNOBS = ("scale", "views", "seed", "min_coverage", "min_valid", "point_size_px", "splat", "splat_max_px")
+_SHARED_VIEW_KNOBS = (
+    "scale", "views", "seed", "min_coverage", "min_valid", "point_size_px", "splat", "splat_max_px", "splat_factor",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -75,11 +77,12 @@ class PairParams:
     fill_px: int = 2
     label_rule: str = "surface"
     min_region_points: int = MIN_REGION_POINTS
+    splat_factor: float = WORLD_SPLAT_FACTOR
 
     # what each knob added after the first release meant before it existed (a record without it)
     BEFORE: ClassVar[Mapping[str, object]] = {
         "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
-        "min_region_points": 1,
+        "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR,
     }  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -114,6 +117,7 @@ class PairParams:
             splat=self.splat,
             splat_max_px=self.splat_max_px,
             fill_px=self.fill_px,
+            splat_factor=self.splat_factor,
         )
 
     def view_params_spec(self) -> ViewParams:
@@ -127,6 +131,7 @@ class PairParams:
             "point_size_px": self.point_size_px,
             "splat": self.splat,
             "splat_max_px": self.splat_max_px,
+            "splat_factor": self.splat_factor,
         }
         return ViewParams.from_dict({**base, **self.view_params})
 
@@ -148,4 +153,6 @@ class PairParams:
         for knob in ("colour", "change_rule"):  # auto: resolved per pair, outputs made before keep their key
             if doc[knob] == "auto":
                 del doc[knob]
+        if doc["splat_factor"] == WORLD_SPLAT_FACTOR:  # the renders of before: their key is kept
+            del doc["splat_factor"]
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]

@@ -243,8 +243,9 @@ def _splat_text(p: JsonObject) -> str:
         text = f"splats: fixed, every point a {p['point_size_px']} px disk"
     else:
         text = (
-            f"splats: sized by the world, a point's disk spans its spacing seen from the camera (at least "
-            f"{p['point_size_px']} px, at most {p.get('splat_max_px', 31)} px)"
+            f"splats: sized by the world, a point's disk spans {p.get('splat_factor', 2.0):g} x its spacing seen from "
+            f"the camera (at least {p['point_size_px']} px, at most {p.get('splat_max_px', 31)} px; an object's edge "
+            "is drawn up to half a disk beyond where its surface ends)"
         )
     fill = p.get("fill_px", 0)
     return text + (

@@ -213,14 +213,12 @@ def disk_area_px(point_size_px: int) -> int:
 
 def drawn_diameter_px(spacing_px: float, pair: PairParams, point_size_px: int | None = None) -> int:
     """The disk (pixels across) a point at ``spacing_px`` from its neighbours is drawn as: the point
-    size for fixed splats; for world splats its spacing times WORLD_SPLAT_FACTOR, within the point
-    size and ``splat_max_px`` (siteline.render.splats)."""
-    from siteline.render.settings import WORLD_SPLAT_FACTOR
-
+    size for fixed splats; for world splats its spacing times the pair's ``splat_factor``, within the
+    point size and ``splat_max_px`` (siteline.render.splats)."""
     size = pair.point_size_px if point_size_px is None else point_size_px
     if pair.splat != "world":
         return size
-    return int(min(pair.splat_max_px, max(size, math.ceil(WORLD_SPLAT_FACTOR * spacing_px))))
+    return int(min(pair.splat_max_px, max(size, math.ceil(pair.splat_factor * spacing_px))))
 
 
 def expected_coverage(spacing_px: float, diameter_px: int) -> float:

@@ -29,6 +29,9 @@ class RenderSettings:
     precision: dtype of the projection arithmetic; float32 is faster, float64 agrees with pycolmap to
     1e-9 px. Coordinates are always site-local.
     chunk_points: points projected per batch; bounds temporary memory (~60 bytes per point).
+    splat_factor: a world splat's diameter in point spacings (WORLD_SPLAT_FACTOR by default): wider
+    closes more gaps, and draws an object's edge that much beyond where its surface ends
+    (docs/performance.md measures both against analytic truth).
     """
 
     scale: float = 0.125
@@ -39,6 +42,7 @@ class RenderSettings:
     splat: str = "fixed"
     splat_max_px: int = 31
     fill_px: int = 0
+    splat_factor: float = WORLD_SPLAT_FACTOR
 
     def __post_init__(self) -> None:
         if not (isinstance(self.scale, int | float) and math.isfinite(self.scale) and 0 < self.scale <= 4):
@@ -66,6 +70,9 @@ class RenderSettings:
         f = self.fill_px
         if not isinstance(f, int) or isinstance(f, bool) or not 0 <= f <= MAX_FILL_PX:
             raise RenderError(f"fill_px {f!r} must be an integer from 0 to {MAX_FILL_PX}.")
+        k = self.splat_factor
+        if not isinstance(k, int | float) or isinstance(k, bool) or not (math.isfinite(k) and 0.5 <= k <= 4):
+            raise RenderError(f"splat_factor {k!r} must be a number from 0.5 to 4 (point spacings per world splat).")
 
     def to_dict(self) -> JsonObject:
         return asdict(self)

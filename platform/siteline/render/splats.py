@@ -3,7 +3,7 @@ world seen from the camera (DESIGN.md §6).
 
 A disk of diameter d pixels centred on the pixel a point falls in covers the pixels whose centres lie
 within d / 2 of that pixel's centre: 1 is the point's own pixel, 2 a cross of 5, 3 the 3 x 3 block.
-World splats take ``d = WORLD_SPLAT_FACTOR x spacing_m x f / depth`` rounded up, clamped to the point
+World splats take ``d = splat_factor x spacing_m x f / depth`` rounded up (siteline.render.settings), clamped to the point
 size and ``splat_max_px``: near points of a sparse cloud get wide disks, far or dense ones a pixel.
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from siteline.errors import RenderError
-from siteline.render.settings import WORLD_SPLAT_FACTOR, RenderSettings
+from siteline.render.settings import RenderSettings
 
 
 @functools.lru_cache(maxsize=128)
@@ -79,13 +79,13 @@ def diameters_px(
     spacing_m: torch.Tensor | None, z: torch.Tensor, focal_px: float, settings: RenderSettings
 ) -> torch.Tensor:
     """(M,) int64 splat diameter of each point in pixels: the point size for fixed splats; for world
-    splats ``WORLD_SPLAT_FACTOR x spacing_m x focal_px / z`` rounded up, at least the point size and
+    splats ``settings.splat_factor x spacing_m x focal_px / z`` rounded up, at least the point size and
     at most ``splat_max_px``. spacing_m, z: (M,) metres (points with z <= 0 or no finite value get
     the point size; they are not drawn anyway)."""
     lo, hi = settings.point_size_px, settings.splat_max_px
     if settings.splat == "fixed" or spacing_m is None:
         return torch.full(z.shape, lo, dtype=torch.int64, device=z.device)
-    d = WORLD_SPLAT_FACTOR * focal_px * spacing_m.to(device=z.device, dtype=z.dtype) / z
+    d = settings.splat_factor * focal_px * spacing_m.to(device=z.device, dtype=z.dtype) / z
     d = torch.where(z > 0, torch.nan_to_num(d, nan=0.0, posinf=float(hi)), 0.0)
     return d.clamp_(lo, hi).ceil_().to(torch.int64)
 

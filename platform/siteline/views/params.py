@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass
 
 from siteline.errors import RenderError, ViewsError
 from siteline.records.specs import parse_spec
-from siteline.render.settings import RenderSettings
+from siteline.render.settings import WORLD_SPLAT_FACTOR, RenderSettings
 from siteline.schema import JsonObject
 from siteline.views.strategies import MIRROR_RULES
 
@@ -32,7 +32,7 @@ class ViewParams:
     scale, min_coverage: reject views whose coverage at render scale ``scale`` is below min_coverage.
     min_valid: reject views whose probe shows less than this share of pixels of kept points (a class
     that is not ignored, inside the fence): the pair's valid share can only be lower.
-    point_size_px, splat, splat_max_px: the renders' splats, which the coverage probes draw.
+    point_size_px, splat, splat_max_px, splat_factor: the renders' splats, which the coverage probes draw.
     probe_factor: with world splats, coverage probes render at this fraction of ``scale`` (a
     sixteenth of the pixels at 0.25), with point sizes scaled alike (at least 1 px): a probe then
     costs about a sixteenth of a render, and since each splat spans its spacing whatever the pixel
@@ -60,6 +60,7 @@ class ViewParams:
     splat: str = "fixed"
     splat_max_px: int = 31
     probe_factor: float = 0.25
+    splat_factor: float = WORLD_SPLAT_FACTOR
 
     def __post_init__(self) -> None:
         for name in ("vertical_fractions", "forward_fractions"):
@@ -100,6 +101,7 @@ class ViewParams:
             point_size_px=size,
             splat=self.splat,
             splat_max_px=max(size, math.ceil(self.splat_max_px * factor)),
+            splat_factor=self.splat_factor,
         )
 
     @property
