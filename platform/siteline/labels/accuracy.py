@@ -27,10 +27,12 @@ class Measured:
 
 # bench/truth.py, 2026-11-28, this 2-core machine (one run each; docs/performance.md)
 MEASURED: tuple[Measured, ...] = (
-    Measured("synthetic site", 10, "nearest", 1, 0.931, 0.971, 0.951, 294),
-    Measured("synthetic site", 10, "surface", 8, 0.969, 0.964, 0.966, 24),
-    Measured("box scene", 40, "nearest", 1, 0.474, 0.926, 0.628, 666),
-    Measured("box scene", 40, "surface", 8, 0.792, 0.911, 0.848, 10),
+    Measured("synthetic site", 10, "nearest", 1, 0.926, 0.979, 0.952, 330),
+    Measured("synthetic site", 10, "surface", 8, 0.960, 0.974, 0.967, 28),
+    Measured("synthetic site", 100, "nearest", 1, 0.943, 0.990, 0.966, 590),
+    Measured("synthetic site", 100, "surface", 8, 0.971, 0.988, 0.979, 31),
+    Measured("box scene", 40, "nearest", 1, 0.536, 0.986, 0.694, 696),
+    Measured("box scene", 40, "surface", 8, 0.819, 0.985, 0.894, 4),
 )
 
 
