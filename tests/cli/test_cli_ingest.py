@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from sitehelpers import cli_create_site, run_cli
 
 from siteline.synth import SynthConfig, write_site
@@ -84,3 +85,28 @@ def test_ingest_cli_scene_and_mission_commands(home, capsys, tmp_path) -> None:
     assert code == 2 and "no scene with id 99" in err
     code, _, err = run(capsys, "ingest", str(missions[0]), "--site", "nowhere")
     assert code == 2 and "unknown site 'nowhere'" in err
+
+
+@pytest.mark.slow  # two epochs ingested, a release refused (about 40 s)
+def test_a_release_of_a_scene_without_ground_names_the_scene_and_the_way_forward(home, capsys, tmp_path) -> None:
+    import laspy
+    import numpy as np
+
+    from siteline.synth import LAS_RELPATH
+
+    site = tmp_path / "site"
+    write_site(site, SynthConfig(epochs=2, density_pts_m2=2.0, seed=4))
+    missions = sorted((site / "missions").iterdir())
+    las_path = missions[1] / LAS_RELPATH
+    las = laspy.read(las_path)
+    las.classification = np.zeros(len(las.points), np.uint8)  # a raw scanner export: every point class 0
+    las.write(las_path)
+    assert run_cli(capsys, "init")[0] == 0
+    assert cli_create_site(capsys, site / "fence.geojson")[0] == 0
+    for m, extra in zip(missions, ([], ["--accept-misalignment"]), strict=True):  # ICP needs ground too
+        code, _, err = run_cli(capsys, "ingest", str(m), "--site", "demo", *extra)
+        assert code == 0, err
+    code, out, err = run_cli(capsys, "release", "build", "--site", "demo", "--name", "noground")
+    assert code == 2, (out, err)
+    assert "later scene 2" in err and "0 ground points" in err and "labels import" in err, err
+    assert "need at least 3" not in err

@@ -78,6 +78,13 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuT
     params, taxonomy = plan.params, plan.site.taxonomy
     ground = t2.points(resolution=0.5, attributes=("class",))
     on_ground = ground.attributes["class"] == taxonomy.id_of("ground")
+    if int(on_ground.sum()) < 3:
+        raise PairError(
+            f"pair {plan.pair_id}: views are placed above the ground of the later scene {plan.t2.id}, and it has "
+            f"{int(on_ground.sum())} ground points of {len(on_ground):,} read (its cloud carries no ground class: "
+            "every point class 0 or 1, say). Classify its ground (siteline scene export, then labels import with "
+            "ground marked) or map its source codes to ground in the site taxonomy, then build again."
+        )
     plane = fit_ground_plane(ground.xyz_m[on_ground].astype(np.float32), seed=params.seed)
     names = {c.name for c in taxonomy.classes}
     skip = np.array([taxonomy.id_of(c) for c in ("snow", "noise") if c in names], dtype=np.uint8)
