@@ -115,7 +115,16 @@ class Visibility:
     def __init__(self, prims: list[Primitive], spec: LidarSpec) -> None:
         self.prims = prims
         self.dirs = directions(spec.oblique_tilts_deg)
-        self.corners = [_bounds(p) for p in prims]
+        corners = np.stack([_bounds(p) for p in prims]) if prims else np.zeros((0, 8, 3))
+        # per direction: its plane's axes and each surface's shadow rectangle and nearest depth on it
+        self.frames = []
+        for d in self.dirs:
+            e1 = np.cross(d, [0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.cross(d, [1.0, 0.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(d, e1)
+            ca, cb, cd = corners @ e1, corners @ e2, corners @ d
+            rect = np.stack([ca.min(axis=1), ca.max(axis=1), cb.min(axis=1), cb.max(axis=1), cd.min(axis=1)], axis=1)
+            self.frames.append((d, e1, e2, rect))
 
     def visible(self, xyz: np.ndarray) -> np.ndarray:
         """(N,) bool: seen along at least one direction."""
@@ -133,19 +142,20 @@ class Visibility:
     def _seen(self, xyz: np.ndarray, k: int) -> np.ndarray:
         from siteline.synth.raycast import distances
 
-        d = self.dirs[k]
-        e1 = np.cross(d, [0.0, 1.0, 0.0]) if abs(d[1]) < 0.9 else np.cross(d, [1.0, 0.0, 0.0])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(d, e1)
-        a, b, depth = xyz @ e1, xyz @ e2, xyz @ d
+        d, e1, e2, rect = self.frames[k]
         blocked = np.zeros(len(xyz), bool)
-        for prim, corners in zip(self.prims, self.corners, strict=True):
-            ca, cb, cd = corners @ e1, corners @ e2, corners @ d
-            near = (a >= ca.min()) & (a <= ca.max()) & (b >= cb.min()) & (b <= cb.max()) & (depth > cd.min())
-            idx = np.flatnonzero(near & ~blocked)
+        if not len(xyz):
+            return ~blocked
+        a, b, depth = xyz @ e1, xyz @ e2, xyz @ d
+        # only the surfaces whose shadow rectangle meets these points' and that lie nearer the sensor
+        near = (rect[:, 1] >= a.min()) & (rect[:, 0] <= a.max()) & (rect[:, 3] >= b.min()) & (rect[:, 2] <= b.max())
+        near &= rect[:, 4] < depth.max()
+        for i in np.flatnonzero(near):
+            a0, a1, b0, b1, d0 = rect[i]
+            idx = np.flatnonzero((a >= a0) & (a <= a1) & (b >= b0) & (b <= b1) & (depth > d0) & ~blocked)
             if not len(idx):
                 continue
-            t = distances(xyz[idx], np.broadcast_to(-d, (len(idx), 3)), prim)
+            t = distances(xyz[idx], np.broadcast_to(-d, (len(idx), 3)), self.prims[i])
             blocked[idx[np.isfinite(t) & (t > SELF_M)]] = True
         return ~blocked
 

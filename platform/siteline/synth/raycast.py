@@ -56,16 +56,17 @@ def _quad(o: np.ndarray, d: np.ndarray, origin: Vec, u: Vec, v: Vec) -> np.ndarr
     """Ray parameter of each ray's hit on the parallelogram origin + a u + b v (a, b in [0, 1]), inf
     where it misses."""
     p0, eu, ev = (np.asarray(x, dtype=np.float64) for x in (origin, u, v))
-    n = np.cross(eu, ev)
-    denom = d @ n
+    n = np.array([eu[1] * ev[2] - eu[2] * ev[1], eu[2] * ev[0] - eu[0] * ev[2], eu[0] * ev[1] - eu[1] * ev[0]])
+    # coordinates in the (u, v) basis through the inverse of its Gram matrix (u, v need not be orthogonal)
+    guu, guv, gvv = eu @ eu, eu @ ev, ev @ ev
+    det = guu * gvv - guv * guv
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        t = (p0 @ n - o @ n) / denom
+        t = (p0 @ n - o @ n) / (d @ n)
         hit = o + t[:, None] * d - p0
-        # coordinates in the (u, v) basis through its Gram matrix (u, v need not be orthogonal)
-        g = np.array([[eu @ eu, eu @ ev], [eu @ ev, ev @ ev]])
-        rhs = np.stack([hit @ eu, hit @ ev], axis=1)
-        ab = rhs @ np.linalg.inv(g).T
-    ok = np.isfinite(t) & (t > NEAR_M) & (ab >= 0).all(axis=1) & (ab <= 1).all(axis=1)
+        hu, hv = hit @ eu, hit @ ev
+        a = (gvv * hu - guv * hv) / det
+        b = (guu * hv - guv * hu) / det
+    ok = np.isfinite(t) & (t > NEAR_M) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
     return np.where(ok, t, np.inf)
 
 
