@@ -154,7 +154,8 @@ def _screenshots(svc: Service, run_id: str, why_id: str, tmp_path: Path) -> None
     SITELINE_SCREENSHOTS (docs/images when set so) for the docs."""
     from playwright.sync_api import sync_playwright  # a dev dependency
 
-    out = Path(os.environ.get("SITELINE_SCREENSHOTS", tmp_path / "shots"))
+    # an empty SITELINE_SCREENSHOTS is unset, not the working directory (shots once landed at the root)
+    out = Path(os.environ.get("SITELINE_SCREENSHOTS") or tmp_path / "shots")
     out.mkdir(parents=True, exist_ok=True)
     ui = svc.api.removesuffix("/api")
     with sync_playwright() as p:

@@ -25,9 +25,13 @@ Two rules, one call (:func:`change_flags`):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:
+    from pykdtree.kdtree import KDTree
 
 from siteline.codes import CHANGED, UNCHANGED
 from siteline.codes import IGNORE as IGNORED
@@ -36,23 +40,30 @@ from siteline.errors import LabelError
 NN_BACKENDS = ("pykdtree", "ckdtree")
 
 
+def float32_tree(xyz: np.ndarray) -> KDTree:
+    """A pykdtree k-d tree of (N, 3) site-local points in float32 (built once, queried by
+    :func:`nearest` and :func:`plane_distances` alike)."""
+    from pykdtree.kdtree import KDTree
+
+    return KDTree(np.ascontiguousarray(xyz, dtype=np.float32))
+
+
 def nearest(
-    b_xyz: np.ndarray, a_xyz: np.ndarray, radius_m: float, backend: str = "pykdtree"
+    b_xyz: np.ndarray, a_xyz: np.ndarray, radius_m: float, backend: str = "pykdtree", tree: KDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Distance to and index of each query's nearest point of ``b_xyz`` within ``radius_m`` (inf and
     an out-of-range index beyond it). pykdtree works in float32 site-local coordinates (the faster
-    here, bench/release.py); ckdtree in float64 on every core."""
+    here, bench/release.py; ``tree``: its tree of ``b_xyz`` when already built); ckdtree in float64 on
+    every core."""
     if backend == "pykdtree":
-        from pykdtree.kdtree import KDTree
-
-        tree = KDTree(np.ascontiguousarray(b_xyz, dtype=np.float32))
+        tree = tree if tree is not None else float32_tree(b_xyz)
         d, i = tree.query(np.ascontiguousarray(a_xyz, dtype=np.float32), k=1, distance_upper_bound=radius_m)
         d = np.asarray(d, dtype=np.float64)
         d[d > radius_m] = np.inf
         return d, np.asarray(i, dtype=np.int64)
     if backend == "ckdtree":
-        tree = cKDTree(np.asarray(b_xyz, dtype=np.float64))
-        return tree.query(np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1)
+        exact = cKDTree(np.asarray(b_xyz, dtype=np.float64))
+        return exact.query(np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1)
     raise LabelError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
 
 
@@ -70,16 +81,15 @@ class SurfaceTest:
 
 
 def plane_distances(
-    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest
+    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest, tree: KDTree | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each query point: its distance (metres) along the normal of the plane fitted to its
     ``test.neighbours`` nearest points of ``b_xyz`` within ``test.search_m`` (inf where fewer than 3
     lie there), the level of detection there (metres) and the index of its nearest point (len(b_xyz)
-    where none). Site-local coordinates; the fit is in float64 about the neighbours' mean."""
-    from pykdtree.kdtree import KDTree
-
+    where none). Site-local coordinates; the fit is in float64 about the neighbours' mean. ``tree``:
+    :func:`float32_tree` of ``b_xyz`` when already built."""
     k = max(3, min(test.neighbours, len(b_xyz)))
-    tree = KDTree(np.ascontiguousarray(b_xyz, dtype=np.float32))
+    tree = tree if tree is not None else float32_tree(b_xyz)
     d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=test.search_m)
     d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
     valid = d <= test.search_m
@@ -158,12 +168,13 @@ def change_flags(
         out[live] = CHANGED
         return out
     b_kept = b_xyz[b_keep]
-    dist, idx = nearest(b_kept, a_xyz[live], radius_m, matching.backend)
+    tree = float32_tree(b_kept) if matching.backend == "pykdtree" else None
+    dist, idx = nearest(b_kept, a_xyz[live], radius_m, matching.backend, tree)
     found = np.isfinite(dist)
     surface = matching.surface
     if surface is not None and not found.all():
         again = np.flatnonzero(~found)
-        d, lod, first = plane_distances(b_kept, a_xyz[live][again], surface)
+        d, lod, first = plane_distances(b_kept, a_xyz[live][again], surface, tree)
         on = d <= lod
         found[again[on]] = True
         idx[again[on]] = first[on]
