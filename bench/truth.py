@@ -125,7 +125,7 @@ def main() -> None:
         print(
             f"{name:>12}: P {row['precision']:.3f} R {row['recall']:.3f} F1 {row['f1']:.3f} "
             f"boundary F {row['boundary_f']:.3f} specks/view median {row['specks_median']:.0f} "
-            f"(max {row['specks_max']}), scored {row['scored_share']:.1%} of pixels, labels {row['label_seconds']:.1f} s, "
+            f"(max {row['specks_max']}), rim pieces/view median {row['rims_median']:.0f}, scored {row['scored_share']:.1%} of pixels, labels {row['label_seconds']:.1f} s, "
             f"pair {seconds:.0f} s; {objects}"
         )
     cat.dispose()

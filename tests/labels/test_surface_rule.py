@@ -8,6 +8,7 @@ import pytest
 
 from siteline.labels.change import (
     CHANGED,
+    IGNORED,
     UNCHANGED,
     Matching,
     SurfaceTest,
@@ -81,10 +82,12 @@ def test_a_point_the_other_scan_could_not_see_is_not_change():
     under = np.c_[rng.uniform(5, 6, 200), rng.uniform(5, 6, 200), np.zeros(200)]
     a_beam = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, 10.0)]
     test = SurfaceTest(search_m=0.5)
-    assert hidden_from_other(a_beam, under, test).all()
+    covered, hidden = hidden_from_other(a_beam, under, test)
+    assert covered.all() and hidden.all()
     # the same points with A's ground under them as well: A saw through, they are not hidden
     a_ground = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, -3.0)]
-    assert not hidden_from_other(np.concatenate([a_beam, a_ground]), under, test).any()
+    covered, hidden = hidden_from_other(np.concatenate([a_beam, a_ground]), under, test)
+    assert covered.all() and not hidden.any()
     b_flags = flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, surface=True)
     assert (b_flags == UNCHANGED).all()
     assert (flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, False) == CHANGED).all()
@@ -127,3 +130,43 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     assert PairParams(splat_factor=1.5).digest() != base.digest()
     assert PairParams(splat_factor=1.5).render_settings().splat_factor == 1.5
     assert PairParams(splat_factor=1.5).view_params_spec().probe_settings().splat_factor == 1.5
+    # the edge trim is on by default, a knob of the renders, and names other outputs
+    assert base.trim_edges and base.render_settings().trim_edges
+    assert PairParams(trim_edges=False).digest() != base.digest()
+    assert PairParams.BEFORE["trim_edges"] is False
+    with pytest.raises(PairError, match="trim_edges"):
+        PairParams.from_dict({"trim_edges": "yes"})
+
+
+def test_a_point_where_the_other_scene_has_nothing_at_all_is_ignored():
+    # A scanned 10 m of ground, B only the first 5 m: beyond, nothing says whether it changed
+    rng = np.random.default_rng(4)
+    a = np.c_[rng.uniform(0, 10, 4000), rng.uniform(0, 4, 4000), np.zeros(4000)]
+    b = np.c_[rng.uniform(0, 5, 2000), rng.uniform(0, 4, 2000), np.zeros(2000)]
+    fa = flags(a, np.full(4000, GROUND, np.uint8), b, np.full(2000, GROUND, np.uint8), 0.2, surface=True)
+    beyond = a[:, 0] > 6.5
+    assert (fa[beyond] == IGNORED).all()
+    assert (fa[a[:, 0] < 4.5] == UNCHANGED).all()
+    # the nearest rule alone calls it change
+    assert (flags(a, np.full(4000, GROUND, np.uint8), b, np.full(2000, GROUND, np.uint8), 0.2, False)[beyond] == CHANGED).all()
+
+
+def test_ground_beside_a_new_worker_is_not_changed_by_its_nearest_point():
+    # the same ground in both scenes; in B a worker stands on it: ground points of A whose nearest point
+    # of B is the worker's foot still find B's ground within the radius
+    rng = np.random.default_rng(5)
+    a = plane(rng, 8_000, size=10.0, noise=0.005)
+    b_ground = plane(rng, 8_000, size=10.0, noise=0.005)
+    foot = np.c_[rng.uniform(4.8, 5.2, 300), rng.uniform(4.8, 5.2, 300), rng.uniform(0.0, 1.8, 300)]
+    b = np.concatenate([b_ground, foot])
+    bc = np.r_[np.full(len(b_ground), GROUND, np.uint8), np.full(len(foot), TAX.id_of("worker"), np.uint8)]
+    ac = np.full(len(a), GROUND, np.uint8)
+    near_foot = np.hypot(a[:, 0] - 5.0, a[:, 1] - 5.0) < 0.4
+    assert near_foot.sum() > 20
+    fa = flags(a, ac, b, bc, 0.2, surface=True)
+    assert (fa[near_foot] == UNCHANGED).mean() > 0.99
+    # the nearest rule compares with the nearest point alone and calls some of them changed
+    assert (flags(a, ac, b, bc, 0.2, False)[near_foot] == CHANGED).any()
+    # the worker itself is change: no worker in A
+    fb = flags(b, bc, a, ac, 0.2, surface=True)
+    assert (fb[len(b_ground) :][foot[:, 2] > 0.3] == CHANGED).all()

@@ -160,13 +160,15 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     noisy = truth.mask.copy()
     noisy[5, 5] = CHANGED  # a one-pixel speck
     noisy[100:110, 100:110] = CHANGED  # a 100 px false region: no speck
+    ys, xs = np.nonzero(truth.mask == CHANGED)
+    noisy[ys.max() + 1, xs.min() + 3 : xs.min() + 6] = CHANGED  # an edge drawn one pixel too far: a rim piece
     half = truth.mask == CHANGED
     rows = np.nonzero(half.any(axis=1))[0]
     noisy[rows[: len(rows) // 2]] = np.where(half[rows[: len(rows) // 2]], UNCHANGED, noisy[rows[: len(rows) // 2]])
     s = MaskScore()
     s.add(noisy, truth)
-    assert s.specks == [1]
-    assert s.fp == 101
+    assert s.specks == [1] and s.rims == [1]
+    assert s.fp == 104
     assert s.object_recall()["removed#2"] == pytest.approx(0.5, abs=0.05)
     assert 0 < s.boundary_f < 1
 

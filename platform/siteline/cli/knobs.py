@@ -39,6 +39,7 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "splat_max": (int | None, typer.Option(None, "--splat-max", help="Largest world splat, pixels across (default 31).")),
     "fill": (int | None, typer.Option(None, "--fill", help="Fill gaps from the surface around them within this many pixels (default 2; 0: none).")),
     "splat_factor": (float | None, typer.Option(None, "--splat-factor", help="World splat diameter in point spacings (default 2): smaller draws edges nearer to where surfaces end, with more holes (docs/performance.md).")),
+    "trim_edges": (bool | None, typer.Option(None, "--trim-edges/--no-trim-edges", help="Give the pixels where a world splat reaches past its surface's edge to the surface behind (the default; docs/performance.md).")),
     "label_rule": (str | None, typer.Option(None, "--label-rule", help="3D change rule: surface (the default: a flagged point is checked against the other scene's local surface) or nearest (nearest neighbour alone).")),
     "min_region_points": (int | None, typer.Option(None, "--min-region", help="Changed regions of fewer points are taken back to unchanged (default 8; 1 keeps every point).")),
     "one_side_hole": (str | None, typer.Option(None, "--one-side-hole", help="Changed on one side, a hole on the other: ignore or changed.")),
@@ -66,7 +67,7 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
         pair["radius_m"] = None if radius == AUTO else radius
     for name in (
         "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule", "splat",
-        "splat_factor", "label_rule", "min_region_points",
+        "splat_factor", "trim_edges", "label_rule", "min_region_points",
     ):  # fmt: skip
         if values.get(name) is not None:
             pair[name] = values[name]

@@ -12,11 +12,14 @@ Two rules, one call (:func:`change_flags`):
   normal is within the level of detection, ``lod_sigmas`` x the neighbours' RMS residual to their
   plane (their roughness) and never under ``lod_floor_m`` (range noise and registration error), as
   M3C2 judges a distance against roughness; its class is then compared with its nearest neighbour's
-  as before. A point with nothing of the other scene around it is changed when the other scene
+  as before, except that any of the other scene's points within r with the point's class will do
+  (its nearest may be a worker standing beside it). A point with nothing of the other scene around it is changed when the other scene
   saw through where it is: its lowest point in the point's cell of a plan grid of the search radius
   lies below it (the ground under a jib that turned away). When all of them lie above it, that
   scene could not see the place from above (the ground in a jib's scan shadow) and the point is
-  unchanged: the change, if any, is the other scene's to show. What it cannot see: a surface that
+  unchanged: the change, if any, is the other scene's to show. When the other scene has no point
+  at all in that cell, it never covered the place (beyond its scan, its fence or a hole in it) and
+  the point is ignored: nothing says whether it changed. What it cannot see: a surface that
   moved along itself or by less than the level of detection; a change within r of an unchanged
   surface of the same class; and it takes for change a wall or mast face one scan saw and the
   other's scan shadow hid (the other scene's ground below it shows through in plan).
@@ -112,10 +115,11 @@ def plane_distances(
     return dist, lod, first
 
 
-def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -> np.ndarray:
-    """(M,) bool: the query points the other scene (``b_xyz``) could not have seen from above: in
-    the query's cell of a plan grid of ``test.search_m`` the other scene has points, and its lowest
-    lies more than the level-of-detection floor above the query point."""
+def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -> tuple[np.ndarray, np.ndarray]:
+    """Two (M,) bool arrays about the query points, from the other scene (``b_xyz``) in each query
+    point's cell of a plan grid of ``test.search_m``: ``covered``, it has points there; ``hidden``, it
+    has, and its lowest lies more than the level-of-detection floor above the query point (it could
+    not have seen the point from above)."""
     cell = test.search_m
     b_ij = np.floor(np.asarray(b_xyz, np.float64)[:, :2] / cell).astype(np.int64)
     q_ij = np.floor(np.asarray(q_xyz, np.float64)[:, :2] / cell).astype(np.int64)
@@ -128,7 +132,28 @@ def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -
     lowest = np.minimum.reduceat(np.asarray(b_xyz, np.float64)[order, 2], starts)
     at = np.clip(np.searchsorted(keys, q_key), 0, len(keys) - 1)
     has = keys[at] == q_key
-    return has & (lowest[at] > np.asarray(q_xyz, np.float64)[:, 2] + test.lod_floor_m)
+    return has, has & (lowest[at] > np.asarray(q_xyz, np.float64)[:, 2] + test.lod_floor_m)
+
+
+def class_within(
+    b_xyz: np.ndarray,
+    b_cls: np.ndarray,
+    q_xyz: np.ndarray,
+    q_cls: np.ndarray,
+    radius_m: float,
+    test: SurfaceTest,
+    tree: KDTree | None = None,
+) -> np.ndarray:
+    """(M,) bool: whether any of each query point's ``test.neighbours`` nearest points of ``b_xyz``
+    within ``radius_m`` has the query's class. Site-local metres; ``tree``: :func:`float32_tree` of
+    ``b_xyz`` when already built."""
+    k = max(1, min(test.neighbours, len(b_xyz)))
+    tree = tree if tree is not None else float32_tree(b_xyz)
+    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=radius_m)
+    d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
+    valid = d <= radius_m
+    cls = np.asarray(b_cls)[np.where(valid, i, 0)]
+    return (valid & (cls == np.asarray(q_cls)[:, None])).any(axis=1)
 
 
 @dataclass(frozen=True)
@@ -171,6 +196,7 @@ def change_flags(
     tree = float32_tree(b_kept) if matching.backend == "pykdtree" else None
     dist, idx = nearest(b_kept, a_xyz[live], radius_m, matching.backend, tree)
     found = np.isfinite(dist)
+    uncovered = np.zeros(len(dist), dtype=bool)
     surface = matching.surface
     if surface is not None and not found.all():
         again = np.flatnonzero(~found)
@@ -180,19 +206,27 @@ def change_flags(
         idx[again[on]] = first[on]
         alone = np.flatnonzero(~np.isfinite(d))
         if len(alone):
-            unseen = hidden_from_other(b_kept, a_xyz[live][again[alone]], surface)
+            covered, unseen = hidden_from_other(b_kept, a_xyz[live][again[alone]], surface)
             # nothing to compare with: unchanged from this side, whatever the classes say
             seen_not = again[alone[unseen]]
             found[seen_not] = True
             idx[seen_not] = -1
+            # the other scene has nothing in the point's plan cell: it never covered the place
+            uncovered[again[alone[~covered]]] = True
     same = np.zeros(len(dist), dtype=bool)
     compared = found & (idx >= 0)
     b_near, a_live = b_cls[b_keep][idx[compared]], a_cls[live][compared]
     same[compared] = b_near == a_live
     if geometric is not None:
         same[compared] |= geometric[b_near] | geometric[a_live]
+    if surface is not None:
+        # the nearest point may be another object's (a worker beside the ground point, a wall's
+        # foot): the class is compared with any of the other scene's points within the radius
+        differ = np.flatnonzero(compared)[~same[compared]]
+        if len(differ):
+            same[differ] = class_within(b_kept, b_cls[b_keep], a_xyz[live][differ], a_cls[live][differ], radius_m, surface, tree)
     same[found & (idx < 0)] = True
-    out[live] = np.where(same, UNCHANGED, CHANGED)
+    out[live] = np.where(uncovered, IGNORED, np.where(same, UNCHANGED, CHANGED))
     return out
 
 

@@ -78,11 +78,12 @@ class PairParams:
     label_rule: str = "surface"
     min_region_points: int = MIN_REGION_POINTS
     splat_factor: float = WORLD_SPLAT_FACTOR
+    trim_edges: bool = True
 
     # what each knob added after the first release meant before it existed (a record without it)
     BEFORE: ClassVar[Mapping[str, object]] = {
         "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
-        "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR,
+        "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR, "trim_edges": False,
     }  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -118,6 +119,7 @@ class PairParams:
             splat_max_px=self.splat_max_px,
             fill_px=self.fill_px,
             splat_factor=self.splat_factor,
+            trim_edges=self.trim_edges,
         )
 
     def view_params_spec(self) -> ViewParams:

@@ -244,8 +244,12 @@ def _splat_text(p: JsonObject) -> str:
     else:
         text = (
             f"splats: sized by the world, a point's disk spans {p.get('splat_factor', 2.0):g} x its spacing seen from "
-            f"the camera (at least {p['point_size_px']} px, at most {p.get('splat_max_px', 31)} px; an object's edge "
-            "is drawn up to half a disk beyond where its surface ends)"
+            f"the camera (at least {p['point_size_px']} px, at most {p.get('splat_max_px', 31)} px; "
+            + (
+                "where a disk reaches past its surface's edge, the surface behind is drawn instead)"
+                if p.get("trim_edges", False)
+                else "an object's edge is drawn up to half a disk beyond where its surface ends)"
+            )
         )
     fill = p.get("fill_px", 0)
     return text + (

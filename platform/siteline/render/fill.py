@@ -33,7 +33,7 @@ _NONE = torch.iinfo(torch.int64).max
 
 
 @functools.lru_cache(maxsize=1)
-def _enclosed_table() -> list[bool]:
+def enclosed_table() -> list[bool]:
     """For each 8-bit set of occupied sectors: whether its longest cyclic run of empty sectors is at
     most :data:`MAX_EMPTY_SECTORS`."""
     table = []
@@ -84,7 +84,7 @@ def fill_gaps(
     if dev.type == "cpu" and compiled:  # one compiled pass (siteline.render.kernels), the same pixels
         index, depth = index.clone(), depth.clone().to(torch.float32)
         ring = torch.tensor(_ring(radius_px), dtype=torch.int64).numpy()
-        table = np.array(_enclosed_table(), dtype=bool)
+        table = np.array(enclosed_table(), dtype=bool)
         done = kernels.fill_gaps(index.numpy(), depth.numpy(), ring, table, np.float32(SAME_SURFACE), radius_px, width)
         return index, depth, torch.from_numpy(done)
     inf = torch.tensor(float("inf"), dtype=torch.float32, device=dev)
@@ -114,7 +114,7 @@ def fill_gaps(
         # beyond the image counts as empty: a surface must surround a pixel within the image
         bits |= on_front.to(torch.int64) << sector
         best = torch.minimum(best, torch.where(on_front, (d2 << 32) | q, _NONE))
-    enclosed = torch.tensor(_enclosed_table(), dtype=torch.bool, device=dev)[bits]
+    enclosed = torch.tensor(enclosed_table(), dtype=torch.bool, device=dev)[bits]
     behind = ~hit[cand] | (zf[cand] > limit)  # a gap, or a farther surface seen through one
     take = enclosed & behind & (best != _NONE)
     dst, src = cand[take], best[take] & 0xFFFFFFFF

@@ -170,3 +170,72 @@ def fill_gaps(
     index[:] = out_index
     depth[:] = out_depth
     return filled
+
+
+@kernel
+def trim_edges(
+    index: np.ndarray,
+    depth: np.ndarray,
+    spacing_px: np.ndarray,
+    centre_index: np.ndarray,
+    centre_depth: np.ndarray,
+    centre_u: np.ndarray,
+    centre_v: np.ndarray,
+    ring: np.ndarray,
+    enclosed: np.ndarray,
+    same_surface: np.float32,
+    keep_spacings: np.float32,
+    reach_spacings: np.float32,
+    width: int,
+) -> np.ndarray:
+    """The edge trim of siteline.render.edges, in one pass (see there): ``index`` (H W,) int64 winning
+    point per pixel (-1 none) and ``depth`` (H W,) float32 metres are changed in place; returns the
+    (H W,) bool pixels trimmed. spacing_px: (H W,) float32 the winner's spacing in pixels;
+    centre_index / centre_depth: (H W,) the nearest point whose own pixel this is (-1 / inf none),
+    centre_u / centre_v: (H W,) float32 where in its pixel that point falls (0 to 1 from the pixel's
+    corner); ring: (M, 4) int64 rows (du, dv, squared distance, sector) sorted by distance;
+    enclosed: (256,) bool per set of occupied sectors."""
+    n = len(index)
+    height = n // width
+    out_index, out_depth = index.copy(), depth.copy()
+    trimmed = np.zeros(n, np.bool_)
+    widen = np.float32(1.0) + same_surface
+    half = np.float32(0.5)
+    for p in range(n):
+        if index[p] < 0:
+            continue
+        limit = depth[p] * widen
+        s = spacing_px[p]
+        keep2 = (keep_spacings * s) ** 2
+        reach2 = (reach_spacings * s) ** 2
+        if centre_depth[p] <= limit:
+            du, dv = centre_u[p] - half, centre_v[p] - half
+            if du * du + dv * dv <= keep2:
+                continue
+        x, y = p % width, p // width
+        bits, far, keep = 0, -1, False
+        for k in range(len(ring)):
+            if ring[k, 2] > reach2 + 2:
+                break
+            u, v = x + ring[k, 0], y + ring[k, 1]
+            if u < 0 or u >= width or v < 0 or v >= height:
+                continue
+            q = v * width + u
+            c = centre_depth[q]
+            if c <= limit:
+                du, dv = ring[k, 0] + centre_u[q] - half, ring[k, 1] + centre_v[q] - half
+                if du * du + dv * dv <= keep2:
+                    keep = True
+                    break
+                if ring[k, 2] <= reach2:
+                    bits |= 1 << ring[k, 3]
+                    if enclosed[bits]:
+                        keep = True
+                        break
+            elif far < 0 and c < np.inf and ring[k, 2] <= reach2:
+                far = q
+        if not keep and far >= 0:
+            out_index[p], out_depth[p], trimmed[p] = centre_index[far], centre_depth[far], True
+    index[:] = out_index
+    depth[:] = out_depth
+    return trimmed

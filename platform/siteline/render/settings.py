@@ -32,6 +32,8 @@ class RenderSettings:
     splat_factor: a world splat's diameter in point spacings (WORLD_SPLAT_FACTOR by default): wider
     closes more gaps, and draws an object's edge that much beyond where its surface ends
     (docs/performance.md measures both against analytic truth).
+    trim_edges: with world splats, give the pixels where a splat reaches past its surface's edge to
+    the farther surface behind (siteline.render.edges); no effect on fixed splats.
     """
 
     scale: float = 0.125
@@ -43,6 +45,7 @@ class RenderSettings:
     splat_max_px: int = 31
     fill_px: int = 0
     splat_factor: float = WORLD_SPLAT_FACTOR
+    trim_edges: bool = False
 
     def __post_init__(self) -> None:
         if not (isinstance(self.scale, int | float) and math.isfinite(self.scale) and 0 < self.scale <= 4):
@@ -73,6 +76,9 @@ class RenderSettings:
         k = self.splat_factor
         if not isinstance(k, int | float) or isinstance(k, bool) or not (math.isfinite(k) and 0.5 <= k <= 4):
             raise RenderError(f"splat_factor {k!r} must be a number from 0.5 to 4 (point spacings per world splat).")
+
+        if not isinstance(self.trim_edges, bool):
+            raise RenderError(f"trim_edges {self.trim_edges!r} must be true or false.")
 
     def to_dict(self) -> JsonObject:
         return asdict(self)

@@ -11,7 +11,8 @@ spacing seen from the camera. A world splat's pixels carry its depth plus a para
 to the splat's world radius at its rim, so where neighbouring splats of one surface overlap each
 pixel goes to the point whose centre is nearest, while a surface farther than that radius stays
 hidden. The gap fill (siteline.render.fill) then closes what the splats left between the points
-of one surface.
+of one surface. With ``trim_edges`` a world splat that reaches past its surface's edge gives the
+pixels there back to the farther surface behind (siteline.render.edges).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import torch
 from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
 from siteline.render import kernels
+from siteline.render.edges import trim_edges
 from siteline.render.fill import fill_gaps
 from siteline.render.settings import RenderSettings
 from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels
@@ -192,12 +194,14 @@ def _splat(
     dev: torch.device,
     zbuf: torch.Tensor,
     depths: torch.Tensor | None = None,
+    centres: torch.Tensor | None = None,
 ) -> int:
     """Project ``pts`` (N, 3) site-local through the scaled camera ``cam`` in batches and keep per
     pixel of ``zbuf`` ((H W + 1,) int64; the last slot swallows invalid points) the minimum key
     (float32 depth bits << 32 | point index); return how many points fell in the frustum. spacing:
     (N,) metres per point, for world splats; depths: (N,) float32, receives each point's camera
-    depth when given (a world splat's key holds its depth plus the paraboloid)."""
+    depth when given (a world splat's key holds its depth plus the paraboloid); centres: (H W + 1,)
+    int64, receives the keys of the points drawn as one pixel each when given (the edge trim's)."""
     W, H = cam.width, cam.height
     npix = W * H
     project = _projector(cam, settings, dev)
@@ -215,10 +219,12 @@ def _splat(
         vi = torch.where(valid, v, zero).floor_().to(torch.int64)
         depth_bits = torch.where(valid, z, zero).to(torch.float32).view(torch.int32).to(torch.int64)
         index = torch.arange(start, stop, device=dev, dtype=torch.int64)
-        if settings.point_size_px == 1 and not world:
+        if centres is not None or (settings.point_size_px == 1 and not world):
             key = (depth_bits << 32) | index
-            zbuf.scatter_reduce_(0, torch.where(valid, vi * W + ui, npix), key, reduce="amin")
-            continue
+            own = torch.where(valid & (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H), vi * W + ui, npix)
+            (zbuf if centres is None else centres).scatter_reduce_(0, own, key, reduce="amin")
+            if centres is None:
+                continue
         # a disk scatters every point several times: drop the invalid ones once, first
         sel = torch.nonzero(valid).squeeze(1)
         ui, vi, zs, index = ui[sel], vi[sel], z[sel].to(torch.float32), index[sel]
@@ -318,6 +324,21 @@ def central_depths(xyz: np.ndarray, camera: Camera, scale: float, fraction: floa
     return out[np.isfinite(out)]
 
 
+def _within_pixel(
+    pts: torch.Tensor, keys: torch.Tensor, cam: Camera, settings: RenderSettings, dev: torch.device
+) -> torch.Tensor:
+    """(2, H W) float32 where in its pixel the point of each z-buffer key falls (u, v from the pixel's
+    corner, 0 to 1; 0.5 where no point): the same projection as the render."""
+    hit = keys != EMPTY_KEY
+    which = torch.nonzero(hit).squeeze(1)
+    out = torch.full((2, int(keys.shape[0])), 0.5, dtype=torch.float32, device=dev)
+    if len(which):
+        _, u, v, _ = _projector(cam, settings, dev)(pts[(keys[which] & INDEX_MASK).to(pts.device)])
+        out[0, which] = (u - u.floor()).to(torch.float32)
+        out[1, which] = (v - v.floor()).to(torch.float32)
+    return out
+
+
 def _winners(zbuf: torch.Tensor, npix: int) -> tuple[torch.Tensor, torch.Tensor]:
     """(index, depth) per pixel of a z-buffer, on its device: (H W,) int64 winning point, -1 where
     none, and (H W,) float32 the depth its key holds (NaN where none)."""
@@ -384,10 +405,19 @@ def render_points(
     zbuf = torch.full((npix + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
     world = settings.splat == "world"
     depths = torch.empty(n, dtype=torch.float32, device=dev) if world else None
-    in_frustum = _splat(pts, spacing, cam, settings, dev, zbuf, depths)
+    trim = world and settings.trim_edges and spacing is not None
+    centres = torch.full((npix + 1,), EMPTY_KEY, dtype=torch.int64, device=dev) if trim else None
+    in_frustum = _splat(pts, spacing, cam, settings, dev, zbuf, depths, centres)
     index, depth = _winners(zbuf, npix)
     if depths is not None and n:  # the winners' own depth, not their splat's
         depth = torch.where(index >= 0, depths[index.clamp(min=0)], float("nan"))
+    trimmed = torch.zeros(npix, dtype=torch.bool, device=dev)
+    if trim and centres is not None and spacing is not None and n:
+        spacing_px = torch.where(index >= 0, spacing[index.clamp(min=0)] * _focal(cam) / depth, 0.0)
+        centre_uv = _within_pixel(pts, centres[:npix], cam, settings, dev)
+        index, depth, trimmed = trim_edges(
+            index, depth, spacing_px, centres[:npix], centre_uv, cam.width, settings.splat_max_px
+        )
     drawn = int((index >= 0).sum())
     filled = torch.zeros(npix, dtype=torch.bool, device=dev)
     if settings.fill_px:
@@ -403,6 +433,7 @@ def render_points(
         "coverage": float(hit.mean()) if hit.size else 0.0,
         "drawn": drawn / npix if npix else 0.0,
         "filled": float(filled_img.mean()) if filled_img.size else 0.0,
+        "trimmed": int(trimmed.sum()) / npix if npix else 0.0,
         "seconds": time.perf_counter() - t0,
         "seconds_splat": t_splat,
         "width": cam.width,

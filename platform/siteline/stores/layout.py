@@ -51,10 +51,13 @@ def pair_labels(
 ) -> str:
     """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
     by the change ``rule`` (siteline.labels.rule), the ``label_rule`` and the smallest region kept
-    (siteline.labels.params; the nearest rule keeping every point names no suffix, as before both)."""
+    (siteline.labels.params; the nearest rule keeping every point names no suffix, as before both;
+    the surface rule is named with its version)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"
-    by += "" if label_rule == "nearest" else f"-{label_rule}"
+    # the surface rule's second version ignores points the other scene never covered (stores of the
+    # first, "-surface", are not reused)
+    by += "" if label_rule == "nearest" else f"-{label_rule}2"
     by += "" if min_region_points <= 1 else f"-m{min_region_points}"
     return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um{by}.zarr")
 

@@ -117,8 +117,11 @@ class MaskScore:
     tp, fp, fn, tn: changed-class confusion. boundary: [predicted boundary pixels within
     BOUNDARY_PX of a true one, predicted boundary pixels, true boundary pixels within BOUNDARY_PX of a
     predicted one, true boundary pixels]. objects: object name -> [changed pixels found, changed
-    pixels]. specks: per view, the false-changed components under SPECK_PX pixels. scored: pixels
-    both label; pixels: every pixel."""
+    pixels]. specks: per view, the false-changed components under SPECK_PX pixels that lie on
+    unchanged ground, more than BOUNDARY_PX from any truly changed pixel (a speck a model would learn
+    as change); rims: per view, those under SPECK_PX within BOUNDARY_PX of a truly changed pixel (an
+    edge drawn a pixel too far, in pieces: counted, and already in precision and boundary F).
+    scored: pixels both label; pixels: every pixel."""
 
     tp: int = 0
     fp: int = 0
@@ -127,6 +130,7 @@ class MaskScore:
     boundary: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
     objects: dict[str, list[int]] = field(default_factory=dict)
     specks: list[int] = field(default_factory=list)
+    rims: list[int] = field(default_factory=list)
     scored: int = 0
     pixels: int = 0
 
@@ -157,7 +161,12 @@ class MaskScore:
             got[1] += int(mine.sum())
         labels, n = ndimage.label(p & ~t, structure=np.ones((3, 3), bool))
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
-        self.specks.append(int((sizes < SPECK_PX).sum()))
+        near_change = ndimage.distance_transform_edt(~t) <= BOUNDARY_PX if t.any() else np.zeros_like(t)
+        touching = np.zeros(n + 1, bool)
+        touching[np.unique(labels[near_change & (labels > 0)])] = True
+        small = sizes < SPECK_PX
+        self.specks.append(int((small & ~touching[1:]).sum()))
+        self.rims.append(int((small & touching[1:]).sum()))
 
     @property
     def precision(self) -> float:
@@ -192,6 +201,7 @@ class MaskScore:
             "object_recall": self.object_recall(),
             "specks_median": float(np.median(self.specks)) if self.specks else float("nan"),
             "specks_max": max(self.specks, default=0),
+            "rims_median": float(np.median(self.rims)) if self.rims else float("nan"),
             "views": len(self.specks),
             "scored_share": self.scored / self.pixels if self.pixels else float("nan"),
             "confusion": {"tp": self.tp, "fp": self.fp, "fn": self.fn, "tn": self.tn},
