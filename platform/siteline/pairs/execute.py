@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.errors import PairError
+from siteline.errors import PairError, ViewsError
 from siteline.labels.params import expected_false_change
 from siteline.labels.store import auto_radius, write_labels
 from siteline.labelsets.store import open_labelled
@@ -28,7 +28,7 @@ from siteline.stores import Store, layout, move
 from siteline.tiles.reader import SceneTiles
 from siteline.tolerances import RATIO_TOL, at_least
 from siteline.views.generate import NamedCamera, SyntheticView, ViewSet, generate_views, key_sorted
-from siteline.views.ground import fit_ground_plane
+from siteline.views.ground import GroundChoice, model_ground
 
 log = logging.getLogger(__name__)
 FOLDERS = ("A", "B", "label")
@@ -64,6 +64,31 @@ def pair_labels(
     return replace(labels, uri=uri, radius=info)
 
 
+def scene_ground(plan: PairPlan, t2: SceneTiles) -> GroundChoice:
+    """The ground the later scene's views stand on (siteline.views.ground.model_ground): its ground
+    class, or ground found from geometry where the class is missing or says nothing; a plane, or a
+    terrain where the ground is not one. Read at 0.5 m, so its cost grows with the site's area, not
+    its points. :class:`PairError` naming the scene when no ground is found at all."""
+    taxonomy = plan.site.taxonomy
+    read = t2.points(resolution=0.5, attributes=("class",))
+    on_ground = read.attributes["class"] == taxonomy.id_of("ground")
+    try:
+        choice = model_ground(read.xyz_m, on_ground, seed=plan.params.seed)
+    except ViewsError as exc:
+        raise PairError(
+            f"pair {plan.pair_id}: views are placed above the ground of the later scene {plan.t2.id}, and none "
+            f"was found: {exc} Its cloud has {int(on_ground.sum())} ground-class points of {len(on_ground):,} read "
+            "and no ground shape either. Check the scene's points (siteline scene show), or classify its ground "
+            "(siteline scene export, then labels import with ground marked) and build again."
+        ) from exc
+    if choice.source != "class":
+        log.info(
+            "pair %d: scene %d has %d ground-class points of %s read; ground found from geometry (%d points, %.0f %%)",
+            plan.pair_id, plan.t2.id, int(on_ground.sum()), f"{len(on_ground):,}", choice.ground_points, 100 * choice.share,
+        )  # fmt: skip
+    return choice
+
+
 def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None) -> ViewSet:
     """Synthetic views of the later scene (DESIGN.md §5): probes read its tiles at the pair's point
     size, torch's threads following the machine's load (``threads``; a new one when None);
@@ -76,16 +101,7 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuT
             f"again into a new site, or with photos."
         )
     params, taxonomy = plan.params, plan.site.taxonomy
-    ground = t2.points(resolution=0.5, attributes=("class",))
-    on_ground = ground.attributes["class"] == taxonomy.id_of("ground")
-    if int(on_ground.sum()) < 3:
-        raise PairError(
-            f"pair {plan.pair_id}: views are placed above the ground of the later scene {plan.t2.id}, and it has "
-            f"{int(on_ground.sum())} ground points of {len(on_ground):,} read (its cloud carries no ground class: "
-            "every point class 0 or 1, say). Classify its ground (siteline scene export, then labels import with "
-            "ground marked) or map its source codes to ground in the site taxonomy, then build again."
-        )
-    plane = fit_ground_plane(ground.xyz_m[on_ground].astype(np.float32), seed=params.seed)
+    choice = scene_ground(plan, t2)
     names = {c.name for c in taxonomy.classes}
     skip = np.array([taxonomy.id_of(c) for c in ("snow", "noise") if c in names], dtype=np.uint8)
     source = TilePointSource(
@@ -99,12 +115,13 @@ def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuT
 
     views = generate_views(
         cams,
-        plane,
+        choice.model,
         plan.fence,
         source,
         params.view_params_spec(),
         progress=step,
     )
+    views.ground_choice = choice
     if not views.views:
         raise PairError(
             f"pair {plan.pair_id}: every synthetic view was rejected ({views.all_rejected()}); lower "
@@ -203,7 +220,8 @@ def execute_pair(
         summary = {
             "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
             "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.to_dict(),
-            "ground_plane": views.ground.to_dict(), "fence": plan.fence_source, "colour": plan.colour.to_dict(),
+            "ground_plane": views.ground_choice.plane.to_dict() if views.ground_choice else views.ground.to_dict(),
+            "ground": views.ground_choice.to_dict() if views.ground_choice else None, "fence": plan.fence_source, "colour": plan.colour.to_dict(),
             "change_rule": plan.change_rule.to_dict(),
             "candidates": views.candidates, "probed": views.probed, "rejected": rejected,
             "views": [r.to_dict() for r in records],

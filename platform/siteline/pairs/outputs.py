@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from siteline.pairs.plan import PairPlan
-from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, PairOutput, RenderedView
+from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed, PairOutput, RenderedView
 from siteline.schema import JsonObject
 from siteline.stores import Store, join
 
@@ -16,6 +16,7 @@ def output_of(plan: PairPlan, doc: JsonObject) -> PairOutput:
         tuple(RenderedView.from_dict(v) for v in doc["views"]), ChangeLabels.from_dict(doc["labels"]), plan.versions,
         plan.digest, plan.params.to_dict(), ColourPlan.from_dict(doc.get("colour") or {"source": "rgb"}),
         doc.get("fence", "site fence"), ChangeRulePlan.from_dict(doc.get("change_rule")), Drawn.from_dict(doc),
+        GroundUsed.from_dict(doc.get("ground")),
     )  # fmt: skip
 
 

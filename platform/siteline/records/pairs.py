@@ -278,13 +278,66 @@ class Drawn:
 
 
 @dataclass(frozen=True)
+class GroundUsed:
+    """The ground a pair's views stood on: ``model`` (``plane`` or ``terrain``), where its points came
+    from (``class``, or ``morphology`` with the filter's params), how many and what share of the
+    points read, the terrain's 95th-percentile departure from the best plane and the tolerance under
+    which the plane is kept (metres), and the terrain's cell (metres; None for a plane)."""
+
+    model: str
+    source: str
+    ground_points: int
+    share: float
+    residual_m: float
+    tolerance_m: float
+    filter: Mapping[str, Any] | None = None
+    cell_m: float | None = None
+
+    def to_dict(self) -> JsonObject:
+        return {
+            "model": self.model, "source": self.source, "ground_points": self.ground_points, "share": self.share,
+            "residual_m": self.residual_m, "tolerance_m": self.tolerance_m,
+            "filter": dict(self.filter) if self.filter is not None else None, "cell_m": self.cell_m,
+        }  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any] | None) -> GroundUsed | None:
+        """From a pair summary's ``ground``; None for outputs made before it was recorded."""
+        if not doc:
+            return None
+        cell = doc.get("cell_m", (doc.get("terrain") or {}).get("cell_m"))
+        return cls(
+            str(doc["model"]), str(doc["source"]), int(doc["ground_points"]), float(doc["share"]),
+            float(doc["residual_m"]), float(doc["tolerance_m"]), doc.get("filter"), None if cell is None else float(cell),
+        )  # fmt: skip
+
+    def summary(self) -> str:
+        """In words, for a datasheet."""
+        found = (
+            "the ground class"
+            if self.source == "class"
+            else "ground found from the points' shape (progressive morphological filter, "
+            + ", ".join(f"{k} {v:g}" for k, v in (self.filter or {}).items())
+            + "; no usable ground class)"
+        )
+        shape = (
+            f"a plane (the terrain departs from it by {self.residual_m:.2f} m, within the {self.tolerance_m:g} m tolerance)"
+            if self.model == "plane"
+            else f"a terrain grid of {self.cell_m:g} m cells (it departs from a plane by {self.residual_m:.1f} m, "
+            f"over the {self.tolerance_m:g} m tolerance)"
+        )
+        return f"views stand on {shape}, from {found}: {self.ground_points:,} points, {self.share:.0%} of those read"
+
+
+@dataclass(frozen=True)
 class PairOutput:
     """A processed pair's outputs in the store at ``root``: the scenes (t1, t2 ids), the change radius
     (metres), the rendered views in index order, the 3D label record (store address, counts,
     checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
     label sets and tilings), the pair parameters (their JSON form), the colour the images show
     (outputs made before it: RGB), the fence views were judged against (the site's, or a scene's
-    footprint), the change rule of its labels and how its views were drawn (None: not recorded)."""
+    footprint), the change rule of its labels, how its views were drawn and the ground they stood on
+    (None: not recorded)."""
 
     pair_id: int
     t1: int
@@ -300,6 +353,7 @@ class PairOutput:
     fence: str = "site fence"
     change_rule: ChangeRulePlan = ChangeRulePlan()
     drawn: Drawn | None = None
+    ground: GroundUsed | None = None
 
     @property
     def view_count(self) -> int:

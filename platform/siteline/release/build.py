@@ -103,7 +103,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
          "labels": o.labels.to_dict(), "colour_source": o.colour.source, "colour": o.colour.to_dict(), "fence": o.fence,
-         "change_rule": o.change_rule.to_dict(),
+         "change_rule": o.change_rule.to_dict(), **({"ground": o.ground.to_dict()} if o.ground else {}),
          "views": {"made": len(o.views), "asked": o.params.get("views"), **(o.drawn.to_dict() if o.drawn else {})}}
         for o in (outputs[pid] for pid in sorted(outputs))
     ]  # fmt: skip

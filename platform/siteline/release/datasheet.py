@@ -9,6 +9,7 @@ from PIL import Image
 
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
 from siteline.labels.accuracy import accuracy_text
+from siteline.records.pairs import GroundUsed
 from siteline.records.registration import Registration
 from siteline.release.params import DEFAULT_RADIUS_CEILING_M
 from siteline.schema import JsonObject
@@ -217,6 +218,9 @@ def _camera_lines(lin: JsonObject) -> list[str]:
         if (a := r.alignment) is not None:
             lines.append(f"- scene {sid} co-registered onto scene {a.against_scene}: {a.summary()}")
     lines += [_views_text(q) for q in lin["pairs"] if q.get("views")]
+    lines += [
+        f"- pair {q['id']}: {ground.summary()}" for q in lin["pairs"] if (ground := GroundUsed.from_dict(q.get("ground")))
+    ]
     lines += [
         f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
         + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")

@@ -24,7 +24,7 @@ from siteline.tolerances import (
     at_least,
 )
 from siteline.views import strategies
-from siteline.views.ground import GroundPlane
+from siteline.views.ground import GroundChoice, GroundModel, GroundPlane
 from siteline.views.params import SAMPLER_VERSION, ViewParams
 from siteline.views.sources import PointSource
 
@@ -145,14 +145,16 @@ class ViewSet:
     """The outcome of view generation: the sample, the candidate count, what the cheap geometric
     tests rejected (``rejected``) and the picker that drew the sample (``reserve``: its next views
     replace views a later stage rejects, siteline.pairs: too few valid pixels; its ``rejected``
-    counts the probes' verdicts)."""
+    counts the probes' verdicts); ``ground_choice``: how the ground was found and modelled, when the
+    caller chose it (siteline.views.ground.model_ground)."""
 
     views: list[SyntheticView]
     params: ViewParams
-    ground: GroundPlane
+    ground: GroundModel
     candidates: int
     rejected: dict[str, int] = field(default_factory=dict)
     reserve: Picker | None = None
+    ground_choice: GroundChoice | None = None
 
     def all_rejected(self) -> dict[str, int]:
         """Every rejection so far by reason: the geometric tests' and the probes'."""
@@ -174,7 +176,7 @@ class ViewSet:
         return {
             "params": self.params.to_dict(),
             "sampler": SAMPLER_VERSION,
-            "ground_plane": self.ground.to_dict(),
+            ("ground_plane" if isinstance(self.ground, GroundPlane) else "terrain"): self.ground.to_dict(),
             "candidates": self.candidates,
             "probed": self.probed,
             "rejected": self.all_rejected(),
@@ -196,7 +198,7 @@ def central_median_depth(camera: Camera, source: PointSource, params: ViewParams
 
 def candidate_views(
     parent: NamedCamera,
-    ground: GroundPlane,
+    ground: GroundModel,
     fence_m: Sequence[Sequence[float]] | None,
     depth_of: Callable[[Camera], float | None],
     params: ViewParams,
@@ -245,7 +247,7 @@ def candidate_views(
 
 def reject_geometric(
     views: list[SyntheticView],
-    ground: GroundPlane,
+    ground: GroundModel,
     fence_m: Sequence[Sequence[float]] | None,
     source: PointSource,
     params: ViewParams,
@@ -297,7 +299,7 @@ def probe(view: SyntheticView, source: PointSource, params: ViewParams) -> Synth
 
 def reject(
     views: list[SyntheticView],
-    ground: GroundPlane,
+    ground: GroundModel,
     fence_m: Sequence[Sequence[float]] | None,
     source: PointSource,
     params: ViewParams,
@@ -363,7 +365,7 @@ def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list
 
 def generate_views(
     cameras: Iterable[NamedCamera],
-    ground: GroundPlane,
+    ground: GroundModel,
     fence_m: Sequence[Sequence[float]] | None,
     source: PointSource,
     params: ViewParams | None = None,

@@ -10,14 +10,15 @@ import shapely
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
 from siteline.site.fence import inside_fence, nearest_segment
-from siteline.views.ground import GroundPlane
+from siteline.views.ground import GroundModel
 
 
-def vertical(camera: Camera, plane: GroundPlane, fraction: float) -> Camera:
-    """Move the camera along the ground-plane normal to ``fraction`` of its height; orientation kept."""
+def vertical(camera: Camera, ground: GroundModel, fraction: float) -> Camera:
+    """Move the camera along the ground's up direction (a plane's normal, or world up over a terrain)
+    to ``fraction`` of its height above the ground below it; orientation kept."""
     C = camera.center
-    h = float(plane.height(C))
-    n = np.asarray(plane.normal)
+    h = float(ground.height(C))
+    n = np.asarray(ground.up)
     return camera.with_center(C - (1.0 - fraction) * h * n)
 
 
@@ -31,22 +32,16 @@ def mirror_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 MIRROR_RULES = ("aim-site", "reflect")
 
 
-def ground_target(camera: Camera, ground: GroundPlane) -> np.ndarray | None:
-    """Where the camera's optical axis meets the ground plane ((3,) site-local metres), or None when
-    it looks level or up."""
-    n = np.asarray(ground.normal, dtype=np.float64)
-    C, f = camera.center, camera.forward
-    denom = float(f @ n)
-    if denom >= -1e-6:
-        return None
-    t = -float(ground.height(C[None])[0]) / denom
-    return C + t * f if t > 0 else None
+def ground_target(camera: Camera, ground: GroundModel) -> np.ndarray | None:
+    """Where the camera's optical axis meets the ground ((3,) site-local metres), or None when it
+    looks level or up, or meets none."""
+    return ground.axis_hit(camera.center, camera.forward)
 
 
 def mirror(
     camera: Camera,
     fence_m: Sequence[Sequence[float]],
-    ground: GroundPlane | None = None,
+    ground: GroundModel | None = None,
     rule: str = "aim-site",
 ) -> tuple[Camera, tuple[tuple[float, float], tuple[float, float]]]:
     """Reflect the camera's centre across the nearest fence segment, and orient it by ``rule``:
@@ -67,6 +62,8 @@ def mirror(
     M = mirror_matrix(a, b)
     anchor = np.array([a[0], a[1], 0.0])
     C2 = M @ (C - anchor) + anchor
+    if ground is not None:  # over a terrain, the mirrored camera keeps its height above the ground
+        C2 = ground.keep_height(C, C2)
     segment = ((float(a[0]), float(a[1])), (float(b[0]), float(b[1])))
     if rule == "aim-site":
         if ground is None:
@@ -74,11 +71,7 @@ def mirror(
         target = ground_target(camera, ground)
         if target is None or not inside_fence(target[None, :2], fence_m)[0]:
             centroid = np.asarray(shapely.Polygon(fence_m).centroid.coords[0], dtype=np.float64)
-            n = np.asarray(ground.normal, dtype=np.float64)
-            # the ground point below the centroid: solve n . (x, y, z) + d = 0 for z
-            target = np.array(
-                [centroid[0], centroid[1], -(n[0] * centroid[0] + n[1] * centroid[1] + ground.d) / n[2]]
-            )
+            target = ground.point_below(centroid)
         if np.linalg.norm(target - C2) > 1e-6:
             aimed = Camera.look_at(
                 C2, target, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy
