@@ -170,3 +170,17 @@ def test_ground_beside_a_new_worker_is_not_changed_by_its_nearest_point():
     # the worker itself is change: no worker in A
     fb = flags(b, bc, a, ac, 0.2, surface=True)
     assert (fb[len(b_ground) :][foot[:, 2] > 0.3] == CHANGED).all()
+
+
+def test_the_plan_cell_test_agrees_with_a_brute_force_count():
+    rng = np.random.default_rng(6)
+    b = np.c_[rng.uniform(0, 20, 5000), rng.uniform(0, 10, 5000), rng.uniform(-1, 3, 5000)]
+    q = np.c_[rng.uniform(-2, 22, 400), rng.uniform(-2, 12, 400), rng.uniform(-1, 3, 400)]
+    test = SurfaceTest(search_m=0.7, lod_floor_m=0.05)
+    covered, hidden = hidden_from_other(b, q, test)
+    bc, qc = np.floor(b[:, :2] / 0.7).astype(int), np.floor(q[:, :2] / 0.7).astype(int)
+    for k in range(len(q)):
+        mine = (bc == qc[k]).all(axis=1)
+        assert covered[k] == mine.any()
+        assert hidden[k] == (mine.any() and b[mine, 2].min() > q[k, 2] + 0.05)
+    assert covered.any() and (~covered).any() and hidden.any()

@@ -63,16 +63,18 @@ def test_surface_labels_beat_the_nearest_rule_against_analytic_truth(tmp_path: P
 
 def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
     assert density_of_spacing(0.1487) == pytest.approx(9.98, abs=0.05)
-    assert measured_for("surface", 8, 0.15).density == 10  # the synthetic site
-    assert measured_for("surface", 8, 0.07).density == 40  # the box scene
-    assert measured_for("surface", 3, 0.15) is None
-    text = accuracy_text("surface", 8, 0.15)
-    assert "precision 0.96" in text and "synthetic site at 10 points/m2" in text
+    assert measured_for("surface", 8, True, 0.15).density == 10  # the synthetic site
+    assert measured_for("surface", 8, True, 0.07).density == 40  # the box scene
+    assert measured_for("surface", 8, True, 0.015).density == 1000
+    assert measured_for("surface", 3, True, 0.15) is None
+    assert measured_for("surface", 8, False, 0.15) is None  # not measured without the trim
+    text = accuracy_text("surface", 8, True, 0.15)
+    assert "precision 0.98" in text and "synthetic site at 10 points/m2" in text
     pair = {"id": 1, "radius_m": 0.37, "labels": {"radius": {
         "median_spacing_m": {"t1": 0.15, "t2": 0.148}, "multiplier": 2.5,
         "expected_false_change": {"multiplier": 2.5, "per_direction": 0.0131, "union": 0.026},
     }}}  # fmt: skip
-    [line] = _radius_lines([pair], 1.0, {"label_rule": "surface", "min_region_points": 8})
+    [line] = _radius_lines([pair], 1.0, {"label_rule": "surface", "min_region_points": 8, "trim_edges": True})
     assert "surface rule" in line and "regions under 8 points" in line and "measured against analytic truth" in line
     [old] = _radius_lines([pair], 1.0, {})
     assert "2^(-k^2) per direction" in old and "nearest" not in old.split(";")[0]

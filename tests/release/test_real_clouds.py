@@ -214,6 +214,10 @@ def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
     _ok(home, "release", "build", "--site", "topo", "--name", "topo-cd", "--views", "4")
     root = home / "releases" / "topo-cd" / ".drafts" / "1.0.0"
     (pair,) = json.loads((root / "manifest.json").read_text())["lineage"]["pairs"]
+    # 41 m of relief over 285 m: the views stand on a terrain grid, and the datasheet says so
+    assert pair["ground"]["model"] == "terrain" and pair["ground"]["source"] == "class"
+    assert pair["ground"]["residual_m"] > 1.0
+    assert "views stand on a terrain grid" in (root / "README.md").read_text()
     assert pair["colour"]["source"] == "intensity" and pair["colour"]["stretch_t1"][1] > 1000
     a = _images(root, "A")
     assert a and min(img.any(axis=-1).mean() for img in a) > 0.2
@@ -286,3 +290,33 @@ def test_a_small_dense_site_gets_a_release_with_defaults(tmp_path) -> None:
     manifest = json.loads((home / "releases" / "plot-cd" / "1.0.0" / "manifest.json").read_text())
     assert len(manifest["items"]) >= 30 and {it["split"] for it in manifest["items"]} == {"train", "val", "test"}
     assert max(it["change_ratio"] for it in manifest["items"]) > 0.01
+
+
+@pytest.mark.slow  # about 5 min here: two ingests, a release with default settings; `make test-all` runs it
+def test_a_cloud_without_a_ground_class_is_released_with_defaults(tmp_path) -> None:
+    """autzen with every class zeroed (a scanner's raw export) and an edited copy of it (a building
+    removed, one built, classes zero too): the release finds the ground from the points' shape, says
+    so, and gives at least 24 items, none blank."""
+    import laspy
+
+    src = tmp_path / "autzen_raw.laz"
+    las = laspy.read(AUTZEN)
+    las.classification = np.zeros(len(las.points), np.uint8)
+    las.write(src)
+    c = centre_xy(AUTZEN)
+    change = {"removed_box": (c[0] - 250, c[1] - 100, c[0] - 150, c[1]),
+              "built_box": (c[0] + 100, c[1] - 50, c[0] + 180, c[1] + 30, 20.0), "reclass": {6: 0}}  # fmt: skip
+    home = _site(tmp_path, "raw", src, "EPSG:32610", (493000, 4878000, 130), change, AUTZEN_DATES,
+                 ingest=("--overlap", "0.5", "0.3"))  # fmt: skip
+    assert json.loads(_ok(home, "scene", "show", "2", "--json"))["class_histogram"].get("ground", 0) == 0
+    _ok(home, "release", "build", "--site", "raw", "--name", "raw-cd")
+    root = home / "releases" / "raw-cd" / ".drafts" / "1.0.0"
+    manifest = json.loads((root / "manifest.json").read_text())
+    (pair,) = manifest["lineage"]["pairs"]
+    # its levee and river bank: the ground departs from a plane by about 6 m, as its ground class says too
+    assert pair["ground"]["source"] == "morphology" and pair["ground"]["model"] == "terrain"
+    assert 0.2 < pair["ground"]["share"] < 0.95
+    assert "ground found from the points' shape" in (root / "README.md").read_text()
+    a, b = _images(root, "A"), _images(root, "B")
+    assert len(a) == len(b) >= 24
+    assert min(img.any(axis=-1).mean() for img in a + b) > 0.2  # no blank image

@@ -115,24 +115,44 @@ def plane_distances(
     return dist, lod, first
 
 
+# a plan grid of up to this many cells is looked up in a dense array (64 MiB of bool at most)
+DENSE_CELLS = 1 << 26
+
+
 def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -> tuple[np.ndarray, np.ndarray]:
     """Two (M,) bool arrays about the query points, from the other scene (``b_xyz``) in each query
     point's cell of a plan grid of ``test.search_m``: ``covered``, it has points there; ``hidden``, it
     has, and its lowest lies more than the level-of-detection floor above the query point (it could
     not have seen the point from above)."""
     cell = test.search_m
-    b_ij = np.floor(np.asarray(b_xyz, np.float64)[:, :2] / cell).astype(np.int64)
-    q_ij = np.floor(np.asarray(q_xyz, np.float64)[:, :2] / cell).astype(np.int64)
-    lo = np.minimum(b_ij.min(axis=0), q_ij.min(axis=0))
-    span = np.maximum(b_ij.max(axis=0), q_ij.max(axis=0)) - lo + 1
-    b_key = (b_ij[:, 0] - lo[0]) * span[1] + (b_ij[:, 1] - lo[1])
+    q = np.asarray(q_xyz, np.float64)
+    q_ij = np.floor(q[:, :2] / cell).astype(np.int64)
+    lo, hi = q_ij.min(axis=0), q_ij.max(axis=0)
+    span = hi - lo + 1
+    b = np.asarray(b_xyz)
+    b_ij = np.floor(b[:, :2].astype(np.float64) / cell).astype(np.int64)
+    # only the other scene's points in the queries' cells matter: a lookup over the queries' extent
+    # picks them without sorting every point of the other scene
+    within = ((b_ij >= lo) & (b_ij <= hi)).all(axis=1)
     q_key = (q_ij[:, 0] - lo[0]) * span[1] + (q_ij[:, 1] - lo[1])
+    b_key = (b_ij[within, 0] - lo[0]) * span[1] + (b_ij[within, 1] - lo[1])
+    b_z = b[within, 2].astype(np.float64)
+    if int(span[0]) * int(span[1]) <= DENSE_CELLS:
+        present = np.zeros(int(span[0]) * int(span[1]), dtype=bool)
+        present[q_key] = True
+        pick = present[b_key]
+    else:
+        pick = np.isin(b_key, np.unique(q_key))
+    b_key, b_z = b_key[pick], b_z[pick]
     order = np.argsort(b_key, kind="stable")
     keys, starts = np.unique(b_key[order], return_index=True)
-    lowest = np.minimum.reduceat(np.asarray(b_xyz, np.float64)[order, 2], starts)
-    at = np.clip(np.searchsorted(keys, q_key), 0, len(keys) - 1)
+    lowest = np.minimum.reduceat(b_z[order], starts) if len(keys) else np.zeros(0)
+    at = np.clip(np.searchsorted(keys, q_key), 0, max(len(keys) - 1, 0))
+    if not len(keys):
+        none = np.zeros(len(q_key), dtype=bool)
+        return none, none.copy()
     has = keys[at] == q_key
-    return has, has & (lowest[at] > np.asarray(q_xyz, np.float64)[:, 2] + test.lod_floor_m)
+    return has, has & (lowest[at] > q[:, 2] + test.lod_floor_m)
 
 
 def class_within(

@@ -323,7 +323,7 @@ class GroundUsed:
         shape = (
             f"a plane (the terrain departs from it by {self.residual_m:.2f} m, within the {self.tolerance_m:g} m tolerance)"
             if self.model == "plane"
-            else f"a terrain grid of {self.cell_m:g} m cells (it departs from a plane by {self.residual_m:.1f} m, "
+            else f"a terrain grid of {self.cell_m:.1f} m cells (it departs from a plane by {self.residual_m:.1f} m, "
             f"over the {self.tolerance_m:g} m tolerance)"
         )
         return f"views stand on {shape}, from {found}: {self.ground_points:,} points, {self.share:.0%} of those read"

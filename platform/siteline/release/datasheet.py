@@ -117,7 +117,7 @@ def _radius_lines(pairs: list[JsonObject], ceiling: float, params: JsonObject) -
         info = (q.get("labels") or {}).get("radius") or {}
         fc = info.get("expected_false_change")
         spacing = max((info.get("median_spacing_m") or {}).values(), default=float("nan"))
-        measured = accuracy_text(rule, regions, spacing)
+        measured = accuracy_text(rule, regions, bool(params.get("trim_edges", False)), spacing)
         if fc and rule == "surface":
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
