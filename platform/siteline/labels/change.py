@@ -212,21 +212,25 @@ def change_flags(
     if not b_keep.any():
         out[live] = CHANGED
         return out
-    b_kept = b_xyz[b_keep]
+    # each selection once (copies of a million points or more), none when everything is kept
+    b_kept = b_xyz if b_keep.all() else b_xyz[b_keep]
+    b_classes = b_cls if b_keep.all() else b_cls[b_keep]
+    a_pts = a_xyz if live.all() else a_xyz[live]
+    a_classes = a_cls if live.all() else a_cls[live]
     tree = float32_tree(b_kept) if matching.backend == "pykdtree" else None
-    dist, idx = nearest(b_kept, a_xyz[live], radius_m, matching.backend, tree)
+    dist, idx = nearest(b_kept, a_pts, radius_m, matching.backend, tree)
     found = np.isfinite(dist)
     uncovered = np.zeros(len(dist), dtype=bool)
     surface = matching.surface
     if surface is not None and not found.all():
         again = np.flatnonzero(~found)
-        d, lod, first = plane_distances(b_kept, a_xyz[live][again], surface, tree)
+        d, lod, first = plane_distances(b_kept, a_pts[again], surface, tree)
         on = d <= lod
         found[again[on]] = True
         idx[again[on]] = first[on]
         alone = np.flatnonzero(~np.isfinite(d))
         if len(alone):
-            covered, unseen = hidden_from_other(b_kept, a_xyz[live][again[alone]], surface)
+            covered, unseen = hidden_from_other(b_kept, a_pts[again[alone]], surface)
             # nothing to compare with: unchanged from this side, whatever the classes say
             seen_not = again[alone[unseen]]
             found[seen_not] = True
@@ -235,16 +239,16 @@ def change_flags(
             uncovered[again[alone[~covered]]] = True
     same = np.zeros(len(dist), dtype=bool)
     compared = found & (idx >= 0)
-    b_near, a_live = b_cls[b_keep][idx[compared]], a_cls[live][compared]
-    same[compared] = b_near == a_live
+    b_near, a_here = b_classes[idx[compared]], a_classes[compared]
+    same[compared] = b_near == a_here
     if geometric is not None:
-        same[compared] |= geometric[b_near] | geometric[a_live]
+        same[compared] |= geometric[b_near] | geometric[a_here]
     if surface is not None:
         # the nearest point may be another object's (a worker beside the ground point, a wall's
         # foot): the class is compared with any of the other scene's points within the radius
         differ = np.flatnonzero(compared)[~same[compared]]
         if len(differ):
-            same[differ] = class_within(b_kept, b_cls[b_keep], a_xyz[live][differ], a_cls[live][differ], radius_m, surface, tree)
+            same[differ] = class_within(b_kept, b_classes, a_pts[differ], a_classes[differ], radius_m, surface, tree)
     same[found & (idx < 0)] = True
     out[live] = np.where(uncovered, IGNORED, np.where(same, UNCHANGED, CHANGED))
     return out
