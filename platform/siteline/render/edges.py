@@ -69,23 +69,21 @@ def trim_edges(
     index: (H W,) int64 winning point per pixel, -1 none; depth: (H W,) float32 metres, the winner's
     own camera depth; spacing_px: (H W,) float32 the winner's spacing in pixels; centres: (H W,) int64
     z-buffer keys of one-pixel points (float32 depth bits << 32 | point index; int64 max where none);
-    centre_uv: (2, H W) float32 where in its pixel each of those points falls (0 to 1); max_radius_px: the widest reach looked at. Returns the new (index, depth) and (H W,) bool
-    ``trimmed``, on the tensors' device (the pass itself runs compiled on the CPU: its cost is per
+    centre_uv: (2, H W) float32 where in its pixel each of those points falls (0 to 1); max_radius_px:
+    the widest reach looked at. Returns the new (index, depth) and (H W,) bool ``trimmed``, on the tensors' device (the pass itself runs compiled on the CPU: its cost is per
     pixel)."""
     dev = index.device
     empty = centres == torch.iinfo(torch.int64).max
     centre_index = torch.where(empty, -1, centres & 0xFFFFFFFF).cpu().numpy()
-    centre_depth = torch.where(
-        empty, float("inf"), (centres >> 32).to(torch.int32).view(torch.float32)
-    ).to(torch.float32).cpu().numpy()
+    centre_depth = torch.where(empty, float("inf"), (centres >> 32).to(torch.int32).view(torch.float32))
+    centre = torch.cat([centre_depth.to(torch.float32)[None], centre_uv.to(torch.float32)]).cpu().numpy()
+    spx = torch.nan_to_num(spacing_px.to(torch.float32), nan=0.0, posinf=float(max_radius_px))
+    drawn = torch.stack([depth.to(torch.float32), spx]).cpu().numpy().copy()
     out_index = index.cpu().numpy().copy()
-    out_depth = depth.to(torch.float32).cpu().numpy().copy()
-    spx = torch.nan_to_num(spacing_px.to(torch.float32), nan=0.0, posinf=float(max_radius_px)).cpu().numpy()
-    uv = centre_uv.to(torch.float32).cpu().numpy()
+    knobs = np.array([SAME_SURFACE, KEEP_SPACINGS, REACH_SPACINGS], dtype=np.float32)
     done = kernels.trim_edges(
-        out_index, out_depth, np.ascontiguousarray(spx), centre_index, centre_depth,
-        np.ascontiguousarray(uv[0]), np.ascontiguousarray(uv[1]),
-        ring(max(1, int(max_radius_px)) + 1), np.array(enclosed_table(), dtype=bool), np.float32(SAME_SURFACE),
-        np.float32(KEEP_SPACINGS), np.float32(REACH_SPACINGS), width,
+        out_index, drawn, centre_index, np.ascontiguousarray(centre), ring(max(1, int(max_radius_px)) + 1),
+        np.array(enclosed_table(), dtype=bool), knobs, width,
     )  # fmt: skip
+    out_depth = drawn[0]
     return torch.from_numpy(out_index).to(dev), torch.from_numpy(out_depth).to(dev), torch.from_numpy(done).to(dev)

@@ -175,31 +175,30 @@ def fill_gaps(
 @kernel
 def trim_edges(
     index: np.ndarray,
-    depth: np.ndarray,
-    spacing_px: np.ndarray,
+    drawn: np.ndarray,
     centre_index: np.ndarray,
-    centre_depth: np.ndarray,
-    centre_u: np.ndarray,
-    centre_v: np.ndarray,
+    centre: np.ndarray,
     ring: np.ndarray,
     enclosed: np.ndarray,
-    same_surface: np.float32,
-    keep_spacings: np.float32,
-    reach_spacings: np.float32,
+    knobs: np.ndarray,
     width: int,
 ) -> np.ndarray:
     """The edge trim of siteline.render.edges, in one pass (see there): ``index`` (H W,) int64 winning
-    point per pixel (-1 none) and ``depth`` (H W,) float32 metres are changed in place; returns the
-    (H W,) bool pixels trimmed. spacing_px: (H W,) float32 the winner's spacing in pixels;
-    centre_index / centre_depth: (H W,) the nearest point whose own pixel this is (-1 / inf none),
-    centre_u / centre_v: (H W,) float32 where in its pixel that point falls (0 to 1 from the pixel's
-    corner); ring: (M, 4) int64 rows (du, dv, squared distance, sector) sorted by distance;
-    enclosed: (256,) bool per set of occupied sectors."""
+    point per pixel (-1 none) and ``drawn`` (2, H W) float32, the winner's depth (metres; changed in
+    place with ``index``) and its spacing in pixels; returns the (H W,) bool pixels trimmed.
+    centre_index: (H W,) int64 the nearest point whose own pixel this is (-1 none); centre: (3, H W)
+    float32 its depth (inf none) and where in the pixel it falls (u, v: 0 to 1 from the pixel's
+    corner); ring: (M, 4) int64 rows (du, dv, squared distance, sector) sorted by distance; enclosed:
+    (256,) bool per set of occupied sectors; knobs: (3,) float32 SAME_SURFACE, KEEP_SPACINGS,
+    REACH_SPACINGS."""
     n = len(index)
     height = n // width
+    depth, spacing_px = drawn[0], drawn[1]
+    centre_depth, centre_u, centre_v = centre[0], centre[1], centre[2]
     out_index, out_depth = index.copy(), depth.copy()
     trimmed = np.zeros(n, np.bool_)
-    widen = np.float32(1.0) + same_surface
+    widen = np.float32(1.0) + knobs[0]
+    keep_spacings, reach_spacings = knobs[1], knobs[2]
     half = np.float32(0.5)
     for p in range(n):
         if index[p] < 0:
@@ -237,5 +236,5 @@ def trim_edges(
         if not keep and far >= 0:
             out_index[p], out_depth[p], trimmed[p] = centre_index[far], centre_depth[far], True
     index[:] = out_index
-    depth[:] = out_depth
+    drawn[0] = out_depth
     return trimmed
