@@ -55,3 +55,50 @@ def test_a_publish_racing_the_ingest_of_a_middle_scene_is_refused_when_it_is_rec
 
         assert get_release(s, "race", draft.version).status == "draft"
     cat.dispose()
+
+
+@pytest.mark.parametrize("engine", ["sqlite", "postgresql"])
+def test_an_ingest_committing_inside_the_publish_waits_for_it_on_both_engines(
+    tmp_path, synth_site, monkeypatch, request, engine
+) -> None:
+    """The window the re-check leaves: an ingest of the middle scene that tries to commit after the
+    publish re-checked its pairs and before the publish commits. It must wait for the publish (the
+    site's row lock, a write lock on SQLite, held across both), so the release is published from pairs
+    current when it was recorded and the ingest supersedes them afterwards. On SQLite, where SELECT ...
+    FOR UPDATE is ignored, the ingest used to commit inside the window: 1.0.0 published on a pair that
+    was already superseded."""
+    import threading
+
+    from siteline.catalog import releases
+
+    url = None if engine == "sqlite" else request.getfixturevalue("postgres_url")
+    settings = make_home(tmp_path, url=url, site_dir=synth_site)
+    cat = open_catalog(settings)
+    e0, e1, e2 = epoch_dirs(synth_site)
+    ingest_and_tile(cat, settings, [e0, e2])
+    draft = pipeline.release(cat, settings, "demo", "race", KNOBS)
+    events: list[str] = []
+    ingest = threading.Thread(
+        target=lambda: (ingest_mission(cat, settings, e1, "demo"), events.append("ingest committed"))
+    )
+    checked = releases.refuse_superseded
+
+    def check_then_let_the_ingest_run(session, rel):  # noqa: ANN001, ANN202  (the window, widened)
+        checked(session, rel)
+        ingest.start()
+        ingest.join(timeout=8.0)  # an ingest free to commit does so well within this
+        events.append("publish recording")
+
+    monkeypatch.setattr(releases, "refuse_superseded", check_then_let_the_ingest_run)
+    try:
+        publish_release(cat, settings, "race", draft.version)
+        events.append("publish committed")
+    finally:
+        ingest.join(timeout=120)
+    assert events == ["publish recording", "publish committed", "ingest committed"], events
+    with cat.transaction() as s:
+        from siteline.catalog.pairs import pair_ids_of_scene  # noqa: F401  (the ingest's pairs exist)
+        from siteline.catalog.releases import get_release
+
+        assert get_release(s, "race", draft.version).status == "published"
+    cat.dispose()

@@ -169,7 +169,13 @@ def scene_count(session: Session, site: SiteKey) -> int:
 
 
 def lock_site(session: Session, site_id: int) -> Site:
-    """The site row, locked for the rest of the transaction (one registration per site at a time)."""
+    """The site row, locked for the rest of the transaction (one registration, or one publish's
+    re-check and record, per site at a time). SQLite ignores SELECT ... FOR UPDATE and opens no
+    transaction for a read: there a no-op write to the row takes the database's write lock first,
+    held until the transaction ends, so a concurrent ingest waits (busy timeout) as on PostgreSQL."""
+    if session.get_bind().dialect.name == "sqlite":
+        table = Site.__table__
+        session.execute(sa.update(table).where(table.c.id == site_id).values(id=table.c.id))
     return session.execute(sa.select(Site).where(Site.id == site_id).with_for_update()).scalar_one()
 
 
