@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from pathlib import Path
@@ -95,6 +96,10 @@ def _root(
     show_logs(verbose)
 
 
+# errnos of a destination the user may not write: permission denied, not permitted, read-only file system
+_NOT_WRITABLE = (errno.EACCES, errno.EPERM, errno.EROFS)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and return its exit status.
 
@@ -125,6 +130,14 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:
         from siteline.stores.diskspace import disk_full, full_disk_message
 
+        if isinstance(exc, OSError) and exc.errno in _NOT_WRITABLE and not disk_full(exc):
+            # an operator's mistake (a read-only or foreign destination), told in one line
+            where = f" {exc.filename}" if exc.filename else ""
+            err_console.print(
+                Text.assemble(("error:", "bold red"), " ", f"cannot write{where}: {exc.strerror}; choose a folder you can write to."),
+                soft_wrap=True,
+            )
+            return 2
         if not disk_full(exc):
             raise
         err_console.print(Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True)

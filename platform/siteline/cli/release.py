@@ -210,6 +210,7 @@ def browse(
     out: Path | None = typer.Option(
         None, "--out", help="HTML file (or folder) to write (default: <version>.html beside the release's folder)."
     ),
+    force: bool = typer.Option(False, "--force", help="Replace an existing file given with --out."),
     as_json: bool = JsonOption,
 ) -> None:
     """Write the release browser (draft or published) as one HTML page beside the release: a grid of
@@ -219,6 +220,8 @@ def browse(
 
     with catalog() as cat, cat.transaction() as s:
         root, status = release_location(s, name, version)
+    if out is not None and out.is_file() and not force:
+        raise ReleaseError(f"{out} exists: pass --force to replace it, or give another --out.")
     page = write_browser(root, out, status)
     emit(
         as_json,
@@ -250,8 +253,18 @@ def export(
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
+        rel = get_release(s, name, version)
+        recorded, files = rel.manifest_sha256, release_item_files(s, rel.id)
     from siteline.stores import layout
 
+    # an export trusts nothing on disk it has not checked: the same checks as `release verify`
+    problems = verify_files(root, recorded, files) if root.is_dir() or recorded is not None else []
+    if problems:
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        raise ReleaseError(
+            f"release {name} {version} differs from what was published: {problems[0]}{more}; nothing exported. "
+            f"`siteline release verify {name} {version}` lists every difference."
+        )
     result = export_release(
         root, profile, out, copy=copy, protected=layout.releases(settings().home), license_id=license_id
     )
