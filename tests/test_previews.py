@@ -96,3 +96,70 @@ def test_a_stopped_run_says_why_in_words() -> None:
     assert "rescheduled (attempt 2 of 3)" in md and "Where it was: 40 % done (pair 1: renders 3 of 6)." in md
     md = stopped_markdown("r", [RunEvent(at, "Crashed", "Flow run infrastructure exited with status -9", 3)], None, 3)
     assert "crashed 3 times, the most the service retries" in md and "rescheduled" not in md and "went down" not in md
+
+
+def _raw(base: str, request: bytes, timeout: float = 5.0) -> bytes:
+    """Send ``request`` as is on a new connection; what comes back before the server closes it."""
+    import socket
+
+    host, port = base.removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port)), timeout=timeout) as sock:
+        sock.sendall(request)
+        chunks = []
+        while chunk := sock.recv(65536):
+            chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def test_malformed_paths_and_numbers_get_400_never_500_or_silence(served) -> None:
+    base, _ = served
+    for path in (b"/releases/r/1.0.0/mon%00tage.png", b"/static/" + b"a" * 300 + b".js",
+                 b"/3d/r/1.0.0/" + b"9" * 5000 + b"/plan.json", b"/" + b"x/" * 1500):  # fmt: skip
+        answer = _raw(base, b"GET " + path + b" HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+        assert answer.startswith(b"HTTP/1.0 400") or answer.startswith(b"HTTP/1.1 400"), (path[:40], answer[:80])
+        assert b"Traceback" not in answer and b"Error" not in answer.split(b"\r\n\r\n", 1)[-1]
+
+
+def test_idle_and_half_sent_connections_are_closed_and_their_number_capped(tmp_path, monkeypatch) -> None:
+    import socket
+    import time
+
+    from siteline.previews import server as srv
+
+    monkeypatch.setattr(srv.PreviewHandler, "timeout", 0.5)
+    home = tmp_path / "home"
+    server = make_server(home, "127.0.0.1", 0, limit=3)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    port = server.server_address[1]
+    try:
+        idle = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(3)]
+        idle[0].sendall(b"GET /previews/ HTTP/1.1\r\nHo")  # half-sent
+        time.sleep(0.2)
+        # a fourth while three are held: answered 503 at once, and closed
+        assert _raw(f"http://127.0.0.1:{port}", b"GET / HTTP/1.0\r\n\r\n").startswith(b"HTTP/1.0 503")
+        time.sleep(1.0)
+        for sock in idle:  # each closed by the server after its idle timeout
+            assert sock.recv(65536) == b""
+            sock.close()
+        time.sleep(0.2)
+        # their slots are free again
+        assert httpx.get(f"http://127.0.0.1:{port}/", timeout=5).status_code == 200
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_a_client_gone_mid_answer_is_one_line_in_the_log(tmp_path, caplog) -> None:
+    import logging
+
+    server = make_server(tmp_path / "home", "127.0.0.1", 0)
+    try:
+        with caplog.at_level(logging.INFO, logger="siteline.previews.server"):
+            try:
+                raise BrokenPipeError(32, "Broken pipe")
+            except BrokenPipeError:
+                server.handle_error(None, ("10.0.0.7", 5555))
+        [record] = caplog.records
+        assert "went away" in record.getMessage() and record.exc_info is None
+    finally:
+        server.server_close()

@@ -40,6 +40,15 @@ MAX_BUDGET = 20_000_000
 # how many pairs' plans (open readers and their node plans) the server keeps
 OPEN_PAIRS = 4
 _ROUTE = re.compile(r"^/(browse|3d)/([^/]+)/([^/]+)/(.*)$")
+# a connection idle or half-sent this long is closed (seconds)
+IDLE_TIMEOUT_S = 20.0
+# connections served at once; more are answered 503 and closed
+MAX_CONNECTIONS = 64
+# the longest path and path segment a request may name (characters)
+MAX_PATH = 2048
+MAX_SEGMENT = 255
+# a pair or chunk number has at most this many digits
+MAX_DIGITS = 9
 
 
 @dataclass(frozen=True)
@@ -134,6 +143,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
     every other method is refused (501)."""
 
     home: Path
+    timeout = IDLE_TIMEOUT_S  # socket timeout: an idle or half-sent request is closed
 
     def __init__(
         self, *args: Any, home: Path, access: ReleaseAccess | None = None, plans: _Plans | None = None,
@@ -204,6 +214,9 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         return self._send(node.read_bytes(), kind, cache=True)
 
     def _release_route(self, kind: str, name: str, version: str, rest: str) -> io.BytesIO:
+        head, _, tail = rest.partition("/")
+        if kind == "3d" and (not head.isdigit() or len(head) > MAX_DIGITS):
+            return self._text(400, f"/3d/{name}/{version}/<pair>/: the pair is a number of at most {MAX_DIGITS} digits")
         try:
             root, status = self._locate(name, version)
             doc = self.manifests.read(root)
@@ -219,9 +232,6 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
                 kind_ = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
                 return self._send(path.read_bytes(), kind_, cache=status == "published")
             return self._text(404, f"release {name} {version} has no {rest}")
-        head, _, tail = rest.partition("/")
-        if not head.isdigit():
-            return self._text(404, f"/3d/{name}/{version}/<pair>/: the pair is a number, not {head!r}")
         pair = int(head)
         if tail == "":
             page = _viewer_page(f"{name} {version} ({status}): pair {pair} in 3D", f"{base}/{pair}")
@@ -243,7 +253,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
             return self._text(404, str(exc))
         if tail == "plan.json":
             return self._send(json.dumps(plan.to_dict(browse)).encode(), "application/json")
-        m = re.fullmatch(r"t([12])/(\d+)\.bin", tail)
+        m = re.fullmatch(r"t([12])/(\d{1,%d})\.bin" % MAX_DIGITS, tail)
         if m is None:
             return self._text(404, f"pair {pair} in 3D has no {tail}")
         try:
@@ -254,6 +264,8 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
 
     def send_head(self) -> io.BufferedIOBase | io.BytesIO | None:  # type: ignore[override]
         path = unquote(urlsplit(self.path).path)
+        if "\x00" in path or len(path) > MAX_PATH or any(len(p) > MAX_SEGMENT for p in path.split("/")):
+            return self._text(400, f"a path without NUL bytes, of at most {MAX_PATH} characters and {MAX_SEGMENT} a segment")
         if path in ("/", ""):
             return self._index()
         if path == "/favicon.ico":
@@ -302,14 +314,54 @@ def _viewer_page(title: str, base: str) -> str:
     return template.replace("{{TITLE}}", html.escape(title)).replace("{{BASE}}", base).replace("{{STATIC}}", STATIC)
 
 
+class PreviewServer(http.server.ThreadingHTTPServer):
+    """A thread per connection, at most MAX_CONNECTIONS at once (the next is answered 503 and
+    closed); a client that goes away mid-answer is one line in the log, not a traceback."""
+
+    daemon_threads = True
+
+    def __init__(self, address: tuple[str, int], handler: Callable[..., Any], limit: int = MAX_CONNECTIONS) -> None:
+        super().__init__(address, handler)
+        self.slots = threading.BoundedSemaphore(limit)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        if not self.slots.acquire(blocking=False):
+            try:
+                request.sendall(b"HTTP/1.0 503 Service Unavailable\r\nContent-Type: text/plain\r\n"
+                                b"Connection: close\r\n\r\ntoo many connections: try again\n")  # fmt: skip
+            except OSError:
+                pass
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self.slots.release()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self.slots.release()
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        import sys
+
+        exc = sys.exc_info()[1]
+        if isinstance(exc, ConnectionError | TimeoutError):
+            log.info("previews: %s went away (%s)", client_address[0], type(exc).__name__)
+            return
+        log.exception("previews: a request of %s failed", client_address[0])
+
+
 def make_server(
-    home: Path, host: str, port: int, access: ReleaseAccess | None = None
-) -> http.server.ThreadingHTTPServer:
+    home: Path, host: str, port: int, access: ReleaseAccess | None = None, limit: int = MAX_CONNECTIONS
+) -> PreviewServer:
     """A server of ``home``'s previews and releases on ``host``:``port`` (not started); ``access``:
-    how to reach drafts and the scenes behind a release (None: published releases, no 3D viewer)."""
+    how to reach drafts and the scenes behind a release (None: published releases, no 3D viewer);
+    ``limit``: connections served at once."""
     layout.previews(home).mkdir(parents=True, exist_ok=True)
     layout.releases(home).mkdir(parents=True, exist_ok=True)
     handler = partial(PreviewHandler, home=Path(home), access=access, plans=_Plans(), manifests=_Manifests())
-    server = http.server.ThreadingHTTPServer((host, port), handler)
-    server.daemon_threads = True
-    return server
+    return PreviewServer((host, port), handler, limit)
