@@ -131,7 +131,7 @@ def test_server_routes_and_refusals(built, server) -> None:
         ("/browse/rel/1.0.0/files/%2e%2e/%2e%2e/catalog.sqlite", 404, b"has no"),
         ("/browse/rel/1.0.0/files/.draft", 404, b"has no"),
         ("/3d/rel/1.0.0/7/plan.json", 404, b"has no pair 7"),
-        ("/3d/rel/1.0.0/x/plan.json", 404, b"the pair is a number"),
+        ("/3d/rel/1.0.0/x/plan.json", 400, b"the pair is a number"),  # a malformed request
         ("/3d/rel/1.0.0/1/plan.json?budget=5", 400, b"budget"),
         ("/3d/rel/1.0.0/1/t1/9999.bin", 404, b"no chunk 9999"),
         ("/static/../server.py", 404, b""),
