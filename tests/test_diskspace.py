@@ -32,7 +32,19 @@ def test_full_disks_are_told_apart_from_other_errors(tmp_path) -> None:
     assert not disk_full(OSError(errno.EACCES, "Permission denied")) and not disk_full(KeyError("x"))
     line = full_disk_message(_raised_from(full), tmp_path / "home" / "not-yet")
     assert f"writing {tmp_path / 'tile.bin'}" in line and "MB free of" in line and "\n" not in line
-    assert f"the file system holding {tmp_path / 'home' / 'not-yet'}" in line
+    # the free space of the disk that filled (the file's), not the home's
+    assert f"the file system holding {tmp_path} has" in line
+    unknown = full_disk_message(OSError(errno.ENOSPC, "No space left on device"), tmp_path / "home" / "not-yet")
+    assert f"the file system holding {tmp_path} has" in unknown  # the home's, from its nearest existing folder
+
+
+def test_a_full_disk_is_told_by_errno_never_by_a_file_name() -> None:
+    # a missing file whose name says "No space left on device": a missing file, not a full disk
+    missing = FileNotFoundError(errno.ENOENT, "No such file or directory", "/data/No space left on device/a.laz")
+    assert not disk_full(missing) and not disk_full(_raised_from(missing))
+    assert not disk_full(RuntimeError("scene 'no space left on device' not found"))
+    assert not disk_full(KeyError("database or disk is full"))  # only a database driver's words count
+    assert disk_full(OSError("15321 requested and 8763 written"))  # numpy's short write, no errno
 
 
 def test_the_cli_ends_a_full_disk_with_one_line_and_exit_1(tmp_path, monkeypatch, capsys) -> None:
