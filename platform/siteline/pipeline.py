@@ -282,9 +282,10 @@ def pair_cloud(catalog: Catalog, settings: Settings, doc: Mapping[str, Any], pai
         have = ", ".join(str(p["id"]) for p in lineage["pairs"])
         raise ReleaseError(f"{what} has no pair {pair_id} (its pairs: {have}).")
     scenes = {int(sc["id"]): sc for sc in lineage["scenes"]}
-    label_uri = str(pair["labels"]["uri"])
+    label_uri = settings.store.resolve(str(pair["labels"]["uri"]))  # relative to this home's store
     if not settings.store.is_complete(label_uri):
-        raise ReleaseError(f"{what}, pair {pair_id}: its change labels at {label_uri} are gone (deleted since).")
+        # the manifest's own (relative) address: the message is served to HTTP clients
+        raise ReleaseError(f"{what}, pair {pair_id}: its change labels ({pair['labels']['uri']}) are gone (deleted since).")
     with catalog.transaction() as s:
         opened = []
         for key in ("t1", "t2"):

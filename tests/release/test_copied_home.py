@@ -98,3 +98,60 @@ def test_migration_makes_recorded_addresses_relative(tmp_path):
     with engine.connect() as conn:
         assert conn.execute(sa.text("SELECT tile_store_uri FROM scene")).scalar_one() == tiles
     engine.dispose()
+
+
+def test_a_copied_home_shows_a_pair_in_3d_with_the_original_gone(built, tmp_path):
+    """The manifest records the change labels relative to the store (``store:labels/...``), never
+    the building home's folder: a copy's 3D viewer reads its own stores, the original moved away."""
+    import json
+
+    from siteline import pipeline
+    from siteline.config import Settings, sqlite_url
+
+    settings, _, pub = built
+    home = settings.home
+    copy = tmp_path / "home2"
+    subprocess.run(["cp", "-a", str(home), str(copy)], check=True)
+    doc = json.loads((copy / "releases" / "rel" / pub.version / "manifest.json").read_text())
+    assert str(home) not in json.dumps(doc), "the manifest names the building home's folder"
+    assert all(p["labels"]["uri"].startswith("store:labels/") for p in doc["lineage"]["pairs"])
+
+    def strings(x):  # noqa: ANN001, ANN202
+        if isinstance(x, dict):
+            for v in x.values():
+                yield from strings(v)
+        elif isinstance(x, list):
+            for v in x:
+                yield from strings(v)
+        elif isinstance(x, str):
+            yield x
+
+    assert [t for t in strings(doc) if t.startswith("/")] == []
+    away = tmp_path / "original-moved-away"
+    home.rename(away)
+    try:
+        mine = Settings(home=copy, database_url=sqlite_url(copy / "catalog.sqlite"))
+        cat = open_catalog(mine)
+        try:
+            pair = int(doc["lineage"]["pairs"][0]["id"])
+            cloud = pipeline.pair_cloud(cat, mine, doc, pair)
+            assert cloud.pair_id == pair
+        finally:
+            cat.dispose()
+    finally:
+        away.rename(home)
+
+
+def test_verify_refuses_a_manifest_with_an_absolute_path(built, tmp_path):
+    import json
+
+    from siteline.release.manifest import verify_files
+    from sitehelpers import writable_copy
+
+    _, _, pub = built
+    copy = writable_copy(pub.root, tmp_path / "copy")
+    doc = json.loads((copy / "manifest.json").read_text())
+    doc["lineage"]["pairs"][0]["labels"]["uri"] = "/home/someone/siteline/stores/labels/pair-1.zarr"
+    (copy / "manifest.json").write_text(json.dumps(doc))
+    problems = verify_files(copy)
+    assert any("absolute path" in p and "lineage.pairs[0].labels.uri" in p for p in problems), problems

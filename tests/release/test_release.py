@@ -285,7 +285,7 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
 
     doc = read_manifest(pub.root)
     pair = doc["lineage"]["pairs"][0]
-    label_uri = pair["labels"]["uri"]
+    label_uri = settings.store.resolve(pair["labels"]["uri"])  # store:labels/... in the manifest
     with cat.transaction() as s:
         t1, t2 = (SceneTiles.from_source(tile_source(s, pair[side])) for side in ("t1", "t2"))
     forward = LabelledPair.with_labels(t1, t2, label_uri)

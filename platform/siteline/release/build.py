@@ -27,6 +27,7 @@ from siteline.release.plan import ReleasePlan
 from siteline.release.splits import assign_splits
 from siteline.schema import JsonObject
 from siteline.stores import join, open_store, publish_folder
+from siteline.stores.base import store_relative
 
 log = logging.getLogger(__name__)
 # an A or B image with fewer non-black pixels than this share of its pixels is blank: its points carry
@@ -102,7 +103,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject
     params = plan.params
     pairs = [
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
-         "labels": o.labels.to_dict(), "colour_source": o.colour.source, "colour": o.colour.to_dict(), "fence": o.fence,
+         "labels": o.labels.to_dict() | {"uri": store_relative(o.labels.uri, plan.store_url)}, "colour_source": o.colour.source, "colour": o.colour.to_dict(), "fence": o.fence,
          "change_rule": o.change_rule.to_dict(), **({"ground": o.ground.to_dict()} if o.ground else {}),
          "views": {"made": len(o.views), "asked": o.params.get("views"), **(o.drawn.to_dict() if o.drawn else {})}}
         for o in (outputs[pid] for pid in sorted(outputs))

@@ -75,6 +75,17 @@ def safe_relative(path: str) -> bool:
     )
 
 
+def _absolute_paths(node: object, where: str) -> list[tuple[str, str]]:
+    """Every string under ``node`` that is an absolute file-system path, with where it lies."""
+    if isinstance(node, dict):
+        return [hit for k, v in node.items() for hit in _absolute_paths(v, f"{where}.{k}")]
+    if isinstance(node, list):
+        return [hit for i, v in enumerate(node) for hit in _absolute_paths(v, f"{where}[{i}]")]
+    if isinstance(node, str) and (node.startswith("/") or re.match(r"^[A-Za-z]:[\\/]", node)):
+        return [(where, node)]
+    return []
+
+
 def verify_files(
     root: Path, manifest_sha256: str | None = None, recorded_files: Sequence[str] = ()
 ) -> list[str]:
@@ -103,6 +114,11 @@ def verify_files(
                 f"{MANIFEST}: sha256 differs from the catalog's record ({manifest_sha256[:12]}...)"
             )
     doc = read_manifest(root)
+    problems += [
+        f"{MANIFEST}: {where} records the absolute path {value!r}; a release records paths relative to its "
+        "home or store (one built by a version before that: build it again)"
+        for where, value in _absolute_paths(doc.get("lineage", {}), "lineage")
+    ]
     listed = set()
     named = {f["path"] for f in doc["files"]}
     problems += [f"{rel}: recorded by the catalog but not in the manifest" for rel in recorded_files if rel not in named]

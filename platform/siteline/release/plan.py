@@ -244,7 +244,8 @@ class ReleasePlan:
     """What building a draft release needs from the catalog: the site and its record for the lineage,
     the release's name and version (and the key that chose it), its parameters, each pair's plan
     (where its outputs are), the scenes' lineage, the draft's folder, and the splits of the latest
-    earlier version's items (which this one keeps: siteline.release.splits)."""
+    earlier version's items (which this one keeps: siteline.release.splits), and the data store's
+    root (the manifest records its addresses relative to it)."""
 
     site_name: str
     site_lineage: JsonObject
@@ -258,6 +259,7 @@ class ReleasePlan:
     reason: str
     up_to_date: str | None
     earlier_splits: dict[tuple[int, int], str] = field(default_factory=dict)
+    store_url: str = ""
 
     @property
     def output_digests(self) -> dict[str, str]:
@@ -300,7 +302,7 @@ def plan_release(
     return ReleasePlan(
         site_name, record, name, version, params, pairs, tuple(scene_lineage(session, pairs)), key,
         paths.release_draft(settings.home, name, version), reason, up_to_date,
-        earlier_item_splits(session, name, version),
+        earlier_item_splits(session, name, version), settings.store.url,
     )  # fmt: skip
 
 

@@ -35,6 +35,19 @@ class StagedFile:
     discard: Callable[[], None]
 
 
+# a manifest's address inside the data store, written relative to its root so a copied or restored
+# home resolves it to its own store (siteline.stores.base.Store.resolve)
+STORE_PREFIX = "store:"
+
+
+def store_relative(address: str, root: str) -> str:
+    """``address`` as ``store:<path under root>`` when it lies under the store ``root``, else as given."""
+    root = root.rstrip("/")
+    if address.startswith(root + "/"):
+        return STORE_PREFIX + address[len(root) + 1 :]
+    return address
+
+
 class Store(ABC):
     """A store root (``url``) and a local ``staging`` folder (folders being built for a remote store,
     and a cache of files fetched from it). Methods take full addresses, so a store also reads
@@ -50,6 +63,13 @@ class Store(ABC):
     def uri(self, *parts: str) -> str:
         """The address of ``parts`` under the root (what the catalog records)."""
         return join(self.url, *parts)
+
+    def resolve(self, address: str) -> str:
+        """A manifest's address under this store: ``store:<path>`` under its root; an absolute one
+        (releases built before addresses were relative) as written."""
+        if address.startswith(STORE_PREFIX):
+            return join(self.url, address[len(STORE_PREFIX) :])
+        return address
 
     @abstractmethod
     def ensure(self) -> None:
