@@ -281,8 +281,8 @@ class Drawn:
 class GroundUsed:
     """The ground a pair's views stood on: ``model`` (``plane`` or ``terrain``), where its points came
     from (``class``, or ``morphology`` with the filter's params), how many and what share of the
-    points read, the terrain's 95th-percentile departure from the best plane and the tolerance under
-    which the plane is kept (metres), and the terrain's cell (metres; None for a plane)."""
+    points read, how far the terrain rises above the best plane (95th percentile) and the tolerance
+    under which the plane is kept (metres), and the terrain's cell (metres; None for a plane)."""
 
     model: str
     source: str
@@ -321,10 +321,11 @@ class GroundUsed:
             + "; no usable ground class)"
         )
         shape = (
-            f"a plane (the terrain departs from it by {self.residual_m:.2f} m, within the {self.tolerance_m:g} m tolerance)"
+            f"a plane (the terrain rises above it by {self.residual_m:.2f} m, within the {self.tolerance_m:g} m "
+            "tolerance)"
             if self.model == "plane"
-            else f"a terrain grid of {self.cell_m:.1f} m cells (it departs from a plane by {self.residual_m:.1f} m, "
-            f"over the {self.tolerance_m:g} m tolerance)"
+            else f"a terrain grid of {self.cell_m:.1f} m cells (the terrain rises above the best plane by "
+            f"{self.residual_m:.1f} m, over the {self.tolerance_m:g} m tolerance)"
         )
         return f"views stand on {shape}, from {found}: {self.ground_points:,} points, {self.share:.0%} of those read"
 

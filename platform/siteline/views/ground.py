@@ -18,8 +18,9 @@ from siteline.views.terrain import TerrainGrid, terrain_grid
 # survey has (a cloud that is all ground, or all but a handful, carries no ground class that helps)
 MIN_GROUND_POINTS = 50
 GROUND_SHARE = (0.005, 0.995)
-# a plane is kept while the terrain departs from it by no more than this (95th percentile of the
-# cells that hold ground, metres): a few metres of camera height over 30-100 m flights
+# a plane is kept while the terrain rises above it by no more than this (95th percentile of the
+# cells that hold ground, metres): ground above the plane is what puts a lowered camera under it;
+# ground below it (a pit, an excavation) leaves cameras higher than planned, never under the ground
 PLANE_TOLERANCE_M = 1.0
 
 
@@ -158,9 +159,9 @@ def fit_ground_plane(
 class GroundChoice:
     """The ground of one scene as view generation uses it: the ``model`` (a plane or a terrain grid),
     where its points came from (``source``: ``class``, the ground class; ``morphology``, found from
-    geometry with ``filter`` params), how many and what share of the points read they are, and the
-    terrain's departure from the best plane (``residual_m``, 95th percentile of the cells holding
-    ground; the model is the plane when it is within ``tolerance_m``)."""
+    geometry with ``filter`` params), how many and what share of the points read they are, and how far
+    the terrain rises above the best plane (``residual_m``, 95th percentile over the cells holding
+    ground, 0 where it lies below; the model is the plane when it is within ``tolerance_m``)."""
 
     model: GroundModel
     source: str
@@ -201,7 +202,8 @@ def model_ground(
 ) -> GroundChoice:
     """The ground of a cloud (N, 3) site-local metres whose ground class is ``on_ground`` (N,) bool:
     that class when :func:`usable_ground_class`, else the morphological filter's ground; a plane fit
-    to it, kept when the terrain grid departs from it by at most ``tolerance_m``, else the grid.
+    to it, kept when the terrain grid rises above it by at most ``tolerance_m`` (95th percentile), else
+    the grid.
     :class:`ViewsError` when neither gives 3 ground points."""
     pts = np.asarray(xyz, dtype=np.float64)
     mask = np.asarray(on_ground, dtype=bool)
@@ -216,7 +218,8 @@ def model_ground(
         )
     plane = fit_ground_plane(ground, seed=seed)
     grid, held = terrain_grid(ground)
-    residual = float(np.percentile(np.abs(grid.z - plane_heights(plane, grid))[held], 95))
+    rise = np.maximum(grid.z - plane_heights(plane, grid), 0.0)[held]
+    residual = float(np.percentile(rise, 95))
     model: GroundModel = plane if residual <= tolerance_m else grid
     return GroundChoice(model, source, len(ground), len(ground) / max(len(pts), 1), residual, tolerance_m, plane, params)
 
