@@ -40,7 +40,8 @@ def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
     doc = read_manifest(root)
     out = tmp_path / "hf"
     result = export_release(root, "hf", out, license_id="cc-by-4.0")
-    ds = datasets.load_dataset(str(out))
+    # a cache of its own: the machine's HF cache served another build's rows for the same folder name
+    ds = datasets.load_dataset(str(out), cache_dir=str(tmp_path / "hf-cache"))
     want = {hub.HUB_SPLITS[s]: sorted(it["id"] for it in doc["items"] if it["split"] == s) for s in hub.HUB_SPLITS}
     assert {s: sorted(ds[s]["id"]) for s in ds} == {s: ids for s, ids in want.items() if ids}
     assert result.splits == {s: len(ids) for s, ids in want.items() if ids}
@@ -77,7 +78,7 @@ def test_shards_are_cut_by_size_and_still_load(built, tmp_path, monkeypatch) -> 
     export_release(root, "hf", out)
     shards = sorted((out / "data").glob("train-*.parquet"))
     assert len(shards) == n_train and shards[-1].name == f"train-{n_train - 1:05d}-of-{n_train:05d}.parquet"
-    assert datasets.load_dataset(str(out), split="train").num_rows == n_train
+    assert datasets.load_dataset(str(out), split="train", cache_dir=str(tmp_path / "hf-cache")).num_rows == n_train
 
 
 def test_the_executable_exports_and_refuses_a_used_folder(built, tmp_path) -> None:
