@@ -23,13 +23,12 @@ points. Measured against analytic truth in docs/performance.md.
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 import torch
 
 from siteline.render import kernels
-from siteline.render.fill import SAME_SURFACE, SECTORS, enclosed_table
+from siteline.render.fill import SAME_SURFACE, enclosed_table, ring_offsets
 
 # a surface is taken to extend this many of its spacings past its last sample: a quarter, measured
 # against analytic truth (a half drew edges a pixel too far, docs/performance.md)
@@ -41,16 +40,9 @@ REACH_SPACINGS = 2.5
 @functools.lru_cache(maxsize=8)
 def ring(radius_px: int) -> np.ndarray:
     """(M, 4) int64 rows (du, dv, squared distance, sector) of every offset within ``radius_px`` but
-    the centre, nearest first (ties by row, then column)."""
-    k = radius_px
-    rows = []
-    for dv in range(-k, k + 1):
-        for du in range(-k, k + 1):
-            d2 = du * du + dv * dv
-            if d2 == 0 or d2 > k * k:
-                continue
-            sector = int(math.floor((math.atan2(dv, du) + math.pi / SECTORS) / (2 * math.pi / SECTORS))) % SECTORS
-            rows.append((du, dv, d2, sector))
+    the centre (the gap fill's offsets and sectors, siteline.render.fill.ring_offsets), nearest first
+    (ties by row, then column)."""
+    rows = [r for r in ring_offsets(radius_px) if r[2] <= radius_px * radius_px]
     rows.sort(key=lambda r: (r[2], r[1], r[0]))
     return np.array(rows, dtype=np.int64).reshape(-1, 4)
 

@@ -47,7 +47,7 @@ def enclosed_table() -> list[bool]:
 
 
 @functools.lru_cache(maxsize=16)
-def _ring(radius_px: int) -> list[tuple[int, int, int, int]]:
+def ring_offsets(radius_px: int) -> list[tuple[int, int, int, int]]:
     """(du, dv, squared distance, sector) of every offset within ``radius_px`` but the centre."""
     offs, _ = disk(2 * radius_px + 1)
     out = []
@@ -83,7 +83,7 @@ def fill_gaps(
         return index, depth, filled
     if dev.type == "cpu" and compiled:  # one compiled pass (siteline.render.kernels), the same pixels
         index, depth = index.clone(), depth.clone().to(torch.float32)
-        ring = torch.tensor(_ring(radius_px), dtype=torch.int64).numpy()
+        ring = torch.tensor(ring_offsets(radius_px), dtype=torch.int64).numpy()
         table = np.array(enclosed_table(), dtype=bool)
         done = kernels.fill_gaps(index.numpy(), depth.numpy(), ring, table, np.float32(SAME_SURFACE), radius_px, width)
         return index, depth, torch.from_numpy(done)
@@ -99,7 +99,7 @@ def fill_gaps(
     cv, cu = cand // width, cand % width
     neighbours = []
     front = torch.full(cand.shape, float("inf"), dtype=torch.float32, device=dev)
-    for du, dv, d2, sector in _ring(radius_px):
+    for du, dv, d2, sector in ring_offsets(radius_px):
         u, v = cu + du, cv + dv
         inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
         q = torch.where(inside, v * width + u, 0)
