@@ -55,8 +55,8 @@ def real_clouds() -> None:
         hull = np.isfinite(zg)
         truth = np.abs(xyz[:, 2] - np.where(hull, zg, 0.0)) < 0.3
         print(f"{name}: {len(xyz):,} points, ground by the truth {truth[hull].mean():.0%} (class 2: {(cls == 2).mean():.0%})")
-        runs = [(f"morphology, {c:g} m cells", lambda c=c: morphological_ground(xyz, MorphologyParams(cell_m=c))) for c in (1.0, 2.0)]
-        runs += [(f"CSF, cloth {r:g} m", lambda r=r: _csf(xyz, r)) for r in (0.5, 1.0, 2.0)]
+        runs = [(f"morphology, {c:g} m cells", lambda c=c, xyz=xyz: morphological_ground(xyz, MorphologyParams(cell_m=c))) for c in (1.0, 2.0)]
+        runs += [(f"CSF, cloth {r:g} m", lambda r=r, xyz=xyz: _csf(xyz, r)) for r in (0.5, 1.0, 2.0)]
         for label, run in runs:
             t = time.perf_counter()
             found = run()

@@ -145,8 +145,9 @@ def test_a_copied_home_shows_a_pair_in_3d_with_the_original_gone(built, tmp_path
 def test_verify_refuses_a_manifest_with_an_absolute_path(built, tmp_path):
     import json
 
-    from siteline.release.manifest import verify_files
     from sitehelpers import writable_copy
+
+    from siteline.release.manifest import verify_files
 
     _, _, pub = built
     copy = writable_copy(pub.root, tmp_path / "copy")

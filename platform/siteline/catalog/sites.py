@@ -174,8 +174,7 @@ def lock_site(session: Session, site_id: int) -> Site:
     transaction for a read: there a no-op write to the row takes the database's write lock first,
     held until the transaction ends, so a concurrent ingest waits (busy timeout) as on PostgreSQL."""
     if session.get_bind().dialect.name == "sqlite":
-        table = Site.__table__
-        session.execute(sa.update(table).where(table.c.id == site_id).values(id=table.c.id))
+        session.execute(sa.update(Site).where(Site.id == site_id).values(id=Site.id))
     return session.execute(sa.select(Site).where(Site.id == site_id).with_for_update()).scalar_one()
 
 

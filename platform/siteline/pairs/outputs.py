@@ -5,7 +5,15 @@ from __future__ import annotations
 import json
 
 from siteline.pairs.plan import PairPlan
-from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed, PairOutput, RenderedView
+from siteline.records.pairs import (
+    ChangeLabels,
+    ChangeRulePlan,
+    ColourPlan,
+    Drawn,
+    GroundUsed,
+    PairOutput,
+    RenderedView,
+)
 from siteline.schema import JsonObject
 from siteline.stores import Store, join
 

@@ -253,7 +253,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
             return self._text(404, str(exc))
         if tail == "plan.json":
             return self._send(json.dumps(plan.to_dict(browse)).encode(), "application/json")
-        m = re.fullmatch(r"t([12])/(\d{1,%d})\.bin" % MAX_DIGITS, tail)
+        m = re.fullmatch(rf"t([12])/(\d{{1,{MAX_DIGITS}}})\.bin", tail)
         if m is None:
             return self._text(404, f"pair {pair} in 3D has no {tail}")
         try:

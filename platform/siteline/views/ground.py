@@ -65,6 +65,11 @@ class GroundPlane:
     def to_dict(self) -> dict:
         return {"normal": list(self.normal), "d": self.d}
 
+    @classmethod
+    def from_dict(cls, doc: dict) -> GroundPlane:
+        nx, ny, nz = (float(v) for v in doc["normal"])
+        return cls((nx, ny, nz), float(doc["d"]))
+
     def keep_height(self, before: np.ndarray, after: np.ndarray) -> np.ndarray:
         """A camera moved in plan from ``before`` to ``after`` (3,): the plane model leaves it where it
         was put (a mirror across the fence keeps its z, as views have been placed since the first
@@ -87,11 +92,6 @@ class GroundModel(Protocol):
     def keep_height(self, before: np.ndarray, after: np.ndarray) -> np.ndarray: ...
 
     def to_dict(self) -> dict: ...
-
-    @classmethod
-    def from_dict(cls, doc: dict) -> GroundPlane:
-        nx, ny, nz = (float(v) for v in doc["normal"])
-        return cls((nx, ny, nz), float(doc["d"]))
 
 
 def _plane_through(p: np.ndarray) -> tuple[np.ndarray, float] | None:
