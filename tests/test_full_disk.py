@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -61,3 +63,66 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(small_fs, size) -> None:
         assert [s["status"] for s in scenes] == ["registered"] and blobs
     else:  # while ingesting: nothing of the mission is kept
         assert blobs == []
+
+
+def _leftovers(home: Path) -> list[Path]:
+    return [p for p in home.rglob("*") if any(t in p.name for t in (".partial", ".tmp-", ".new-"))]
+
+
+def _tiles(home: Path) -> dict[str, str]:
+    import hashlib
+
+    root = home / "stores" / "tiles"
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in root.rglob("*") if p.is_file()}
+
+
+def _status(home: Path) -> list[str]:
+    return [s["status"] for s in json.loads(_run(home, "scene", "list", "--site", "a", "--json").stdout)["scenes"]]
+
+
+def test_retile_on_a_full_disk_or_stopped_leaves_the_old_store_and_nothing_else(small_fs) -> None:
+    """`scene tile --retile` that fails (the disk fills; SIGTERM; SIGKILL of its process group) leaves
+    the scene's current store as it was and no `.partial`: at once, or (SIGKILL) at the next run."""
+    mnt = small_fs("40m")
+    home = mnt / "home"
+    assert _run(home, "init").returncode == 0
+    assert _run(home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130").returncode == 0
+    assert _run(home, "ingest", str(AUTZEN), "--site", "a", "--captured-at", "2020-01-01T00:00:00Z").returncode == 0
+    before = _tiles(home)
+
+    # the disk fills while the new store is written (it needs ~3 MB)
+    filler = mnt / "filler"
+    free_kb = os.statvfs(mnt).f_bavail * os.statvfs(mnt).f_frsize // 1024
+    filler.write_bytes(b"\0" * ((free_kb - 1200) * 1024))
+    r = _run(home, "scene", "tile", "1", "--retile", "--workers", "2")
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert r.stderr.count("error:") == 1 and "the disk is full" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert _leftovers(home) == [] and _tiles(home) == before and _status(home) == ["tiled"]
+    filler.unlink()
+
+    # stopped: SIGTERM (a service manager, a cancelled run) once the new store is being written
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        env = {k: v for k, v in os.environ.items() if not k.startswith(("SITELINE_", "PREFECT_API"))}
+        p = subprocess.Popen([str(EXE), "scene", "tile", "1", "--retile", "--workers", "2"], env=env | {"SITELINE_HOME": str(home)},
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+        deadline = time.monotonic() + 120
+        while not any(".partial-" in q.name for q in (home / "stores" / "tiles").iterdir()):
+            assert p.poll() is None, p.communicate()
+            assert time.monotonic() < deadline, "the retile never started writing"
+            time.sleep(0.02)
+        if sig == signal.SIGTERM:
+            p.send_signal(sig)
+            _, err = p.communicate(timeout=120)
+            assert p.returncode == 128 + sig, err
+            assert "Traceback" not in err, err
+            assert _leftovers(home) == [], "SIGTERM left what it was writing"
+        else:
+            os.killpg(p.pid, sig)  # the whole command, workers included, as a lost machine would
+            p.communicate(timeout=120)
+        assert _tiles(home) == before and _status(home) == ["tiled"]
+
+    # the next run clears what the killed one left and tiles the scene again
+    r = _run(home, "scene", "tile", "1", "--retile")
+    assert r.returncode == 0, (r.stdout, r.stderr)
+    assert _leftovers(home) == [] and _status(home) == ["tiled"]
+    assert set(_tiles(home)) != set(before)  # a new generation's store replaced the old one

@@ -5,6 +5,8 @@ from __future__ import annotations
 import errno
 import os
 import sys
+import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +102,31 @@ def _root(
 _NOT_WRITABLE = (errno.EACCES, errno.EPERM, errno.EROFS)
 
 
+def _exit_on_sigterm() -> Callable[[], None]:
+    """SIGTERM (``kill``, a service manager's stop, a cancelled flow run) ends this process as Ctrl-C
+    does: by an exception, so every ``finally`` removes what the command was writing. Forked worker
+    processes inherit the handler; in them it keeps the default (die at once: their parent cleans up)."""
+    import signal
+
+    owner = os.getpid()
+
+    def terminated(signum: int, _frame: object) -> None:
+        if os.getpid() != owner:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+            return
+        raise SystemExit(128 + signum)
+
+    if threading.current_thread() is not threading.main_thread():  # handlers are set in the main thread only
+        return lambda: None
+    before = signal.signal(signal.SIGTERM, terminated)
+
+    def restore() -> None:
+        signal.signal(signal.SIGTERM, before)
+
+    return restore
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the CLI and return its exit status.
 
@@ -108,6 +135,14 @@ def main(argv: list[str] | None = None) -> int:
     With ``standalone_mode=False`` click *returns* the code of a ``typer.Exit`` instead of raising it,
     so the return value is passed on, never dropped.
     """
+    restore = _exit_on_sigterm()
+    try:
+        return _run(argv)
+    finally:
+        restore()  # main() called in a process that goes on (a test, a notebook) leaves its handler as it was
+
+
+def _run(argv: list[str] | None) -> int:
     try:
         rc = app(args=argv, standalone_mode=False)
     except SitelineError as exc:
