@@ -12,7 +12,10 @@ With ``--splat world`` (the default) points are drawn as world splats and gaps f
 Scale 2.0 renders 1320 x 990: the paper's 1/4 of a frame, twice its pixels per side.
 
     python bench/paper_scale.py [--density 1000] [--views 300] [--scale 1.0] [--splat world]
-        [--fill 2] [--json out.json]
+        [--fill 2] [--labels-only] [--json out.json]
+
+``--labels-only`` stops each pair after its change labels (the stage that held the pair's peak
+memory): their seconds and peak RSS, without the views and renders.
     make bench-scale
 """
 
@@ -127,12 +130,35 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, kn
     }
 
 
+def stage_labels(work: Path, knobs: dict) -> dict:
+    """The pair's change labels alone (the stage that held the pair's peak memory), with ``knobs``."""
+    from siteline.catalog import open_catalog
+    from siteline.labelsets.store import open_labelled
+    from siteline.pairs.execute import pair_labels
+    from siteline.pairs.params import PairParams
+    from siteline.pairs.plan import plan_pair
+    from siteline.progress import no_progress
+
+    settings = _settings(work)
+    cat = open_catalog(settings)
+    with cat.transaction() as s:
+        plan = plan_pair(s, settings.store, 1, PairParams(**knobs), None)
+    t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
+    t0 = time.perf_counter()
+    labels = pair_labels(plan, t1, t2, settings.store, no_progress)
+    total = time.perf_counter() - t0
+    cat.dispose()
+    return {"seconds": total, "labels_s": total, "radius_m": labels.radius_m}
+
+
 def child(stage: str, work: str, args: list[str]) -> None:
     work_p = Path(work)
     if stage == "synth":
         res = stage_synth(work_p, float(args[0]))
     elif stage == "ingest":
         res = stage_ingest(work_p)
+    elif stage == "labels":
+        res = stage_labels(work_p, json.loads(args[0]))
     else:
         res = stage_pair(work_p, int(args[0]), float(args[1]), None if args[2] == "-" else float(args[2]), json.loads(args[3]))
     res["peak_mib"] = _peak_mib()
@@ -158,7 +184,10 @@ def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
     out["ingest_tile"] = _run("ingest", work)
     mv = "-" if args.min_valid is None else str(args.min_valid)
     knobs = {"point_size_px": args.point_size, "lod_factor": args.lod_factor, "splat": args.splat, "fill_px": args.fill}
-    out["pair"] = _run("pair", work, str(args.views), str(args.scale), mv, json.dumps(knobs))
+    if args.labels_only:
+        out["pair"] = _run("labels", work, json.dumps({k: v for k, v in knobs.items() if k not in ("point_size_px", "splat", "fill_px")}))
+    else:
+        out["pair"] = _run("pair", work, str(args.views), str(args.scale), mv, json.dumps(knobs))
     return out
 
 
@@ -178,6 +207,7 @@ def main() -> None:
     ap.add_argument("--lod-factor", type=float, default=1.0)
     ap.add_argument("--splat", choices=("world", "fixed"), default="world", help="how big a point is drawn")
     ap.add_argument("--fill", type=int, default=2, help="gap fill radius, px (0: none)")
+    ap.add_argument("--labels-only", action="store_true", help="of the pair, its change labels only (their time and peak memory)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="paper-scale-") as d:
@@ -186,16 +216,22 @@ def main() -> None:
             run_density(Path(d), args.density, args),
         ]
     lo, hi = runs
+    keys = ("seconds", "labels_s", "views_s", "renders_s", "peak_mib", "points_read_per_covered_px")
     ratios = {
         "points": sum(hi["synth"]["points"]) / sum(lo["synth"]["points"]),
         "ingest_tile_s": hi["ingest_tile"]["seconds"] / lo["ingest_tile"]["seconds"],
-        **{
-            k: hi["pair"][k] / max(lo["pair"][k], 1e-9)
-            for k in ("seconds", "labels_s", "views_s", "renders_s", "peak_mib", "points_read_per_covered_px")
-        },
+        **{k: hi["pair"][k] / max(lo["pair"][k], 1e-9) for k in keys if k in hi["pair"]},
     }
     report = {"runs": runs, "ratios_dense_over_sparse": ratios}
     for r in runs:
+        if args.labels_only:
+            p = r["pair"]
+            print(
+                f"{r['density_pts_m2']:g} pts/m2 ({sum(r['synth']['points']):,} points): synth {r['synth']['seconds']:.0f} s, "
+                f"ingest+tile {r['ingest_tile']['seconds']:.0f} s ({r['ingest_tile']['peak_mib']:.0f} MiB), "
+                f"labels {p['labels_s']:.0f} s at r = {p['radius_m']:.3f} m ({p['peak_mib']:.0f} MiB peak)"
+            )
+            continue
         p = r["pair"]
         print(
             f"{r['density_pts_m2']:g} pts/m2 ({sum(r['synth']['points']):,} points): synth {r['synth']['seconds']:.0f} s "
