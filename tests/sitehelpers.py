@@ -129,3 +129,17 @@ def ingest_and_tile(cat, settings: Settings, missions: list[Path], site: str = "
         ids.append(ingest_mission(cat, settings, m, site).scene_id)
         tile_scene(cat, settings, ids[-1], resources=TilingResources(workers=1))
     return ids
+
+
+def chromium_path() -> Path:
+    """Debian's Chromium for the page tests (`make test` installs it where it is missing). A page test
+    without it fails, naming the fix; SITELINE_SKIP_BROWSER=1 skips the page tests on purpose."""
+    import pytest
+
+    found = shutil.which("chromium") or shutil.which("chromium-browser")
+    if found is not None:
+        return Path(found)
+    if os.environ.get("SITELINE_SKIP_BROWSER") == "1":
+        pytest.skip("SITELINE_SKIP_BROWSER=1: the page tests are skipped")
+    pytest.fail("no Chromium to open the pages: `make test` installs Debian's (apt-get install chromium); "
+                "SITELINE_SKIP_BROWSER=1 skips the page tests on purpose")  # fmt: skip

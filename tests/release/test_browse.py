@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from sitehelpers import run_exe
+from sitehelpers import chromium_path, run_exe
 
 from siteline import pipeline
 from siteline.catalog.releases import release_location
@@ -24,8 +24,6 @@ from siteline.previews.browser import camera_figures, write_browser
 from siteline.previews.cloud import budget_takes, decode_chunk
 from siteline.previews.server import ReleaseAccess, make_server
 from siteline.release.manifest import read_manifest
-
-CHROMIUM = Path("/usr/bin/chromium")
 
 
 def _cloud(built, pair: int = 1):
@@ -203,13 +201,12 @@ def _fake_release(root: Path, n: int, size: tuple[int, int] = (40, 30)) -> dict:
 
 @pytest.fixture(scope="module")
 def chromium():
-    if not CHROMIUM.exists():  # a system package: `make test-all` installs it, `make test` may not have it
-        pytest.skip("Debian's chromium is not installed (make test-all installs it)")
+    chromium = chromium_path()  # a system package `make test` installs; missing, the page tests fail
     from playwright.sync_api import sync_playwright  # a dev dependency
 
     with sync_playwright() as p:
         browser = p.chromium.launch(
-            executable_path=str(CHROMIUM),
+            executable_path=str(chromium),
             args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"],
         )
         yield browser

@@ -19,7 +19,7 @@ import httpx
 import laspy
 import numpy as np
 import pytest
-from sitehelpers import epoch_dirs
+from sitehelpers import chromium_path, epoch_dirs
 
 REPO = Path(__file__).resolve().parents[2]
 EXE = str(Path(sys.executable).with_name("siteline"))
@@ -159,7 +159,7 @@ def _screenshots(svc: Service, run_id: str, why_id: str, tmp_path: Path) -> None
     out.mkdir(parents=True, exist_ok=True)
     ui = svc.api.removesuffix("/api")
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=shutil.which("chromium"),
+        browser = p.chromium.launch(executable_path=str(chromium_path()),
                                     args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"])  # fmt: skip
         page = browser.new_page(viewport={"width": 1400, "height": 900})
         page.goto(f"{ui}/artifacts/artifact/{why_id}")
@@ -259,9 +259,7 @@ def test_the_service(tmp_path, synth_site) -> None:
         assert run["run_count"] >= 2
 
         # the UI shows the release's images: the artifact page in headless Chromium loads the montage
-        chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-        if chromium is None:
-            pytest.skip("no Chromium here to look at the UI (Debian: apt-get install chromium)")
+        chromium = str(chromium_path())
         arts = httpx.post(f"{svc.api}/artifacts/filter", json={"artifacts": {"key": {"any_": ["release-demo-demo-cd"]}}},
                           timeout=30).json()  # fmt: skip
         latest = max(arts, key=lambda a: a["created"])
