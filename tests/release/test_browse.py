@@ -176,7 +176,8 @@ SOLID = {"A": (0, 0, 255), "B": (255, 255, 0)}
 
 def _fake_release(root: Path, n: int, size: tuple[int, int] = (40, 30)) -> dict:
     """A release folder of ``n`` items whose A is blue, B yellow, and whose mask marks the left half
-    changed (label 255 there, ignore nowhere): enough for the browser, whose pixels are then known."""
+    changed (label 255 there) and the bottom quarter of the right half ignored: enough for the browser,
+    whose pixels are then known."""
     w, h = size
     items = []
     for k in range(n):
@@ -185,7 +186,7 @@ def _fake_release(root: Path, n: int, size: tuple[int, int] = (40, 30)) -> dict:
         for folder, img in (
             ("A", Image.new("RGB", size, SOLID["A"])), ("B", Image.new("RGB", size, SOLID["B"])),
             ("label", Image.fromarray(np.where(np.arange(w)[None, :] < w // 2, 255, 0).repeat(h, 0).astype(np.uint8))),
-            ("ignore", Image.new("L", size, 0)),
+            ("ignore", Image.fromarray(np.pad(np.full((h // 4, w // 2), 255, np.uint8), ((h - h // 4, 0), (w - w // 2, 0))))),
         ):  # fmt: skip
             (root / split / folder).mkdir(parents=True, exist_ok=True)
             img.save(root / split / folder / f"{iid}.png")
@@ -257,6 +258,83 @@ def test_browser_swipe_and_mask_in_chromium(chromium, tmp_path) -> None:
     assert stages.count() == 2
     page.keyboard.press("ArrowRight")
     assert doc["items"][3]["id"] in page.evaluate("location.hash")
+
+
+def _view(page) -> dict:
+    """What the detail view shows: its item and every control a copied address must carry."""
+    return page.evaluate("""() => ({
+        open: !document.getElementById("detail").hidden, title: document.getElementById("d-title").textContent,
+        ...Object.fromEntries(["d-mode", "d-mask", "d-opacity", "d-swipe", "f-split", "f-sort", "f-thumb", "f-chg-min", "f-chg-max"]
+            .map(id => [id, document.getElementById(id).value])),
+        ignore: document.getElementById("d-ignore").checked, count: document.getElementById("count").textContent })""")
+
+
+def test_a_copied_address_reopens_the_same_view(chromium, tmp_path) -> None:
+    """The whole view is written into the address as it changes, a copied address reopens it in a new
+    tab, and editing the address of an open tab changes the view (hashchange)."""
+    root = tmp_path / "releases" / "site" / "1.0.0"
+    doc = _fake_release(root, 30)
+    page_path = write_browser(root)
+    page = _open(chromium, page_path.as_uri(), (1400, 800))
+    page.select_option("#f-split", "val")
+    page.select_option("#f-sort", "-change")
+    page.fill("#f-chg-min", "10")
+    page.dispatch_event("#f-chg-min", "input")
+    page.locator(".cell").first.click()
+    page.select_option("#d-mode", "side")
+    page.select_option("#d-mask", "A")
+    page.locator("#d-opacity").fill("30")
+    page.locator("#d-ignore").uncheck()
+    page.wait_for_timeout(300)  # the slider's write waits for it to rest
+    seen = _view(page)
+    href = page.evaluate("location.href")
+    for key in ("item=", "mode=side", "mask=A", "opacity=0.3", "ignore=0", "split=val", "sort=-change", "chg=10-100"):
+        assert key in href, (key, href)
+    again = _open(chromium, href, (1400, 800))
+    assert _view(again) == seen and seen["open"] and seen["d-mode"] == "side"
+    # an address edited in the open tab: another item in swipe mode, no filters
+    other = doc["items"][4]["id"]
+    again.evaluate(f"location.hash = '#item={other}&mode=swipe&swipe=30'")
+    again.wait_for_function(f"document.getElementById('d-title').textContent.startsWith('{other}')")
+    now = _view(again)
+    assert now["d-mode"] == "swipe" and now["d-swipe"] == "30" and now["f-split"] == "" and now["d-mask"] == "both"
+    assert now["count"].startswith("30 of 30")
+    again.evaluate("location.hash = ''")
+    again.wait_for_function("document.getElementById('detail').hidden")
+
+
+def test_grid_fills_the_width_and_mask_thumbnails_use_the_legend_colours(chromium, tmp_path) -> None:
+    root = tmp_path / "releases" / "site" / "1.0.0"
+    _fake_release(root, 12)
+    page_path = write_browser(root)
+    page = _open(chromium, page_path.as_uri() + "#thumb=label", (1400, 800))
+    page.wait_for_function("[...document.images].every(i => i.complete)")
+    right = page.evaluate("Math.max(...[...document.querySelectorAll('.cell')].map(c => c.getBoundingClientRect().right))")
+    width = page.evaluate("document.getElementById('grid-scroll').clientWidth")
+    assert width - right < 12, (right, width)  # at 1400 px five columns fill the row (200 px were left)
+    px = _pixels(page, ".cell .mthumb >> nth=0")
+    h, w = px.shape[:2]
+    shown = h * 40 / 30  # the 40 x 30 mask fitted to the thumbnail's height, centred
+    x = lambda f: int((w - shown) / 2 + f * shown)  # noqa: E731
+    assert _near(px[h // 2, x(0.25)], (255, 26, 26), 60)  # changed: red, as the legend says
+    assert _near(px[h // 2, x(0.75)], (0, 0, 0), 30)  # unchanged: black
+    # ignore (the bottom quarter of the right half) is hatched: pale blue stripes with black between
+    ign = px[int(h * 0.8):h - 3, x(0.55):x(0.97)]
+    pale = (ign[..., 2] > 120).mean()
+    assert 0.15 < pale < 0.7, pale  # stripes, not a solid fill
+    assert (px[int(h * 0.8):h - 3, x(0.25)][:, 0] > 200).all()  # changed is solid
+
+
+def test_ignore_is_hatched_over_the_image(chromium, tmp_path) -> None:
+    root = tmp_path / "releases" / "site" / "1.0.0"
+    doc = _fake_release(root, 3, (200, 160))
+    page_path = write_browser(root)
+    page = _open(chromium, f"{page_path.as_uri()}#item={doc['items'][0]['id']}&mode=side&mask=B&opacity=1", (1400, 800))
+    px = _pixels(page, ".stage >> nth=1")
+    h, w = px.shape[:2]
+    ign = px[int(h * 0.8):h - 2, int(w * 0.55):w - 2]
+    plain = np.abs(ign - np.asarray(SOLID["B"])).max(axis=2) <= 40
+    assert 0.3 < plain.mean() < 0.85, plain.mean()  # B's own yellow shows between the stripes
 
 
 def test_browser_of_5000_items_stays_light(chromium, tmp_path) -> None:
