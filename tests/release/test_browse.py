@@ -384,6 +384,8 @@ def test_viewer_draws_change_in_red_and_green_in_chromium(chromium, server) -> N
 
 def test_clicking_a_camera_opens_its_item_in_the_browser(chromium, server) -> None:
     page = _open(chromium, server + "/3d/rel/1.0.0/2/", (1100, 700))
+    assert not page.is_checked("#cams")  # frusta are drawn when asked
+    page.check("#cams")
     plan = json.loads(_get(server + "/3d/rel/1.0.0/2/plan.json")[1])
     panel = page.evaluate("document.getElementById('panel').getBoundingClientRect().right")
     # a camera in sight, not under the panel
@@ -395,6 +397,27 @@ def test_clicking_a_camera_opens_its_item_in_the_browser(chromium, server) -> No
     shown.wait_for_function("document.body.dataset.ready")
     assert shown.url.endswith(f"/browse/rel/1.0.0/#item={item}")
     assert shown.locator("#d-title").inner_text().startswith(item) and shown.locator("#detail").is_visible()
+
+
+def test_viewer_status_is_true_and_eye_dome_lighting_shades_edges(chromium, server) -> None:
+    plan = json.loads(_get(server + "/3d/rel/1.0.0/1/plan.json?budget=60000")[1])
+    page = _open(chromium, server + "/3d/rel/1.0.0/1/?budget=60000", (1100, 700))
+    planned = plan["points"]["t1"] + plan["points"]["t2"]
+    total = plan["scene_points"]["t1"] + plan["scene_points"]["t2"]
+    text = page.locator("#counts").inner_text()
+    assert planned < total and f"{planned:,} loaded of the {total:,}" in text, text
+    assert "a budget of 60,000 points" in text and f"t1 to level {plan['levels']['t1']}" in text, text
+    assert page.is_checked("#edl") and not page.is_checked("#cams")
+    lit = _scene_pixels(page)
+    page.uncheck("#edl")
+    page.wait_for_timeout(200)
+    flat = _scene_pixels(page)
+    drawn = np.abs(flat - np.array([0x15, 0x18, 0x1D])).max(axis=2) > 20  # points, not the background
+    assert drawn.mean() > 0.05
+    ratio = (lit.sum(axis=2) / np.maximum(flat.sum(axis=2), 1))[drawn]
+    darker = (ratio < 0.7).mean()
+    # eye-dome lighting darkens the points at depth steps (edges, the backs of objects), not the rest
+    assert 0.02 < darker < 0.5 and np.median(ratio) > 0.8, (darker, np.median(ratio))
 
 
 def test_chunks_read_from_many_threads_at_once_are_whole(built) -> None:

@@ -141,7 +141,7 @@ class PairCloud:
         hi = np.max([t.all_nodes.hi.max(axis=0) for t in (t1, t2) if len(t.all_nodes.hi)], axis=0)
         (take1, level1), (take2, level2) = (budget_takes(t, budget // 2) for t in (t1, t2))
         return CloudPlan(
-            self, (chunk_plan(t1, take1), chunk_plan(t2, take2)), (lo + hi) / 2, hi - lo, (level1, level2)
+            self, (chunk_plan(t1, take1), chunk_plan(t2, take2)), (lo + hi) / 2, hi - lo, (level1, level2), budget
         )
 
     def side(self, side: int) -> SceneTiles:
@@ -151,14 +151,15 @@ class PairCloud:
 @dataclass(frozen=True)
 class CloudPlan:
     """The chunks of each scene (``chunks[0]``: t1) under a budget, the middle of the two scenes'
-    bounds (site-local metres; positions are sent from it) and their extent, and the deepest whole
-    level drawn of each."""
+    bounds (site-local metres; positions are sent from it) and their extent, the deepest whole
+    level drawn of each, and the point budget they were chosen for."""
 
     cloud: PairCloud
     chunks: tuple[list[CloudChunk], list[CloudChunk]]
     centre: np.ndarray
     extent: np.ndarray
     levels: tuple[int, int]
+    budget: int
     # a scene's reader keeps a cache of decoded chunks: one read of it at a time (a page asks for several)
     _reading: tuple[threading.Lock, threading.Lock] = field(
         default_factory=lambda: (threading.Lock(), threading.Lock()), repr=False, compare=False
@@ -194,6 +195,7 @@ class CloudPlan:
             "points": {f"t{s + 1}": sum(c.points for c in self.chunks[s]) for s in (0, 1)},
             "scene_points": {"t1": self.cloud.scenes.t1.point_count, "t2": self.cloud.scenes.t2.point_count},
             "levels": {"t1": self.levels[0], "t2": self.levels[1]},
+            "budget": self.budget,
             "colour": self.cloud.colour.source,
             "classes": [
                 {"id": c.id, "name": c.name, "color": list(c.color), "ignore": c.ignore} for c in self.cloud.taxonomy.classes
