@@ -16,3 +16,7 @@ IGNORE_CAUSES = ("no_surface", "gap", "one_side", "outside_fence", "ignored_clas
 # a release adds the padding it writes around the rendered image (siteline.release.layout), and
 # counts as unaccounted the ignore of outputs made before causes were recorded
 RELEASE_IGNORE_CAUSES = (*IGNORE_CAUSES, "padding", "unaccounted")
+
+# the generating software siteline's synthetic sites write into their LAS headers: a release whose
+# scenes all carry it is synthetic, and says so (the dataset card, siteline.release.hub)
+SYNTHETIC_SOFTWARE = "siteline synth"

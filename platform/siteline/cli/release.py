@@ -242,14 +242,21 @@ def export(
     ),
     out: Path = typer.Option(..., "--out", help="New folder for the export (outside the release)."),
     copy: bool = typer.Option(False, "--copy", help="Copy files instead of relative symlinks."),
-    license_id: str = typer.Option(
-        "other", "--license", help="hf: the dataset card's licence, a hub licence id (cc-by-4.0, mit, other...)."
+    license_id: str | None = typer.Option(
+        None, "--license", help="hf (required): the card's licence, a hub licence id (cc-by-4.0, mit, ...) or other."
+    ),
+    license_name: str | None = typer.Option(None, "--license-name", help="hf, with --license other: the licence's name."),
+    license_link: str | None = typer.Option(
+        None, "--license-link", help="hf, with --license other: an http(s) address of the licence's text."
     ),
     as_json: bool = JsonOption,
 ) -> None:
     """Lay a release out as one toolbox's stock loader expects (or as a Hugging Face dataset); print the
     setting that honours ignore."""
     from siteline.release.export import export_release
+    from siteline.release.hub import HubLicense
+
+    hub_license = HubLicense(license_id, license_name, license_link) if license_id is not None else None
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
@@ -266,7 +273,7 @@ def export(
             f"`siteline release verify {name} {version}` lists every difference."
         )
     result = export_release(
-        root, profile, out, copy=copy, protected=layout.releases(settings().home), license_id=license_id
+        root, profile, out, copy=copy, protected=layout.releases(settings().home), license=hub_license
     )
     emit(
         as_json,

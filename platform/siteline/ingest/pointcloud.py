@@ -234,6 +234,7 @@ def _scan(
         z_unit=z_unit_of(src, z_unit),
         creation_date=day.isoformat() if day is not None else None,
         gps_time_standard=header.gps_time_standard,
+        generating_software=header.software,
         colour_stats=t.colour_stats(survey),
         footprint=[list(v) for v in outline] if outline is not None else None,
         stable_sample=np.concatenate(t.samples) if t.samples else np.zeros((0, 4)),

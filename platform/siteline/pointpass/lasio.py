@@ -392,7 +392,9 @@ def write_changed_classes(first: Path, second: Path, out: Path, chunk: int = 1_0
 @dataclass(frozen=True)
 class LasHeaderFacts:
     """What a scan records of a file's header: LAS version ("1.4"), point format id, scales and
-    offsets (per axis), creation date, and whether GPS times are standard (adjusted) GPS time."""
+    offsets (per axis), creation date, whether GPS times are standard (adjusted) GPS time, and who
+    wrote the file (the header's system identifier and generating software, "; "-joined; None when
+    both are blank)."""
 
     version: str
     point_format: int
@@ -400,6 +402,7 @@ class LasHeaderFacts:
     offsets: list[float]
     creation_date: date | None
     gps_time_standard: bool
+    software: str | None = None
 
 
 def header_facts(header: laspy.LasHeader) -> LasHeaderFacts:
@@ -408,6 +411,7 @@ def header_facts(header: laspy.LasHeader) -> LasHeaderFacts:
         f"{header.version.major}.{header.version.minor}", int(header.point_format.id),
         [float(v) for v in header.scales], [float(v) for v in header.offsets], header.creation_date,
         bool(int(header.global_encoding.gps_time_type)),
+        "; ".join(t for t in (str(v).strip("\x00 ") for v in (header.system_identifier, header.generating_software)) if t) or None,
     )  # fmt: skip
 
 

@@ -61,6 +61,8 @@ class LasScan:
     whether the header's global encoding says GPS times are adjusted standard GPS time (absolute:
     seconds since the GPS epoch less 1e9) rather than seconds of the GPS week. footprint: the
     outline of the points (a fence ring, site-local metres; siteline.site.fence.footprint), or None.
+    generating_software: the header's system identifier and generating software, "; "-joined ("siteline
+    synth; ..." for a generated site; None when blank or scanned before it was recorded).
     stable_sample: (N, 4) float64 the co-registration sample: site-local x, y, z of points of stable
     surfaces (4th column 1: ground, building) and of structure (2: vegetation, unclassified);
     survey_sample: (N, 4) x, y, z (site-local) and intensity of every k-th point of the file (both
@@ -89,6 +91,7 @@ class LasScan:
     footprint: list[list[float]] | None = None
     code_histogram: dict[int, int] = field(default_factory=dict)
     class_scheme: str | None = None
+    generating_software: str | None = None
     stable_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
     survey_sample: np.ndarray | None = field(default=None, repr=False, compare=False)
 

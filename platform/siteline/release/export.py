@@ -20,6 +20,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.errors import ReleaseError
+from siteline.release.hub import HubLicense
 from siteline.release.layout import manifest_format
 from siteline.release.manifest import SAFE_ITEM_ID, read_manifest
 from siteline.schema import JsonObject
@@ -257,16 +258,21 @@ HF_LOADER = "datasets.load_dataset(<out>): parquet shards data/<split>-*.parquet
 PROFILE_NAMES = (*PROFILES, HF_PROFILE)
 
 
-def _export_hf(root: Path, out: Path, doc: JsonObject, license_id: str) -> ExportResult:
+def _export_hf(root: Path, out: Path, doc: JsonObject, license: HubLicense | None) -> ExportResult:
     from siteline.release.hub import HUB_SPLITS, export_hf
 
+    if license is None:
+        raise ReleaseError(
+            "the hf export needs a licence for its card: --license with a hub licence id (cc-by-4.0, mit, ...), "
+            "or --license other with --license-name and --license-link."
+        )
     with publish_folder(out) as work:
-        shards = export_hf(root, doc, work, license_id)
+        shards = export_hf(root, doc, work, license)
         result = ExportResult(
             HF_PROFILE, str(out), sum(len(v) for v in shards.files.values()), shards.rows,
             dict(HUB_SPLITS), "label holds 0 unchanged, 1 changed, 255 ignore (from label_ignore/)",
             "ignore is carried: train with ignore_index=255 on the label field (or mask with the ignore field)",
-            f"load it with datasets.load_dataset({str(out)!r}); licence in the card: {license_id}",
+            f"load it with datasets.load_dataset({str(out)!r}); licence in the card: {license.id}",
         )  # fmt: skip
         record = result.to_dict() | {
             "release": {"name": doc["name"], "version": doc["version"], "root": str(root)},
@@ -278,21 +284,21 @@ def _export_hf(root: Path, out: Path, doc: JsonObject, license_id: str) -> Expor
 
 def export_release(
     root: Path, profile_name: str, out: Path, copy: bool = False, protected: Path | None = None,
-    license_id: str = "other",
+    license: HubLicense | None = None,
 ) -> ExportResult:  # fmt: skip
     """Lay out the release at ``root`` for ``profile_name`` in the new folder ``out``: relative
     symlinks into the release (``copy``: copies; derived labels are written anew), list files, and
     ``siteline-export.json`` (with the file names given, stem -> item id); built beside ``out`` and
     renamed into place whole. ``out`` may not resolve inside the release or inside ``protected``
     (the folder of every release). The ``hf`` profile writes parquet shards and a dataset card
-    (licence ``license_id``, a hub licence id) instead of links."""
+    (its licence ``license``, required there) instead of links."""
     if profile_name not in PROFILE_NAMES:
         raise ReleaseError(f"unknown export profile {profile_name!r}: use one of {', '.join(PROFILE_NAMES)}.")
     root, out = Path(root).resolve(), Path(out).absolute()
     doc = read_manifest(root)
     _check_export(root, out, doc, protected)
     if profile_name == HF_PROFILE:
-        return _export_hf(root, out, doc, license_id)
+        return _export_hf(root, out, doc, license)
     profile = PROFILES[profile_name]
     planned, names, ids = _plan_files(root, profile, out, doc)
     profile.check_paths(out, [dest for source, _, dest in planned if source == "A"])

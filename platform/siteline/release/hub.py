@@ -3,6 +3,7 @@ card that ``datasets.load_dataset(FOLDER)`` reads with no code of ours.
 
 Each row is one item: its four images as the PNG bytes of the release (``image_a``, ``image_b``;
 ``label`` 0 unchanged, 1 changed, 255 ignore, from ``label_ignore/``; ``ignore`` 255 where ignored),
+``label_preview`` (the mask in colour, for the hub's viewer),
 its split, pair, view, figures and camera. Shards are ``data/<split>-NNNNN-of-NNNNN.parquet``, cut at
 :data:`SHARD_BYTES` of images, written with the features in the parquet schema (key ``huggingface``)
 and in the card's YAML header (``configs`` maps the hub's splits to the shard files). The hub names the
@@ -11,12 +12,16 @@ release's ``val`` split ``validation``. Needs the ``datasets`` package (``pip in
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from siteline.codes import IGNORE_CAUSES
+import numpy as np
+
+from siteline.codes import IGNORE_CAUSES, SYNTHETIC_SOFTWARE
 from siteline.errors import ReleaseError
+from siteline.labels.accuracy import accuracy_text
 from siteline.schema import JsonObject
 
 HUB_SPLITS = {"train": "train", "val": "validation", "test": "test"}
@@ -50,6 +55,7 @@ def features() -> Any:
         {
             "id": ds.Value("string"),
             **{name: ds.Image() for name in IMAGE_FOLDERS},
+            "label_preview": ds.Image(),
             "split": ds.Value("string"),
             "pair": i32,
             "view": i32,
@@ -77,6 +83,7 @@ def _row(root: Path, it: JsonObject) -> JsonObject:
         if not path.is_file():
             raise ReleaseError(f"{path} is missing: the release is incomplete (`siteline release verify`).")
         images[name] = {"bytes": path.read_bytes(), "path": f"{it['id']}.png"}
+    images["label_preview"] = {"bytes": _preview(root / it["split"] / "label_ignore" / f"{it['id']}.png"), "path": f"{it['id']}.png"}
     cam = it.get("camera")
     return {
         "id": it["id"], **images, "split": it["split"], "pair": it["pair"], "view": it["view"],
@@ -86,6 +93,22 @@ def _row(root: Path, it: JsonObject) -> JsonObject:
         "ignore_causes": {c: float(it.get("ignore", {}).get(c, 0.0)) for c in IGNORE_CAUSES} if it.get("ignore") else None,
         "camera": {k: cam[k] for k in ("fx", "fy", "cx", "cy")} | cam["cam_from_world"] if cam else None,
     }  # fmt: skip
+
+
+def _preview(label: Path) -> bytes:
+    """The 0/1/255 mask at ``label`` as an RGB PNG in the release's mask colours (the hub's viewer shows
+    the raw mask as black)."""
+    import io
+
+    from PIL import Image
+
+    from siteline.release.datasheet import colour_mask
+
+    with Image.open(label) as im:
+        rgb = colour_mask(np.asarray(im))
+    buf = io.BytesIO()
+    Image.fromarray(rgb).save(buf, format="PNG", optimize=False)
+    return buf.getvalue()
 
 
 def _shards(root: Path, items: list[JsonObject]) -> list[list[JsonObject]]:
@@ -146,19 +169,116 @@ def write_shards(root: Path, doc: JsonObject, work: Path) -> Shards:
     return Shards(written, rows, num_bytes, file_bytes)
 
 
-def card(doc: JsonObject, shards: Shards, license_id: str, datasheet: str) -> str:
-    """README.md of the export: the hub's YAML header (licence, task, sizes, splits and their files,
-    features), how to load it, what the fields hold, the citation, then the release's own datasheet."""
+@dataclass(frozen=True)
+class HubLicense:
+    """The card's licence: a hub licence id (``cc-by-4.0``, ``mit``, ...) or ``other`` with the
+    licence's name and a link to its text (the hub shows both)."""
+
+    id: str
+    name: str | None = None
+    link: str | None = None
+
+    def __post_init__(self) -> None:
+        if not self.id or not self.id.replace("-", "").replace(".", "").isalnum():
+            raise ReleaseError(f"--license {self.id!r}: give a hub licence id such as cc-by-4.0, or other.")
+        if self.id == "other" and not (self.name and self.link):
+            raise ReleaseError(
+                "--license other needs --license-name and --license-link (the hub shows them beside the data); "
+                "or give a hub licence id such as cc-by-4.0."
+            )
+        if self.link is not None and not self.link.startswith(("https://", "http://")):
+            raise ReleaseError(f"--license-link {self.link!r}: an http(s) address of the licence's text.")
+
+    def card_fields(self) -> JsonObject:
+        return {"license": self.id} | ({"license_name": self.name, "license_link": self.link} if self.id == "other" else {})
+
+    def text(self) -> str:
+        if self.id == "other":
+            return f"{self.name} ({self.link})"
+        return f"`{self.id}` (https://huggingface.co/docs/hub/repositories-licenses)"
+
+
+def provenance(doc: JsonObject) -> tuple[str, str]:
+    """(``synthetic``, ``surveyed`` or ``unrecorded``; a sentence saying so) from what wrote the scenes'
+    LAS files (the lineage's ``las_software``)."""
+    made = [sc.get("las_software") for sc in doc["lineage"]["scenes"]]
+    if made and all(m and m.startswith(SYNTHETIC_SOFTWARE) for m in made):
+        return "synthetic", (
+            "**Synthetic.** Every scene is a generated site (siteline's synthetic survey: analytic ground, "
+            "buildings, a crane, vehicles and workers scanned by a simulated Zenmuse LiDAR), not a survey: "
+            "use it to test a pipeline or to pre-train, and measure on surveyed data."
+        )
+    if made and all(made) and not any(m.startswith(SYNTHETIC_SOFTWARE) for m in made if m):
+        programs = ", ".join(sorted(set(str(m) for m in made)))
+        return "surveyed", f"**Surveyed.** The scenes are drone LiDAR surveys (their LAS files written by {programs})."
+    return "unrecorded", (
+        "**Source not recorded.** Some scenes were ingested before siteline recorded what wrote their LAS "
+        "files: whether they are surveyed or synthetic is not stated here."
+    )
+
+
+def _split_rows(doc: JsonObject) -> list[str]:
+    rows = []
+    for split, hub in HUB_SPLITS.items():
+        items = [it for it in doc["items"] if it["split"] == split]
+        if not items:
+            continue
+        px = [it["size_px"][0] * it["size_px"][1] for it in items]
+        valid = sum(it["valid"] * n for it, n in zip(items, px, strict=True)) / sum(px)
+        changed = sum(it["change_ratio"] * it["valid"] * n for it, n in zip(items, px, strict=True)) / sum(px)
+        pairs = sorted({it["pair"] for it in items})
+        rows.append(f"| {hub} | {len(items)} | {', '.join(map(str, pairs))} | {changed:.1%} | {1 - valid:.1%} |")
+    return rows
+
+
+def _split_rule(doc: JsonObject) -> str:
+    rule = doc.get("split_rule")
+    text = rule.get("rule") if isinstance(rule, dict) else rule
+    return str(text) if text else "the release's rule (not recorded in this manifest)"
+
+
+def _made_lines(doc: JsonObject) -> list[str]:
+    lin = doc["lineage"]
+    p = lin["parameters"]
+    pairs = lin["pairs"]
+    radii = [q["radius_m"] for q in pairs]
+    lines = [
+        f"- {len(lin['scenes'])} scenes (epochs) of one site, {len(pairs)} pairs of consecutive scenes, "
+        f"{p['views']} synthetic views asked per pair (seed {p['seed']}); each view rendered from both scenes' "
+        "point clouds with the same camera, so A and B are pixel-aligned.",
+        f"- render scale {p['scale']}, points drawn as {p.get('splat', 'fixed')} splats"
+        + (", edges trimmed" if p.get("trim_edges") else "")
+        + f", gaps up to {p.get('fill_px', 0)} px filled; level-of-detail factor {p['lod_factor']}.",
+        f"- change labels: the {p.get('label_rule', 'nearest')} rule on the 3D points at a radius of "
+        f"{min(radii):.3f}-{max(radii):.3f} m (a change smaller than the radius is not labelled), then projected "
+        "into both views and OR-ed (symmetric masks).",
+    ]
+    said: dict[str, list[str]] = {}  # one sentence for the pairs it holds for
+    for q in pairs:
+        info = (q.get("labels") or {}).get("radius") or {}
+        spacing = max((info.get("median_spacing_m") or {}).values(), default=float("nan"))
+        measured = accuracy_text(p.get("label_rule", "nearest"), int(p.get("min_region_points", 1)), bool(p.get("trim_edges")), spacing)
+        if measured:
+            said.setdefault(measured, []).append(str(q["id"]))
+    lines += [f"- pair{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {text}." for text, ids in said.items()]
+    return lines
+
+
+def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject | None = None) -> str:
+    """README.md of the export, written for the parquet layout: the hub's YAML header (licence, task,
+    sizes, splits and their files, features), what the data is and where it comes from, how to load
+    it (a snippet that runs on this folder as written), splits, fields and label meanings, how it was
+    made, its limitations, licence and citation."""
     from huggingface_hub import DatasetCardData
 
+    kind, source = provenance(doc)
     counts = shards.rows
     data = DatasetCardData(
-        license=license_id,
         pretty_name=f"{doc['name']} {doc['version']} (siteline change detection)",
         task_categories=["image-segmentation"],
         task_ids=["semantic-segmentation"],
         size_categories=[size_category(len(doc["items"]))],
-        tags=["change-detection", "construction", "drone", "lidar", "siteline"],
+        tags=["change-detection", "construction", "drone", "lidar", "siteline"] + (["synthetic"] if kind == "synthetic" else []),
         configs=[
             {"config_name": "default", "data_files": [{"split": s, "path": f"data/{s}-*.parquet"} for s in counts]}
         ],
@@ -168,55 +288,104 @@ def card(doc: JsonObject, shards: Shards, license_id: str, datasheet: str) -> st
             "download_size": shards.file_bytes,
             "dataset_size": sum(shards.num_bytes.values()),
         },
+        **license.card_fields(),
     )
-    sizes = ", ".join(f"{s} {n}" for s, n in counts.items())
+    ignore = (stats or {}).get("ignore", {}).get("share")
+    ignore_text = f"{ignore:.1%} of all pixels" if ignore is not None else "a share of the pixels"
+    first = next(iter(counts), "train")
     body = [
         f"# {doc['name']} {doc['version']}",
         "",
-        f"A bi-temporal change-detection dataset made by siteline from drone LiDAR scenes of a construction site "
-        f"(the iVISION-2DCD method): {len(doc['items'])} pixel-aligned image pairs ({sizes}) with symmetric change "
-        "masks, exported from the immutable release as parquet shards.",
+        f"Bi-temporal change detection for construction monitoring: {len(doc['items'])} pixel-aligned image pairs "
+        "(A: the earlier scene, B: the later one) rendered from drone LiDAR point clouds of a construction site, "
+        "each with a symmetric change mask, made by siteline with the iVISION-2DCD method (ICRA 2026). "
+        f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
+        "",
+        source,
+        "",
+        "![samples: A, B, mask (green unchanged, red changed, white ignore)](montage.png)",
+        "",
+        "## Use",
         "",
         "```python",
+        "import numpy as np",
+        "import torch",
         "from datasets import load_dataset",
+        "",
         'ds = load_dataset("path/to/this/folder")  # or the hub id once pushed',
-        'item = ds["train"][0]  # item["image_a"], item["image_b"], item["label"]: PIL images',
+        f'row = ds["{first}"][0]',
+        'a = torch.from_numpy(np.asarray(row["image_a"])).permute(2, 0, 1).float() / 255  # (3, H, W)',
+        'b = torch.from_numpy(np.asarray(row["image_b"])).permute(2, 0, 1).float() / 255',
+        'label = torch.from_numpy(np.asarray(row["label"])).long()  # (H, W): 0 unchanged, 1 changed, 255 ignore',
+        "loss = torch.nn.CrossEntropyLoss(ignore_index=255)  # ignore pixels are not scored",
+        'print(row["id"], tuple(a.shape), float((label == 1).float().mean()))',
         "```",
+        "",
+        "## Splits",
+        "",
+        f"Items are split by {_split_rule(doc)} (views of one pair are correlated: they see the same scenes).",
+        "",
+        "| split | rows | pairs | changed (of all pixels) | ignore |",
+        "|---|---|---|---|---|",
+        *_split_rows(doc),
+        "",
+        "## Fields",
         "",
         "| field | holds |",
         "|---|---|",
-        "| `image_a`, `image_b` | t1 and t2 renders (RGB, 8-bit), pixel-aligned; padded right and bottom to a multiple of 32 px |",
-        "| `label` | 0 unchanged, 1 changed, 255 ignore (train with `ignore_index=255`) |",
-        "| `ignore` | 255 where the pixel is ignored (no surface, a gap, seen from one side, outside the fence, an "
-        "ignored class, padding), else 0 |",
+        "| `id` | the item's id in the release (`<site>_p<pair>_v<view>`) |",
+        "| `image_a`, `image_b` | t1 and t2 renders (RGB, 8-bit PNG), pixel-aligned; padded right and bottom to a multiple of 32 px |",
+        "| `label` | the change mask, one byte a pixel: **0 unchanged, 1 changed, 255 ignore** (train with `ignore_index=255`); "
+        "as an image it looks black: see `label_preview` |",
+        "| `label_preview` | the same mask in colour for the hub's viewer: green unchanged, red changed, white ignore |",
+        "| `ignore` | 255 where the pixel is ignored, else 0 |",
         "| `split` | the release's split (`val` is the hub's `validation`) |",
         "| `pair`, `view` | the pair of consecutive scenes and the synthetic view's index in it |",
         "| `strategy` | how the view was derived from a real camera (tilt, mirror, forward shift) |",
         "| `coverage`, `valid`, `change_ratio`, `filled` | shares of the rendered image: covered in both epochs, "
-        "labelled, changed, and filled across gaps |",
+        "labelled (not ignore), changed (of the labelled), and filled across gaps between points |",
         "| `width`, `height` | the rendered size inside the padded image, pixels |",
-        "| `ignore_causes` | share of the rendered image ignored for each cause |",
+        "| `ignore_causes` | share of the rendered image ignored for each cause: " + ", ".join(f"`{c}`" for c in IGNORE_CAUSES) + " |",
         "| `camera` | the synthetic camera: fx, fy, cx, cy (pixels), `x_cam = rotation x_site + translation` (site-local metres) |",
+        "",
+        "## How it was made",
+        "",
+        *_made_lines(doc),
+        "",
+        "## Limitations",
+        "",
+        "- The images are renders of point clouds, not photographs: surfaces are as fine as the points (no texture "
+        "finer than the point spacing), the sky and unscanned space are empty (ignore), and where a scene has no "
+        "colour the images are shaded from its intensity or height.",
+        f"- Ignore covers {ignore_text} (no surface, gaps between points, a surface seen in one epoch only, outside "
+        "the site fence, ignored classes, padding). Scores that count ignore as unchanged inflate accuracy and mIoU: "
+        "exclude it (`ignore_index=255`).",
+        "- Labels come from comparing the two point clouds, not from people: a change smaller than the radius, or "
+        "hidden in one scene, is not labelled, and the measured precision and recall above bound how far the masks "
+        "can be trusted.",
+        "- One site and its epochs: views are many but places are few; do not expect a model trained here alone to "
+        "carry to other sites, sensors or seasons.",
+        *(["- Synthetic: shapes, materials and scanner noise are simulated."] if kind == "synthetic" else []),
+        "",
+        "## Licence",
+        "",
+        f"{license.text()}.",
         "",
         "## Citation",
         "",
         "```bibtex",
         CITATION,
         "```",
-        "",
-        "## Datasheet (the release's README)",
-        "",
-        datasheet,
     ]  # fmt: skip
     return f"---\n{data.to_yaml()}\n---\n\n" + "\n".join(body) + "\n"
 
 
-def export_hf(root: Path, doc: JsonObject, work: Path, license_id: str) -> Shards:
+def export_hf(root: Path, doc: JsonObject, work: Path, license: HubLicense) -> Shards:
     """Write the hub export of the release at ``root`` (manifest ``doc``) into the new folder ``work``:
     parquet shards and README.md (the release's montage copied beside it)."""
     shards = write_shards(root, doc, work)
-    datasheet = (root / "README.md").read_text() if (root / "README.md").is_file() else ""
+    stats = json.loads((root / "stats.json").read_text()) if (root / "stats.json").is_file() else None
     if (root / "montage.png").is_file():
         (work / "montage.png").write_bytes((root / "montage.png").read_bytes())
-    (work / "README.md").write_text(card(doc, shards, license_id, datasheet))
+    (work / "README.md").write_text(card(doc, shards, license, stats))
     return shards

@@ -234,6 +234,7 @@ def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[JsonObjec
                 "label_set_version": labels.version, "label_set_source": labels.source,
                 "label_set_sha256": labels.source_sha256, "registration": scene.registration.to_dict(),
                 "tile_checksum": tiling.checksum if tiling is not None else None,
+                "las_software": scene.statistics.scan.generating_software if scene.statistics.scan else None,
             }
         )  # fmt: skip
     return out

@@ -23,6 +23,7 @@ import pycolmap
 import pyproj
 from scipy.spatial.transform import Rotation
 
+from siteline.codes import SYNTHETIC_SOFTWARE
 from siteline.errors import SynthError
 from siteline.pointpass.lasio import LasWriter, las_header
 from siteline.schema import JsonObject
@@ -91,7 +92,7 @@ def _write_las(
     x0, _, y0, _ = m.TERRAIN_M
     header = las_header(
         cfg.crs, origin + np.array([x0, y0, -20.0]), LAS_SCALE_M, 3, "1.2", created=site.epochs[e].time.date(),
-        software=("siteline synth", "DJI Terra (simulated by siteline)"),
+        software=(SYNTHETIC_SOFTWARE, "DJI Terra (simulated by siteline)"),
     )  # fmt: skip
     keep_p = min(1.0, PHOTO_DENSITY_PTS_M2 / cfg.density_pts_m2)
     photo_xyz, photo_rgb = [], []
