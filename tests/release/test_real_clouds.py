@@ -196,7 +196,7 @@ def test_infeasible_settings_are_refused_before_any_view(autzen) -> None:
 
 
 @pytest.mark.slow  # 29 s: a second real cloud ingested and released twice; `make test-all` runs it
-def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
+def test_cloud_without_rgb_renders_height_with_edl_and_refuses_rgb(tmp_path) -> None:
     c = centre_xy(TOPOGRAPHY)
     change = {"removed_box": (c[0] - 60, c[1] - 60, c[0] - 20, c[1] - 20),
               "built_box": (c[0] + 30, c[1] + 30, c[0] + 70, c[1] + 60, 8.0), "days": 400}  # fmt: skip
@@ -218,11 +218,17 @@ def test_cloud_without_rgb_renders_intensity_and_refuses_rgb(tmp_path) -> None:
     assert pair["ground"]["model"] == "terrain" and pair["ground"]["source"] == "class"
     assert pair["ground"]["residual_m"] > 1.0
     assert "views stand on a terrain grid" in (root / "README.md").read_text()
-    assert pair["colour"]["source"] == "intensity" and pair["colour"]["stretch_t1"][1] > 1000
+    # no RGB: the height above the ground on the ramp
+    assert pair["colour"]["source"] == "height" and "shading" not in pair["colour"]
+    assert "colour from height" in (root / "README.md").read_text()
     a = _images(root, "A")
     assert a and min(img.any(axis=-1).mean() for img in a) > 0.2
-    grey = np.concatenate([img.reshape(-1, 3) for img in a])
-    assert np.array_equal(grey[:, 0], grey[:, 1])  # intensity is grey
+    ramp = np.concatenate([img.reshape(-1, 3) for img in a])
+    assert not np.array_equal(ramp[:, 0], ramp[:, 1])  # a colour ramp, not grey
+    # intensity as asked, with eye-dome lighting: grey, shaded
+    _ok(home, "release", "build", "--site", "topo", "--name", "grey", "--views", "4", "--colour", "intensity", "--shading", "edl")
+    grey = np.concatenate([img.reshape(-1, 3) for img in _images(home / "releases" / "grey" / ".drafts" / "1.0.0", "A")])
+    assert np.array_equal(grey[:, 0], grey[:, 1])
 
 
 @pytest.mark.slow  # 25 s: two ingests and two builds; `make test-all` runs it

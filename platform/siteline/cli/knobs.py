@@ -46,6 +46,7 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "all_points": (bool | None, typer.Option(None, "--all-points/--lod", help="Render every point (no level of detail; slower).")),
     "lod_factor": (float | None, typer.Option(None, "--lod-factor", help="Level of detail read per view (1 = half a drawn point).")),
     "colour": (str | None, typer.Option(None, "--colour", help="What images show: auto (RGB, else intensity, else elevation), rgb, intensity or elevation.")),
+    "shading": (str | None, typer.Option(None, "--shading", help="Eye-dome lighting of the images: edl, or none (auto, the default: none; bench/legible.py).")),
     "change_rule": (str | None, typer.Option(None, "--change-rule", help="auto (geometry when the scenes classify differently), semantic or geometry (class-agnostic).")),
     "pad": (bool | None, typer.Option(None, "--pad/--no-pad", help="Pad images to multiples of 32 and at least 256 px.")),
     "radius_ceiling": (float | None, typer.Option(None, "--radius-ceiling", help="Warn when a pair's change radius (the smallest change it resolves) is above this, metres (default 1).")),
@@ -66,7 +67,7 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
         radius = _number(values["radius"], "--radius", float)
         pair["radius_m"] = None if radius == AUTO else radius
     for name in (
-        "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "change_rule", "splat",
+        "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "shading", "change_rule", "splat",
         "splat_factor", "trim_edges", "label_rule", "min_region_points",
     ):  # fmt: skip
         if values.get(name) is not None:

@@ -160,7 +160,7 @@ def _render_queue(
     while queue:
         v = queue.pop(0)
         threads()
-        r = render_pair_view(scenes, v.camera, params, device, plan.colour, plan.site.fence)
+        r = render_pair_view(scenes, v.camera, params, device, plan.colour, plan.site.fence, views.ground)
         low = not at_least(r.valid, params.min_valid, RATIO_TOL)
         if low:
             low_valid += 1

@@ -13,7 +13,7 @@ from siteline.errors import PairError, SitelineError
 from siteline.labels.params import LabelParams
 from siteline.labels.rule import CHANGE_RULES
 from siteline.records.enums import HOLE_RULES, HoleRule
-from siteline.records.pairs import COLOUR_CHOICES
+from siteline.records.pairs import COLOUR_CHOICES, SHADING_CHOICES
 from siteline.records.specs import parse_spec
 from siteline.render.settings import WORLD_SPLAT_FACTOR, RenderSettings
 from siteline.schema import JsonObject
@@ -52,7 +52,9 @@ class PairParams:
     change_rule: whether classes take part in change (``semantic``, DESIGN.md §4) or geometry only
     (``geometry``: a point is changed only when nothing kept lies within the radius); ``auto`` takes
     geometry for a pair whose scenes classify differently (siteline.labels.rule), and is left out of
-    the digest like ``colour``.
+    the digest like ``colour``. shading: eye-dome lighting of A/B (``edl``, siteline.render.shading;
+    ``auto`` and ``none``: none, bench/legible.py); ``auto`` is left out of the digest, and shaded
+    outputs get a key of their own (siteline.pairs.plan.output_digest).
 
     The persisted JSON stays flat (the knobs above), so the catalog, the lineage and ``release diff``
     show each knob once under its one name."""
@@ -79,11 +81,13 @@ class PairParams:
     min_region_points: int = MIN_REGION_POINTS
     splat_factor: float = WORLD_SPLAT_FACTOR
     trim_edges: bool = True
+    shading: str = "auto"
 
     # what each knob added after the first release meant before it existed (a record without it)
     BEFORE: ClassVar[Mapping[str, object]] = {
         "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
         "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR, "trim_edges": False,
+        "shading": "none",
     }  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -96,6 +100,8 @@ class PairParams:
             raise PairError(f"min_valid {self.min_valid} must lie in [0, 1].")
         if self.colour not in COLOUR_CHOICES:
             raise PairError(f"colour {self.colour!r}: use one of {', '.join(COLOUR_CHOICES)}.")
+        if self.shading not in SHADING_CHOICES:
+            raise PairError(f"shading {self.shading!r}: use one of {', '.join(SHADING_CHOICES)}.")
         if self.change_rule not in CHANGE_RULES:
             raise PairError(f"change rule {self.change_rule!r}: use one of {', '.join(CHANGE_RULES)}.")
         if self.one_side_hole not in HOLE_RULES:
@@ -152,7 +158,7 @@ class PairParams:
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""
         doc = self.to_dict()
-        for knob in ("colour", "change_rule"):  # auto: resolved per pair, outputs made before keep their key
+        for knob in ("colour", "change_rule", "shading"):  # auto: resolved per pair, outputs made before keep their key
             if doc[knob] == "auto":
                 del doc[knob]
         if doc["splat_factor"] == WORLD_SPLAT_FACTOR:  # the renders of before: their key is kept

@@ -15,10 +15,11 @@ from siteline.codes import CHANGED as MASK_CHANGED
 from siteline.codes import IGNORE as MASK_IGNORE
 from siteline.codes import IGNORE_CAUSES
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
-from siteline.errors import LabelError
+from siteline.errors import LabelError, PairError
 from siteline.labels.change import CHANGED, IGNORED
 from siteline.records.enums import HOLE_RULES
 from siteline.records.pairs import ColourPlan
+from siteline.render.shading import eye_dome
 from siteline.render.zbuffer import RenderResult, render_points
 from siteline.site.fence import inside_fence
 from siteline.stores import join
@@ -26,6 +27,7 @@ from siteline.tiles.reader import SceneTiles
 
 if TYPE_CHECKING:
     from siteline.pairs.params import PairParams
+    from siteline.views.ground import GroundModel
 
 
 # a hole is a gap between points when a closing of the render's hit mask with a square of this
@@ -165,12 +167,15 @@ def render_pair_view(
     device: str = "cpu",
     colour: ColourPlan = ColourPlan("rgb"),
     fence: Sequence[Sequence[float]] | None = None,
+    ground: GroundModel | None = None,
 ) -> PairRender:
     """Render ``camera`` on both scenes with ``params`` (scale, point size, splats and gap fill,
     level of detail or ``all_points``, ``one_side_hole``: :func:`pair_mask`) in ``colour`` (the
     pair's RGB, intensity or elevation: siteline.render.colour), build the mask and say why each
     ignored pixel is ignored (``fence``: the site's, site-local metres, which made points outside it
-    ignore; None when it has none)."""
+    ignore; None when it has none). A height colour needs the pair's ``ground`` (the views' model)."""
+    if colour.source == "height" and ground is None:
+        raise PairError("a height colour plan needs the pair's ground model to render.")
     settings = params.render_settings()
     out = []
     outside = []
@@ -188,8 +193,12 @@ def render_pair_view(
         read += pts.stats.points_read
         xyz = pts.xyz_m.astype(np.float32)  # site-local: float32 keeps millimetres here
         values = pts.attributes.pop(source) if source else None
+        if colour.source == "height":
+            values = ground.height(pts.xyz_m)  # type: ignore[union-attr]
         attrs = pts.attributes | {"rgb": colour.colours(side, pts.xyz_m, values)}
         r = render_points(xyz, camera, settings, attrs, device=device, spacing_m=pts.spacing_m)
+        if colour.shading == "edl":  # intensity or elevation alone show no edges: shade by depth
+            r.attributes["rgb"] = eye_dome(r.rgb, r.depth)
         out.append(r)
         outside.append(_outside(r, pts.xyz_m, fence))
     ra, rb = out

@@ -80,15 +80,18 @@ def chunk_plan(tiles: SceneTiles, take: np.ndarray, chunk_points: int = CHUNK_PO
 
 
 def encode_chunk(
-    tiles: SceneTiles, chunk: CloudChunk, side: int, colour: ColourPlan, centre: np.ndarray
+    tiles: SceneTiles, chunk: CloudChunk, side: int, colour: ColourPlan, centre: np.ndarray, floor_z: float = 0.0
 ) -> bytes:
     """Read ``chunk`` of scene ``side`` (1 or 2; ``tiles`` reads ``change`` and ``class``) and pack
     it as :data:`HEADER` describes: positions in float32 metres from ``centre`` (site-local, so
-    float32 keeps millimetres whatever the site's coordinates), the change code, class and colour."""
+    float32 keeps millimetres whatever the site's coordinates), the change code, class and colour
+    (a height colour, whose ground model the viewer lacks, from the scenes' lowest z, ``floor_z``)."""
     source = colour.attribute
     names = ("change", "class", *((source,) if source else ()))
     pts = tiles.read_nodes({chunk.tile: (chunk.nodes, chunk.take)}, names)
     values = pts.attributes.get(source) if source else None
+    if colour.source == "height":
+        values = pts.xyz_m[:, 2] - floor_z
     rgb = colour.colours(side, pts.xyz_m, values)
     xyz = (pts.xyz_m - centre).astype("<f4")
     n = len(xyz)
@@ -171,7 +174,8 @@ class CloudPlan:
         if side not in (1, 2) or not 0 <= k < len(self.chunks[side - 1]):
             raise IndexError(f"scene t{side} has no chunk {k}")
         with self._reading[side - 1]:
-            return encode_chunk(self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre)
+            floor = float(self.centre[2] - self.extent[2] / 2)
+            return encode_chunk(self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre, floor)
 
     def to_dict(self, browser: str | None) -> JsonObject:
         """The viewer's plan (JSON): chunk counts and sizes, the centre, the classes, and each camera

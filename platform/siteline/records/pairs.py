@@ -100,9 +100,16 @@ changed, or made before it was measured)."""
         return cls(**values | {"params": ViewStrategy.from_dict(doc["params"]), "camera": Camera.from_dict(doc["camera"])})
 
 
-ColourChoice = Literal["auto", "rgb", "intensity", "elevation"]
-ColourSource = Literal["rgb", "intensity", "elevation"]
+ColourChoice = Literal["auto", "rgb", "height", "intensity", "elevation"]
+ColourSource = Literal["rgb", "height", "intensity", "elevation"]
+# height above the pair's ground (siteline.views.ground) on the ramp, metres: one fixed stretch for every
+# pair and release, so a colour is a height everywhere (trees, buildings and cranes up to 25 m apart)
+HEIGHT_RANGE_M = (0.0, 25.0)
 COLOUR_CHOICES: tuple[str, ...] = get_args(ColourChoice)
+# how A/B are shaded: eye-dome lighting (siteline.render.shading) or not; auto: not (measured on a
+# LiDAR-only forest, bench/legible.py: it darkens every splat's rim and brings trees and ground closer)
+ShadingChoice = Literal["auto", "edl", "none"]
+SHADING_CHOICES: tuple[str, ...] = get_args(ShadingChoice)
 # the elevation ramp: low -> high, five stops of viridis (perceptually uniform, readable in grey)
 RAMP = np.array(
     [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64
@@ -112,28 +119,32 @@ RAMP = np.array(
 @dataclass(frozen=True)
 class ColourPlan:
     """A pair's colour: ``source``, and for intensity each scene's (low, high) stretch, for elevation
-    the pair's (low, high) site-local z stretch (metres) used for both scenes; ``why`` says how
-    ``auto`` chose."""
+    the pair's (low, high) site-local z stretch (metres) used for both scenes, for height the
+    (low, high) height above the pair's ground (metres, :data:`HEIGHT_RANGE_M`); ``why`` says how
+    ``auto`` chose; ``shading``: ``edl`` (eye-dome lighting over the colour) or ``none``."""
 
     source: ColourSource
     stretch_t1: tuple[float, float] | None = None
     stretch_t2: tuple[float, float] | None = None
     why: str = ""
+    shading: str = "none"
 
     @property
     def attribute(self) -> str | None:
-        """The tile attribute the colour is made from (None: from the points' z)."""
-        return {"rgb": "rgb", "intensity": "intensity", "elevation": None}[self.source]
+        """The tile attribute the colour is made from (None: from the points' z, or for height from
+        their height above the ground, which the caller gives)."""
+        return {"rgb": "rgb", "intensity": "intensity", "elevation": None, "height": None}[self.source]
 
     def colours(self, side: int, xyz: np.ndarray, values: np.ndarray | None) -> np.ndarray:
         """(N, 3) uint8 colour of scene ``side`` (1 or 2)'s points: their RGB, or their ``values``
-        (intensity) or z stretched between this plan's bounds."""
+        (intensity; for height their heights above the ground, metres) or z stretched between this
+        plan's bounds onto the grey scale (intensity) or the ramp."""
+        if self.source in ("rgb", "height") and values is None:
+            raise PairError(f"a {self.source} colour plan needs the points' {'rgb' if self.source == 'rgb' else 'heights'}.")
         if self.source == "rgb":
-            if values is None:
-                raise PairError("an RGB colour plan needs the points' rgb.")
-            return values
+            return values  # type: ignore[return-value]
         lo, hi = (self.stretch_t1 if side == 1 else self.stretch_t2) or (0.0, 1.0)
-        data = np.asarray(values if self.source == "intensity" else xyz[:, 2], dtype=np.float64)
+        data = np.asarray(values if self.source in ("intensity", "height") else xyz[:, 2], dtype=np.float64)
         t = np.clip((data - lo) / max(hi - lo, 1e-9), 0.0, 1.0) if len(data) else data
         if self.source == "intensity":
             grey = np.rint(t * 255.0).astype(np.uint8)
@@ -149,7 +160,7 @@ class ColourPlan:
             "stretch_t1": list(self.stretch_t1) if self.stretch_t1 else None,
             "stretch_t2": list(self.stretch_t2) if self.stretch_t2 else None,
             "why": self.why,
-        }
+        } | ({"shading": self.shading} if self.shading != "none" else {})  # unshaded plans as before
 
     @classmethod
     def from_dict(cls, doc: JsonObject) -> ColourPlan:
@@ -161,7 +172,10 @@ class ColourPlan:
         def bounds(v: Any) -> tuple[float, float] | None:
             return (float(v[0]), float(v[1])) if v else None
 
-        return cls(source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")))
+        return cls(
+            source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")),
+            str(doc.get("shading", "none")),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -224,6 +224,7 @@ def _camera_lines(lin: JsonObject) -> list[str]:
     lines += [
         f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
         + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")
+        + (", shaded by eye-dome lighting (siteline.render.shading)" if q.get("colour", {}).get("shading") == "edl" else "")
         + f", views judged against the {q.get('fence', 'site fence')}"
         + _rule_text(q.get("change_rule"))
         for q in lin["pairs"]

@@ -356,7 +356,7 @@ def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject
         "",
         "- The images are renders of point clouds, not photographs: surfaces are as fine as the points (no texture "
         "finer than the point spacing), the sky and unscanned space are empty (ignore), and where a scene has no "
-        "colour the images are shaded from its intensity or height.",
+        "colour the images show the height above the ground on a colour ramp (0-25 m).",
         f"- Ignore covers {ignore_text} (no surface, gaps between points, a surface seen in one epoch only, outside "
         "the site fence, ignored classes, padding). Scores that count ignore as unchanged inflate accuracy and mIoU: "
         "exclude it (`ignore_index=255`).",

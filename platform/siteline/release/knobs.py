@@ -27,9 +27,9 @@ AUTO = "auto"
 AUTO_KNOBS = ("scale", "point_size_px", "views")
 # views auto: up to this many per pair, as many as the cameras and the acceptance rules give
 AUTO_VIEWS = 300
-# knobs for which "auto" is a value of their own, resolved per pair (colour: siteline.render.colour;
-# change_rule: siteline.labels.rule)
-VALUE_AUTO_KNOBS = ("colour", "change_rule")
+# knobs for which "auto" is a value of their own, resolved per pair (colour and shading:
+# siteline.render.colour; change_rule: siteline.labels.rule)
+VALUE_AUTO_KNOBS = ("colour", "change_rule", "shading")
 TARGET_LONG_SIDE_PX = 512
 MIN_IMAGE_PX = 256
 # the release settings beside the pair knobs
