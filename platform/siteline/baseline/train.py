@@ -18,7 +18,7 @@ from siteline.baseline.model import FCSiamDiff, parameter_count
 from siteline.data import ChangeDetectionDataset, TrainTransforms
 from siteline.errors import ReleaseError
 from siteline.release.manifest import read_manifest
-from siteline.release.metrics import IGNORE, confusion
+from siteline.release.metrics import IGNORE, confusion, scores
 from siteline.release.score import score_record
 from siteline.schema import JsonObject
 
@@ -136,7 +136,8 @@ def evaluate(
     root: Path, checkpoint: Path, out_json: Path, split: str = "test", device: str = "cpu"
 ) -> JsonObject:
     """Predict every image of ``split`` (padded to a multiple of 16), accumulate one confusion matrix,
-    and write the scores with the release's manifest hash and the metric definition."""
+    and write the scores with the release's manifest hash and the metric definition, beside those of
+    predicting every pixel unchanged (``trivial_scores``: the floor a model that learned must clear)."""
     ckpt = torch.load(checkpoint, map_location=device, weights_only=True)
     model = FCSiamDiff().to(device)
     model.load_state_dict(ckpt["model"])
@@ -151,6 +152,9 @@ def evaluate(
         logits = model(_pad16(s["image"])[None].to(device))[..., :h, :w]
         per_image.append(confusion(logits.argmax(1)[0].cpu(), s["mask"][0]))
     result = score_record(root, split, per_image) | {"checkpoint": str(checkpoint), "model": "FC-Siam-diff"}
+    # the floor a model must clear: every pixel predicted unchanged (mIoU about half the unchanged share)
+    cm = np.asarray(result["confusion"], dtype=np.int64)
+    result["trivial_scores"] = scores(np.array([[cm[0].sum(), 0], [cm[1].sum(), 0]])).to_dict() | {"predicts": "all unchanged"}
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps(result, indent=1) + "\n")
     return result
