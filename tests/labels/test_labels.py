@@ -181,3 +181,30 @@ def test_labels_identical_at_origin_and_georeferenced(tmp_path) -> None:
 def test_truth_sidecar_is_json_describable(synth_site) -> None:
     doc = json.loads((synth_site / "truth" / "site.json").read_text())
     assert len(doc["epochs"]) == SYNTH.epochs
+
+
+def test_labelling_holds_a_few_whole_tiles_whatever_the_site(tmp_path, synth_site) -> None:
+    """Column by column, at most two whole tiles a scene are held (the one labelled and the next of its
+    column), the rest as strips of the columns still needed; each tile is decoded at most twice, and a
+    halo equals the points of the widened cell taken from the whole scene."""
+    from siteline.labels.store import _WHOLE_TILES, _Decoded
+
+    tiles = _site_tiles(tmp_path, synth_site, 0)
+    r = 0.5
+    dec = _Decoded(tiles, r)
+    everything = tiles.points(attributes=("class",))
+    grid = sorted(dec.keys)
+    assert len({i for i, _ in grid}) > 2 and len({j for _, j in grid}) > 1  # columns and rows to hold
+    size = tiles.spec.tile_size_m
+    for ij in grid:
+        dec.release_before(ij[0])
+        xyz, _ = dec.halo(ij)
+        assert len(dec._whole) <= _WHOLE_TILES
+        assert all(i >= ij[0] - 1 for i, _ in dec._strips)
+        x0, y0 = ij[0] * size, ij[1] * size
+        p = everything.xyz_m
+        inside = (p[:, 0] >= x0 - r) & (p[:, 0] <= x0 + size + r) & (p[:, 1] >= y0 - r) & (p[:, 1] <= y0 + size + r)
+        # the strips take a neighbour's points within r of the shared edge: the widened cell, up to
+        # points on the cell's own border lines that belong to the next tile
+        assert abs(len(xyz) - int(inside.sum())) <= max(10, int(0.001 * inside.sum()))
+    assert dec.decodes <= 2 * len(grid)

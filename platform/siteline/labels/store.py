@@ -48,63 +48,85 @@ def auto_radius(
     return multiplier * sparse, RadiusChoice(spacing, multiplier)
 
 
+# the offsets of a tile's 8 neighbours, in the order a halo joins their strips (after the tile itself)
+_AROUND = tuple((dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
+# whole decoded tiles kept per scene: the one being labelled and the next of its column
+_WHOLE_TILES = 2
+
+
 class _Decoded:
-    """One scene's tiles decoded once each (float32 site-local xyz and classes), with the edge strips a
-    neighbouring tile's halo takes from them; a tile is dropped once no tile left to label needs it."""
+    """One scene's tiles decoded (float32 site-local xyz and classes) for labelling column by column:
+    whole only while labelled (the tile being labelled and the next of its column, :data:`_WHOLE_TILES`),
+    and otherwise as the edge strips within the radius that a neighbouring tile's halo takes from them
+    (kept until no tile left to label needs them). A tile of the next column is decoded once for its
+    strips and again when labelled: memory follows a tile and the strips, not the site's rows."""
 
     def __init__(self, tiles: SceneTiles, radius_m: float) -> None:
         self.tiles = tiles
         self.r = radius_m
         self.size = tiles.spec.tile_size_m
-        self._cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]] = {}
+        self._whole: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}  # oldest first
+        self._strips: dict[tuple[int, int], dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]] = {}
         self.keys = {parse_tile_key(t): t for t in tiles.by_tile}
+        self.decodes = 0
 
-    def get(self, ij: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]] | None:
-        if ij not in self.keys:
-            return None
-        hit = self._cache.get(ij)
-        if hit is None:
-            data = self.tiles.read_tile(self.keys[ij], ("class",))
-            xyz, cls = data.xyz_m.astype(np.float32), data.attributes["class"]
+    def _decode(self, ij: tuple[int, int], keep_whole: bool) -> tuple[np.ndarray, np.ndarray]:
+        data = self.tiles.read_tile(self.keys[ij], ("class",))
+        self.decodes += 1
+        xyz, cls = data.xyz_m.astype(np.float32), data.attributes["class"]
+        if ij not in self._strips:
             x0, y0 = ij[0] * self.size, ij[1] * self.size
             x, y = data.xyz_m[:, 0], data.xyz_m[:, 1]
-            strips = {
-                "w": np.flatnonzero(x <= x0 + self.r),
-                "e": np.flatnonzero(x >= x0 + self.size - self.r),
-                "s": np.flatnonzero(y <= y0 + self.r),
-                "n": np.flatnonzero(y >= y0 + self.size - self.r),
-            }
-            hit = self._cache[ij] = (xyz, cls, strips)
-        return hit
+            # what this tile gives the tile at -(dx, dy) from it: the west strip to the tile west of it...
+            side_x = {1: x <= x0 + self.r, -1: x >= x0 + self.size - self.r}
+            side_y = {1: y <= y0 + self.r, -1: y >= y0 + self.size - self.r}
+            strips = {}
+            for dx, dy in _AROUND:
+                if (dx, dy) == (0, 0):
+                    continue
+                sel = side_x[dx] & side_y[dy] if dx and dy else side_x[dx] if dx else side_y[dy]
+                idx = np.flatnonzero(sel)
+                strips[(dx, dy)] = (xyz[idx], cls[idx])
+            self._strips[ij] = strips
+        if keep_whole:
+            self._whole.pop(ij, None)
+            self._whole[ij] = (xyz, cls)
+            while len(self._whole) > _WHOLE_TILES:
+                del self._whole[next(iter(self._whole))]
+        return xyz, cls
+
+    def get(self, ij: tuple[int, int]) -> tuple[np.ndarray, np.ndarray] | None:
+        """Tile ``ij`` whole (xyz, classes), None when the scene has no such tile."""
+        if ij not in self.keys:
+            return None
+        hit = self._whole.get(ij)
+        return hit if hit is not None else self._decode(ij, keep_whole=True)
+
+    def _strip(self, ij: tuple[int, int], toward: tuple[int, int]) -> tuple[np.ndarray, np.ndarray] | None:
+        if ij not in self.keys:
+            return None
+        if ij not in self._strips:  # the next of this column is labelled next: keep it whole
+            self._decode(ij, keep_whole=toward[0] == 0)
+        return self._strips[ij][toward]
 
     def halo(self, ij: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
         """This scene's points in the grid cell of tile ``ij`` widened by the radius: the tile itself
         and, of each of its 8 neighbours, the strip within the radius of the shared edge or corner."""
         parts_xyz, parts_cls = [], []
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                got = self.get((ij[0] + dx, ij[1] + dy))
-                if got is None:
-                    continue
-                xyz, cls, strips = got
-                idx: slice | np.ndarray
-                if dx == 0 and dy == 0:
-                    idx = slice(None)
-                else:
-                    # the neighbour east of ij (dx 1) gives its west strip, and so on
-                    sel = [strips[{-1: "e", 1: "w"}[dx]]] if dx else []
-                    sel += [strips[{-1: "n", 1: "s"}[dy]]] if dy else []
-                    idx = sel[0] if len(sel) == 1 else np.intersect1d(sel[0], sel[1], assume_unique=True)
-                parts_xyz.append(xyz[idx])
-                parts_cls.append(cls[idx])
+        for dx, dy in _AROUND:
+            got = self.get(ij) if (dx, dy) == (0, 0) else self._strip((ij[0] + dx, ij[1] + dy), (dx, dy))
+            if got is None:
+                continue
+            parts_xyz.append(got[0])
+            parts_cls.append(got[1])
         if not parts_xyz:
             return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
         return np.concatenate(parts_xyz), np.concatenate(parts_cls)
 
     def release_before(self, column: int) -> None:
-        """Drop decoded tiles of columns left of ``column`` - 1 (no tile from ``column`` on needs them)."""
-        for ij in [ij for ij in self._cache if ij[0] < column - 1]:
-            del self._cache[ij]
+        """Drop the strips of columns left of ``column`` - 1 (no tile from ``column`` on needs them)."""
+        for ij in [ij for ij in self._strips if ij[0] < column - 1]:
+            del self._strips[ij]
 
 
 def _write_flags(group: zarr.Group, tile: str, flags: np.ndarray, spec: TileSpec) -> None:
@@ -141,9 +163,9 @@ def write_labels(
     """Compute both directions in one pass over the site grid (each tile of each scene against the
     other scene's points in the tile's grid cell widened by ``radius_m``, or by the surface test's
     search radius) into the new Zarr group ``out`` (removed again on an error; publish it through
-    ``siteline.stores.Store.publish`` for all-or-nothing). Each tile of each scene is read and
-    decoded once; decoded tiles live until the columns of tiles that need them for a halo are done
-    (at most three columns per scene). ``ignored``, ``geometric`` and ``surface``: the rule
+    ``siteline.stores.Store.publish`` for all-or-nothing). Tiles are decoded whole only while they
+    are labelled, and as edge strips for their neighbours' halos (:class:`_Decoded`): a tile of the
+    next column is decoded twice, and memory stays at a few tiles and the strips whatever the site. ``ignored``, ``geometric`` and ``surface``: the rule
     (siteline.labels.change.change_flags); then changed regions of fewer than ``min_region_points``
     points are taken back to unchanged, each scene's changed points linked across its whole grid
     (siteline.labels.regions, linked through cells of REGION_CELL_RADII x r). The flags of both scenes are held (a byte a point) until written."""
