@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 
 CHECK = """
@@ -28,6 +30,7 @@ assert static.joinpath("three", "three.module.js").is_file() and static.joinpath
 """
 
 
+@pytest.mark.slow  # builds and installs a wheel (about a minute); `make test-all` runs it
 def test_wheel_install_finds_schemas_and_migrations(tmp_path) -> None:
     wheels, target = tmp_path / "wheels", tmp_path / "target"
     pip = [sys.executable, "-m", "pip", "-q"]

@@ -6,6 +6,7 @@ import json
 import os
 import shutil
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -207,7 +208,26 @@ def test_upload_event_reaches_the_api(harness, tmp_path) -> None:
 
     from siteline.cli.watch import post_events, upload_event
 
-    post_events(PREFECT_API_URL.value(), [upload_event(tmp_path / "m9", "demo")])
+    sent = upload_event(tmp_path / "m9", "demo")
+    post_events(PREFECT_API_URL.value(), [sent])
+    # the server stored it: read back by its name, with its resource and payload
+    from datetime import UTC, datetime, timedelta
+
+    from prefect.client.orchestration import get_client
+    from prefect.events.filters import EventFilter, EventNameFilter, EventOccurredFilter
+
+    since = datetime.now(UTC) - timedelta(minutes=5)
+    with get_client(sync_client=True) as client:
+        for _ in range(50):  # events are written by the server's consumer a moment after they arrive
+            page = client.read_events(EventFilter(
+                occurred=EventOccurredFilter(since=since, until=datetime.now(UTC) + timedelta(minutes=1)),
+                event=EventNameFilter(name=[sent["event"]])), limit=50)  # fmt: skip
+            got = [e for e in page.events if str(e.id) == sent["id"]]
+            if got:
+                break
+            time.sleep(0.2)
+    assert got, "the upload event never reached the server's event store"
+    assert got[0].resource.id == "siteline.mission.m9" and got[0].payload["site"] == "demo"
 
 
 @pytest.mark.e2e

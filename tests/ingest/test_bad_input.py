@@ -252,7 +252,8 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_setti
     t0 = time.perf_counter()
     with pytest.raises(PointCloudError, match=f"cloud.laz.*{words}"):
         open_las(path)
-    assert time.perf_counter() - t0 < 2.0
+    # refused from the header: reading the claimed points would take minutes (a bound loose enough for a loaded CI machine)
+    assert time.perf_counter() - t0 < 30.0
     opts = IngestOptions(captured_at=__import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC), crs="EPSG:2994")
     with pytest.raises(PointCloudError, match="LAZ chunks hold 100,001 to 150,000"):
         ingest_mission(cat, site_settings, tmp_path / "m", "demo", opts, workers=2)
@@ -348,4 +349,4 @@ def test_a_forged_laz_chunk_size_is_refused_before_anything_is_allocated(tmp_pat
         t0 = time.perf_counter()
         with pytest.raises(PointCloudError, match="cloud.laz.*(chunks of 4,294,967,294 points|forged)"):
             open_las(path)
-        assert time.perf_counter() - t0 < 1.0
+        assert time.perf_counter() - t0 < 30.0  # refused from the chunk table, not by decompressing it

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import multiprocessing
 import time
+from pathlib import Path
 
 import pytest
 import torch
 
-from siteline.render.threads import CpuThreads, runnable_others, threads_for
+from siteline.render.threads import LOADAVG, CpuThreads, runnable_others, threads_for
 
 
 @pytest.mark.parametrize(
@@ -42,7 +43,10 @@ def test_busy_processes_are_seen_and_the_count_is_given_back() -> None:
     try:
         time.sleep(0.3)
         seen = runnable_others(samples=5)
-        assert seen is None or seen >= 2  # the three spinners (one may be off the queue for an instant)
+        if not Path(LOADAVG).exists():
+            assert seen is None  # not Linux: the system does not say
+        else:
+            assert seen is not None and seen >= 2  # the three spinners (one may be off the queue for an instant)
         governor = CpuThreads("cpu", every_s=0.0)
         governor.cap = 4  # as if the process had been given 4 threads
         governor.cores = 2
