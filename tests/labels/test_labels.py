@@ -208,3 +208,19 @@ def test_labelling_holds_a_few_whole_tiles_whatever_the_site(tmp_path, synth_sit
         # points on the cell's own border lines that belong to the next tile
         assert abs(len(xyz) - int(inside.sum())) <= max(10, int(0.001 * inside.sum()))
     assert dec.decodes <= 2 * len(grid)
+
+
+def test_labels_in_slabs_equal_labels_of_whole_tiles(tmp_path, synth_site, monkeypatch) -> None:
+    """A tile labelled in slabs of a few thousand points (each against the other scene within the halo)
+    gives the flags of the whole tile, with the surface rule and small regions: the same checksum."""
+    from siteline.labels import store
+    from siteline.labels.params import LabelParams
+
+    t1, t2 = _site_tiles(tmp_path, synth_site, 0), _site_tiles(tmp_path, synth_site, 1)
+    r = 0.5
+    rule = {"surface": LabelParams(rule="surface").surface_test(r), "min_region_points": 8}
+    whole = write_labels(t1, t2, r, IGN, tmp_path / "whole.zarr", **rule)
+    monkeypatch.setattr(store, "BLOCK_POINTS", 1_000)
+    slabs = write_labels(t1, t2, r, IGN, tmp_path / "slabs.zarr", **rule)
+    assert max(t.prefix(k) for t in (t1, t2) for k in t.by_tile) > 1_000 * 5  # tiles of several slabs
+    assert slabs.checksum == whole.checksum and slabs.counts == whole.counts

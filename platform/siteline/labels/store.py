@@ -48,6 +48,9 @@ def auto_radius(
     return multiplier * sparse, RadiusChoice(spacing, multiplier)
 
 
+# a tile's points are labelled in slabs of at most this many (the rule's working memory is several
+# times its points' bytes: a 20 M point tile held 2-3 GB at once)
+BLOCK_POINTS = 2_000_000
 # the offsets of a tile's 8 neighbours, in the order a halo joins their strips (after the tile itself)
 _AROUND = tuple((dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 # whole decoded tiles kept per scene: the one being labelled and the next of its column
@@ -129,6 +132,30 @@ class _Decoded:
             del self._strips[ij]
 
 
+def _flags_in_blocks(
+    a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray, radius_m: float,
+    ignored: np.ndarray, matching: Matching, geometric: np.ndarray | None, halo_m: float,
+) -> np.ndarray:  # fmt: skip
+    """:func:`change_flags` of a tile's points in slabs of at most :data:`BLOCK_POINTS` (sorted by x),
+    each against the other scene's points within ``halo_m`` of the slab: a point's flag depends only on
+    those (its radius, the surface test's search radius and plan cell), so the flags are the tile's
+    whole, and the rule's working memory follows the slab, not the tile (20 M points at 8000/m2)."""
+    n = len(a_xyz)
+    if n <= BLOCK_POINTS:
+        return change_flags(a_xyz, a_cls, b_xyz, b_cls, radius_m, ignored, matching, geometric)
+    out = np.empty(n, dtype=np.uint8)
+    order = np.argsort(a_xyz[:, 0], kind="stable")
+    for start in range(0, n, BLOCK_POINTS):
+        idx = order[start : start + BLOCK_POINTS]
+        slab = a_xyz[idx]
+        lo, hi = slab[:, :2].min(axis=0) - halo_m, slab[:, :2].max(axis=0) + halo_m
+        near = np.flatnonzero(
+            (b_xyz[:, 0] >= lo[0]) & (b_xyz[:, 0] <= hi[0]) & (b_xyz[:, 1] >= lo[1]) & (b_xyz[:, 1] <= hi[1])
+        )
+        out[idx] = change_flags(slab, a_cls[idx], b_xyz[near], b_cls[near], radius_m, ignored, matching, geometric)
+    return out
+
+
 def _write_flags(group: zarr.Group, tile: str, flags: np.ndarray, spec: TileSpec) -> None:
     from zarr.codecs import BloscCodec, BloscShuffle
 
@@ -194,8 +221,8 @@ def write_labels(
                 if mine is None:
                     continue
                 their_xyz, their_cls = sides[other[side]][1].halo(ij)
-                flags = change_flags(
-                    mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, Matching(surface=surface), geometric
+                flags = _flags_in_blocks(
+                    mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, Matching(surface=surface), geometric, halo_m
                 )
                 flags_of[side][dec.keys[ij]] = flags
                 changed_xyz[side].append(mine[0][flags == CHANGED])
