@@ -4,9 +4,11 @@ level order), 0 unchanged, 1 changed or 255 ignored."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -133,16 +135,16 @@ class _Decoded:
 
 
 def _flags_in_blocks(
-    a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray, radius_m: float,
-    ignored: np.ndarray, matching: Matching, geometric: np.ndarray | None, halo_m: float,
+    a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray,
+    rule: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray], halo_m: float,
 ) -> np.ndarray:  # fmt: skip
-    """:func:`change_flags` of a tile's points in slabs of at most :data:`BLOCK_POINTS` (sorted by x),
+    """``rule`` (:func:`change_flags` with its radius and tests) of a tile's points in slabs of at most :data:`BLOCK_POINTS` (sorted by x),
     each against the other scene's points within ``halo_m`` of the slab: a point's flag depends only on
     those (its radius, the surface test's search radius and plan cell), so the flags are the tile's
     whole, and the rule's working memory follows the slab, not the tile (20 M points at 8000/m2)."""
     n = len(a_xyz)
     if n <= BLOCK_POINTS:
-        return change_flags(a_xyz, a_cls, b_xyz, b_cls, radius_m, ignored, matching, geometric)
+        return rule(a_xyz, a_cls, b_xyz, b_cls)
     out = np.empty(n, dtype=np.uint8)
     order = np.argsort(a_xyz[:, 0], kind="stable")
     for start in range(0, n, BLOCK_POINTS):
@@ -152,7 +154,7 @@ def _flags_in_blocks(
         near = np.flatnonzero(
             (b_xyz[:, 0] >= lo[0]) & (b_xyz[:, 0] <= hi[0]) & (b_xyz[:, 1] >= lo[1]) & (b_xyz[:, 1] <= hi[1])
         )
-        out[idx] = change_flags(slab, a_cls[idx], b_xyz[near], b_cls[near], radius_m, ignored, matching, geometric)
+        out[idx] = rule(slab, a_cls[idx], b_xyz[near], b_cls[near])
     return out
 
 
@@ -213,6 +215,9 @@ def write_labels(
         flags_of: dict[str, dict[str, np.ndarray]] = {side: {} for side in sides}
         changed_xyz: dict[str, list[np.ndarray]] = {side: [] for side in sides}
         grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
+        rule = functools.partial(
+            change_flags, radius_m=radius_m, ignored=ignored, matching=Matching(surface=surface), geometric=geometric
+        )
         for ij in grid:
             for dec in (sides["t1"][1], sides["t2"][1]):
                 dec.release_before(ij[0])
@@ -221,9 +226,7 @@ def write_labels(
                 if mine is None:
                     continue
                 their_xyz, their_cls = sides[other[side]][1].halo(ij)
-                flags = _flags_in_blocks(
-                    mine[0], mine[1], their_xyz, their_cls, radius_m, ignored, Matching(surface=surface), geometric, halo_m
-                )
+                flags = _flags_in_blocks(mine[0], mine[1], their_xyz, their_cls, rule, halo_m)
                 flags_of[side][dec.keys[ij]] = flags
                 changed_xyz[side].append(mine[0][flags == CHANGED])
         cell = REGION_CELL_RADII * radius_m

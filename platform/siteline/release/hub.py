@@ -264,47 +264,9 @@ def _made_lines(doc: JsonObject) -> list[str]:
     return lines
 
 
-def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject | None = None) -> str:
-    """README.md of the export, written for the parquet layout: the hub's YAML header (licence, task,
-    sizes, splits and their files, features), what the data is and where it comes from, how to load
-    it (a snippet that runs on this folder as written), splits, fields and label meanings, how it was
-    made, its limitations, licence and citation."""
-    from huggingface_hub import DatasetCardData
-
-    kind, source = provenance(doc)
-    counts = shards.rows
-    data = DatasetCardData(
-        pretty_name=f"{doc['name']} {doc['version']} (siteline change detection)",
-        task_categories=["image-segmentation"],
-        task_ids=["semantic-segmentation"],
-        size_categories=[size_category(len(doc["items"]))],
-        tags=["change-detection", "construction", "drone", "lidar", "siteline"] + (["synthetic"] if kind == "synthetic" else []),
-        configs=[
-            {"config_name": "default", "data_files": [{"split": s, "path": f"data/{s}-*.parquet"} for s in counts]}
-        ],
-        dataset_info={
-            "features": features()._to_yaml_list(),
-            "splits": [{"name": s, "num_bytes": shards.num_bytes[s], "num_examples": n} for s, n in counts.items()],
-            "download_size": shards.file_bytes,
-            "dataset_size": sum(shards.num_bytes.values()),
-        },
-        **license.card_fields(),
-    )
-    ignore = (stats or {}).get("ignore", {}).get("share")
-    ignore_text = f"{ignore:.1%} of all pixels" if ignore is not None else "a share of the pixels"
-    first = next(iter(counts), "train")
-    body = [
-        f"# {doc['name']} {doc['version']}",
-        "",
-        f"Bi-temporal change detection for construction monitoring: {len(doc['items'])} pixel-aligned image pairs "
-        "(A: the earlier scene, B: the later one) rendered from drone LiDAR point clouds of a construction site, "
-        "each with a symmetric change mask, made by siteline with the iVISION-2DCD method (ICRA 2026). "
-        f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
-        "",
-        source,
-        "",
-        "![samples: A, B, mask (green unchanged, red changed, white ignore)](montage.png)",
-        "",
+def _use_lines(first: str) -> list[str]:
+    """The card's Use section: a snippet that runs on the export as written (the folder put in)."""
+    return [
         "## Use",
         "",
         "```python",
@@ -321,37 +283,34 @@ def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject
         'print(row["id"], tuple(a.shape), float((label == 1).float().mean()))',
         "```",
         "",
-        "## Splits",
-        "",
-        f"Items are split by {_split_rule(doc)} (views of one pair are correlated: they see the same scenes).",
-        "",
-        "| split | rows | pairs | changed (of all pixels) | ignore |",
-        "|---|---|---|---|---|",
-        *_split_rows(doc),
-        "",
-        "## Fields",
-        "",
-        "| field | holds |",
-        "|---|---|",
-        "| `id` | the item's id in the release (`<site>_p<pair>_v<view>`) |",
-        "| `image_a`, `image_b` | t1 and t2 renders (RGB, 8-bit PNG), pixel-aligned; padded right and bottom to a multiple of 32 px |",
-        "| `label` | the change mask, one byte a pixel: **0 unchanged, 1 changed, 255 ignore** (train with `ignore_index=255`); "
-        "as an image it looks black: see `label_preview` |",
-        "| `label_preview` | the same mask in colour for the hub's viewer: green unchanged, red changed, white ignore |",
-        "| `ignore` | 255 where the pixel is ignored, else 0 |",
-        "| `split` | the release's split (`val` is the hub's `validation`) |",
-        "| `pair`, `view` | the pair of consecutive scenes and the synthetic view's index in it |",
-        "| `strategy` | how the view was derived from a real camera (tilt, mirror, forward shift) |",
-        "| `coverage`, `valid`, `change_ratio`, `filled` | shares of the rendered image: covered in both epochs, "
-        "labelled (not ignore), changed (of the labelled), and filled across gaps between points |",
-        "| `width`, `height` | the rendered size inside the padded image, pixels |",
-        "| `ignore_causes` | share of the rendered image ignored for each cause: " + ", ".join(f"`{c}`" for c in IGNORE_CAUSES) + " |",
-        "| `camera` | the synthetic camera: fx, fy, cx, cy (pixels), `x_cam = rotation x_site + translation` (site-local metres) |",
-        "",
-        "## How it was made",
-        "",
-        *_made_lines(doc),
-        "",
+    ]  # fmt: skip
+
+
+FIELD_LINES = [
+    "## Fields",
+    "",
+    "| field | holds |",
+    "|---|---|",
+    "| `id` | the item's id in the release (`<site>_p<pair>_v<view>`) |",
+    "| `image_a`, `image_b` | t1 and t2 renders (RGB, 8-bit PNG), pixel-aligned; padded right and bottom to a multiple of 32 px |",
+    "| `label` | the change mask, one byte a pixel: **0 unchanged, 1 changed, 255 ignore** (train with `ignore_index=255`); "
+    "as an image it looks black: see `label_preview` |",
+    "| `label_preview` | the same mask in colour for the hub's viewer: green unchanged, red changed, white ignore |",
+    "| `ignore` | 255 where the pixel is ignored, else 0 |",
+    "| `split` | the release's split (`val` is the hub's `validation`) |",
+    "| `pair`, `view` | the pair of consecutive scenes and the synthetic view's index in it |",
+    "| `strategy` | how the view was derived from a real camera (tilt, mirror, forward shift) |",
+    "| `coverage`, `valid`, `change_ratio`, `filled` | shares of the rendered image: covered in both epochs, "
+    "labelled (not ignore), changed (of the labelled), and filled across gaps between points |",
+    "| `width`, `height` | the rendered size inside the padded image, pixels |",
+    "| `ignore_causes` | share of the rendered image ignored for each cause: " + ", ".join(f"`{c}`" for c in IGNORE_CAUSES) + " |",
+    "| `camera` | the synthetic camera: fx, fy, cx, cy (pixels), `x_cam = rotation x_site + translation` (site-local metres) |",
+    "",
+]  # fmt: skip
+
+
+def _limitation_lines(kind: str, ignore_text: str) -> list[str]:
+    return [
         "## Limitations",
         "",
         "- The images are renders of point clouds, not photographs: surfaces are as fine as the points (no texture "
@@ -367,6 +326,71 @@ def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject
         "carry to other sites, sensors or seasons.",
         *(["- Synthetic: shapes, materials and scanner noise are simulated."] if kind == "synthetic" else []),
         "",
+    ]  # fmt: skip
+
+
+def _card_data(doc: JsonObject, shards: Shards, license: HubLicense, kind: str) -> Any:
+    """The card's YAML header: licence, task, sizes, splits and their shard files, features."""
+    from huggingface_hub import DatasetCardData
+
+    counts = shards.rows
+    return DatasetCardData(
+        pretty_name=f"{doc['name']} {doc['version']} (siteline change detection)",
+        task_categories=["image-segmentation"],
+        task_ids=["semantic-segmentation"],
+        size_categories=[size_category(len(doc["items"]))],
+        tags=["change-detection", "construction", "drone", "lidar", "siteline"] + (["synthetic"] if kind == "synthetic" else []),
+        configs=[
+            {"config_name": "default", "data_files": [{"split": s, "path": f"data/{s}-*.parquet"} for s in counts]}
+        ],
+        dataset_info={
+            "features": features()._to_yaml_list(),
+            "splits": [{"name": s, "num_bytes": shards.num_bytes[s], "num_examples": n} for s, n in counts.items()],
+            "download_size": shards.file_bytes,
+            "dataset_size": sum(shards.num_bytes.values()),
+        },
+        **license.card_fields(),
+    )
+
+
+def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject | None = None) -> str:
+    """README.md of the export, written for the parquet layout: the hub's YAML header (licence, task,
+    sizes, splits and their files, features), what the data is and where it comes from, how to load
+    it (a snippet that runs on this folder as written), splits, fields and label meanings, how it was
+    made, its limitations, licence and citation."""
+    kind, source = provenance(doc)
+    counts = shards.rows
+    data = _card_data(doc, shards, license, kind)
+    ignore = (stats or {}).get("ignore", {}).get("share")
+    ignore_text = f"{ignore:.1%} of all pixels" if ignore is not None else "a share of the pixels"
+    first = next(iter(counts), "train")
+    body = [
+        f"# {doc['name']} {doc['version']}",
+        "",
+        f"Bi-temporal change detection for construction monitoring: {len(doc['items'])} pixel-aligned image pairs "
+        "(A: the earlier scene, B: the later one) rendered from drone LiDAR point clouds of a construction site, "
+        "each with a symmetric change mask, made by siteline with the iVISION-2DCD method (ICRA 2026). "
+        f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
+        "",
+        source,
+        "",
+        "![samples: A, B, mask (green unchanged, red changed, white ignore)](montage.png)",
+        "",
+        *_use_lines(first),
+        "## Splits",
+        "",
+        f"Items are split by {_split_rule(doc)} (views of one pair are correlated: they see the same scenes).",
+        "",
+        "| split | rows | pairs | changed (of all pixels) | ignore |",
+        "|---|---|---|---|---|",
+        *_split_rows(doc),
+        "",
+        *FIELD_LINES,
+        "## How it was made",
+        "",
+        *_made_lines(doc),
+        "",
+        *_limitation_lines(kind, ignore_text),
         "## Licence",
         "",
         f"{license.text()}.",
