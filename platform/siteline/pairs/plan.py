@@ -26,24 +26,24 @@ from siteline.stores import Store, layout
 
 def output_digest(
     params: PairParams, versions: tuple[int, int], tilings: tuple[int, int] = (0, 0), rule: str = "semantic",
-    shading: str = "none",
+    look: str = "none",
 ) -> str:  # fmt: skip
     """The key of a pair's outputs: the parameters' digest, extended by the label-set versions when
     either is not 1, by the scenes' tiling generations when either was re-tiled and by the change
     rule when it is ``geometry`` (so outputs made before each was recorded keep their key, a
     re-tiled scene never reuses outputs aligned with its old tile order, and an ``auto`` rule that
     resolves to geometry never reuses semantic labels), and by the look of the images when they are
-    shaded or coloured by height (``shading``: e.g. ``edl:height``; an ``auto`` colour or shading that
+    shaded or coloured by height (``look``: ColourPlan.look, e.g. ``edl:height``; an ``auto`` colour or shading that
     resolves to them never reuses the intensity images made before)."""
-    if tuple(versions) == (1, 1) and tuple(tilings) == (0, 0) and rule == "semantic" and shading == "none":
+    if tuple(versions) == (1, 1) and tuple(tilings) == (0, 0) and rule == "semantic" and look == "none":
         return params.digest()
     text = f"{params.digest()}:labels:{versions[0]}:{versions[1]}"
     if tuple(tilings) != (0, 0):
         text += f":tiles:{tilings[0]}:{tilings[1]}"
     if rule != "semantic":
         text += f":rule:{rule}"
-    if shading != "none":
-        text += f":shading:{shading}"
+    if look != "none":
+        text += f":shading:{look}"  # the key's words as first written
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
@@ -150,10 +150,9 @@ def plan_pair(
     scans = [get_scene(session, sid).statistics.scan for sid in ids]
     s1, s2 = ((sid, sc.colour_stats if sc else None) for sid, sc in zip(ids, scans, strict=True))
     colour = resolve_colour(params.colour, s1, s2, shading=params.shading)
-    look = ":".join(x for x in (colour.shading if colour.shading != "none" else "", "height" if colour.source == "height" else "") if x)
     digest = output_digest(
         params, (t1.label_set.version, t2.label_set.version), (t1.generation, t2.generation), rule.rule,
-        look or "none",
+        colour.look,
     )  # fmt: skip
     fence, fence_source = site.fence, "site fence"
     if fence is None:

@@ -154,6 +154,14 @@ class ColourPlan:
             np.stack([np.interp(pos, np.arange(len(RAMP)), RAMP[:, c]) for c in range(3)], axis=1)
         ).astype(np.uint8)
 
+    @property
+    def look(self) -> str:
+        """What sets these images apart from the intensity or RGB images of before, for the outputs'
+        key: ``edl``, ``height``, ``edl:height``, or ``none``."""
+        parts = [self.shading] if self.shading != "none" else []
+        parts += ["height"] if self.source == "height" else []
+        return ":".join(parts) or "none"
+
     def to_dict(self) -> JsonObject:
         return {
             "source": self.source,
