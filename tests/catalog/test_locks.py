@@ -59,3 +59,30 @@ def test_a_killed_holder_frees_the_lock(tmp_path) -> None:
     with exclusive(engine, "held", timeout_s=5):
         assert lock_file(db, "held").exists()
     assert not lock_file(db, "held").exists()
+
+
+def test_a_folder_pruned_while_made_is_made_again(tmp_path, monkeypatch) -> None:
+    """mkdir(exist_ok=True) raises FileExistsError when another holder removes the lock folder between
+    its mkdir and its is_dir check (seen once in CI with four processes): the lock is then taken anyway."""
+    real_mkdir, raced = Path.mkdir, []
+
+    def mkdir(self: Path, *args, **kwargs) -> None:
+        if self.name.endswith(".locks") and not raced:
+            raced.append(self)
+            raise FileExistsError(17, "File exists", str(self))
+        real_mkdir(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "mkdir", mkdir)
+    db = str(tmp_path / "catalog.sqlite")
+    with exclusive(make_engine(f"sqlite:///{db}"), "raced", timeout_s=5):
+        assert lock_file(db, "raced").exists()
+    assert raced
+
+
+def test_a_file_where_the_lock_folder_goes_is_named(tmp_path) -> None:
+    db = str(tmp_path / "catalog.sqlite")
+    lock_file(db, "x").parent.write_text("not a folder")
+    with pytest.raises(CatalogError, match="lock folder but is a file"), exclusive(
+        make_engine(f"sqlite:///{db}"), "x", timeout_s=1
+    ):
+        pass

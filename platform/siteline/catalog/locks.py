@@ -65,7 +65,14 @@ def _open_locked(path: Path, name: str, deadline: float | None, timeout_s: float
     """A descriptor of ``path`` holding its ``flock``, the file still the one at ``path`` (a holder
     removes it when done: a waiter that got the lock on a removed file opens the new one)."""
     while True:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:  # another holder pruned the folder while mkdir checked it: again
+            if path.parent.exists() and not path.parent.is_dir():
+                raise CatalogError(
+                    f"{path.parent} should be the catalog's lock folder but is a file: move it away."
+                ) from None
+            continue
         try:
             fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o644)
         except FileNotFoundError:  # the folder was pruned between the two calls
