@@ -187,7 +187,7 @@ def test_labelling_holds_a_few_whole_tiles_whatever_the_site(tmp_path, synth_sit
     """Column by column, at most two whole tiles a scene are held (the one labelled and the next of its
     column), the rest as strips of the columns still needed; each tile is decoded at most twice, and a
     halo equals the points of the widened cell taken from the whole scene."""
-    from siteline.labels.store import _WHOLE_TILES, _Decoded
+    from siteline.labels.store import _STRIP_MARGIN_M, _WHOLE_TILES, _Decoded, _join
 
     tiles = _site_tiles(tmp_path, synth_site, 0)
     r = 0.5
@@ -198,11 +198,11 @@ def test_labelling_holds_a_few_whole_tiles_whatever_the_site(tmp_path, synth_sit
     size = tiles.spec.tile_size_m
     for ij in grid:
         dec.release_before(ij[0])
-        xyz, _ = dec.halo(ij)
+        xyz, _ = _join(dec.halo(ij))
         assert len(dec._whole) <= _WHOLE_TILES
         assert all(i >= ij[0] - 1 for i, _ in dec._strips)
         x0, y0 = ij[0] * size, ij[1] * size
-        p = everything.xyz_m
+        p, r = everything.xyz_m, 0.5 + _STRIP_MARGIN_M
         inside = (p[:, 0] >= x0 - r) & (p[:, 0] <= x0 + size + r) & (p[:, 1] >= y0 - r) & (p[:, 1] <= y0 + size + r)
         # the strips take a neighbour's points within r of the shared edge: the widened cell, up to
         # points on the cell's own border lines that belong to the next tile

@@ -17,7 +17,7 @@ from siteline.labels.change import (
     median_spacing,
 )
 from siteline.labels.params import LabelParams
-from siteline.labels.regions import region_sizes, small_regions
+from siteline.labels.regions import RegionCells, region_sizes, small_regions
 from siteline.site.taxonomy import default_taxonomy
 
 TAX = default_taxonomy()
@@ -104,6 +104,23 @@ def test_regions_link_touching_cells_and_count_points():
     assert small.tolist() == [False] * 400 + [True, True, True]
     assert not small_regions(singles, 0.25, 1).any()
     assert region_sizes(np.zeros((0, 3)), 0.25).tolist() == []
+
+
+def test_region_cells_gathered_by_parts_equal_the_regions_of_all_points():
+    """Changed points handed over tile by tile as cells (4 bytes a point) give the small regions of all
+    the points at once, a region that crosses the parts' border counted whole."""
+    rng = np.random.default_rng(5)
+    pts = np.c_[rng.uniform(0, 20, 30_000), rng.uniform(0, 20, 30_000), rng.uniform(0, 3, 30_000)]
+    pts = np.concatenate([pts[rng.random(len(pts)) < 0.02], [[9.99, 5.0, 1.0], [10.01, 5.0, 1.0]]])
+    parts = [pts[pts[:, 0] < 10], pts[pts[:, 0] >= 10], np.zeros((0, 3))]
+    cells = RegionCells(0.4)
+    for part in parts:
+        cells.add(part.astype(np.float32))
+    expect = small_regions(np.concatenate(parts).astype(np.float32), 0.4, 4)
+    got = cells.small(4)
+    assert [len(g) for g in got] == [len(p) for p in parts]
+    assert np.array_equal(np.concatenate(got), expect) and 0 < expect.sum() < len(expect)
+    assert not np.concatenate(cells.small(1)).any()
 
 
 def test_label_params_refuse_unknown_rules_and_regions():

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import zarr
+from numcodecs import Zstd
 
 from siteline.errors import LabelError
 from siteline.labels.change import (
@@ -24,7 +25,7 @@ from siteline.labels.change import (
     change_flags,
     median_spacing,
 )
-from siteline.labels.regions import small_regions
+from siteline.labels.regions import RegionCells
 from siteline.records.pairs import ChangeLabels, RadiusChoice
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import parse_tile_key
@@ -57,6 +58,8 @@ BLOCK_POINTS = 2_000_000
 _AROUND = tuple((dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 # whole decoded tiles kept per scene: the one being labelled and the next of its column
 _WHOLE_TILES = 2
+_STRIP_MARGIN_M = 1e-3
+_ZSTD = Zstd(level=1)
 
 
 class _Decoded:
@@ -76,15 +79,17 @@ class _Decoded:
         self.decodes = 0
 
     def _decode(self, ij: tuple[int, int], keep_whole: bool) -> tuple[np.ndarray, np.ndarray]:
-        data = self.tiles.read_tile(self.keys[ij], ("class",))
+        xyz, attrs = self.tiles.read_tile_float32(self.keys[ij], ("class",))
         self.decodes += 1
-        xyz, cls = data.xyz_m.astype(np.float32), data.attributes["class"]
+        cls = attrs["class"]
         if ij not in self._strips:
-            x0, y0 = ij[0] * self.size, ij[1] * self.size
-            x, y = data.xyz_m[:, 0], data.xyz_m[:, 1]
+            # the strips a millimetre wider than the radius: float32 positions against float64 edges
+            # take every point within it (one more point beyond it changes no flag)
+            x0, y0, r = ij[0] * self.size, ij[1] * self.size, self.r + _STRIP_MARGIN_M
+            x, y = xyz[:, 0], xyz[:, 1]
             # what this tile gives the tile at -(dx, dy) from it: the west strip to the tile west of it...
-            side_x = {1: x <= x0 + self.r, -1: x >= x0 + self.size - self.r}
-            side_y = {1: y <= y0 + self.r, -1: y >= y0 + self.size - self.r}
+            side_x = {1: x <= x0 + r, -1: x >= x0 + self.size - r}
+            side_y = {1: y <= y0 + r, -1: y >= y0 + self.size - r}
             strips = {}
             for dx, dy in _AROUND:
                 if (dx, dy) == (0, 0):
@@ -114,47 +119,60 @@ class _Decoded:
             self._decode(ij, keep_whole=toward[0] == 0)
         return self._strips[ij][toward]
 
-    def halo(self, ij: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-        """This scene's points in the grid cell of tile ``ij`` widened by the radius: the tile itself
-        and, of each of its 8 neighbours, the strip within the radius of the shared edge or corner."""
-        parts_xyz, parts_cls = [], []
+    def halo(self, ij: tuple[int, int]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """This scene's points in the grid cell of tile ``ij`` widened by the radius, as parts (xyz,
+        classes) not joined (a join would copy the tile): the tile itself and, of each of its 8
+        neighbours, the strip within the radius of the shared edge or corner."""
+        parts = []
         for dx, dy in _AROUND:
             got = self.get(ij) if (dx, dy) == (0, 0) else self._strip((ij[0] + dx, ij[1] + dy), (dx, dy))
-            if got is None:
-                continue
-            parts_xyz.append(got[0])
-            parts_cls.append(got[1])
-        if not parts_xyz:
-            return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
-        return np.concatenate(parts_xyz), np.concatenate(parts_cls)
+            if got is not None:
+                parts.append(got)
+        return parts
 
     def release_before(self, column: int) -> None:
         """Drop the strips of columns left of ``column`` - 1 (no tile from ``column`` on needs them)."""
         for ij in [ij for ij in self._strips if ij[0] < column - 1]:
             del self._strips[ij]
 
+    def close(self) -> None:
+        """Let go of every tile and strip held."""
+        self._whole.clear()
+        self._strips.clear()
+
+
+def _join(parts: list[tuple[np.ndarray, np.ndarray]], keep: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The parts' points (xyz, classes) in one pair of arrays, each part's ``keep`` rows only when given."""
+    if keep is not None:
+        parts = [(xyz[k], cls[k]) for (xyz, cls), k in zip(parts, keep, strict=True)]
+    if not parts:
+        return np.zeros((0, 3), np.float32), np.zeros(0, np.uint8)
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
 
 def _flags_in_blocks(
-    a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray,
+    a_xyz: np.ndarray, a_cls: np.ndarray, halo: list[tuple[np.ndarray, np.ndarray]],
     rule: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray], halo_m: float,
 ) -> np.ndarray:  # fmt: skip
-    """``rule`` (:func:`change_flags` with its radius and tests) of a tile's points in slabs of at most :data:`BLOCK_POINTS` (sorted by x),
-    each against the other scene's points within ``halo_m`` of the slab: a point's flag depends only on
-    those (its radius, the surface test's search radius and plan cell), so the flags are the tile's
-    whole, and the rule's working memory follows the slab, not the tile (20 M points at 8000/m2)."""
+    """``rule`` (:func:`change_flags` with its radius and tests) of a tile's points against the other
+    scene's ``halo`` (its parts, :meth:`_Decoded.halo`), in slabs of at most :data:`BLOCK_POINTS`
+    (sorted by x), each against the halo's points within ``halo_m`` of the slab: a point's flag depends
+    only on those (its radius, the surface test's search radius and plan cell), so the flags are the
+    tile's whole, and the rule's working memory follows the slab, not the tile (20 M points at 8000/m2)."""
     n = len(a_xyz)
     if n <= BLOCK_POINTS:
-        return rule(a_xyz, a_cls, b_xyz, b_cls)
+        return rule(a_xyz, a_cls, *_join(halo))
     out = np.empty(n, dtype=np.uint8)
     order = np.argsort(a_xyz[:, 0], kind="stable")
     for start in range(0, n, BLOCK_POINTS):
         idx = order[start : start + BLOCK_POINTS]
         slab = a_xyz[idx]
         lo, hi = slab[:, :2].min(axis=0) - halo_m, slab[:, :2].max(axis=0) + halo_m
-        near = np.flatnonzero(
-            (b_xyz[:, 0] >= lo[0]) & (b_xyz[:, 0] <= hi[0]) & (b_xyz[:, 1] >= lo[1]) & (b_xyz[:, 1] <= hi[1])
-        )
-        out[idx] = rule(slab, a_cls[idx], b_xyz[near], b_cls[near])
+        near = [
+            np.flatnonzero((b[:, 0] >= lo[0]) & (b[:, 0] <= hi[0]) & (b[:, 1] >= lo[1]) & (b[:, 1] <= hi[1]))
+            for b, _ in halo
+        ]
+        out[idx] = rule(slab, a_cls[idx], *_join(halo, near))
     return out
 
 
@@ -212,8 +230,8 @@ def write_labels(
         root = zarr.open_group(str(out), mode="w")
         sides = {"t1": (t1, _Decoded(t1, halo_m)), "t2": (t2, _Decoded(t2, halo_m))}
         other = {"t1": "t2", "t2": "t1"}
-        flags_of: dict[str, dict[str, np.ndarray]] = {side: {} for side in sides}
-        changed_xyz: dict[str, list[np.ndarray]] = {side: [] for side in sides}
+        flags_of: dict[str, dict[str, _Packed]] = {side: {} for side in sides}
+        changed = {side: RegionCells(REGION_CELL_RADII * radius_m) for side in sides}
         grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
         rule = functools.partial(
             change_flags, radius_m=radius_m, ignored=ignored, matching=Matching(surface=surface), geometric=geometric
@@ -225,18 +243,19 @@ def write_labels(
                 mine = dec.get(ij)
                 if mine is None:
                     continue
-                their_xyz, their_cls = sides[other[side]][1].halo(ij)
-                flags = _flags_in_blocks(mine[0], mine[1], their_xyz, their_cls, rule, halo_m)
-                flags_of[side][dec.keys[ij]] = flags
-                changed_xyz[side].append(mine[0][flags == CHANGED])
-        cell = REGION_CELL_RADII * radius_m
-        taken_back = {side: _drop_small_regions(flags_of[side], changed_xyz[side], cell, min_region_points) for side in sides}
+                flags = _flags_in_blocks(mine[0], mine[1], sides[other[side]][1].halo(ij), rule, halo_m)
+                flags_of[side][dec.keys[ij]] = _Packed(flags)
+                changed[side].add(mine[0][flags == CHANGED])
+        for _, dec in sides.values():
+            dec.close()
+        taken_back = {side: _drop_small_regions(flags_of[side], changed[side], min_region_points) for side in sides}
         groups = {side: root.require_group(side).require_group("tiles") for side in sides}
         counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
         digests: dict[str, dict[str, str]] = {side: {} for side in sides}
         n_total = 0
         for side, (tiles, _) in sides.items():
-            for tile, flags in flags_of[side].items():
+            for tile, packed in flags_of[side].items():
+                flags = packed.unpack()
                 _write_flags(groups[side], tile, flags, tiles.spec)
                 digests[side][tile] = hashlib.sha256(flags.tobytes()).hexdigest()
                 _count(flags, counts[side])
@@ -255,18 +274,32 @@ def write_labels(
     return ChangeLabels(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)
 
 
-def _drop_small_regions(
-    flags: dict[str, np.ndarray], changed: list[np.ndarray], cell_m: float, min_points: int
-) -> int:
+class _Packed:
+    """A tile's flags held compressed until written (a byte a point of both scenes was 0.39 GB at
+    8000 points/m2; they are mostly one value, and zstd keeps a few per cent of it)."""
+
+    def __init__(self, flags: np.ndarray) -> None:
+        self.n = len(flags)
+        self._data = _ZSTD.encode(np.ascontiguousarray(flags, np.uint8))
+
+    def unpack(self) -> np.ndarray:
+        return np.frombuffer(_ZSTD.decode(self._data), np.uint8, count=self.n).copy()
+
+    def repack(self, flags: np.ndarray) -> None:
+        self._data = _ZSTD.encode(np.ascontiguousarray(flags, np.uint8))
+
+
+def _drop_small_regions(flags: dict[str, _Packed], changed: RegionCells, min_points: int) -> int:
     """Take the changed points of regions under ``min_points`` points back to unchanged in ``flags``
-    (tile -> flags, in the order ``changed`` holds each tile's changed points); return how many."""
-    if min_points <= 1 or not changed:
+    (tile -> flags, in the order ``changed`` took each tile's changed points); return how many."""
+    if min_points <= 1:
         return 0
-    small = small_regions(np.concatenate(changed), cell_m, min_points)
-    start = 0
-    for tile_flags in flags.values():
-        where = np.flatnonzero(tile_flags == CHANGED)
-        mine = small[start : start + len(where)]
-        tile_flags[where[mine]] = UNCHANGED
-        start += len(where)
-    return int(small.sum())
+    taken = 0
+    for packed, small in zip(flags.values(), changed.small(min_points), strict=True):
+        if not small.any():
+            continue
+        tile_flags = packed.unpack()
+        tile_flags[np.flatnonzero(tile_flags == CHANGED)[small]] = UNCHANGED
+        packed.repack(tile_flags)
+        taken += int(small.sum())
+    return taken

@@ -409,16 +409,44 @@ class SceneTiles:
         sel = np.flatnonzero(take)
         return {tile: (sel, take[sel])} if len(sel) else {}
 
-    def _gather(self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]) -> Points:
-        """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
-        cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres;
-        concatenate over tiles."""
+    def read_tile_float32(
+        self, tile: str, attributes: Sequence[str], block_points: int = 1 << 20
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Every point of ``tile`` as (N, 3) float32 site-local metres and its ``attributes``: the
+        values of :meth:`read_tile` cast to float32, read block by block (about ``block_points``, whole
+        shards) past the chunk cache. For a pass that reads each tile once whole (the change labels):
+        it holds the result and one block, where a read through the cache holds the raw counts, the
+        float64 metres and the cached chunks at once (1.4 GB more on a 20 M point tile)."""
+        self._check_attributes(attributes)
+        n = self.prefix(tile)
+        i, j = parse_tile_key(tile)
+        origin = tile_origin_local(i, j, self.spec.tile_size_m)
+        counts = self._handle(tile, COUNTS)
+        arrays = {a: self._handle(tile, a) for a in attributes}
+        unit = int((counts.shards or counts.chunks)[0])
+        step = max(unit, block_points // unit * unit)
+        xyz = np.empty((n, 3), np.float32)
+        out = {a: np.empty((n, *arr.shape[1:]), dtype=arr.dtype) for a, arr in arrays.items()}
+        for lo in range(0, n, step):
+            hi = min(n, lo + step)
+            xyz[lo:hi] = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m)
+            for a, arr in arrays.items():
+                out[a][lo:hi] = arr[lo:hi]
+        return xyz, out
+
+    def _check_attributes(self, attributes: Sequence[str]) -> None:
         bad = [a for a in attributes if (a not in ATTRIBUTES or a == COUNTS) and a not in self.attributes]
         if bad:
             raise TileError(
                 f"unknown attributes {bad}; choose from {[a for a in ATTRIBUTES if a != COUNTS]} "
                 f"(positions always come back as {METRES!r})."
             )
+
+    def _gather(self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]) -> Points:
+        """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
+        cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres;
+        concatenate over tiles."""
+        self._check_attributes(attributes)
         stats = ReadStats()
         parts: dict[str, list[np.ndarray]] = {a: [] for a in (METRES, *attributes)}
         for tile in sorted(plan):
@@ -433,7 +461,11 @@ class SceneTiles:
                 parts[a].append(values)
             stats.tiles_read += 1
             stats.points_read += k if idx is None else len(idx)
-        out = {a: np.concatenate(chunks) if chunks else self._empty(a) for a, chunks in parts.items()}
+        # one tile's metres are a fresh array: no copy (its attributes may be the cache's own chunks)
+        out = {
+            a: (chunks[0] if len(chunks) == 1 and a == METRES else np.concatenate(chunks)) if chunks else self._empty(a)
+            for a, chunks in parts.items()
+        }
         stats.points_returned = len(out[METRES])
         xyz = out.pop(METRES)
         return Points(xyz, out, stats)
