@@ -15,7 +15,7 @@ PRIMITIVES = {
     "camera", "site", "pointpass",
 }  # fmt: skip
 STAGES = {"ingest", "register", "tiles", "labels", "labelsets", "views", "render", "pairs", "release"}
-TOP = {"pipeline", "cli", "__main__"}
+TOP = {"pipeline", "trade", "cli", "__main__"}
 MAX_STAGE_FUNCTION_LINES = 60
 
 

@@ -1,49 +1,27 @@
 """The change labels measured the way a user meets them: the analytic box scene through the pipeline
-with the release defaults, its masks scored against the ray-cast truth (bench/truth.py in small)."""
+with the release defaults, its masks scored against the ray-cast truth (bench/trade.py in small)."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from siteline import pipeline
-from siteline.catalog import migrate, open_catalog
-from siteline.catalog.engine import make_engine
-from siteline.catalog.pairs import pair_ids_of_scene
-from siteline.catalog.scenes import list_scenes
-from siteline.catalog.sites import add_site, get_site
-from siteline.config import Settings, sqlite_url
+from siteline.catalog import open_catalog
 from siteline.labels.accuracy import accuracy_text, density_of_spacing, measured_for
 from siteline.release.datasheet import _radius_lines
-from siteline.site.fence import load_fence_geojson
-from siteline.site.spec import make_site_spec
-from siteline.synth import SynthConfig, write_site
 from siteline.synth.scoring import score_pair
+from siteline.trade import SITE, synthetic_pair
 
 
 @pytest.mark.slow  # about a minute: a 2-epoch scene ingested and its pair processed twice
 def test_surface_labels_beat_the_nearest_rule_against_analytic_truth(tmp_path: Path) -> None:
-    cfg = SynthConfig(epochs=2, density_pts_m2=20.0, seed=0, snow_epochs=(), projection_error_epochs=(), layout="boxes")
-    site_dir = tmp_path / "site"
-    write_site(site_dir, cfg)
-    settings = Settings(home=tmp_path / "home", database_url=sqlite_url(tmp_path / "home" / "catalog.sqlite"))
-    settings.home.mkdir()
-    engine = make_engine(settings.database_url)
-    migrate.upgrade(engine)
-    engine.dispose()
-    ring = load_fence_geojson(site_dir / "fence.geojson", cfg.origin)
+    settings, site_dir, pid = synthetic_pair(tmp_path, "boxes", 20.0, views=6)
     cat = open_catalog(settings)
     try:
-        with cat.transaction() as s:
-            add_site(s, make_site_spec("boxes", cfg.crs, cfg.origin, [*ring, ring[0]]), {"pair": {"views": 6}})
-        for e in json.loads((site_dir / "truth" / "site.json").read_text())["epochs"]:
-            pipeline.ingest(cat, settings, site_dir / e["mission_dir"], "boxes")
-        with cat.transaction() as s:
-            pid = pair_ids_of_scene(s, list_scenes(s, get_site(s, "boxes"))[-1].id)[0]
-        base = pipeline.release_parameters(cat, "boxes").pair
+        base = pipeline.release_parameters(cat, SITE).pair
         assert (base.label_rule, base.min_region_points) == ("surface", 8)
         scores = {}
         for name, params in (("default", base), ("nearest", replace(base, label_rule="nearest", min_region_points=1))):

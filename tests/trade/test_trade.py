@@ -1,37 +1,68 @@
-"""The trade report runs from one command and its Pareto front is right."""
+"""The trade (siteline.trade) runs from the installed command, scores against the analytic truth, and
+refuses what it cannot run in one line."""
 
 from __future__ import annotations
 
-import csv
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
-from siteline.cli import main
-from siteline.cli.bench import _bench_trade
+from siteline.errors import ConfigError
+from siteline.trade import TradeRow, parse_variant, trade_markdown
 
-pareto = _bench_trade().pareto
-
-
-def test_pareto_front() -> None:
-    costs = [1.0, 2.0, 3.0, 1.5, 4.0]
-    values = [0.5, 0.7, 0.6, 0.4, 0.9]
-    assert pareto(costs, values) == [0, 1, 4]
+SITELINE = Path(sys.executable).with_name("siteline")
 
 
-@pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
-def test_bench_trade_quick_run(tmp_path, capsys) -> None:
-    code = main(
-        ["bench", "trade", "--quick", "--views", "2", "--site-density", "2", "--out", str(tmp_path / "t")]
+def test_variants_are_parsed_and_bad_ones_named() -> None:
+    assert parse_variant('r4={"radius_multiplier": 4}') == ("r4", {"radius_multiplier": 4})
+    for bad in ("r4", 'r4={"radius_multiplier": 4', "=", 'x=[1]'):
+        with pytest.raises(ConfigError, match="variant"):
+            parse_variant(bad)
+
+
+def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
+    scores = {"precision": 0.9, "recall": 0.8, "f1": 0.85, "boundary_f": 0.7, "specks_median": 1.0,
+              "scored_share": 0.9, "object_recall": {"jib#21": 0.95, "pole#60": 0.62}}  # fmt: skip
+    rows = [TradeRow("default", {}, 10.0, 1.0, 0.3, scores), TradeRow("fixed 1 px", {"splat": "fixed"}, error="every view rejected")]
+    md = trade_markdown(rows, "boxes", 40.0)
+    assert "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 |" in md
+    assert "| fixed 1 px | splat=fixed | no release: every view rejected |" in md
+    assert math.isnan(rows[1].seconds)
+
+
+def test_bench_trade_refuses_a_bad_grid_and_variant_in_one_line(tmp_path) -> None:
+    cases = (
+        (["--grid", "huge"], "grid 'huge'"),
+        (["--variant", "oops"], "variant 'oops'"),
+        (["--variant", 'big={"radius_multipler": 4}'], "unknown pair knobs ['radius_multipler']"),
+        (["--variant", 'neg={"scale_factor": -1}'], "scale_factor must be a positive number"),
     )
-    assert code == 0
-    rows = list(csv.DictReader(open(tmp_path / "t" / "trade.csv")))
-    assert len(rows) == 8  # 2 scales x 2 point sizes x (fixed disks, world splats)
-    assert {r["splat"] for r in rows} == {"fixed", "world"}
+    for args, words in cases:
+        proc = subprocess.run([str(SITELINE), "bench", "trade", "--out", str(tmp_path), *args], capture_output=True, text=True)
+        assert proc.returncode != 0 and words in proc.stderr + proc.stdout
+        assert "Traceback" not in proc.stderr
+    assert not any(tmp_path.iterdir())  # nothing made before the refusal
+
+
+@pytest.mark.slow  # a small 2-epoch site made, ingested and processed twice: about a minute
+def test_bench_trade_from_the_installed_command(tmp_path) -> None:
+    env = os.environ | {"SITELINE_HOME": str(tmp_path / "unused-home")}
+    proc = subprocess.run(
+        [str(SITELINE), "bench", "trade", "--layout", "boxes", "--site-density", "8", "--views", "3", "--grid", "quick",
+         "--pictures", "1", "--out", str(tmp_path / "t")],
+        capture_output=True, text=True, env=env, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    folder = tmp_path / "t" / "boxes-8"
+    rows = json.loads((folder / "trade.json").read_text())
+    assert [r["variant"] for r in rows] == ["default", "no gap fill"]
     for r in rows:
-        assert 0.0 <= float(r["coverage"]) <= 1.0 and 0.0 <= float(r["f1_2d"]) <= 1.0
-        assert float(r["seconds_per_view"]) > 0 and float(r["points_read_per_view"]) > 0
-    labels = list(csv.DictReader(open(tmp_path / "t" / "labels3d.csv")))
-    assert {r["backend"] for r in labels} == {"pykdtree", "ckdtree"}
-    assert len({r["accuracy_3d"] for r in labels}) == 1  # the backend changes speed, never the labels
-    assert (tmp_path / "t" / "seconds_vs_f1.png").stat().st_size > 1000
-    assert "Pareto" in (tmp_path / "t" / "trade.md").read_text()
+        assert r["error"] is None and 0 < r["precision"] <= 1 and 0 < r["recall"] <= 1 and r["views"] == 3
+        assert r["object_recall"] and all(0 <= v <= 1 for v in r["object_recall"].values())
+    assert "| default | release defaults |" in (folder / "trade.md").read_text()
+    assert len(list(folder.glob("*.png"))) == 2

@@ -1,9 +1,9 @@
-"""``siteline bench trade``: measure the speed/accuracy trade on a synthetic site with known truth."""
+"""``siteline bench trade``: the speed/accuracy trade of the pair knobs, measured on a synthetic site
+against its analytic truth (siteline.trade)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from types import ModuleType
 
 import typer
 
@@ -12,66 +12,33 @@ from siteline.cli.common import console
 app = typer.Typer(help="Measurements.", no_args_is_help=True)
 
 
-def _bench_trade() -> ModuleType:
-    """``bench/trade.py`` of the source checkout: a benchmark, not part of the installed library."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[3] / "bench" / "trade.py"
-    if not path.is_file():
-        from siteline.errors import ConfigError
-
-        raise ConfigError(
-            f"siteline bench trade runs bench/trade.py from a source checkout of siteline; {path} is missing."
-        )
-    spec = importlib.util.spec_from_file_location("siteline_bench_trade", path)
-    if spec is None or spec.loader is None:
-        from siteline.errors import ConfigError
-
-        raise ConfigError(f"{path} cannot be loaded as a Python module.")
-    module = importlib.util.module_from_spec(spec)
-    import sys
-
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @app.command("trade")
 def trade(
-    site_density: float = typer.Option(
-        10.0, "--site-density", help="Synthetic LiDAR density, points per m2."
+    site_density: float = typer.Option(10.0, "--site-density", help="Synthetic LiDAR density, points per m2."),
+    layout: str = typer.Option(
+        "site", "--layout", help="site (the construction site) or boxes (the analytic box scene with a turning jib)."
     ),
-    views: int = typer.Option(8, "--views", help="Views rendered per setting."),
-    out: Path = typer.Option(
-        Path("trade"), "--out", help="Output folder: trade.csv, trade.md, labels3d.csv, plots."
+    views: int = typer.Option(24, "--views", help="Views a pair."),
+    grid: str = typer.Option(
+        "full", "--grid",
+        help="full (radius x1.5 and x4, fixed 1 and 3 px points, no gap fill, scale x2, LOD x2) or quick (default, no gap fill).",
+    ),  # fmt: skip
+    variant: list[str] = typer.Option(
+        [], "--variant", help='NAME=JSON pair knobs over the defaults, e.g. r3=\'{"radius_multiplier": 3}\' (replaces --grid).'
     ),
+    out: Path = typer.Option(Path("trade"), "--out", help="Output folder: the site, trade.json, trade.md, pictures."),
+    pictures: int = typer.Option(0, "--pictures", help="Save mask | truth | disagreement of this many views a variant."),
     seed: int = typer.Option(0, "--seed"),
-    quick: bool = typer.Option(
-        False, "--quick", help="A reduced grid (scale 1 and 1/4, radius x2.5) for a smoke run."
-    ),
-    dense: bool = typer.Option(
-        False,
-        "--dense",
-        help="The grid for paper density (use with --site-density 1000): scales 1/4 and 1/8, point "
-        "sizes 1 and 3, LOD 1, 1.41 and 2, radius x2.5, pykdtree.",
-    ),
-    splats: bool = typer.Option(
-        False,
-        "--splats",
-        help="Fixed disks against world splats with the gap fill, at scales 1 and 2 of the synthetic "
-        "photos (1/8 and 1/4 of a Zenmuse L2 frame), point sizes 1 and 3, LOD 1, radius x2.5.",
-    ),
 ) -> None:
-    """Sweep scale x point size x splats x level of detail x label radius x nearest-neighbour backend."""
-    trade_module = _bench_trade()
-    TradeGrid, run_trade = trade_module.TradeGrid, trade_module.run_trade  # noqa: N806
+    """Each variant's masks scored per pixel against the ray-cast truth: precision, recall, F1, boundary F,
+    each changed object's recall, specks per view, seconds."""
+    from siteline.errors import ConfigError
+    from siteline.trade import GRIDS, parse_variant, run_trade
 
-    if quick + dense + splats > 1:
-        raise typer.BadParameter("choose one of --quick, --dense and --splats.")
-    grid = (
-        trade_module.QUICK if quick else trade_module.DENSE if dense else trade_module.SPLATS if splats else TradeGrid()
-    )
-    rows = run_trade(out, site_density, views, seed, grid, progress=lambda m: console.print(m))
-    console.print((out / "trade.md").read_text())
-    console.print(f"{len(rows)} settings measured; CSV, tables and plots in {out}")
+    if grid not in GRIDS:
+        raise ConfigError(f"grid {grid!r}: use one of {', '.join(GRIDS)}.")
+    variants = dict(parse_variant(v) for v in variant) if variant else GRIDS[grid]
+    rows = run_trade(out, layout, site_density, views, variants, seed, lambda m: console.print(m, highlight=False), pictures)
+    folder = out / f"{layout}-{site_density:g}"
+    console.print((folder / "trade.md").read_text(), highlight=False)
+    console.print(f"{len(rows)} settings measured; trade.json and trade.md in {folder}")

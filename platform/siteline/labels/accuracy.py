@@ -1,5 +1,5 @@
 """How accurate the masks of each change rule measured against a truth the renderer did not draw: the
-synthetic scenes' analytic surfaces ray-cast per pixel (siteline.synth.viewtruth, ``bench/truth.py``,
+synthetic scenes' analytic surfaces ray-cast per pixel (siteline.synth.viewtruth, ``bench/trade.py``,
 24 views a pair, every other knob at the release default). A release quotes the row of its rule,
 smallest region and edge trim nearest its density."""
 
@@ -27,7 +27,7 @@ class Measured:
     specks_median: float
 
 
-# bench/truth.py, 2026-11-28, this 2-core machine (one run each; docs/performance.md): the nearest
+# bench/trade.py, 2026-11-28, this 2-core machine (one run each; docs/performance.md): the nearest
 # rule as releases made it before, and the defaults since
 MEASURED: tuple[Measured, ...] = (
     Measured("synthetic site", 10, "nearest", 1, False, 0.928, 0.978, 0.952, 246),

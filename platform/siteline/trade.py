@@ -1,0 +1,264 @@
+"""The speed/accuracy trade, measured against a truth the renderer did not draw.
+
+A 2-epoch synthetic site (the construction site, or the analytic box scene ``boxes``) is made, ingested
+and run through the pipeline with its release defaults and with named variants of the pair knobs
+(label radius, splats, gap fill, render scale, level of detail, ...); each variant's masks are scored
+per pixel against the site's analytic surfaces ray-cast through the same cameras
+(siteline.synth.scoring): precision, recall and F1 of changed, boundary F (2 px), each changed object's
+recall, false-change specks per view, seconds. ``siteline bench trade`` and ``bench/trade.py`` run it.
+A variant that leaves no usable view is reported as such, not dropped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from siteline import pipeline
+from siteline.catalog import Catalog, migrate, open_catalog
+from siteline.catalog.engine import make_engine
+from siteline.catalog.pairs import pair_ids_of_scene
+from siteline.catalog.scenes import list_scenes
+from siteline.catalog.sites import add_site, get_site
+from siteline.config import Settings, sqlite_url
+from siteline.errors import ConfigError, PairError
+from siteline.pairs.params import PairParams
+from siteline.site.fence import load_fence_geojson
+from siteline.site.spec import make_site_spec
+from siteline.synth import SynthConfig, write_site
+from siteline.synth.scoring import score_pair
+
+SITE = "trade"
+LAYOUTS = ("site", "boxes")
+# named sets of variants (pair knobs over the release defaults). The synthetic photos are 1/8 of a
+# Zenmuse L2 frame, so the default scale renders 1/8 of a frame and "scale 1/4" the paper's 1/4.
+GRIDS: dict[str, dict[str, dict[str, object]]] = {
+    "quick": {"default": {}, "no gap fill": {"fill_px": 0}},
+    "full": {
+        "default": {},
+        "radius x1.5": {"radius_multiplier": 1.5},
+        "radius x4": {"radius_multiplier": 4.0},
+        "fixed 1 px": {"splat": "fixed", "point_size_px": 1},
+        "fixed 3 px": {"splat": "fixed", "point_size_px": 3},
+        "no gap fill": {"fill_px": 0},
+        "scale x2": {"scale_factor": 2.0},
+        "LOD x2": {"lod_factor": 2.0},
+    },
+}
+
+
+@dataclass(frozen=True)
+class TradeRow:
+    """One variant's measurement: its knobs, the pair's seconds (labels, views and renders) and the
+    labels' alone, the change radius (metres) and the scores (siteline.synth.viewtruth.MaskScore's
+    dict), or why it made no release (``error``)."""
+
+    variant: str
+    knobs: Mapping[str, object]
+    seconds: float = math.nan
+    label_seconds: float = math.nan
+    radius_m: float = math.nan
+    scores: Mapping[str, object] = field(default_factory=dict)
+    error: str | None = None
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "variant": self.variant, "knobs": dict(self.knobs), "seconds": self.seconds,
+            "label_seconds": self.label_seconds, "radius_m": self.radius_m, "error": self.error, **self.scores,
+        }  # fmt: skip
+
+    def line(self) -> str:
+        """The row in one line of text."""
+        if self.error:
+            return f"{self.variant:>12}: no release: {self.error}"
+        s = self.scores
+        objects = ", ".join(f"{k} {v:.2f}" for k, v in dict(s["object_recall"]).items())  # type: ignore[call-overload]
+        return (
+            f"{self.variant:>12}: P {s['precision']:.3f} R {s['recall']:.3f} F1 {s['f1']:.3f} boundary F "
+            f"{s['boundary_f']:.3f} specks/view median {s['specks_median']:.0f} (max {s['specks_max']}), rim "
+            f"pieces/view median {s['rims_median']:.0f}, scored {s['scored_share']:.1%} of pixels, labels "
+            f"{self.label_seconds:.1f} s, pair {self.seconds:.0f} s; {objects}"
+        )
+
+
+def parse_variant(text: str) -> tuple[str, dict[str, object]]:
+    """``NAME=JSON`` (pair knobs over the defaults, e.g. ``r4={"radius_multiplier": 4}``)."""
+    name, sep, knobs = text.partition("=")
+    try:
+        parsed = json.loads(knobs) if sep else None
+    except ValueError as exc:
+        raise ConfigError(f"variant {text!r}: the knobs after '=' are not JSON ({exc}).") from None
+    if not name or not isinstance(parsed, dict):
+        raise ConfigError(f"variant {text!r}: write NAME={{\"knob\": value, ...}}.")
+    return name, parsed
+
+
+def synthetic_pair(out: Path, layout: str, density: float, views: int, seed: int = 0) -> tuple[Settings, Path, int]:
+    """A 2-epoch synthetic site at ``density`` points/m2 under ``out`` (made once: a later call reuses
+    it), its home with the site registered (``views`` views a pair) and both epochs ingested; the
+    settings, the site's folder and the pair's id."""
+    if layout not in LAYOUTS:
+        raise ConfigError(f"layout {layout!r}: use one of {', '.join(LAYOUTS)}.")
+    if not (math.isfinite(density) and density > 0):
+        raise ConfigError(f"site density {density!r} must be a positive number of points per m2.")
+    cfg = SynthConfig(
+        epochs=2, density_pts_m2=density, seed=seed, snow_epochs=(), projection_error_epochs=(), layout=layout
+    )
+    site_dir = out / "site"
+    if not (site_dir / "truth" / "site.json").exists():
+        write_site(site_dir, cfg)
+    home = out / "home"
+    settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
+    made = (home / "catalog.sqlite").exists()
+    home.mkdir(parents=True, exist_ok=True)
+    engine = make_engine(settings.database_url)
+    migrate.upgrade(engine)
+    engine.dispose()
+    cat = open_catalog(settings)
+    try:
+        if not made:
+            ring = load_fence_geojson(site_dir / "fence.geojson", cfg.origin)
+            with cat.transaction() as s:
+                spec = make_site_spec(SITE, cfg.crs, cfg.origin, [*ring, ring[0]])
+                add_site(s, spec, {"pair": {"views": views, "seed": seed}})
+        doc = json.loads((site_dir / "truth" / "site.json").read_text())
+        for e in doc["epochs"]:
+            pipeline.ingest(cat, settings, site_dir / e["mission_dir"], SITE)
+        with cat.transaction() as s:
+            scenes = list_scenes(s, get_site(s, SITE))
+            pid = pair_ids_of_scene(s, scenes[-1].id)[0]
+    finally:
+        cat.dispose()
+    return settings, site_dir, pid
+
+
+def variant_params(base: PairParams, name: str, knobs: Mapping[str, object]) -> PairParams:
+    """``base`` with variant ``name``'s ``knobs`` over it (``scale_factor`` multiplies its scale);
+    :class:`ConfigError` naming the variant for an unknown knob or a bad value."""
+    knobs = dict(knobs)
+    if "scale_factor" in knobs:
+        factor = knobs.pop("scale_factor")
+        if not isinstance(factor, int | float) or not factor > 0:
+            raise ConfigError(f"variant {name!r}: scale_factor must be a positive number, got {factor!r}.")
+        knobs["scale"] = base.scale * float(factor)
+    unknown = sorted(set(knobs) - set(base.to_dict()))
+    if unknown:
+        raise ConfigError(f"variant {name!r}: unknown pair knobs {unknown}; see siteline.pairs.params.PairParams.")
+    try:
+        return PairParams.from_dict(base.to_dict() | knobs)
+    except (TypeError, ValueError, PairError) as exc:
+        raise ConfigError(f"variant {name!r}: {exc}") from None
+
+
+def measure_variant(
+    cat: Catalog, settings: Settings, site_dir: Path, pid: int, name: str, knobs: Mapping[str, object],
+    pictures: Callable[[str, int, np.ndarray, np.ndarray], None] | None = None,
+) -> TradeRow:  # fmt: skip
+    """Pair ``pid`` processed with ``knobs`` over the site's release defaults, scored against the
+    analytic truth. ``scale_factor`` multiplies the default scale. ``pictures`` is given each view's
+    index, mask and truth."""
+    params = variant_params(pipeline.release_parameters(cat, SITE).pair, name, knobs)
+    t = time.perf_counter()
+    try:
+        result = pipeline.process_pairs(cat, settings, [pid], params)[pid]
+    except PairError as exc:  # a setting that leaves no usable view is a finding
+        return TradeRow(name, dict(knobs), error=str(exc))
+    seconds = time.perf_counter() - t
+
+    def keep(view, mask, truth) -> None:  # noqa: ANN001
+        if pictures is not None:
+            pictures(name, view.index, mask, truth.mask)
+
+    score = score_pair(settings.store, result.root, site_dir, (0, 1), keep)
+    return TradeRow(
+        name, dict(knobs), seconds, result.labels.seconds or math.nan, result.radius_m, score.to_dict()
+    )
+
+
+def run_trade(
+    out: Path, layout: str = "site", density: float = 10.0, views: int = 24,
+    variants: Mapping[str, Mapping[str, object]] | None = None, seed: int = 0,
+    progress: Callable[[str], None] = print, pictures: int = 0,
+) -> list[TradeRow]:  # fmt: skip
+    """Every variant (name -> pair knobs; the full grid when None) measured on the synthetic site of
+    ``layout`` at ``density`` points/m2 kept under ``out/<layout>-<density>``; writes trade.json and
+    trade.md there (and ``pictures`` mask | truth | disagreement images a variant) and returns the rows."""
+    variants = variants if variants is not None else GRIDS["full"]
+    for name, knobs in variants.items():  # refused before anything is made
+        variant_params(PairParams(), name, knobs)
+    if layout not in LAYOUTS:
+        raise ConfigError(f"layout {layout!r}: use one of {', '.join(LAYOUTS)}.")
+    folder = Path(out) / f"{layout}-{density:g}"
+    folder.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    settings, site_dir, pid = synthetic_pair(folder, layout, density, views, seed)
+    progress(f"synthetic {layout} at {density:g} points/m2 ingested ({time.perf_counter() - t0:.0f} s)")
+    saved: dict[str, int] = {}
+
+    def picture(name: str, index: int, mask: np.ndarray, truth: np.ndarray) -> None:
+        if saved.get(name, 0) < pictures:
+            save_disagreement(folder / f"{name.replace(' ', '_').replace('/', '-')}-{index:04d}.png", mask, truth)
+            saved[name] = saved.get(name, 0) + 1
+
+    rows = []
+    cat = open_catalog(settings)
+    try:
+        for name, knobs in variants.items():
+            rows.append(measure_variant(cat, settings, site_dir, pid, name, knobs, picture))
+            progress(rows[-1].line())
+    finally:
+        cat.dispose()
+    (folder / "trade.json").write_text(json.dumps([r.to_dict() for r in rows], indent=1) + "\n")
+    (folder / "trade.md").write_text(trade_markdown(rows, layout, density))
+    return rows
+
+
+def trade_markdown(rows: list[TradeRow], layout: str, density: float) -> str:
+    """The rows as a Markdown table (the least-scoring object's recall beside the totals)."""
+    head = (
+        f"Trade on the synthetic {layout} at {density:g} points/m2, against the analytic truth\n\n"
+        "| variant | knobs | precision | recall | F1 | boundary F | specks / view | lowest object recall | scored | pair s | labels s |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in rows:
+        knobs = ", ".join(f"{k}={v}" for k, v in r.knobs.items()) or "release defaults"
+        if r.error:
+            lines.append(f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |")
+            continue
+        s = r.scores
+        objects: dict[str, float] = dict(s["object_recall"])  # type: ignore[call-overload]
+        low = min(objects.items(), key=lambda kv: kv[1]) if objects else ("-", math.nan)
+        lines.append(
+            f"| {r.variant} | {knobs} | {s['precision']:.3f} | {s['recall']:.3f} | {s['f1']:.3f} | "
+            f"{s['boundary_f']:.3f} | {s['specks_median']:.0f} | {low[0]} {low[1]:.2f} | {s['scored_share']:.1%} | "
+            f"{r.seconds:.0f} | {r.label_seconds:.1f} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
+def save_disagreement(path: Path, mask: np.ndarray, truth: np.ndarray) -> None:
+    """mask | truth | disagreement as one PNG (red: false changed, blue: missed, grey: ignored by either)."""
+    colours = {0: (40, 140, 60), 1: (220, 40, 40), 255: (235, 235, 235)}
+
+    def paint(m: np.ndarray) -> np.ndarray:
+        img = np.zeros((*m.shape, 3), np.uint8)
+        for v, c in colours.items():
+            img[m == v] = c
+        return img
+
+    diff = np.full((*mask.shape, 3), 255, np.uint8)
+    both = (mask != 255) & (truth != 255)
+    diff[~both] = (200, 200, 200)
+    diff[both & (mask == 1) & (truth == 0)] = (220, 30, 30)
+    diff[both & (mask == 0) & (truth == 1)] = (30, 60, 220)
+    diff[both & (mask == 1) & (truth == 1)] = (30, 30, 30)
+    gap = np.full((mask.shape[0], 4, 3), 255, np.uint8)
+    Image.fromarray(np.concatenate([paint(mask), gap, paint(truth), gap, diff], axis=1)).save(path)
