@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal, NamedTuple
@@ -409,14 +409,14 @@ class SceneTiles:
         sel = np.flatnonzero(take)
         return {tile: (sel, take[sel])} if len(sel) else {}
 
-    def read_tile_float32(
+    def tile_blocks(
         self, tile: str, attributes: Sequence[str], block_points: int = 1 << 20
-    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Every point of ``tile`` as (N, 3) float32 site-local metres and its ``attributes``: the
-        values of :meth:`read_tile` cast to float32, read block by block (about ``block_points``, whole
-        shards) past the chunk cache. For a pass that reads each tile once whole (the change labels):
-        it holds the result and one block, where a read through the cache holds the raw counts, the
-        float64 metres and the cached chunks at once (1.4 GB more on a 20 M point tile)."""
+    ) -> Iterator[tuple[int, np.ndarray, dict[str, np.ndarray]]]:
+        """``tile``'s points block by block (about ``block_points``, whole shards), past the chunk cache:
+        (the block's first index, (n, 3) float32 site-local metres, its ``attributes``), the values of
+        :meth:`read_tile` cast to float32. For passes over whole tiles that read each once (the change
+        labels): a read through the cache holds the raw counts, the float64 metres and the cached
+        chunks at once (1.4 GB more on a 20 M point tile)."""
         self._check_attributes(attributes)
         n = self.prefix(tile)
         i, j = parse_tile_key(tile)
@@ -425,13 +425,24 @@ class SceneTiles:
         arrays = {a: self._handle(tile, a) for a in attributes}
         unit = int((counts.shards or counts.chunks)[0])
         step = max(unit, block_points // unit * unit)
-        xyz = np.empty((n, 3), np.float32)
-        out = {a: np.empty((n, *arr.shape[1:]), dtype=arr.dtype) for a, arr in arrays.items()}
         for lo in range(0, n, step):
             hi = min(n, lo + step)
-            xyz[lo:hi] = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m)
-            for a, arr in arrays.items():
-                out[a][lo:hi] = arr[lo:hi]
+            xyz = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m).astype(np.float32)
+            yield lo, xyz, {a: np.asarray(arr[lo:hi]) for a, arr in arrays.items()}
+
+    def read_tile_float32(
+        self, tile: str, attributes: Sequence[str], block_points: int = 1 << 20
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Every point of ``tile`` as (N, 3) float32 site-local metres and its ``attributes``, filled
+        from :meth:`tile_blocks` (the result and one block held)."""
+        self._check_attributes(attributes)
+        n = self.prefix(tile)
+        xyz = np.empty((n, 3), np.float32)
+        out = {a: np.empty((n, *self._handle(tile, a).shape[1:]), self._handle(tile, a).dtype) for a in attributes}
+        for lo, block, attrs in self.tile_blocks(tile, attributes, block_points):
+            xyz[lo : lo + len(block)] = block
+            for a, values in attrs.items():
+                out[a][lo : lo + len(block)] = values
         return xyz, out
 
     def _check_attributes(self, attributes: Sequence[str]) -> None:
