@@ -40,7 +40,7 @@ typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
 bench: $(STAMP)
-	for b in bench/*.py; do [ $$b = bench/paper_scale.py ] || $(PY) $$b || exit 1; done
+	for b in bench/*.py; do n=$$(basename $$b .py); [ $$n = paper_scale ] || [ $$n = __init__ ] || $(PY) -m bench.$$n || exit 1; done
 
 # one 2-epoch pair at 1000 points/m2 and at 250, 300 views (tens of minutes on 2 cores)
 bench-scale: $(STAMP)

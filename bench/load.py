@@ -8,7 +8,7 @@ slowdown beside the fair share: with N busy single-threaded processes on C cores
 gets about C T / (N + T) cores where it had min(C, T), so it should take min(C, T) (N + T) / (C T) as
 long.
 
-    python bench/load.py [--busy 2 6] [--threads auto adaptive 1]
+    python -m bench.load [--busy 2 6] [--threads auto adaptive 1]
 """
 
 from __future__ import annotations
@@ -33,10 +33,7 @@ def _spin() -> None:
 
 def _prepare(home: Path) -> None:
     """A home with autzen and a later epoch of it ingested (site ``az``)."""
-    sys.path.insert(0, str(ROOT / "tests"))
     from datetime import UTC, datetime
-
-    from realdata import AUTZEN, centre_xy, later_epoch
 
     from siteline import pipeline
     from siteline.catalog import migrate, open_catalog
@@ -45,6 +42,7 @@ def _prepare(home: Path) -> None:
     from siteline.config import Settings, sqlite_url
     from siteline.ingest.options import IngestOptions
     from siteline.site.spec import make_site_spec
+    from tests.realdata import AUTZEN, centre_xy, later_epoch
 
     c = centre_xy(AUTZEN)
     later = later_epoch(AUTZEN, home / "later.laz", removed_box=(c[0] - 150, c[1] - 150, c[0] - 50, c[1] - 50), days=300)
@@ -110,7 +108,7 @@ def _run(home: Path, threads: str, busy: int) -> dict[str, float]:
         p.start()
     try:
         out = subprocess.run(
-            [sys.executable, __file__, "--child", str(home), threads], capture_output=True, text=True, check=True
+            [sys.executable, "-m", "bench.load", "--child", str(home), threads], capture_output=True, text=True, check=True, cwd=ROOT
         ).stdout
     finally:
         for p in spinners:

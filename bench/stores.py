@@ -3,7 +3,7 @@ with the stores on an object store, in the same run. The object store is moto's 
 process on 127.0.0.1 (a Python server: slower than MinIO or S3 per request, so the ratios are an
 upper bound on what the object-store path itself costs).
 
-    python bench/stores.py [--density 10] [--views 6]
+    python -m bench.stores [--density 10] [--views 6]
 """
 
 from __future__ import annotations
@@ -49,9 +49,6 @@ def _start_s3() -> tuple[subprocess.Popen, str]:
 
 
 def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, float]:
-    sys.path.insert(0, str(REPO / "tests"))
-    from sitehelpers import epoch_dirs, make_home
-
     from siteline.catalog import open_catalog
     from siteline.ingest.stage import ingest_mission
     from siteline.pairs.params import PairParams
@@ -59,6 +56,7 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     from siteline.release.params import ReleaseParams
     from siteline.release.stage import build_release
     from siteline.tiles.stage import tile_scene
+    from tests.sitehelpers import epoch_dirs, make_home
 
     settings = make_home(root, site_dir=site_dir, store_url=store_url)
     settings.store.ensure()

@@ -2,7 +2,7 @@
 bytes per point, peak memory at two sizes, a codec comparison, and for a 1/8-scale view of a dense
 scene the points read per covered pixel and the batched read throughput.
 
-    python bench/tiles.py [--points 20000000] [--small 5000000] [--view-only]
+    python -m bench.tiles [--points 20000000] [--small 5000000] [--view-only]
 """
 
 from __future__ import annotations
@@ -18,11 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.ingest import ORIGIN, make_las  # the same generated site as bench/ingest.py
 from siteline.pointpass import TilingResources
 from siteline.tiles.writer import TileInput
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ingest import ORIGIN, make_las  # noqa: E402  (the same generated site as bench/ingest.py)
 
 
 def child(mode: str, path: str, out: str) -> None:
@@ -62,7 +60,9 @@ def child(mode: str, path: str, out: str) -> None:
 
 
 def run(*args: str) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--child", *args], capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, "-m", "bench.tiles", "--child", *args], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[1]
+    )
     if out.returncode:
         raise SystemExit(out.stderr)
     return json.loads(out.stdout.strip().splitlines()[-1])

@@ -4,17 +4,15 @@ its process or machine died; or its process exited) or was rescheduled, a markdo
 crash automation (deploy/service.py) marks it. Supervised by `deploy/serve.sh`; restarting it
 repeats nothing already reported.
 
-    python deploy/reporter.py [--every 3]
+    python -m deploy.reporter [--every 3]   (from the repository root)
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import re
 import time
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 from uuid import UUID
 
 from prefect.client.orchestration import SyncPrefectClient, get_client
@@ -27,19 +25,8 @@ from prefect.client.schemas.filters import (
 )
 from prefect.events.filters import EventFilter, EventNameFilter, EventOccurredFilter, EventRelatedFilter
 
+from deploy.service import MAX_ATTEMPTS, TAG
 from siteline.previews.markdown import RunEvent, stopped_markdown
-
-
-def _service():  # noqa: ANN202 (the module)
-    """deploy/service.py, loaded by its path (a module named ``service`` may be another on sys.path)."""
-    spec = importlib.util.spec_from_file_location("siteline_deploy_service", Path(__file__).resolve().with_name("service.py"))
-    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-    spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return module
-
-
-_SERVICE = _service()
-MAX_ATTEMPTS, TAG = _SERVICE.MAX_ATTEMPTS, _SERVICE.TAG
 
 WATCHED = ("prefect.flow-run.Crashed", "prefect.flow-run.AwaitingRetry")
 LOOK_BACK = timedelta(hours=6)

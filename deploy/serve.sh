@@ -80,10 +80,10 @@ fi
 "$BIN/prefect" work-pool create siteline-process --type process --overwrite >/dev/null
 "$BIN/prefect" --no-prompt deploy --all --prefect-file deploy/prefect.yaml >>"$LOGS/deploy.log" 2>&1 \
   || { echo "prefect deploy failed; see $LOGS/deploy.log"; exit 1; }
-"$BIN/python" deploy/service.py --pair-slots "$SITELINE_PAIR_SLOTS"
+"$BIN/python" -m deploy.service --pair-slots "$SITELINE_PAIR_SLOTS"
 supervise prefect-worker "$BIN/prefect" worker start --pool siteline-process --name siteline-worker
 supervise previews "$BIN/siteline" previews serve
-supervise reporter "$BIN/python" deploy/reporter.py
+supervise reporter "$BIN/python" -m deploy.reporter
 supervise watcher "$BIN/siteline" watch "$SITELINE_WATCH_DIR" --site "$SITELINE_SITE" \
   --stable-seconds "${SITELINE_STABLE_SECONDS:-10}"
 echo "UI: ${PREFECT_API_URL%/api}   previews: $SITELINE_PREVIEW_URL   logs: $LOGS"

@@ -2,7 +2,7 @@
 flows hold, and the two automations that recover from killed processes without a person. Run by
 `deploy/serve.sh` after `prefect deploy`; idempotent (limits are upserted, automations replaced by name).
 
-    python deploy/service.py [--pair-slots N]
+    python -m deploy.service [--pair-slots N]   (from the repository root)
 
 Recovery: a flow run of a siteline deployment whose heartbeats (PREFECT_FLOWS_HEARTBEAT_FREQUENCY=30,
 set by serve.sh) stop for HEARTBEAT_GRACE_S is marked Crashed (deploy/reporter.py then says so on its page); a crashed siteline run is rescheduled

@@ -19,7 +19,6 @@ rescheduled run reuses every finished output, and marks the task runs its killed
 from __future__ import annotations
 
 import logging
-import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -32,26 +31,24 @@ from prefect.concurrency.sync import concurrency
 from prefect.events import emit_event
 from prefect.runtime import flow_run
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from runner import cluster_executor, task_runner  # noqa: E402
-from ui import RunProgress, ingest_dashboards, note, pair_dashboards, release_dashboards, slug, tag_run  # noqa: E402
-
-from siteline import pipeline  # noqa: E402
-from siteline.catalog import Catalog, open_catalog  # noqa: E402
-from siteline.catalog.pairs import pair_ids_of_scene, site_name_of_pair  # noqa: E402  # noqa: E402
-from siteline.catalog.scenes import site_name_of_scene  # noqa: E402
-from siteline.catalog.stages import record_failure  # noqa: E402
-from siteline.config import Settings, load_settings  # noqa: E402
-from siteline.errors import SitelineError, StoreError  # noqa: E402
-from siteline.ingest.options import IngestOptions  # noqa: E402
-from siteline.pairs.params import PairParams  # noqa: E402
-from siteline.pointpass import TilingResources  # noqa: E402
-from siteline.records.pairs import PairOutput  # noqa: E402
-from siteline.records.release import ReleaseInfo, ReleaseOptions  # noqa: E402
-from siteline.records.runs import StageRun  # noqa: E402
-from siteline.release.knobs import ReleaseKnobs  # noqa: E402
-from siteline.stores import join  # noqa: E402
-from siteline.stores.diskspace import disk_full, full_disk_message  # noqa: E402
+from flows.runner import cluster_executor, task_runner
+from flows.ui import RunProgress, ingest_dashboards, note, pair_dashboards, release_dashboards, slug, tag_run
+from siteline import pipeline
+from siteline.catalog import Catalog, open_catalog
+from siteline.catalog.pairs import pair_ids_of_scene, site_name_of_pair
+from siteline.catalog.scenes import site_name_of_scene
+from siteline.catalog.stages import record_failure
+from siteline.config import Settings, load_settings
+from siteline.errors import SitelineError, StoreError
+from siteline.ingest.options import IngestOptions
+from siteline.pairs.params import PairParams
+from siteline.pointpass import TilingResources
+from siteline.records.pairs import PairOutput
+from siteline.records.release import ReleaseInfo, ReleaseOptions
+from siteline.records.runs import StageRun
+from siteline.release.knobs import ReleaseKnobs
+from siteline.stores import join
+from siteline.stores.diskspace import disk_full, full_disk_message
 
 # the library's INFO lines (views, renders, releases) reach the run logs: PREFECT_LOGGING_EXTRA_LOGGERS=siteline
 # gives the logger Prefect's handlers, this its level

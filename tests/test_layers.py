@@ -296,3 +296,18 @@ def test_scene_and_site_rows_stay_inside_the_catalog() -> None:
             if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("siteline.catalog"):
                 bad += [f"{_rel(path)} imports {a.name}" for a in node.names if a.name in rows]
     assert not bad, bad
+
+
+def test_no_sys_path_edit_anywhere() -> None:
+    """The library, the service (flows, deploy), the benchmarks and the tests import by package names
+    (the service and benchmarks run from the repository root; pytest's pythonpath is that root)."""
+    root = PACKAGE.parents[1]
+    edits = ("sys.path." + "insert", "sys.path." + "append", "sys.path" + "[", "sys.path +" + "=")
+    found = [
+        f"{p.relative_to(root)}:{n}"
+        for folder in ("platform", "flows", "deploy", "bench", "tests")
+        for p in sorted((root / folder).rglob("*.py"))
+        for n, line in enumerate(p.read_text().splitlines(), 1)
+        if any(e in line for e in edits)
+    ]
+    assert not found, found

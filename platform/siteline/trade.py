@@ -37,8 +37,9 @@ from siteline.synth.scoring import score_pair
 
 SITE = "trade"
 LAYOUTS = ("site", "boxes")
-# named sets of variants (pair knobs over the release defaults). The synthetic photos are 1/8 of a
-# Zenmuse L2 frame, so the default scale renders 1/8 of a frame and "scale 1/4" the paper's 1/4.
+# named sets of variants (pair knobs over the release defaults: on the synthetic site, 3 px world
+# splats at the auto scale 0.78 of its 660 x 495 photos). The photos are 1/8 of a Zenmuse L2 frame, so
+# scale 1 renders the paper's 1/8 of a frame and scale 2 its 1/4.
 GRIDS: dict[str, dict[str, dict[str, object]]] = {
     "quick": {"default": {}, "no gap fill": {"fill_px": 0}},
     "full": {
@@ -48,7 +49,8 @@ GRIDS: dict[str, dict[str, dict[str, object]]] = {
         "fixed 1 px": {"splat": "fixed", "point_size_px": 1},
         "fixed 3 px": {"splat": "fixed", "point_size_px": 3},
         "no gap fill": {"fill_px": 0},
-        "scale x2": {"scale_factor": 2.0},
+        "scale 1/8 frame": {"scale": 1.0},
+        "scale 1/4 frame": {"scale": 2.0},
         "LOD x2": {"lod_factor": 2.0},
     },
 }
@@ -84,8 +86,13 @@ class TradeRow:
             f"{self.variant:>12}: P {s['precision']:.3f} R {s['recall']:.3f} F1 {s['f1']:.3f} boundary F "
             f"{s['boundary_f']:.3f} specks/view median {s['specks_median']:.0f} (max {s['specks_max']}), rim "
             f"pieces/view median {s['rims_median']:.0f}, scored {s['scored_share']:.1%} of pixels, labels "
-            f"{self.label_seconds:.1f} s, pair {self.seconds:.0f} s; {objects}"
+            f"{_seconds(self.label_seconds)}, pair {self.seconds:.0f} s; {objects}"
         )
+
+
+def _seconds(s: float) -> str:
+    """Seconds, or "reused" for labels an earlier variant made (same radius and rule)."""
+    return "reused" if math.isnan(s) else f"{s:.1f} s"
 
 
 def parse_variant(text: str) -> tuple[str, dict[str, object]]:
@@ -140,19 +147,13 @@ def synthetic_pair(out: Path, layout: str, density: float, views: int, seed: int
 
 
 def variant_params(base: PairParams, name: str, knobs: Mapping[str, object]) -> PairParams:
-    """``base`` with variant ``name``'s ``knobs`` over it (``scale_factor`` multiplies its scale);
-    :class:`ConfigError` naming the variant for an unknown knob or a bad value."""
-    knobs = dict(knobs)
-    if "scale_factor" in knobs:
-        factor = knobs.pop("scale_factor")
-        if not isinstance(factor, int | float) or not factor > 0:
-            raise ConfigError(f"variant {name!r}: scale_factor must be a positive number, got {factor!r}.")
-        knobs["scale"] = base.scale * float(factor)
+    """``base`` with variant ``name``'s ``knobs`` over it; :class:`ConfigError` naming the variant for
+    an unknown knob or a bad value."""
     unknown = sorted(set(knobs) - set(base.to_dict()))
     if unknown:
         raise ConfigError(f"variant {name!r}: unknown pair knobs {unknown}; see siteline.pairs.params.PairParams.")
     try:
-        return PairParams.from_dict(base.to_dict() | knobs)
+        return PairParams.from_dict(base.to_dict() | dict(knobs))
     except (TypeError, ValueError, PairError) as exc:
         raise ConfigError(f"variant {name!r}: {exc}") from None
 
@@ -162,8 +163,7 @@ def measure_variant(
     pictures: Callable[[str, int, np.ndarray, np.ndarray], None] | None = None,
 ) -> TradeRow:  # fmt: skip
     """Pair ``pid`` processed with ``knobs`` over the site's release defaults, scored against the
-    analytic truth. ``scale_factor`` multiplies the default scale. ``pictures`` is given each view's
-    index, mask and truth."""
+    analytic truth. ``pictures`` is given each view's index, mask and truth."""
     params = variant_params(pipeline.release_parameters(cat, SITE).pair, name, knobs)
     t = time.perf_counter()
     try:
@@ -221,7 +221,8 @@ def run_trade(
 
 
 def trade_markdown(rows: list[TradeRow], layout: str, density: float) -> str:
-    """The rows as a Markdown table (the least-scoring object's recall beside the totals)."""
+    """The rows as a Markdown table (the least-scoring object's recall beside the totals; a variant's
+    pair seconds leave out labels it reused)."""
     head = (
         f"Trade on the synthetic {layout} at {density:g} points/m2, against the analytic truth\n\n"
         "| variant | knobs | precision | recall | F1 | boundary F | specks / view | lowest object recall | scored | pair s | labels s |\n"
@@ -239,7 +240,7 @@ def trade_markdown(rows: list[TradeRow], layout: str, density: float) -> str:
         lines.append(
             f"| {r.variant} | {knobs} | {s['precision']:.3f} | {s['recall']:.3f} | {s['f1']:.3f} | "
             f"{s['boundary_f']:.3f} | {s['specks_median']:.0f} | {low[0]} {low[1]:.2f} | {s['scored_share']:.1%} | "
-            f"{r.seconds:.0f} | {r.label_seconds:.1f} |"
+            f"{r.seconds:.0f} | {_seconds(r.label_seconds)} |"
         )
     return head + "\n".join(lines) + "\n"
 

@@ -9,11 +9,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from legacy_dji import legacy_photo  # tests/legacy_dji.py, beside sitehelpers
 
 from siteline.camera.photos import read_photo_meta
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "data"))
-from legacy_dji import legacy_photo  # noqa: E402
 
 
 @pytest.mark.parametrize(

@@ -5,14 +5,10 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import sys
 import time
 from pathlib import Path
 
 import pytest
-
-FLOWS = Path(__file__).resolve().parents[2] / "flows"
-sys.path.insert(0, str(FLOWS))
 
 
 @pytest.fixture(scope="module")
@@ -70,8 +66,9 @@ SMALL = {
 def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkeypatch) -> None:
     import asyncio
 
-    import pipeline
     from prefect.client.orchestration import get_client
+
+    from flows import pipeline
 
     settings = _home(tmp_path, small_site, monkeypatch)
     monkeypatch.setenv("SITELINE_RELEASE_POLICY", "every-pair")
@@ -160,9 +157,8 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
 def test_retry_then_success_and_permanent_failure_recorded(
     harness, small_site, tmp_path, monkeypatch
 ) -> None:
-    import pipeline
-
     import siteline.pipeline as tiles_pkg  # the pipeline calls the tile stage
+    from flows import pipeline
     from siteline.catalog import open_catalog
     from siteline.catalog.models import Scene
     from siteline.catalog.stages import stage_runs
@@ -238,9 +234,9 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
     """Threads on one machine (SQLite, local store) against Dask workers that, like workers on other
     machines, share nothing with the flow but the PostgreSQL catalog and an S3 store: each worker has
     its own SITELINE_HOME. Tiles, labels and renders must come out identical."""
-    import pipeline
     from prefect_dask import DaskTaskRunner
 
+    from flows import pipeline
     from siteline.catalog import open_catalog
     from siteline.ingest.stage import ingest_mission
     from siteline.stores import open_store
@@ -295,7 +291,7 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
 
 def test_progress_words_name_their_unit() -> None:
     """The UI's progress says what it counts: 'hashing 0.0 MB of 8.9 MB', not 'hashing 0 of 8,869,660'."""
-    from ui import counted
+    from flows.ui import counted
 
     assert counted("hashing", 0, 8_869_660) == "0.0 MB of 8.9 MB"
     assert counted("reading points", 5_000, 110_000) == "5,000 of 110,000 points"
@@ -308,9 +304,8 @@ def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, 
     import errno
     import logging
 
-    import pipeline
-
     import siteline.pipeline as tiles_pkg
+    from flows import pipeline
     from siteline.catalog import open_catalog
     from siteline.errors import TileError
     from siteline.ingest.stage import ingest_mission
@@ -361,8 +356,7 @@ def test_a_crashed_run_says_why_on_its_own_page(harness) -> None:
     from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterFlowRunId
     from prefect.states import Crashed, Running, Scheduled
 
-    sys.path.insert(0, str(FLOWS.parent / "deploy"))
-    import reporter
+    from deploy import reporter
 
     @flow(name="siteline-probe")
     def probe() -> None:  # never run: its run is driven by hand

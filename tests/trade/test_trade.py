@@ -28,11 +28,16 @@ def test_variants_are_parsed_and_bad_ones_named() -> None:
 def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     scores = {"precision": 0.9, "recall": 0.8, "f1": 0.85, "boundary_f": 0.7, "specks_median": 1.0,
               "scored_share": 0.9, "object_recall": {"jib#21": 0.95, "pole#60": 0.62}}  # fmt: skip
-    rows = [TradeRow("default", {}, 10.0, 1.0, 0.3, scores), TradeRow("fixed 1 px", {"splat": "fixed"}, error="every view rejected")]
+    rows = [
+        TradeRow("default", {}, 10.0, 1.0, 0.3, scores),
+        TradeRow("fill 0", {"fill_px": 0}, 8.0, math.nan, 0.3, scores),
+        TradeRow("fixed 1 px", {"splat": "fixed"}, error="every view rejected"),
+    ]
     md = trade_markdown(rows, "boxes", 40.0)
-    assert "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 |" in md
+    assert "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | 90.0% | 10 | 1.0 s |" in md
+    assert "| fill 0 | fill_px=0 |" in md and md.count("| reused |") == 1
     assert "| fixed 1 px | splat=fixed | no release: every view rejected |" in md
-    assert math.isnan(rows[1].seconds)
+    assert math.isnan(rows[2].seconds)
 
 
 def test_bench_trade_refuses_a_bad_grid_and_variant_in_one_line(tmp_path) -> None:
@@ -40,7 +45,7 @@ def test_bench_trade_refuses_a_bad_grid_and_variant_in_one_line(tmp_path) -> Non
         (["--grid", "huge"], "grid 'huge'"),
         (["--variant", "oops"], "variant 'oops'"),
         (["--variant", 'big={"radius_multipler": 4}'], "unknown pair knobs ['radius_multipler']"),
-        (["--variant", 'neg={"scale_factor": -1}'], "scale_factor must be a positive number"),
+        (["--variant", 'neg={"scale": -1}'], "variant 'neg'"),
     )
     for args, words in cases:
         proc = subprocess.run([str(SITELINE), "bench", "trade", "--out", str(tmp_path), *args], capture_output=True, text=True)

@@ -21,7 +21,7 @@ def trade(
     views: int = typer.Option(24, "--views", help="Views a pair."),
     grid: str = typer.Option(
         "full", "--grid",
-        help="full (radius x1.5 and x4, fixed 1 and 3 px points, no gap fill, scale x2, LOD x2) or quick (default, no gap fill).",
+        help="full (radius x1.5 and x4, fixed 1 and 3 px points, no gap fill, scale 1 and 2 (1/8 and 1/4 of an L2 frame on the synthetic photos), LOD x2) or quick (default, no gap fill).",
     ),  # fmt: skip
     variant: list[str] = typer.Option(
         [], "--variant", help='NAME=JSON pair knobs over the defaults, e.g. r3=\'{"radius_multiplier": 3}\' (replaces --grid).'
