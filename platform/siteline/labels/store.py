@@ -157,38 +157,63 @@ def _flags_in_blocks(
 ) -> np.ndarray:  # fmt: skip
     """``rule`` (:func:`change_flags` with its radius and tests) of a tile's points against the other
     scene's ``halo`` (its parts, :meth:`_Decoded.halo`), in slabs of at most :data:`BLOCK_POINTS`
-    (sorted by x), each against the halo's points within ``halo_m`` of the slab: a point's flag depends
+    (along x), each against the halo's points within ``halo_m`` of the slab: a point's flag depends
     only on those (its radius, the surface test's search radius and plan cell), so the flags are the
     tile's whole, and the rule's working memory follows the slab, not the tile (20 M points at 8000/m2)."""
     n = len(a_xyz)
     if n <= BLOCK_POINTS:
         return rule(a_xyz, a_cls, *_join(halo))
     out = np.empty(n, dtype=np.uint8)
-    for idx in _slabs(a_xyz[:, 0], BLOCK_POINTS):
-        slab = a_xyz[idx]
-        lo, hi = slab[:, :2].min(axis=0) - halo_m, slab[:, :2].max(axis=0) + halo_m
-        near = [
-            np.flatnonzero((b[:, 0] >= lo[0]) & (b[:, 0] <= hi[0]) & (b[:, 1] >= lo[1]) & (b[:, 1] <= hi[1]))
-            for b, _ in halo
-        ]
-        out[idx] = rule(slab, a_cls[idx], *_join(halo, near))
+    cuts = _slab_cuts(a_xyz[:, 0], BLOCK_POINTS)
+    edges = np.concatenate([[-np.inf], cuts, [np.inf]])
+    mine = _slab_of(a_xyz[:, 0], cuts)
+    theirs = [_slab_of(b[:, 0], cuts) for b, _ in halo]
+    for k in range(len(cuts) + 1):
+        idx = np.flatnonzero(mine == k)
+        if not len(idx):
+            continue
+        # the halo's points within halo_m of the slab's x range (all of the halo's y lies within
+        # halo_m of the tile): those of the slabs that range touches, then those within it exactly
+        lo, hi = edges[k] - halo_m, edges[k + 1] + halo_m
+        first, last = _slab_of(np.array([lo, hi]), cuts)
+        near = []
+        for (b, _), of in zip(halo, theirs, strict=True):
+            cand = np.flatnonzero((of >= first) & (of <= last))
+            x = b[cand, 0]
+            near.append(cand[(x >= lo) & (x <= hi)])
+        out[idx] = rule(a_xyz[idx], a_cls[idx], *_join(halo, near))
     return out
 
 
-def _slabs(x: np.ndarray, size: int) -> Iterator[np.ndarray]:
-    """The indices of the points in consecutive slabs along ``x`` of about ``size`` points (whole bins
-    of a histogram eight times finer; a bin denser than ``size`` is a slab of its own): every point in
-    exactly one, without sorting the tile (an argsort of 25 M points held 200 MB)."""
+def _slab_cuts(x: np.ndarray, size: int) -> np.ndarray:
+    """Where to cut ``x`` into consecutive slabs of about ``size`` points (whole bins of a histogram
+    eight times finer; a bin denser than ``size`` is a slab of its own), without sorting the tile (an
+    argsort of 25 M points held 200 MB): slab k holds cuts[k - 1] <= x < cuts[k]."""
     counts, edges = np.histogram(x, bins=8 * (len(x) // size + 1))
     cuts, held = [], 0
     for k, c in enumerate(counts):
         if held and held + c > size:
-            cuts.append(k)
+            cuts.append(float(edges[k]))
             held = 0
         held += int(c)
-    bounds = [-np.inf, *(float(edges[k]) for k in cuts), np.inf]
-    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
-        idx = np.flatnonzero((x >= lo) & (x < hi))
+    return np.array(cuts, np.float64)
+
+
+def _slab_of(x: np.ndarray, cuts: np.ndarray) -> np.ndarray:
+    """(N,) uint16: the slab of each ``x`` between ``cuts``, worked out a block at a time (one pass:
+    selecting each slab by comparing every point with its ends cost a pass per slab)."""
+    out = np.empty(len(x), np.uint16)
+    for lo in range(0, len(x), 1 << 20):
+        out[lo : lo + (1 << 20)] = np.searchsorted(cuts, x[lo : lo + (1 << 20)], side="right")
+    return out
+
+
+def _slabs(x: np.ndarray, size: int) -> Iterator[np.ndarray]:
+    """The indices of the points in each non-empty slab of ``x`` (:func:`_slab_cuts`): every point in
+    exactly one."""
+    of = _slab_of(x, _slab_cuts(x, size))
+    for k in range(int(of.max(initial=0)) + 1):
+        idx = np.flatnonzero(of == k)
         if len(idx):
             yield idx
 
