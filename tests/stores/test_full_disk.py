@@ -26,7 +26,7 @@ def small_fs(tmp_path):
     def mount(size: str) -> Path:
         r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)], capture_output=True)
         if r.returncode != 0:
-            # mounting needs root; tests/test_diskspace.py covers the same code without a mount
+            # mounting needs root; tests/stores/test_diskspace.py covers the same code without a mount
             pytest.skip(f"cannot mount a tmpfs here (needs root): {r.stderr.decode().strip()}")
         return mnt
 

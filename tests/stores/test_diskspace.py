@@ -1,6 +1,6 @@
 """A full disk told in one line, without mounting anything: which errors count as a full disk, what
 the line says, and the CLI's exit status and output when a command hits one (the tmpfs test in
-tests/test_full_disk.py fills a real disk where mounting is allowed)."""
+tests/stores/test_full_disk.py fills a real disk where mounting is allowed)."""
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ from siteline.camera.poses import Rigid, Sim3
 from siteline.errors import CameraError, GeometryError
 from siteline.pointpass.schema import dequantise, quantise
 
-REAL_PHOTO = Path(__file__).resolve().parent / "data" / "DJI_H20T.jpg"
+REAL_PHOTO = Path(__file__).resolve().parents[1] / "data" / "DJI_H20T.jpg"
 UTM18N = pyproj.CRS("EPSG:32618")
 
 
