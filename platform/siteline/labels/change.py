@@ -102,7 +102,7 @@ def plane_distances(
     ok = np.flatnonzero(count >= 3)
     if len(ok):
         w = valid[ok].astype(np.float64)
-        pts = np.asarray(b_xyz, np.float64)[np.where(valid[ok], i[ok], 0)]  # (m, k, 3)
+        pts = np.asarray(np.asarray(b_xyz)[np.where(valid[ok], i[ok], 0)], np.float64)  # (m, k, 3)
         n = w.sum(axis=1)
         mean = (pts * w[..., None]).sum(axis=1) / n[:, None]
         centred = (pts - mean[:, None, :]) * w[..., None]
@@ -130,6 +130,11 @@ def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -
     lo, hi = q_ij.min(axis=0), q_ij.max(axis=0)
     span = hi - lo + 1
     b = np.asarray(b_xyz)
+    # the other scene's points near the queries' extent first (a cell's margin: every point of their
+    # cells is among them), so the floor below is not taken of the whole neighbourhood per call
+    box_lo, box_hi = lo * cell - cell, (hi + 1) * cell + cell
+    near = (b[:, 0] >= box_lo[0]) & (b[:, 0] <= box_hi[0]) & (b[:, 1] >= box_lo[1]) & (b[:, 1] <= box_hi[1])
+    b = b[near]
     b_ij = np.floor(b[:, :2].astype(np.float64) / cell).astype(np.int64)
     # only the other scene's points in the queries' cells matter: a lookup over the queries' extent
     # picks them without sorting every point of the other scene
