@@ -227,13 +227,16 @@ def test_labels_in_slabs_equal_labels_of_whole_tiles(tmp_path, synth_site, monke
 
 
 def test_slabs_take_every_point_once_in_bounded_runs_along_x() -> None:
-    from siteline.labels.store import _slabs
+    from siteline.labels.store import _slab_cuts, _slabs
+
+    def slabs_of(x: np.ndarray, size: int) -> list[np.ndarray]:
+        return [idx for _, idx in _slabs(x, _slab_cuts(x, size))]
 
     rng = np.random.default_rng(2)
     x = np.concatenate([rng.uniform(0, 100, 50_000), np.full(3_000, 42.0)]).astype(np.float32)  # a wall
-    slabs = list(_slabs(x, 5_000))
+    slabs = slabs_of(x, 5_000)
     taken = np.concatenate(slabs)
     assert np.array_equal(np.sort(taken), np.arange(len(x)))
     assert len(slabs) >= 10 and max(len(s) for s in slabs) <= 5_000 + 3_000 + 700
     assert all(x[a].max() <= x[b].min() for a, b in zip(slabs[:-1], slabs[1:], strict=True))
-    assert [len(s) for s in _slabs(np.full(10, 3.0, np.float32), 4)] == [10]  # one value: one slab, none empty
+    assert [len(s) for s in slabs_of(np.full(10, 3.0, np.float32), 4)] == [10]  # one value: one slab, none empty

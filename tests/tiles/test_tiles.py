@@ -81,7 +81,7 @@ def test_round_trip_within_half_a_quantum(tmp_path, origin, crs, scale) -> None:
 
 
 def test_a_tile_read_in_float32_blocks_is_the_read_cast(tmp_path) -> None:
-    """read_tile_float32 (the labels' read: block by block, past the cache) gives read_tile's values
+    """read_tile_uncached (the labels' read: block by block, past the cache) gives read_tile's values
     cast to float32, georeferenced, with blocks smaller than a tile, and names an unknown attribute."""
     origin = (445_000.0, 5_030_000.0, 80.0)
     _cloud(tmp_path / "c.las", origin, n=30_000)
@@ -89,12 +89,12 @@ def test_a_tile_read_in_float32_blocks_is_the_read_cast(tmp_path) -> None:
     for tile in tiles.by_tile:
         whole = tiles.read_tile(tile, ("class", "gps_time"))
         cached = tiles._cached
-        xyz, attrs = tiles.read_tile_float32(tile, ("class", "gps_time"), block_points=5000)
+        xyz, attrs = tiles.read_tile_uncached(tile, ("class", "gps_time"), block_points=5000)
         assert tiles._cached == cached  # past the cache
         assert xyz.dtype == np.float32 and np.array_equal(xyz, whole.xyz_m.astype(np.float32))
         assert all(np.array_equal(attrs[a], whole.attributes[a]) for a in ("class", "gps_time"))
     with pytest.raises(TileError, match="unknown attributes"):
-        tiles.read_tile_float32(next(iter(tiles.by_tile)), ("colour",))
+        tiles.read_tile_uncached(next(iter(tiles.by_tile)), ("colour",))
 
 
 def test_levels_partition_points_and_are_uniform(tmp_path) -> None:

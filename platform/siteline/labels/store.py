@@ -46,7 +46,7 @@ def auto_radius(
     spacing = {}
     for name, tiles in (("t1", a), ("t2", b)):
         tile = max(tiles.by_tile, key=lambda t: tiles.prefix(t))
-        spacing[name] = median_spacing(tiles.read_tile(tile, ()).xyz_m, max_points)
+        spacing[name] = median_spacing(tiles.read_tile_uncached(tile, (), np.float64)[0], max_points)
     sparse = max(spacing.values())
     return multiplier * sparse, RadiusChoice(spacing, multiplier)
 
@@ -104,7 +104,7 @@ class _Decoded:
         hit = self._whole.get(ij)
         if hit is None:
             self._whole.clear()  # the tile labelled before goes first
-            xyz, attrs = self.tiles.read_tile_float32(self.keys[ij], ("class",))
+            xyz, attrs = self.tiles.read_tile_uncached(self.keys[ij], ("class",))
             self.decodes += 1
             hit = self._whole[ij] = (xyz, attrs["class"])
             if ij not in self._strips:
@@ -166,12 +166,8 @@ def _flags_in_blocks(
     out = np.empty(n, dtype=np.uint8)
     cuts = _slab_cuts(a_xyz[:, 0], BLOCK_POINTS)
     edges = np.concatenate([[-np.inf], cuts, [np.inf]])
-    mine = _slab_of(a_xyz[:, 0], cuts)
     theirs = [_slab_of(b[:, 0], cuts) for b, _ in halo]
-    for k in range(len(cuts) + 1):
-        idx = np.flatnonzero(mine == k)
-        if not len(idx):
-            continue
+    for k, idx in _slabs(a_xyz[:, 0], cuts):
         # the halo's points within halo_m of the slab's x range (all of the halo's y lies within
         # halo_m of the tile): those of the slabs that range touches, then those within it exactly
         lo, hi = edges[k] - halo_m, edges[k + 1] + halo_m
@@ -208,14 +204,14 @@ def _slab_of(x: np.ndarray, cuts: np.ndarray) -> np.ndarray:
     return out
 
 
-def _slabs(x: np.ndarray, size: int) -> Iterator[np.ndarray]:
-    """The indices of the points in each non-empty slab of ``x`` (:func:`_slab_cuts`): every point in
-    exactly one."""
-    of = _slab_of(x, _slab_cuts(x, size))
-    for k in range(int(of.max(initial=0)) + 1):
+def _slabs(x: np.ndarray, cuts: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
+    """Each non-empty slab of ``x`` between ``cuts`` (:func:`_slab_cuts`): its number and the indices of
+    its points, every point in exactly one."""
+    of = _slab_of(x, cuts)
+    for k in range(len(cuts) + 1):
         idx = np.flatnonzero(of == k)
         if len(idx):
-            yield idx
+            yield k, idx
 
 
 def _write_flags(group: zarr.Group, tile: str, flags: np.ndarray, spec: TileSpec) -> None:

@@ -410,13 +410,14 @@ class SceneTiles:
         return {tile: (sel, take[sel])} if len(sel) else {}
 
     def tile_blocks(
-        self, tile: str, attributes: Sequence[str], block_points: int = 1 << 20
+        self, tile: str, attributes: Sequence[str], dtype: type = np.float32, block_points: int = 1 << 20
     ) -> Iterator[tuple[int, np.ndarray, dict[str, np.ndarray]]]:
         """``tile``'s points block by block (about ``block_points``, whole shards), past the chunk cache:
-        (the block's first index, (n, 3) float32 site-local metres, its ``attributes``), the values of
-        :meth:`read_tile` cast to float32. For passes over whole tiles that read each once (the change
-        labels): a read through the cache holds the raw counts, the float64 metres and the cached
-        chunks at once (1.4 GB more on a 20 M point tile)."""
+        (the block's first index, (n, 3) site-local metres in ``dtype``, its ``attributes``), the values
+        of :meth:`read_tile` (cast when ``dtype`` is float32). For passes over whole tiles that read each
+        once (the change labels, their spacing): a read through the cache holds the raw counts, the
+        float64 metres and the cached chunks at once (1.4 GB more on a 20 M point tile), and leaves 256
+        MB of chunks cached that no later read of the pass wants."""
         self._check_attributes(attributes)
         n = self.prefix(tile)
         i, j = parse_tile_key(tile)
@@ -427,19 +428,19 @@ class SceneTiles:
         step = max(unit, block_points // unit * unit)
         for lo in range(0, n, step):
             hi = min(n, lo + step)
-            xyz = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m).astype(np.float32)
+            xyz: np.ndarray = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m).astype(dtype, copy=False)
             yield lo, xyz, {a: np.asarray(arr[lo:hi]) for a, arr in arrays.items()}
 
-    def read_tile_float32(
-        self, tile: str, attributes: Sequence[str], block_points: int = 1 << 20
+    def read_tile_uncached(
+        self, tile: str, attributes: Sequence[str], dtype: type = np.float32, block_points: int = 1 << 20
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """Every point of ``tile`` as (N, 3) float32 site-local metres and its ``attributes``, filled
-        from :meth:`tile_blocks` (the result and one block held)."""
+        """Every point of ``tile`` as (N, 3) site-local metres in ``dtype`` and its ``attributes``,
+        filled from :meth:`tile_blocks` (the result and one block held, nothing cached)."""
         self._check_attributes(attributes)
         n = self.prefix(tile)
-        xyz = np.empty((n, 3), np.float32)
+        xyz: np.ndarray = np.empty((n, 3), dtype)
         out = {a: np.empty((n, *self._handle(tile, a).shape[1:]), self._handle(tile, a).dtype) for a in attributes}
-        for lo, block, attrs in self.tile_blocks(tile, attributes, block_points):
+        for lo, block, attrs in self.tile_blocks(tile, attributes, dtype, block_points):
             xyz[lo : lo + len(block)] = block
             for a, values in attrs.items():
                 out[a][lo : lo + len(block)] = values
