@@ -65,7 +65,8 @@ def test_run_starts_cut_sorted_codes() -> None:
 
 
 def test_cube_rows_count_points_per_level_and_cube() -> None:
-    from siteline.pointpass.kernels.nodes import LEVEL_SHIFT, Z_OFFSET, cube_rows
+    from siteline.pointpass.kernels.nodes import cube_rows
+    from siteline.pointpass.schema import LEVEL_SHIFT, Z_OFFSET
 
     rng = np.random.default_rng(3)
     counts = np.c_[rng.integers(-5, 50_000, (20_000, 2)), rng.integers(-3_000, 9_000, 20_000)].astype(
@@ -121,7 +122,8 @@ def test_place_points_fill_a_group_alike_in_any_batches(shuffle: bool) -> None:
 def test_node_order_sorts_each_group_by_its_reversed_morton_code_stably() -> None:
     """Groups small (insertion) and large (counting), with negative counts and duplicates: each
     sorted by the key, ties in input order, never a point across groups."""
-    from siteline.pointpass.kernels.nodes import order_in_groups, order_key
+    from siteline.pointpass.kernels import order_key
+    from siteline.pointpass.kernels.nodes import order_in_groups
 
     rng = np.random.default_rng(5)
     counts = rng.integers(-(2**20), 2**20, (20_000, 3)).astype(np.int32)

@@ -6,6 +6,7 @@ import numpy as np
 
 from siteline.pointpass.kernels import levels as levels_kernels
 from siteline.pointpass.kernels import radix
+from siteline.pointpass.schema import voxel_key
 from siteline.records.tiling import TileSpec
 
 
@@ -75,11 +76,7 @@ def _assign_by_sorting(
             return levels
         cell = cells[level]
         p = pts[remaining]
-        key = (
-            (np.floor_divide(p[:, 0], cell) + (1 << 20))
-            | ((np.floor_divide(p[:, 1], cell) + (1 << 20)) << 21)
-            | (np.floor_divide(p[:, 2], cell) << 42)
-        )
+        key = voxel_key(np.floor_divide(p[:, 0], cell), np.floor_divide(p[:, 1], cell), np.floor_divide(p[:, 2], cell))
         _, first = np.unique(key, return_index=True)  # first occurrence in the shuffled order
         levels[remaining[first]] = level
         keep = np.ones(remaining.size, dtype=bool)

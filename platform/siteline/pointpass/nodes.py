@@ -165,7 +165,7 @@ class NodePlan:
 
     def node_order(self, counts: np.ndarray, lo: int) -> np.ndarray:
         """The order that puts placed rows [lo, lo + len(counts)) (whole groups; counts (M, 3) int32) in
-        node order: each group sorted by :func:`siteline.pointpass.kernels.nodes.order_key` of its points,
+        node order: each group sorted by :func:`siteline.pointpass.schema.order_key` of its points,
         ties in input order, for "reversed-morton"; as placed otherwise."""
         if self.order != "reversed-morton":
             return np.arange(len(counts))

@@ -8,11 +8,15 @@ them; the tile store keeps one array per field, siteline.tiles.codecs). Keys are
 - a **cube count** key (tiles' node plan): ``level << 48 | (cube z + 2**20) << 2d | cube y << d | cube x``
   at depth d;
 - a **group** key: ``(band << cube bits | cube) << 4 | level``;
+- a **voxel** key (:func:`voxel_key`, the level-of-detail fallback): ``(x + 2**20) | (y + 2**20) << 21 |
+  z << 42`` of a point's voxel;
 - a **node-order** key: the Morton code of the low :data:`ORDER_BITS` bits of a point's counts, read
   from the lowest bit up (x, y, z).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +49,13 @@ LEVEL_BITS = 4  # a level's bits at the bottom of a group key
 # node-order keys
 ORDER_BITS = 4  # the low bits of each count a node-order key holds
 
+# voxel keys: 21 bits for x and y each, offset so they pack unsigned
+VOXEL_OFFSET = 1 << 20
+VOXEL_BITS = 21
+
+# the largest count an int32 tile count holds (a quantised coordinate at or past it overflows)
+COUNT_LIMIT = 2**31 - 1
+
 
 def cell_ids(ij: np.ndarray, block: np.ndarray) -> np.ndarray:
     """(N,) int64 ids of (site-grid tile (N, 2), block in the tile (N,)), ordered by tile then block."""
@@ -73,6 +84,13 @@ def unpack_cube(cube: np.ndarray, d: int | np.ndarray) -> tuple[np.ndarray, np.n
     return cube & mask, (cube >> d) & mask, cube >> (2 * d)
 
 
+def cube_count_key(level: Any, x: Any, y: Any, z: Any, d: Any) -> Any:
+    """The cube-count key of a finest cube (x, y, z) at depth ``d`` (z may be negative) and a level:
+    ``level << 48 | (z + 2**20) << 2d | y << d | x`` (the cube packed as :func:`pack_cube` does; written
+    out, as the kernels compile this function alone)."""
+    return level << LEVEL_SHIFT | (z + Z_OFFSET) << (2 * d) | y << d | x
+
+
 def split_cube_count_key(key: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
     """(level (M,), finest cube (M, 3) x, y, z) of cube-count keys at depth ``top``."""
     x, y, z = unpack_cube(key & ((1 << LEVEL_SHIFT) - 1), top)
@@ -95,10 +113,26 @@ def group_node(key: np.ndarray) -> np.ndarray:
     return key >> LEVEL_BITS
 
 
+def voxel_key(x: Any, y: Any, z: Any) -> Any:
+    """The voxel key of integer voxel coordinates (x and y within +-2**20, z from 0):
+    ``(x + 2**20) | (y + 2**20) << 21 | z << 42``."""
+    return (x + VOXEL_OFFSET) | ((y + VOXEL_OFFSET) << VOXEL_BITS) | (z << (2 * VOXEL_BITS))
+
+
+def order_key(x: Any, y: Any, z: Any) -> Any:
+    """The node-order key of a point (int64 counts x, y, z): the Morton code of their
+    :data:`ORDER_BITS` low bits read from the lowest bit up, bit 0 of x most significant, then bit 0 of
+    y, bit 0 of z, bit 1 of x, ... (12 bits)."""
+    k = np.int64(0)
+    for b in range(ORDER_BITS):
+        k = (k << 3) | ((x >> b) & 1) << 2 | ((y >> b) & 1) << 1 | ((z >> b) & 1)
+    return k
+
+
 def quantise(local: np.ndarray, origin_local: np.ndarray, quantum_m: float) -> np.ndarray:
     """int32 counts of ``quantum_m`` of site-local float64 points relative to ``origin_local``."""
     q = np.rint((np.asarray(local, dtype=np.float64) - origin_local) / quantum_m)
-    if np.abs(q).max(initial=0) >= 2**31 - 1:
+    if np.abs(q).max(initial=0) >= COUNT_LIMIT:
         raise TileError("a coordinate overflows the int32 tile counts; is the tile size right?")
     return q.astype(np.int32)
 

@@ -14,6 +14,8 @@ from typing import Any, TypeVar, cast
 
 import numba
 
+from siteline.pointpass import schema
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -21,6 +23,13 @@ def kernel(fn: F) -> F:
     """``fn`` (nopython-compatible) as a numba kernel: compiled on its first call, cached on disk,
     releasing the GIL, numpy's error model (a division by zero gives inf, not an exception)."""
     return cast(F, numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
+
+
+# the schema's key packing compiled for the kernels: each key's layout is written once, in schema.py
+cube_count_key = kernel(schema.cube_count_key)
+group_key = kernel(schema.group_key)
+order_key = kernel(schema.order_key)
+pack_cube = kernel(schema.pack_cube)
 
 
 def load() -> None:

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from siteline.pointpass.kernels import kernel
+from siteline.pointpass.schema import COUNT_LIMIT
 
 
 @kernel
@@ -83,7 +84,7 @@ def tile_codes(
         qy = np.rint((local[p, 1] - j * tile_m) * inv_q)
         qz = np.rint(local[p, 2] * inv_q)
         far = max(far, abs(qx), abs(qy), abs(qz))
-        if far >= 2147483647.0:
+        if far >= COUNT_LIMIT:
             return lo_i, lo_j, span_j, far
         cx, cy, cz = np.int32(qx), np.int32(qy), np.int32(qz)
         counts[p, 0], counts[p, 1], counts[p, 2] = cx, cy, cz

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.pointpass.kernels import kernel
+from siteline.pointpass.kernels import cube_count_key, group_key, kernel, order_key, pack_cube
 from siteline.pointpass.kernels.radix import radix_order, run_starts
-from siteline.pointpass.schema import LEVEL_BITS, LEVEL_SHIFT, ORDER_BITS, Z_OFFSET
+from siteline.pointpass.schema import ORDER_BITS, Z_OFFSET
 
 
 @kernel
@@ -42,7 +42,7 @@ def cube_rows(counts: np.ndarray, levels: np.ndarray, edge: int, depth: int) -> 
     for r in range(m):
         p = order[first[r]]
         cx, cy, cz = fine_cube(counts, p, edge, depth)
-        rows[r, 0] = np.int64(levels[p]) << LEVEL_SHIFT | (cz + Z_OFFSET) << (2 * depth) | cy << depth | cx
+        rows[r, 0] = cube_count_key(np.int64(levels[p]), cx, cy, cz, depth)
         rows[r, 1] = (first[r + 1] if r + 1 < m else n) - first[r]
     return rows
 
@@ -77,8 +77,7 @@ def group_points(
         d = depth_of_band[band]
         cx, cy, cz = fine_cube(counts, p, edge, depth)
         s = depth - d
-        cube = ((cz >> s) - z0) << (2 * d) | (cy >> s) << d | (cx >> s)
-        k = ((band << cube_bits) | cube) << LEVEL_BITS | lv
+        k = group_key(band, pack_cube(cx >> s, cy >> s, (cz >> s) - z0, d), lv, cube_bits)
         g = np.searchsorted(key, k)
         if g >= groups or key[g] != k:
             return np.full(n, -1, np.int64)
@@ -137,21 +136,10 @@ _SMALL = 64  # groups up to this many points are sorted by insertion, not by cou
 
 
 @kernel
-def order_key(x: np.int64, y: np.int64, z: np.int64) -> np.int64:
-    """The node-order key of a point (counts x, y, z): the Morton code of their 4 low bits read from
-    the lowest bit up, bit 0 of x most significant, then bit 0 of y, bit 0 of z, bit 1 of x, ...
-    (12 bits)."""
-    k = np.int64(0)
-    for b in range(ORDER_BITS):
-        k = (k << 3) | ((x >> b) & 1) << 2 | ((y >> b) & 1) << 1 | ((z >> b) & 1)
-    return k
-
-
-@kernel
 def order_in_groups(counts: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     """(N,) int64 order that sorts each group of points (rows ``bounds[g]:bounds[g + 1]`` of counts
-    (N, 3)) by :func:`order_key`, ties in their order (a stable counting sort): ``rows[order]`` is
-    in node order."""
+    (N, 3)) by their node-order key (:func:`siteline.pointpass.schema.order_key`), ties in their order (a
+    stable counting sort): ``rows[order]`` is in node order."""
     n = counts.shape[0]
     key = np.empty(n, np.int64)
     for p in range(n):
