@@ -39,7 +39,7 @@ def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.05, half_m:
     """n points over a (2 half_m)^2 site, written in chunks (memory stays bounded), in flight-line
     order (sorted by GPS time along y strips, as a scanner writes them); z_noise_m spreads them
     vertically about a gentle surface."""
-    from siteline.pointpass.lasio import fill_record, las_header
+    from siteline.pointpass import fill_record, las_header
 
     rng = np.random.default_rng(seed)
     header = las_header("EPSG:32618", ORIGIN - [half_m + 10, half_m + 10, 10], 0.001)
@@ -73,6 +73,12 @@ def make_las(path: Path, n: int, seed: int = 0, z_noise_m: float = 0.05, half_m:
 def _vm_hwm_mib(pid: int | str) -> float:
     with open(f"/proc/{pid}/status") as fh:
         return next(int(line.split()[1]) for line in fh if line.startswith("VmHWM")) / 1024
+
+
+def _children() -> list[int]:
+    """This process's child processes (its pool's workers), read from /proc: the same in any tree."""
+    tasks = Path(f"/proc/{os.getpid()}/task")
+    return [int(pid) for t in tasks.iterdir() for pid in (t / "children").read_text().split()]
 
 
 def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) -> None:
@@ -128,11 +134,9 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         cat.dispose()
         shutil.rmtree(home, ignore_errors=True)  # the stored copy, tiles and catalog of the run
     sec = time.perf_counter() - t
-    from siteline.pointpass.workers import _POOLS, shutdown_pools
-
-    # each process's own peak (VmHWM): ru_maxrss would count the parent's size at the fork
-    kids = max((_vm_hwm_mib(pid) for pool in _POOLS.values() for pid in pool._processes), default=0.0)
-    shutdown_pools(wait=True)
+    # each process's own peak (VmHWM): ru_maxrss would count the parent's size at the fork (the pool
+    # shuts down as the process exits)
+    kids = max((_vm_hwm_mib(pid) for pid in _children()), default=0.0)
     peak = _vm_hwm_mib("self")
     print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))
 

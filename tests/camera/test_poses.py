@@ -17,7 +17,7 @@ from siteline.camera.photos import read_photo_meta
 from siteline.camera.pinhole import Camera
 from siteline.camera.poses import Rigid, Sim3
 from siteline.errors import CameraError, GeometryError
-from siteline.pointpass.schema import dequantise, quantise
+from siteline.pointpass import dequantise, quantise
 
 REAL_PHOTO = Path(__file__).resolve().parents[1] / "data" / "DJI_H20T.jpg"
 UTM18N = pyproj.CRS("EPSG:32618")

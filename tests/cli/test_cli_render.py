@@ -9,7 +9,7 @@ from PIL import Image
 from sitehelpers import run_cli
 
 from siteline.camera.pinhole import Camera
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import write_las
 from siteline.site.fence import fence_geojson
 
 ORIGIN = (445000.0, 5030000.0, 80.0)

@@ -10,8 +10,7 @@ import pytest
 from siteline.camera.pinhole import Camera
 from siteline.errors import PointCloudError, RegistrationError, ViewsError
 from siteline.labels.change import CHANGED, IGNORED, change_flags
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import TilingResources, write_las
 from siteline.register.georegister import check_spread
 from siteline.register.icp import point_to_plane_icp
 from siteline.render.georef import render_georeferenced

@@ -27,7 +27,7 @@ from siteline.errors import (
 )
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import ingest_mission
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import write_las
 from siteline.synth import LAS_RELPATH
 
 
@@ -246,7 +246,7 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_setti
 
     from realdata import AUTZEN
 
-    from siteline.pointpass.lasio import open_las
+    from siteline.pointpass import open_las
 
     path = _count_patched(AUTZEN, tmp_path / "m" / "cloud.laz", count)
     t0 = time.perf_counter()
@@ -262,7 +262,7 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_setti
 
 
 def test_las_whose_header_counts_more_points_than_it_holds_is_refused_at_open(tmp_path) -> None:
-    from siteline.pointpass.lasio import open_las
+    from siteline.pointpass import open_las
 
     path = tmp_path / "cloud.las"
     _flat_las(path, n=1_000)
@@ -309,7 +309,7 @@ def test_a_laz_whose_count_is_short_by_less_than_its_last_chunk_is_refused(cat, 
     written."""
     from realdata import AUTZEN
 
-    from siteline.pointpass.lasio import open_las
+    from siteline.pointpass import open_las
 
     path = _count_patched(AUTZEN, tmp_path / "m" / "cloud.laz", 110_000 - short)
     with pytest.raises(PointCloudError, match="cloud.laz.*last LAZ chunk holds more than"):
@@ -342,7 +342,7 @@ def test_a_forged_laz_chunk_size_is_refused_before_anything_is_allocated(tmp_pat
 
     from realdata import AUTZEN
 
-    from siteline.pointpass.lasio import open_las
+    from siteline.pointpass import open_las
 
     for count in (None, 2_000_000_000):
         path = _chunk_size_patched(AUTZEN, tmp_path / f"c{count}" / "cloud.laz", 2**32 - 2, count)

@@ -13,7 +13,7 @@ from sitehelpers import run_cli
 from siteline.errors import MissionError
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import ingest_mission
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import write_las
 
 # LAS 1.x header: file creation day of year at byte 90, year at byte 92 (both uint16)
 CREATION_OFFSET = 90

@@ -15,7 +15,7 @@ from sitehelpers import copy_mission
 from siteline.catalog.models import Mission
 from siteline.errors import MissionError, PointCloudError
 from siteline.ingest.stage import ingest_mission
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import write_las
 
 LAS_NAME = "cloud_merged.las"
 

@@ -23,8 +23,7 @@ from siteline.catalog.sites import get_site
 from siteline.errors import RegistrationError
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import ingest_mission
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import TilingResources, write_las
 from siteline.synth import LAS_RELPATH, SynthConfig, write_site
 from siteline.tiles.stage import tile_scene
 

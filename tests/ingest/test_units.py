@@ -172,7 +172,7 @@ def test_a_header_crs_its_coordinates_disprove_is_refused_and_overridden_by_crs(
     from realdata import AUTZEN
 
     from siteline.errors import CRSError
-    from siteline.pointpass.sitestream import source_crs
+    from siteline.pointpass import source_crs
 
     src = laspy.read(AUTZEN)
     las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))

@@ -18,8 +18,7 @@ from labelsets.edits import centre_box, export, shuffled, versions
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
 from siteline.labelsets.stage import ImportOptions, import_labels
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import read_labels_vlr
+from siteline.pointpass import TilingResources, read_labels_vlr
 from siteline.stores import layout
 
 GROUND, BUILDING, MATERIAL, WORKS = 1, 2, 4, 6
@@ -305,7 +304,7 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
     from siteline.catalog.sites import add_site
     from siteline.ingest.options import IngestOptions
     from siteline.ingest.stage import ingest_mission
-    from siteline.pointpass.lasio import write_las
+    from siteline.pointpass import write_las
     from siteline.site.spec import make_site_spec
     from siteline.tiles.stage import tile_scene
 

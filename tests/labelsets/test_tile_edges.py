@@ -10,8 +10,7 @@ import numpy as np
 
 from siteline.labelsets.execute import SPILL_DTYPE, _match_tiles, _spill
 from siteline.labelsets.plan import ImportPlan
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import TilingResources, write_las
 from siteline.progress import no_progress
 from siteline.records import LabelSetRef, TileSource
 from siteline.site.spec import make_site_spec

@@ -11,9 +11,7 @@ import textwrap
 import numpy as np
 import pyproj
 
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
-from siteline.pointpass.partition import Slice
+from siteline.pointpass import Slice, TilingResources, write_las
 from siteline.records.tiling import TileSpec
 from siteline.site.spec import make_site_spec
 from siteline.tiles.batches import batches
@@ -72,7 +70,7 @@ _WRITE = textwrap.dedent(
     """
     import json, sys
     from pathlib import Path
-    from siteline.pointpass.partition import Partition
+    from siteline.pointpass import Partition
     from siteline.records.tiling import TileSpec
     from siteline.tiles.batches import write_tile
     from siteline.tiles.layout import tile_key
@@ -96,7 +94,7 @@ def _peak_kib(tmp_path, n: int, budget: int) -> tuple[int, int]:
     """RSS before and peak RSS during the tile writing of a process that writes the tiles of n
     points over the same area (partitioned in another process, so only the tile writing counts),
     having written them once before (kernels and libraries loaded)."""
-    from siteline.pointpass.partition import PassSource
+    from siteline.pointpass import PassSource
     from siteline.tiles.writer import _partition
 
     las, folder = tmp_path / f"s{n}.las", tmp_path / f"p{n}-{budget}"
@@ -133,7 +131,7 @@ def test_gather_reads_slices_in_order_and_refuses_a_short_run_file(tmp_path) -> 
     import pytest
 
     from siteline.errors import TileError
-    from siteline.pointpass.schema import RECORD
+    from siteline.pointpass import RECORD
     from siteline.tiles.batches import _gather
 
     runs = []

@@ -9,8 +9,7 @@ import numpy as np
 import pyproj
 import pytest
 
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import TilingResources, write_las
 from siteline.records.tiling import TileSpec
 from siteline.site.spec import make_site_spec
 from siteline.stores import open_store

@@ -16,8 +16,7 @@ import pytest
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import TilingResources, write_las
 from siteline.records.tiling import TileSpec
 from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import render_points

@@ -13,8 +13,7 @@ import pytest
 
 from siteline.camera.pinhole import Camera
 from siteline.pairs.sources import TilePointSource
-from siteline.pointpass import TilingResources
-from siteline.pointpass.lasio import write_las
+from siteline.pointpass import TilingResources, write_las
 from siteline.site.spec import make_site_spec
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.writer import TileInput, write_tiles

@@ -71,7 +71,7 @@ def render(
     as_json: bool = JsonOption,
 ) -> None:
     """Render a point cloud through a camera into RGB, hit mask and depth."""
-    from siteline.pointpass.sitestream import read_site_local
+    from siteline.pointpass import read_site_local
     from siteline.render.outputs import write_render
     from siteline.render.settings import RenderSettings
     from siteline.render.zbuffer import render_points
@@ -124,7 +124,7 @@ def views_generate(
     as_json: bool = JsonOption,
 ) -> None:
     """Generate synthetic views: 32 candidates per real camera, rejection, stratified sample of N."""
-    from siteline.pointpass.sitestream import read_site_local
+    from siteline.pointpass import read_site_local
     from siteline.views.generate import generate_views
     from siteline.views.ground import fit_ground_plane
     from siteline.views.params import ViewParams

@@ -19,7 +19,7 @@ from siteline.ingest.mission import capture_time, choose_las, colmap_dir, missio
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan
 from siteline.ingest.pointcloud import scan_las
-from siteline.pointpass.sitestream import correction_rigid
+from siteline.pointpass import correction_rigid
 from siteline.progress import Progress, no_progress, step
 from siteline.records.mission import CheckedMission, MissionManifest
 from siteline.records.scan import LasScan

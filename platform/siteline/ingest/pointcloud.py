@@ -11,10 +11,19 @@ import numpy as np
 import pyproj
 
 from siteline.errors import PointCloudError
-from siteline.pointpass import PARALLEL_MIN_POINTS, PassSource, pass_file
-from siteline.pointpass.lasio import LasHeaderFacts, detect_eight_bit, header_facts, open_las
-from siteline.pointpass.sitestream import SiteChunk, source_crs, source_transformer
-from siteline.pointpass.workers import start_pool
+from siteline.pointpass import (
+    PARALLEL_MIN_POINTS,
+    LasHeaderFacts,
+    PassSource,
+    SiteChunk,
+    detect_eight_bit,
+    header_facts,
+    open_las,
+    pass_file,
+    source_crs,
+    source_transformer,
+    start_pool,
+)
 from siteline.progress import no_step
 from siteline.records.scan import (
     COLOUR_NAMES,

@@ -30,9 +30,15 @@ from siteline.labelsets.mapping import TaxonomyMap, coding_lut
 from siteline.labelsets.match import match_points, point_keys
 from siteline.labelsets.plan import ImportPlan
 from siteline.labelsets.store import open_labelled, write_tile_classes
-from siteline.pointpass import quantise
-from siteline.pointpass.lasio import open_las, read_labels_vlr
-from siteline.pointpass.sitestream import SiteReading, file_crs, site_chunks, source_transformer
+from siteline.pointpass import (
+    SiteReading,
+    file_crs,
+    open_las,
+    quantise,
+    read_labels_vlr,
+    site_chunks,
+    source_transformer,
+)
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.site.spec import SiteSpec

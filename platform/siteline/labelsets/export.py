@@ -10,7 +10,7 @@ from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.labelsets.store import open_labelled
-from siteline.pointpass.lasio import write_changed_classes
+from siteline.pointpass import write_changed_classes
 from siteline.tiles.export import export_las
 
 

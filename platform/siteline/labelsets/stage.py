@@ -16,7 +16,7 @@ from siteline.errors import LabelSetError
 from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED, execute_label_import
 from siteline.labelsets.mapping import TaxonomyMap
 from siteline.labelsets.plan import ImportPlan, plan_label_import
-from siteline.pointpass.lasio import open_las, read_labels_vlr
+from siteline.pointpass import open_las, read_labels_vlr
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import LabelSetImport
 from siteline.records.runs import StageRun

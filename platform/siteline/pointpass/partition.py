@@ -27,7 +27,7 @@ import numpy as np
 
 from siteline.errors import StoreError, TileError
 from siteline.pointpass.kernels import cut, radix, rows
-from siteline.pointpass.schema import BLOCK_BITS, COUNTS, RECORD, block_of, cell_ids, tile_of
+from siteline.pointpass.schema import BLOCK_BITS, COUNT_LIMIT, COUNTS, RECORD, block_of, cell_ids, tile_of
 from siteline.pointpass.sitestream import Correction, SiteChunk, SiteReading, site_chunks, source_transformer
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
@@ -139,7 +139,7 @@ def chunk_records(sc: SiteChunk, spec: TileSpec) -> tuple[np.ndarray, np.ndarray
     lo_i, lo_j, span_j, far = cut.tile_codes(
         local, spec.tile_size_m, spec.quantum_m, block_edge(spec), side, counts, code
     )
-    if far >= 2**31 - 1:
+    if far >= COUNT_LIMIT:
         raise TileError(
             f"a point lies {far * spec.quantum_m:,.0f} m from its tile's origin (z from the site origin): "
             f"more than int32 counts of the {spec.quantum_m} m quantum reach; is the quantum right?"

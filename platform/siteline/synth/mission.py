@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from siteline.codes import SYNTHETIC_SOFTWARE
 from siteline.errors import SynthError
-from siteline.pointpass.lasio import LasWriter, las_header
+from siteline.pointpass import LasWriter, las_header
 from siteline.schema import JsonObject
 from siteline.site.crs import parse_crs, parse_origin
 from siteline.site.fence import fence_geojson

@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 
 from siteline.errors import TileError
-from siteline.pointpass.resources import TilingResources
+from siteline.pointpass import TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.site.crs import parse_source_crs

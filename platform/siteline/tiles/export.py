@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.pointpass.lasio import LasWriter, labels_vlr, las_header
+from siteline.pointpass import LasWriter, labels_vlr, las_header
 from siteline.schema import JsonObject
 from siteline.site.spec import SiteSpec
 from siteline.stores import atomic_file

@@ -10,7 +10,7 @@ from siteline.catalog.missions import las_location
 from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.errors import TileError
-from siteline.pointpass.sitestream import Correction
+from siteline.pointpass import Correction
 from siteline.records.mission import LasLocation
 from siteline.records.scan import EIGHT_BIT
 from siteline.records.tiling import SceneTiling

@@ -8,8 +8,7 @@ from dataclasses import dataclass
 from siteline.catalog import Catalog
 from siteline.catalog.scenes import record_tiling
 from siteline.config import Settings
-from siteline.pointpass import PartitionCache
-from siteline.pointpass.resources import TilingResources
+from siteline.pointpass import PartitionCache, TilingResources
 from siteline.progress import Progress, no_progress
 from siteline.records.runs import StageRun
 from siteline.records.tiling import SceneTiling, TileSpec

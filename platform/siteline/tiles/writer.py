@@ -30,10 +30,20 @@ from typing import Any
 import pyproj
 
 from siteline.errors import TileError
-from siteline.pointpass import PARALLEL_MIN_POINTS, Partition, PassSource, Slice, TilingResources, pass_file
-from siteline.pointpass.lasio import detect_eight_bit, open_las
-from siteline.pointpass.sitestream import Correction, source_transformer
-from siteline.pointpass.workers import pool_map, process_pool
+from siteline.pointpass import (
+    PARALLEL_MIN_POINTS,
+    Correction,
+    Partition,
+    PassSource,
+    Slice,
+    TilingResources,
+    detect_eight_bit,
+    open_las,
+    pass_file,
+    pool_map,
+    process_pool,
+    source_transformer,
+)
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import NodeTable, TileSpec
 from siteline.site.crs import ZUnit, crs_text, z_unit_of
