@@ -170,7 +170,7 @@ def release_dashboards(settings: Settings, site: str, info: ReleaseInfo) -> None
         description=f"release {info.name} {info.version} ({info.status}): {info.reason}",
     )
     create_table_artifact(
-        [{"split": k, **v} for k, v in (doc.get("stats", {}).get("class_balance") or {}).items()],
+        [{"split": k, **v} for k, v in (doc.stats.get("class_balance") or {}).items()],
         key=slug("balance", site, info.name),
         description=f"class balance of {info.name} {info.version}",
     )

@@ -11,13 +11,11 @@ import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 from siteline.catalog import Catalog
 from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion, plan_site_deletion
 from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.pairs import pair_ids_of_scene, scene_ids_of_pairs, unprocessed_pairs
-from siteline.catalog.scenes import needs_tiling
 from siteline.catalog.sites import get_site, imported_label_sets
 from siteline.catalog.sites import redefine_site as redefine_catalog_site
 from siteline.config import Settings
@@ -33,7 +31,7 @@ from siteline.pointpass import TilingResources
 from siteline.previews.cloud import PairCloud
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import ColourPlan, PairOutput
-from siteline.records.release import ReleaseInfo, ReleaseOptions
+from siteline.records.release import Manifest, ReleaseInfo, ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
 from siteline.release.plan import (
@@ -110,16 +108,13 @@ def tile_scenes(
     run_id: str | None = None,
 ) -> list[TileOutcome]:
     """Tile every scene of ``scene_ids`` that is not tiled yet, or was tiled under an earlier version
-    of its site's taxonomy or fence, with ``resources`` (workers, or a Dask cluster's executor)."""
-    done = []
-    for sid in scene_ids:
-        with catalog.transaction() as s:
-            due = needs_tiling(s, sid)
-        if due:
-            done.append(
-                tile_scene(catalog, settings, sid, resources=resources, progress=progress, run_id=run_id)
-            )
-    return done
+    of its site's taxonomy or fence, with ``resources`` (workers, or a Dask cluster's executor): what
+    each tiling did (the tile stage's plan decides which scenes need it; those left alone are not
+    listed)."""
+    outcomes = (
+        tile_scene(catalog, settings, sid, resources=resources, progress=progress, run_id=run_id) for sid in scene_ids
+    )
+    return [o for o in outcomes if o.tiling is not None]
 
 
 def redefine_site(
@@ -270,13 +265,13 @@ def release(
     return build_release(catalog, settings, site, name, params, built, run_id, progress)
 
 
-def pair_cloud(catalog: Catalog, settings: Settings, doc: Mapping[str, Any], pair_id: int) -> PairCloud:
+def pair_cloud(catalog: Catalog, settings: Settings, doc: Manifest, pair_id: int) -> PairCloud:
     """Pair ``pair_id`` of the release whose manifest is ``doc``, opened for the 3D viewer: its scenes
     as the release saw them (the label sets and change labels of its lineage), its colour, the site's
     taxonomy and the release's items of the pair. :class:`ReleaseError` when the release has no such
     pair, or the scenes were tiled again or their labels deleted since (the points no longer match)."""
-    lineage = doc["lineage"]
-    what = f"release {doc['name']} {doc['version']}"
+    lineage = doc.lineage
+    what = f"release {doc.title}"
     pair = next((p for p in lineage["pairs"] if int(p["id"]) == pair_id), None)
     if pair is None:
         have = ", ".join(str(p["id"]) for p in lineage["pairs"])
@@ -299,7 +294,7 @@ def pair_cloud(catalog: Catalog, settings: Settings, doc: Mapping[str, Any], pai
                 )
             opened.append(open_labelled(source, ref))
         taxonomy = get_site(s, lineage["sites"][0]["name"]).spec.taxonomy
-    items = tuple(it for it in doc["items"] if int(it["pair"]) == pair_id)
+    items = tuple(it for it in doc.items if it.pair == pair_id)
     return PairCloud(
         pair_id, LabelledPair.with_labels(opened[0], opened[1], label_uri),
         ColourPlan.from_dict(pair.get("colour") or {"source": pair.get("colour_source", "rgb")}), taxonomy, items,

@@ -81,7 +81,7 @@ def test_release_build_uses_the_site_settings_and_is_up_to_date_once_built(tmp_p
     assert first.returncode == 0, first.stderr
     info = json.loads(first.stdout)
     assert (info["version"], info["status"], info["reason"]) == ("1.0.0", "published", "first version")
-    doc = read_manifest(Path(info["root"]))
+    doc = read_manifest(Path(info["root"])).doc
     assert doc["lineage"]["release_params"]["derived"]["scale"].startswith("auto: 512 px long side")
     assert all(max(it["size_px"]) >= 512 for it in doc["items"])  # 515 x 386 renders
     before = sorted((settings.home / "releases").rglob("*"))

@@ -45,12 +45,12 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
 
     second = pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(publish=True))
     assert second.version == "2.0.0"  # a label set changed: major bump
-    lineage = read_manifest(second.root)["lineage"]
+    lineage = read_manifest(second.root).doc["lineage"]
     scenes_ = {sc["id"]: sc for sc in lineage["scenes"]}
     assert scenes_[1]["label_set_version"] == new.version and scenes_[2]["label_set_version"] == pinned[2]
     assert scenes_[1]["label_set_sha256"] == new.source_sha256
     assert lineage["pairs"][0]["label_sets"] == {"t1": new.version, "t2": pinned[2]}
-    old = read_manifest(first.root)["lineage"]
+    old = read_manifest(first.root).doc["lineage"]
     assert {sc["id"]: sc["label_set_version"] for sc in old["scenes"]} == pinned
     # the old pair outputs were not overwritten: both output folders are complete
     roots = sorted(

@@ -12,7 +12,7 @@ from siteline.config import Settings
 from siteline.previews.images import url_of
 from siteline.previews.markdown import release_markdown
 from siteline.previews.server import make_server
-from siteline.records.release import ReleaseInfo
+from siteline.records.release import Manifest, ReleaseInfo
 
 PNG = b"\x89PNG\r\n\x1a\n" + b"0" * 32
 
@@ -59,10 +59,12 @@ def test_urls_point_at_the_preview_route(tmp_path) -> None:
 
 
 def test_the_release_artifact_says_why_where_and_how_big() -> None:
-    item = {"split": "train", "pair": 1, "coverage": 0.9, "valid": 0.6, "change_ratio": 0.1,
+    item = {"id": "p1_v0", "split": "train", "pair": 1, "view": 0, "coverage": 0.9, "valid": 0.6, "change_ratio": 0.1,
             "size_px": [515, 386], "padded_px": [544, 416]}  # fmt: skip
     doc = {
-        "items": [item, item | {"split": "test", "valid": 0.3}],
+        "format": "siteline-release/2", "name": "r", "version": "2.0.0", "created": "2026-11-28", "code_version": "0",
+        "splits": {"train": [1], "val": [], "test": [1]}, "files": [],
+        "items": [item, item | {"id": "p1_v1", "view": 1, "split": "test", "valid": 0.3}],
         "lineage": {
             "parameters": {"scale": 0.78, "point_size_px": 3, "views": 24, "min_coverage": 0.5, "min_valid": 0.25},
             "release_params": {"derived": {"scale": "auto: 512 px long side from the smallest camera"}},
@@ -72,14 +74,14 @@ def test_the_release_artifact_says_why_where_and_how_big() -> None:
         "stats": {"class_balance": {"train": {"changed": 10, "unchanged": 20, "ignore": 5}}},
     }
     info = ReleaseInfo("r", "2.0.0", "published", "/h/releases/r/2.0.0", 2, "ab" * 32, {}, "scene 1 label set v1 -> v2")
-    md = release_markdown(info, doc, "http://h:4201/releases/r/2.0.0/montage.png")
+    md = release_markdown(info, Manifest.from_dict(doc), "http://h:4201/releases/r/2.0.0/montage.png")
     assert "![montage of r 2.0.0" in md and "(http://h:4201/releases/r/2.0.0/montage.png)" in md
     assert "| why this version | scene 1 label set v1 -> v2 |" in md
     assert "515 x 386 px (stored padded to 544 x 416)" in md and "0.78 (auto: 512 px" in md
     assert "| valid fraction | mean 0.45 (min 0.30, max 0.60) |" in md
     assert "| 1 | 1 -> 2 | v2, v1 | 2 | 0.380 |" in md and "| 1 | 2024-11-27 | v2 | import x.las |" in md
     # with the preview server's address: links to the release browser and to each pair in 3D
-    md = release_markdown(info, doc, "http://h:4201/releases/r/2.0.0/montage.png", "http://h:4201")
+    md = release_markdown(info, Manifest.from_dict(doc), "http://h:4201/releases/r/2.0.0/montage.png", "http://h:4201")
     assert "[browse every item](http://h:4201/browse/r/2.0.0/)" in md and "[pair 1](http://h:4201/3d/r/2.0.0/1/)" in md
 
 

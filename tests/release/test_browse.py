@@ -23,13 +23,14 @@ from siteline.errors import ReleaseError
 from siteline.previews.browser import camera_figures, write_browser
 from siteline.previews.cloud import budget_takes, decode_chunk
 from siteline.previews.server import ReleaseAccess, make_server
+from siteline.records.release import Manifest
 from siteline.release.manifest import read_manifest
 
 
 def _cloud(built, pair: int = 1):
     settings, cat, pub = built
-    doc = read_manifest(Path(pub.root))
-    return doc, pipeline.pair_cloud(cat, settings, doc, pair)
+    manifest = read_manifest(Path(pub.root))
+    return manifest.doc, pipeline.pair_cloud(cat, settings, manifest, pair)
 
 
 def test_viewer_reads_every_point_with_the_labels_the_release_used(built) -> None:
@@ -77,9 +78,9 @@ def test_cameras_are_drawn_where_the_items_were_rendered(built) -> None:
 
 def test_pair_cloud_refuses_a_pair_the_release_lacks(built) -> None:
     settings, cat, pub = built
-    doc = read_manifest(Path(pub.root))
+    doc = read_manifest(Path(pub.root)).doc
     with pytest.raises(ReleaseError, match=r"has no pair 99 \(its pairs: 1, 2\)"):
-        pipeline.pair_cloud(cat, settings, doc, 99)
+        pipeline.pair_cloud(cat, settings, Manifest.from_dict(doc), 99)
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +112,7 @@ def test_server_routes_and_refusals(built, server) -> None:
     status, body = _get(server + "/")
     assert status == 200 and b'href="/browse/rel/1.0.0/"' in body and b'href="/3d/rel/1.0.0/2/"' in body
     status, body = _get(server + "/browse/rel/1.0.0/")
-    doc = read_manifest(root)
+    doc = read_manifest(root).doc
     assert status == 200 and all(it["id"].encode() in body for it in doc["items"])
     it = doc["items"][0]
     rel = f"{it['split']}/A/{it['id']}.png"
@@ -159,7 +160,7 @@ def test_release_browse_writes_a_page_beside_the_release(built, tmp_path) -> Non
     r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(tmp_path / "page.html"))
     assert r.returncode == 0, r.stderr
     page = (tmp_path / "page.html").read_text()
-    assert "file://" in r.stdout and all(it["id"] in page for it in read_manifest(root)["items"])
+    assert "file://" in r.stdout and all(it["id"] in page for it in read_manifest(root).doc["items"])
     # images addressed relative to the page, so it opens from the disk
     assert json.loads(page.split('type="application/json">')[1].split("</script>")[0])["images"].startswith("../")
     r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(root / "x.html"))
@@ -195,7 +196,9 @@ def _fake_release(root: Path, n: int, size: tuple[int, int] = (40, 30)) -> dict:
             "coverage": 0.9, "valid": 1.0 - (k % 10) / 20, "change_ratio": (k % 13) / 13, "size_px": [w, h],
             "padded_px": [w, h], "ignore": {}, "filled": 0.0,
         })  # fmt: skip
-    doc = {"name": "site", "version": "1.0.0", "items": items, "lineage": {"pairs": []}}
+    pairs = {sp: sorted({it["pair"] for it in items if it["split"] == sp}) for sp in ("train", "val", "test")}
+    doc = {"format": 2, "name": "site", "version": "1.0.0", "created": "2026-11-28T00:00:00+00:00", "code_version": "test",
+           "files": [], "splits": pairs, "items": items, "lineage": {"pairs": []}}  # fmt: skip
     (root / "manifest.json").write_text(json.dumps(doc))
     return doc
 

@@ -15,6 +15,7 @@ from sitehelpers import make_home, run_exe
 from siteline.catalog import migrate, open_catalog, store_roots
 from siteline.catalog.addresses import Roots, rooted
 from siteline.catalog.engine import make_engine
+from siteline.records.release import Manifest
 
 
 def _dump(db: Path) -> str:
@@ -134,7 +135,7 @@ def test_a_copied_home_shows_a_pair_in_3d_with_the_original_gone(built, tmp_path
         cat = open_catalog(mine)
         try:
             pair = int(doc["lineage"]["pairs"][0]["id"])
-            cloud = pipeline.pair_cloud(cat, mine, doc, pair)
+            cloud = pipeline.pair_cloud(cat, mine, Manifest.from_dict(doc), pair)
             assert cloud.pair_id == pair
         finally:
             cat.dispose()

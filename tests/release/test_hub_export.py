@@ -16,6 +16,7 @@ import pytest
 import yaml
 from PIL import Image
 
+from siteline.records.release import Manifest
 from siteline.release import hub
 from siteline.release.export import export_release
 from siteline.release.manifest import read_manifest, verify_files
@@ -37,7 +38,7 @@ def _card(out: Path) -> dict:
 def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root)
+    doc = read_manifest(root).doc
     out = tmp_path / "hf"
     result = export_release(root, "hf", out, license=hub.HubLicense("cc-by-4.0"))
     # a cache of its own: the machine's HF cache served another build's rows for the same folder name
@@ -74,7 +75,7 @@ def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
 def test_shards_are_cut_by_size_and_still_load(built, tmp_path, monkeypatch) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root)
+    doc = read_manifest(root).doc
     n_train = sum(it["split"] == "train" for it in doc["items"])
     monkeypatch.setattr(hub, "SHARD_BYTES", 1)  # one item a shard
     out = tmp_path / "hf"
@@ -129,7 +130,7 @@ def test_the_card_is_written_for_the_export_and_its_snippet_runs(built, tmp_path
     env = os.environ | {"HF_DATASETS_CACHE": str(tmp_path / "hf-cache"), "HF_DATASETS_OFFLINE": "1"}
     ran = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=env)
     assert ran.returncode == 0, ran.stderr
-    assert ran.stdout.startswith("rel_p") or ran.stdout.split()[0] in {it["id"] for it in read_manifest(Path(pub.root))["items"]}
+    assert ran.stdout.startswith("rel_p") or ran.stdout.split()[0] in {it["id"] for it in read_manifest(Path(pub.root)).doc["items"]}
 
 
 @pytest.mark.parametrize(
@@ -142,5 +143,7 @@ def test_the_card_is_written_for_the_export_and_its_snippet_runs(built, tmp_path
     ],
 )
 def test_provenance_is_read_from_what_wrote_the_scenes(made, kind) -> None:
-    doc = {"lineage": {"scenes": [{"id": k, "las_software": m} for k, m in enumerate(made)]}}
-    assert hub.provenance(doc)[0] == kind
+    doc = {"format": "siteline-release/2", "name": "r", "version": "1.0.0", "created": "2026-11-28", "code_version": "0",
+           "items": [], "splits": {"train": [], "val": [], "test": []}, "files": [],
+           "lineage": {"scenes": [{"id": k, "las_software": m} for k, m in enumerate(made)]}}  # fmt: skip
+    assert hub.provenance(Manifest.from_dict(doc))[0] == kind

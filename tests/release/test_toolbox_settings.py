@@ -105,7 +105,7 @@ def test_predictions_under_export_names_and_resized_ones_are_scored(built, tmp_p
 
     settings, _, pub = built
     root = Path(pub.root)
-    items = [it for it in read_manifest(root)["items"] if it["split"] == "test"]
+    items = [it for it in read_manifest(root).doc["items"] if it["split"] == "test"]
     truth = {it["id"]: np.asarray(Image.open(root / "test" / "label_ignore" / f"{it['id']}.png")) for it in items}
     perfect = {i: np.where(t == 1, 255, 0).astype(np.uint8) for i, t in truth.items()}
     for profile, name in (("torchange", lambda i: i.lower()), ("torchgeo-levircd", lambda i: f"test_{i}")):

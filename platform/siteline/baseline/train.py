@@ -106,11 +106,11 @@ def train(
     out_dir.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(root)
     torch.save(
-        {"model": model.state_dict(), "release": f"{manifest['name']} {manifest['version']}"},
+        {"model": model.state_dict(), "release": manifest.title},
         out_dir / "model.pt",
     )
     log = {
-        "release": f"{manifest['name']} {manifest['version']}",
+        "release": manifest.title,
         "iterations": it,
         "losses": losses,
         "seconds": time.perf_counter() - t0,

@@ -263,13 +263,3 @@ def record_tiling(
     add_completed(session, run)
 
 
-def needs_tiling(session: Session, scene_id: int) -> bool:
-    """Whether the scene is not tiled, or was tiled under an earlier version of its site."""
-    scene = scene_row(session, scene_id)
-    tiling = scene_statistics(scene).tiling
-    site = session.get(Site, scene.site_id)
-    if scene.status != "tiled" or tiling is None or site is None:
-        return True
-    return tiling.site_version != (site.version or 1)
-
-

@@ -49,13 +49,13 @@ class ChangeDetectionDataset(Dataset):
             )
         manifest = read_manifest(self.root)
         self.label_folder = ignore_aware_folder(manifest)
-        self.items = sorted((it for it in manifest["items"] if it["split"] == split), key=lambda it: it["id"])
+        self.items = manifest.items_of(split)
         self.split = split
         self.transforms = transforms
-        self.manifest_name = f"{manifest['name']} {manifest['version']}"
+        self.manifest_name = manifest.title
         for it in self.items[:1]:
             for sub in ("A", "B", self.label_folder):
-                p = self.root / split / sub / f"{it['id']}.png"
+                p = self.root / split / sub / f"{it.id}.png"
                 if not p.is_file():
                     raise ReleaseError(
                         f"{p} is missing: the release at {self.root} is incomplete (run `siteline release verify`)."
@@ -72,16 +72,16 @@ class ChangeDetectionDataset(Dataset):
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         it = self.items[index]
-        a, b = self._image("A", it["id"]), self._image("B", it["id"])
+        a, b = self._image("A", it.id), self._image("B", it.id)
         mask = np.asarray(
-            Image.open(self.root / self.split / self.label_folder / f"{it['id']}.png"), dtype=np.int64
+            Image.open(self.root / self.split / self.label_folder / f"{it.id}.png"), dtype=np.int64
         )
         sample = {
             "image": torch.stack([a, b]),
             "mask": torch.from_numpy(mask)[None],
-            "id": it["id"],
-            "pair": it["pair"],
-            "view": it["view"],
+            "id": it.id,
+            "pair": it.pair,
+            "view": it.view,
         }
         if self.transforms is not None:
             sample = self.transforms(sample)

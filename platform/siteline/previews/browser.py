@@ -10,12 +10,15 @@ import html
 import json
 import math
 import os
+from collections.abc import Mapping
 from importlib.resources import files
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from siteline.errors import ReleaseError
+from siteline.records.release import Manifest
 from siteline.release.manifest import read_manifest
 from siteline.schema import JsonObject
 from siteline.stores import atomic_file
@@ -26,7 +29,7 @@ COLUMNS = (
 )  # fmt: skip
 
 
-def camera_figures(camera: JsonObject) -> JsonObject:
+def camera_figures(camera: Mapping[str, Any]) -> JsonObject:
     """What a person reads of a synthetic camera (``schema/camera.schema.json``): its centre in
     site-local metres, heading (degrees clockwise from site north, +y), down-tilt (degrees below the
     horizon, 90 = nadir), focal length (pixels) and horizontal field of view (degrees)."""
@@ -46,31 +49,31 @@ def camera_figures(camera: JsonObject) -> JsonObject:
     }
 
 
-def browser_data(doc: JsonObject, images: str, viewer: str | None) -> JsonObject:
+def browser_data(doc: Manifest, images: str, viewer: str | None) -> JsonObject:
     """The page's data: the items as rows of :data:`COLUMNS` (compact: 5,000 items are ~1.5 MB),
     where the images are (``images``: a URL or a path relative to the page, the release's root) and
     the 3D viewer's base URL for the release's pairs (None where no server is behind the page)."""
     rows = []
-    for it in sorted(doc["items"], key=lambda it: it["id"]):
-        cam = it.get("camera")
+    for it in sorted(doc.items, key=lambda it: it.id):
+        cam = it.camera
         rows.append([
-            it["id"], it["split"], it["pair"], it["view"], it["strategy"], round(it["coverage"], 5),
-            round(it["valid"], 5), round(it["change_ratio"], 5), round(it.get("filled", 0.0), 5),
-            it["size_px"], it.get("padded_px", it["size_px"]),
-            {k: round(v, 5) for k, v in it.get("ignore", {}).items()}, camera_figures(cam) if cam else None,
-            round(it["change_visible"], 5) if it.get("change_visible") is not None else None,
+            it.id, it.split, it.pair, it.view, it.strategy, round(it.coverage, 5),
+            round(it.valid, 5), round(it.change_ratio, 5), round(it.filled, 5),
+            it.size_px, it.padded_px,
+            {k: round(v, 5) for k, v in it.ignore.items()}, camera_figures(cam) if cam else None,
+            round(it.change_visible, 5) if it.change_visible is not None else None,
         ])  # fmt: skip
     return {
-        "name": doc["name"], "version": doc["version"], "images": images.rstrip("/"), "viewer": viewer,
+        "name": doc.name, "version": doc.version, "images": images.rstrip("/"), "viewer": viewer,
         "columns": list(COLUMNS), "rows": rows,
     }  # fmt: skip
 
 
-def browser_page(doc: JsonObject, images: str, viewer: str | None = None, status: str = "published") -> str:
+def browser_page(doc: Manifest, images: str, viewer: str | None = None, status: str = "published") -> str:
     """The release browser of manifest ``doc`` as one HTML page (:func:`browser_data`)."""
     template = files("siteline.previews").joinpath("static/browser.html").read_text()
     data = json.dumps(browser_data(doc, images, viewer), separators=(",", ":"))
-    title = f"{doc['name']} {doc['version']} ({status}): {len(doc['items'])} items"
+    title = f"{doc.title} ({status}): {len(doc.items)} items"
     # inside <script>: no '</' may end the element early
     return template.replace("{{TITLE}}", html.escape(title)).replace("{{DATA}}", data.replace("</", "<\\/"))
 

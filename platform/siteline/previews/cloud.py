@@ -14,6 +14,7 @@ import numpy as np
 from siteline.camera.pinhole import Camera
 from siteline.pairs.render import LabelledPair
 from siteline.records.pairs import ColourPlan
+from siteline.records.release import ReleaseItem
 from siteline.schema import JsonObject
 from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
@@ -135,7 +136,7 @@ class PairCloud:
     scenes: LabelledPair
     colour: ColourPlan
     taxonomy: Taxonomy
-    items: tuple[JsonObject, ...]
+    items: tuple[ReleaseItem, ...]
 
     def plan(self, budget: int = DEFAULT_BUDGET) -> CloudPlan:
         """What the viewer fetches for a budget of ``budget`` points over both scenes."""
@@ -184,12 +185,12 @@ class CloudPlan:
         depth = max(float(np.linalg.norm(self.extent[:2])) * 0.06, 1.0)
         cams = []
         for it in self.cloud.items:
-            if not it.get("camera"):
+            if not it.camera:
                 continue
-            pts = np.asarray(frustum(Camera.from_dict(it["camera"], f"item {it['id']}"), depth)) - self.centre
+            pts = np.asarray(frustum(Camera.from_dict(dict(it.camera), f"item {it.id}"), depth)) - self.centre
             cams.append({
-                "item": it["id"], "split": it["split"], "view": it["view"], "strategy": it["strategy"],
-                "points": np.round(pts, 4).tolist(), "browser": f"{browser}#item={it['id']}" if browser else None,
+                "item": it.id, "split": it.split, "view": it.view, "strategy": it.strategy,
+                "points": np.round(pts, 4).tolist(), "browser": f"{browser}#item={it.id}" if browser else None,
             })  # fmt: skip
         return {
             "pair": self.cloud.pair_id,

@@ -3,14 +3,14 @@ of the data (images, why a version exists, sizes, coverage, valid fractions, whe
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any
 from urllib.parse import quote
 
+from siteline.records.enums import SPLITS
 from siteline.records.pairs import PairOutput
-from siteline.records.release import ReleaseInfo
+from siteline.records.release import Manifest, ReleaseInfo, ReleaseItem
 
 
 @dataclass(frozen=True)
@@ -30,24 +30,24 @@ def _spread(values: Sequence[float]) -> str:
     return f"mean {sum(values) / len(values):.2f} (min {min(values):.2f}, max {max(values):.2f})"
 
 
-def _sizes(items: Sequence[Mapping[str, Any]]) -> str:
-    rendered = sorted({tuple(it["size_px"]) for it in items})
-    padded = sorted({tuple(it["padded_px"]) for it in items})
+def _sizes(items: Sequence[ReleaseItem]) -> str:
+    rendered = sorted({tuple(it.size_px) for it in items})
+    padded = sorted({tuple(it.padded_px) for it in items})
     text = ", ".join(f"{w} x {h}" for w, h in rendered) + " px"
     if padded != rendered:
         text += " (stored padded to " + ", ".join(f"{w} x {h}" for w, h in padded) + ")"
     return text
 
 
-def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str, preview_url: str | None = None) -> str:
+def release_markdown(info: ReleaseInfo, doc: Manifest, montage_url: str, preview_url: str | None = None) -> str:
     """The release artifact: montage, links to its browser and each pair in 3D on the preview server
     at ``preview_url`` (None: none), why this version, where it is, sizes and figures, its pairs,
     label sets and class balance (``doc``: the release's manifest)."""
-    items = doc.get("items", [])
-    lineage = doc.get("lineage", {})
+    items = doc.items
+    lineage = doc.lineage
     params = lineage.get("parameters", {})
     derived = lineage.get("release_params", {}).get("derived", {})
-    splits = {s: sum(1 for it in items if it["split"] == s) for s in ("train", "val", "test")}
+    splits = {s: sum(1 for it in items if it.split == s) for s in SPLITS}
     lines = [
         f"# Release {info.name} {info.version} ({info.status})",
         "",
@@ -63,9 +63,9 @@ def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str
         f"| scale | {params.get('scale')} {('(' + derived['scale'] + ')') if 'scale' in derived else ''} |",
         f"| point size | {params.get('point_size_px')} px {('(' + derived['point_size_px'] + ')') if 'point_size_px' in derived else ''} |",
         f"| views per pair | {params.get('views')} asked, min coverage {params.get('min_coverage')}, min valid {params.get('min_valid')} |",
-        f"| coverage | {_spread([it['coverage'] for it in items])} |",
-        f"| valid fraction | {_spread([it['valid'] for it in items])} |",
-        f"| change ratio | {_spread([it['change_ratio'] for it in items])} |",
+        f"| coverage | {_spread([it.coverage for it in items])} |",
+        f"| valid fraction | {_spread([it.valid for it in items])} |",
+        f"| change ratio | {_spread([it.change_ratio for it in items])} |",
         f"| manifest sha256 | `{info.manifest_sha256}` |",
         "",
         "## Pairs",
@@ -74,25 +74,25 @@ def release_markdown(info: ReleaseInfo, doc: Mapping[str, Any], montage_url: str
         "|---|---|---|---|---|",
     ]
     for q in lineage.get("pairs", []):
-        views = sum(1 for it in items if it["pair"] == q["id"])
+        views = sum(1 for it in items if it.pair == q["id"])
         ls = q.get("label_sets", {})
         lines.append(f"| {q['id']} | {q['t1']} -> {q['t2']} | v{ls.get('t1')}, v{ls.get('t2')} | {views} | {q['radius_m']:.3f} |")
     lines += ["", "## Scenes and label sets", "", "| scene | captured | label set | source |", "|---|---|---|---|"]
     for sc in lineage.get("scenes", []):
         lines.append(f"| {sc['id']} | {sc['capture_time']} | v{sc['label_set_version']} | {sc['label_set_source']} |")
-    balance = doc.get("stats", {}).get("class_balance", {})
+    balance = doc.stats.get("class_balance", {})
     lines += ["", "## Class balance (pixels)", "", "| split | changed | unchanged | ignore |", "|---|---|---|---|"]
     lines += [f"| {k} | {v['changed']:,} | {v['unchanged']:,} | {v['ignore']:,} |" for k, v in balance.items()]
     return "\n".join(lines) + "\n"
 
 
-def _see_links(info: ReleaseInfo, doc: Mapping[str, Any], preview_url: str | None) -> list[str]:
+def _see_links(info: ReleaseInfo, doc: Manifest, preview_url: str | None) -> list[str]:
     """Links to the release browser and to each pair in 3D (``siteline previews serve``)."""
     if not preview_url:
         return []
     base = f"{preview_url.rstrip('/')}"
     release = f"{quote(info.name)}/{quote(info.version)}"
-    pairs = " ".join(f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.get("lineage", {}).get("pairs", []))
+    pairs = " ".join(f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.lineage.get("pairs", []))
     return [f"**See it:** [browse every item]({base}/browse/{release}/) (A | B swipe, mask, filters) · in 3D, change in red: {pairs}", ""]
 
 

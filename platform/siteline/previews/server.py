@@ -28,8 +28,8 @@ from urllib.parse import parse_qs, quote, unquote, urlsplit
 from siteline.errors import SitelineError
 from siteline.previews.browser import browser_page
 from siteline.previews.cloud import DEFAULT_BUDGET, CloudPlan, PairCloud
+from siteline.records.release import Manifest
 from siteline.release.manifest import read_manifest
-from siteline.schema import JsonObject
 from siteline.stores import layout
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,7 @@ class ReleaseAccess:
     pair_id)`` -> the pair opened for the 3D viewer (``siteline.pipeline.pair_cloud``)."""
 
     locate: Callable[[str, str], tuple[Path, str]]
-    open_pair: Callable[[JsonObject, int], PairCloud]
+    open_pair: Callable[[Manifest, int], PairCloud]
 
 
 class _Plans:
@@ -105,10 +105,10 @@ class _Manifests:
     changes: a page asks for dozens of chunks, and a release of 5,000 items has a manifest of megabytes."""
 
     def __init__(self) -> None:
-        self._docs: OrderedDict[Path, tuple[tuple[int, int], JsonObject]] = OrderedDict()
+        self._docs: OrderedDict[Path, tuple[tuple[int, int], Manifest]] = OrderedDict()
         self._guard = threading.Lock()
 
-    def read(self, root: Path) -> JsonObject:
+    def read(self, root: Path) -> Manifest:
         """``read_manifest(root)``, from memory when the file is the one read before."""
         try:
             st = (root / "manifest.json").stat()
@@ -185,7 +185,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         for name in sorted(n for n in os.listdir(top) if not n.startswith(".")) if top.is_dir() else []:
             for version in sorted(v for v in os.listdir(top / name) if not v.startswith(".") and (top / name / v).is_dir()):
                 try:
-                    pairs = [int(p["id"]) for p in self.manifests.read(top / name / version)["lineage"]["pairs"]]
+                    pairs = [int(p["id"]) for p in self.manifests.read(top / name / version).lineage["pairs"]]
                 except (SitelineError, KeyError, ValueError, OSError):
                     continue
                 base = f"{quote(name)}/{quote(version)}"
@@ -247,7 +247,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
             return self._text(400, f"budget: between 1000 and {MAX_BUDGET} points, not {budget}")
         try:
             plan = self.plans.get(
-                (str(root), doc.get("created"), pair, budget), lambda: self.access.open_pair(doc, pair).plan(budget)  # type: ignore[union-attr]
+                (str(root), doc.created, pair, budget), lambda: self.access.open_pair(doc, pair).plan(budget)  # type: ignore[union-attr]
             )
         except SitelineError as exc:
             return self._text(404, str(exc))

@@ -6,7 +6,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from siteline.records.enums import ReleaseStatus, Split
+from siteline.records.enums import SPLITS, ReleaseStatus, Split
 from siteline.schema import JsonObject
 
 
@@ -49,6 +49,66 @@ class ReleaseItem:
             if doc[key] is None:
                 del doc[key]
         return doc
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> ReleaseItem:
+        """An item of a manifest (:meth:`to_dict`); ``padded_px`` defaults to ``size_px`` (items stored
+        unpadded). KeyError, TypeError or ValueError on an item that is not one."""
+        split = doc["split"]
+        if split not in SPLITS:
+            raise ValueError(f"item {doc['id']!r}: split {split!r} is none of {', '.join(SPLITS)}")
+        size = (int(doc["size_px"][0]), int(doc["size_px"][1]))
+        padded = doc.get("padded_px") or size
+        return cls(
+            id=str(doc["id"]), split=split, pair=int(doc["pair"]), view=int(doc["view"]),
+            strategy=str(doc.get("strategy", "")), coverage=float(doc["coverage"]),
+            change_ratio=float(doc["change_ratio"]), valid=float(doc["valid"]), size_px=size,
+            padded_px=(int(padded[0]), int(padded[1])), ignore={k: float(v) for k, v in (doc.get("ignore") or {}).items()},
+            filled=float(doc.get("filled", 0.0)), camera=doc.get("camera"),
+            change_visible=None if doc.get("change_visible") is None else float(doc["change_visible"]),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A release's manifest.json as read back (``schema/release.schema.json``): its format, name and version,
+    items, the pairs of each split, the files it lists (path -> sha256), statistics, lineage and split rule
+    (still documents); ``format`` as written (2, or ``siteline-release/1``; None where a manifest has none); ``doc`` is the file's document itself, for what serves or copies it
+    as written."""
+
+    format: int | str | None
+    name: str
+    version: str
+    created: str
+    code_version: str
+    items: tuple[ReleaseItem, ...]
+    splits: Mapping[str, tuple[int, ...]]
+    files: Mapping[str, str]
+    stats: JsonObject
+    lineage: JsonObject
+    split_rule: JsonObject
+    doc: JsonObject
+
+    @classmethod
+    def from_dict(cls, doc: JsonObject) -> Manifest:
+        """The record of a manifest document. KeyError, TypeError or ValueError where it is not one."""
+        return cls(
+            format=doc.get("format"), name=str(doc["name"]), version=str(doc["version"]), created=str(doc["created"]),
+            code_version=str(doc["code_version"]), items=tuple(ReleaseItem.from_dict(it) for it in doc["items"]),
+            splits={s: tuple(int(p) for p in doc["splits"][s]) for s in SPLITS},
+            files={str(f["path"]): str(f["sha256"]) for f in doc["files"]},
+            stats=dict(doc.get("stats") or {}), lineage=dict(doc["lineage"]),
+            split_rule=dict(doc.get("split_rule") or {}), doc=doc,
+        )  # fmt: skip
+
+    @property
+    def title(self) -> str:
+        """``<name> <version>``."""
+        return f"{self.name} {self.version}"
+
+    def items_of(self, split: str) -> list[ReleaseItem]:
+        """The items of ``split``, by id (the order every consumer of a split reads them in)."""
+        return sorted((it for it in self.items if it.split == split), key=lambda it: it.id)
 
 
 @dataclass(frozen=True)

@@ -160,9 +160,9 @@ def execute_build(
     with publish_folder(plan.draft) as work:
         items = _write_items(plan, outputs, split_plan.of, work, progress)
         rows = [it.to_dict() for it in items]
-        stats = datasheet.statistics(work, rows)
+        stats = datasheet.statistics(work, list(items))
         (work / "stats.json").write_text(json.dumps(stats, indent=1) + "\n")
-        datasheet.montage(work, [it for it in rows if it["valid"] > 0.2] or rows).save(work / "montage.png")
+        datasheet.montage(work, [it for it in items if it.valid > 0.2] or list(items)).save(work / "montage.png")
         doc = {
             "format": layout.FORMAT, "layout": layout.layout_record(plan.params.pad), "name": plan.name,
             "version": plan.version, "created": datetime.now(UTC).isoformat(), "code_version": __version__,

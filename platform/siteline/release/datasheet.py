@@ -9,9 +9,11 @@ from PIL import Image
 
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
 from siteline.labels.accuracy import accuracy_text
-from siteline.records.pairs import GroundUsed
+from siteline.pairs.params import PairParams
+from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed
 from siteline.records.registration import Registration
-from siteline.release.params import DEFAULT_RADIUS_CEILING_M
+from siteline.records.release import ReleaseItem
+from siteline.release.params import ReleaseParams
 from siteline.schema import JsonObject
 
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}
@@ -34,15 +36,15 @@ def triplet_grid(triplets: list[tuple[np.ndarray, np.ndarray, np.ndarray]], widt
     return img.resize((width, max(1, int(img.height * width / img.width))), Image.Resampling.NEAREST)
 
 
-def montage(root: Path, items: list[JsonObject], count: int = 6, width: int = 1200) -> Image.Image:
+def montage(root: Path, items: list[ReleaseItem], count: int = 6, width: int = 1200) -> Image.Image:
     """Rows of (t1, t2, mask) for ``count`` sample items of the release at ``root``."""
 
-    def rgb(sub: str, it: JsonObject) -> np.ndarray:
-        return np.asarray(Image.open(root / it["split"] / sub / f"{it['id']}.png").convert("RGB"))
+    def rgb(sub: str, it: ReleaseItem) -> np.ndarray:
+        return np.asarray(Image.open(root / it.split / sub / f"{it.id}.png").convert("RGB"))
 
     return triplet_grid(
         [
-            (rgb("A", it), rgb("B", it), np.asarray(Image.open(root / it["split"] / "label_ignore" / f"{it['id']}.png")))
+            (rgb("A", it), rgb("B", it), np.asarray(Image.open(root / it.split / "label_ignore" / f"{it.id}.png")))
             for it in items[:count]
         ],
         width,
@@ -53,7 +55,7 @@ def _shares(px: dict[str, float], total: float) -> dict[str, float]:
     return {k: (v / total if total else 0.0) for k, v in px.items()}
 
 
-def ignore_breakdown(items: list[JsonObject], ignored_px: dict[str, int]) -> JsonObject:
+def ignore_breakdown(items: list[ReleaseItem], ignored_px: dict[str, int]) -> JsonObject:
     """Where a release's ignore pixels come from: per cause (siteline.codes.RELEASE_IGNORE_CAUSES) the
     share of all stored pixels and of the rendered ones, overall and per split, and the share of
     rendered pixels whose point came from the gap fill. ``items``: the manifest's items (their
@@ -61,14 +63,14 @@ def ignore_breakdown(items: list[JsonObject], ignored_px: dict[str, int]) -> Jso
     pixels counted in its ``label_ignore/`` images, so what no item accounts for (outputs made before
     causes were recorded) is ``unaccounted``."""
 
-    def tally(rows: list[JsonObject], counted: int) -> JsonObject:
-        rendered = sum(it["size_px"][0] * it["size_px"][1] for it in rows)
-        stored = sum(it["padded_px"][0] * it["padded_px"][1] for it in rows)
-        px = {c: sum((it.get("ignore") or {}).get(c, 0.0) * it["size_px"][0] * it["size_px"][1] for it in rows)
+    def tally(rows: list[ReleaseItem], counted: int) -> JsonObject:
+        rendered = sum(it.size_px[0] * it.size_px[1] for it in rows)
+        stored = sum(it.padded_px[0] * it.padded_px[1] for it in rows)
+        px = {c: sum(it.ignore.get(c, 0.0) * it.size_px[0] * it.size_px[1] for it in rows)
               for c in IGNORE_CAUSES}  # fmt: skip
         px["padding"] = float(stored - rendered)
         px["unaccounted"] = max(0.0, counted - sum(px.values()))
-        filled = sum(it.get("filled", 0.0) * it["size_px"][0] * it["size_px"][1] for it in rows)
+        filled = sum(it.filled * it.size_px[0] * it.size_px[1] for it in rows)
         return {
             "share": counted / stored if stored else 0.0,
             "share_of_rendered": (counted - px["padding"]) / rendered if rendered else 0.0,
@@ -78,25 +80,25 @@ def ignore_breakdown(items: list[JsonObject], ignored_px: dict[str, int]) -> Jso
         }
 
     out = tally(items, sum(ignored_px.values()))
-    splits = sorted({it["split"] for it in items})
-    out["per_split"] = {sp: tally([it for it in items if it["split"] == sp], ignored_px.get(sp, 0)) for sp in splits}
+    splits = sorted({it.split for it in items})
+    out["per_split"] = {sp: tally([it for it in items if it.split == sp], ignored_px.get(sp, 0)) for sp in splits}
     return out
 
 
-def statistics(root: Path, items: list[JsonObject]) -> JsonObject:
+def statistics(root: Path, items: list[ReleaseItem]) -> JsonObject:
     """Pixel class balance per split (from ``label_ignore/``; padding counts as ignore), coverage,
     per-pair change ratio and where the ignore pixels come from (:func:`ignore_breakdown`)."""
     per_split: dict[str, dict[str, int]] = {}
     per_pair: dict[int, list[float]] = {}
     for it in items:
-        m = np.asarray(Image.open(root / it["split"] / "label_ignore" / f"{it['id']}.png"))
-        s = per_split.setdefault(it["split"], {"unchanged": 0, "changed": 0, "ignore": 0, "images": 0})
+        m = np.asarray(Image.open(root / it.split / "label_ignore" / f"{it.id}.png"))
+        s = per_split.setdefault(it.split, {"unchanged": 0, "changed": 0, "ignore": 0, "images": 0})
         s["unchanged"] += int((m == 0).sum())
         s["changed"] += int((m == 1).sum())
         s["ignore"] += int((m == 255).sum())
         s["images"] += 1
-        per_pair.setdefault(it["pair"], []).append(it["change_ratio"])
-    cov = [it["coverage"] for it in items]
+        per_pair.setdefault(it.pair, []).append(it.change_ratio)
+    cov = [it.coverage for it in items]
     return {
         "class_balance": per_split,
         "coverage": {"mean": float(np.mean(cov)) if cov else 0.0, "min": float(np.min(cov)) if cov else 0.0},
@@ -106,18 +108,17 @@ def statistics(root: Path, items: list[JsonObject]) -> JsonObject:
     }
 
 
-def _radius_lines(pairs: list[JsonObject], ceiling: float, params: JsonObject) -> list[str]:
+def _radius_lines(pairs: list[JsonObject], ceiling: float, params: PairParams) -> list[str]:
     """One line per pair: its radius, the false change it implies on unchanged surfaces, what its
     rule measured against analytic truth (siteline.labels.accuracy) and, when it is above the
     release's radius ceiling (metres), that it is."""
-    rule = params.get("label_rule", "nearest")
-    regions = int(params.get("min_region_points", 1))
+    rule, regions = params.label_rule, params.min_region_points
     out = []
     for q in pairs:
-        info = (q.get("labels") or {}).get("radius") or {}
-        fc = info.get("expected_false_change")
-        spacing = max((info.get("median_spacing_m") or {}).values(), default=float("nan"))
-        measured = accuracy_text(rule, regions, bool(params.get("trim_edges", False)), spacing)
+        radius = ChangeLabels.from_dict(q["labels"]).radius
+        fc = radius.expected_false_change if radius is not None else None
+        spacing = max(radius.median_spacing_m.values(), default=float("nan")) if radius is not None else float("nan")
+        measured = accuracy_text(rule, regions, params.trim_edges, spacing)
         if fc and rule == "surface":
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
@@ -190,10 +191,10 @@ def _views_text(q: JsonObject) -> str:
     """How many views a pair gave of those asked, and why not more."""
     v = q["views"]
     text = f"- pair {q['id']}: {v['made']} views of the {v['asked']} asked"
-    if "candidates" in v:
-        rejected = ", ".join(f"{n} {_REJECTED_WORDS.get(k, k)}" for k, n in sorted(v.get("rejected", {}).items()))
-        unprobed = v["candidates"] - sum(v.get("rejected", {}).values()) - v["made"]
-        text += f" from {v['candidates']} candidates ({rejected or 'none rejected'}"
+    if (drawn := Drawn.from_dict(v)) is not None:
+        rejected = ", ".join(f"{n} {_REJECTED_WORDS.get(k, k)}" for k, n in sorted(drawn.rejected.items()))
+        unprobed = drawn.candidates - sum(drawn.rejected.values()) - v["made"]
+        text += f" from {drawn.candidates} candidates ({rejected or 'none rejected'}"
         text += f"; {unprobed} not needed)" if unprobed > 0 and v["made"] >= (v["asked"] or 0) else ")"
     return text
 
@@ -221,42 +222,45 @@ def _camera_lines(lin: JsonObject) -> list[str]:
     lines += [
         f"- pair {q['id']}: {ground.summary()}" for q in lin["pairs"] if (ground := GroundUsed.from_dict(q.get("ground")))
     ]
-    lines += [
-        f"- pair {q['id']}: colour from {q.get('colour_source', 'rgb')}"
-        + (f" ({q['colour']['why']})" if q.get("colour", {}).get("why") else "")
-        + (", shaded by eye-dome lighting (siteline.render.shading)" if q.get("colour", {}).get("shading") == "edl" else "")
-        + f", views judged against the {q.get('fence', 'site fence')}"
-        + _rule_text(q.get("change_rule"))
-        for q in lin["pairs"]
-    ]
+    lines += [_colour_text(q) for q in lin["pairs"]]
     return lines
 
 
-def _rule_text(rule: JsonObject | None) -> str:
-    """How a pair's change labels treat classes, and why (outputs made before it: semantic)."""
-    if not rule:
-        return ", change rule semantic"
-    text = f", change rule {rule['rule']} ({rule.get('why', '')})"
-    if rule.get("differences"):
-        text += ": " + "; ".join(rule["differences"])
+def _colour_text(q: JsonObject) -> str:
+    """A pair's colour, its fence and its change rule, in words."""
+    colour = ColourPlan.from_dict(q["colour"])
+    return (
+        f"- pair {q['id']}: colour from {colour.source}"
+        + (f" ({colour.why})" if colour.why else "")
+        + (", shaded by eye-dome lighting (siteline.render.shading)" if colour.shading == "edl" else "")
+        + f", views judged against the {q['fence']}"
+        + _rule_text(ChangeRulePlan.from_dict(q["change_rule"]))
+    )
+
+
+def _rule_text(rule: ChangeRulePlan) -> str:
+    """How a pair's change labels treat classes, and why."""
+    text = f", change rule {rule.rule} ({rule.why})"
+    if rule.differences:
+        text += ": " + "; ".join(rule.differences)
     return text
 
 
-def _splat_text(p: JsonObject) -> str:
+def _splat_text(p: PairParams) -> str:
     """How points were drawn and gaps filled, in words."""
-    if p.get("splat", "fixed") == "fixed":
-        text = f"splats: fixed, every point a {p['point_size_px']} px disk"
+    if p.splat == "fixed":
+        text = f"splats: fixed, every point a {p.point_size_px} px disk"
     else:
         text = (
-            f"splats: sized by the world, a point's disk spans {p.get('splat_factor', 2.0):g} x its spacing seen from "
-            f"the camera (at least {p['point_size_px']} px, at most {p.get('splat_max_px', 31)} px; "
+            f"splats: sized by the world, a point's disk spans {p.splat_factor:g} x its spacing seen from "
+            f"the camera (at least {p.point_size_px} px, at most {p.splat_max_px} px; "
             + (
                 "where a disk reaches past its surface's edge, the surface behind is drawn instead)"
-                if p.get("trim_edges", False)
+                if p.trim_edges
                 else "an object's edge is drawn up to half a disk beyond where its surface ends)"
             )
         )
-    fill = p.get("fill_px", 0)
+    fill = p.fill_px
     return text + (
         f"; gaps filled from the nearest point of the surface around them within {fill} px" if fill else "; no gap fill"
     )
@@ -299,11 +303,10 @@ def _ignore_lines(stats: JsonObject) -> list[str]:
 
 
 def _source_lines(lin: JsonObject) -> list[str]:
-    p = lin["parameters"]
-    radius = (
-        f"auto ({p['radius_multiplier']} x median spacing)" if p["radius_m"] is None else f"{p['radius_m']} m"
-    )
-    lod = "none (every point rendered)" if p.get("all_points") else f"LOD factor {p['lod_factor']}"
+    release = ReleaseParams.from_dict(lin["release_params"])
+    p = release.pair
+    radius = f"auto ({p.radius_multiplier} x median spacing)" if p.radius_m is None else f"{p.radius_m} m"
+    lod = "none (every point rendered)" if p.all_points else f"LOD factor {p.lod_factor}"
     return [
         "## Sources",
         "",
@@ -322,20 +325,18 @@ def _source_lines(lin: JsonObject) -> list[str]:
         "",
         "## Parameters",
         "",
-        f"- preset: {lin.get('preset') or 'none'}",
-        f"- render scale {p['scale']}, point size {p['point_size_px']} px, level-of-detail factor {p['lod_factor']}",
+        f"- preset: {release.preset or 'none'}",
+        f"- render scale {p.scale}, point size {p.point_size_px} px, level-of-detail factor {p.lod_factor}",
         "- " + _splat_text(p),
-        f"- views per pair {p['views']}, seed {p['seed']}, minimum coverage {p['min_coverage']}, minimum valid "
-        f"share {p.get('min_valid', 0.25)}",
+        f"- views per pair {p.views}, seed {p.seed}, minimum coverage {p.min_coverage}, minimum valid "
+        f"share {p.min_valid}",
         f"- change radius: {radius}",
-        *_radius_lines(
-            lin["pairs"], lin.get("release_params", {}).get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), p
-        ),
-        f"- change labels: the {p.get('label_rule', 'nearest')} rule (siteline.labels.change), changed regions under "
-        f"{p.get('min_region_points', 1)} points taken back (siteline.labels.regions)",
+        *_radius_lines(lin["pairs"], release.radius_ceiling_m, p),
+        f"- change labels: the {p.label_rule} rule (siteline.labels.change), changed regions under "
+        f"{p.min_region_points} points taken back (siteline.labels.regions)",
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
-        f"**{p.get('one_side_hole', 'ignore')}**; change is the union (OR) of the two directions.",
+        f"**{p.one_side_hole}**; change is the union (OR) of the two directions.",
         f"- level of detail: {lod}",
         "",
     ]

@@ -20,6 +20,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.errors import ReleaseError
+from siteline.records.release import Manifest
 from siteline.release.hub import HubLicense
 from siteline.release.layout import manifest_format
 from siteline.release.manifest import SAFE_ITEM_ID, read_manifest
@@ -189,7 +190,7 @@ class ExportResult:
         return dict(self.__dict__)
 
 
-def _check_export(root: Path, out: Path, doc: JsonObject, protected: Path | None) -> None:
+def _check_export(root: Path, out: Path, doc: Manifest, protected: Path | None) -> None:
     """Refuse an export that could not be read or would write where it must not: inside a release
     (resolved, so a symlink or '..' cannot hide it), over a file or a non-empty folder."""
     real = Path(os.path.realpath(out))
@@ -201,15 +202,15 @@ def _check_export(root: Path, out: Path, doc: JsonObject, protected: Path | None
             )
     if out.exists() and not out.is_dir():
         raise ReleaseError(f"export folder {out} is a file: choose a new folder.")
-    bad = [it["id"] for it in doc["items"] if not SAFE_ITEM_ID.fullmatch(str(it["id"]))]
+    bad = [it.id for it in doc.items if not SAFE_ITEM_ID.fullmatch(it.id)]
     if bad:
         raise ReleaseError(
-            f"release {doc['name']} {doc['version']}: item id {bad[0]!r} is not a file name; the manifest was "
+            f"release {doc.title}: item id {bad[0]!r} is not a file name; the manifest was "
             "edited (`siteline release verify`). Nothing was written."
         )
     if manifest_format(doc) < 2:
         raise ReleaseError(
-            f"release {doc['name']} {doc['version']} is format 1 (label/ holds 0/1/255): rebuild it with this "
+            f"release {doc.title} is format 1 (label/ holds 0/1/255): rebuild it with this "
             "siteline to export it; format 1 releases stay readable with siteline.data."
         )
     if out.exists() and any(out.iterdir()):
@@ -219,21 +220,21 @@ def _check_export(root: Path, out: Path, doc: JsonObject, protected: Path | None
 
 
 def _plan_files(
-    root: Path, profile: Profile, out: Path, doc: JsonObject
+    root: Path, profile: Profile, out: Path, doc: Manifest
 ) -> tuple[list[tuple[str, Path, Path]], dict[str, list[str]], dict[str, str]]:
     """(source, release file, export path) for every file, the stems per tool split, and stem -> item id."""
     split_map = dict(profile.split_map)
     names: dict[str, list[str]] = {}
     ids: dict[str, str] = {}
     planned: list[tuple[str, Path, Path]] = []
-    for it in sorted(doc["items"], key=lambda it: it["id"]):
-        split = split_map[it["split"]]
-        stem = profile.stem(split, it["id"])
+    for it in sorted(doc.items, key=lambda it: it.id):
+        split = split_map[it.split]
+        stem = profile.stem(split, it.id)
         names.setdefault(split, []).append(stem)
-        ids[stem] = it["id"]
+        ids[stem] = it.id
         for source, dest in profile.files(split, stem):
             folder = "label_ignore" if source in DERIVED else source
-            planned.append((source, root / it["split"] / folder / f"{it['id']}.png", out / dest))
+            planned.append((source, root / it.split / folder / f"{it.id}.png", out / dest))
     return planned, names, ids
 
 
@@ -258,7 +259,7 @@ HF_LOADER = "datasets.load_dataset(<out>): parquet shards data/<split>-*.parquet
 PROFILE_NAMES = (*PROFILES, HF_PROFILE)
 
 
-def _export_hf(root: Path, out: Path, doc: JsonObject, license: HubLicense | None) -> ExportResult:
+def _export_hf(root: Path, out: Path, doc: Manifest, license: HubLicense | None) -> ExportResult:
     from siteline.release.hub import HUB_SPLITS, export_hf
 
     if license is None:
@@ -275,7 +276,7 @@ def _export_hf(root: Path, out: Path, doc: JsonObject, license: HubLicense | Non
             f"load it with datasets.load_dataset({str(out)!r}); licence in the card: {license.id}",
         )  # fmt: skip
         record = result.to_dict() | {
-            "release": {"name": doc["name"], "version": doc["version"], "root": str(root)},
+            "release": {"name": doc.name, "version": doc.version, "root": str(root)},
             "tool": HF_LOADER, "links": "images copied into the parquet shards", "shards": shards.files,
         }  # fmt: skip
         (work / EXPORT_RECORD).write_text(json.dumps(record, indent=1) + "\n")
@@ -312,7 +313,7 @@ def export_release(
             (work / rel).parent.mkdir(parents=True, exist_ok=True)
             (work / rel).write_text("".join(f"{line}\n" for line in lines))
         record = result.to_dict() | {
-            "release": {"name": doc["name"], "version": doc["version"], "root": str(root)},
+            "release": {"name": doc.name, "version": doc.version, "root": str(root)},
             "tool": profile.tool,
             "links": "copies" if copy else "relative symlinks into the release",
         }

@@ -22,6 +22,7 @@ import numpy as np
 from siteline.codes import IGNORE_CAUSES, SYNTHETIC_SOFTWARE
 from siteline.errors import ReleaseError
 from siteline.labels.accuracy import accuracy_text
+from siteline.records.release import Manifest, ReleaseItem
 from siteline.schema import JsonObject
 
 HUB_SPLITS = {"train": "train", "val": "validation", "test": "test"}
@@ -76,21 +77,21 @@ def features() -> Any:
     )
 
 
-def _row(root: Path, it: JsonObject) -> JsonObject:
+def _row(root: Path, it: ReleaseItem) -> JsonObject:
     images = {}
     for name, folder in IMAGE_FOLDERS.items():
-        path = root / it["split"] / folder / f"{it['id']}.png"
+        path = root / it.split / folder / f"{it.id}.png"
         if not path.is_file():
             raise ReleaseError(f"{path} is missing: the release is incomplete (`siteline release verify`).")
-        images[name] = {"bytes": path.read_bytes(), "path": f"{it['id']}.png"}
-    images["label_preview"] = {"bytes": _preview(root / it["split"] / "label_ignore" / f"{it['id']}.png"), "path": f"{it['id']}.png"}
-    cam = it.get("camera")
+        images[name] = {"bytes": path.read_bytes(), "path": f"{it.id}.png"}
+    images["label_preview"] = {"bytes": _preview(root / it.split / "label_ignore" / f"{it.id}.png"), "path": f"{it.id}.png"}
+    cam = it.camera
     return {
-        "id": it["id"], **images, "split": it["split"], "pair": it["pair"], "view": it["view"],
-        "strategy": it["strategy"], "coverage": it["coverage"], "valid": it["valid"],
-        "change_ratio": it["change_ratio"], "filled": it.get("filled", 0.0),
-        "width": it["size_px"][0], "height": it["size_px"][1],
-        "ignore_causes": {c: float(it.get("ignore", {}).get(c, 0.0)) for c in IGNORE_CAUSES} if it.get("ignore") else None,
+        "id": it.id, **images, "split": it.split, "pair": it.pair, "view": it.view,
+        "strategy": it.strategy, "coverage": it.coverage, "valid": it.valid,
+        "change_ratio": it.change_ratio, "filled": it.filled,
+        "width": it.size_px[0], "height": it.size_px[1],
+        "ignore_causes": {c: float(it.ignore.get(c, 0.0)) for c in IGNORE_CAUSES} if it.ignore else None,
         "camera": {k: cam[k] for k in ("fx", "fy", "cx", "cy")} | cam["cam_from_world"] if cam else None,
     }  # fmt: skip
 
@@ -111,12 +112,12 @@ def _preview(label: Path) -> bytes:
     return buf.getvalue()
 
 
-def _shards(root: Path, items: list[JsonObject]) -> list[list[JsonObject]]:
+def _shards(root: Path, items: list[ReleaseItem]) -> list[list[ReleaseItem]]:
     """Items cut into shards of at most SHARD_BYTES of images (at least one item each)."""
-    shards: list[list[JsonObject]] = []
+    shards: list[list[ReleaseItem]] = []
     size = SHARD_BYTES
     for it in items:
-        item_bytes = sum((root / it["split"] / f / f"{it['id']}.png").stat().st_size for f in IMAGE_FOLDERS.values())
+        item_bytes = sum((root / it.split / f / f"{it.id}.png").stat().st_size for f in IMAGE_FOLDERS.values())
         if size + item_bytes > SHARD_BYTES and (not shards or shards[-1]):
             shards.append([])
             size = 0
@@ -144,7 +145,7 @@ class Shards:
     file_bytes: int
 
 
-def write_shards(root: Path, doc: JsonObject, work: Path) -> Shards:
+def write_shards(root: Path, doc: Manifest, work: Path) -> Shards:
     """The parquet shards of every split in ``work/data/``."""
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -156,7 +157,7 @@ def write_shards(root: Path, doc: JsonObject, work: Path) -> Shards:
     num_bytes: dict[str, int] = {}
     (work / "data").mkdir(parents=True)
     for split, hub in HUB_SPLITS.items():
-        items = sorted((it for it in doc["items"] if it["split"] == split), key=lambda it: it["id"])
+        items = doc.items_of(split)
         shards = _shards(root, items)
         for n, shard in enumerate(shards):
             rel = f"data/{hub}-{n:05d}-of-{len(shards):05d}.parquet"
@@ -198,10 +199,10 @@ class HubLicense:
         return f"`{self.id}` (https://huggingface.co/docs/hub/repositories-licenses)"
 
 
-def provenance(doc: JsonObject) -> tuple[str, str]:
+def provenance(doc: Manifest) -> tuple[str, str]:
     """(``synthetic``, ``surveyed`` or ``unrecorded``; a sentence saying so) from what wrote the scenes'
     LAS files (the lineage's ``las_software``)."""
-    made = [sc.get("las_software") for sc in doc["lineage"]["scenes"]]
+    made = [sc.get("las_software") for sc in doc.lineage["scenes"]]
     if made and all(m and m.startswith(SYNTHETIC_SOFTWARE) for m in made):
         return "synthetic", (
             "**Synthetic.** Every scene is a generated site (siteline's synthetic survey: analytic ground, "
@@ -217,28 +218,28 @@ def provenance(doc: JsonObject) -> tuple[str, str]:
     )
 
 
-def _split_rows(doc: JsonObject) -> list[str]:
+def _split_rows(doc: Manifest) -> list[str]:
     rows = []
     for split, hub in HUB_SPLITS.items():
-        items = [it for it in doc["items"] if it["split"] == split]
+        items = [it for it in doc.items if it.split == split]
         if not items:
             continue
-        px = [it["size_px"][0] * it["size_px"][1] for it in items]
-        valid = sum(it["valid"] * n for it, n in zip(items, px, strict=True)) / sum(px)
-        changed = sum(it["change_ratio"] * it["valid"] * n for it, n in zip(items, px, strict=True)) / sum(px)
-        pairs = sorted({it["pair"] for it in items})
+        px = [it.size_px[0] * it.size_px[1] for it in items]
+        valid = sum(it.valid * n for it, n in zip(items, px, strict=True)) / sum(px)
+        changed = sum(it.change_ratio * it.valid * n for it, n in zip(items, px, strict=True)) / sum(px)
+        pairs = sorted({it.pair for it in items})
         rows.append(f"| {hub} | {len(items)} | {', '.join(map(str, pairs))} | {changed:.1%} | {1 - valid:.1%} |")
     return rows
 
 
-def _split_rule(doc: JsonObject) -> str:
-    rule = doc.get("split_rule")
+def _split_rule(doc: Manifest) -> str:
+    rule = doc.split_rule
     text = rule.get("rule") if isinstance(rule, dict) else rule
     return str(text) if text else "the release's rule (not recorded in this manifest)"
 
 
-def _made_lines(doc: JsonObject) -> list[str]:
-    lin = doc["lineage"]
+def _made_lines(doc: Manifest) -> list[str]:
+    lin = doc.lineage
     p = lin["parameters"]
     pairs = lin["pairs"]
     radii = [q["radius_m"] for q in pairs]
@@ -329,16 +330,16 @@ def _limitation_lines(kind: str, ignore_text: str) -> list[str]:
     ]  # fmt: skip
 
 
-def _card_data(doc: JsonObject, shards: Shards, license: HubLicense, kind: str) -> Any:
+def _card_data(doc: Manifest, shards: Shards, license: HubLicense, kind: str) -> Any:
     """The card's YAML header: licence, task, sizes, splits and their shard files, features."""
     from huggingface_hub import DatasetCardData
 
     counts = shards.rows
     return DatasetCardData(
-        pretty_name=f"{doc['name']} {doc['version']} (siteline change detection)",
+        pretty_name=f"{doc.title} (siteline change detection)",
         task_categories=["image-segmentation"],
         task_ids=["semantic-segmentation"],
-        size_categories=[size_category(len(doc["items"]))],
+        size_categories=[size_category(len(doc.items))],
         tags=["change-detection", "construction", "drone", "lidar", "siteline"] + (["synthetic"] if kind == "synthetic" else []),
         configs=[
             {"config_name": "default", "data_files": [{"split": s, "path": f"data/{s}-*.parquet"} for s in counts]}
@@ -353,7 +354,7 @@ def _card_data(doc: JsonObject, shards: Shards, license: HubLicense, kind: str) 
     )
 
 
-def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject | None = None) -> str:
+def card(doc: Manifest, shards: Shards, license: HubLicense, stats: JsonObject | None = None) -> str:
     """README.md of the export, written for the parquet layout: the hub's YAML header (licence, task,
     sizes, splits and their files, features), what the data is and where it comes from, how to load
     it (a snippet that runs on this folder as written), splits, fields and label meanings, how it was
@@ -365,12 +366,12 @@ def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject
     ignore_text = f"{ignore:.1%} of all pixels" if ignore is not None else "a share of the pixels"
     first = next(iter(counts), "train")
     body = [
-        f"# {doc['name']} {doc['version']}",
+        f"# {doc.title}",
         "",
-        f"Bi-temporal change detection for construction monitoring: {len(doc['items'])} pixel-aligned image pairs "
+        f"Bi-temporal change detection for construction monitoring: {len(doc.items)} pixel-aligned image pairs "
         "(A: the earlier scene, B: the later one) rendered from drone LiDAR point clouds of a construction site, "
         "each with a symmetric change mask, made by siteline with the iVISION-2DCD method (ICRA 2026). "
-        f"Built by siteline {doc['code_version']} on {doc['created'][:10]}.",
+        f"Built by siteline {doc.code_version} on {doc.created[:10]}.",
         "",
         source,
         "",
@@ -404,7 +405,7 @@ def card(doc: JsonObject, shards: Shards, license: HubLicense, stats: JsonObject
     return f"---\n{data.to_yaml()}\n---\n\n" + "\n".join(body) + "\n"
 
 
-def export_hf(root: Path, doc: JsonObject, work: Path, license: HubLicense) -> Shards:
+def export_hf(root: Path, doc: Manifest, work: Path, license: HubLicense) -> Shards:
     """Write the hub export of the release at ``root`` (manifest ``doc``) into the new folder ``work``:
     parquet shards and README.md (the release's montage copied beside it)."""
     shards = write_shards(root, doc, work)

@@ -11,6 +11,7 @@ import numpy as np
 
 from siteline.codes import CHANGED, IGNORE
 from siteline.errors import ReleaseError
+from siteline.records.release import Manifest
 from siteline.schema import JsonObject
 
 FORMAT = 2
@@ -32,19 +33,18 @@ PAD_MIN_SIDE_PX = 256
 PAD_FILL = {"A": 0, "B": 0, "label": 0, "ignore": 255, "label_ignore": IGNORE}
 
 
-def manifest_format(doc: JsonObject) -> int:
+def manifest_format(manifest: Manifest) -> int:
     """1 or 2: the format of a release manifest."""
-    fmt = doc.get("format")
-    if fmt == FORMAT_1:
+    if manifest.format == FORMAT_1:
         return 1
-    if fmt == FORMAT:
+    if manifest.format == FORMAT:
         return 2
-    raise ReleaseError(f"release {doc.get('name')} {doc.get('version')}: unknown format {fmt!r}.")
+    raise ReleaseError(f"release {manifest.title}: unknown format {manifest.format!r}.")
 
 
-def ignore_aware_folder(doc: JsonObject) -> str:
+def ignore_aware_folder(manifest: Manifest) -> str:
     """The folder holding 0/1/255 labels: ``label_ignore`` (format 2) or ``label`` (format 1)."""
-    return "label_ignore" if manifest_format(doc) == 2 else "label"
+    return "label_ignore" if manifest_format(manifest) == 2 else "label"
 
 
 def levir_label(mask: np.ndarray) -> np.ndarray:

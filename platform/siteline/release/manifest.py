@@ -8,7 +8,9 @@ import re
 from collections.abc import Sequence
 from pathlib import Path
 
+from siteline.errors import ReleaseError
 from siteline.hashing import sha256_file
+from siteline.records.release import Manifest
 from siteline.schema import JsonObject, validate
 
 MANIFEST = "manifest.json"
@@ -49,16 +51,30 @@ def write_manifest(root: Path, doc: JsonObject) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def read_manifest(root: Path) -> JsonObject:
-    from siteline.errors import ReleaseError
+def read_manifest(root: Path) -> Manifest:
+    """The manifest of the release at ``root``, as a record; :class:`ReleaseError` names the file
+    when it is missing, not JSON, or not a release manifest."""
+    path = Path(root) / MANIFEST
+    doc = _read_document(root)
+    try:
+        return Manifest.from_dict(doc)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ReleaseError(f"{path} is not a siteline release manifest ({type(exc).__name__}: {exc}).") from exc
 
+
+def _read_document(root: Path) -> JsonObject:
+    """The manifest of ``root`` as the JSON document it is (verification reads it so: a tampered one
+    is reported, not refused)."""
     path = Path(root) / MANIFEST
     if not path.is_file():
         raise ReleaseError(f"{root} holds no {MANIFEST}: not a siteline release (or not built yet).")
     try:
-        return json.loads(path.read_text())
+        doc = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
         raise ReleaseError(f"{path} is not valid JSON: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise ReleaseError(f"{path} holds a JSON {type(doc).__name__}, not a release manifest.")
+    return doc
 
 
 SAFE_ITEM_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,200}")
@@ -113,7 +129,7 @@ def verify_files(
             problems.append(
                 f"{MANIFEST}: sha256 differs from the catalog's record ({manifest_sha256[:12]}...)"
             )
-    doc = read_manifest(root)
+    doc = _read_document(root)
     problems += [
         f"{MANIFEST}: {where} records the absolute path {value!r}; a release records paths relative to its "
         "home or store (one built by a version before that: build it again)"

@@ -8,6 +8,7 @@ from typing import Any
 from sqlalchemy.orm import Session
 
 from siteline.catalog.releases import get_release
+from siteline.records.enums import SPLITS
 from siteline.release.manifest import read_manifest
 from siteline.schema import JsonObject
 
@@ -26,11 +27,10 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
     files that differ between two versions."""
     a, b = get_release(session, name, v1), get_release(session, name, v2)
     ma, mb = read_manifest(Path(str(a.root_uri))), read_manifest(Path(str(b.root_uri)))
-    pa = {p["id"]: p for p in ma["lineage"]["pairs"]}
-    pb = {p["id"]: p for p in mb["lineage"]["pairs"]}
-    fa = {f["path"]: f["sha256"] for f in ma["files"]}
-    fb = {f["path"]: f["sha256"] for f in mb["files"]}
-    flat_a, flat_b = _flat(ma["lineage"]["parameters"]), _flat(mb["lineage"]["parameters"])
+    pa = {p["id"]: p for p in ma.lineage["pairs"]}
+    pb = {p["id"]: p for p in mb.lineage["pairs"]}
+    fa, fb = ma.files, mb.files
+    flat_a, flat_b = _flat(ma.lineage["parameters"]), _flat(mb.lineage["parameters"])
     pair_labels = {
         pid: {"radius_m": [pa[pid]["radius_m"], pb[pid]["radius_m"]]}
         for pid in sorted(set(pa) & set(pb))
@@ -38,8 +38,8 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
         or pa[pid].get("labels", {}).get("checksum") != pb[pid].get("labels", {}).get("checksum")
     }
     # a lineage written before label sets were versioned used version 1 of every scene
-    sa_ = {sc["id"]: sc for sc in ma["lineage"]["scenes"]}
-    sb_ = {sc["id"]: sc for sc in mb["lineage"]["scenes"]}
+    sa_ = {sc["id"]: sc for sc in ma.lineage["scenes"]}
+    sb_ = {sc["id"]: sc for sc in mb.lineage["scenes"]}
     scene_labels = {
         sid: {
             "version": [sa_[sid].get("label_set_version", 1), sb_[sid].get("label_set_version", 1)],
@@ -53,7 +53,7 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
         "from": v1,
         "to": v2,
         # why the later version exists (its bump: new items only -> minor, an item changed -> major)
-        "why": mb.get("lineage", {}).get("version_reason"),
+        "why": mb.lineage.get("version_reason"),
         "pairs": {"added": sorted(set(pb) - set(pa)), "removed": sorted(set(pa) - set(pb))},
         "parameters": {
             k: [flat_a.get(k), flat_b.get(k)]
@@ -62,9 +62,9 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
         },
         "label_sets": {"scenes": scene_labels, "pairs": pair_labels},
         "splits": {
-            s: [ma["splits"][s], mb["splits"][s]]
-            for s in ("train", "val", "test")
-            if ma["splits"][s] != mb["splits"][s]
+            s: [list(ma.splits[s]), list(mb.splits[s])]
+            for s in SPLITS
+            if ma.splits[s] != mb.splits[s]
         },
         "files": {
             "added": sorted(set(fb) - set(fa)),

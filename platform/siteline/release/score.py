@@ -9,6 +9,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.errors import ReleaseError
+from siteline.records.release import ReleaseItem
 from siteline.release.export import prediction_names
 from siteline.release.layout import ignore_aware_folder
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
@@ -33,18 +34,18 @@ def read_prediction(path: Path) -> np.ndarray:
     )
 
 
-def find_predictions(pred_dir: Path, split: str, items: list[JsonObject]) -> dict[str, Path]:
+def find_predictions(pred_dir: Path, split: str, items: list[ReleaseItem]) -> dict[str, Path]:
     """Item id -> its prediction file: ``<id>.png`` or the name any export profile gave the item
     (``test_<id>.png`` for TorchGeo, the lower-cased id for torchange). ReleaseError names the
     missing ones."""
     present = {p.name: p for p in pred_dir.iterdir() if p.is_file()}
     found, missing = {}, []
     for it in items:
-        name = next((n for n in prediction_names(split, it["id"]) if n in present), None)
+        name = next((n for n in prediction_names(split, it.id) if n in present), None)
         if name is None:
-            missing.append(it["id"])
+            missing.append(it.id)
         else:
-            found[it["id"]] = present[name]
+            found[it.id] = present[name]
     if missing:
         raise ReleaseError(
             f"prediction folder {pred_dir} lacks {len(missing)} of {len(items)} {split} images. Each is found "
@@ -76,15 +77,15 @@ def score_predictions(
         raise ReleaseError(f"split {split!r} is not one of train, val, test.")
     if not pred_dir.is_dir():
         raise ReleaseError(f"prediction folder {pred_dir} does not exist.")
-    items = sorted((it for it in doc["items"] if it["split"] == split), key=lambda it: it["id"])
+    items = doc.items_of(split)
     if not items:
-        raise ReleaseError(f"release {doc['name']} {doc['version']} has no {split} images.")
+        raise ReleaseError(f"release {doc.title} has no {split} images.")
     paths = find_predictions(pred_dir, split, items)
     folder = ignore_aware_folder(doc)
     per_image = []
     for it in items:
-        truth = np.asarray(Image.open(root / split / folder / f"{it['id']}.png"), dtype=np.int64)
-        pred = _sized(read_prediction(paths[it["id"]]), paths[it["id"]], truth.shape, pred_size)
+        truth = np.asarray(Image.open(root / split / folder / f"{it.id}.png"), dtype=np.int64)
+        pred = _sized(read_prediction(paths[it.id]), paths[it.id], truth.shape, pred_size)
         per_image.append(confusion(pred, truth))
     return score_record(root, split, per_image) | {"predictions": str(pred_dir), "pred_size": pred_size}
 
@@ -116,8 +117,8 @@ def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> JsonObj
     cm = np.asarray(np.sum(per_image, axis=0, dtype=np.int64)) if per_image else np.zeros((2, 2), np.int64)
     return {
         "release": {
-            "name": doc["name"],
-            "version": doc["version"],
+            "name": doc.name,
+            "version": doc.version,
             "manifest_sha256": hashlib.sha256((Path(root) / MANIFEST).read_bytes()).hexdigest(),
         },
         "split": split,

@@ -72,7 +72,7 @@ def _release_info(catalog: Catalog, name: str, version: str) -> ReleaseInfo:
         items = sum(release_item_counts(s, rel.id).values())
         status, root, sha = rel.status, str(rel.root_uri), rel.manifest_sha256
         reason = (rel.parameters or {}).get("version_reason", "")
-    return ReleaseInfo(name, version, status, root, items, sha, read_manifest(Path(root)).get("stats", {}), reason)  # type: ignore[arg-type]
+    return ReleaseInfo(name, version, status, root, items, sha, read_manifest(Path(root)).stats, reason)  # type: ignore[arg-type]
 
 
 def _build(
