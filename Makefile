@@ -34,6 +34,7 @@ test-all: $(STAMP) browser
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 # mypy over platform/siteline ([tool.mypy] in pyproject.toml)
 typecheck: $(STAMP)

@@ -54,8 +54,16 @@ def real_clouds() -> None:
         zg = griddata(xyz[cls == 2, :2], xyz[cls == 2, 2], xyz[:, :2], method="linear")
         hull = np.isfinite(zg)
         truth = np.abs(xyz[:, 2] - np.where(hull, zg, 0.0)) < 0.3
-        print(f"{name}: {len(xyz):,} points, ground by the truth {truth[hull].mean():.0%} (class 2: {(cls == 2).mean():.0%})")
-        runs = [(f"morphology, {c:g} m cells", lambda c=c, xyz=xyz: morphological_ground(xyz, MorphologyParams(cell_m=c))) for c in (1.0, 2.0)]
+        print(
+            f"{name}: {len(xyz):,} points, ground by the truth {truth[hull].mean():.0%} (class 2: {(cls == 2).mean():.0%})"
+        )
+        runs = [
+            (
+                f"morphology, {c:g} m cells",
+                lambda c=c, xyz=xyz: morphological_ground(xyz, MorphologyParams(cell_m=c)),
+            )
+            for c in (1.0, 2.0)
+        ]
         runs += [(f"CSF, cloth {r:g} m", lambda r=r, xyz=xyz: _csf(xyz, r)) for r in (0.5, 1.0, 2.0)]
         for label, run in runs:
             t = time.perf_counter()
@@ -66,7 +74,9 @@ def real_clouds() -> None:
                 continue
             f, g = found[hull], truth[hull]
             tp = int((f & g).sum())
-            print(f"  {label}: precision {tp / max(f.sum(), 1):.3f} recall {tp / g.sum():.3f} in {seconds:.2f} s")
+            print(
+                f"  {label}: precision {tp / max(f.sum(), 1):.3f} recall {tp / g.sum():.3f} in {seconds:.2f} s"
+            )
 
 
 def scene_cost(points: int) -> None:
@@ -91,7 +101,9 @@ def scene_cost(points: int) -> None:
     keep = rng.random(n) < min(1.0, 40_000 * 4 / n)
     t = time.perf_counter()
     choice = model_ground(xyz[keep], np.zeros(int(keep.sum()), bool))
-    print(f"  as a pair reads it (about 4 points/m2, {int(keep.sum()):,} points): {choice.kind} in {time.perf_counter() - t:.2f} s")
+    print(
+        f"  as a pair reads it (about 4 points/m2, {int(keep.sum()):,} points): {choice.kind} in {time.perf_counter() - t:.2f} s"
+    )
 
 
 def main() -> None:

@@ -98,6 +98,7 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         from siteline.config import Settings, sqlite_url
         from siteline.ingest.options import IngestOptions
         from siteline.ingest.stage import ingest_mission
+
         try:
             from siteline.site.spec import make_site_spec
         except ImportError:  # --tree: a checkout from before the site package (siteline.site was a module)
@@ -141,7 +142,9 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
     print(json.dumps({"points": n, "seconds": sec, "peak_mib": peak, "worker_peak_mib": kids, **out}))
 
 
-def run(mode: str, path: Path, workers: int, batch_points: int, half_m: float, tree: str | None = None) -> dict:
+def run(
+    mode: str, path: Path, workers: int, batch_points: int, half_m: float, tree: str | None = None
+) -> dict:
     """One measurement in its own process; ``tree``: a siteline checkout whose library it runs."""
     env = os.environ | ({"PYTHONPATH": str(Path(tree) / "platform")} if tree else {})
     out = subprocess.run(

@@ -113,7 +113,8 @@ def edge_contrast(rgb: np.ndarray, depth: np.ndarray) -> float:
 
 VARIANTS = {
     f"{source}{' + EDL' if edl else ''}": (source, edl)
-    for source in ("intensity", "elevation", "height") for edl in (False, True)
+    for source in ("intensity", "elevation", "height")
+    for edl in (False, True)
 }
 
 
@@ -125,7 +126,17 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="legible-") as d:
         settings = site(Path(d))
         # the release's own settings for this site (auto scale and point size), as `release build` resolves them
-        _cli(settings.home, "release", "build", "--site", "forest", "--name", "forest-cd", "--views", str(args.views))
+        _cli(
+            settings.home,
+            "release",
+            "build",
+            "--site",
+            "forest",
+            "--name",
+            "forest-cd",
+            "--views",
+            str(args.views),
+        )
         (built,) = settings.home.glob("releases/forest-cd/.drafts/*/manifest.json")
         params = PairParams.from_dict(json.loads(built.read_text())["lineage"]["parameters"])
         cat = open_catalog(settings)
@@ -175,7 +186,9 @@ def main() -> None:
                     out.append((img, r))
                 if k == 0:
                     (a, ra), (b, rb) = out
-                    mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole)
+                    mask = pair_mask(
+                        ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole
+                    )
                     shots[name] = [a, b, colour_mask(mask)]
         cat.dispose()
     print(f"{len(views)} views of the forest pair (0.9 points/m2, no RGB) at {views[0].camera.width} x "

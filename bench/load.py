@@ -45,7 +45,9 @@ def _prepare(home: Path) -> None:
     from tests.realdata import AUTZEN, centre_xy, later_epoch
 
     c = centre_xy(AUTZEN)
-    later = later_epoch(AUTZEN, home / "later.laz", removed_box=(c[0] - 150, c[1] - 150, c[0] - 50, c[1] - 50), days=300)
+    later = later_epoch(
+        AUTZEN, home / "later.laz", removed_box=(c[0] - 150, c[1] - 150, c[0] - 50, c[1] - 50), days=300
+    )
     settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
     engine = make_engine(settings.database_url)
     migrate.upgrade(engine)
@@ -54,7 +56,9 @@ def _prepare(home: Path) -> None:
     with cat.transaction() as s:
         add_site(s, make_site_spec("az", "EPSG:32610", (493000.0, 4878000.0, 130.0), None))
     for k, path in enumerate((AUTZEN, later)):
-        pipeline.ingest(cat, settings, path, "az", IngestOptions(captured_at=datetime(2020 + k, 5, 1, tzinfo=UTC)))
+        pipeline.ingest(
+            cat, settings, path, "az", IngestOptions(captured_at=datetime(2020 + k, 5, 1, tzinfo=UTC))
+        )
     cat.dispose()
 
 
@@ -108,7 +112,11 @@ def _run(home: Path, threads: str, busy: int) -> dict[str, float]:
         p.start()
     try:
         out = subprocess.run(
-            [sys.executable, "-m", "bench.load", "--child", str(home), threads], capture_output=True, text=True, check=True, cwd=ROOT
+            [sys.executable, "-m", "bench.load", "--child", str(home), threads],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=ROOT,
         ).stdout
     finally:
         for p in spinners:
@@ -122,8 +130,12 @@ def main() -> None:
         return
     ap = argparse.ArgumentParser()
     ap.add_argument("--busy", type=int, nargs="+", default=[2, 6])
-    ap.add_argument("--threads", nargs="+", default=["auto", "adaptive", "1"],
-                    help="torch threads: auto (torch's default, fixed), adaptive (siteline's: the cores the load leaves), or a number")
+    ap.add_argument(
+        "--threads",
+        nargs="+",
+        default=["auto", "adaptive", "1"],
+        help="torch threads: auto (torch's default, fixed), adaptive (siteline's: the cores the load leaves), or a number",
+    )
     args = ap.parse_args()
     cores = os.cpu_count() or 1
     with tempfile.TemporaryDirectory() as d:

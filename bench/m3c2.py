@@ -26,7 +26,11 @@ def _epoch(site: Path, doc: dict, i: int, key: str) -> tuple[np.ndarray, np.ndar
     las = laspy.read(site / e["mission_dir"] / LAS_RELPATH)
     xyz = np.c_[las.x, las.y, las.z] - np.asarray(doc["origin"])
     lut, _ = default_taxonomy().code_lut("las")
-    return xyz, lut[np.asarray(las.classification)].astype(np.uint8), np.load(site / "truth" / e["name"] / f"{key}.npy")
+    return (
+        xyz,
+        lut[np.asarray(las.classification)].astype(np.uint8),
+        np.load(site / "truth" / e["name"] / f"{key}.npy"),
+    )
 
 
 def _score(name: str, pred: np.ndarray, truth: np.ndarray, seconds: float) -> dict:
@@ -46,7 +50,17 @@ def main() -> None:
 
     site = args.out / f"site-{args.density:g}"
     if not (site / "truth" / "site.json").exists():
-        write_site(site, SynthConfig(epochs=2, density_pts_m2=args.density, snow_epochs=(), projection_error_epochs=(), photos=False, colmap=False))
+        write_site(
+            site,
+            SynthConfig(
+                epochs=2,
+                density_pts_m2=args.density,
+                snow_epochs=(),
+                projection_error_epochs=(),
+                photos=False,
+                colmap=False,
+            ),
+        )
     doc = json.loads((site / "truth" / "site.json").read_text())
     a, ac, truth = _epoch(site, doc, 0, "changed_until_next")
     b, bc, _ = _epoch(site, doc, 1, "changed_since_previous")

@@ -128,7 +128,9 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, kn
         "valid_median": float(np.median([r["valid"] for r in recs])),
         "valid_min": float(min(r["valid"] for r in recs)),
         "ignore_fraction": float(1 - np.mean([r["valid"] for r in recs])),
-        "ignore_causes": {c: float(np.mean([r["ignore"].get(c, 0.0) for r in recs])) for c in recs[0]["ignore"]},
+        "ignore_causes": {
+            c: float(np.mean([r["ignore"].get(c, 0.0) for r in recs])) for c in recs[0]["ignore"]
+        },
         "filled": float(np.mean([r["filled"] for r in recs])),
         "probed": summary.get("probed"),
         "image_px": [round(w * scale), round(h * scale)],
@@ -165,7 +167,13 @@ def child(stage: str, work: str, args: list[str]) -> None:
     elif stage == "labels":
         res = stage_labels(work_p, json.loads(args[0]))
     else:
-        res = stage_pair(work_p, int(args[0]), float(args[1]), None if args[2] == "-" else float(args[2]), json.loads(args[3]))
+        res = stage_pair(
+            work_p,
+            int(args[0]),
+            float(args[1]),
+            None if args[2] == "-" else float(args[2]),
+            json.loads(args[3]),
+        )
     res["peak_mib"] = _peak_mib()
     print("RESULT " + json.dumps(res))
 
@@ -201,9 +209,18 @@ def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
     if args.labels_only:
         shutil.rmtree(work / "home" / "stores" / "labels", ignore_errors=True)  # a kept folder's last labels
     mv = "-" if args.min_valid is None else str(args.min_valid)
-    knobs = {"point_size_px": args.point_size, "lod_factor": args.lod_factor, "splat": args.splat, "fill_px": args.fill}
+    knobs = {
+        "point_size_px": args.point_size,
+        "lod_factor": args.lod_factor,
+        "splat": args.splat,
+        "fill_px": args.fill,
+    }
     if args.labels_only:
-        out["pair"] = _run("labels", work, json.dumps({k: v for k, v in knobs.items() if k not in ("point_size_px", "splat", "fill_px")}))
+        out["pair"] = _run(
+            "labels",
+            work,
+            json.dumps({k: v for k, v in knobs.items() if k not in ("point_size_px", "splat", "fill_px")}),
+        )
     else:
         out["pair"] = _run("pair", work, str(args.views), str(args.scale), mv, json.dumps(knobs))
     return out
@@ -225,7 +242,11 @@ def main() -> None:
     ap.add_argument("--lod-factor", type=float, default=1.0)
     ap.add_argument("--splat", choices=("world", "fixed"), default="world", help="how big a point is drawn")
     ap.add_argument("--fill", type=int, default=2, help="gap fill radius, px (0: none)")
-    ap.add_argument("--labels-only", action="store_true", help="of the pair, its change labels only (their time and peak memory)")
+    ap.add_argument(
+        "--labels-only",
+        action="store_true",
+        help="of the pair, its change labels only (their time and peak memory)",
+    )
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument(
         "--work", type=Path, default=None,

@@ -133,12 +133,16 @@ def main() -> None:
     rows = []
     for scale in (1.0, 0.5, 0.25, 0.125):
         for ps, splat in ((1, "fixed"), (3, "fixed"), (1, "world")):
-            s = RenderSettings(scale=scale, point_size_px=ps, splat=splat, fill_px=2 if splat == "world" else 0)
+            s = RenderSettings(
+                scale=scale, point_size_px=ps, splat=splat, fill_px=2 if splat == "world" else 0
+            )
             render_points(xyz[:1000], cam, s, device=args.device, spacing_m=spacing[:1000])  # warm-up
             sec, r = timed(
                 lambda s=s: render_points(xyz, cam, s, {"rgb": rgb}, device=args.device, spacing_m=spacing)
             )
-            rows.append((scale, ps, splat, sec, args.points / sec, r.coverage, r.camera.width, r.camera.height))
+            rows.append(
+                (scale, ps, splat, sec, args.points / sec, r.coverage, r.camera.width, r.camera.height)
+            )
     base = {}
     if args.device != "cpu":
         xyz, rgb = xyz.cpu().numpy(), rgb.cpu().numpy()
@@ -153,7 +157,9 @@ def main() -> None:
             f"pixel agreement with siteline {agree:.4%}"
         )
     print()
-    print(f"| scale | size (px) | point size | splats (spacing {spacing_m:.3f} m) | seconds | M points/s | coverage | speed-up vs numpy |")
+    print(
+        f"| scale | size (px) | point size | splats (spacing {spacing_m:.3f} m) | seconds | M points/s | coverage | speed-up vs numpy |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for scale, ps, splat, sec, pps, cov, w, h in rows:
         ratio = f"{base[scale] / sec:.1f}x" if scale in base and ps == 1 and splat == "fixed" else ""

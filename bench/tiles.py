@@ -61,7 +61,10 @@ def child(mode: str, path: str, out: str) -> None:
 
 def run(*args: str) -> dict:
     out = subprocess.run(
-        [sys.executable, "-m", "bench.tiles", "--child", *args], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[1]
+        [sys.executable, "-m", "bench.tiles", "--child", *args],
+        capture_output=True,
+        text=True,
+        cwd=Path(__file__).resolve().parents[1],
     )
     if out.returncode:
         raise SystemExit(out.stderr)

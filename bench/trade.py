@@ -21,9 +21,16 @@ def main() -> None:
     ap.add_argument("--density", type=float, default=10.0, help="points per m2")
     ap.add_argument("--views", type=int, default=24)
     ap.add_argument("--grid", choices=tuple(GRIDS), default="full")
-    ap.add_argument("--variant", action="append", default=[], help="NAME=JSON pair knobs over the defaults (replaces --grid)")
+    ap.add_argument(
+        "--variant",
+        action="append",
+        default=[],
+        help="NAME=JSON pair knobs over the defaults (replaces --grid)",
+    )
     ap.add_argument("--out", type=Path, default=Path("bench-trade"))
-    ap.add_argument("--pictures", type=int, default=0, help="save mask | truth | disagreement of the first N views")
+    ap.add_argument(
+        "--pictures", type=int, default=0, help="save mask | truth | disagreement of the first N views"
+    )
     args = ap.parse_args()
     variants = dict(parse_variant(v) for v in args.variant) if args.variant else GRIDS[args.grid]
     rows = run_trade(args.out, args.layout, args.density, args.views, variants, pictures=args.pictures)

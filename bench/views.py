@@ -29,7 +29,10 @@ def _epochs(out: Path, copies: int) -> tuple[Path, Path]:
     if copies > 1:
         idx = np.tile(np.arange(len(xyz)), copies)
         pts = las.points[idx]
-        xyz = xyz[idx] + np.r_[np.zeros((len(las.points), 3)), rng.normal(0, 0.8, (len(idx) - len(las.points), 3))]
+        xyz = (
+            xyz[idx]
+            + np.r_[np.zeros((len(las.points), 3)), rng.normal(0, 0.8, (len(idx) - len(las.points), 3))]
+        )
     paths = []
     for k in range(2):
         keep = np.ones(len(xyz), bool)
@@ -53,7 +56,12 @@ def spread(views: list, ground: object) -> dict[str, float]:
     out = {}
     for name, vals in (("pitch_deg", pitch), ("height_m", height)):
         p10, p50, p90 = np.percentile(vals, [10, 50, 90]) if len(vals) else (0.0, 0.0, 0.0)
-        out |= {f"{name}_p10": p10, f"{name}_p50": p50, f"{name}_p90": p90, f"{name}_std": float(np.std(vals))}
+        out |= {
+            f"{name}_p10": p10,
+            f"{name}_p50": p50,
+            f"{name}_p90": p90,
+            f"{name}_std": float(np.std(vals)),
+        }
     return out
 
 
@@ -140,8 +148,10 @@ def main() -> None:
                     flush=True,
                 )
     x1, x4 = rows[(1, "defaults")], rows[(args.dense, "defaults")]
-    print(f"x{args.dense} / x1 density: time {x4['seconds'] / x1['seconds']:.2f}x, points read "
-          f"{x4['points_read'] / x1['points_read']:.2f}x, cloud {x4['points'] / x1['points']:.2f}x")
+    print(
+        f"x{args.dense} / x1 density: time {x4['seconds'] / x1['seconds']:.2f}x, points read "
+        f"{x4['points_read'] / x1['points_read']:.2f}x, cloud {x4['points'] / x1['points']:.2f}x"
+    )
 
 
 if __name__ == "__main__":

@@ -95,14 +95,20 @@ def report(client: SyncPrefectClient, since: datetime, done: set[str]) -> list[s
         marks = "".join(f"<!-- state {i} -->" for i in sorted(ids))
         first_line = text.splitlines()[2]
         client.create_artifact(
-            ArtifactCreate(key=f"why-{run_id}", type="markdown", data=text + marks, flow_run_id=run_id,
-                           description=first_line[:250])  # fmt: skip
+            ArtifactCreate(
+                key=f"why-{run_id}",
+                type="markdown",
+                data=text + marks,
+                flow_run_id=run_id,
+                description=first_line[:250],
+            )
         )
         if bar is not None:
             last = history[-1]
             note = "rescheduled after a crash" if last.state == "AwaitingRetry" else "crashed"
             client.update_artifact(
-                bar.id, ArtifactUpdate(description=f"stopped at {bar.data:.0f} %: {note}: {last.message}"[:250])
+                bar.id,
+                ArtifactUpdate(description=f"stopped at {bar.data:.0f} %: {note}: {last.message}"[:250]),
             )
         done |= ids
         out.append(name)

@@ -66,7 +66,10 @@ class MessageOnly(logging.Filter):
         if isinstance(exc, SitelineError):
             record.exc_info, record.exc_text = None, None
         elif exc is not None and disk_full(exc):
-            record.msg, record.args = f"{record.getMessage()}: {full_disk_message(exc, load_settings().home)}", None
+            record.msg, record.args = (
+                f"{record.getMessage()}: {full_disk_message(exc, load_settings().home)}",
+                None,
+            )
             record.exc_info, record.exc_text = None, None
         return True
 
@@ -145,7 +148,11 @@ def _call(fn: Callable[..., T], *args: Any) -> T:
 def _knobs(release_settings: dict[str, Any] | None) -> ReleaseKnobs | None:
     """The flow parameter ``release_settings`` (siteline.release.knobs JSON: a preset, pair knobs,
     pad, min_image_px) as a layer over the site's settings."""
-    return ReleaseKnobs.from_dict(release_settings, "flow parameter release_settings") if release_settings else None
+    return (
+        ReleaseKnobs.from_dict(release_settings, "flow parameter release_settings")
+        if release_settings
+        else None
+    )
 
 
 def _close_stale_runs() -> None:
@@ -223,7 +230,8 @@ def _abandon_progress(client: Any, task_run_ids: list[Any], message: str) -> Non
     )
     for art in arts:
         client.update_artifact(
-            art.id, ArtifactUpdate(data=art.data, description=f"{art.description or ''} - abandoned: {message}")
+            art.id,
+            ArtifactUpdate(data=art.data, description=f"{art.description or ''} - abandoned: {message}"),
         )
 
 
@@ -245,7 +253,9 @@ def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> dict[str, A
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
 def tile_task(scene_id: int) -> dict[str, Any] | None:
-    progress = RunProgress(slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0})
+    progress = RunProgress(
+        slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0}
+    )
     with cluster_executor() as executor:  # on a Dask runner, the cluster's workers write the tiles
         done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id], progress=progress,
                       resources=TilingResources(executor=executor))  # fmt: skip
@@ -260,9 +270,17 @@ def tile_task(scene_id: int) -> dict[str, Any] | None:
 def process_pair_task(pair_id: int, pair_params: dict[str, Any]) -> PairOutput:
     p = PairParams.from_dict(pair_params)
     with _slot(PAIR_SLOTS, f"pair {pair_id}"):
-        progress = RunProgress(slug("pair", pair_id), f"pair {pair_id}", {"labels": 1.0, "views": 1.0, "renders": 4.0})
+        progress = RunProgress(
+            slug("pair", pair_id), f"pair {pair_id}", {"labels": 1.0, "views": 1.0, "renders": 4.0}
+        )
         outs = _stage(
-            "process_pair", f"pair:{pair_id}", p.to_dict(), pipeline.process_pairs, [pair_id], p, progress=progress
+            "process_pair",
+            f"pair:{pair_id}",
+            p.to_dict(),
+            pipeline.process_pairs,
+            [pair_id],
+            p,
+            progress=progress,
         )
     out = outs[pair_id]
     progress.finish(f"{len(out.views)} views at {out.root}")
@@ -270,7 +288,9 @@ def process_pair_task(pair_id: int, pair_params: dict[str, Any]) -> PairOutput:
 
 
 @task(retries=1, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def build_release_task(site: str, name: str, release_settings: dict[str, Any] | None, publish: bool) -> ReleaseInfo:
+def build_release_task(
+    site: str, name: str, release_settings: dict[str, Any] | None, publish: bool
+) -> ReleaseInfo:
     with _slot(RELEASE_SLOTS, f"release {name}"):
         progress = RunProgress(slug("release", name), f"release {name}",
                                {"labels": 1.0, "views": 1.0, "renders": 4.0, "release images": 2.0})  # fmt: skip
@@ -345,7 +365,11 @@ def process_scene_pairs_flow(
     tag_run(f"site:{site}", f"scene:{scene_id}")
     pair_ids = _read(pair_ids_of_scene, scene_id)
     if not pair_ids:
-        note(site, f"scene {scene_id}", f"scene {scene_id} has no pair yet (ingest its neighbours): nothing to process.")
+        note(
+            site,
+            f"scene {scene_id}",
+            f"scene {scene_id} has no pair yet (ingest its neighbours): nothing to process.",
+        )
         return []
     params = _call(pipeline.release_parameters, site, _knobs(release_settings))
     get_run_logger().info(
@@ -383,13 +407,17 @@ def build_release_flow(
     latest version already has these inputs."""
     _close_stale_runs()
     tag_run(f"site:{site}", f"release:{name}")
-    info = build_release_task.with_options(task_run_name=slug("release", name))(site, name, release_settings, publish)
+    info = build_release_task.with_options(task_run_name=slug("release", name))(
+        site, name, release_settings, publish
+    )
     tag_run(f"release:{name}:{info.version}")
     if info.up_to_date:  # its artifacts are there already
         note(site, f"release {name}", f"release {name} is up to date: {info.version} ({info.status}) has these "
              "pairs, outputs, label sets and parameters, so nothing was built or published.")  # fmt: skip
     else:
-        get_run_logger().info("release %s %s %s (%s) at %s", name, info.version, info.status, info.reason, info.root)
+        get_run_logger().info(
+            "release %s %s %s (%s) at %s", name, info.version, info.status, info.reason, info.root
+        )
         release_dashboards(load_settings(), site, info)
     return info.to_dict()
 
@@ -409,7 +437,11 @@ def process_pair_flow(pair_id: int, release_settings: dict[str, Any] | None = No
     site = _read(site_name_of_pair, pair_id)
     tag_run(f"site:{site}", f"pair:{pair_id}")
     params = _call(pipeline.release_parameters, site, _knobs(release_settings))
-    out = process_pair_task.with_options(task_run_name=f"pair-{pair_id}").submit(pair_id, params.pair.to_dict()).result()
+    out = (
+        process_pair_task.with_options(task_run_name=f"pair-{pair_id}")
+        .submit(pair_id, params.pair.to_dict())
+        .result()
+    )
     pair_dashboards(load_settings(), site, out)
     return _summary(out)
 

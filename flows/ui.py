@@ -62,7 +62,9 @@ class RunProgress:
         self.totals: dict[str, int | None] = {}
         self.logged: dict[str, int] = {}
         self.last = 0.0
-        self.id = create_progress_artifact(0.0, key=slug("progress", what, run_tag()), description=f"{title}: starting")
+        self.id = create_progress_artifact(
+            0.0, key=slug("progress", what, run_tag()), description=f"{title}: starting"
+        )
 
     def __call__(self, task: str, amount: int, total: int | None) -> None:
         self.done[task] = self.done.get(task, 0) + amount
@@ -81,7 +83,9 @@ class RunProgress:
     def percent(self) -> float:
         total_weight = sum(self.weights.values()) or 1.0
         got = sum(
-            w * min(1.0, self.done.get(t, 0) / self.totals[t]) for t, w in self.weights.items() if self.totals.get(t)
+            w * min(1.0, self.done.get(t, 0) / self.totals[t])
+            for t, w in self.weights.items()
+            if self.totals.get(t)
         )
         return round(100.0 * got / total_weight, 1)
 
@@ -141,7 +145,9 @@ def ingest_dashboards(site: str, mission: str, res: dict[str, Any]) -> None:
 def note(site: str, subject: str, text: str) -> None:
     """A one-paragraph markdown artifact (and a log line): what a run decided not to do, and why."""
     get_run_logger().info("%s", text)
-    create_markdown_artifact(f"# {subject}\n\n{text}\n", key=slug("note", site, subject), description=text[:200])
+    create_markdown_artifact(
+        f"# {subject}\n\n{text}\n", key=slug("note", site, subject), description=text[:200]
+    )
 
 
 def pair_dashboards(settings: Settings, site: str, out: PairOutput, shown: int = 4) -> None:

@@ -77,12 +77,28 @@ def _with_structure(las: laspy.LasData, xyz: np.ndarray, box: tuple[float, ...],
     roof = np.c_[rng.uniform(x0, x1, n_roof), rng.uniform(y0, y1, n_roof), np.full(n_roof, base + height)]
     n_wall = max(int(density * 2 * (x1 - x0 + y1 - y0) * height / 4), 20)
     t = rng.uniform(0, 2 * (x1 - x0 + y1 - y0), n_wall)
-    wx = np.where(t < x1 - x0, x0 + t, np.where(t < x1 - x0 + y1 - y0, x1, np.where(t < 2 * (x1 - x0) + y1 - y0, x1 - (t - (x1 - x0 + y1 - y0)), x0)))
-    wy = np.where(t < x1 - x0, y0, np.where(t < x1 - x0 + y1 - y0, y0 + (t - (x1 - x0)), np.where(t < 2 * (x1 - x0) + y1 - y0, y1, y1 - (t - 2 * (x1 - x0) - (y1 - y0)))))
+    wx = np.where(
+        t < x1 - x0,
+        x0 + t,
+        np.where(
+            t < x1 - x0 + y1 - y0,
+            x1,
+            np.where(t < 2 * (x1 - x0) + y1 - y0, x1 - (t - (x1 - x0 + y1 - y0)), x0),
+        ),
+    )
+    wy = np.where(
+        t < x1 - x0,
+        y0,
+        np.where(
+            t < x1 - x0 + y1 - y0,
+            y0 + (t - (x1 - x0)),
+            np.where(t < 2 * (x1 - x0) + y1 - y0, y1, y1 - (t - 2 * (x1 - x0) - (y1 - y0))),
+        ),
+    )
     wall = np.c_[wx, wy, base + rng.uniform(0, height, n_wall)]
     add = np.r_[roof, wall]
     extra = laspy.ScaleAwarePointRecord.zeros(len(add), header=las.header)
-    template = las.points[: 1]
+    template = las.points[:1]
     for name in las.point_format.dimension_names:
         if name not in ("X", "Y", "Z"):
             extra[name] = np.repeat(np.asarray(template[name]), len(add))
@@ -90,7 +106,9 @@ def _with_structure(las: laspy.LasData, xyz: np.ndarray, box: tuple[float, ...],
     extra["classification"] = np.full(len(add), 6, np.uint8)
     out = laspy.LasData(las.header)
     out.points = laspy.ScaleAwarePointRecord(
-        np.concatenate([las.points.array, extra.array]), las.header.point_format, las.header.scales,
+        np.concatenate([las.points.array, extra.array]),
+        las.header.point_format,
+        las.header.scales,
         las.header.offsets,
     )
     return out

@@ -36,7 +36,9 @@ def _env(settings) -> dict[str, str]:
 def _race(settings, *argvs: list[str]) -> list[subprocess.CompletedProcess]:
     """Start every command at once; wait for all."""
     procs = [
-        subprocess.Popen([str(EXE), *argv], env=_env(settings), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        subprocess.Popen(
+            [str(EXE), *argv], env=_env(settings), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         for argv in argvs
     ]
     out = []
@@ -53,7 +55,9 @@ def _ok(runs: list[subprocess.CompletedProcess]) -> list[str]:
 
 
 # 34 s each on a 2-core machine: SQLite in `make test`, PostgreSQL in `make test-all`
-@pytest.mark.parametrize("db_url", ["sqlite", pytest.param("postgresql", marks=pytest.mark.slow)], indirect=True)
+@pytest.mark.parametrize(
+    "db_url", ["sqlite", pytest.param("postgresql", marks=pytest.mark.slow)], indirect=True
+)
 def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
     from siteline.catalog import open_catalog
     from siteline.catalog.labelsets import label_sets, labelled_source
@@ -68,7 +72,9 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
 
     # the same mission dropped twice at once: ingested (and tiled) once, the other run says so
     outs = _ok(_race(settings, ["ingest", e00, "--site", "demo"], ["ingest", e00, "--site", "demo"]))
-    assert sum("ingested as scene 1" in o for o in outs) == 1 and sum("already ingested" in o for o in outs) == 1
+    assert (
+        sum("ingested as scene 1" in o for o in outs) == 1 and sum("already ingested" in o for o in outs) == 1
+    )
     cat = open_catalog(settings)
     with cat.transaction() as s:
         assert len(list_missions(s)) == 1
@@ -85,7 +91,9 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
     roots = {json.loads(o)["root"] for o in outs}
     for name in ("a", "b"):
         assert _ok(_race(settings, ["release", "verify", name, "1.0.0"]))
-    pair_dirs = [p for p in (Path(settings.store.url) / "pairs" / "pair-1").iterdir() if not p.name.startswith(".")]
+    pair_dirs = [
+        p for p in (Path(settings.store.url) / "pairs" / "pair-1").iterdir() if not p.name.startswith(".")
+    ]
     assert len(pair_dirs) == 1 and len(roots) == 2  # one set of outputs, two releases drawn from it
     labels = next(p for p in (Path(settings.store.url) / "labels").iterdir() if not p.name.startswith("."))
     with cat.transaction() as s:
@@ -102,7 +110,9 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
         export_label_set(cat, 1, tmp_path / f"s1_{k}.las")
         las = laspy.read(tmp_path / f"s1_{k}.las")
         codes = np.asarray(las.classification).copy()
-        edited.append(np.flatnonzero(codes != 255)[200 * k : 200 * (k + 1)])  # each file corrects other points
+        edited.append(
+            np.flatnonzero(codes != 255)[200 * k : 200 * (k + 1)]
+        )  # each file corrects other points
         codes[edited[-1]] = cls
         las.classification = codes
         las.write(tmp_path / f"s1_{k}_fixed.las")

@@ -271,7 +271,7 @@ def test_the_engine_surface_is_what_architecture_names_and_laspy_stays_inside() 
     doc = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
     para = doc[doc.index("The engine's surface") :].split("\n\n")[0]
     listed = set(re.findall(r"`([A-Za-z_]+)`", para.split("):", 1)[1].split(".\n")[0]))
-    assert listed == set(engine.__all__), (sorted(listed ^ set(engine.__all__)))
+    assert listed == set(engine.__all__), sorted(listed ^ set(engine.__all__))
     front = ast.parse((PACKAGE / "pointpass" / "__init__.py").read_text())
     typed = {
         (node.module.removeprefix("siteline.pointpass."), a.name)
@@ -288,11 +288,17 @@ def test_the_engine_surface_is_what_architecture_names_and_laspy_stays_inside() 
             continue
         for name in _imports(ast.parse(path.read_text())):
             # tests write their fixtures and the ingest bench measures its baseline with laspy itself
-            if name.split(".")[0] == "laspy" and not path.is_relative_to(ROOT / "tests") and path.parent.name != "bench":
+            if (
+                name.split(".")[0] == "laspy"
+                and not path.is_relative_to(ROOT / "tests")
+                and path.parent.name != "bench"
+            ):
                 outside.append(f"{path.relative_to(ROOT)} imports laspy")
             parts = name.split(".")
             if parts[:2] == ["siteline", "pointpass"] and len(parts) > 2 and parts[2] not in engine._FRONT:
-                outside.append(f"{path.relative_to(ROOT)} imports {name}: use the engine's front, siteline.pointpass")
+                outside.append(
+                    f"{path.relative_to(ROOT)} imports {name}: use the engine's front, siteline.pointpass"
+                )
     assert not outside, outside
     for stage in ("ingest/pointcloud.py", "tiles/writer.py"):
         assert (PACKAGE / stage).read_text().count("pass_file(") == 1, stage

@@ -92,7 +92,12 @@ def ingest(
     if result.scene_id is None:
         return Ingested(result, None)
     tiled = tile_scene(
-        catalog, settings, result.scene_id, resources=TilingResources(workers), progress=progress, run_id=run_id
+        catalog,
+        settings,
+        result.scene_id,
+        resources=TilingResources(workers),
+        progress=progress,
+        run_id=run_id,
     )
     if tiled.tiling is not None:
         result.message += f"; {tiled.message}"
@@ -112,7 +117,8 @@ def tile_scenes(
     each tiling did (the tile stage's plan decides which scenes need it; those left alone are not
     listed)."""
     outcomes = (
-        tile_scene(catalog, settings, sid, resources=resources, progress=progress, run_id=run_id) for sid in scene_ids
+        tile_scene(catalog, settings, sid, resources=resources, progress=progress, run_id=run_id)
+        for sid in scene_ids
     )
     return [o for o in outcomes if o.tiling is not None]
 
@@ -164,9 +170,13 @@ def redefine_site(
         try:
             how = ImportOptions(by_name, f"carried to site version {version} from {path.name}", carried=True)
             done = import_labels(catalog, settings, sid, path, how, progress=progress)
-            message = f"scene {sid}: corrections of label set {carry[sid]} carried over as label set {done.version}"
+            message = (
+                f"scene {sid}: corrections of label set {carry[sid]} carried over as label set {done.version}"
+            )
         except LabelSetError as exc:
-            message = f"scene {sid}: corrections of label set {carry[sid]} not carried ({exc}); its file is {path}"
+            message = (
+                f"scene {sid}: corrections of label set {carry[sid]} not carried ({exc}); its file is {path}"
+            )
         log.info(message)
         outcomes.append(TileOutcome(None, message))
     return version, outcomes
@@ -244,7 +254,9 @@ def release(
                 )  # fmt: skip
     log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
              params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
-    outputs = process_pairs(catalog, settings, chosen, params.pair, progress, options.device, run_id, label_sets)
+    outputs = process_pairs(
+        catalog, settings, chosen, params.pair, progress, options.device, run_id, label_sets
+    )
     for out in outputs.values():
         if out.radius_m > params.radius_ceiling_m:
             radius = out.labels.radius
@@ -280,7 +292,9 @@ def pair_cloud(catalog: Catalog, settings: Settings, doc: Manifest, pair_id: int
     label_uri = settings.store.resolve(str(pair["labels"]["uri"]))  # relative to this home's store
     if not settings.store.is_complete(label_uri):
         # the manifest's own (relative) address: the message is served to HTTP clients
-        raise ReleaseError(f"{what}, pair {pair_id}: its change labels ({pair['labels']['uri']}) are gone (deleted since).")
+        raise ReleaseError(
+            f"{what}, pair {pair_id}: its change labels ({pair['labels']['uri']}) are gone (deleted since)."
+        )
     with catalog.transaction() as s:
         opened = []
         for key in ("t1", "t2"):

@@ -103,11 +103,13 @@ def parse_variant(text: str) -> tuple[str, dict[str, object]]:
     except ValueError as exc:
         raise ConfigError(f"variant {text!r}: the knobs after '=' are not JSON ({exc}).") from None
     if not name or not isinstance(parsed, dict):
-        raise ConfigError(f"variant {text!r}: write NAME={{\"knob\": value, ...}}.")
+        raise ConfigError(f'variant {text!r}: write NAME={{"knob": value, ...}}.')
     return name, parsed
 
 
-def synthetic_pair(out: Path, layout: str, density: float, views: int, seed: int = 0) -> tuple[Settings, Path, int]:
+def synthetic_pair(
+    out: Path, layout: str, density: float, views: int, seed: int = 0
+) -> tuple[Settings, Path, int]:
     """A 2-epoch synthetic site at ``density`` points/m2 under ``out`` (made once: a later call reuses
     it), its home with the site registered (``views`` views a pair) and both epochs ingested; the
     settings, the site's folder and the pair's id."""
@@ -151,7 +153,9 @@ def variant_params(base: PairParams, name: str, knobs: Mapping[str, object]) -> 
     an unknown knob or a bad value."""
     unknown = sorted(set(knobs) - set(base.to_dict()))
     if unknown:
-        raise ConfigError(f"variant {name!r}: unknown pair knobs {unknown}; see siteline.pairs.params.PairParams.")
+        raise ConfigError(
+            f"variant {name!r}: unknown pair knobs {unknown}; see siteline.pairs.params.PairParams."
+        )
     try:
         return PairParams.from_dict(base.to_dict() | dict(knobs))
     except (TypeError, ValueError, PairError) as exc:
@@ -204,7 +208,9 @@ def run_trade(
 
     def picture(name: str, index: int, mask: np.ndarray, truth: np.ndarray) -> None:
         if saved.get(name, 0) < pictures:
-            save_disagreement(folder / f"{name.replace(' ', '_').replace('/', '-')}-{index:04d}.png", mask, truth)
+            save_disagreement(
+                folder / f"{name.replace(' ', '_').replace('/', '-')}-{index:04d}.png", mask, truth
+            )
             saved[name] = saved.get(name, 0) + 1
 
     rows = []

@@ -52,7 +52,10 @@ def test_a_killed_holder_frees_the_lock(tmp_path) -> None:
     while not ready.exists():
         time.sleep(0.05)
     engine = make_engine(f"sqlite:///{db}")
-    with pytest.raises(CatalogError, match="held by another writer"), exclusive(engine, "held", timeout_s=0.5):
+    with (
+        pytest.raises(CatalogError, match="held by another writer"),
+        exclusive(engine, "held", timeout_s=0.5),
+    ):
         pass
     os.kill(holder.pid, signal.SIGKILL)
     holder.join(10)
@@ -82,7 +85,8 @@ def test_a_folder_pruned_while_made_is_made_again(tmp_path, monkeypatch) -> None
 def test_a_file_where_the_lock_folder_goes_is_named(tmp_path) -> None:
     db = str(tmp_path / "catalog.sqlite")
     lock_file(db, "x").parent.write_text("not a folder")
-    with pytest.raises(CatalogError, match="lock folder but is a file"), exclusive(
-        make_engine(f"sqlite:///{db}"), "x", timeout_s=1
+    with (
+        pytest.raises(CatalogError, match="lock folder but is a file"),
+        exclusive(make_engine(f"sqlite:///{db}"), "x", timeout_s=1),
     ):
         pass

@@ -142,7 +142,10 @@ def test_a_mission_goes_into_two_sites_after_0007_and_downgrade_says_what_blocks
     migrate.upgrade(engine)
     assert _diff(engine) == []
     with engine.begin() as conn:
-        assert conn.execute(sa.text("SELECT name, version FROM site ORDER BY name")).all() == [("a", 1), ("b", 1)]
+        assert conn.execute(sa.text("SELECT name, version FROM site ORDER BY name")).all() == [
+            ("a", 1),
+            ("b", 1),
+        ]
         conn.execute(sa.text(mission.format(2)))
     with pytest.raises(Exception, match="ingested into several sites"):
         migrate.downgrade(engine, "0006")

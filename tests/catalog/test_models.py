@@ -169,7 +169,9 @@ def test_label_set_versions_are_unique_and_newest_is_found(cat) -> None:
     from siteline.records import LabelSetImport, StageRun
 
     def imported(scene_id: int, uri: str, file: str, sha: str, note: str | None, changed: int, changes: dict):
-        return LabelSetImport(scene_id, 2, 1, uri, file, sha, 10, 10, 0, 0, 0, changed, changes, {}, note=note)
+        return LabelSetImport(
+            scene_id, 2, 1, uri, file, sha, 10, 10, 0, 0, 0, changed, changes, {}, note=note
+        )
 
     with cat.transaction() as s:
         site = _site(s)
@@ -177,7 +179,9 @@ def test_label_set_versions_are_unique_and_newest_is_found(cat) -> None:
         s.add(LabelSet(scene_id=scene.id, version=1, source="las", class_histogram={"ground": 10}))
         s.flush()
         record_label_set(
-            s, imported(scene.id, "/x/v2.zarr", "f.laz", "b" * 64, "fix", 1, {"ground->building": 1}), StageRun("t", "x")
+            s,
+            imported(scene.id, "/x/v2.zarr", "f.laz", "b" * 64, "fix", 1, {"ground->building": 1}),
+            StageRun("t", "x"),
         )
         sid = scene.id
     with cat.transaction() as s:
@@ -188,4 +192,6 @@ def test_label_set_versions_are_unique_and_newest_is_found(cat) -> None:
         with pytest.raises(LabelSetError, match="no label-set version 3"):
             label_set(s, sid, 3)
     with pytest.raises(sa.exc.IntegrityError), cat.transaction() as s:
-        record_label_set(s, imported(sid, "/x/again.zarr", "g.laz", "c" * 64, None, 0, {}), StageRun("t", "x"))
+        record_label_set(
+            s, imported(sid, "/x/again.zarr", "g.laz", "c" * 64, None, 0, {}), StageRun("t", "x")
+        )

@@ -106,7 +106,9 @@ def test_a_release_of_a_scene_without_ground_finds_its_ground_and_says_so(home, 
     for m, extra in zip(missions, ([], ["--accept-misalignment"]), strict=True):  # ICP needs ground too
         code, _, err = run_cli(capsys, "ingest", str(m), "--site", "demo", *extra)
         assert code == 0, err
-    code, out, err = run_cli(capsys, "release", "build", "--site", "demo", "--name", "noground", "--views", "6", "--json")
+    code, out, err = run_cli(
+        capsys, "release", "build", "--site", "demo", "--name", "noground", "--views", "6", "--json"
+    )
     assert code == 0, (out, err)
     root = Path(json.loads(out)["root"])
     (pair,) = json.loads((root / "manifest.json").read_text())["lineage"]["pairs"]

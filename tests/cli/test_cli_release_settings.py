@@ -44,7 +44,9 @@ def test_site_settings_are_stored_shown_updated_and_checked(home, capsys) -> Non
         "preset": "fast",
         "pair": {"scale": "auto", "min_valid": 0.3},
     }
-    code, out, err = run_cli(capsys, "site", "update", "s", "--no-trim-edges", "--splat-factor", "1.5", "--json")
+    code, out, err = run_cli(
+        capsys, "site", "update", "s", "--no-trim-edges", "--splat-factor", "1.5", "--json"
+    )
     assert code == 0, err
     assert json.loads(out)["release_settings"]["pair"] == {
         "scale": "auto", "min_valid": 0.3, "trim_edges": False, "splat_factor": 1.5,

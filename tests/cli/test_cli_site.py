@@ -190,7 +190,9 @@ def test_demo_runs_and_is_rerunnable(home, capsys) -> None:
         ([[["a", "b"], [1, 0], [1, 1], ["a", "b"]]], "not a number pair"),
     ],
 )
-def test_malformed_fence_is_one_line_not_a_traceback(initialised, capsys, tmp_path, coordinates, message) -> None:
+def test_malformed_fence_is_one_line_not_a_traceback(
+    initialised, capsys, tmp_path, coordinates, message
+) -> None:
     fence = tmp_path / "fence.geojson"
     fence.write_text(json.dumps({"type": "Polygon", "coordinates": coordinates}))
     code, _, err = run(

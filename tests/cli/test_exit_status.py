@@ -92,7 +92,9 @@ def test_catalog_commands_start_light(exe_home) -> None:
         "rc = main(['scene', 'list', '--site', 'nosuch'])\n"
         "print(rc, sorted(m for m in ('torch', 'siteline.pipeline', 'siteline.render.zbuffer') if m in sys.modules))\n"
     )
-    env = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")} | {"SITELINE_HOME": str(exe_home)}
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")} | {
+        "SITELINE_HOME": str(exe_home)
+    }
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
     assert proc.stdout.strip().splitlines()[-1] == "2 []", proc.stdout + proc.stderr
     help_ = run_exe(exe_home, "ingest", "--help")

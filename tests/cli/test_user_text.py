@@ -50,7 +50,9 @@ def test_a_note_with_markup_and_escapes_stays_readable(capsys, scenes, tmp_path,
         (["--name", "R", "--version", "1.0.0\n"], "version '1.0.0\\n' is not semantic"),
     ],
 )
-def test_bad_release_names_and_versions_are_refused_before_anything(capsys, scenes, monkeypatch, argv, match) -> None:
+def test_bad_release_names_and_versions_are_refused_before_anything(
+    capsys, scenes, monkeypatch, argv, match
+) -> None:
     settings, _ = scenes
     monkeypatch.setenv("SITELINE_HOME", str(settings.home))
     monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
@@ -64,5 +66,7 @@ def test_a_site_name_with_a_trailing_newline_is_refused(capsys, home) -> None:
     from sitehelpers import SYNTH
 
     assert run_cli(capsys, "init")[0] == 0
-    code, _, err = run_cli(capsys, "site", "create", "demo\n", "--crs", SYNTH.crs, "--origin", *map(str, SYNTH.origin))
+    code, _, err = run_cli(
+        capsys, "site", "create", "demo\n", "--crs", SYNTH.crs, "--origin", *map(str, SYNTH.origin)
+    )
     assert code == 2 and "site name 'demo\\n' is not allowed" in err

@@ -116,7 +116,9 @@ def test_no_crs_and_no_override(cat, site_settings, tmp_path) -> None:
         ingest_mission(cat, site_settings, tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
     when = __import__("datetime").datetime(2024, 6, 1, tzinfo=__import__("datetime").UTC)
-    r = ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs="EPSG:32618", captured_at=when))
+    r = ingest_mission(
+        cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs="EPSG:32618", captured_at=when)
+    )
     assert r.created
 
 
@@ -238,7 +240,9 @@ def _count_patched(src: Path, dest: Path, count: int) -> Path:
 
 
 @pytest.mark.parametrize(("count", "words"), [(55_000, "header is wrong"), (4_000_000_000, "forged")])
-def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_settings, tmp_path, count, words) -> None:
+def test_laz_whose_header_count_its_chunks_contradict_is_refused(
+    cat, site_settings, tmp_path, count, words
+) -> None:
     """A real LAZ (3 chunks of up to 50,000 points) whose header counts half its points would have been
     cut short without a word; one claiming 4e9 points is refused from its chunk table before anything
     is allocated. Ingest (in parallel ranges), and a plain open, refuse both naming the file."""
@@ -254,7 +258,10 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(cat, site_setti
         open_las(path)
     # refused from the header: reading the claimed points would take minutes (a bound loose enough for a loaded CI machine)
     assert time.perf_counter() - t0 < 30.0
-    opts = IngestOptions(captured_at=__import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC), crs="EPSG:2994")
+    opts = IngestOptions(
+        captured_at=__import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC),
+        crs="EPSG:2994",
+    )
     with pytest.raises(PointCloudError, match="LAZ chunks hold 100,001 to 150,000"):
         ingest_mission(cat, site_settings, tmp_path / "m", "demo", opts, workers=2)
     _assert_nothing_written(cat, site_settings)
@@ -302,7 +309,9 @@ def test_non_finite_gps_times_never_reach_the_catalog(db_url, tmp_path) -> None:
 
 
 @pytest.mark.parametrize("short", [2, 500, 9_999])
-def test_a_laz_whose_count_is_short_by_less_than_its_last_chunk_is_refused(cat, site_settings, tmp_path, short) -> None:
+def test_a_laz_whose_count_is_short_by_less_than_its_last_chunk_is_refused(
+    cat, site_settings, tmp_path, short
+) -> None:
     """autzen's last chunk holds 10,000 points; a header counting 2 to 9,999 fewer passed the chunk
     table (a fixed-size table records no count per chunk) and lost them without a word. The last
     chunk's bytes decode past the count: refused naming the file, at open and at ingest, nothing
@@ -316,7 +325,14 @@ def test_a_laz_whose_count_is_short_by_less_than_its_last_chunk_is_refused(cat, 
         open_las(path)
     when = __import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC)
     with pytest.raises(PointCloudError, match="cloud.laz.*last LAZ chunk holds more than"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(captured_at=when, crs="EPSG:2994"), workers=2)
+        ingest_mission(
+            cat,
+            site_settings,
+            tmp_path / "m",
+            "demo",
+            IngestOptions(captured_at=when, crs="EPSG:2994"),
+            workers=2,
+        )
     _assert_nothing_written(cat, site_settings)
 
 
@@ -324,7 +340,9 @@ def _chunk_size_patched(src: Path, dest: Path, chunk_size: int, count: int | Non
     """``src`` (LAZ) with its laszip record's chunk size (bytes 12-15 of the record) set, and its header
     count too when given."""
     data = bytearray(src.read_bytes())
-    at = data.index(b"laszip encoded") - 2  # the VLR header: reserved (2), user id (16), record id, length, description (32)
+    at = (
+        data.index(b"laszip encoded") - 2
+    )  # the VLR header: reserved (2), user id (16), record id, length, description (32)
     record = at + 54
     data[record + 12 : record + 16] = struct.pack("<I", chunk_size)
     if count is not None:

@@ -51,7 +51,14 @@ def test_captured_at_ingests_it_and_scene_show_says_so(capsys, home, tmp_path) -
     code, _, err = run_cli(capsys, "ingest", str(mission), "--site", "demo", "--captured-at", "yesterday")
     assert code == 2 and "--captured-at 'yesterday' is not an ISO 8601 time" in err
     code, out, err = run_cli(
-        capsys, "ingest", str(mission), "--site", "demo", "--captured-at", "2024-06-01T10:30:00+02:00", "--json"
+        capsys,
+        "ingest",
+        str(mission),
+        "--site",
+        "demo",
+        "--captured-at",
+        "2024-06-01T10:30:00+02:00",
+        "--json",
     )
     assert code == 0, err
     scene = json.loads(out)["scene_id"]

@@ -155,8 +155,14 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     from siteline.site.fence import fence_area_m2
 
     # no --altitude: chosen from the cloud's density and the fence's area, and the reason recorded
-    altitude, why = auto_altitude(SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings)))
-    assert r.registration.over == "site fence" and survey["altitude_m"] == altitude and survey["altitude_why"] == why
+    altitude, why = auto_altitude(
+        SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings))
+    )
+    assert (
+        r.registration.over == "site fence"
+        and survey["altitude_m"] == altitude
+        and survey["altitude_why"] == why
+    )
     with cat.transaction() as s:
         sc = get_scene(s, r.scene_id)
         assert sc.capture_time.year == 2024  # from the raw folder name

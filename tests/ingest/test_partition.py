@@ -61,7 +61,9 @@ def test_parallel_ranges_scan_and_partition_as_one_process_does(synth_site, tmp_
     (tmp_path / "two").mkdir()
     one = scan_las(las, site, workers=1, runs_into=tmp_path / "one")
     monkeypatch.setattr("siteline.pointpass.partition.PARALLEL_MIN_POINTS", 1)
-    monkeypatch.setattr("siteline.pointpass.partition.RANGE_POINTS", 50_000)  # several ranges over two processes
+    monkeypatch.setattr(
+        "siteline.pointpass.partition.RANGE_POINTS", 50_000
+    )  # several ranges over two processes
     two = scan_las(las, site, workers=2, runs_into=tmp_path / "two")
     for field in ("point_count", "bounds_min", "bounds_max", "class_histogram", "unknown_codes", "outside_fence",
                   "colour", "gps_time_range"):  # fmt: skip

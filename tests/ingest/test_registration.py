@@ -63,7 +63,9 @@ def test_flat_ground_alone_reports_the_free_directions() -> None:
     assert sorted(res.free) == ["x", "y", "yaw"]
     # the free directions are left at zero: only z was moved (0.3 m), nothing claimed across
     assert res.translation_m == pytest.approx(0.3, abs=0.02)
-    text = Alignment(1, res.translation_m, res.rotation_deg, True, res.residual_m, res.residual_xy_m, dict(res.axes)).summary()
+    text = Alignment(
+        1, res.translation_m, res.rotation_deg, True, res.residual_m, res.residual_xy_m, dict(res.axes)
+    ).summary()
     assert "yaw, x, y NOT CHECKED" in text and "m across" not in text
 
 

@@ -95,19 +95,44 @@ def test_a_scene_no_survey_covers_ingests_and_a_release_refuses_naming_it(tmp_pa
     home = tmp_path / "home"
     _run(home, "init")
     _run(home, "site", "create", "patch", "--crs", "EPSG:3857", "--origin", "1423215", "4189097", "67")
-    first = _run(home, "ingest", str(REAL / "laspy_plane.laz"), "--site", "patch", "--crs", "EPSG:3857", "--captured-at", WHEN)
-    assert first.returncode == 0 and "no cameras" in first.stdout and "no survey position" in first.stdout, first.stdout
+    first = _run(
+        home,
+        "ingest",
+        str(REAL / "laspy_plane.laz"),
+        "--site",
+        "patch",
+        "--crs",
+        "EPSG:3857",
+        "--captured-at",
+        WHEN,
+    )
+    assert first.returncode == 0 and "no cameras" in first.stdout and "no survey position" in first.stdout, (
+        first.stdout
+    )
     las = laspy.read(REAL / "laspy_plane.laz")
     x, y = np.asarray(las.x), np.asarray(las.y)
     corner = (x > np.quantile(x, 0.75)) & (y > np.quantile(y, 0.75))
     las.z = np.asarray(las.z) + np.where(corner, 0.5, 0.0)  # a corner raised
     later = tmp_path / "plane_later.laz"
     las.write(later)
-    second = _run(home, "ingest", str(later), "--site", "patch", "--crs", "EPSG:3857", "--captured-at", "2021-02-01T00:00:00Z")
+    second = _run(
+        home,
+        "ingest",
+        str(later),
+        "--site",
+        "patch",
+        "--crs",
+        "EPSG:3857",
+        "--captured-at",
+        "2021-02-01T00:00:00Z",
+    )
     assert second.returncode == 0, second.stderr
     scene = json.loads(_run(home, "scene", "show", "2", "--json").stdout)
     assert scene["cameras"] == 0 and "no survey position" in scene["registration"]["note"]
     r = _run(home, "release", "build", "--site", "patch", "--name", "patch-cd")
     assert r.returncode == 2, r.stderr
-    assert "pair 1 gives no views: its later scene 2 has no cameras" in r.stderr and "no survey position" in r.stderr
+    assert (
+        "pair 1 gives no views: its later scene 2 has no cameras" in r.stderr
+        and "no survey position" in r.stderr
+    )
     assert not (home / "releases" / "patch-cd").exists()

@@ -94,7 +94,15 @@ def _check_round_trip(las: laspy.LasData, xyz_ft: np.ndarray, z_metres_per_unit:
 def _ingest_and_show(capsys, mission: Path, *extra: str) -> tuple[int, dict]:  # noqa: ANN001
     """``siteline ingest`` the mission into site oregon; return its scene id and ``scene show``."""
     code, out, err = run_cli(
-        capsys, "ingest", str(mission), "--site", "oregon", "--captured-at", "2024-06-01T12:00:00Z", *extra, "--json"
+        capsys,
+        "ingest",
+        str(mission),
+        "--site",
+        "oregon",
+        "--captured-at",
+        "2024-06-01T12:00:00Z",
+        *extra,
+        "--json",
     )
     assert code == 0, err
     scene = json.loads(out)["scene_id"]

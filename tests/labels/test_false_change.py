@@ -26,7 +26,9 @@ def test_false_change_at_the_default_multiplier_is_within_the_recorded_expectati
     radius = multiplier * spacing
     ground = np.full(len(a), default_taxonomy().id_of("ground"), np.uint8)
     flags = change_flags(a, ground, b, ground, radius, default_taxonomy().ignored_lut())
-    interior = np.all((a[:, :2] > 1.0) & (a[:, :2] < side - 1.0), axis=1)  # the border has no neighbours beyond
+    interior = np.all(
+        (a[:, :2] > 1.0) & (a[:, :2] < side - 1.0), axis=1
+    )  # the border has no neighbours beyond
     measured = float((flags[interior] == CHANGED).mean())
     expected = expected_false_change(multiplier)["per_direction"]
     assert expected / 1.5 < measured < expected * 1.5, (measured, expected)

@@ -46,7 +46,9 @@ def test_change_flags_equal_brute_force_on_small_scenes() -> None:
     bc[:50] = 4  # the same place, another class
     for r in (0.05, 0.3):
         for backend in ("pykdtree", "ckdtree"):
-            assert np.array_equal(change_flags(a, ac, b, bc, r, IGN, Matching(backend)), _brute(a, ac, b, bc, r))
+            assert np.array_equal(
+                change_flags(a, ac, b, bc, r, IGN, Matching(backend)), _brute(a, ac, b, bc, r)
+            )
 
 
 def test_edge_cases() -> None:
@@ -203,7 +205,12 @@ def test_labelling_holds_a_few_whole_tiles_whatever_the_site(tmp_path, synth_sit
         assert all(i >= ij[0] - 1 for i, _ in dec._strips)
         x0, y0 = ij[0] * size, ij[1] * size
         p, r = everything.xyz_m, 0.5 + _STRIP_MARGIN_M
-        inside = (p[:, 0] >= x0 - r) & (p[:, 0] <= x0 + size + r) & (p[:, 1] >= y0 - r) & (p[:, 1] <= y0 + size + r)
+        inside = (
+            (p[:, 0] >= x0 - r)
+            & (p[:, 0] <= x0 + size + r)
+            & (p[:, 1] >= y0 - r)
+            & (p[:, 1] <= y0 + size + r)
+        )
         # the strips take a neighbour's points within r of the shared edge: the widened cell, up to
         # points on the cell's own border lines that belong to the next tile
         assert abs(len(xyz) - int(inside.sum())) <= max(10, int(0.001 * inside.sum()))
@@ -239,4 +246,6 @@ def test_slabs_take_every_point_once_in_bounded_runs_along_x() -> None:
     assert np.array_equal(np.sort(taken), np.arange(len(x)))
     assert len(slabs) >= 10 and max(len(s) for s in slabs) <= 5_000 + 3_000 + 700
     assert all(x[a].max() <= x[b].min() for a, b in zip(slabs[:-1], slabs[1:], strict=True))
-    assert [len(s) for s in slabs_of(np.full(10, 3.0, np.float32), 4)] == [10]  # one value: one slab, none empty
+    assert [len(s) for s in slabs_of(np.full(10, 3.0, np.float32), 4)] == [
+        10
+    ]  # one value: one slab, none empty

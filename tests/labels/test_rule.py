@@ -51,7 +51,9 @@ def test_geometry_rule_flags_only_what_moved() -> None:
     b_cls = np.full(4000, TAX.id_of("ground"), np.uint8)
     ignored = TAX.ignored_lut()
     semantic, geometry = (
-        change_flags(xyz, a_cls, b_xyz, b_cls, 0.5, ignored, geometric=ChangeRulePlan(rule).geometric_lut(TAX))
+        change_flags(
+            xyz, a_cls, b_xyz, b_cls, 0.5, ignored, geometric=ChangeRulePlan(rule).geometric_lut(TAX)
+        )
         for rule in ("semantic", "geometry")
     )
     assert (semantic[xyz[:, 0] < 10] == 1).all()

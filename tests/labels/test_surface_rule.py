@@ -26,7 +26,9 @@ GROUND = TAX.id_of("ground")
 CRANE = TAX.id_of("crane")
 
 
-def plane(rng: np.random.Generator, n: int, size: float = 20.0, z: float = 0.0, noise: float = 0.02) -> np.ndarray:
+def plane(
+    rng: np.random.Generator, n: int, size: float = 20.0, z: float = 0.0, noise: float = 0.02
+) -> np.ndarray:
     xy = rng.uniform(0, size, (n, 2))
     return np.c_[xy, z + rng.normal(0, noise, n)]
 
@@ -36,7 +38,9 @@ def beam(rng: np.random.Generator, n: int, x0: float, y0: float, length: float, 
     return np.c_[rng.uniform(x0, x0 + length, n), rng.uniform(y0, y0 + 0.5, n), np.full(n, z)]
 
 
-def flags(a: np.ndarray, ac: np.ndarray, b: np.ndarray, bc: np.ndarray, r: float, surface: bool) -> np.ndarray:
+def flags(
+    a: np.ndarray, ac: np.ndarray, b: np.ndarray, bc: np.ndarray, r: float, surface: bool
+) -> np.ndarray:
     test = SurfaceTest(search_m=2 * r) if surface else None
     return change_flags(a, ac, b, bc, r, IGN, Matching(surface=test))
 
@@ -88,9 +92,14 @@ def test_a_point_the_other_scan_could_not_see_is_not_change():
     a_ground = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, -3.0)]
     covered, hidden = hidden_from_other(np.concatenate([a_beam, a_ground]), under, test)
     assert covered.all() and not hidden.any()
-    b_flags = flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, surface=True)
+    b_flags = flags(
+        under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, surface=True
+    )
     assert (b_flags == UNCHANGED).all()
-    assert (flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, False) == CHANGED).all()
+    assert (
+        flags(under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, False)
+        == CHANGED
+    ).all()
 
 
 def test_regions_link_touching_cells_and_count_points():
@@ -165,7 +174,10 @@ def test_a_point_where_the_other_scene_has_nothing_at_all_is_ignored():
     assert (fa[beyond] == IGNORED).all()
     assert (fa[a[:, 0] < 4.5] == UNCHANGED).all()
     # the nearest rule alone calls it change
-    assert (flags(a, np.full(4000, GROUND, np.uint8), b, np.full(2000, GROUND, np.uint8), 0.2, False)[beyond] == CHANGED).all()
+    assert (
+        flags(a, np.full(4000, GROUND, np.uint8), b, np.full(2000, GROUND, np.uint8), 0.2, False)[beyond]
+        == CHANGED
+    ).all()
 
 
 def test_ground_beside_a_new_worker_is_not_changed_by_its_nearest_point():

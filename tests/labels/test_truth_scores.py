@@ -24,7 +24,10 @@ def test_surface_labels_beat_the_nearest_rule_against_analytic_truth(tmp_path: P
         base = pipeline.release_parameters(cat, SITE).pair
         assert (base.label_rule, base.min_region_points) == ("surface", 8)
         scores = {}
-        for name, params in (("default", base), ("nearest", replace(base, label_rule="nearest", min_region_points=1))):
+        for name, params in (
+            ("default", base),
+            ("nearest", replace(base, label_rule="nearest", min_region_points=1)),
+        ):
             out = pipeline.process_pairs(cat, settings, [pid], params)[pid]
             scores[name] = score_pair(settings.store, out.root, site_dir, (0, 1))
     finally:
@@ -53,6 +56,10 @@ def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
         "expected_false_change": {"multiplier": 2.5, "per_direction": 0.0131, "union": 0.026},
     }}}  # fmt: skip
     [line] = _radius_lines([pair], 1.0, {"label_rule": "surface", "min_region_points": 8, "trim_edges": True})
-    assert "surface rule" in line and "regions under 8 points" in line and "measured against analytic truth" in line
+    assert (
+        "surface rule" in line
+        and "regions under 8 points" in line
+        and "measured against analytic truth" in line
+    )
     [old] = _radius_lines([pair], 1.0, {})
     assert "2^(-k^2) per direction" in old and "nearest" not in old.split(";")[0]

@@ -143,7 +143,9 @@ def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
         import_labels(cat, settings, 2, tmp_path / "s2_asprs.las")  # ASPRS codes read as site ids
     from siteline.labelsets.mapping import read_taxonomy_map
 
-    res = import_labels(cat, settings, 2, tmp_path / "s2_asprs.las", ImportOptions(read_taxonomy_map(tmp_path / "map.json")))
+    res = import_labels(
+        cat, settings, 2, tmp_path / "s2_asprs.las", ImportOptions(read_taxonomy_map(tmp_path / "map.json"))
+    )
     assert res.changed == int(edit.sum()) and res.changes == {"ground->building": int(edit.sum())}
 
 

@@ -75,7 +75,9 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     monkeypatch.setenv("SITELINE_RELEASE_NAME", "flowrel")
     announced = []
     real_emit = pipeline.emit_event
-    monkeypatch.setattr(pipeline, "emit_event", lambda *a, **k: announced.append(k["payload"]) or real_emit(*a, **k))
+    monkeypatch.setattr(
+        pipeline, "emit_event", lambda *a, **k: announced.append(k["payload"]) or real_emit(*a, **k)
+    )
     scenes = [pipeline.ingest_mission_flow(str(m), "demo") for m in _missions(small_site)]
     assert scenes == [1, 2]
     assert announced == [{"scene_id": 2, "site": "demo", "pairs": [1]}]  # the first scene has no pair yet
@@ -90,7 +92,9 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     shutil.copytree(_missions(small_site)[1], again)
     assert pipeline.ingest_mission_flow(str(again), "demo") == 2 and len(announced) == 1
     pipeline.process_scene_pairs_flow(scenes[1], SMALL)
-    assert sorted(p.name for p in (settings.home / "releases" / "flowrel").iterdir() if not p.name.startswith(".")) == ["1.0.0"]
+    assert sorted(
+        p.name for p in (settings.home / "releases" / "flowrel").iterdir() if not p.name.startswith(".")
+    ) == ["1.0.0"]
 
     async def artifacts():
         async with get_client() as client:
@@ -100,12 +104,17 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     keys = set(found)
     assert any(k.startswith("mission-demo-") for k in keys) and any(k.startswith("scene-demo-") for k in keys)
     assert {"pair-demo-1", "samples-demo-pair-1", "release-demo-flowrel", "montage-demo-flowrel"} <= keys
-    assert any(k.startswith("progress-pair-1-") for k in keys) and any(k.startswith("progress-release-flowrel-") for k in keys)
+    assert any(k.startswith("progress-pair-1-") for k in keys) and any(
+        k.startswith("progress-release-flowrel-") for k in keys
+    )
     assert any(k.startswith("note-demo-release-flowrel") for k in keys)  # "up to date", said in the UI
     # the images the UI loads are served by `siteline previews serve` at SITELINE_PREVIEW_URL
     assert found["samples-demo-pair-1"].data.startswith("http://127.0.0.1:4201/previews/pairs/pair-1/")
     release_md = found["release-demo-flowrel"].data
-    assert "![montage of flowrel 1.0.0" in release_md and "http://127.0.0.1:4201/releases/flowrel/1.0.0/montage.png" in release_md
+    assert (
+        "![montage of flowrel 1.0.0" in release_md
+        and "http://127.0.0.1:4201/releases/flowrel/1.0.0/montage.png" in release_md
+    )
     assert "why this version | first version" in release_md and "valid fraction | mean" in release_md
     from siteline.catalog import open_catalog
     from siteline.catalog.stages import stage_runs
@@ -298,7 +307,9 @@ def test_progress_words_name_their_unit() -> None:
     assert counted("renders", 3, None) == "3 views"
 
 
-def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, tmp_path, monkeypatch) -> None:
+def test_an_expected_failure_is_logged_without_a_traceback(
+    harness, small_site, tmp_path, monkeypatch
+) -> None:
     """A SitelineError (here a tile store the scene's LAS is missing from) or a full disk fails the
     run with its message in the run logs and no traceback; a programming error keeps its traceback."""
     import errno
@@ -324,7 +335,11 @@ def test_an_expected_failure_is_logged_without_a_traceback(harness, small_site, 
     logging.getLogger("prefect").addHandler(handler)
     try:
         full = OSError(errno.ENOSPC, "No space left on device")
-        for exc in (TileError("scene 1: point cloud cloud.las is missing from the store."), full, KeyError("bug")):
+        for exc in (
+            TileError("scene 1: point cloud cloud.las is missing from the store."),
+            full,
+            KeyError("bug"),
+        ):
             records.clear()
 
             def fail(*a, exc=exc, **k):
@@ -392,7 +407,15 @@ def test_a_crashed_run_says_why_on_its_own_page(harness) -> None:
         assert "Why scene-9-labels-v2 stopped" in text and why in text and "rescheduled (attempt" in text
         assert "42 % done (pair 1: renders 3 of 6)" in text
         progress = next(a for a in arts if a.id == bar.id)
-        assert progress.description.startswith("stopped at 42 %: rescheduled after a crash: "), progress.description
+        assert progress.description.startswith("stopped at 42 %: rescheduled after a crash: "), (
+            progress.description
+        )
         # nothing new: nothing written again, also by a reporter that starts afresh
         assert reporter.report(client, since, done) == [] and reporter.report(client, since, set()) == []
-        assert not [a for a in client.read_artifacts(artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[other.id]))) if a.key and a.key.startswith("why-")]
+        assert not [
+            a
+            for a in client.read_artifacts(
+                artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[other.id]))
+            )
+            if a.key and a.key.startswith("why-")
+        ]

@@ -80,7 +80,11 @@ def test_state_written_before_fingerprints_is_taken_as_reported(tmp_path) -> Non
 def test_upload_event_schema(tmp_path) -> None:
     ev = upload_event(tmp_path / "m1", "demo", "abc")
     assert ev["event"] == UPLOADED and ev["resource"]["prefect.resource.id"] == "siteline.mission.m1"
-    assert ev["payload"] == {"mission_dir": str((tmp_path / "m1").resolve()), "site": "demo", "fingerprint": "abc"}
+    assert ev["payload"] == {
+        "mission_dir": str((tmp_path / "m1").resolve()),
+        "site": "demo",
+        "fingerprint": "abc",
+    }
     assert upload_event(tmp_path / "m1", "demo", "abc")["id"] == ev["id"]  # the same content, the same event
     assert upload_event(tmp_path / "m1", "demo", "abd")["id"] != ev["id"]
     json.dumps(ev)
@@ -110,4 +114,8 @@ def test_labels_imported_event_matches_the_deployment_trigger() -> None:
         "scene_id": "{{ event.payload.scene_id }}",
         "reason": "labels v{{ event.payload.version }}",  # the run says why it ran (issue 24)
     }
-    assert ev["payload"]["scene_id"] == 3 and ev["payload"]["version"] == 2 and ev["resource"]["siteline.site.spec"] == "demo"
+    assert (
+        ev["payload"]["scene_id"] == 3
+        and ev["payload"]["version"] == 2
+        and ev["resource"]["siteline.site.spec"] == "demo"
+    )

@@ -27,7 +27,9 @@ def test_low_valid_views_are_replaced(scenes, monkeypatch) -> None:
     # the probes judge min_valid before any render; with them passing every view, the rendered check
     # is what replaces a view (a probe's valid share is an upper bound, so renders can still fall short)
     judged = generate.probe
-    monkeypatch.setattr(generate, "probe", lambda view, source, params: judged(view, source, replace(params, min_valid=0.0)))
+    monkeypatch.setattr(
+        generate, "probe", lambda view, source, params: judged(view, source, replace(params, min_valid=0.0))
+    )
     strict = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=threshold))
     monkeypatch.undo()
     assert strict.root != loose.root

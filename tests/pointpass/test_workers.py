@@ -153,11 +153,15 @@ def test_workers_whose_parent_dies_before_they_start_exit_too(tmp_path) -> None:
 
     (tmp_path / "sitecustomize.py").write_text(SLOW_START)
     env = os.environ | {"PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen([sys.executable, "-c", PARENT_OF_SLOW_WORKERS], stdout=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", PARENT_OF_SLOW_WORKERS], stdout=subprocess.PIPE, text=True, env=env
+    )
     try:
         parent = int(proc.stdout.readline())
         deadline = time.monotonic() + 10.0
-        while len(_children(parent)) < 3 and time.monotonic() < deadline:  # two workers and the resource tracker
+        while (
+            len(_children(parent)) < 3 and time.monotonic() < deadline
+        ):  # two workers and the resource tracker
             time.sleep(0.1)
         children = _children(parent)
     finally:

@@ -62,18 +62,38 @@ def test_the_release_artifact_says_why_where_and_how_big() -> None:
     item = {"id": "p1_v0", "split": "train", "pair": 1, "view": 0, "coverage": 0.9, "valid": 0.6, "change_ratio": 0.1,
             "size_px": [515, 386], "padded_px": [544, 416]}  # fmt: skip
     doc = {
-        "format": "siteline-release/2", "name": "r", "version": "2.0.0", "created": "2026-11-28", "code_version": "0",
-        "splits": {"train": [1], "val": [], "test": [1]}, "files": [],
+        "format": "siteline-release/2",
+        "name": "r",
+        "version": "2.0.0",
+        "created": "2026-11-28",
+        "code_version": "0",
+        "splits": {"train": [1], "val": [], "test": [1]},
+        "files": [],
         "items": [item, item | {"id": "p1_v1", "view": 1, "split": "test", "valid": 0.3}],
         "lineage": {
-            "parameters": {"scale": 0.78, "point_size_px": 3, "views": 24, "min_coverage": 0.5, "min_valid": 0.25},
+            "parameters": {
+                "scale": 0.78,
+                "point_size_px": 3,
+                "views": 24,
+                "min_coverage": 0.5,
+                "min_valid": 0.25,
+            },
             "release_params": {"derived": {"scale": "auto: 512 px long side from the smallest camera"}},
             "pairs": [{"id": 1, "t1": 1, "t2": 2, "radius_m": 0.38, "label_sets": {"t1": 2, "t2": 1}}],
-            "scenes": [{"id": 1, "capture_time": "2024-11-27", "label_set_version": 2, "label_set_source": "import x.las"}],
+            "scenes": [
+                {
+                    "id": 1,
+                    "capture_time": "2024-11-27",
+                    "label_set_version": 2,
+                    "label_set_source": "import x.las",
+                }
+            ],
         },
         "stats": {"class_balance": {"train": {"changed": 10, "unchanged": 20, "ignore": 5}}},
     }
-    info = ReleaseInfo("r", "2.0.0", "published", "/h/releases/r/2.0.0", 2, "ab" * 32, {}, "scene 1 label set v1 -> v2")
+    info = ReleaseInfo(
+        "r", "2.0.0", "published", "/h/releases/r/2.0.0", 2, "ab" * 32, {}, "scene 1 label set v1 -> v2"
+    )
     md = release_markdown(info, Manifest.from_dict(doc), "http://h:4201/releases/r/2.0.0/montage.png")
     assert "![montage of r 2.0.0" in md and "(http://h:4201/releases/r/2.0.0/montage.png)" in md
     assert "| why this version | scene 1 label set v1 -> v2 |" in md
@@ -81,8 +101,13 @@ def test_the_release_artifact_says_why_where_and_how_big() -> None:
     assert "| valid fraction | mean 0.45 (min 0.30, max 0.60) |" in md
     assert "| 1 | 1 -> 2 | v2, v1 | 2 | 0.380 |" in md and "| 1 | 2024-11-27 | v2 | import x.las |" in md
     # with the preview server's address: links to the release browser and to each pair in 3D
-    md = release_markdown(info, Manifest.from_dict(doc), "http://h:4201/releases/r/2.0.0/montage.png", "http://h:4201")
-    assert "[browse every item](http://h:4201/browse/r/2.0.0/)" in md and "[pair 1](http://h:4201/3d/r/2.0.0/1/)" in md
+    md = release_markdown(
+        info, Manifest.from_dict(doc), "http://h:4201/releases/r/2.0.0/montage.png", "http://h:4201"
+    )
+    assert (
+        "[browse every item](http://h:4201/browse/r/2.0.0/)" in md
+        and "[pair 1](http://h:4201/3d/r/2.0.0/1/)" in md
+    )
 
 
 def test_a_stopped_run_says_why_in_words() -> None:
@@ -96,8 +121,14 @@ def test_a_stopped_run_says_why_in_words() -> None:
                           "40 % done (pair 1: renders 3 of 6)", 3)  # fmt: skip
     assert md.startswith("# Why scene-1-labels-v3 stopped") and f"**{why}**" in md and "went down" in md
     assert "rescheduled (attempt 2 of 3)" in md and "Where it was: 40 % done (pair 1: renders 3 of 6)." in md
-    md = stopped_markdown("r", [RunEvent(at, "Crashed", "Flow run infrastructure exited with status -9", 3)], None, 3)
-    assert "crashed 3 times, the most the service retries" in md and "rescheduled" not in md and "went down" not in md
+    md = stopped_markdown(
+        "r", [RunEvent(at, "Crashed", "Flow run infrastructure exited with status -9", 3)], None, 3
+    )
+    assert (
+        "crashed 3 times, the most the service retries" in md
+        and "rescheduled" not in md
+        and "went down" not in md
+    )
 
 
 def _raw(base: str, request: bytes, timeout: float = 5.0) -> bytes:
@@ -118,7 +149,10 @@ def test_malformed_paths_and_numbers_get_400_never_500_or_silence(served) -> Non
     for path in (b"/releases/r/1.0.0/mon%00tage.png", b"/static/" + b"a" * 300 + b".js",
                  b"/3d/r/1.0.0/" + b"9" * 5000 + b"/plan.json", b"/" + b"x/" * 1500):  # fmt: skip
         answer = _raw(base, b"GET " + path + b" HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
-        assert answer.startswith(b"HTTP/1.0 400") or answer.startswith(b"HTTP/1.1 400"), (path[:40], answer[:80])
+        assert answer.startswith(b"HTTP/1.0 400") or answer.startswith(b"HTTP/1.1 400"), (
+            path[:40],
+            answer[:80],
+        )
         assert b"Traceback" not in answer and b"Error" not in answer.split(b"\r\n\r\n", 1)[-1]
 
 

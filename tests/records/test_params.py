@@ -38,7 +38,7 @@ def test_pair_params_are_composed_of_the_stages_specs() -> None:
         {"splat": "round"},
         {"fill_px": 20},
         {"view_params": {"clearance": 2.0}},
-    ],  # fmt: skip
+    ],
 )
 def test_pair_params_refuse_what_a_component_refuses(bad) -> None:
     with pytest.raises(PairError, match="pair parameters|view_params|view parameters"):

@@ -41,7 +41,11 @@ def test_viewer_reads_every_point_with_the_labels_the_release_used(built) -> Non
         parts = [decode_chunk(plan.chunk(side, k)) for k in range(len(plan.chunks[side - 1]))]
         change = np.concatenate([p["change"] for p in parts])
         assert len(change) == cloud.side(side).point_count
-        got = {"unchanged": int((change == 0).sum()), "changed": int((change == 1).sum()), "ignored": int((change == 255).sum())}
+        got = {
+            "unchanged": int((change == 0).sum()),
+            "changed": int((change == 1).sum()),
+            "ignored": int((change == 255).sum()),
+        }
         assert got == record[key]
         # positions come back to the tiles' site-local metres within float32 of the centre
         xyz = np.concatenate([p["xyz"] for p in parts]).astype(np.float64) + plan.centre
@@ -91,7 +95,12 @@ def server(built) -> Iterator[str]:
         with cat.transaction() as s:
             return release_location(s, name, version)
 
-    srv = make_server(settings.home, "127.0.0.1", 0, ReleaseAccess(locate, lambda doc, p: pipeline.pair_cloud(cat, settings, doc, p)))
+    srv = make_server(
+        settings.home,
+        "127.0.0.1",
+        0,
+        ReleaseAccess(locate, lambda doc, p: pipeline.pair_cloud(cat, settings, doc, p)),
+    )
     threading.Thread(target=srv.serve_forever, daemon=True).start()
     yield f"http://127.0.0.1:{srv.server_address[1]}"
     srv.shutdown()
@@ -162,9 +171,13 @@ def test_release_browse_writes_a_page_beside_the_release(built, tmp_path) -> Non
     page = (tmp_path / "page.html").read_text()
     assert "file://" in r.stdout and all(it["id"] in page for it in read_manifest(root).doc["items"])
     # images addressed relative to the page, so it opens from the disk
-    assert json.loads(page.split('type="application/json">')[1].split("</script>")[0])["images"].startswith("../")
+    assert json.loads(page.split('type="application/json">')[1].split("</script>")[0])["images"].startswith(
+        "../"
+    )
     r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(root / "x.html"))
-    assert r.returncode == 2 and "inside the release" in r.stderr + r.stdout and not (root / "x.html").exists()
+    assert (
+        r.returncode == 2 and "inside the release" in r.stderr + r.stdout and not (root / "x.html").exists()
+    )
     r = run_exe(settings.home, "release", "browse", "rel", "7.7.7")
     assert r.returncode == 2 and "no release rel 7.7.7" in r.stderr + r.stdout
     assert sorted(p.name for p in root.parent.iterdir()) == before
@@ -211,7 +224,12 @@ def chromium():
     with sync_playwright() as p:
         browser = p.chromium.launch(
             executable_path=str(chromium),
-            args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"],
+            args=[
+                "--no-sandbox",
+                "--use-angle=swiftshader",
+                "--enable-unsafe-swiftshader",
+                "--ignore-gpu-blocklist",
+            ],
         )
         yield browser
         browser.close()
@@ -291,7 +309,16 @@ def test_a_copied_address_reopens_the_same_view(chromium, tmp_path) -> None:
     page.wait_for_timeout(300)  # the slider's write waits for it to rest
     seen = _view(page)
     href = page.evaluate("location.href")
-    for key in ("item=", "mode=side", "mask=A", "opacity=0.3", "ignore=0", "split=val", "sort=-change", "chg=10-100"):
+    for key in (
+        "item=",
+        "mode=side",
+        "mask=A",
+        "opacity=0.3",
+        "ignore=0",
+        "split=val",
+        "sort=-change",
+        "chg=10-100",
+    ):
         assert key in href, (key, href)
     again = _open(chromium, href, (1400, 800))
     assert _view(again) == seen and seen["open"] and seen["d-mode"] == "side"
@@ -300,7 +327,12 @@ def test_a_copied_address_reopens_the_same_view(chromium, tmp_path) -> None:
     again.evaluate(f"location.hash = '#item={other}&mode=swipe&swipe=30'")
     again.wait_for_function(f"document.getElementById('d-title').textContent.startsWith('{other}')")
     now = _view(again)
-    assert now["d-mode"] == "swipe" and now["d-swipe"] == "30" and now["f-split"] == "" and now["d-mask"] == "both"
+    assert (
+        now["d-mode"] == "swipe"
+        and now["d-swipe"] == "30"
+        and now["f-split"] == ""
+        and now["d-mask"] == "both"
+    )
     assert now["count"].startswith("30 of 30")
     again.evaluate("location.hash = ''")
     again.wait_for_function("document.getElementById('detail').hidden")
@@ -312,7 +344,9 @@ def test_grid_fills_the_width_and_mask_thumbnails_use_the_legend_colours(chromiu
     page_path = write_browser(root)
     page = _open(chromium, page_path.as_uri() + "#thumb=label", (1400, 800))
     page.wait_for_function("[...document.images].every(i => i.complete)")
-    right = page.evaluate("Math.max(...[...document.querySelectorAll('.cell')].map(c => c.getBoundingClientRect().right))")
+    right = page.evaluate(
+        "Math.max(...[...document.querySelectorAll('.cell')].map(c => c.getBoundingClientRect().right))"
+    )
     width = page.evaluate("document.getElementById('grid-scroll').clientWidth")
     assert width - right < 12, (right, width)  # at 1400 px five columns fill the row (200 px were left)
     px = _pixels(page, ".cell .mthumb >> nth=0")
@@ -322,20 +356,22 @@ def test_grid_fills_the_width_and_mask_thumbnails_use_the_legend_colours(chromiu
     assert _near(px[h // 2, x(0.25)], (255, 26, 26), 60)  # changed: red, as the legend says
     assert _near(px[h // 2, x(0.75)], (0, 0, 0), 30)  # unchanged: black
     # ignore (the bottom quarter of the right half) is hatched: pale blue stripes with black between
-    ign = px[int(h * 0.8):h - 3, x(0.55):x(0.97)]
+    ign = px[int(h * 0.8) : h - 3, x(0.55) : x(0.97)]
     pale = (ign[..., 2] > 120).mean()
     assert 0.15 < pale < 0.7, pale  # stripes, not a solid fill
-    assert (px[int(h * 0.8):h - 3, x(0.25)][:, 0] > 200).all()  # changed is solid
+    assert (px[int(h * 0.8) : h - 3, x(0.25)][:, 0] > 200).all()  # changed is solid
 
 
 def test_ignore_is_hatched_over_the_image(chromium, tmp_path) -> None:
     root = tmp_path / "releases" / "site" / "1.0.0"
     doc = _fake_release(root, 3, (200, 160))
     page_path = write_browser(root)
-    page = _open(chromium, f"{page_path.as_uri()}#item={doc['items'][0]['id']}&mode=side&mask=B&opacity=1", (1400, 800))
+    page = _open(
+        chromium, f"{page_path.as_uri()}#item={doc['items'][0]['id']}&mode=side&mask=B&opacity=1", (1400, 800)
+    )
     px = _pixels(page, ".stage >> nth=1")
     h, w = px.shape[:2]
-    ign = px[int(h * 0.8):h - 2, int(w * 0.55):w - 2]
+    ign = px[int(h * 0.8) : h - 2, int(w * 0.55) : w - 2]
     plain = np.abs(ign - np.asarray(SOLID["B"])).max(axis=2) <= 40
     assert 0.3 < plain.mean() < 0.85, plain.mean()  # B's own yellow shows between the stripes
 
@@ -355,7 +391,11 @@ def test_browser_of_5000_items_stays_light(chromium, tmp_path) -> None:
     page.wait_for_function(f"!!document.querySelector('img[alt=\"{last}\"]')")
     scrolled = time.perf_counter() - start
     page.select_option("#f-split", "val")
-    assert page.locator("#count").inner_text().startswith(f"{sum(it['split'] == 'val' for it in doc['items'])} of 5000")
+    assert (
+        page.locator("#count")
+        .inner_text()
+        .startswith(f"{sum(it['split'] == 'val' for it in doc['items'])} of 5000")
+    )
     print(f"\n5,000 items: page ready in {loaded:.2f} s ({page.evaluate('document.body.dataset.ready')} ms of script), "
           f"{cells} cells in the DOM, scrolled to the last row in {scrolled:.2f} s")  # fmt: skip
 
@@ -393,7 +433,9 @@ def test_clicking_a_camera_opens_its_item_in_the_browser(chromium, server) -> No
     panel = page.evaluate("document.getElementById('panel').getBoundingClientRect().right")
     # a camera in sight, not under the panel
     spots = {c["item"]: page.evaluate(f"window.siteline3d.cameraAt('{c['item']}')") for c in plan["cameras"]}
-    item, at = next((i, p) for i, p in spots.items() if p and panel + 10 < p["x"] < 1090 and 10 < p["y"] < 690)
+    item, at = next(
+        (i, p) for i, p in spots.items() if p and panel + 10 < p["x"] < 1090 and 10 < p["y"] < 690
+    )
     with page.context.expect_page() as opened:
         page.mouse.click(at["x"], at["y"])
     shown = opened.value

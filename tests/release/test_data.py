@@ -109,5 +109,8 @@ def test_baseline_loss_decreases_and_evaluation_cites_the_manifest(built, tmp_pa
     # the floor beside it: every pixel predicted unchanged, scored on the same truth
     masks = [ChangeDetectionDataset(pub.root, "train")[i]["mask"][0] for i in range(len(ds))]
     floor = scores(sum(confusion(torch.zeros_like(m), m) for m in masks))
-    assert result["trivial_scores"]["miou"] == pytest.approx(floor.miou) and result["trivial_scores"]["f1"] == 0.0
+    assert (
+        result["trivial_scores"]["miou"] == pytest.approx(floor.miou)
+        and result["trivial_scores"]["f1"] == 0.0
+    )
     assert result["trivial_scores"]["predicts"] == "all unchanged"

@@ -67,11 +67,17 @@ def _torchgeo_levircdplus(out: Path, split: str):  # LEVIRCDPlus._load_files: tr
     ]
 
 
-def _changemamba(out: Path, split: str):  # ChangeDetectionDataset: T1/T2/GT + name list, imageio float32 / 255
+def _changemamba(
+    out: Path, split: str
+):  # ChangeDetectionDataset: T1/T2/GT + name list, imageio float32 / 255
     names = [line.strip() for line in (out / f"{split}_list.txt").read_text().splitlines()]
     base = out / split
     return [
-        (base / "T1" / n, base / "T2" / n, (np.array(_png(base / "GT" / n), np.float32) / 255).astype(np.int64))
+        (
+            base / "T1" / n,
+            base / "T2" / n,
+            (np.array(_png(base / "GT" / n), np.float32) / 255).astype(np.int64),
+        )
         for n in names
     ]
 
@@ -84,7 +90,9 @@ def _changeformer(out: Path, split: str):  # CDDataset: list/<split>.txt, label_
     ]
 
 
-def _torchange(out: Path, split: str):  # LEVIRCD: A/*.png; B by '/A/' -> '/B/', label by '/A' -> '/label'; > 0
+def _torchange(
+    out: Path, split: str
+):  # LEVIRCD: A/*.png; B by '/A/' -> '/B/', label by '/A' -> '/label'; > 0
     a = sorted(glob.glob(os.path.join(out, split, "A", "*.png")))
     return [(p, p.replace("/A/", "/B/"), (_png(p.replace("/A", "/label")) > 0).astype(int)) for p in a]
 

@@ -43,7 +43,9 @@ def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
     result = export_release(root, "hf", out, license=hub.HubLicense("cc-by-4.0"))
     # a cache of its own: the machine's HF cache served another build's rows for the same folder name
     ds = datasets.load_dataset(str(out), cache_dir=str(tmp_path / "hf-cache"))
-    want = {hub.HUB_SPLITS[s]: sorted(it["id"] for it in doc["items"] if it["split"] == s) for s in hub.HUB_SPLITS}
+    want = {
+        hub.HUB_SPLITS[s]: sorted(it["id"] for it in doc["items"] if it["split"] == s) for s in hub.HUB_SPLITS
+    }
     assert {s: sorted(ds[s]["id"]) for s in ds} == {s: ids for s, ids in want.items() if ids}
     assert result.splits == {s: len(ids) for s, ids in want.items() if ids}
     items = {it["id"]: it for it in doc["items"]}
@@ -63,8 +65,13 @@ def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
             assert (row["split"], row["pair"], row["view"]) == (it["split"], it["pair"], it["view"])
             assert row["valid"] == it["valid"] and (row["width"], row["height"]) == tuple(it["size_px"])
             cam = it["camera"]
-            assert row["camera"]["fx"] == cam["fx"] and row["camera"]["rotation"] == cam["cam_from_world"]["rotation"]
-            assert row["ignore_causes"] == {c: pytest.approx(it["ignore"].get(c, 0.0)) for c in row["ignore_causes"]}
+            assert (
+                row["camera"]["fx"] == cam["fx"]
+                and row["camera"]["rotation"] == cam["cam_from_world"]["rotation"]
+            )
+            assert row["ignore_causes"] == {
+                c: pytest.approx(it["ignore"].get(c, 0.0)) for c in row["ignore_causes"]
+            }
     header = _card(out)
     assert header["license"] == "cc-by-4.0" and header["task_categories"] == ["image-segmentation"]
     assert {s["name"]: s["num_examples"] for s in header["dataset_info"]["splits"]} == result.splits
@@ -82,7 +89,10 @@ def test_shards_are_cut_by_size_and_still_load(built, tmp_path, monkeypatch) -> 
     export_release(root, "hf", out, license=hub.HubLicense("mit"))
     shards = sorted((out / "data").glob("train-*.parquet"))
     assert len(shards) == n_train and shards[-1].name == f"train-{n_train - 1:05d}-of-{n_train:05d}.parquet"
-    assert datasets.load_dataset(str(out), split="train", cache_dir=str(tmp_path / "hf-cache")).num_rows == n_train
+    assert (
+        datasets.load_dataset(str(out), split="train", cache_dir=str(tmp_path / "hf-cache")).num_rows
+        == n_train
+    )
 
 
 def test_the_executable_exports_and_refuses_a_used_folder(built, tmp_path) -> None:
@@ -91,11 +101,24 @@ def test_the_executable_exports_and_refuses_a_used_folder(built, tmp_path) -> No
     out = tmp_path / "hf"
     argv = [EXE, "release", "export", "rel", pub.version, "--profile", "hf", "--out", str(out)]
     # a card needs a licence: none, or other without its name and link, is refused in one line
-    for extra in ([], ["--license", "other"], ["--license", "other", "--license-name", "x", "--license-link", "ftp://x"]):
+    for extra in (
+        [],
+        ["--license", "other"],
+        ["--license", "other", "--license-name", "x", "--license-link", "ftp://x"],
+    ):
         refused = subprocess.run(argv + extra, env=env, capture_output=True, text=True, timeout=300)
-        assert refused.returncode == 2 and "licen" in refused.stderr and "Traceback" not in refused.stderr, refused.stderr
+        assert refused.returncode == 2 and "licen" in refused.stderr and "Traceback" not in refused.stderr, (
+            refused.stderr
+        )
         assert not out.exists()
-    argv += ["--license", "other", "--license-name", "Site Survey Data Licence 1.0", "--license-link", "https://example.org/sdl"]
+    argv += [
+        "--license",
+        "other",
+        "--license-name",
+        "Site Survey Data Licence 1.0",
+        "--license-link",
+        "https://example.org/sdl",
+    ]
     done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "0 unchanged, 1 changed, 255 ignore" in done.stdout and "load_dataset" in done.stdout
@@ -111,16 +134,33 @@ def test_the_card_is_written_for_the_export_and_its_snippet_runs(built, tmp_path
     layout; and the "Use" snippet runs on the export as written (the folder put in)."""
     _, _, pub = built
     out = tmp_path / "hf"
-    export_release(Path(pub.root), "hf", out, license=hub.HubLicense("other", "Site Survey Data Licence 1.0", "https://example.org/sdl"))
+    export_release(
+        Path(pub.root),
+        "hf",
+        out,
+        license=hub.HubLicense("other", "Site Survey Data Licence 1.0", "https://example.org/sdl"),
+    )
     text = (out / "README.md").read_text()
     header = _card(out)
     assert header["license"] == "other" and header["license_name"] == "Site Survey Data Licence 1.0"
     assert header["license_link"] == "https://example.org/sdl" and "synthetic" in header["tags"]
     body = text.split("---\n", 2)[2]
     assert [ln for ln in body.splitlines() if ln.startswith("# ")] == [f"# rel {pub.version}"]
-    for section in ("## Use", "## Splits", "## Fields", "## How it was made", "## Limitations", "## Licence", "## Citation"):
+    for section in (
+        "## Use",
+        "## Splits",
+        "## Fields",
+        "## How it was made",
+        "## Limitations",
+        "## Licence",
+        "## Citation",
+    ):
         assert section in body, section
-    assert "**Synthetic.**" in body and "0 unchanged, 1 changed, 255 ignore" in body and "https://example.org/sdl" in body
+    assert (
+        "**Synthetic.**" in body
+        and "0 unchanged, 1 changed, 255 ignore" in body
+        and "https://example.org/sdl" in body
+    )
     for stale in ("label/", "A/", "Which folder", "ChangeDetectionDataset", "manifest.json"):
         assert stale not in body, stale
     code = body.split("```python\n", 1)[1].split("```", 1)[0]
@@ -130,7 +170,9 @@ def test_the_card_is_written_for_the_export_and_its_snippet_runs(built, tmp_path
     env = os.environ | {"HF_DATASETS_CACHE": str(tmp_path / "hf-cache"), "HF_DATASETS_OFFLINE": "1"}
     ran = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=env)
     assert ran.returncode == 0, ran.stderr
-    assert ran.stdout.startswith("rel_p") or ran.stdout.split()[0] in {it["id"] for it in read_manifest(Path(pub.root)).doc["items"]}
+    assert ran.stdout.startswith("rel_p") or ran.stdout.split()[0] in {
+        it["id"] for it in read_manifest(Path(pub.root)).doc["items"]
+    }
 
 
 @pytest.mark.parametrize(

@@ -101,5 +101,11 @@ def test_causes_on_a_hand_made_view() -> None:
     n = h * w
     assert small_gaps(hit_a)[6, 6] and not small_gaps(hit_a)[0, 0]
     assert causes == pytest.approx(
-        {"no_surface": 36 / n, "gap": 1 / n, "one_side": 9 / n, "outside_fence": 1 / n, "ignored_class": 1 / n}
+        {
+            "no_surface": 36 / n,
+            "gap": 1 / n,
+            "one_side": 9 / n,
+            "outside_fence": 1 / n,
+            "ignored_class": 1 / n,
+        }
     )

@@ -57,18 +57,30 @@ def test_layers_apply_preset_then_knobs_site_then_command() -> None:
     assert (p.pair.scale, p.pair.point_size_px, p.preset) == (0.78, 3, "exact")
     assert set(p.derived) == {"scale"}
     p = resolve([ReleaseKnobs(), ReleaseKnobs()], SYNTH)  # nothing set: both auto, defaults elsewhere
-    assert (p.pair.scale, p.pair.point_size_px, p.pair.views, p.min_image_px, p.pad) == (0.78, 3, 300, 256, True)
+    assert (p.pair.scale, p.pair.point_size_px, p.pair.views, p.min_image_px, p.pad) == (
+        0.78,
+        3,
+        300,
+        256,
+        True,
+    )
     assert resolve([ReleaseKnobs(pad=False, min_image_px=64)], SYNTH).min_image_px == 64
     # the radius ceiling: 1 m unless a layer sets it, in the parameters' JSON only when set
     assert p.radius_ceiling_m == 1.0 and "radius_ceiling_m" not in p.to_dict()
     q = resolve([ReleaseKnobs(radius_ceiling_m=0.3), ReleaseKnobs(pair={"change_rule": "geometry"})], SYNTH)
-    assert q.radius_ceiling_m == 0.3 and q.to_dict()["radius_ceiling_m"] == 0.3 and q.pair.change_rule == "geometry"
+    assert (
+        q.radius_ceiling_m == 0.3
+        and q.to_dict()["radius_ceiling_m"] == 0.3
+        and q.pair.change_rule == "geometry"
+    )
     assert type(q).from_dict(q.to_dict()) == q
 
 
 def test_images_under_the_floor_are_refused_with_the_scale_that_would_do() -> None:
     fast = resolve([ReleaseKnobs(preset="fast")], SYNTH)
-    with pytest.raises(ReleaseError, match=r"83 x 62 px \(scale 0.125 of scene 1's 660 x 495 px cameras\).*--scale 0.39"):
+    with pytest.raises(
+        ReleaseError, match=r"83 x 62 px \(scale 0.125 of scene 1's 660 x 495 px cameras\).*--scale 0.39"
+    ):
         check_image_size(fast, SYNTH, "release r")
     check_image_size(resolve([ReleaseKnobs(preset="fast", min_image_px=64)], SYNTH), SYNTH, "release r")
     check_image_size(resolve([ReleaseKnobs(preset="fast")], PAPER), PAPER, "release r")  # 706 px: fine
@@ -98,7 +110,9 @@ def test_bad_settings_are_refused_by_name(doc, message) -> None:
 
 def test_update_writes_over_and_unsets() -> None:
     stored = ReleaseKnobs(preset="fast", pair={"views": 40, "scale": 0.5}, min_image_px=128)
-    new = stored.updated(ReleaseKnobs(pair={"views": 60}, radius_ceiling_m=0.2), unset=["scale", "min_image_px"])
+    new = stored.updated(
+        ReleaseKnobs(pair={"views": 60}, radius_ceiling_m=0.2), unset=["scale", "min_image_px"]
+    )
     assert new.to_dict() == {"preset": "fast", "pair": {"views": 60}, "radius_ceiling_m": 0.2}
     assert "radius_ceiling_m" not in new.updated(ReleaseKnobs(), unset=["radius_ceiling_m"]).to_dict()
     assert ReleaseKnobs.from_dict(new.to_dict()) == new

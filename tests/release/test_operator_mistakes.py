@@ -44,10 +44,22 @@ def test_browse_refuses_an_existing_page_unless_forced(built, tmp_path) -> None:
     settings, _, pub = built
     page = tmp_path / "mine.html"
     page.write_text("my notes")
-    r = run_exe(settings.home, "release", "browse", "rel", pub.version, "--out", str(page), env=_env(settings))
+    r = run_exe(
+        settings.home, "release", "browse", "rel", pub.version, "--out", str(page), env=_env(settings)
+    )
     assert r.returncode == 2 and "exists" in r.stderr and "--force" in r.stderr
     assert page.read_text() == "my notes"
-    r = run_exe(settings.home, "release", "browse", "rel", pub.version, "--out", str(page), "--force", env=_env(settings))
+    r = run_exe(
+        settings.home,
+        "release",
+        "browse",
+        "rel",
+        pub.version,
+        "--out",
+        str(page),
+        "--force",
+        env=_env(settings),
+    )
     assert r.returncode == 0, r.stderr
     assert "<html" in page.read_text().lower()
 
@@ -66,7 +78,9 @@ def test_bad_ports_urls_and_public_addresses_are_refused_in_one_line(tmp_path) -
         assert words in r.stderr and "Traceback" not in r.stderr, r.stderr
 
 
-def test_a_destination_that_cannot_be_written_is_one_line_and_status_2(built, tmp_path, capsys, monkeypatch) -> None:
+def test_a_destination_that_cannot_be_written_is_one_line_and_status_2(
+    built, tmp_path, capsys, monkeypatch
+) -> None:
     # run as root here, so a read-only folder is simulated where the page is written
     settings, _, pub = built
     from siteline.previews import browser
@@ -77,6 +91,8 @@ def test_a_destination_that_cannot_be_written_is_one_line_and_status_2(built, tm
     monkeypatch.setenv("SITELINE_HOME", str(settings.home))
     monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
     monkeypatch.setattr(browser, "browser_page", refuse)
-    code, _, err = run_cli(capsys, "release", "browse", "rel", pub.version, "--out", str(tmp_path / "ro" / "page.html"))
+    code, _, err = run_cli(
+        capsys, "release", "browse", "rel", pub.version, "--out", str(tmp_path / "ro" / "page.html")
+    )
     assert code == 2 and "cannot write" in err and "page.html" in err and "Permission denied" in err
     assert "Traceback" not in err

@@ -28,7 +28,9 @@ def test_a_draft_whose_pair_was_superseded_is_not_published(tmp_path, synth_site
     cat.dispose()
 
 
-def test_a_publish_racing_the_ingest_of_a_middle_scene_is_refused_when_it_is_recorded(tmp_path, synth_site, monkeypatch) -> None:
+def test_a_publish_racing_the_ingest_of_a_middle_scene_is_refused_when_it_is_recorded(
+    tmp_path, synth_site, monkeypatch
+) -> None:
     """The middle scene's ingest commits after the publish planned (checked its pairs) and before it
     records: the publish checks again, under the site's row lock, in the transaction that records it,
     and moves the draft back (an attack with a 60 s window published 1.0.0 on e00 -> e02)."""

@@ -87,7 +87,9 @@ def test_a_file_that_cannot_tell_its_date_is_refused(autzen, tmp_path) -> None:
     stale = autzen / "partitions" / f".new-{host}+999999999+{token}"
     stale.mkdir(parents=True)
     (stale / "run-00000.bin").write_bytes(b"x" * 1000)
-    assert "already" in _ok(autzen, "ingest", str(AUTZEN), "--site", "autzen", "--captured-at", AUTZEN_DATES[0])
+    assert "already" in _ok(
+        autzen, "ingest", str(AUTZEN), "--site", "autzen", "--captured-at", AUTZEN_DATES[0]
+    )
     assert not stale.exists()
 
 
@@ -167,12 +169,26 @@ def test_codes_the_taxonomy_does_not_map_are_refused_or_ignored(autzen, tmp_path
     before = _ok(autzen, "scene", "list", "--site", "autzen", "--json")
     r = _run(autzen, "ingest", str(odd), "--site", "autzen", "--captured-at", "2021-01-01T00:00:00Z")
     assert r.returncode == 2 and "class codes 29 (500 points) are not mapped" in r.stderr, r.stderr
-    assert "odd.laz" in r.stderr and "custom classification" in r.stderr and "--unmapped-codes ignore" in r.stderr
+    assert (
+        "odd.laz" in r.stderr
+        and "custom classification" in r.stderr
+        and "--unmapped-codes ignore" in r.stderr
+    )
     assert _ok(autzen, "scene", "list", "--site", "autzen", "--json") == before
     home = tmp_path / "home"
     _ok(home, "init")
     _ok(home, "site", "create", "odd", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130")
-    _ok(home, "ingest", str(odd), "--site", "odd", "--unmapped-codes", "ignore", "--captured-at", "2021-01-01T00:00:00Z")
+    _ok(
+        home,
+        "ingest",
+        str(odd),
+        "--site",
+        "odd",
+        "--unmapped-codes",
+        "ignore",
+        "--captured-at",
+        "2021-01-01T00:00:00Z",
+    )
     scene = json.loads(_ok(home, "scene", "show", "1", "--json"))
     assert scene["class_histogram"]["ignore"] == 500 and scene["unknown_codes"] == {"29": 500}
 
@@ -226,8 +242,24 @@ def test_cloud_without_rgb_renders_height_with_edl_and_refuses_rgb(tmp_path) -> 
     ramp = np.concatenate([img.reshape(-1, 3) for img in a])
     assert not np.array_equal(ramp[:, 0], ramp[:, 1])  # a colour ramp, not grey
     # intensity as asked, with eye-dome lighting: grey, shaded
-    _ok(home, "release", "build", "--site", "topo", "--name", "grey", "--views", "4", "--colour", "intensity", "--shading", "edl")
-    grey = np.concatenate([img.reshape(-1, 3) for img in _images(home / "releases" / "grey" / ".drafts" / "1.0.0", "A")])
+    _ok(
+        home,
+        "release",
+        "build",
+        "--site",
+        "topo",
+        "--name",
+        "grey",
+        "--views",
+        "4",
+        "--colour",
+        "intensity",
+        "--shading",
+        "edl",
+    )
+    grey = np.concatenate(
+        [img.reshape(-1, 3) for img in _images(home / "releases" / "grey" / ".drafts" / "1.0.0", "A")]
+    )
     assert np.array_equal(grey[:, 0], grey[:, 1])
 
 
@@ -240,7 +272,9 @@ def test_black_colour_is_refused_at_build_never_published(tmp_path) -> None:
     src = tmp_path / "black.laz"
     las = laspy.read(AUTZEN)
     c = centre_xy(AUTZEN)
-    las.points = las.points[(np.abs(np.asarray(las.x) - c[0]) < 200) & (np.abs(np.asarray(las.y) - c[1]) < 150)]
+    las.points = las.points[
+        (np.abs(np.asarray(las.x) - c[0]) < 200) & (np.abs(np.asarray(las.y) - c[1]) < 150)
+    ]
     for ch in ("red", "green", "blue"):
         values = np.zeros(len(las.points), np.uint16)
         values[0] = 255
@@ -252,7 +286,19 @@ def test_black_colour_is_refused_at_build_never_published(tmp_path) -> None:
     r = _run(home, "release", "build", "--site", "black", "--name", "black-cd", "--views", "4")
     assert r.returncode == 2 and "blank images" in r.stderr and "--colour intensity" in r.stderr
     assert not (home / "releases" / "black-cd" / ".drafts" / "1.0.0").exists()
-    _ok(home, "release", "build", "--site", "black", "--name", "black-cd", "--views", "2", "--colour", "intensity")
+    _ok(
+        home,
+        "release",
+        "build",
+        "--site",
+        "black",
+        "--name",
+        "black-cd",
+        "--views",
+        "2",
+        "--colour",
+        "intensity",
+    )
 
 
 def _small_dense_site(path: Path, density: float = 400.0, seed: int = 0) -> Path:
@@ -294,7 +340,11 @@ def test_a_small_dense_site_gets_a_release_with_defaults(tmp_path) -> None:
     r = _run(home, "release", "build", "--site", "plot", "--name", "plot-cd", "--publish")
     assert r.returncode == 0, r.stderr
     manifest = json.loads((home / "releases" / "plot-cd" / "1.0.0" / "manifest.json").read_text())
-    assert len(manifest["items"]) >= 30 and {it["split"] for it in manifest["items"]} == {"train", "val", "test"}
+    assert len(manifest["items"]) >= 30 and {it["split"] for it in manifest["items"]} == {
+        "train",
+        "val",
+        "test",
+    }
     assert max(it["change_ratio"] for it in manifest["items"]) > 0.01
 
 
@@ -322,7 +372,9 @@ def test_a_cloud_without_a_ground_class_is_released_with_defaults(tmp_path) -> N
     # its levee: the ground rises above the best plane by about 1.2 m (95th percentile), near the 1 m
     # tolerance: whichever model, the record says why
     g = pair["ground"]
-    assert g["source"] == "morphology" and g["model"] == ("terrain" if g["residual_m"] > g["tolerance_m"] else "plane")
+    assert g["source"] == "morphology" and g["model"] == (
+        "terrain" if g["residual_m"] > g["tolerance_m"] else "plane"
+    )
     assert 0.2 < pair["ground"]["share"] < 0.95
     assert "ground found from the points' shape" in (root / "README.md").read_text()
     a, b = _images(root, "A"), _images(root, "B")

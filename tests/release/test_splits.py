@@ -55,7 +55,9 @@ def test_a_view_held_out_of_train_stays_out_over_three_versions() -> None:
     assert held and "max_shared_footprint" in plan.rule
     for version, new_pair in ((2, 2), (3, 3)):  # each later version adds a pair
         previous = dict(plan.of) | dict.fromkeys(plan.left_out, LEFT_OUT)
-        views = views | {new_pair: [_view(i, 20.0 * i, height=120.0) for i in range(40)]}  # the same ground again
+        views = views | {
+            new_pair: [_view(i, 20.0 * i, height=120.0) for i in range(40)]
+        }  # the same ground again
         plan = assign_splits(views, seed=0, previous=previous)
         assert held <= set(plan.left_out) and not held & set(plan.of), f"version {version}"
         assert all(plan.of[item] == split for item, split in previous.items() if split != LEFT_OUT)

@@ -69,7 +69,9 @@ def test_verify_catches_forged_manifests_and_symlinks(built) -> None:
     manifest = json.loads((root / "manifest.json").read_text())
     image = next(f for f in manifest["files"] if f["path"].endswith(".png"))
     cases = {
-        "edited field": lambda t: t.write("manifest.json", (root / "manifest.json").read_bytes().replace(b'"created"', b'"created" ', 1)),
+        "edited field": lambda t: t.write(
+            "manifest.json", (root / "manifest.json").read_bytes().replace(b'"created"', b'"created" ', 1)
+        ),
         "forged image, entry updated": lambda t: _forge(t, root, manifest, image["path"]),
         "image swapped for a symlink": lambda t: t.symlink(image["path"]),
     }
@@ -81,7 +83,9 @@ def test_verify_catches_forged_manifests_and_symlinks(built) -> None:
         finally:
             t.restore()
         assert bad.returncode == 1, (what, bad.stdout, bad.stderr)
-        expect = "a symlink" if "symlink" in what else "manifest.json: sha256 differs from the catalog's record"
+        expect = (
+            "a symlink" if "symlink" in what else "manifest.json: sha256 differs from the catalog's record"
+        )
         assert expect in bad.stdout, (what, bad.stdout)
     assert _exe(settings, "release", "verify", "rel", pub.version).returncode == 0
 
@@ -106,7 +110,17 @@ def test_exports_stay_out_of_releases_and_inside_themselves(built, tmp_path) -> 
         export_release(root, "opencd", tmp_path / "link" / "out", protected=settings.home / "releases")
     assert not list(root.rglob("export")) and not (root / "train" / "x").exists()
     (tmp_path / "afile").write_text("mine")
-    code = _exe(settings, "release", "export", "rel", pub.version, "--profile", "opencd", "--out", str(tmp_path / "afile"))
+    code = _exe(
+        settings,
+        "release",
+        "export",
+        "rel",
+        pub.version,
+        "--profile",
+        "opencd",
+        "--out",
+        str(tmp_path / "afile"),
+    )
     assert code.returncode == 2 and "is a file" in code.stderr and "Traceback" not in code.stderr
     (tmp_path / ".new.partial").mkdir()  # someone's folder beside --out new: not ours to delete
     export_release(root, "opencd", tmp_path / "new")
@@ -138,7 +152,9 @@ sys.exit(main(sys.argv[2:]))
 def _killed(settings, target: str, *argv: str) -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("SITELINE_")}
     env |= {"SITELINE_HOME": str(settings.home), "SITELINE_DATABASE_URL": settings.database_url}
-    proc = subprocess.run([sys.executable, "-c", KILL, target, *argv], env=env, capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", KILL, target, *argv], env=env, capture_output=True, text=True
+    )
     assert proc.returncode == -signal.SIGKILL, proc.stderr[-2000:]
 
 
@@ -152,7 +168,11 @@ def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     final = settings.home / "releases" / "crash-a" / "1.0.0"
     assert final.is_dir()
     bad = _exe(settings, "release", "verify", "crash-a", "1.0.0")
-    assert bad.returncode == 1 and "never recorded" in bad.stdout and "siteline release repair crash-a 1.0.0" in bad.stdout
+    assert (
+        bad.returncode == 1
+        and "never recorded" in bad.stdout
+        and "siteline release repair crash-a 1.0.0" in bad.stdout
+    )
     again = _exe(settings, "release", "publish", "crash-a", "1.0.0")
     assert again.returncode == 0, again.stderr
     assert _exe(settings, "release", "verify", "crash-a", "1.0.0").returncode == 0
@@ -172,6 +192,8 @@ def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     _killed(settings, "record_draft", *fewer)
     refused = _exe(settings, "release", "publish", "crash-c", "1.0.0")
     assert refused.returncode == 2 and "catalog's record" in refused.stderr, refused.stderr
-    assert "not the draft the catalog records" in _exe(settings, "release", "verify", "crash-c", "1.0.0").stdout
+    assert (
+        "not the draft the catalog records" in _exe(settings, "release", "verify", "crash-c", "1.0.0").stdout
+    )
     assert "removed" in _exe(settings, "release", "repair", "crash-c", "1.0.0").stdout
     assert _exe(settings, "release", "show", "crash-c", "1.0.0").returncode == 2

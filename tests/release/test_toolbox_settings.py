@@ -43,9 +43,13 @@ class TorchGeoChangeTask(nn.Module):
         super().__init__()
         self.task, self.loss = task, loss
         classes = num_classes or 1
-        self.model = nn.Sequential(nn.Conv2d(in_channels * 2, 8, 3, padding=1), nn.ReLU(), nn.Conv2d(8, classes, 1))
+        self.model = nn.Sequential(
+            nn.Conv2d(in_channels * 2, 8, 3, padding=1), nn.ReLU(), nn.Conv2d(8, classes, 1)
+        )
         if loss == "ce":
-            self.criterion: nn.Module = nn.CrossEntropyLoss(ignore_index=-1000 if ignore_index is None else ignore_index)
+            self.criterion: nn.Module = nn.CrossEntropyLoss(
+                ignore_index=-1000 if ignore_index is None else ignore_index
+            )
         elif loss == "bce":
             self.criterion = nn.BCEWithLogitsLoss()
         else:
@@ -73,7 +77,9 @@ def test_the_torchgeo_setting_trains_one_step_and_the_default_loss_does_not(buil
     loss = task.training_step(batch)
     loss.backward()
     opt.step()
-    assert torch.isfinite(loss) and all(p.grad is not None and torch.isfinite(p.grad).all() for p in task.parameters())
+    assert torch.isfinite(loss) and all(
+        p.grad is not None and torch.isfinite(p.grad).all() for p in task.parameters()
+    )
     # ignore pixels do not count: a task whose every valid pixel is right has no loss from them
     assert (batch["mask"] == 255).any()
     without_loss = {k: v for k, v in kwargs.items() if k != "loss"}  # what the export used to print
@@ -90,7 +96,9 @@ def test_changemamba_reads_ignore_as_its_ignore_index_with_stock_settings(built,
     out = export_release(root, "changemamba", tmp_path / "cm")
     assert "nothing to change" in out.honour_ignore
     name = (tmp_path / "cm" / "train_list.txt").read_text().split()[0]
-    label = torch.from_numpy(np.array(Image.open(tmp_path / "cm" / "train" / "GT" / name), np.float32) / 255).long()
+    label = torch.from_numpy(
+        np.array(Image.open(tmp_path / "cm" / "train" / "GT" / name), np.float32) / 255
+    ).long()
     truth = np.asarray(Image.open(root / "train" / "label_ignore" / name))
     assert np.array_equal(label.numpy(), truth)  # 0 / 1 / 255 exactly
     logits = torch.zeros(1, 2, *label.shape)
@@ -100,13 +108,17 @@ def test_changemamba_reads_ignore_as_its_ignore_index_with_stock_settings(built,
     assert F.cross_entropy(logits, label[None], ignore_index=255) < 1e-3
 
 
-def test_predictions_under_export_names_and_resized_ones_are_scored(built, tmp_path, capsys, monkeypatch) -> None:
+def test_predictions_under_export_names_and_resized_ones_are_scored(
+    built, tmp_path, capsys, monkeypatch
+) -> None:
     from sitehelpers import run_cli
 
     settings, _, pub = built
     root = Path(pub.root)
     items = [it for it in read_manifest(root).doc["items"] if it["split"] == "test"]
-    truth = {it["id"]: np.asarray(Image.open(root / "test" / "label_ignore" / f"{it['id']}.png")) for it in items}
+    truth = {
+        it["id"]: np.asarray(Image.open(root / "test" / "label_ignore" / f"{it['id']}.png")) for it in items
+    }
     perfect = {i: np.where(t == 1, 255, 0).astype(np.uint8) for i, t in truth.items()}
     for profile, name in (("torchange", lambda i: i.lower()), ("torchgeo-levircd", lambda i: f"test_{i}")):
         folder = tmp_path / profile
@@ -114,7 +126,12 @@ def test_predictions_under_export_names_and_resized_ones_are_scored(built, tmp_p
         for i, arr in perfect.items():
             Image.fromarray(arr).save(folder / f"{name(i)}.png")
         assert score_predictions(root, "test", folder)["scores"]["f1"] == 1.0, profile
-    record = json.loads((export_release(root, "torchange", tmp_path / "tc").out and (tmp_path / "tc" / "siteline-export.json")).read_text())
+    record = json.loads(
+        (
+            export_release(root, "torchange", tmp_path / "tc").out
+            and (tmp_path / "tc" / "siteline-export.json")
+        ).read_text()
+    )
     assert record["names"] == {i.lower(): i for i in sorted(record["names"].values())}
     # ChangeFormer predicts at 256 x 256: scored at that declared size, brought back by nearest neighbour
     squashed = tmp_path / "cf"
@@ -125,9 +142,30 @@ def test_predictions_under_export_names_and_resized_ones_are_scored(built, tmp_p
     monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
     code, _, err = run_cli(capsys, "release", "score", "rel", pub.version, "--pred", str(squashed))
     assert code == 2 and "--pred-size" in err
-    code, out, err = run_cli(capsys, "release", "score", "rel", pub.version, "--pred", str(squashed), "--pred-size", "256x256", "--json")
+    code, out, err = run_cli(
+        capsys,
+        "release",
+        "score",
+        "rel",
+        pub.version,
+        "--pred",
+        str(squashed),
+        "--pred-size",
+        "256x256",
+        "--json",
+    )
     assert code == 0, err and json.loads(out)["scores"]["f1"] > 0.9
-    code, out, _ = run_cli(capsys, "release", "export", "rel", pub.version, "--profile", "changeformer", "--out", str(tmp_path / "cfx"))
+    code, out, _ = run_cli(
+        capsys,
+        "release",
+        "export",
+        "rel",
+        pub.version,
+        "--profile",
+        "changeformer",
+        "--out",
+        str(tmp_path / "cfx"),
+    )
     assert code == 0 and "--pred-size 256x256" in out
     with pytest.raises(ReleaseError, match="WIDTHxHEIGHT"):
         from siteline.release.score import parse_size

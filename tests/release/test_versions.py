@@ -24,7 +24,9 @@ def test_added_pairs_are_a_minor_version_and_move_no_item(tmp_path, synth_site) 
     cat = open_catalog(settings)
     e0, e1, e2 = epoch_dirs(synth_site)
     ingest_and_tile(cat, settings, [e0, e1])
-    first = publish_release(cat, settings, "ver", pipeline.release(cat, settings, "demo", "ver", KNOBS).version)
+    first = publish_release(
+        cat, settings, "ver", pipeline.release(cat, settings, "demo", "ver", KNOBS).version
+    )
     ingest_and_tile(cat, settings, [e2])
     second = pipeline.release(cat, settings, "demo", "ver", KNOBS)
     assert second.version == "1.1.0" and second.reason.startswith("new items only (pairs added: 2")

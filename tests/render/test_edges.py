@@ -87,7 +87,12 @@ def test_the_trim_does_not_depend_on_the_batch() -> None:
     pts, spacing, label = _plate_over_ground()
     cam = _camera()
     a = render_points(pts, cam, TRIM, spacing_m=spacing)
-    b = render_points(pts, cam, RenderSettings(scale=1.0, splat="world", trim_edges=True, chunk_points=1_777), spacing_m=spacing)
+    b = render_points(
+        pts,
+        cam,
+        RenderSettings(scale=1.0, splat="world", trim_edges=True, chunk_points=1_777),
+        spacing_m=spacing,
+    )
     assert np.array_equal(a.index, b.index)
 
 

@@ -39,7 +39,9 @@ def test_diameter_follows_spacing_over_depth() -> None:
 
     z = torch.tensor([5.0, 10.0, 20.0, 80.0, 1e4])
     spacing = torch.full((5,), 0.1)
-    d = diameters_px(spacing, z, 400.0, RenderSettings(scale=1.0, splat="world", point_size_px=1, splat_max_px=15))
+    d = diameters_px(
+        spacing, z, 400.0, RenderSettings(scale=1.0, splat="world", point_size_px=1, splat_max_px=15)
+    )
     # 2 x 0.1 m x 400 px / z, rounded up, between the point size and splat_max_px
     assert d.tolist() == [15, 8, 4, 1, 1]
     fixed = diameters_px(spacing, z, 400.0, RenderSettings(scale=1.0, point_size_px=3))
@@ -105,7 +107,9 @@ def test_world_splats_need_a_spacing_per_point() -> None:
         render_points(pts, oblique_camera(), WORLD, spacing_m=np.ones(3, np.float32))
 
 
-@pytest.mark.parametrize("bad", [{"splat": "round"}, {"fill_px": -1}, {"fill_px": 9}, {"splat_max_px": 1, "point_size_px": 3}])
+@pytest.mark.parametrize(
+    "bad", [{"splat": "round"}, {"fill_px": -1}, {"fill_px": 9}, {"splat_max_px": 1, "point_size_px": 3}]
+)
 def test_bad_splat_settings_are_refused(bad: dict) -> None:
     with pytest.raises(RenderError):
         RenderSettings(**bad)
@@ -204,7 +208,10 @@ def test_the_cpu_kernels_draw_what_the_tensor_code_draws(monkeypatch, fill) -> N
     spacing = local_spacing(xyz)
     cam = oblique_camera(400, 300)
     kept = cls != 2
-    for s in (RenderSettings(scale=1.0, point_size_px=3, fill_px=fill), RenderSettings(scale=1.0, splat="world", fill_px=fill)):
+    for s in (
+        RenderSettings(scale=1.0, point_size_px=3, fill_px=fill),
+        RenderSettings(scale=1.0, splat="world", fill_px=fill),
+    ):
         compiled = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb}, spacing_m=spacing)
         cov = coverage_of(xyz.astype(np.float32), cam, s, spacing_m=spacing, kept=kept)
         monkeypatch.setattr(zb, "CPU_KERNELS", False)

@@ -46,7 +46,9 @@ def test_busy_processes_are_seen_and_the_count_is_given_back() -> None:
         if not Path(LOADAVG).exists():
             assert seen is None  # not Linux: the system does not say
         else:
-            assert seen is not None and seen >= 2  # the three spinners (one may be off the queue for an instant)
+            assert (
+                seen is not None and seen >= 2
+            )  # the three spinners (one may be off the queue for an instant)
         governor = CpuThreads("cpu", every_s=0.0)
         governor.cap = 4  # as if the process had been given 4 threads
         governor.cores = 2

@@ -58,7 +58,11 @@ class Service:
         self.log = open(home.parent / "serve.out", "w")  # noqa: SIM115 (closed in stop)
         self.proc = subprocess.Popen(["bash", "deploy/serve.sh"], cwd=REPO, env=self.env, stdout=self.log,
                                      stderr=subprocess.STDOUT, start_new_session=True)  # fmt: skip
-        _until("the service to start", lambda: "drop missions into" in (home.parent / "serve.out").read_text(), 240)
+        _until(
+            "the service to start",
+            lambda: "drop missions into" in (home.parent / "serve.out").read_text(),
+            240,
+        )
 
     def stop(self) -> None:
         os.killpg(self.proc.pid, signal.SIGTERM)
@@ -75,7 +79,9 @@ class Service:
         return subprocess.run([EXE, *argv], env=self.env, capture_output=True, text=True, timeout=600)
 
     def runs(self) -> list[dict]:
-        r = httpx.post(f"{self.api}/flow_runs/filter", json={"sort": "START_TIME_ASC", "limit": 200}, timeout=30)
+        r = httpx.post(
+            f"{self.api}/flow_runs/filter", json={"sort": "START_TIME_ASC", "limit": 200}, timeout=30
+        )
         r.raise_for_status()
         return r.json()
 
@@ -92,7 +98,9 @@ class Service:
             if entry.name.isdigit():
                 try:
                     parent[int(entry.name)] = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-                    cmd[int(entry.name)] = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+                    cmd[int(entry.name)] = (
+                        (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+                    )
                 except (OSError, IndexError, ValueError):
                     continue
 
@@ -113,7 +121,9 @@ class Service:
 
     def versions(self) -> list[str]:
         root = self.home / "releases" / "demo-cd"
-        return sorted(p.name for p in root.iterdir() if (p / "manifest.json").is_file()) if root.is_dir() else []
+        return (
+            sorted(p.name for p in root.iterdir() if (p / "manifest.json").is_file()) if root.is_dir() else []
+        )
 
     def drop(self, mission: Path, name: str | None = None) -> None:
         dest = self.home / "uploads" / (name or mission.name)
@@ -132,7 +142,9 @@ def _corrected(svc: Service, scene: int, tmp: Path, version: int) -> Path:
     las = laspy.read(out)
     cls = np.asarray(las.classification).copy()
     x, y = np.asarray(las.x), np.asarray(las.y)
-    box = (abs(x - np.median(x) + 10 * version) < 15) & (abs(y - np.median(y)) < 15) & (cls != 255) & (cls != 5)
+    box = (
+        (abs(x - np.median(x) + 10 * version) < 15) & (abs(y - np.median(y)) < 15) & (cls != 255) & (cls != 5)
+    )
     cls[box] = 5
     las.classification = cls
     las.write(out)
@@ -145,7 +157,12 @@ def _scene_run(svc: Service, name: str) -> dict:
 
 def _rendering(svc: Service, name: str) -> None:
     run = _scene_run(svc, name)
-    _until(f"{name} to be rendering", lambda: "views" in svc.logs(run["id"]) or "renders" in svc.logs(run["id"]), 300, 1.0)
+    _until(
+        f"{name} to be rendering",
+        lambda: "views" in svc.logs(run["id"]) or "renders" in svc.logs(run["id"]),
+        300,
+        1.0,
+    )
 
 
 def _screenshots(svc: Service, run_id: str, why_id: str, tmp_path: Path) -> None:
@@ -172,7 +189,9 @@ def _screenshots(svc: Service, run_id: str, why_id: str, tmp_path: Path) -> None
         for name, url in (("browser.png", f"{svc.preview}/browse/demo-cd/4.0.0/"),
                           ("viewer-3d.png", f"{svc.preview}/3d/demo-cd/4.0.0/1/")):  # fmt: skip
             page.goto(url)
-            page.wait_for_function("document.body.dataset.ready || document.body.dataset.error", timeout=120_000)
+            page.wait_for_function(
+                "document.body.dataset.ready || document.body.dataset.error", timeout=120_000
+            )
             assert page.evaluate("document.body.dataset.error") is None
             page.wait_for_timeout(1000)
             page.screenshot(path=out / name)
@@ -200,7 +219,10 @@ def test_the_service(tmp_path, synth_site) -> None:
         figures["third upload -> 1.1.0 (s)"] = time.monotonic() - t0
         manifest = json.loads((svc.home / "releases" / "demo-cd" / "1.1.0" / "manifest.json").read_text())
         assert manifest["lineage"]["parameters"]["views"] == 6
-        assert all(max(it["size_px"]) >= 512 for it in manifest["items"]) and len(manifest["lineage"]["pairs"]) == 2
+        assert (
+            all(max(it["size_px"]) >= 512 for it in manifest["items"])
+            and len(manifest["lineage"]["pairs"]) == 2
+        )
 
         # the same mission dropped again under another name: ingested as nothing new, no event, no release
         _until("the service to settle", svc.settled, 300)
@@ -220,7 +242,9 @@ def test_the_service(tmp_path, synth_site) -> None:
         _until("the service to settle", svc.settled, 900)
         assert not [r["name"] for r in svc.runs() if r["state_type"] != "COMPLETED"]
         assert svc.versions() == ["1.0.0", "1.1.0", "2.0.0"]
-        lineage = json.loads((svc.home / "releases" / "demo-cd" / "2.0.0" / "manifest.json").read_text())["lineage"]
+        lineage = json.loads((svc.home / "releases" / "demo-cd" / "2.0.0" / "manifest.json").read_text())[
+            "lineage"
+        ]
         assert {sc["id"]: sc["label_set_version"] for sc in lineage["scenes"]} == {1: 2, 2: 1, 3: 2}
 
         # the worker killed mid-pair: its flow process finishes the work, the release appears by itself
@@ -276,7 +300,9 @@ def test_the_service(tmp_path, synth_site) -> None:
         assert got.status_code == 200 and got.content[:8] == b"\x89PNG\r\n\x1a\n"
         # the release artifact links its browser and its pairs in 3D, which the service's preview server serves
         browse = f"{svc.preview}/browse/demo-cd/4.0.0/"
-        assert f'href="{browse}"' in page.stdout and f'href="{svc.preview}/3d/demo-cd/4.0.0/1/"' in page.stdout
+        assert (
+            f'href="{browse}"' in page.stdout and f'href="{svc.preview}/3d/demo-cd/4.0.0/1/"' in page.stdout
+        )
         assert httpx.get(browse, timeout=30).status_code == 200
         plan = httpx.get(f"{svc.preview}/3d/demo-cd/4.0.0/1/plan.json", timeout=120).json()
         assert plan["points"]["t1"] > 0 and plan["cameras"]

@@ -34,13 +34,19 @@ def test_full_disks_are_told_apart_from_other_errors(tmp_path) -> None:
     assert f"writing {tmp_path / 'tile.bin'}" in line and "MB free of" in line and "\n" not in line
     # the free space of the disk that filled (the file's), not the home's
     assert f"the file system holding {tmp_path} has" in line
-    unknown = full_disk_message(OSError(errno.ENOSPC, "No space left on device"), tmp_path / "home" / "not-yet")
-    assert f"the file system holding {tmp_path} has" in unknown  # the home's, from its nearest existing folder
+    unknown = full_disk_message(
+        OSError(errno.ENOSPC, "No space left on device"), tmp_path / "home" / "not-yet"
+    )
+    assert (
+        f"the file system holding {tmp_path} has" in unknown
+    )  # the home's, from its nearest existing folder
 
 
 def test_a_full_disk_is_told_by_errno_never_by_a_file_name() -> None:
     # a missing file whose name says "No space left on device": a missing file, not a full disk
-    missing = FileNotFoundError(errno.ENOENT, "No such file or directory", "/data/No space left on device/a.laz")
+    missing = FileNotFoundError(
+        errno.ENOENT, "No such file or directory", "/data/No space left on device/a.laz"
+    )
     assert not disk_full(missing) and not disk_full(_raised_from(missing))
     assert not disk_full(RuntimeError("scene 'no space left on device' not found"))
     assert not disk_full(KeyError("database or disk is full"))  # only a database driver's words count

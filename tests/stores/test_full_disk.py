@@ -24,7 +24,9 @@ def small_fs(tmp_path):
     mnt.mkdir()
 
     def mount(size: str) -> Path:
-        r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)], capture_output=True)
+        r = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)], capture_output=True
+        )
         if r.returncode != 0:
             # mounting needs root; tests/stores/test_diskspace.py covers the same code without a mount
             pytest.skip(f"cannot mount a tmpfs here (needs root): {r.stderr.decode().strip()}")
@@ -43,12 +45,18 @@ def _run(home: Path, *argv: str) -> subprocess.CompletedProcess:
 # sizes that fill the disk during the blob copy and partition, the catalog commit, and the tile writes
 # (`make test` runs the catalog case, `make test-all` all three)
 @pytest.mark.parametrize(
-    "size", [pytest.param("1500k", marks=pytest.mark.slow), "4500k", pytest.param("6m", marks=pytest.mark.slow)]
+    "size",
+    [pytest.param("1500k", marks=pytest.mark.slow), "4500k", pytest.param("6m", marks=pytest.mark.slow)],
 )
 def test_a_full_disk_is_one_line_and_leaves_nothing(small_fs, size) -> None:
     home = small_fs(size) / "home"
     assert _run(home, "init").returncode == 0
-    assert _run(home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130").returncode == 0
+    assert (
+        _run(
+            home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130"
+        ).returncode
+        == 0
+    )
     r = _run(home, "ingest", str(AUTZEN), "--site", "a", "--captured-at", "2020-01-01T00:00:00Z")
     assert r.returncode == 1, (r.stdout, r.stderr)
     assert "Traceback" not in r.stderr and "error: the disk is full" in r.stderr, r.stderr
@@ -73,11 +81,17 @@ def _tiles(home: Path) -> dict[str, str]:
     import hashlib
 
     root = home / "stores" / "tiles"
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in root.rglob("*") if p.is_file()}
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in root.rglob("*")
+        if p.is_file()
+    }
 
 
 def _status(home: Path) -> list[str]:
-    return [s["status"] for s in json.loads(_run(home, "scene", "list", "--site", "a", "--json").stdout)["scenes"]]
+    return [
+        s["status"] for s in json.loads(_run(home, "scene", "list", "--site", "a", "--json").stdout)["scenes"]
+    ]
 
 
 def test_retile_on_a_full_disk_or_stopped_leaves_the_old_store_and_nothing_else(small_fs) -> None:
@@ -86,8 +100,16 @@ def test_retile_on_a_full_disk_or_stopped_leaves_the_old_store_and_nothing_else(
     mnt = small_fs("40m")
     home = mnt / "home"
     assert _run(home, "init").returncode == 0
-    assert _run(home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130").returncode == 0
-    assert _run(home, "ingest", str(AUTZEN), "--site", "a", "--captured-at", "2020-01-01T00:00:00Z").returncode == 0
+    assert (
+        _run(
+            home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130"
+        ).returncode
+        == 0
+    )
+    assert (
+        _run(home, "ingest", str(AUTZEN), "--site", "a", "--captured-at", "2020-01-01T00:00:00Z").returncode
+        == 0
+    )
     before = _tiles(home)
 
     # the disk fills while the new store is written (it needs ~3 MB)
@@ -96,7 +118,9 @@ def test_retile_on_a_full_disk_or_stopped_leaves_the_old_store_and_nothing_else(
     filler.write_bytes(b"\0" * ((free_kb - 1200) * 1024))
     r = _run(home, "scene", "tile", "1", "--retile", "--workers", "2")
     assert r.returncode == 1, (r.stdout, r.stderr)
-    assert r.stderr.count("error:") == 1 and "the disk is full" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.count("error:") == 1 and "the disk is full" in r.stderr and "Traceback" not in r.stderr, (
+        r.stderr
+    )
     assert _leftovers(home) == [] and _tiles(home) == before and _status(home) == ["tiled"]
     filler.unlink()
 

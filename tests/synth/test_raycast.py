@@ -21,12 +21,16 @@ def nadir(height: float, size: int = 101, x: float = 0.0, y: float = 0.0) -> Cam
     return Camera.look_at((x, y, height), (x, y, 0.0), size, size, F)
 
 
-def ground(size: float = 1000.0, pit: tuple | None = None, exclude: tuple | None = None, key: str = "ground") -> Primitive:
+def ground(
+    size: float = 1000.0, pit: tuple | None = None, exclude: tuple | None = None, key: str = "ground"
+) -> Primitive:
     h = size / 2
     return Primitive(key, "v1", 1, 2, "terrain", ((-h, h, -h, h), (0.0, 0.0), pit, exclude), (100, 100, 100))
 
 
-def box(cx: float, cy: float, size: tuple, yaw: float = 0.0, key: str = "box", sig: str = "v1", oid: int = 5) -> Primitive:
+def box(
+    cx: float, cy: float, size: tuple, yaw: float = 0.0, key: str = "box", sig: str = "v1", oid: int = 5
+) -> Primitive:
     return Primitive(key, sig, oid, 6, "box", ((cx, cy, 0.0), size, yaw), (200, 0, 0))
 
 
@@ -97,7 +101,9 @@ def test_a_cylinder_seen_from_the_side_and_a_cone_half_way_down():
 
 def test_terrain_pit_floor_ramp_and_hole():
     pit = (-10.0, 10.0, -10.0, 10.0, 4.0)
-    floor = Primitive("pit", "d4", 2, 2, "terrain", ((-10.0, 10.0, -10.0, 10.0), (0.0, 0.0), pit, None), (0, 0, 0))
+    floor = Primitive(
+        "pit", "d4", 2, 2, "terrain", ((-10.0, 10.0, -10.0, 10.0), (0.0, 0.0), pit, None), (0, 0, 0)
+    )
     rim = ground(100.0, exclude=(-10.0, 10.0, -10.0, 10.0))
     for x, z in ((0.0, -4.0), (-9.0, -2.0), (-9.5, -1.0), (9.0, -2.0), (-20.0, 0.0)):
         hits = cast(nadir(30.0, 3, x=x, y=0.0), [rim, floor])
@@ -109,7 +115,9 @@ def test_terrain_pit_floor_ramp_and_hole():
 
 
 def test_a_sloped_terrain_is_met_where_its_height_field_is():
-    slope = Primitive("g", "v1", 1, 2, "terrain", ((-50.0, 50.0, -50.0, 50.0), (0.2, 0.0), None, None), (0, 0, 0))
+    slope = Primitive(
+        "g", "v1", 1, 2, "terrain", ((-50.0, 50.0, -50.0, 50.0), (0.2, 0.0), None, None), (0, 0, 0)
+    )
     cam = Camera.look_at((-40.0, 0.0, 30.0), (20.0, 0.0, 0.0), 64, 48, 60.0)
     hits = cast(cam, [slope])
     got = hits.points[hits.which == 0]
@@ -120,7 +128,12 @@ def test_a_sloped_terrain_is_met_where_its_height_field_is():
 def test_view_truth_of_a_removed_a_moved_and_a_kept_box():
     cam = nadir(40.0, 121)
     kept = box(-12.0, 0.0, (3.0, 3.0, 2.0), key="kept", oid=1)
-    first = [ground(), kept, box(0.0, 0.0, (4.0, 4.0, 3.0), key="removed", oid=2), box(10.0, 10.0, (2.0, 2.0, 2.0), key="moved", oid=3)]
+    first = [
+        ground(),
+        kept,
+        box(0.0, 0.0, (4.0, 4.0, 3.0), key="removed", oid=2),
+        box(10.0, 10.0, (2.0, 2.0, 2.0), key="moved", oid=3),
+    ]
     second = [ground(), kept, box(12.0, 10.0, (2.0, 2.0, 2.0), key="moved", sig="v2", oid=3)]
     truth = view_truth(cam, first, second)
     ha, hb = cast(cam, first), cast(cam, second)
@@ -138,7 +151,9 @@ def test_view_truth_ignores_sky_ignored_classes_and_outside_the_fence():
     cam = Camera.look_at((0.0, -30.0, 10.0), (0.0, 0.0, 10.0), 60, 40, 40.0)  # level: the upper half is sky
     snow = Primitive("flake", "e1", 9, 21, "sphere", (0.0, 0.0, 10.0, 1.0), (255, 255, 255))
     g = ground(100.0)
-    truth = view_truth(cam, [g, snow], [g], ignored_classes={21}, fence=[(-5, -50), (5, -50), (5, 50), (-5, 50), (-5, -50)])
+    truth = view_truth(
+        cam, [g, snow], [g], ignored_classes={21}, fence=[(-5, -50), (5, -50), (5, 50), (-5, 50), (-5, -50)]
+    )
     hits = cast(cam, [g, snow])
     assert (truth.mask[hits.which == MISS] == IGNORE).all()
     assert (truth.mask[hits.which == 1] == IGNORE).all()
@@ -164,7 +179,9 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     noisy[ys.max() + 1, xs.min() + 3 : xs.min() + 6] = CHANGED  # an edge drawn one pixel too far: a rim piece
     half = truth.mask == CHANGED
     rows = np.nonzero(half.any(axis=1))[0]
-    noisy[rows[: len(rows) // 2]] = np.where(half[rows[: len(rows) // 2]], UNCHANGED, noisy[rows[: len(rows) // 2]])
+    noisy[rows[: len(rows) // 2]] = np.where(
+        half[rows[: len(rows) // 2]], UNCHANGED, noisy[rows[: len(rows) // 2]]
+    )
     s = MaskScore()
     s.add(noisy, truth)
     assert s.specks == [1] and s.rims == [1]

@@ -84,7 +84,12 @@ def test_a_tile_read_in_float32_blocks_is_the_read_cast(tmp_path) -> None:
     cast to float32, georeferenced, with blocks smaller than a tile, and names an unknown attribute."""
     origin = (445_000.0, 5_030_000.0, 80.0)
     _cloud(tmp_path / "c.las", origin, n=30_000)
-    _, _, tiles = _tile(tmp_path, tmp_path / "c.las", origin, spec=TileSpec(tile_size_m=60.0, chunk_points=1024, shard_points=4096))
+    _, _, tiles = _tile(
+        tmp_path,
+        tmp_path / "c.las",
+        origin,
+        spec=TileSpec(tile_size_m=60.0, chunk_points=1024, shard_points=4096),
+    )
     for tile in tiles.by_tile:
         whole = tiles.read_tile(tile, ("class", "gps_time"))
         cached = tiles._cached

@@ -20,7 +20,7 @@ SITELINE = Path(sys.executable).with_name("siteline")
 
 def test_variants_are_parsed_and_bad_ones_named() -> None:
     assert parse_variant('r4={"radius_multiplier": 4}') == ("r4", {"radius_multiplier": 4})
-    for bad in ("r4", 'r4={"radius_multiplier": 4', "=", 'x=[1]'):
+    for bad in ("r4", 'r4={"radius_multiplier": 4', "=", "x=[1]"):
         with pytest.raises(ConfigError, match="variant"):
             parse_variant(bad)
 
@@ -34,7 +34,10 @@ def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
         TradeRow("fixed 1 px", {"splat": "fixed"}, error="every view rejected"),
     ]
     md = trade_markdown(rows, "boxes", 40.0)
-    assert "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | 90.0% | 10 | 1.0 s |" in md
+    assert (
+        "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | 90.0% | 10 | 1.0 s |"
+        in md
+    )
     assert "| fill 0 | fill_px=0 |" in md and md.count("| reused |") == 1
     assert "| fixed 1 px | splat=fixed | no release: every view rejected |" in md
     assert math.isnan(rows[2].seconds)
@@ -48,7 +51,9 @@ def test_bench_trade_refuses_a_bad_grid_and_variant_in_one_line(tmp_path) -> Non
         (["--variant", 'neg={"scale": -1}'], "variant 'neg'"),
     )
     for args, words in cases:
-        proc = subprocess.run([str(SITELINE), "bench", "trade", "--out", str(tmp_path), *args], capture_output=True, text=True)
+        proc = subprocess.run(
+            [str(SITELINE), "bench", "trade", "--out", str(tmp_path), *args], capture_output=True, text=True
+        )
         assert proc.returncode != 0 and words in proc.stderr + proc.stdout
         assert "Traceback" not in proc.stderr
     assert not any(tmp_path.iterdir())  # nothing made before the refusal

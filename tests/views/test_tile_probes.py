@@ -89,7 +89,9 @@ def test_tiled_probes_keep_the_whole_cloud_views(scenes) -> None:
 def test_stratified_order_prefixes_are_the_samples(n) -> None:
     from siteline.views.generate import SyntheticView, key_sorted, stratified_order, stratified_sample
 
-    views = [SyntheticView(f"img{i % 7}", f"s{i % 3}", ViewStrategy(1.0, False, 0.0), None) for i in range(30)]  # no geometry needed
+    views = [
+        SyntheticView(f"img{i % 7}", f"s{i % 3}", ViewStrategy(1.0, False, 0.0), None) for i in range(30)
+    ]  # no geometry needed
     order = stratified_order(views, seed=3)
     assert len(order) == 30 and len({id(v) for v in order}) == 30
     assert stratified_sample(views, n, seed=3) == key_sorted(order[:n], seed=3)
@@ -101,7 +103,10 @@ def test_a_prefetched_batch_serves_each_probe_the_points_of_its_own_read(scenes)
     _, cat = scenes
     tiles, cams, _, _ = _inputs(cat)
     probes = [c.camera for c in cams[:6]]
-    single, batched = TilePointSource(tiles, SKIP, memory_points=0), TilePointSource(tiles, SKIP, memory_points=0)
+    single, batched = (
+        TilePointSource(tiles, SKIP, memory_points=0),
+        TilePointSource(tiles, SKIP, memory_points=0),
+    )
     held = TilePointSource(tiles, SKIP, whole_points=0)  # node prefixes from memory
     before = (single.reads, single.points_read, batched.points_read)
     own = [single.points_for_view(c, PARAMS.scale) for c in probes]
@@ -131,5 +136,7 @@ def test_coverage_of_equals_the_renders_coverage() -> None:
             xyz[0] = np.nan
         w, h = (int(v) for v in rng.integers(20, 160, 2))
         cam = Camera.look_at(rng.normal(0, 5, 3) + [0, 0, 40], [0, 0, 0], w, h, float(rng.uniform(20, 200)))
-        s = RenderSettings(scale=float(rng.choice([0.37, 0.5, 1.0])), point_size_px=int(rng.choice([1, 3, 5, 7])))
+        s = RenderSettings(
+            scale=float(rng.choice([0.37, 0.5, 1.0])), point_size_px=int(rng.choice([1, 3, 5, 7]))
+        )
         assert coverage_of(xyz, cam, s).hit == render_points(xyz, cam, s).coverage

@@ -99,9 +99,7 @@ def test_vertical_heights_are_fractions_of_the_real_height() -> None:
     h0 = plane.height(cam.camera.center)
     for v in cands:
         if not v.params.mirrored and v.params.forward_fraction == 0:
-            assert plane.height(v.camera.center) == pytest.approx(
-                v.params.vertical_fraction * h0, abs=1e-9
-            )
+            assert plane.height(v.camera.center) == pytest.approx(v.params.vertical_fraction * h0, abs=1e-9)
             assert np.allclose(v.camera.R, cam.camera.R)
 
 
@@ -166,7 +164,9 @@ def test_views_under_geometry_and_underground_are_rejected() -> None:
 
 
 def _fake(strategy: str, i: int) -> SyntheticView:
-    return SyntheticView(f"p{i}", strategy, ViewStrategy(1.0, False, 0.0), Camera.look_at((0, 0, 10), (0, 0, 0), 4, 4, 2.0))
+    return SyntheticView(
+        f"p{i}", strategy, ViewStrategy(1.0, False, 0.0), Camera.look_at((0, 0, 10), (0, 0, 0), 4, 4, 2.0)
+    )
 
 
 def test_sample_is_stratified() -> None:
@@ -238,7 +238,9 @@ def test_mirror_of_a_camera_above_the_fence_is_kept_at_both_magnitudes() -> None
 def test_removing_one_candidate_changes_at_most_one_sampled_view() -> None:
     strategies_ = [f"v{v}-{m}-f{f}" for v in (1, 0.5) for m in ("orig", "mirror") for f in (0, 0.5)]
     pool = [
-        SyntheticView(f"IMG_{p:04d}.JPG", s, ViewStrategy(1.0, False, 0.0), _fake(s, p).camera) for p in range(12) for s in strategies_
+        SyntheticView(f"IMG_{p:04d}.JPG", s, ViewStrategy(1.0, False, 0.0), _fake(s, p).camera)
+        for p in range(12)
+        for s in strategies_
     ]
     ident = [(v.parent, v.strategy) for v in pool]
     for n in (10, 40, 90):
@@ -277,7 +279,9 @@ def test_mirrored_views_of_a_camera_outside_the_fence_look_into_the_site(pitch_d
         reflected, _ = mirror(cam, FENCE, rule="reflect")
         t = ground_target(reflected, ground)
         hits_reflect += t is not None and bool(inside_fence(t[None, :2], FENCE)[0])
-    if pitch_deg > -40:  # oblique views: the reflect rule sends some axes out of the site; aim-site never does
+    if (
+        pitch_deg > -40
+    ):  # oblique views: the reflect rule sends some axes out of the site; aim-site never does
         assert hits_reflect < 12
 
 

@@ -154,7 +154,9 @@ def evaluate(
     result = score_record(root, split, per_image) | {"checkpoint": str(checkpoint), "model": "FC-Siam-diff"}
     # the floor a model must clear: every pixel predicted unchanged (mIoU about half the unchanged share)
     cm = np.asarray(result["confusion"], dtype=np.int64)
-    result["trivial_scores"] = scores(np.array([[cm[0].sum(), 0], [cm[1].sum(), 0]])).to_dict() | {"predicts": "all unchanged"}
+    result["trivial_scores"] = scores(np.array([[cm[0].sum(), 0], [cm[1].sum(), 0]])).to_dict() | {
+        "predicts": "all unchanged"
+    }
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps(result, indent=1) + "\n")
     return result

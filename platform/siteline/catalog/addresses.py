@@ -96,7 +96,9 @@ class StoreAddresses(sa.types.TypeDecorator):
     def process_bind_param(self, value: dict[str, str] | None, dialect: sa.Dialect) -> dict[str, str] | None:
         return None if value is None else {k: to_record(str(v)) for k, v in value.items()}
 
-    def process_result_value(self, value: dict[str, str] | None, dialect: sa.Dialect) -> dict[str, str] | None:
+    def process_result_value(
+        self, value: dict[str, str] | None, dialect: sa.Dialect
+    ) -> dict[str, str] | None:
         return None if value is None else {k: from_record(v) for k, v in value.items()}
 
 

@@ -55,7 +55,9 @@ def _blobs_left(session: Session, scenes: list[Scene]) -> list[str]:
     """The blobs of the scenes' missions and alignment samples that nothing outside them names."""
     mission_ids = [sc.mission_id for sc in scenes]
     shas = set(
-        session.execute(sa.select(MissionFile.sha256).where(MissionFile.mission_id.in_(mission_ids))).scalars()
+        session.execute(
+            sa.select(MissionFile.sha256).where(MissionFile.mission_id.in_(mission_ids))
+        ).scalars()
     )
     shas |= {s for sc in scenes if (s := scene_statistics(sc).stable_sample_sha256)}
     kept = set(
@@ -100,7 +102,9 @@ def plan_scene_deletion(session: Session, scene_id: int) -> Deletion:
 
 def plan_site_deletion(session: Session, name: str) -> Deletion:
     site = site_row(session, name)
-    ids = list(session.execute(sa.select(Scene.id).where(Scene.site_id == site.id).order_by(Scene.id)).scalars())
+    ids = list(
+        session.execute(sa.select(Scene.id).where(Scene.site_id == site.id).order_by(Scene.id)).scalars()
+    )
     return plan_deletion(session, ids, f"site {name}", name)
 
 

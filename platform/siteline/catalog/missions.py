@@ -139,4 +139,3 @@ def las_location(session: Session, scene_id: int) -> LasLocation:
     if mission is None or row is None:
         raise TileError(f"scene {scene_id}: its mission records no point cloud file.")
     return LasLocation(mission.storage, mission.root_uri, row.path, row.sha256)  # type: ignore[arg-type]
-

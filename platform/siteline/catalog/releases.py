@@ -55,6 +55,7 @@ def earlier_item_splits(session: Session, name: str, version: str) -> dict[tuple
     """(pair id, view index) -> split of every item of the latest version of ``name`` before
     ``version`` (empty for a first version), and ``left_out`` for the views it left out of every
     split: what a new version keeps (siteline.release.splits)."""
+
     def semver(v: str) -> tuple[int, ...]:
         return tuple(int(x) for x in v.split("."))
 
@@ -63,7 +64,9 @@ def earlier_item_splits(session: Session, name: str, version: str) -> dict[tuple
         return {}
     latest = max(rows, key=lambda r: semver(r.version))
     items = session.execute(
-        sa.select(ReleaseItem.pair_id, ReleaseItem.item_id, ReleaseItem.split).where(ReleaseItem.release_id == latest.id)
+        sa.select(ReleaseItem.pair_id, ReleaseItem.item_id, ReleaseItem.split).where(
+            ReleaseItem.release_id == latest.id
+        )
     ).all()
     out = {(pid, int(item.rsplit("_v", 1)[1])): split for pid, item, split in items}
     for pid, view in (latest.parameters or {}).get("left_out") or []:
@@ -128,7 +131,11 @@ def record_draft(session: Session, draft: DraftRelease, folders: tuple[str, ...]
 def superseded_pairs(session: Session, rel: Release) -> list[int]:
     """The pairs release ``rel`` was built from that a scene ingested between their scenes has
     superseded since (they are no longer consecutive)."""
-    return [pid for pid in (rel.parameters or {}).get("pairs", []) if get_pair(session, pid).status == "superseded"]
+    return [
+        pid
+        for pid in (rel.parameters or {}).get("pairs", [])
+        if get_pair(session, pid).status == "superseded"
+    ]
 
 
 def refuse_superseded(session: Session, rel: Release) -> None:

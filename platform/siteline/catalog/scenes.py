@@ -261,5 +261,3 @@ def record_tiling(
             first.class_histogram = hist
     scene.statistics = stats.to_json()
     add_completed(session, run)
-
-

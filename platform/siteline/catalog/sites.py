@@ -71,7 +71,9 @@ def redefine_site(
         raise SiteNotFoundError(f"unknown site {name!r}.")
     if taxonomy is None and fence is None and not clear_fence:
         raise SiteError(f"site {name}: give --taxonomy, --fence or --no-fence to change.")
-    scenes = list(session.execute(sa.select(Scene).where(Scene.site_id == site.id).order_by(Scene.id)).scalars())
+    scenes = list(
+        session.execute(sa.select(Scene).where(Scene.site_id == site.id).order_by(Scene.id)).scalars()
+    )
     if taxonomy is not None:
         _, known = taxonomy.code_lut("las") if "las" in taxonomy.source_codes else (None, None)
         for sc in scenes:

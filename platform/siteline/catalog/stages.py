@@ -48,9 +48,7 @@ def record_failure(session: Session, run: StageRun, error: BaseException) -> int
     return row.id
 
 
-def stage_runs(
-    session: Session, subject: str | None = None, stage: str | None = None
-) -> list[JsonObject]:
+def stage_runs(session: Session, subject: str | None = None, stage: str | None = None) -> list[JsonObject]:
     """Stage runs (optionally of one subject or stage), oldest first, as dicts."""
     q = sa.select(StageRunRow).order_by(StageRunRow.started_at, StageRunRow.id)
     if subject:

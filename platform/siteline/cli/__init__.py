@@ -149,7 +149,9 @@ def _run(argv: list[str] | None) -> int:
         from siteline.stores.diskspace import disk_full, full_disk_message
 
         if disk_full(exc):  # a store error on a full disk: one message and status for every full disk
-            err_console.print(Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True)
+            err_console.print(
+                Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True
+            )
             return 1
         err_console.print(Text.assemble(("error:", "bold red"), " ", plain(str(exc))), soft_wrap=True)
         return 1 if isinstance(exc, WorkerError) else 2  # a dead worker: the command ran and failed
@@ -169,13 +171,19 @@ def _run(argv: list[str] | None) -> int:
             # an operator's mistake (a read-only or foreign destination), told in one line
             where = f" {exc.filename}" if exc.filename else ""
             err_console.print(
-                Text.assemble(("error:", "bold red"), " ", f"cannot write{where}: {exc.strerror}; choose a folder you can write to."),
+                Text.assemble(
+                    ("error:", "bold red"),
+                    " ",
+                    f"cannot write{where}: {exc.strerror}; choose a folder you can write to.",
+                ),
                 soft_wrap=True,
             )
             return 2
         if not disk_full(exc):
             raise
-        err_console.print(Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True)
+        err_console.print(
+            Text.assemble(("error:", "bold red"), " ", full_disk_message(exc, _home())), soft_wrap=True
+        )
         return 1  # the command ran and failed for want of space
     return rc if isinstance(rc, int) else 0
 

@@ -91,7 +91,9 @@ def demo(
     site_name: str = typer.Option(DEMO_SITE, "--site", help="Name of the demo site."),
     epochs: int = typer.Option(4, "--epochs", help="Synthetic epochs."),
     train_iters: int = typer.Option(
-        150, "--train-iters", help="Baseline training iterations (150: enough to clear the all-unchanged floor)."
+        150,
+        "--train-iters",
+        help="Baseline training iterations (150: enough to clear the all-unchanged floor).",
     ),
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""

@@ -73,7 +73,9 @@ def ingest(
         0.1, "--max-georegistration-rms-m", help="Largest accepted georegistration RMS, metres."
     ),
     workers: int = typer.Option(
-        2, "--workers", help="Processes reading the point cloud (in point ranges) and writing tiles (each owns whole tiles)."
+        2,
+        "--workers",
+        help="Processes reading the point cloud (in point ranges) and writing tiles (each owns whole tiles).",
     ),
     captured_at: str | None = typer.Option(
         None,
@@ -82,16 +84,22 @@ def ingest(
         "(a LiDAR-only LAS without a creation date); overrides the photos' time. Recorded as given.",
     ),
     plan_cameras: bool = typer.Option(
-        False, "--plan-cameras", help="Plan the cameras from the point cloud even when the mission has "
-        "photos (a mission without photos always gets planned cameras)."
+        False,
+        "--plan-cameras",
+        help="Plan the cameras from the point cloud even when the mission has "
+        "photos (a mission without photos always gets planned cameras).",
     ),
     camera: str = typer.Option(
-        "zenmuse-l2", "--camera", help="Camera of planned cameras: zenmuse-l2, zenmuse-p1-35mm, or a JSON "
-        "file of width, height, fx (fy, cx, cy) in pixels."
+        "zenmuse-l2",
+        "--camera",
+        help="Camera of planned cameras: zenmuse-l2, zenmuse-p1-35mm, or a JSON "
+        "file of width, height, fx (fy, cx, cy) in pixels.",
     ),
     altitude_m: float | None = typer.Option(
-        None, "--altitude", help="Planned cameras' height above the ground, metres (default: chosen from the "
-        "cloud's density and area, 20-120 m)."
+        None,
+        "--altitude",
+        help="Planned cameras' height above the ground, metres (default: chosen from the "
+        "cloud's density and area, 20-120 m).",
     ),
     overlap: tuple[float, float] = typer.Option(
         (0.7, 0.6), "--overlap", help="Planned survey's forward and side overlap (0-0.95)."
@@ -100,8 +108,10 @@ def ingest(
         45.0, "--oblique-pitch", help="Planned oblique cameras' tilt below the horizontal, degrees (0: none)."
     ),
     unmapped_codes: str = typer.Option(
-        "refuse", "--unmapped-codes", help="Class codes the site taxonomy does not map: refuse the file "
-        "(naming them) or make their points ignore."
+        "refuse",
+        "--unmapped-codes",
+        help="Class codes the site taxonomy does not map: refuse the file "
+        "(naming them) or make their points ignore.",
     ),
     as_json: bool = JsonOption,
 ) -> None:
@@ -231,8 +241,8 @@ def scene_tile(
     cfg = settings()
     with catalog() as cat, progress_bars(as_json) as bars:
         done = tile_scene(
-                cat, cfg, scene_id, resources=TilingResources(workers), progress=bars, retile=retile
-            )
+            cat, cfg, scene_id, resources=TilingResources(workers), progress=bars, retile=retile
+        )
     emit(
         as_json,
         {"message": done.message, "tiles": done.tiling.to_dict() if done.tiling else None},

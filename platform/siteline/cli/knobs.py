@@ -76,7 +76,11 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
         if values.get(name) is not None:
             pair[knob] = values[name]
     return ReleaseKnobs(
-        values.get("preset"), pair, values.get("pad"), values.get("min_image_px"), values.get("radius_ceiling")
+        values.get("preset"),
+        pair,
+        values.get("pad"),
+        values.get("min_image_px"),
+        values.get("radius_ceiling"),
     )
 
 

@@ -32,7 +32,10 @@ def imported_event(scene_id: int, version: int, site: str) -> dict:
         "id": str(uuid.uuid4()),
         "occurred": datetime.now(UTC).isoformat(),
         "event": IMPORTED,
-        "resource": {"prefect.resource.id": f"siteline.labelset.{scene_id}.{version}", "siteline.site.spec": site},
+        "resource": {
+            "prefect.resource.id": f"siteline.labelset.{scene_id}.{version}",
+            "siteline.site.spec": site,
+        },
         "payload": {"scene_id": scene_id, "version": version, "site": site},
         "related": [],
     }
@@ -43,7 +46,9 @@ def import_cmd(
     scene_id: int = typer.Argument(..., help="Scene id the file was exported from."),
     file: Path = typer.Argument(..., help="Corrected LAS/LAZ file (e.g. from `siteline scene export`)."),
     taxonomy_map: str | None = typer.Option(
-        None, "--taxonomy-map", help='How to read the file\'s class codes: a JSON file mapping them to site '
+        None,
+        "--taxonomy-map",
+        help="How to read the file's class codes: a JSON file mapping them to site "
         'classes ({"2": "ground"}), "las" (the site taxonomy\'s LAS codes, e.g. ASPRS) or "site" (site class ids; '
         "needed when the file lost the record `scene export` writes).",
     ),
@@ -168,7 +173,12 @@ def diff_cmd(
         older = label_set(s, scene_id, v1 if v1 is not None else (newer.parent_version or newer.version))
         (source, ref_a), (_, ref_b) = (labelled_source(s, scene_id, r.version) for r in (older, newer))
     va, vb = ref_a.version, ref_b.version
-    record = {"scene": scene_id, "from": va, "to": vb, **diff_tiles(open_labelled(source, ref_a), open_labelled(source, ref_b), taxonomy)}
+    record = {
+        "scene": scene_id,
+        "from": va,
+        "to": vb,
+        **diff_tiles(open_labelled(source, ref_a), open_labelled(source, ref_b), taxonomy),
+    }
 
     def human() -> None:
         console.print(

@@ -50,7 +50,9 @@ def _bind(preview_url: str, host: str | None, port: int | None, public: bool) ->
 
 @app.command("serve")
 def serve(
-    host: str | None = typer.Option(None, "--host", help="Address to listen on (default: SITELINE_PREVIEW_URL's)."),
+    host: str | None = typer.Option(
+        None, "--host", help="Address to listen on (default: SITELINE_PREVIEW_URL's)."
+    ),
     port: int | None = typer.Option(None, "--port", help="Port (default: SITELINE_PREVIEW_URL's, 4201)."),
     public: bool = typer.Option(
         False, "--public", help="Allow an address beyond this machine (the server has no authentication)."

@@ -85,8 +85,14 @@ def build_message(info: ReleaseInfo) -> str:
             f"release {info.name} is up to date: {info.version} ({info.status}) has the same pairs, outputs, "
             f"label sets and parameters; nothing was built ({info.root})"
         )
-    then = "" if info.status == "published" else f"; publish with `siteline release publish {info.name} {info.version}`"
-    return f"{info.status} {info.name} {info.version} ({info.reason}): {info.items} items at {info.root}{then}"
+    then = (
+        ""
+        if info.status == "published"
+        else f"; publish with `siteline release publish {info.name} {info.version}`"
+    )
+    return (
+        f"{info.status} {info.name} {info.version} ({info.reason}): {info.items} items at {info.root}{then}"
+    )
 
 
 def parse_label_sets(values: list[str]) -> dict[int, int] | None:
@@ -208,7 +214,9 @@ def browse(
     name: str = typer.Argument(...),
     version: str = typer.Argument(...),
     out: Path | None = typer.Option(
-        None, "--out", help="HTML file (or folder) to write (default: <version>.html beside the release's folder)."
+        None,
+        "--out",
+        help="HTML file (or folder) to write (default: <version>.html beside the release's folder).",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing file given with --out."),
     as_json: bool = JsonOption,
@@ -243,9 +251,13 @@ def export(
     out: Path = typer.Option(..., "--out", help="New folder for the export (outside the release)."),
     copy: bool = typer.Option(False, "--copy", help="Copy files instead of relative symlinks."),
     license_id: str | None = typer.Option(
-        None, "--license", help="hf (required): the card's licence, a hub licence id (cc-by-4.0, mit, ...) or other."
+        None,
+        "--license",
+        help="hf (required): the card's licence, a hub licence id (cc-by-4.0, mit, ...) or other.",
     ),
-    license_name: str | None = typer.Option(None, "--license-name", help="hf, with --license other: the licence's name."),
+    license_name: str | None = typer.Option(
+        None, "--license-name", help="hf, with --license other: the licence's name."
+    ),
     license_link: str | None = typer.Option(
         None, "--license-link", help="hf, with --license other: an http(s) address of the licence's text."
     ),
@@ -351,7 +363,8 @@ def query(
         None, "--until", help="Pairs whose t2 was captured on or before (ISO date)."
     ),
     min_change_visible: float | None = typer.Option(
-        None, "--min-change-visible",
+        None,
+        "--min-change-visible",
         help="Only views whose changed pixels show their change at least this much (the share whose colour "
         "differs between A and B); views with nothing changed are left out.",
     ),
@@ -371,10 +384,15 @@ def query(
             f"{name} {version}: {len(rows)} views",
             ["id", "split", "pair", "change ratio", "change visible"],
             [
-                [r["id"], r["split"], r["pair"], f"{r['change_ratio']:.3f}",
-                 "-" if r["change_visible"] is None else f"{r['change_visible']:.2f}"]
+                [
+                    r["id"],
+                    r["split"],
+                    r["pair"],
+                    f"{r['change_ratio']:.3f}",
+                    "-" if r["change_visible"] is None else f"{r['change_visible']:.2f}",
+                ]
                 for r in rows
-            ],  # fmt: skip
+            ],
         ),
     )
 

@@ -141,7 +141,9 @@ def views_generate(
     source = ArrayPointSource(cloud.xyz)
     with progress_bars(False) as bars:
         bars("generating views", 0, len(real))
-        result = generate_views(real, plane, fence_m, source, params, progress=lambda k: bars("generating views", k, None))
+        result = generate_views(
+            real, plane, fence_m, source, params, progress=lambda k: bars("generating views", k, None)
+        )
     doc = result.to_dict()
     doc["origin"] = list(origin)
     out.parent.mkdir(parents=True, exist_ok=True)

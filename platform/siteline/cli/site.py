@@ -111,15 +111,23 @@ def show(name: str = typer.Argument(..., help="Site name."), as_json: bool = Jso
 def update(
     name: str = typer.Argument(..., help="Site name."),
     unset: list[str] | None = typer.Option(
-        None, "--unset", help="A release setting to drop (back to auto or its default), e.g. scale (repeatable)."
+        None,
+        "--unset",
+        help="A release setting to drop (back to auto or its default), e.g. scale (repeatable).",
     ),
     taxonomy: str | None = typer.Option(
-        None, "--taxonomy", help="A new taxonomy JSON (or 'default'): a new site version; its scenes are tiled again."
+        None,
+        "--taxonomy",
+        help="A new taxonomy JSON (or 'default'): a new site version; its scenes are tiled again.",
     ),
     fence: Path | None = typer.Option(
-        None, "--fence", help="A new fence (GeoJSON Polygon in the site CRS): a new site version; scenes tiled again."
+        None,
+        "--fence",
+        help="A new fence (GeoJSON Polygon in the site CRS): a new site version; scenes tiled again.",
     ),
-    no_fence: bool = typer.Option(False, "--no-fence", help="Drop the fence (views judged against each scene's footprint)."),
+    no_fence: bool = typer.Option(
+        False, "--no-fence", help="Drop the fence (views judged against each scene's footprint)."
+    ),
     workers: int = typer.Option(2, "--workers", help="Processes tiling each scene again."),
     as_json: bool = JsonOption,
     *,
@@ -156,7 +164,9 @@ def update(
             lines += [f"site {name} is at version {version}", *(t.message for t in tiled)]
         with cat.transaction() as session:
             site = get_site(session, name)
-            record = site_record(site, scene_count(session, site)) | {"release_now": _release_now(session, name)}
+            record = site_record(site, scene_count(session, site)) | {
+                "release_now": _release_now(session, name)
+            }
     emit(as_json, record, lambda: console.print("\n".join(lines)))
 
 

@@ -30,7 +30,10 @@ def upload_event(mission_dir: Path, site: str, fingerprint: str = "") -> dict:
         "id": str(uuid.uuid5(uuid.NAMESPACE_URL, key)) if fingerprint else str(uuid.uuid4()),
         "occurred": datetime.now(UTC).isoformat(),
         "event": UPLOADED,
-        "resource": {"prefect.resource.id": f"siteline.mission.{mission_dir.name}", "siteline.site.spec": site},
+        "resource": {
+            "prefect.resource.id": f"siteline.mission.{mission_dir.name}",
+            "siteline.site.spec": site,
+        },
         "payload": {"mission_dir": str(mission_dir.resolve()), "site": site, "fingerprint": fingerprint},
         "related": [],
     }

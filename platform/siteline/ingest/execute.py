@@ -81,7 +81,11 @@ def execute_ingest(
             survey, scan.footprint, plan.site, opts.survey, len(photos), scan.density_pts_m2
         )
         if not cameras:
-            log.warning("point cloud %s: %s; it is ingested and tiled all the same", root / las.path, registration.note)
+            log.warning(
+                "point cloud %s: %s; it is ingested and tiled all the same",
+                root / las.path,
+                registration.note,
+            )
     when, when_source = capture_time(photos, entries, scan, root, opts.captured_at)
     if plan.scene_at(when) is not None:
         raise MissionError(
@@ -92,7 +96,9 @@ def execute_ingest(
     sample = load_sample(store, before.statistics.stable_sample_sha256) if before is not None else None
     if before is not None and sample is not None and scan.stable_sample is not None:
         policy = AlignmentPolicy(opts.max_alignment_translation_m, opts.max_alignment_residual_m)
-        alignment = check_alignment(scan.stable_sample, sample, before.id, root.name, policy, opts.accept_misalignment)
+        alignment = check_alignment(
+            scan.stable_sample, sample, before.id, root.name, policy, opts.accept_misalignment
+        )
         registration = registration.aligned(alignment)
         if alignment.applied:
             scan, cameras = corrected(scan, cameras, alignment.correction)
@@ -118,7 +124,12 @@ def check_codes(scan: LasScan, path: Path, site: SiteSpec, unmapped: str) -> Non
         return
     codes = ", ".join(f"{c} ({n:,} points)" for c, n in sorted(scan.unknown_codes.items()))
     if unmapped == "ignore":
-        log.warning("point cloud %s: class codes %s are not in site %s's taxonomy: made ignore", path, codes, site.name)
+        log.warning(
+            "point cloud %s: class codes %s are not in site %s's taxonomy: made ignore",
+            path,
+            codes,
+            site.name,
+        )
         return
     raise MissionError(
         f"point cloud {path}: class codes {codes} are not mapped by site {site.name}'s taxonomy "
@@ -140,7 +151,9 @@ def corrected(
         sample[:, :3] = prev_from_new.apply(sample[:, :3])
     outline = None
     if scan.footprint is not None:
-        ring = prev_from_new.apply(np.c_[np.asarray(scan.footprint, dtype=np.float64), np.zeros(len(scan.footprint))])
+        ring = prev_from_new.apply(
+            np.c_[np.asarray(scan.footprint, dtype=np.float64), np.zeros(len(scan.footprint))]
+        )
         outline = np.round(ring[:, :2], 2).tolist()
     new_from_prev = prev_from_new.inverse()
     moved = {}

@@ -100,7 +100,11 @@ def capture_time(
     holds = (
         "GPS times in seconds of an unnamed GPS week" if scan.gps_time_range is not None else "no GPS time"
     )
-    made = f"; its header's creation day {scan.creation_date} is when the file was written" if scan.creation_date else ""
+    made = (
+        f"; its header's creation day {scan.creation_date} is when the file was written"
+        if scan.creation_date
+        else ""
+    )
     raise MissionError(
         f"mission {root}: no photo time, no DJI raw folder name (DJI_YYYYMMDDHHMM_...) and {root / scan.path} "
         f"holds {holds}{made}: the capture time is unknown and scenes are ordered by it; give it with "

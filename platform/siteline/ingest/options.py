@@ -46,7 +46,9 @@ class IngestOptions:
 
     def __post_init__(self) -> None:
         if self.unmapped_codes not in UNMAPPED_CODES:
-            raise MissionError(f"unmapped codes {self.unmapped_codes!r}: use one of {', '.join(UNMAPPED_CODES)}.")
+            raise MissionError(
+                f"unmapped codes {self.unmapped_codes!r}: use one of {', '.join(UNMAPPED_CODES)}."
+            )
         if self.z_unit is not None:
             parse_z_unit(self.z_unit)
         if self.captured_at is not None and self.captured_at.tzinfo is None:

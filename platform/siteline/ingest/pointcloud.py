@@ -192,7 +192,10 @@ class _Totals:
         self.tmin, self.tmax = min(self.tmin, other.tmin), max(self.tmax, other.tmax)
         self.samples += other.samples
         self.survey += other.survey
-        self.rgb_lo, self.rgb_hi = np.minimum(self.rgb_lo, other.rgb_lo), np.maximum(self.rgb_hi, other.rgb_hi)
+        self.rgb_lo, self.rgb_hi = (
+            np.minimum(self.rgb_lo, other.rgb_lo),
+            np.maximum(self.rgb_hi, other.rgb_hi),
+        )
 
     def colour_stats(self, survey: np.ndarray) -> ColourStats:
         """Whether the colour carries information, and the intensity and z stretches of the sample."""

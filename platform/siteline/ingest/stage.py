@@ -61,7 +61,10 @@ class IngestResult:
 
     def to_dict(self) -> JsonObject:
         doc = {f.name: getattr(self, f.name) for f in fields(self)}
-        return doc | {"scan": self.scan.to_dict() if self.scan is not None else {}, "registration": self.registration.to_dict()}
+        return doc | {
+            "scan": self.scan.to_dict() if self.scan is not None else {},
+            "registration": self.registration.to_dict(),
+        }
 
 
 def _already(plan: IngestPlan) -> IngestResult:
@@ -172,4 +175,3 @@ def ingest_mission(
             if staging is not None:
                 staging.close()
             shutil.rmtree(runs, ignore_errors=True)
-

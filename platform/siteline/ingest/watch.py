@@ -80,7 +80,9 @@ class UploadWatcher:
             prev = self._seen.get(folder.name)
             if prev is None or prev[0] != snap:
                 self._seen[folder.name] = (snap, now)
-            if (folder / self.marker).exists() or (prev is not None and prev[0] == snap and now - prev[1] >= self.stable_s):
+            if (folder / self.marker).exists() or (
+                prev is not None and prev[0] == snap and now - prev[1] >= self.stable_s
+            ):
                 done.append(folder)
         return done
 

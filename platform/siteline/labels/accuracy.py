@@ -52,7 +52,9 @@ def measured_for(rule: str, min_region_points: int, trim_edges: bool, spacing_m:
     ``min_region_points``, its splats trimmed at edges or not, at the median spacing ``spacing_m``;
     None when those settings were not measured."""
     rows = [
-        m for m in MEASURED if (m.rule, m.min_region_points, m.trim_edges) == (rule, min_region_points, trim_edges)
+        m
+        for m in MEASURED
+        if (m.rule, m.min_region_points, m.trim_edges) == (rule, min_region_points, trim_edges)
     ]
     density = density_of_spacing(spacing_m)
     if not rows or not math.isfinite(density):

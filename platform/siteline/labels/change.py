@@ -52,7 +52,11 @@ def float32_tree(xyz: np.ndarray) -> KDTree:
 
 
 def nearest(
-    b_xyz: np.ndarray, a_xyz: np.ndarray, radius_m: float, backend: str = "pykdtree", tree: KDTree | None = None
+    b_xyz: np.ndarray,
+    a_xyz: np.ndarray,
+    radius_m: float,
+    backend: str = "pykdtree",
+    tree: KDTree | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Distance to and index of each query's nearest point of ``b_xyz`` within ``radius_m`` (inf and
     an out-of-range index beyond it). pykdtree works in float32 site-local coordinates (the faster
@@ -66,7 +70,9 @@ def nearest(
         return d, np.asarray(i, dtype=np.int64)
     if backend == "ckdtree":
         exact = cKDTree(np.asarray(b_xyz, dtype=np.float64))
-        return exact.query(np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1)
+        return exact.query(
+            np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1
+        )
     raise LabelError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
 
 
@@ -119,7 +125,9 @@ def plane_distances(
 DENSE_CELLS = 1 << 26
 
 
-def hidden_from_other(b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest) -> tuple[np.ndarray, np.ndarray]:
+def hidden_from_other(
+    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest
+) -> tuple[np.ndarray, np.ndarray]:
     """Two (M,) bool arrays about the query points, from the other scene (``b_xyz``) in each query
     point's cell of a plan grid of ``test.search_m``: ``covered``, it has points there; ``hidden``, it
     has, and its lowest lies more than the level-of-detection floor above the query point (it could
@@ -253,7 +261,9 @@ def change_flags(
         # foot): the class is compared with any of the other scene's points within the radius
         differ = np.flatnonzero(compared)[~same[compared]]
         if len(differ):
-            same[differ] = class_within(b_kept, b_classes, a_pts[differ], a_classes[differ], radius_m, surface, tree)
+            same[differ] = class_within(
+                b_kept, b_classes, a_pts[differ], a_classes[differ], radius_m, surface, tree
+            )
     same[found & (idx < 0)] = True
     out[live] = np.where(uncovered, IGNORED, np.where(same, UNCHANGED, CHANGED))
     return out

@@ -34,7 +34,9 @@ class LabelParams:
         if self.rule not in LABEL_RULES:
             raise LabelError(f"label rule {self.rule!r}: use one of {', '.join(LABEL_RULES)}.")
         if not (isinstance(self.min_region_points, int) and 1 <= self.min_region_points <= 100_000):
-            raise LabelError(f"min_region_points {self.min_region_points!r} must be a whole number from 1 to 100000.")
+            raise LabelError(
+                f"min_region_points {self.min_region_points!r} must be a whole number from 1 to 100000."
+            )
         if self.radius_m is not None and not (
             isinstance(self.radius_m, int | float) and math.isfinite(self.radius_m) and self.radius_m > 0
         ):

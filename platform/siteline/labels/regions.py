@@ -18,7 +18,9 @@ from siteline.errors import LabelError
 
 # the 13 cells that touch a cell and come after it in (i, j, k) order: with their mirror images, the
 # 26 neighbours
-_FORWARD = [(di, dj, dk) for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1) if (di, dj, dk) > (0, 0, 0)]
+_FORWARD = [
+    (di, dj, dk) for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1) if (di, dj, dk) > (0, 0, 0)
+]
 
 
 def region_sizes(xyz: np.ndarray, cell_m: float) -> np.ndarray:
@@ -125,7 +127,9 @@ class RegionCells:
         cells = np.concatenate(self._cells)
         keys, lo, dims = _pack(cells)
         uniq, merged = np.unique(keys, return_inverse=True)  # a cell shared by two parts is one cell
-        counts = np.bincount(merged, weights=np.concatenate(self._counts), minlength=len(uniq)).astype(np.int64)
+        counts = np.bincount(merged, weights=np.concatenate(self._counts), minlength=len(uniq)).astype(
+            np.int64
+        )
         small_cell = cell_region_sizes(_unpack(uniq, lo, dims), counts)[merged] < min_points
         out, start = [], 0
         for part, inverse in zip(self._cells, self._inverse, strict=True):

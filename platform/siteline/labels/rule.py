@@ -50,7 +50,10 @@ def scheme_differences(
 
 
 def resolve_change_rule(
-    choice: str, first: tuple[int, Mapping[str, int]], second: tuple[int, Mapping[str, int]], taxonomy: Taxonomy
+    choice: str,
+    first: tuple[int, Mapping[str, int]],
+    second: tuple[int, Mapping[str, int]],
+    taxonomy: Taxonomy,
 ) -> ChangeRulePlan:
     """The rule of a pair whose scenes hold the class histograms of ``first`` and ``second`` ((scene
     id, points per class name), from the label sets the pair uses): ``auto`` takes ``geometry`` when

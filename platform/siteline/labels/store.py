@@ -143,7 +143,9 @@ class _Decoded:
         self._strips.clear()
 
 
-def _join(parts: list[tuple[np.ndarray, np.ndarray]], keep: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _join(
+    parts: list[tuple[np.ndarray, np.ndarray]], keep: list[np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The parts' points (xyz, classes) in one pair of arrays, each part's ``keep`` rows only when given."""
     if keep is not None:
         parts = [(xyz[k], cls[k]) for (xyz, cls), k in zip(parts, keep, strict=True)]
@@ -296,7 +298,11 @@ def write_labels(
         changed = {side: RegionCells(REGION_CELL_RADII * radius_m) for side in sides}
         grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
         rule = functools.partial(
-            change_flags, radius_m=radius_m, ignored=ignored, matching=Matching(surface=surface), geometric=geometric
+            change_flags,
+            radius_m=radius_m,
+            ignored=ignored,
+            matching=Matching(surface=surface),
+            geometric=geometric,
         )
         for ij in grid:
             for dec in (sides["t1"][1], sides["t2"][1]):
@@ -310,7 +316,9 @@ def write_labels(
                 changed[side].add(mine[0][flags == CHANGED])
         for _, dec in sides.values():
             dec.close()
-        taken_back = {side: _drop_small_regions(flags_of[side], changed[side], min_region_points) for side in sides}
+        taken_back = {
+            side: _drop_small_regions(flags_of[side], changed[side], min_region_points) for side in sides
+        }
         groups = {side: root.require_group(side).require_group("tiles") for side in sides}
         counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
         digests: dict[str, dict[str, str]] = {side: {} for side in sides}
@@ -328,7 +336,13 @@ def write_labels(
         }
         checksum = hashlib.sha256(f"{h['t1']}:{h['t2']}".encode()).hexdigest()
         root.attrs.update(
-            {"radius_m": radius_m, "counts": counts, "checksum": checksum, "points": n_total, "small_regions": taken_back}
+            {
+                "radius_m": radius_m,
+                "counts": counts,
+                "checksum": checksum,
+                "points": n_total,
+                "small_regions": taken_back,
+            }
         )
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)

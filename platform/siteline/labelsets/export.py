@@ -39,7 +39,9 @@ def export_label_set(
     return export_las(tiles, site, out, bounds=bounds, level=level, labels=about), label_set.version
 
 
-def export_corrections(catalog: Catalog, scene_id: int, version: int, out: Path, chunk: int = 1_000_000) -> int:
+def export_corrections(
+    catalog: Catalog, scene_id: int, version: int, out: Path, chunk: int = 1_000_000
+) -> int:
     """Write to ``out`` only the points whose class in label set ``version`` differs from label set 1
     (the corrections an import made), with that version's classes and siteline record; return how
     many. Both versions are exported beside ``out`` and read in step, chunk by chunk (the same tiles,

@@ -25,7 +25,9 @@ def coding_lut(taxonomy: Taxonomy, taxonomy_map: TaxonomyMap) -> tuple[np.ndarra
     if taxonomy_map is None or taxonomy_map == "site":
         return taxonomy.id_lut()
     if isinstance(taxonomy_map, str):
-        raise LabelSetError(f"taxonomy map {taxonomy_map!r}: give a JSON file or one of {', '.join(CODINGS)}.")
+        raise LabelSetError(
+            f"taxonomy map {taxonomy_map!r}: give a JSON file or one of {', '.join(CODINGS)}."
+        )
     try:
         return taxonomy.id_lut(dict(taxonomy_map))
     except SchemaError as exc:

@@ -80,7 +80,12 @@ def _import(
     catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, options: ImportOptions,
     progress: Progress, run_id: str | None,
 ) -> LabelSetImport:  # fmt: skip
-    scene_id, taxonomy_map, note, max_unmatched = plan.scene_id, options.taxonomy_map, options.note, options.max_unmatched
+    scene_id, taxonomy_map, note, max_unmatched = (
+        plan.scene_id,
+        options.taxonomy_map,
+        options.note,
+        options.max_unmatched,
+    )
     run = StageRun(
         "import_labels", f"scene:{scene_id}", {"file": str(path), "version": plan.version}, run_id=run_id
     )

@@ -48,7 +48,13 @@ def pair_labels(
     # what the chosen radius costs on unchanged surfaces, recorded with the labels (and the lineage)
     info = replace(info, expected_false_change=expected_false_change(info.multiplier))
     uri = layout.pair_labels(
-        store, plan.pair_id, plan.versions, radius, plan.change_rule.rule, label_params.rule, label_params.min_region_points
+        store,
+        plan.pair_id,
+        plan.versions,
+        radius,
+        plan.change_rule.rule,
+        label_params.rule,
+        label_params.min_region_points,
     )
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
         labels = ChangeLabels.from_dict(dict(store.open_group(uri).attrs) | {"uri": uri})
@@ -89,7 +95,9 @@ def scene_ground(plan: PairPlan, t2: SceneTiles) -> GroundChoice:
     return choice
 
 
-def pair_views(plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None) -> ViewSet:
+def pair_views(
+    plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None
+) -> ViewSet:
     """Synthetic views of the later scene (DESIGN.md §5): probes read its tiles at the pair's point
     size, torch's threads following the machine's load (``threads``; a new one when None);
     :class:`PairError` when it has no cameras or every candidate is rejected."""
@@ -149,7 +157,13 @@ def _render_all(
 
 
 def _render_queue(
-    plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress, threads: CpuThreads
+    plan: PairPlan,
+    scenes: LabelledPair,
+    views: ViewSet,
+    work: Path,
+    device: str,
+    progress: Progress,
+    threads: CpuThreads,
 ) -> tuple[list[tuple[SyntheticView, RenderedView]], dict[str, int]]:
     params = plan.params
     queue = list(views.views)

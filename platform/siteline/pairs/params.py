@@ -158,7 +158,11 @@ class PairParams:
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""
         doc = self.to_dict()
-        for knob in ("colour", "change_rule", "shading"):  # auto: resolved per pair, outputs made before keep their key
+        for knob in (
+            "colour",
+            "change_rule",
+            "shading",
+        ):  # auto: resolved per pair, outputs made before keep their key
             if doc[knob] == "auto":
                 del doc[knob]
         if doc["splat_factor"] == WORLD_SPLAT_FACTOR:  # the renders of before: their key is kept

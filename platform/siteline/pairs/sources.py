@@ -72,7 +72,9 @@ class TilePointSource:
         self._whole: ProbePoints | None = None
         if tiles.point_count <= memory_points:
             self._held = self._hold()
-            self._coarse = ArrayPointSource(self._from_memory(self._held, *self._coarse_selection(coarse_m)).xyz)
+            self._coarse = ArrayPointSource(
+                self._from_memory(self._held, *self._coarse_selection(coarse_m)).xyz
+            )
             if tiles.point_count <= min(memory_points, whole_points):
                 h = self._held
                 self._whole = ProbePoints(h.xyz[h.draw], h.spacing[h.draw], h.kept[h.draw])
@@ -80,7 +82,9 @@ class TilePointSource:
             read = tiles.points(resolution=coarse_m, attributes=("class",))
             self.points_read += read.stats.points_read
             self.reads += 1
-            self._coarse = ArrayPointSource(read.xyz_m[~np.isin(read.attributes["class"], self.skip)].astype(np.float32))
+            self._coarse = ArrayPointSource(
+                read.xyz_m[~np.isin(read.attributes["class"], self.skip)].astype(np.float32)
+            )
         self._batch: _Batch | None = None
 
     @property
@@ -103,7 +107,11 @@ class TilePointSource:
         self.reads += 1
         a = self.tiles.all_nodes
         c = np.concatenate(cls) if cls else np.zeros(0, np.uint8)
-        starts = np.array([offset[t] for t in a.tiles], np.int64)[a.tile] + a.start if len(a.tile) else np.zeros(0, np.int64)
+        starts = (
+            np.array([offset[t] for t in a.tiles], np.int64)[a.tile] + a.start
+            if len(a.tile)
+            else np.zeros(0, np.int64)
+        )
         return _Held(
             np.concatenate(xyz) if xyz else np.zeros((0, 3), np.float32), ~np.isin(c, self.skip), ~np.isin(c, self.ignored),
             np.concatenate(spacing) if spacing else np.zeros(0, np.float32), starts,
@@ -118,7 +126,12 @@ class TilePointSource:
         return rows[keep], take[keep], np.full(int(keep.sum()), resolution_m)
 
     def _from_memory(
-        self, held: _Held, nodes: np.ndarray, take: np.ndarray, spacing: np.ndarray, planes: np.ndarray | None = None
+        self,
+        held: _Held,
+        nodes: np.ndarray,
+        take: np.ndarray,
+        spacing: np.ndarray,
+        planes: np.ndarray | None = None,
     ) -> ProbePoints:
         """The first ``take`` points of ``nodes`` (positions into ``all_nodes``) from the scene held in
         memory (skipped classes left out), each with the larger of ``spacing`` (its node's) and its
@@ -129,7 +142,9 @@ class TilePointSource:
         idx, sp = idx[idx_draw], sp[idx_draw]
         xyz = held.xyz[idx]
         if planes is not None and len(xyz):
-            inside = np.all(xyz @ planes[:, :3].T.astype(np.float32) + planes[:, 3].astype(np.float32) >= 0, axis=1)
+            inside = np.all(
+                xyz @ planes[:, :3].T.astype(np.float32) + planes[:, 3].astype(np.float32) >= 0, axis=1
+            )
             idx, xyz, sp = idx[inside], xyz[inside], sp[inside]
         return ProbePoints(xyz, sp, held.kept[idx])
 
@@ -196,7 +211,9 @@ class TilePointSource:
         keep = ~np.isin(cls, self.skip)
         if len(out.xyz_m):
             keep &= np.all(out.xyz_m @ planes[:, :3].T + planes[:, 3] >= 0, axis=1)
-        return ProbePoints(out.xyz_m[keep].astype(np.float32), spacing[keep], ~np.isin(cls[keep], self.ignored))
+        return ProbePoints(
+            out.xyz_m[keep].astype(np.float32), spacing[keep], ~np.isin(cls[keep], self.ignored)
+        )
 
     def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
         return self._coarse.nearest_distance(xyz)

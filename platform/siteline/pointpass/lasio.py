@@ -141,7 +141,9 @@ def check_laz_count(header: laspy.LasHeader, path: Path) -> None:
     last chunk's points (pointwise LAZ does not record that chunk's count); a variable-size one is exact."""
     n = int(header.point_count)
     counts, exact = laz_chunk_counts(header, path)
-    low, high = (sum(counts), sum(counts)) if exact else (sum(counts[:-1]) + (1 if counts else 0), sum(counts))
+    low, high = (
+        (sum(counts), sum(counts)) if exact else (sum(counts[:-1]) + (1 if counts else 0), sum(counts))
+    )
     if not counts and n == 0:
         return
     if not low <= n <= high:
@@ -324,7 +326,9 @@ def fill_record(record: laspy.ScaleAwarePointRecord, xyz_crs: np.ndarray, fields
     257), as LAS expects; ``number_of_returns`` absent: at least the return number (never 0)."""
     unknown = set(fields) - set(FIELDS)
     if unknown:
-        raise PointCloudError(f"fields {sorted(unknown)} are not LAS fields siteline writes ({', '.join(FIELDS)}).")
+        raise PointCloudError(
+            f"fields {sorted(unknown)} are not LAS fields siteline writes ({', '.join(FIELDS)})."
+        )
     record.x = xyz_crs[:, 0]
     record.y = xyz_crs[:, 1]
     record.z = xyz_crs[:, 2]

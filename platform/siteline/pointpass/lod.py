@@ -76,7 +76,9 @@ def _assign_by_sorting(
             return levels
         cell = cells[level]
         p = pts[remaining]
-        key = voxel_key(np.floor_divide(p[:, 0], cell), np.floor_divide(p[:, 1], cell), np.floor_divide(p[:, 2], cell))
+        key = voxel_key(
+            np.floor_divide(p[:, 0], cell), np.floor_divide(p[:, 1], cell), np.floor_divide(p[:, 2], cell)
+        )
         _, first = np.unique(key, return_index=True)  # first occurrence in the shuffled order
         levels[remaining[first]] = level
         keep = np.ones(remaining.size, dtype=bool)

@@ -298,7 +298,9 @@ class Partition:
         out: dict[tuple[int, int], list[Slice]] = {}
         rows = zip(*(c[order].tolist() for c in (cols[0], which, *cols[1:])), strict=True)
         for cell, k, off, c, z in rows:
-            out.setdefault(tile_of(cell), []).append(Slice(block_of(cell), str(self.folder / runs[k].name), off, c, z))
+            out.setdefault(tile_of(cell), []).append(
+                Slice(block_of(cell), str(self.folder / runs[k].name), off, c, z)
+            )
         return out
 
     def save(self, made_from: JsonObject | None = None) -> None:

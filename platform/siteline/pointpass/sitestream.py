@@ -67,7 +67,9 @@ def wrong_header_crs(crs: pyproj.CRS, mins: Sequence[float], maxs: Sequence[floa
     if area is None or not crs.is_projected:
         return None
     try:
-        x0, y0, x1, y1 = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True).transform_bounds(*area.bounds)
+        x0, y0, x1, y1 = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True).transform_bounds(
+            *area.bounds
+        )
     except Exception:  # an area PROJ cannot project: no judgement
         return None
     unit = crs.axis_info[0].unit_conversion_factor if crs.axis_info else 1.0
@@ -167,7 +169,9 @@ def local_chunks(
     file. Yields (site-local (N, 3) float64 metres, the chunk, its low and high corner)."""
     o = np.asarray(origin, dtype=np.float64)
     corrected = None if how.correction is None else correction_rigid(how.correction)
-    for chunk in iter_chunks(path, how.chunk_points, how.eight_bit, reader=reader, start=how.start, stop=how.stop):
+    for chunk in iter_chunks(
+        path, how.chunk_points, how.eight_bit, reader=reader, start=how.start, stop=how.stop
+    ):
         xyz = chunk.xyz_crs
         if tr is not None:
             xyz = tr(xyz)
@@ -206,7 +210,9 @@ def site_chunks(
         cls = lut[codes]
         outside = np.zeros(len(cls), dtype=bool)
         if site.fence is not None:
-            outside = ~inside_fence(local[:, :2], site.fence, tol_m=fence_tol_m, box=(lo[0], lo[1], hi[0], hi[1]))
+            outside = ~inside_fence(
+                local[:, :2], site.fence, tol_m=fence_tol_m, box=(lo[0], lo[1], hi[0], hi[1])
+            )
             cls = np.where(outside, tax.ignore_id, cls)
         yield SiteChunk(local, chunk, cls.astype(np.uint8), known[codes], outside, lo, hi)
 

@@ -117,7 +117,9 @@ def process_pool(workers: int) -> ProcessPoolExecutor:
         pool = _POOLS.get(workers)
         if pool is None:
             pool = ProcessPoolExecutor(
-                max_workers=workers, mp_context=get_context("spawn"), initializer=_start_worker,
+                max_workers=workers,
+                mp_context=get_context("spawn"),
+                initializer=_start_worker,
                 initargs=(os.getpid(),),
             )
             with _worker_env():

@@ -92,7 +92,9 @@ def write_browser(root: Path, out: Path | None = None, status: str = "published"
     root = Path(root).resolve()
     out = Path(out).absolute() if out is not None else default_page_path(root)
     if Path(os.path.realpath(out)).is_relative_to(root):
-        raise ReleaseError(f"{out} is inside the release {root}: a release is never written into; choose a path beside it.")
+        raise ReleaseError(
+            f"{out} is inside the release {root}: a release is never written into; choose a path beside it."
+        )
     if out.is_dir():
         out = out / f"{root.parent.name}-{root.name}.html"
     doc = read_manifest(root)

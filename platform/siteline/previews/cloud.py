@@ -81,7 +81,12 @@ def chunk_plan(tiles: SceneTiles, take: np.ndarray, chunk_points: int = CHUNK_PO
 
 
 def encode_chunk(
-    tiles: SceneTiles, chunk: CloudChunk, side: int, colour: ColourPlan, centre: np.ndarray, floor_z: float = 0.0
+    tiles: SceneTiles,
+    chunk: CloudChunk,
+    side: int,
+    colour: ColourPlan,
+    centre: np.ndarray,
+    floor_z: float = 0.0,
 ) -> bytes:
     """Read ``chunk`` of scene ``side`` (1 or 2; ``tiles`` reads ``change`` and ``class``) and pack
     it as :data:`HEADER` describes: positions in float32 metres from ``centre`` (site-local, so
@@ -145,7 +150,12 @@ class PairCloud:
         hi = np.max([t.all_nodes.hi.max(axis=0) for t in (t1, t2) if len(t.all_nodes.hi)], axis=0)
         (take1, level1), (take2, level2) = (budget_takes(t, budget // 2) for t in (t1, t2))
         return CloudPlan(
-            self, (chunk_plan(t1, take1), chunk_plan(t2, take2)), (lo + hi) / 2, hi - lo, (level1, level2), budget
+            self,
+            (chunk_plan(t1, take1), chunk_plan(t2, take2)),
+            (lo + hi) / 2,
+            hi - lo,
+            (level1, level2),
+            budget,
         )
 
     def side(self, side: int) -> SceneTiles:
@@ -176,7 +186,9 @@ class CloudPlan:
             raise IndexError(f"scene t{side} has no chunk {k}")
         with self._reading[side - 1]:
             floor = float(self.centre[2] - self.extent[2] / 2)
-            return encode_chunk(self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre, floor)
+            return encode_chunk(
+                self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre, floor
+            )
 
     def to_dict(self, browser: str | None) -> JsonObject:
         """The viewer's plan (JSON): chunk counts and sizes, the centre, the classes, and each camera
@@ -203,7 +215,8 @@ class CloudPlan:
             "budget": self.budget,
             "colour": self.cloud.colour.source,
             "classes": [
-                {"id": c.id, "name": c.name, "color": list(c.color), "ignore": c.ignore} for c in self.cloud.taxonomy.classes
+                {"id": c.id, "name": c.name, "color": list(c.color), "ignore": c.ignore}
+                for c in self.cloud.taxonomy.classes
             ],
             "cameras": cams,
             "frustum_depth_m": depth,

@@ -39,7 +39,9 @@ def _sizes(items: Sequence[ReleaseItem]) -> str:
     return text
 
 
-def release_markdown(info: ReleaseInfo, doc: Manifest, montage_url: str, preview_url: str | None = None) -> str:
+def release_markdown(
+    info: ReleaseInfo, doc: Manifest, montage_url: str, preview_url: str | None = None
+) -> str:
     """The release artifact: montage, links to its browser and each pair in 3D on the preview server
     at ``preview_url`` (None: none), why this version, where it is, sizes and figures, its pairs,
     label sets and class balance (``doc``: the release's manifest)."""
@@ -76,13 +78,31 @@ def release_markdown(info: ReleaseInfo, doc: Manifest, montage_url: str, preview
     for q in lineage.get("pairs", []):
         views = sum(1 for it in items if it.pair == q["id"])
         ls = q.get("label_sets", {})
-        lines.append(f"| {q['id']} | {q['t1']} -> {q['t2']} | v{ls.get('t1')}, v{ls.get('t2')} | {views} | {q['radius_m']:.3f} |")
-    lines += ["", "## Scenes and label sets", "", "| scene | captured | label set | source |", "|---|---|---|---|"]
+        lines.append(
+            f"| {q['id']} | {q['t1']} -> {q['t2']} | v{ls.get('t1')}, v{ls.get('t2')} | {views} | {q['radius_m']:.3f} |"
+        )
+    lines += [
+        "",
+        "## Scenes and label sets",
+        "",
+        "| scene | captured | label set | source |",
+        "|---|---|---|---|",
+    ]
     for sc in lineage.get("scenes", []):
-        lines.append(f"| {sc['id']} | {sc['capture_time']} | v{sc['label_set_version']} | {sc['label_set_source']} |")
+        lines.append(
+            f"| {sc['id']} | {sc['capture_time']} | v{sc['label_set_version']} | {sc['label_set_source']} |"
+        )
     balance = doc.stats.get("class_balance", {})
-    lines += ["", "## Class balance (pixels)", "", "| split | changed | unchanged | ignore |", "|---|---|---|---|"]
-    lines += [f"| {k} | {v['changed']:,} | {v['unchanged']:,} | {v['ignore']:,} |" for k, v in balance.items()]
+    lines += [
+        "",
+        "## Class balance (pixels)",
+        "",
+        "| split | changed | unchanged | ignore |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {k} | {v['changed']:,} | {v['unchanged']:,} | {v['ignore']:,} |" for k, v in balance.items()
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -92,11 +112,18 @@ def _see_links(info: ReleaseInfo, doc: Manifest, preview_url: str | None) -> lis
         return []
     base = f"{preview_url.rstrip('/')}"
     release = f"{quote(info.name)}/{quote(info.version)}"
-    pairs = " ".join(f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.lineage.get("pairs", []))
-    return [f"**See it:** [browse every item]({base}/browse/{release}/) (A | B swipe, mask, filters) · in 3D, change in red: {pairs}", ""]
+    pairs = " ".join(
+        f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.lineage.get("pairs", [])
+    )
+    return [
+        f"**See it:** [browse every item]({base}/browse/{release}/) (A | B swipe, mask, filters) · in 3D, change in red: {pairs}",
+        "",
+    ]
 
 
-def stopped_markdown(run_name: str, events: Sequence[RunEvent], progress: str | None, max_attempts: int) -> str:
+def stopped_markdown(
+    run_name: str, events: Sequence[RunEvent], progress: str | None, max_attempts: int
+) -> str:
     """Why a run stopped, in words, for its own page: each crash (when, what the state says: for
     a dead process or machine, its missing heartbeats), whether it was rescheduled and which attempt
     comes next, and how far the progress bar had come (``progress``: its description)."""
@@ -121,7 +148,9 @@ def stopped_markdown(run_name: str, events: Sequence[RunEvent], progress: str | 
             "what this attempt had not finished."
         )
     elif attempt >= max_attempts:
-        lines.append(f"It crashed {attempt} times, the most the service retries: run it again by hand once the cause is fixed.")
+        lines.append(
+            f"It crashed {attempt} times, the most the service retries: run it again by hand once the cause is fixed."
+        )
     if progress:
         lines.append(f"Where it was: {progress}.")
     lines += ["", "| time (UTC) | state | attempt | message |", "|---|---|---|---|"]

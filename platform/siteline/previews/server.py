@@ -183,7 +183,9 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         rows = []
         top = layout.releases(self.home)
         for name in sorted(n for n in os.listdir(top) if not n.startswith(".")) if top.is_dir() else []:
-            for version in sorted(v for v in os.listdir(top / name) if not v.startswith(".") and (top / name / v).is_dir()):
+            for version in sorted(
+                v for v in os.listdir(top / name) if not v.startswith(".") and (top / name / v).is_dir()
+            ):
                 try:
                     pairs = [int(p["id"]) for p in self.manifests.read(top / name / version).lineage["pairs"]]
                 except (SitelineError, KeyError, ValueError, OSError):
@@ -216,7 +218,9 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
     def _release_route(self, kind: str, name: str, version: str, rest: str) -> io.BytesIO:
         head, _, tail = rest.partition("/")
         if kind == "3d" and (not head.isdigit() or len(head) > MAX_DIGITS):
-            return self._text(400, f"/3d/{name}/{version}/<pair>/: the pair is a number of at most {MAX_DIGITS} digits")
+            return self._text(
+                400, f"/3d/{name}/{version}/<pair>/: the pair is a number of at most {MAX_DIGITS} digits"
+            )
         try:
             root, status = self._locate(name, version)
             doc = self.manifests.read(root)
@@ -228,7 +232,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
             if rest == "":
                 page = browser_page(doc, f"{base}/files", f"/3d/{quote(name)}/{quote(version)}", status)
                 return self._send(page.encode(), "text/html; charset=utf-8")
-            if rest.startswith("files/") and (path := _inside(root, rest[len("files/"):])) is not None:
+            if rest.startswith("files/") and (path := _inside(root, rest[len("files/") :])) is not None:
                 kind_ = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
                 return self._send(path.read_bytes(), kind_, cache=status == "published")
             return self._text(404, f"release {name} {version} has no {rest}")
@@ -237,7 +241,9 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
             page = _viewer_page(f"{name} {version} ({status}): pair {pair} in 3D", f"{base}/{pair}")
             return self._send(page.encode(), "text/html; charset=utf-8")
         if self.access is None:
-            return self._text(503, "the 3D viewer reads the scenes through the catalog: run `siteline previews serve`.")
+            return self._text(
+                503, "the 3D viewer reads the scenes through the catalog: run `siteline previews serve`."
+            )
         query = parse_qs(urlsplit(self.path).query)
         try:
             budget = int(query.get("budget", [DEFAULT_BUDGET])[0])
@@ -247,7 +253,8 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
             return self._text(400, f"budget: between 1000 and {MAX_BUDGET} points, not {budget}")
         try:
             plan = self.plans.get(
-                (str(root), doc.created, pair, budget), lambda: self.access.open_pair(doc, pair).plan(budget)  # type: ignore[union-attr]
+                (str(root), doc.created, pair, budget),
+                lambda: self.access.open_pair(doc, pair).plan(budget),  # type: ignore[union-attr]
             )
         except SitelineError as exc:
             return self._text(404, str(exc))
@@ -265,13 +272,15 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
     def send_head(self) -> io.BufferedIOBase | io.BytesIO | None:  # type: ignore[override]
         path = unquote(urlsplit(self.path).path)
         if "\x00" in path or len(path) > MAX_PATH or any(len(p) > MAX_SEGMENT for p in path.split("/")):
-            return self._text(400, f"a path without NUL bytes, of at most {MAX_PATH} characters and {MAX_SEGMENT} a segment")
+            return self._text(
+                400, f"a path without NUL bytes, of at most {MAX_PATH} characters and {MAX_SEGMENT} a segment"
+            )
         if path in ("/", ""):
             return self._index()
         if path == "/favicon.ico":
             return self._send(b"", "image/x-icon", 204)
         if path.startswith(STATIC + "/"):
-            return self._static(path[len(STATIC) + 1:])
+            return self._static(path[len(STATIC) + 1 :])
         if (m := _ROUTE.match(path)) is not None:
             try:
                 return self._release_route(*m.groups())
@@ -311,7 +320,11 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
 
 def _viewer_page(title: str, base: str) -> str:
     template = files("siteline.previews").joinpath("static/viewer.html").read_text()
-    return template.replace("{{TITLE}}", html.escape(title)).replace("{{BASE}}", base).replace("{{STATIC}}", STATIC)
+    return (
+        template.replace("{{TITLE}}", html.escape(title))
+        .replace("{{BASE}}", base)
+        .replace("{{STATIC}}", STATIC)
+    )
 
 
 class PreviewServer(http.server.ThreadingHTTPServer):
@@ -320,7 +333,9 @@ class PreviewServer(http.server.ThreadingHTTPServer):
 
     daemon_threads = True
 
-    def __init__(self, address: tuple[str, int], handler: Callable[..., Any], limit: int = MAX_CONNECTIONS) -> None:
+    def __init__(
+        self, address: tuple[str, int], handler: Callable[..., Any], limit: int = MAX_CONNECTIONS
+    ) -> None:
         super().__init__(address, handler)
         self.slots = threading.BoundedSemaphore(limit)
 

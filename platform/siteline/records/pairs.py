@@ -52,7 +52,9 @@ class ViewStrategy:
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> ViewStrategy:
         seg = doc.get("mirror_segment_m")
-        segment = ((float(seg[0][0]), float(seg[0][1])), (float(seg[1][0]), float(seg[1][1]))) if seg else None
+        segment = (
+            ((float(seg[0][0]), float(seg[0][1])), (float(seg[1][0]), float(seg[1][1]))) if seg else None
+        )
         return cls(
             float(doc["vertical_fraction"]), bool(doc["mirrored"]), float(doc["forward_fraction"]), segment,
             doc.get("mirror_rule"), doc.get("central_depth_m"), doc.get("forward_m"),
@@ -62,14 +64,14 @@ class ViewStrategy:
 @dataclass(frozen=True)
 class RenderedView:
     """One view of a pair rendered on both scenes: the synthetic camera (index in the pair's sample,
-    parent real image, strategy key, strategy parameters, probe coverage, camera as
-    ``schema/camera.schema.json``), its file name in A/, B/ and label/, and what the render found:
-    coverage of each scene, valid fraction (neither ignored nor a hole), changed / valid, points read
-    from both scenes, the share of pixels ignored for each cause (siteline.codes.IGNORE_CAUSES;
-    empty for outputs made before causes were recorded), the share of pixels whose point came from
-    the gap fill, and the probe's valid share (an upper bound the view was chosen by), and the share of its changed pixels
-whose colour differs between A and B (siteline.pairs.render.change_visibility; None: nothing
-changed, or made before it was measured)."""
+        parent real image, strategy key, strategy parameters, probe coverage, camera as
+        ``schema/camera.schema.json``), its file name in A/, B/ and label/, and what the render found:
+        coverage of each scene, valid fraction (neither ignored nor a hole), changed / valid, points read
+        from both scenes, the share of pixels ignored for each cause (siteline.codes.IGNORE_CAUSES;
+        empty for outputs made before causes were recorded), the share of pixels whose point came from
+        the gap fill, and the probe's valid share (an upper bound the view was chosen by), and the share of its changed pixels
+    whose colour differs between A and B (siteline.pairs.render.change_visibility; None: nothing
+    changed, or made before it was measured)."""
 
     index: int
     parent: str
@@ -90,14 +92,18 @@ changed, or made before it was measured)."""
 
     def to_dict(self) -> JsonObject:
         return {f.name: getattr(self, f.name) for f in fields(self)} | {
-            "params": self.params.to_dict(), "camera": self.camera.to_dict()
+            "params": self.params.to_dict(),
+            "camera": self.camera.to_dict(),
         }
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> RenderedView:
         names = {f.name for f in fields(cls)}
         values = {k: v for k, v in doc.items() if k in names}
-        return cls(**values | {"params": ViewStrategy.from_dict(doc["params"]), "camera": Camera.from_dict(doc["camera"])})
+        return cls(
+            **values
+            | {"params": ViewStrategy.from_dict(doc["params"]), "camera": Camera.from_dict(doc["camera"])}
+        )
 
 
 ColourChoice = Literal["auto", "rgb", "height", "intensity", "elevation"]
@@ -111,9 +117,7 @@ COLOUR_CHOICES: tuple[str, ...] = get_args(ColourChoice)
 ShadingChoice = Literal["auto", "edl", "none"]
 SHADING_CHOICES: tuple[str, ...] = get_args(ShadingChoice)
 # the elevation ramp: low -> high, five stops of viridis (perceptually uniform, readable in grey)
-RAMP = np.array(
-    [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64
-)
+RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -140,7 +144,9 @@ class ColourPlan:
         (intensity; for height their heights above the ground, metres) or z stretched between this
         plan's bounds onto the grey scale (intensity) or the ramp."""
         if self.source in ("rgb", "height") and values is None:
-            raise PairError(f"a {self.source} colour plan needs the points' {'rgb' if self.source == 'rgb' else 'heights'}.")
+            raise PairError(
+                f"a {self.source} colour plan needs the points' {'rgb' if self.source == 'rgb' else 'heights'}."
+            )
         if self.source == "rgb":
             return values  # type: ignore[return-value]
         lo, hi = (self.stretch_t1 if side == 1 else self.stretch_t2) or (0.0, 1.0)

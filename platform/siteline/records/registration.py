@@ -57,8 +57,14 @@ class Alignment:
         values["correction"] = tuple(tuple(float(v) for v in row) for row in doc.get("correction") or ())
         values["axes"] = dict(doc.get("axes") or {})
         return cls(
-            **{"against_scene": None, "translation_m": 0.0, "rotation_deg": 0.0, "applied": False,
-               "residual_m": float("inf")} | values  # fmt: skip
+            **{
+                "against_scene": None,
+                "translation_m": 0.0,
+                "rotation_deg": 0.0,
+                "applied": False,
+                "residual_m": float("inf"),
+            }
+            | values
         )
 
     def to_dict(self) -> JsonObject:
@@ -66,7 +72,11 @@ class Alignment:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["correction"] = [list(row) for row in self.correction]
         out["axes"] = dict(self.axes)
-        out = {k: v for k, v in out.items() if v is not None or k in ("against_scene", "residual_xy_m", "residual_z_m")}
+        out = {
+            k: v
+            for k, v in out.items()
+            if v is not None or k in ("against_scene", "residual_xy_m", "residual_z_m")
+        }
         return out | ({"free": self.free} if self.axes else {})
 
     @property
@@ -132,7 +142,9 @@ class SurveyPlan:
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> SurveyPlan:
         cam = dict(doc["camera"])
-        camera = Intrinsics(**{k: cam[k] for k in ("width", "height", "fx", "fy", "cx", "cy")}, name=cam.get("name", ""))
+        camera = Intrinsics(
+            **{k: cam[k] for k in ("width", "height", "fx", "fy", "cx", "cy")}, name=cam.get("name", "")
+        )
         return cls(
             camera, doc.get("altitude_m"), float(doc["forward_overlap"]), float(doc["side_overlap"]),
             float(doc["oblique_pitch_deg"]),

@@ -114,7 +114,9 @@ class _Fit:
     """One kind of ICP between two centred clouds: point-to-plane (the target's normals) or
     point-to-point, run from a pose and within a subspace of the six unknowns."""
 
-    def __init__(self, src: np.ndarray, tgt: np.ndarray, scale: float, planes: bool, max_distance_m: float) -> None:
+    def __init__(
+        self, src: np.ndarray, tgt: np.ndarray, scale: float, planes: bool, max_distance_m: float
+    ) -> None:
         self.src, self.tgt, self.scale, self.planes, self.reach = src, tgt, scale, planes, max_distance_m
         self.tree = cKDTree(tgt)
         self.normals = _normals(self.tree, tgt) if planes else None
@@ -135,7 +137,9 @@ class _Fit:
             return p, ((p - q) * n).sum(axis=1), ok, n
         return p, p - q, ok, None
 
-    def run(self, T: np.ndarray, basis: np.ndarray, iterations: int, src: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+    def run(
+        self, T: np.ndarray, basis: np.ndarray, iterations: int, src: np.ndarray | None = None
+    ) -> tuple[np.ndarray, int]:
         """``T`` improved by up to ``iterations`` steps within the span of ``basis`` (6, k); the steps taken."""
         src = self.src if src is None else src
         it = 0
@@ -212,7 +216,11 @@ def _point_residuals(
     e = _moved(T, src[ok]) - tgt[j[ok]]
     keep = d[ok] <= np.quantile(d[ok], 0.9)
     e = e[keep]
-    return float(np.sqrt((e[:, :2] ** 2).sum(axis=1).mean())), float(np.sqrt((e[:, 2] ** 2).mean())), int(ok.sum())
+    return (
+        float(np.sqrt((e[:, :2] ** 2).sum(axis=1).mean())),
+        float(np.sqrt((e[:, 2] ** 2).mean())),
+        int(ok.sum()),
+    )
 
 
 def register_samples(
@@ -231,10 +239,18 @@ def register_samples(
     part. Directions nothing fixes are left at zero and reported free (``axes``)."""
     src = np.asarray(source, dtype=np.float64).reshape(-1, 3)
     tgt = np.asarray(target, dtype=np.float64).reshape(-1, 3)
-    s_src = np.asarray(source_structure if source_structure is not None else np.zeros((0, 3)), np.float64).reshape(-1, 3)
-    s_tgt = np.asarray(target_structure if target_structure is not None else np.zeros((0, 3)), np.float64).reshape(-1, 3)
+    s_src = np.asarray(
+        source_structure if source_structure is not None else np.zeros((0, 3)), np.float64
+    ).reshape(-1, 3)
+    s_tgt = np.asarray(
+        target_structure if target_structure is not None else np.zeros((0, 3)), np.float64
+    ).reshape(-1, 3)
     surfaces = "ground and building"
-    if (len(src) < _MIN_POINTS or len(tgt) < _MIN_POINTS) and len(s_src) >= _MIN_POINTS and len(s_tgt) >= _MIN_POINTS:
+    if (
+        (len(src) < _MIN_POINTS or len(tgt) < _MIN_POINTS)
+        and len(s_src) >= _MIN_POINTS
+        and len(s_tgt) >= _MIN_POINTS
+    ):
         src, tgt, surfaces = np.r_[src, s_src], np.r_[tgt, s_tgt], "every kept class (no ground or building)"
     if len(src) < 10 or len(tgt) < 10:
         return AlignmentCheck(
@@ -259,7 +275,8 @@ def register_samples(
         if by_structure:
             T, _ = structure.run(T, _axes_basis(by_structure), 40)
     axes = {
-        a: SURFACES if k in by_surfaces else STRUCTURE if k in by_structure else None for k, a in enumerate(AXES)
+        a: SURFACES if k in by_surfaces else STRUCTURE if k in by_structure else None
+        for k, a in enumerate(AXES)
     }
     found = surface.residuals(T, src)
     resid = np.zeros(0)

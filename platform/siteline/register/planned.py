@@ -56,6 +56,7 @@ def auto_altitude(plan: SurveyPlan, density_pts_m2: float, area_m2: float) -> tu
         h = lower
     return float(round(h, 1)), why
 
+
 def _ground_z(sample: np.ndarray, xy: np.ndarray, radius_m: float) -> np.ndarray:
     """(K,) ground height under each (K, 2) position: the 10th percentile of the sample's z within
     ``radius_m`` (NaN where fewer than MIN_POINTS_UNDER sample points lie there)."""
@@ -79,9 +80,7 @@ def _nadir(model: Intrinsics, center: np.ndarray) -> Camera:
     return Camera.look_at(center, target, model.width, model.height, model.fx, model.fy, model.cx, model.cy)
 
 
-def plan_cameras(
-    sample: np.ndarray, area: list[tuple[float, float]], plan: SurveyPlan
-) -> dict[str, Camera]:
+def plan_cameras(sample: np.ndarray, area: list[tuple[float, float]], plan: SurveyPlan) -> dict[str, Camera]:
     """Survey cameras over ``area`` (a fence ring, site-local metres) from a (N, 3) site-local sample
     of the scene: north-south lines of nadir images at ``plan.altitude_m`` (set: :func:`auto_altitude`
     chooses it) above the local ground, spaced by the image footprint less the overlaps, kept where

@@ -119,7 +119,9 @@ def check_alignment(
     new_stable, new_structure = _kinds(sample_new)
     old_stable, old_structure = _kinds(sample_previous)
     check = register_samples(new_stable, old_stable, new_structure, old_structure)
-    overlap = check.matched / max(len(new_stable) if check.surfaces == "ground and building" else len(sample_new), 1)
+    overlap = check.matched / max(
+        len(new_stable) if check.surfaces == "ground and building" else len(sample_new), 1
+    )
     bad = (
         check.translation_m > policy.max_translation_m
         or overlap < policy.min_overlap

@@ -162,7 +162,9 @@ def execute_build(
         rows = [it.to_dict() for it in items]
         stats = datasheet.statistics(work, list(items))
         (work / "stats.json").write_text(json.dumps(stats, indent=1) + "\n")
-        datasheet.montage(work, [it for it in items if it.valid > 0.2] or list(items)).save(work / "montage.png")
+        datasheet.montage(work, [it for it in items if it.valid > 0.2] or list(items)).save(
+            work / "montage.png"
+        )
         doc = {
             "format": layout.FORMAT, "layout": layout.layout_record(plan.params.pad), "name": plan.name,
             "version": plan.version, "created": datetime.now(UTC).isoformat(), "code_version": __version__,

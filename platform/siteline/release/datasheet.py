@@ -44,7 +44,11 @@ def montage(root: Path, items: list[ReleaseItem], count: int = 6, width: int = 1
 
     return triplet_grid(
         [
-            (rgb("A", it), rgb("B", it), np.asarray(Image.open(root / it.split / "label_ignore" / f"{it.id}.png")))
+            (
+                rgb("A", it),
+                rgb("B", it),
+                np.asarray(Image.open(root / it.split / "label_ignore" / f"{it.id}.png")),
+            )
             for it in items[:count]
         ],
         width,
@@ -75,13 +79,17 @@ def ignore_breakdown(items: list[ReleaseItem], ignored_px: dict[str, int]) -> Js
             "share": counted / stored if stored else 0.0,
             "share_of_rendered": (counted - px["padding"]) / rendered if rendered else 0.0,
             "causes": _shares(px, stored),
-            "causes_of_rendered": _shares({c: px[c] for c in RELEASE_IGNORE_CAUSES if c != "padding"}, rendered),
+            "causes_of_rendered": _shares(
+                {c: px[c] for c in RELEASE_IGNORE_CAUSES if c != "padding"}, rendered
+            ),
             "filled_of_rendered": filled / rendered if rendered else 0.0,
         }
 
     out = tally(items, sum(ignored_px.values()))
     splits = sorted({it.split for it in items})
-    out["per_split"] = {sp: tally([it for it in items if it.split == sp], ignored_px.get(sp, 0)) for sp in splits}
+    out["per_split"] = {
+        sp: tally([it for it in items if it.split == sp], ignored_px.get(sp, 0)) for sp in splits
+    }
     return out
 
 
@@ -117,7 +125,11 @@ def _radius_lines(pairs: list[JsonObject], ceiling: float, params: PairParams) -
     for q in pairs:
         radius = ChangeLabels.from_dict(q["labels"]).radius
         fc = radius.expected_false_change if radius is not None else None
-        spacing = max(radius.median_spacing_m.values(), default=float("nan")) if radius is not None else float("nan")
+        spacing = (
+            max(radius.median_spacing_m.values(), default=float("nan"))
+            if radius is not None
+            else float("nan")
+        )
         measured = accuracy_text(rule, regions, params.trim_edges, spacing)
         if fc and rule == "surface":
             out.append(
@@ -220,7 +232,9 @@ def _camera_lines(lin: JsonObject) -> list[str]:
             lines.append(f"- scene {sid} co-registered onto scene {a.against_scene}: {a.summary()}")
     lines += [_views_text(q) for q in lin["pairs"] if q.get("views")]
     lines += [
-        f"- pair {q['id']}: {ground.summary()}" for q in lin["pairs"] if (ground := GroundUsed.from_dict(q.get("ground")))
+        f"- pair {q['id']}: {ground.summary()}"
+        for q in lin["pairs"]
+        if (ground := GroundUsed.from_dict(q.get("ground")))
     ]
     lines += [_colour_text(q) for q in lin["pairs"]]
     return lines
@@ -262,7 +276,9 @@ def _splat_text(p: PairParams) -> str:
         )
     fill = p.fill_px
     return text + (
-        f"; gaps filled from the nearest point of the surface around them within {fill} px" if fill else "; no gap fill"
+        f"; gaps filled from the nearest point of the surface around them within {fill} px"
+        if fill
+        else "; no gap fill"
     )
 
 
@@ -310,8 +326,11 @@ def _source_lines(lin: JsonObject) -> list[str]:
     return [
         "## Sources",
         "",
-        "- sites: " + ", ".join(
-            f"{s['name']} ({s['crs']}" + (f", version {s['version']}: taxonomy {s['taxonomy']}" if "version" in s else "") + ")"
+        "- sites: "
+        + ", ".join(
+            f"{s['name']} ({s['crs']}"
+            + (f", version {s['version']}: taxonomy {s['taxonomy']}" if "version" in s else "")
+            + ")"
             for s in lin["sites"]
         ),
         "- scenes: "
@@ -359,7 +378,9 @@ def _split_lines(doc: JsonObject, stats: JsonObject) -> list[str]:
         )
     empty = [s for s, c in (rule.get("changed_share") or {}).items() if c == 0.0]
     if empty:
-        lines.append(f"- no changed pixels in {', '.join(empty)}: the pairs there show no change where their views look")
+        lines.append(
+            f"- no changed pixels in {', '.join(empty)}: the pairs there show no change where their views look"
+        )
     lines.append("")
     for split in ("train", "val", "test"):
         s = stats["class_balance"].get(split)
@@ -413,6 +434,10 @@ def datasheet(doc: JsonObject, stats: JsonObject) -> str:
         "",
     ]
     lines = (
-        head + _layout_lines(doc, stats) + _source_lines(doc["lineage"]) + _split_lines(doc, stats) + _ignore_lines(stats)
+        head
+        + _layout_lines(doc, stats)
+        + _source_lines(doc["lineage"])
+        + _split_lines(doc, stats)
+        + _ignore_lines(stats)
     )
     return "\n".join(lines + _use_lines(doc))

@@ -255,7 +255,9 @@ def _write_files(planned: list[tuple[str, Path, Path]], out: Path, work: Path, c
 
 
 HF_PROFILE = "hf"
-HF_LOADER = "datasets.load_dataset(<out>): parquet shards data/<split>-*.parquet and README.md (the hub's card)"
+HF_LOADER = (
+    "datasets.load_dataset(<out>): parquet shards data/<split>-*.parquet and README.md (the hub's card)"
+)
 PROFILE_NAMES = (*PROFILES, HF_PROFILE)
 
 

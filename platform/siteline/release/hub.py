@@ -84,7 +84,10 @@ def _row(root: Path, it: ReleaseItem) -> JsonObject:
         if not path.is_file():
             raise ReleaseError(f"{path} is missing: the release is incomplete (`siteline release verify`).")
         images[name] = {"bytes": path.read_bytes(), "path": f"{it.id}.png"}
-    images["label_preview"] = {"bytes": _preview(root / it.split / "label_ignore" / f"{it.id}.png"), "path": f"{it.id}.png"}
+    images["label_preview"] = {
+        "bytes": _preview(root / it.split / "label_ignore" / f"{it.id}.png"),
+        "path": f"{it.id}.png",
+    }
     cam = it.camera
     return {
         "id": it.id, **images, "split": it.split, "pair": it.pair, "view": it.view,
@@ -117,7 +120,9 @@ def _shards(root: Path, items: list[ReleaseItem]) -> list[list[ReleaseItem]]:
     shards: list[list[ReleaseItem]] = []
     size = SHARD_BYTES
     for it in items:
-        item_bytes = sum((root / it.split / f / f"{it.id}.png").stat().st_size for f in IMAGE_FOLDERS.values())
+        item_bytes = sum(
+            (root / it.split / f / f"{it.id}.png").stat().st_size for f in IMAGE_FOLDERS.values()
+        )
         if size + item_bytes > SHARD_BYTES and (not shards or shards[-1]):
             shards.append([])
             size = 0
@@ -128,7 +133,12 @@ def _shards(root: Path, items: list[ReleaseItem]) -> list[list[ReleaseItem]]:
 
 def size_category(n: int) -> str:
     """The hub's ``size_categories`` value for ``n`` rows."""
-    for limit, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"), (1_000_000, "100K<n<1M")):
+    for limit, name in (
+        (1_000, "n<1K"),
+        (10_000, "1K<n<10K"),
+        (100_000, "10K<n<100K"),
+        (1_000_000, "100K<n<1M"),
+    ):
         if n < limit:
             return name
     return "1M<n<10M"
@@ -161,7 +171,9 @@ def write_shards(root: Path, doc: Manifest, work: Path) -> Shards:
         shards = _shards(root, items)
         for n, shard in enumerate(shards):
             rel = f"data/{hub}-{n:05d}-of-{len(shards):05d}.parquet"
-            table = pa.Table.from_pylist([feats.encode_example(_row(root, it)) for it in shard], schema=schema)
+            table = pa.Table.from_pylist(
+                [feats.encode_example(_row(root, it)) for it in shard], schema=schema
+            )
             pq.write_table(table, work / rel, row_group_size=ROW_GROUP_ROWS)
             written.setdefault(hub, []).append(rel)
             rows[hub] = rows.get(hub, 0) + table.num_rows
@@ -191,7 +203,9 @@ class HubLicense:
             raise ReleaseError(f"--license-link {self.link!r}: an http(s) address of the licence's text.")
 
     def card_fields(self) -> JsonObject:
-        return {"license": self.id} | ({"license_name": self.name, "license_link": self.link} if self.id == "other" else {})
+        return {"license": self.id} | (
+            {"license_name": self.name, "license_link": self.link} if self.id == "other" else {}
+        )
 
     def text(self) -> str:
         if self.id == "other":
@@ -211,7 +225,10 @@ def provenance(doc: Manifest) -> tuple[str, str]:
         )
     if made and all(made) and not any(m.startswith(SYNTHETIC_SOFTWARE) for m in made if m):
         programs = ", ".join(sorted(set(str(m) for m in made)))
-        return "surveyed", f"**Surveyed.** The scenes are drone LiDAR surveys (their LAS files written by {programs})."
+        return (
+            "surveyed",
+            f"**Surveyed.** The scenes are drone LiDAR surveys (their LAS files written by {programs}).",
+        )
     return "unrecorded", (
         "**Source not recorded.** Some scenes were ingested before siteline recorded what wrote their LAS "
         "files: whether they are surveyed or synthetic is not stated here."
@@ -228,7 +245,9 @@ def _split_rows(doc: Manifest) -> list[str]:
         valid = sum(it.valid * n for it, n in zip(items, px, strict=True)) / sum(px)
         changed = sum(it.change_ratio * it.valid * n for it, n in zip(items, px, strict=True)) / sum(px)
         pairs = sorted({it.pair for it in items})
-        rows.append(f"| {hub} | {len(items)} | {', '.join(map(str, pairs))} | {changed:.1%} | {1 - valid:.1%} |")
+        rows.append(
+            f"| {hub} | {len(items)} | {', '.join(map(str, pairs))} | {changed:.1%} | {1 - valid:.1%} |"
+        )
     return rows
 
 
@@ -258,7 +277,12 @@ def _made_lines(doc: Manifest) -> list[str]:
     for q in pairs:
         info = (q.get("labels") or {}).get("radius") or {}
         spacing = max((info.get("median_spacing_m") or {}).values(), default=float("nan"))
-        measured = accuracy_text(p.get("label_rule", "nearest"), int(p.get("min_region_points", 1)), bool(p.get("trim_edges")), spacing)
+        measured = accuracy_text(
+            p.get("label_rule", "nearest"),
+            int(p.get("min_region_points", 1)),
+            bool(p.get("trim_edges")),
+            spacing,
+        )
         if measured:
             said.setdefault(measured, []).append(str(q["id"]))
     lines += [f"- pair{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {text}." for text, ids in said.items()]
@@ -340,13 +364,19 @@ def _card_data(doc: Manifest, shards: Shards, license: HubLicense, kind: str) ->
         task_categories=["image-segmentation"],
         task_ids=["semantic-segmentation"],
         size_categories=[size_category(len(doc.items))],
-        tags=["change-detection", "construction", "drone", "lidar", "siteline"] + (["synthetic"] if kind == "synthetic" else []),
+        tags=["change-detection", "construction", "drone", "lidar", "siteline"]
+        + (["synthetic"] if kind == "synthetic" else []),
         configs=[
-            {"config_name": "default", "data_files": [{"split": s, "path": f"data/{s}-*.parquet"} for s in counts]}
+            {
+                "config_name": "default",
+                "data_files": [{"split": s, "path": f"data/{s}-*.parquet"} for s in counts],
+            }
         ],
         dataset_info={
             "features": features()._to_yaml_list(),
-            "splits": [{"name": s, "num_bytes": shards.num_bytes[s], "num_examples": n} for s, n in counts.items()],
+            "splits": [
+                {"name": s, "num_bytes": shards.num_bytes[s], "num_examples": n} for s, n in counts.items()
+            ],
             "download_size": shards.file_bytes,
             "dataset_size": sum(shards.num_bytes.values()),
         },

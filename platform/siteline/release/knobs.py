@@ -60,7 +60,9 @@ class ReleaseKnobs:
             k for k, v in self.pair.items() if v == AUTO and k not in AUTO_KNOBS + VALUE_AUTO_KNOBS
         )
         if bad_auto:
-            raise ReleaseError(f"release settings: only {', '.join(AUTO_KNOBS)} may be 'auto', not {bad_auto}.")
+            raise ReleaseError(
+                f"release settings: only {', '.join(AUTO_KNOBS)} may be 'auto', not {bad_auto}."
+            )
         try:  # each value checked by the spec that owns it
             PairParams.from_dict({k: v for k, v in self.pair.items() if v != AUTO or k in VALUE_AUTO_KNOBS})
         except SitelineError as exc:
@@ -68,12 +70,18 @@ class ReleaseKnobs:
         if self.pad is not None and not isinstance(self.pad, bool):
             raise ReleaseError(f"release settings: pad must be true or false, got {self.pad!r}.")
         if self.min_image_px is not None and (
-            isinstance(self.min_image_px, bool) or not isinstance(self.min_image_px, int) or self.min_image_px < 1
+            isinstance(self.min_image_px, bool)
+            or not isinstance(self.min_image_px, int)
+            or self.min_image_px < 1
         ):
-            raise ReleaseError(f"release settings: min_image_px {self.min_image_px!r} must be a positive integer.")
+            raise ReleaseError(
+                f"release settings: min_image_px {self.min_image_px!r} must be a positive integer."
+            )
         c = self.radius_ceiling_m
         if c is not None and (isinstance(c, bool) or not isinstance(c, int | float) or not 0 < c < math.inf):
-            raise ReleaseError(f"release settings: radius_ceiling_m {c!r} must be a positive number of metres.")
+            raise ReleaseError(
+                f"release settings: radius_ceiling_m {c!r} must be a positive number of metres."
+            )
 
     @classmethod
     def exactly(cls, params: PairParams, **kw: Any) -> ReleaseKnobs:
@@ -94,7 +102,9 @@ class ReleaseKnobs:
             elif name in _RELEASE_KEYS:
                 doc.pop(name, None)
             elif name not in _PAIR_KNOBS:
-                raise ReleaseError(f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, {', '.join(_RELEASE_KEYS)}.")
+                raise ReleaseError(
+                    f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, {', '.join(_RELEASE_KEYS)}."
+                )
         return ReleaseKnobs.from_dict(doc)
 
     def to_dict(self) -> JsonObject:
@@ -140,9 +150,7 @@ def auto_point_size(survey: SiteSurvey, scale: float) -> tuple[int, str]:
     if not survey.cameras or not survey.min_density_pts_m2:
         return 1, "auto: 1 px (no camera or density to derive it from)"
     spacing_m = 1.0 / math.sqrt(survey.min_density_pts_m2)
-    per_camera = sorted(
-        spacing_m * c.fx * scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras
-    )
+    per_camera = sorted(spacing_m * c.fx * scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras)
     spacing_px = per_camera[len(per_camera) // 2]
     size = max(1, math.ceil(math.sqrt(2.0) * spacing_px - 1e-9))
     size = min(15, size if size % 2 else size + 1)
@@ -174,7 +182,9 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
     derived: dict[str, str] = {}
     if "views" in auto:
         doc["views"] = AUTO_VIEWS
-        derived["views"] = f"auto: up to {AUTO_VIEWS} a pair, as many as its cameras and the acceptance rules give"
+        derived["views"] = (
+            f"auto: up to {AUTO_VIEWS} a pair, as many as its cameras and the acceptance rules give"
+        )
     if "scale" in auto:
         doc["scale"], derived["scale"] = auto_scale(survey)
     if "point_size_px" in auto:
@@ -237,15 +247,21 @@ def check_coverage(params: ReleaseParams, survey: SiteSurvey, what: str) -> None
     if not survey.cameras or not survey.min_density_pts_m2:
         return
     spacing_m = 1.0 / math.sqrt(survey.min_density_pts_m2)
-    spacing_px = min(spacing_m * c.fx * pair.scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras)
+    spacing_px = min(
+        spacing_m * c.fx * pair.scale / max(c.height_above_ground_m, 1.0) for c in survey.cameras
+    )
     got = expected_coverage(spacing_px, drawn_diameter_px(spacing_px, pair))
     if got >= pair.min_coverage:
         return
     sizes = [
-        p for p in range(1, 16, 2) if expected_coverage(spacing_px, drawn_diameter_px(spacing_px, pair, p)) >= pair.min_coverage
+        p
+        for p in range(1, 16, 2)
+        if expected_coverage(spacing_px, drawn_diameter_px(spacing_px, pair, p)) >= pair.min_coverage
     ]
     need = -math.log(1.0 - min(pair.min_coverage, 0.999))  # disk area / spacing_px**2 needed
-    scale = math.floor(1000 * pair.scale * math.sqrt(disk_area_px(pair.point_size_px) / need) / spacing_px) / 1000
+    scale = (
+        math.floor(1000 * pair.scale * math.sqrt(disk_area_px(pair.point_size_px) / need) / spacing_px) / 1000
+    )
     long_side = min(max(c.width, c.height) for c in survey.cameras)
     fixes = [f"--scale {scale:g} or less"] if scale * long_side >= params.min_image_px else []
     if sizes:

@@ -59,7 +59,9 @@ def read_manifest(root: Path) -> Manifest:
     try:
         return Manifest.from_dict(doc)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise ReleaseError(f"{path} is not a siteline release manifest ({type(exc).__name__}: {exc}).") from exc
+        raise ReleaseError(
+            f"{path} is not a siteline release manifest ({type(exc).__name__}: {exc})."
+        ) from exc
 
 
 def _read_document(root: Path) -> JsonObject:
@@ -116,7 +118,9 @@ def verify_files(
     present = (root / MANIFEST).is_file()
     gone = [rel for rel in recorded_files if not (root / rel).is_file()]
     if manifest_sha256 is not None and not present:
-        problems.append(f"{MANIFEST}: missing (the catalog recorded sha256 {manifest_sha256[:12]}...): tampered with")
+        problems.append(
+            f"{MANIFEST}: missing (the catalog recorded sha256 {manifest_sha256[:12]}...): tampered with"
+        )
     if not present:
         return problems + [f"{rel}: missing (recorded by the catalog)" for rel in gone]
     if manifest_sha256 is not None:
@@ -137,7 +141,11 @@ def verify_files(
     ]
     listed = set()
     named = {f["path"] for f in doc["files"]}
-    problems += [f"{rel}: recorded by the catalog but not in the manifest" for rel in recorded_files if rel not in named]
+    problems += [
+        f"{rel}: recorded by the catalog but not in the manifest"
+        for rel in recorded_files
+        if rel not in named
+    ]
     for f in doc["files"]:
         rel = f["path"]
         listed.add(rel)

@@ -50,7 +50,9 @@ class ReleaseParams:
 
     @classmethod
     def from_dict(cls, doc: JsonObject) -> ReleaseParams:
-        unknown = sorted(set(doc) - {"pair", "preset", "pad", "format", "min_image_px", "derived", "radius_ceiling_m"})
+        unknown = sorted(
+            set(doc) - {"pair", "preset", "pad", "format", "min_image_px", "derived", "radius_ceiling_m"}
+        )
         if unknown:
             raise ReleaseError(f"release parameters: unknown key(s) {unknown}.")
         return cls(

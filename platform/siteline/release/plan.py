@@ -72,9 +72,15 @@ def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
     # a knob added since the previous version had the value it meant before it existed
     old_params = {**PairParams.BEFORE, **previous.get("params", {})}
     out += [
-        f"{k} {old_params.get(k)!r} -> {v!r}" for k, v in key["params"].items() if k in old_params and old_params[k] != v
+        f"{k} {old_params.get(k)!r} -> {v!r}"
+        for k, v in key["params"].items()
+        if k in old_params and old_params[k] != v
     ]
-    out += [f"{k} {previous.get(k)!r} -> {key[k]!r}" for k in ("format", "pad") if k in previous and previous[k] != key[k]]
+    out += [
+        f"{k} {previous.get(k)!r} -> {key[k]!r}"
+        for k in ("format", "pad")
+        if k in previous and previous[k] != key[k]
+    ]
     return out or ["lineage changed"]
 
 
@@ -127,7 +133,9 @@ def refuse_pairs_without_cameras(cameras: Mapping[int, PairCameras], what: str) 
             )
 
 
-def check_view_count(cameras: Mapping[int, PairCameras], params: PairParams, what: str, views_auto: bool) -> None:
+def check_view_count(
+    cameras: Mapping[int, PairCameras], params: PairParams, what: str, views_auto: bool
+) -> None:
     """Refuse ``what`` before any view is made when a pair's later scene has no cameras (naming the
     scene and why), or, unless the view count is auto (as many as the cameras give), when a pair's
     cameras cannot give ``params.views`` candidates at all (each camera gives at most heights x
@@ -175,7 +183,11 @@ def next_version(
     if old_digests == dict(digests):
         return latest.version, "up to date", latest.version
     remade = sorted(int(p) for p, d in digests.items() if old_digests.get(p) != d)
-    return f"{major + 1}.0.0", f"items changed: outputs remade for pairs {', '.join(map(str, remade))} (a scene re-tiled)", None
+    return (
+        f"{major + 1}.0.0",
+        f"items changed: outputs remade for pairs {', '.join(map(str, remade))} (a scene re-tiled)",
+        None,
+    )
 
 
 def choose_pairs(session: Session, site_name: str, pair_ids: Sequence[int] | None = None) -> list[int]:
@@ -288,7 +300,9 @@ def plan_release(
         up_to_date, reason = None, reason if reason != "up to date" else f"version {version} given"
     version = version or auto
     if up_to_date is None:
-        check_image_size(params, site_survey(session, get_site(session, site_name)), f"release {name} {version}")
+        check_image_size(
+            params, site_survey(session, get_site(session, site_name)), f"release {name} {version}"
+        )
     existing = find_release(session, name, version)
     if up_to_date is None and existing is not None and existing.status == "published":
         raise ImmutableError(

@@ -62,9 +62,7 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
         },
         "label_sets": {"scenes": scene_labels, "pairs": pair_labels},
         "splits": {
-            s: [list(ma.splits[s]), list(mb.splits[s])]
-            for s in SPLITS
-            if ma.splits[s] != mb.splits[s]
+            s: [list(ma.splits[s]), list(mb.splits[s])] for s in SPLITS if ma.splits[s] != mb.splits[s]
         },
         "files": {
             "added": sorted(set(fb) - set(fa)),

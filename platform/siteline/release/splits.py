@@ -187,7 +187,9 @@ def _changed(vs: Sequence[RenderedView], band: np.ndarray) -> float:
     return sum(vs[k].valid * vs[k].change_ratio for k in band) / valid if valid else 0.0
 
 
-def _band_order(xy: np.ndarray, vs: Sequence[RenderedView], n_test: int, n_val: int) -> tuple[np.ndarray, float]:
+def _band_order(
+    xy: np.ndarray, vs: Sequence[RenderedView], n_test: int, n_val: int
+) -> tuple[np.ndarray, float]:
     """The order of views ``vs`` (anchors ``xy``) along the band axis, and that axis's angle from the
     long axis (degrees): the long axis when test and val bands there each hold at least half the
     pair's changed share, else the direction whose poorer band holds the most."""
@@ -210,7 +212,9 @@ def _band_order(xy: np.ndarray, vs: Sequence[RenderedView], n_test: int, n_val: 
     return best[1], best[2]
 
 
-def _bands(views: Mapping[int, Sequence[RenderedView]], val_fraction: float, test_fraction: float) -> SplitPlan:
+def _bands(
+    views: Mapping[int, Sequence[RenderedView]], val_fraction: float, test_fraction: float
+) -> SplitPlan:
     of: dict[Item, str] = {}
     left: list[Item] = []
     directions: dict[int, float] = {}

@@ -48,7 +48,12 @@ def build_release(
     ``options.publish``)."""
     params = params or ReleaseParams()
     check_release_name(name)  # before anything: a name is a folder name
-    pair_ids, version, label_sets, publish = options.pair_ids, options.version, options.label_sets, options.publish
+    pair_ids, version, label_sets, publish = (
+        options.pair_ids,
+        options.version,
+        options.label_sets,
+        options.publish,
+    )
     if version is not None:
         semver(version)
     with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time

@@ -78,4 +78,8 @@ def trim_edges(
         np.array(enclosed_table(), dtype=bool), knobs, width,
     )  # fmt: skip
     out_depth = drawn[0]
-    return torch.from_numpy(out_index).to(dev), torch.from_numpy(out_depth).to(dev), torch.from_numpy(done).to(dev)
+    return (
+        torch.from_numpy(out_index).to(dev),
+        torch.from_numpy(out_depth).to(dev),
+        torch.from_numpy(done).to(dev),
+    )

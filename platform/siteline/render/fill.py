@@ -85,7 +85,9 @@ def fill_gaps(
         index, depth = index.clone(), depth.clone().to(torch.float32)
         ring = torch.tensor(ring_offsets(radius_px), dtype=torch.int64).numpy()
         table = np.array(enclosed_table(), dtype=bool)
-        done = kernels.fill_gaps(index.numpy(), depth.numpy(), ring, table, np.float32(SAME_SURFACE), radius_px, width)
+        done = kernels.fill_gaps(
+            index.numpy(), depth.numpy(), ring, table, np.float32(SAME_SURFACE), radius_px, width
+        )
         return index, depth, torch.from_numpy(done)
     inf = torch.tensor(float("inf"), dtype=torch.float32, device=dev)
     z = torch.where(hit, depth.to(torch.float32), inf).view(1, 1, height, width)

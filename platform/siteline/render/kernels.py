@@ -12,7 +12,12 @@ from siteline.pointpass import kernel
 
 @kernel
 def mark_disks(
-    ui: np.ndarray, vi: np.ndarray, diameters: np.ndarray, kept: np.ndarray, hit: np.ndarray, hit_kept: np.ndarray
+    ui: np.ndarray,
+    vi: np.ndarray,
+    diameters: np.ndarray,
+    kept: np.ndarray,
+    hit: np.ndarray,
+    hit_kept: np.ndarray,
 ) -> None:
     """Mark in ``hit`` (H, W) bool every pixel the disk of each point covers (diameter ``diameters``
     px, centred on pixel (``ui``, ``vi``), int64; points off the image mark nothing), and in

@@ -75,7 +75,9 @@ class RenderSettings:
             raise RenderError(f"fill_px {f!r} must be an integer from 0 to {MAX_FILL_PX}.")
         k = self.splat_factor
         if not isinstance(k, int | float) or isinstance(k, bool) or not (math.isfinite(k) and 0.5 <= k <= 4):
-            raise RenderError(f"splat_factor {k!r} must be a number from 0.5 to 4 (point spacings per world splat).")
+            raise RenderError(
+                f"splat_factor {k!r} must be a number from 0.5 to 4 (point spacings per world splat)."
+            )
 
         if not isinstance(self.trim_edges, bool):
             raise RenderError(f"trim_edges {self.trim_edges!r} must be true or false.")

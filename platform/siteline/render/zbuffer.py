@@ -233,11 +233,24 @@ def _splat(
         # world disks rise to their world radius at the rim: (z / f) rho^2 / r metres
         rise = zs / _focal(cam) / (diameters.to(torch.float32) / 2.0) if world else torch.zeros_like(zs)
         if dev.type == "cpu" and CPU_KERNELS:  # one compiled pass over the points (siteline.render.kernels)
-            kernels.splat_nearest(ui.numpy(), vi.numpy(), zs.numpy(), diameters.numpy(), rise.numpy(), index.numpy(), zbuf.numpy(), W)
+            kernels.splat_nearest(
+                ui.numpy(),
+                vi.numpy(),
+                zs.numpy(),
+                diameters.numpy(),
+                rise.numpy(),
+                index.numpy(),
+                zbuf.numpy(),
+                W,
+            )
             continue
         for which, pix, rho2 in _disk_pixels(ui, vi, diameters, cam, settings.splat_max_px):
             z_at = _take(zs, which)
-            zk = z_at + _take(rise, which) * rho2 if world and not (isinstance(rho2, float) and rho2 == 0) else z_at
+            zk = (
+                z_at + _take(rise, which) * rho2
+                if world and not (isinstance(rho2, float) and rho2 == 0)
+                else z_at
+            )
             key = (zk.view(torch.int32).to(torch.int64) << 32) | _take(index, which)
             zbuf.scatter_reduce_(0, pix, key, reduce="amin")
     return in_frustum
@@ -299,7 +312,9 @@ def coverage_of(
         return Coverage(0.0, 0.0)
     if on_cpu:
         return Coverage(int(hit_np.sum()) / npix, int(hit_kept_np.sum()) / npix)
-    return Coverage(int(hit[:npix].sum()) / npix, int(hit_kept[:npix].sum()) / npix)  # as numpy's mean of a mask
+    return Coverage(
+        int(hit[:npix].sum()) / npix, int(hit_kept[:npix].sum()) / npix
+    )  # as numpy's mean of a mask
 
 
 def central_depths(xyz: np.ndarray, camera: Camera, scale: float, fraction: float) -> np.ndarray:
@@ -350,7 +365,11 @@ def _winners(zbuf: torch.Tensor, npix: int) -> tuple[torch.Tensor, torch.Tensor]
 
 
 def _decode(
-    index: torch.Tensor, depth: torch.Tensor, W: int, H: int, attributes: Mapping[str, np.ndarray | torch.Tensor]
+    index: torch.Tensor,
+    depth: torch.Tensor,
+    W: int,
+    H: int,
+    attributes: Mapping[str, np.ndarray | torch.Tensor],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(hit, depth, index, attributes) images of a render's winners (index (H W,) int64, -1 where
     none; depth (H W,) float32). Only hit pixels are gathered, with torch on the CPU: index_select /
@@ -440,5 +459,11 @@ def render_points(
         "height": cam.height,
     }
     return RenderResult(
-        camera=cam, hit=hit, depth=depth_img, index=index_img, attributes=out_attrs, stats=stats, filled=filled_img
+        camera=cam,
+        hit=hit,
+        depth=depth_img,
+        index=index_img,
+        attributes=out_attrs,
+        stats=stats,
+        filled=filled_img,
     )

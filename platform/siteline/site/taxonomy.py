@@ -161,7 +161,11 @@ class Taxonomy:
                 name=doc["name"],
                 classes=tuple(
                     SiteClass(
-                        int(c["id"]), c["name"], bool(c["ignore"]), _rgb(c["color"]), bool(c.get("geometry_only", False))
+                        int(c["id"]),
+                        c["name"],
+                        bool(c["ignore"]),
+                        _rgb(c["color"]),
+                        bool(c.get("geometry_only", False)),
                     )
                     for c in doc["classes"]
                 ),

@@ -90,13 +90,19 @@ def _bounds(prim: Primitive) -> np.ndarray:
         o, u, v = (np.asarray(a, np.float64) for a in prim.params)
         c = np.array([o, o + u, o + v, o + u + v])
     elif prim.kind == "box":
-        c = np.concatenate([np.array([f[0], f[0] + f[1], f[0] + f[2], f[0] + f[1] + f[2]]) for f in _box_faces(*prim.params)])
+        c = np.concatenate(
+            [np.array([f[0], f[0] + f[1], f[0] + f[2], f[0] + f[1] + f[2]]) for f in _box_faces(*prim.params)]
+        )
     elif prim.kind in ("cylinder", "cone"):
         cx, cy, z0, r, h = prim.params
-        c = np.array([[cx + sx * r, cy + sy * r, z] for sx in (-1, 1) for sy in (-1, 1) for z in (z0, z0 + h)])
+        c = np.array(
+            [[cx + sx * r, cy + sy * r, z] for sx in (-1, 1) for sy in (-1, 1) for z in (z0, z0 + h)]
+        )
     else:  # sphere
         cx, cy, cz, r = prim.params
-        c = np.array([[cx + sx * r, cy + sy * r, cz + sz * r] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        c = np.array(
+            [[cx + sx * r, cy + sy * r, cz + sz * r] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
+        )
     lo, hi = c.min(axis=0), c.max(axis=0)
     return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
 
@@ -123,7 +129,9 @@ class Visibility:
             e1 /= np.linalg.norm(e1)
             e2 = np.cross(d, e1)
             ca, cb, cd = corners @ e1, corners @ e2, corners @ d
-            rect = np.stack([ca.min(axis=1), ca.max(axis=1), cb.min(axis=1), cb.max(axis=1), cd.min(axis=1)], axis=1)
+            rect = np.stack(
+                [ca.min(axis=1), ca.max(axis=1), cb.min(axis=1), cb.max(axis=1), cd.min(axis=1)], axis=1
+            )
             self.frames.append((d, e1, e2, rect))
 
     def visible(self, xyz: np.ndarray) -> np.ndarray:
@@ -148,7 +156,12 @@ class Visibility:
             return ~blocked
         a, b, depth = xyz @ e1, xyz @ e2, xyz @ d
         # only the surfaces whose shadow rectangle meets these points' and that lie nearer the sensor
-        near = (rect[:, 1] >= a.min()) & (rect[:, 0] <= a.max()) & (rect[:, 3] >= b.min()) & (rect[:, 2] <= b.max())
+        near = (
+            (rect[:, 1] >= a.min())
+            & (rect[:, 0] <= a.max())
+            & (rect[:, 3] >= b.min())
+            & (rect[:, 2] <= b.max())
+        )
         near &= rect[:, 4] < depth.max()
         for i in np.flatnonzero(near):
             a0, a1, b0, b1, d0 = rect[i]
@@ -236,7 +249,9 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
             xyz = xyz[occ.visible(xyz)]
             if not len(xyz):
                 continue
-            chunk = _finish(xyz, prim, rng, spec, t0, ep, (occ, (jib_c, jib_d, jib_len)), (changed_prev, changed_next))
+            chunk = _finish(
+                xyz, prim, rng, spec, t0, ep, (occ, (jib_c, jib_d, jib_len)), (changed_prev, changed_next)
+            )
             chunk.margin_previous_m = _margin(chunk.xyz, prim, changed_prev, prev_by_key, cache_prev)
             chunk.margin_next_m = _margin(chunk.xyz, prim, changed_next, next_by_key, cache_next)
             yield chunk

@@ -398,7 +398,11 @@ def box_scene(e: int) -> list[Primitive]:
     moves 6 m east an epoch: a thin beam that turns and a thin post that moves."""
     mx, my = BOX_MAST_M
     a = math.radians(30.0 + 60.0 * e)
-    jib_c = (mx + math.cos(a) * BOX_JIB_LENGTH_M / 2, my + math.sin(a) * BOX_JIB_LENGTH_M / 2, BOX_JIB_HEIGHT_M)
+    jib_c = (
+        mx + math.cos(a) * BOX_JIB_LENGTH_M / 2,
+        my + math.sin(a) * BOX_JIB_LENGTH_M / 2,
+        BOX_JIB_HEIGHT_M,
+    )
     pole_x = -20.0 + 6.0 * (e % 4)
     out = [
         Primitive("ground", "v1", 1, GROUND, "terrain", (TERRAIN_M, (0.0, 0.0), None, None), (120, 100, 80), True),

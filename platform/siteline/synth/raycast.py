@@ -56,7 +56,9 @@ def _quad(o: np.ndarray, d: np.ndarray, origin: Vec, u: Vec, v: Vec) -> np.ndarr
     """Ray parameter of each ray's hit on the parallelogram origin + a u + b v (a, b in [0, 1]), inf
     where it misses."""
     p0, eu, ev = (np.asarray(x, dtype=np.float64) for x in (origin, u, v))
-    n = np.array([eu[1] * ev[2] - eu[2] * ev[1], eu[2] * ev[0] - eu[0] * ev[2], eu[0] * ev[1] - eu[1] * ev[0]])
+    n = np.array(
+        [eu[1] * ev[2] - eu[2] * ev[1], eu[2] * ev[0] - eu[0] * ev[2], eu[0] * ev[1] - eu[1] * ev[0]]
+    )
     # coordinates in the (u, v) basis through the inverse of its Gram matrix (u, v need not be orthogonal)
     guu, guv, gvv = eu @ eu, eu @ ev, ev @ ev
     det = guu * gvv - guv * guv
@@ -70,14 +72,18 @@ def _quad(o: np.ndarray, d: np.ndarray, origin: Vec, u: Vec, v: Vec) -> np.ndarr
     return np.where(ok, t, np.inf)
 
 
-def _box(o: np.ndarray, d: np.ndarray, center: Sequence[float], size: Sequence[float], yaw: float) -> np.ndarray:
+def _box(
+    o: np.ndarray, d: np.ndarray, center: Sequence[float], size: Sequence[float], yaw: float
+) -> np.ndarray:
     t = np.full(len(d), np.inf)
     for face in _box_faces(center, size, yaw):
         t = np.minimum(t, _quad(o, d, *face))
     return t
 
 
-def _nearest_root(a: np.ndarray, b: np.ndarray, c: np.ndarray, keep: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+def _nearest_root(
+    a: np.ndarray, b: np.ndarray, c: np.ndarray, keep: Callable[[np.ndarray], np.ndarray]
+) -> np.ndarray:
     """The smaller root t > NEAR_M of a t^2 + b t + c = 0 for which ``keep(t)`` holds, inf where none."""
     disc = b * b - 4 * a * c
     out = np.full(len(a), np.inf)
@@ -91,7 +97,9 @@ def _nearest_root(a: np.ndarray, b: np.ndarray, c: np.ndarray, keep: Callable[[n
     return out
 
 
-def _cylinder(o: np.ndarray, d: np.ndarray, cx: float, cy: float, z0: float, r: float, h: float) -> np.ndarray:
+def _cylinder(
+    o: np.ndarray, d: np.ndarray, cx: float, cy: float, z0: float, r: float, h: float
+) -> np.ndarray:
     ox, oy = o[:, 0] - cx, o[:, 1] - cy
     a = d[:, 0] ** 2 + d[:, 1] ** 2
     b = 2 * (ox * d[:, 0] + oy * d[:, 1])
@@ -170,7 +178,9 @@ def _terrain(
             ex0, ex1, ey0, ey1 = exclude
             ok &= ~((x >= ex0) & (x < ex1) & (y >= ey0) & (y < ey1))
         idx = np.flatnonzero(ok)
-        on = np.abs(z[idx] - terrain_height(x[idx], y[idx], slope, pit)) <= HEIGHT_TOL_M * max(1.0, float(np.abs(c)))
+        on = np.abs(z[idx] - terrain_height(x[idx], y[idx], slope, pit)) <= HEIGHT_TOL_M * max(
+            1.0, float(np.abs(c))
+        )
         idx = idx[on]
         out[idx] = np.minimum(out[idx], t[idx])
     return out

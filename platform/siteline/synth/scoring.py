@@ -80,4 +80,6 @@ def score_pair(
     whose epochs ``epochs`` (t1, t2) the pair's scenes are."""
     model, fence = site_model(site_dir)
     views, scale = pair_views(store, root)
-    return score_views(views, scale, model.primitives(epochs[0]), model.primitives(epochs[1]), fence, keep=keep)
+    return score_views(
+        views, scale, model.primitives(epochs[0]), model.primitives(epochs[1]), fence, keep=keep
+    )

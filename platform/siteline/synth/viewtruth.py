@@ -51,7 +51,11 @@ def _object_names(prims: Iterable[Primitive]) -> dict[int, str]:
 
 
 def _side(
-    hits: SurfaceHits, camera: Camera, other: Sequence[Primitive], ignored: Collection[int], fence: Sequence | None
+    hits: SurfaceHits,
+    camera: Camera,
+    other: Sequence[Primitive],
+    ignored: Collection[int],
+    fence: Sequence | None,
 ) -> tuple:
     """Per pixel of one epoch's hits: (hit, changed, not usable, object id)."""
     prims = hits.primitives

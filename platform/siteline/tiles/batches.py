@@ -88,7 +88,9 @@ def batches(parts: list[Slice], budget: int) -> list[list[Slice]]:
     out: list[list[Slice]] = []
     size = 0
     for k, part in enumerate(parts):
-        if (k == 0 or part.block != parts[k - 1].block) and (not out or size + per_block[part.block] > budget):
+        if (k == 0 or part.block != parts[k - 1].block) and (
+            not out or size + per_block[part.block] > budget
+        ):
             out.append([])
             size = 0
         out[-1].append(part)

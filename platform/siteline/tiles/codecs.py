@@ -57,9 +57,7 @@ def time_scale(values: np.ndarray) -> float | None:
     return next((s for s in TIME_SCALES if round_trips(probe, s) and round_trips(values, s)), None)
 
 
-def array_codecs(
-    name: str, dtype: np.dtype, ndim: int, spec: TileSpec, scale: float | None
-) -> JsonObject:
+def array_codecs(name: str, dtype: np.dtype, ndim: int, spec: TileSpec, scale: float | None) -> JsonObject:
     """``create_array`` keyword arguments (filters, compressors) for tile array ``name`` of ``dtype``
     and ``ndim`` dimensions; ``scale``: the gps_time scale (:func:`time_scale` of all its values)."""
     from zarr.codecs.numcodecs import FixedScaleOffset

@@ -54,7 +54,9 @@ def execute_tiling(
     building = store.publish_shared(uri) if resources.executor is not None else store.publish(uri)
     source = TileInput(las, plan.site, src, plan.z_unit, plan.eight_bit, plan.correction, plan.las.sha256)
     with building as work:
-        written = write_tiles(source, work, spec, resources.completed(scratch=store.staging), plan.seed, progress)
+        written = write_tiles(
+            source, work, spec, resources.completed(scratch=store.staging), plan.seed, progress
+        )
     tiling = SceneTiling(
         uri, spec, written.checksum, generation, written.points, written.tiles, written.levels,
         written.bytes, written.seconds, len(written.nodes), las.stat().st_size, plan.site.version,

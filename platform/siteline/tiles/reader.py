@@ -220,7 +220,13 @@ class AllNodes:
         def cat(name: str) -> np.ndarray:
             return np.concatenate([getattr(p, name) for p in parts]) if parts else np.zeros(0, np.int64)
 
-        below = np.concatenate([np.pad(p.below, ((0, 0), (0, width - p.below.shape[1])), mode="edge") for p in parts]) if parts else np.zeros((0, width), np.int64)
+        below = (
+            np.concatenate(
+                [np.pad(p.below, ((0, 0), (0, width - p.below.shape[1])), mode="edge") for p in parts]
+            )
+            if parts
+            else np.zeros((0, width), np.int64)
+        )
         totals = np.array([level_totals[t] for t in tiles]) if tiles else np.zeros((0, 64))
         return cls(
             tiles, np.repeat(np.arange(len(tiles)), [len(p) for p in parts]),
@@ -428,7 +434,9 @@ class SceneTiles:
         step = max(unit, block_points // unit * unit)
         for lo in range(0, n, step):
             hi = min(n, lo + step)
-            xyz: np.ndarray = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m).astype(dtype, copy=False)
+            xyz: np.ndarray = dequantise(np.asarray(counts[lo:hi]), origin, self.spec.quantum_m).astype(
+                dtype, copy=False
+            )
             yield lo, xyz, {a: np.asarray(arr[lo:hi]) for a, arr in arrays.items()}
 
     def read_tile_uncached(
@@ -439,7 +447,10 @@ class SceneTiles:
         self._check_attributes(attributes)
         n = self.prefix(tile)
         xyz: np.ndarray = np.empty((n, 3), dtype)
-        out = {a: np.empty((n, *self._handle(tile, a).shape[1:]), self._handle(tile, a).dtype) for a in attributes}
+        out = {
+            a: np.empty((n, *self._handle(tile, a).shape[1:]), self._handle(tile, a).dtype)
+            for a in attributes
+        }
         for lo, block, attrs in self.tile_blocks(tile, attributes, dtype, block_points):
             xyz[lo : lo + len(block)] = block
             for a, values in attrs.items():
@@ -475,7 +486,9 @@ class SceneTiles:
             stats.points_read += k if idx is None else len(idx)
         # one tile's metres are a fresh array: no copy (its attributes may be the cache's own chunks)
         out = {
-            a: (chunks[0] if len(chunks) == 1 and a == METRES else np.concatenate(chunks)) if chunks else self._empty(a)
+            a: (chunks[0] if len(chunks) == 1 and a == METRES else np.concatenate(chunks))
+            if chunks
+            else self._empty(a)
             for a, chunks in parts.items()
         }
         stats.points_returned = len(out[METRES])

@@ -69,7 +69,9 @@ def _tile(
         log.info("scene %d is already tiled", scene_id)
         return TileOutcome(None, plan.already_tiled())
     spec = spec or TileSpec.for_site(plan.site)
-    run = StageRun("tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": resources.workers}, run_id=run_id)
+    run = StageRun(
+        "tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": resources.workers}, run_id=run_id
+    )
     cache = PartitionCache(layout.partitions(settings.home))
     cache.sweep_unfinished()  # a partition an ingest killed after its commit was writing
     resources = resources.completed(batch_points=settings.tile_batch_points, partitions=cache)

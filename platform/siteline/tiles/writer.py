@@ -78,7 +78,9 @@ class TileResult:
         return self.bytes / max(self.points, 1)
 
 
-def _share_runs(store: Store, parts: dict[str, list[Slice]], folder: Path, uri: str) -> dict[str, list[Slice]]:
+def _share_runs(
+    store: Store, parts: dict[str, list[Slice]], folder: Path, uri: str
+) -> dict[str, list[Slice]]:
     """Copy the partition's run files to ``uri`` (where a cluster's workers read them); the same
     slices of the copies."""
     names = sorted({Path(p.path).name for slices in parts.values() for p in slices})
@@ -91,7 +93,9 @@ def _partition(
     source: PassSource, total: int, spec: TileSpec, folder: Path, workers: int, progress: Progress
 ) -> Partition:
     """Cut the file into tile runs in ``folder`` (in parallel ranges with a pool)."""
-    done = pass_file(source, total, workers, runs_into=folder, spec=spec, progress=progress, label="partitioning")
+    done = pass_file(
+        source, total, workers, runs_into=folder, spec=spec, progress=progress, label="partitioning"
+    )
     return done.partition if done.partition is not None else Partition(folder, ())
 
 
@@ -195,7 +199,15 @@ def write_tiles(
         if runs_uri is not None:
             store.remove(runs_uri)
     return TileResult(
-        target, nodes.points, len(results), nodes.levels, size, checksum, nodes, time.perf_counter() - t0, t_part
+        target,
+        nodes.points,
+        len(results),
+        nodes.levels,
+        size,
+        checksum,
+        nodes,
+        time.perf_counter() - t0,
+        t_part,
     )
 
 

@@ -222,19 +222,15 @@ def candidate_views(
                     cam_m, segment = strategies.mirror(cam_v, fence_m, ground, params.mirror_rule)
             depth = depth_of(cam_m) if cam_m is not None else None
             for ff in params.forward_fractions:
-                base = ViewStrategy(vf, mirrored, ff, segment, params.mirror_rule if mirrored else None, depth)
+                base = ViewStrategy(
+                    vf, mirrored, ff, segment, params.mirror_rule if mirrored else None, depth
+                )
                 key = strategy_key(vf, mirrored, ff)
                 if cam_m is None:
-                    out.append(
-                        SyntheticView(parent.name, key, base, cam_v, rejected=reason)
-                    )
+                    out.append(SyntheticView(parent.name, key, base, cam_v, rejected=reason))
                     continue
                 if depth is None and ff > 0:
-                    out.append(
-                        SyntheticView(
-                            parent.name, key, base, cam_m, rejected="nothing_ahead"
-                        )
-                    )
+                    out.append(SyntheticView(parent.name, key, base, cam_m, rejected="nothing_ahead"))
                     continue
                 step = ff * (depth or 0.0)
                 out.append(
@@ -398,7 +394,9 @@ def generate_views(
     def judge(v: SyntheticView) -> SyntheticView:
         return probe(v, source, params)
 
-    picker = Picker(survivors, params.seed, judge, lambda vs: source.prefetch([v.camera for v in vs], params.probe_scale))
+    picker = Picker(
+        survivors, params.seed, judge, lambda vs: source.prefetch([v.camera for v in vs], params.probe_scale)
+    )
     drawn = []
     for _ in range(params.views):
         v = picker.next()

@@ -221,7 +221,9 @@ def model_ground(
     rise = np.maximum(grid.z - plane_heights(plane, grid), 0.0)[held]
     residual = float(np.percentile(rise, 95))
     model: GroundModel = plane if residual <= tolerance_m else grid
-    return GroundChoice(model, source, len(ground), len(ground) / max(len(pts), 1), residual, tolerance_m, plane, params)
+    return GroundChoice(
+        model, source, len(ground), len(ground) / max(len(pts), 1), residual, tolerance_m, plane, params
+    )
 
 
 def plane_heights(plane: GroundPlane, grid: TerrainGrid) -> np.ndarray:

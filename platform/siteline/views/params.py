@@ -94,7 +94,9 @@ class ViewParams:
     def probe_settings(self, scale: float | None = None) -> RenderSettings:
         """The render settings of a probe at ``scale`` (the coverage probe's, ``probe_factor`` x the
         view scale, when None): the renders' splats with their sizes scaled to the probe, no gap fill."""
-        factor = (self.probe_factor if self.splat == "world" else 1.0) if scale is None else scale / self.scale
+        factor = (
+            (self.probe_factor if self.splat == "world" else 1.0) if scale is None else scale / self.scale
+        )
         size = max(1, int(self.point_size_px * factor) | 1) if self.splat == "world" else self.point_size_px
         return RenderSettings(
             scale=self.scale * factor,

@@ -42,7 +42,9 @@ class ArrayPointSource:
     """A whole (small) cloud held in memory: xyz (N, 3) float32 site-local metres, with each point's
     spacing in metres (world splats) and whether its class is kept, when known."""
 
-    def __init__(self, xyz: np.ndarray, spacing_m: np.ndarray | None = None, kept: np.ndarray | None = None) -> None:
+    def __init__(
+        self, xyz: np.ndarray, spacing_m: np.ndarray | None = None, kept: np.ndarray | None = None
+    ) -> None:
         self.xyz = np.ascontiguousarray(xyz, dtype=np.float32)
         self.spacing_m = spacing_m
         self.kept = kept

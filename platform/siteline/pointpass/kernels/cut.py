@@ -13,7 +13,9 @@ from siteline.pointpass.schema import COUNT_LIMIT
 
 
 @kernel
-def scaled_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, scale: np.ndarray, offset: np.ndarray) -> np.ndarray:
+def scaled_xyz(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, scale: np.ndarray, offset: np.ndarray
+) -> np.ndarray:
     """(N, 3) float64 coordinates of a LAS chunk's (N,) integer counts X, Y, Z: ``count * scale +
     offset`` per axis (laspy's arithmetic, bit for bit), in one pass."""
     out = np.empty((x.shape[0], 3))
