@@ -46,6 +46,7 @@ from siteline.pointpass import TilingResources
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.records.runs import StageRun
+from siteline.records.tiling import SceneTiling
 from siteline.release.knobs import ReleaseKnobs
 from siteline.stores import join
 from siteline.stores.diskspace import disk_full, full_disk_message
@@ -239,7 +240,7 @@ def _abandon_progress(client: Any, task_run_ids: list[Any], message: str) -> Non
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> dict[str, Any]:
+def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> pipeline.Ingested:
     progress = RunProgress(slug("ingest", site, Path(mission_dir).name), f"ingest of {Path(mission_dir).name}",
                            {"hashing": 1.0, "reading points": 1.0, "storing": 1.0, "partitioning": 2.0, "writing tiles": 2.0})  # fmt: skip
     done = _stage(
@@ -247,12 +248,11 @@ def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> dict[str, A
         Path(mission_dir), site, opts, progress=progress,
     )  # fmt: skip
     progress.finish(done.ingest.message)
-    tiling = done.tiles.tiling if done.tiles is not None else None
-    return done.ingest.to_dict() | {"tiles": tiling.to_dict() if tiling is not None else None}
+    return done
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
-def tile_task(scene_id: int) -> dict[str, Any] | None:
+def tile_task(scene_id: int) -> SceneTiling | None:
     progress = RunProgress(
         slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0}
     )
@@ -262,8 +262,7 @@ def tile_task(scene_id: int) -> dict[str, Any] | None:
     for outcome in done:
         get_run_logger().info(outcome.message)
     progress.finish(done[0].message if done else f"scene {scene_id} was tiled already")
-    tiling = done[0].tiling if done else None
-    return tiling.to_dict() if tiling is not None else None
+    return done[0].tiling if done else None
 
 
 @task(retries=2, retry_delay_seconds=1, retry_condition_fn=transient, cache_policy=NO_CACHE)
@@ -326,16 +325,16 @@ def ingest_mission_flow(
                          captured_at=datetime.fromisoformat(captured_at) if captured_at else None)  # fmt: skip
     with tags(f"site:{site}"):
         # in the flow's own process: the upload folder is on this machine, not on the runner's workers
-        res = ingest_task.with_options(task_run_name=slug("ingest", mission))(mission_dir, site, opts)
-    ingest_dashboards(site, mission, res)
-    sid = res["scene_id"]
+        done = ingest_task.with_options(task_run_name=slug("ingest", mission))(mission_dir, site, opts)
+    ingest_dashboards(site, mission, done)
+    sid = done.ingest.scene_id
     if sid is None:
         return None
     tag_run(f"scene:{sid}")
-    pairs = res["pairs"] if res["created"] else _call(pipeline.pending_pairs, sid)
+    pairs = done.ingest.pairs if done.ingest.created else _call(pipeline.pending_pairs, sid)
     if not pairs:
         why = (f"scene {sid} is the site's first scene (or its neighbours are not ingested): it has no pair yet"
-               if res["created"] else f"mission {mission} is already scene {sid}, and its pairs are processed")  # fmt: skip
+               if done.ingest.created else f"mission {mission} is already scene {sid}, and its pairs are processed")  # fmt: skip
         note(site, f"scene {sid}", f"{why}: nothing to announce, no pair is processed.")
         return sid
     emit_event(
@@ -423,7 +422,7 @@ def build_release_flow(
 
 
 @flow(name="tile-scene", flow_run_name="tile-scene-{scene_id}", task_runner=task_runner())
-def tile_scene_flow(scene_id: int) -> dict[str, Any] | None:
+def tile_scene_flow(scene_id: int) -> SceneTiling | None:
     """Tile a scene that is not tiled yet (ingest tiles new scenes itself)."""
     _close_stale_runs()
     tag_run(f"site:{_read(site_name_of_scene, scene_id)}", f"scene:{scene_id}")

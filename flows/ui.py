@@ -20,10 +20,10 @@ from prefect.artifacts import (
 from prefect.runtime import flow_run
 
 from siteline.config import Settings
+from siteline.pipeline import Ingested
 from siteline.previews.images import pair_samples, url_of
 from siteline.previews.markdown import pair_markdown, release_markdown
 from siteline.records.pairs import PairOutput
-from siteline.records.registration import Registration
 from siteline.records.release import ReleaseInfo
 from siteline.release.manifest import read_manifest
 
@@ -114,31 +114,33 @@ def counted(task: str, done: float, total: int | None) -> str:
     return f"{count} {unit}".rstrip()
 
 
-def ingest_dashboards(site: str, mission: str, res: dict[str, Any]) -> None:
+def ingest_dashboards(site: str, mission: str, done: Ingested) -> None:
+    """The mission's inventory as a table and, when it made a scene, the scene's statistics."""
+    res = done.ingest
     rows = {
-        "mission": mission, "manifest_sha256": res["manifest_sha256"], "files": res["files"],
-        "created": res["created"], "message": res["message"],
+        "mission": mission, "manifest_sha256": res.manifest_sha256, "files": res.files,
+        "created": res.created, "message": res.message,
     }  # fmt: skip
     create_table_artifact(
         [{"item": k, "value": str(v)} for k, v in rows.items()],
         key=slug("mission", site, mission),
         description=f"mission inventory of {mission}",
     )
-    scan, tiles = res.get("scan") or {}, res.get("tiles") or {}
-    if not scan:
+    scan, tiling = res.scan, done.tiles.tiling if done.tiles is not None else None
+    if scan is None:
         return
-    reg = Registration.from_dict(res["registration"])
+    reg = res.registration
     stats = {
-        "points": scan.get("point_count"), "density_pts_m2": round(scan.get("density_pts_m2", 0), 2),
-        "classes": scan.get("class_histogram"), "unknown_codes": scan.get("unknown_codes"),
+        "points": scan.point_count, "density_pts_m2": round(scan.density_pts_m2, 2),
+        "classes": scan.class_histogram, "unknown_codes": scan.unknown_codes,
         "registration": reg.source, "rms_m": reg.rms_m,
         "alignment_m": reg.alignment.translation_m if reg.alignment else None,
-        "tiles": tiles.get("tiles"), "bytes_per_point": tiles.get("bytes_per_point"),
+        "tiles": tiling.tiles if tiling else None, "bytes_per_point": tiling.bytes_per_point if tiling else None,
     }  # fmt: skip
     create_table_artifact(
         [{"statistic": k, "value": str(v)} for k, v in stats.items()],
-        key=slug("scene", site, res["scene_id"]),
-        description=f"scene {res['scene_id']} statistics",
+        key=slug("scene", site, res.scene_id),
+        description=f"scene {res.scene_id} statistics",
     )
 
 

@@ -186,7 +186,7 @@ def test_retry_then_success_and_permanent_failure_recorded(
         return real(*a, **k)
 
     monkeypatch.setattr(tiles_pkg, "tile_scene", flaky)
-    assert pipeline.tile_scene_flow(sid)["points"] > 0
+    assert pipeline.tile_scene_flow(sid).points > 0
     assert calls["n"] == 2
 
     sid2 = ingest_mission(cat, settings, _missions(small_site)[1], "demo").scene_id
@@ -204,7 +204,7 @@ def test_retry_then_success_and_permanent_failure_recorded(
         assert s.get(Scene, sid2).status == "registered" and s.get(Scene, sid2).tile_store_uri is None
     assert not (Path(settings.store.url) / "tiles" / f"scene-{sid2}.zarr").exists()
     monkeypatch.setattr(tiles_pkg, "tile_scene", real)
-    assert pipeline.tile_scene_flow(sid2)["points"] > 0
+    assert pipeline.tile_scene_flow(sid2).points > 0
     cat.dispose()
 
 
