@@ -1,5 +1,5 @@
-"""A non-editable install carries the contracts' schemas, the catalog migrations and the preview pages
-with their vendored three.js."""
+"""A non-editable install carries the contracts' schemas, the catalog migrations, the preview pages
+with their vendored three.js, and the trade measurement (`siteline bench trade` needs no checkout)."""
 
 from __future__ import annotations
 
@@ -27,6 +27,8 @@ from importlib.resources import files
 static = files("siteline.previews").joinpath("static")
 assert static.joinpath("browser.html").is_file() and static.joinpath("viewer.html").is_file()
 assert static.joinpath("three", "three.module.js").is_file() and static.joinpath("three", "LICENSE").is_file()
+import siteline.trade
+assert siteline.trade.__file__.startswith({target!r}), siteline.trade.__file__
 """
 
 
@@ -46,3 +48,14 @@ def test_wheel_install_finds_schemas_and_migrations(tmp_path) -> None:
         [sys.executable, "-c", CHECK.format(target=str(target))], env=env, capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
+    # the installed command runs the trade (one variant, the defaults) on a tiny synthetic site, from a
+    # folder with no checkout
+    out = tmp_path / "trade"
+    ran = subprocess.run(
+        [sys.executable, "-m", "siteline", "bench", "trade", "--site-density", "10", "--views", "4",
+         "--variant", "default={}", "--out", str(out)],
+        env=env | {"SITELINE_HOME": str(tmp_path / "home")}, capture_output=True, text=True, cwd=tmp_path, timeout=1200,
+    )  # fmt: skip
+    assert ran.returncode == 0, ran.stderr[-2000:]
+    row = next(line for line in (out / "trade.md").read_text().splitlines() if line.startswith("| default |"))
+    assert "no release" not in row and float(row.split("|")[3]) > 0.5, row

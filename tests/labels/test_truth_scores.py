@@ -11,6 +11,7 @@ import pytest
 from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.labels.accuracy import accuracy_text, density_of_spacing, measured_for
+from siteline.pairs.params import PairParams
 from siteline.release.datasheet import _radius_lines
 from siteline.synth.scoring import score_pair
 from siteline.trade import SITE, synthetic_pair
@@ -51,15 +52,18 @@ def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
     assert measured_for("surface", 8, False, 0.15) is None  # not measured without the trim
     text = accuracy_text("surface", 8, True, 0.15)
     assert "precision 0.98" in text and "synthetic site at 10 points/m2" in text
-    pair = {"id": 1, "radius_m": 0.37, "labels": {"radius": {
+    pair = {"id": 1, "radius_m": 0.37, "labels": {"radius_m": 0.37, "radius": {
         "median_spacing_m": {"t1": 0.15, "t2": 0.148}, "multiplier": 2.5,
         "expected_false_change": {"multiplier": 2.5, "per_direction": 0.0131, "union": 0.026},
     }}}  # fmt: skip
-    [line] = _radius_lines([pair], 1.0, {"label_rule": "surface", "min_region_points": 8, "trim_edges": True})
+    surface = PairParams(label_rule="surface", min_region_points=8, trim_edges=True)
+    [line] = _radius_lines([pair], 1.0, surface)
     assert (
         "surface rule" in line
         and "regions under 8 points" in line
         and "measured against analytic truth" in line
     )
-    [old] = _radius_lines([pair], 1.0, {})
+    [old] = _radius_lines(
+        [pair], 1.0, PairParams(label_rule="nearest", min_region_points=1, trim_edges=False)
+    )
     assert "2^(-k^2) per direction" in old and "nearest" not in old.split(";")[0]

@@ -269,10 +269,6 @@ def write_labels(
     try:
         root = zarr.open_group(str(out), mode="w")
         sides = {"t1": (t1, _Decoded(t1, halo_m)), "t2": (t2, _Decoded(t2, halo_m))}
-        other = {"t1": "t2", "t2": "t1"}
-        flags_of: dict[str, dict[str, _Packed]] = {side: {} for side in sides}
-        changed = {side: RegionCells(REGION_CELL_RADII * radius_m) for side in sides}
-        grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
         rule = functools.partial(
             change_flags,
             radius_m=radius_m,
@@ -280,37 +276,13 @@ def write_labels(
             matching=Matching(surface=surface),
             geometric=geometric,
         )
-        for ij in grid:
-            for dec in (sides["t1"][1], sides["t2"][1]):
-                dec.release_before(ij[0])
-            for side, (_, dec) in sides.items():
-                mine = dec.get(ij)
-                if mine is None:
-                    continue
-                flags = _flags_in_blocks(mine[0], mine[1], sides[other[side]][1].halo(ij), rule, halo_m)
-                flags_of[side][dec.keys[ij]] = _Packed(flags)
-                changed[side].add(mine[0][flags == CHANGED])
-        for _, dec in sides.values():
-            dec.close()
+        flags_of, changed = _flag_grid(sides, rule, halo_m, radius_m)
         taken_back = {
             side: _drop_small_regions(flags_of[side], changed[side], min_region_points) for side in sides
         }
-        groups = {side: root.require_group(side).require_group("tiles") for side in sides}
-        counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in sides}
-        digests: dict[str, dict[str, str]] = {side: {} for side in sides}
-        n_total = 0
-        for side, (tiles, _) in sides.items():
-            for tile, packed in flags_of[side].items():
-                flags = packed.unpack()
-                _write_flags(groups[side], tile, flags, tiles.spec)
-                digests[side][tile] = hashlib.sha256(flags.tobytes()).hexdigest()
-                _count(flags, counts[side])
-                n_total += len(flags)
-        h = {
-            side: hashlib.sha256("".join(f"{t}:{d}" for t, d in sorted(dg.items())).encode()).hexdigest()
-            for side, dg in digests.items()
-        }
-        checksum = hashlib.sha256(f"{h['t1']}:{h['t2']}".encode()).hexdigest()
+        counts, checksum, n_total = _write_sides(
+            root, {side: tiles.spec for side, (tiles, _) in sides.items()}, flags_of
+        )
         root.attrs.update(
             {
                 "radius_m": radius_m,
@@ -324,6 +296,57 @@ def write_labels(
         shutil.rmtree(out, ignore_errors=True)
         raise
     return ChangeLabels(str(out), radius_m, counts, checksum, time.perf_counter() - t0, n_total)
+
+
+def _flag_grid(
+    sides: dict[str, tuple[SceneTiles, _Decoded]],
+    rule: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    halo_m: float,
+    radius_m: float,
+) -> tuple[dict[str, dict[str, _Packed]], dict[str, RegionCells]]:
+    """Each tile of each scene flagged against the other scene's halo, the site grid column by column
+    (strips of columns behind let go): the packed flags per side and tile, and each side's changed
+    points as region cells."""
+    other = {"t1": "t2", "t2": "t1"}
+    flags_of: dict[str, dict[str, _Packed]] = {side: {} for side in sides}
+    changed = {side: RegionCells(REGION_CELL_RADII * radius_m) for side in sides}
+    grid = sorted(set(sides["t1"][1].keys) | set(sides["t2"][1].keys))
+    for ij in grid:
+        for dec in (sides["t1"][1], sides["t2"][1]):
+            dec.release_before(ij[0])
+        for side, (_, dec) in sides.items():
+            mine = dec.get(ij)
+            if mine is None:
+                continue
+            flags = _flags_in_blocks(mine[0], mine[1], sides[other[side]][1].halo(ij), rule, halo_m)
+            flags_of[side][dec.keys[ij]] = _Packed(flags)
+            changed[side].add(mine[0][flags == CHANGED])
+    for _, dec in sides.values():
+        dec.close()
+    return flags_of, changed
+
+
+def _write_sides(
+    root: zarr.Group, specs: dict[str, TileSpec], flags_of: dict[str, dict[str, _Packed]]
+) -> tuple[dict[str, dict[str, int]], str, int]:
+    """Write every tile's flags under ``root/<side>/tiles/``: the counts per side and label, the
+    checksum of both sides' flags, and the points written."""
+    counts = {side: {"unchanged": 0, "changed": 0, "ignored": 0} for side in flags_of}
+    digests: dict[str, dict[str, str]] = {side: {} for side in flags_of}
+    n_total = 0
+    for side, tiles in flags_of.items():
+        group = root.require_group(side).require_group("tiles")
+        for tile, packed in tiles.items():
+            flags = packed.unpack()
+            _write_flags(group, tile, flags, specs[side])
+            digests[side][tile] = hashlib.sha256(flags.tobytes()).hexdigest()
+            _count(flags, counts[side])
+            n_total += len(flags)
+    h = {
+        side: hashlib.sha256("".join(f"{t}:{d}" for t, d in sorted(dg.items())).encode()).hexdigest()
+        for side, dg in digests.items()
+    }
+    return counts, hashlib.sha256(f"{h['t1']}:{h['t2']}".encode()).hexdigest(), n_total
 
 
 class _Packed:

@@ -223,6 +223,25 @@ def _point_residuals(
     )
 
 
+def _samples(
+    source: np.ndarray,
+    target: np.ndarray,
+    source_structure: np.ndarray | None,
+    target_structure: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]:
+    """The samples as (M, 3) float64 arrays (surfaces, then structure; none given: empty) and which
+    surfaces the fit uses: with too few ground and building points, every kept point takes their part."""
+
+    def rows(a: np.ndarray | None) -> np.ndarray:
+        return np.asarray(a if a is not None else np.zeros((0, 3)), np.float64).reshape(-1, 3)
+
+    src, tgt, s_src, s_tgt = rows(source), rows(target), rows(source_structure), rows(target_structure)
+    few = len(src) < _MIN_POINTS or len(tgt) < _MIN_POINTS
+    if few and len(s_src) >= _MIN_POINTS and len(s_tgt) >= _MIN_POINTS:
+        return np.r_[src, s_src], np.r_[tgt, s_tgt], s_src, s_tgt, "every kept class (no ground or building)"
+    return src, tgt, s_src, s_tgt, "ground and building"
+
+
 def register_samples(
     source: np.ndarray,
     target: np.ndarray,
@@ -237,21 +256,7 @@ def register_samples(
     ``*_structure`` the rest of their kept points (any other class that does not come and go), which
     fix what the surfaces leave free. With too few stable points, every point takes the surfaces'
     part. Directions nothing fixes are left at zero and reported free (``axes``)."""
-    src = np.asarray(source, dtype=np.float64).reshape(-1, 3)
-    tgt = np.asarray(target, dtype=np.float64).reshape(-1, 3)
-    s_src = np.asarray(
-        source_structure if source_structure is not None else np.zeros((0, 3)), np.float64
-    ).reshape(-1, 3)
-    s_tgt = np.asarray(
-        target_structure if target_structure is not None else np.zeros((0, 3)), np.float64
-    ).reshape(-1, 3)
-    surfaces = "ground and building"
-    if (
-        (len(src) < _MIN_POINTS or len(tgt) < _MIN_POINTS)
-        and len(s_src) >= _MIN_POINTS
-        and len(s_tgt) >= _MIN_POINTS
-    ):
-        src, tgt, surfaces = np.r_[src, s_src], np.r_[tgt, s_tgt], "every kept class (no ground or building)"
+    src, tgt, s_src, s_tgt, surfaces = _samples(source, target, source_structure, target_structure)
     if len(src) < 10 or len(tgt) < 10:
         return AlignmentCheck(
             float("inf"), 0.0, 0.0, Rigid("prev", "new", np.eye(3), np.zeros(3)), 0, True, 0,
