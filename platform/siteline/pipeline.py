@@ -24,7 +24,6 @@ from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import IngestResult, ingest_mission
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.params import PairParams
-from siteline.pairs.plan import pair_change_rule
 from siteline.pairs.render import LabelledPair
 from siteline.pairs.stage import process_pair
 from siteline.pointpass import TilingResources
@@ -34,15 +33,7 @@ from siteline.records.pairs import ColourPlan, PairOutput
 from siteline.records.release import Manifest, ReleaseInfo, ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.params import ReleaseParams
-from siteline.release.plan import (
-    check_release_name,
-    check_view_count,
-    choose_pairs,
-    pair_cameras,
-    refuse_pairs_without_cameras,
-    release_params,
-    semver,
-)
+from siteline.release.plan import choose_release, release_params
 from siteline.release.stage import build_release
 from siteline.schema import JsonObject
 from siteline.site.fence import validate_fence
@@ -233,29 +224,24 @@ def release(
     scene's newest label set (or the version ``options.label_sets`` pins), a draft built from exactly
     those outputs, published when ``options.publish``; or the latest version when it already has these
     inputs (``up_to_date``)."""
-    check_release_name(name)  # refused before any pair is processed
-    pair_ids, label_sets = options.pair_ids, options.label_sets
-    if options.version is not None:
-        semver(options.version)
-    with catalog.transaction() as s:
-        chosen = choose_pairs(s, site, pair_ids)
-        cameras = pair_cameras(s, chosen)
-        refuse_pairs_without_cameras(cameras, f"release {name}")
-        params = release_params(s, site, knobs, f"release {name}")
-        check_view_count(cameras, params.pair, f"release {name}", "views" in params.derived)
-        for pid in chosen:  # stated before any pair is processed, not found in the masks afterwards
-            rule = pair_change_rule(s, pid, params.pair.change_rule, label_sets)
-            if rule.differences:
-                other = "geometry" if rule.rule == "semantic" else "semantic"
-                log.warning(
-                    "release %s, pair %d: the scenes classify differently (%s); its change labels use the %s "
-                    "rule (%s; --change-rule %s to change it)",
-                    name, pid, "; ".join(rule.differences), rule.rule, rule.why, other,
-                )  # fmt: skip
+    with catalog.transaction() as s:  # refused before any pair is processed
+        choice = choose_release(s, site, name, knobs, options)
+    chosen, params = list(choice.pair_ids), choice.params
+    for (
+        pid,
+        rule,
+    ) in choice.rules.items():  # stated before any pair is processed, not found in the masks afterwards
+        if rule.differences:
+            other = "geometry" if rule.rule == "semantic" else "semantic"
+            log.warning(
+                "release %s, pair %d: the scenes classify differently (%s); its change labels use the %s "
+                "rule (%s; --change-rule %s to change it)",
+                name, pid, "; ".join(rule.differences), rule.rule, rule.why, other,
+            )  # fmt: skip
     log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
              params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
     outputs = process_pairs(
-        catalog, settings, chosen, params.pair, progress, options.device, run_id, label_sets
+        catalog, settings, chosen, params.pair, progress, options.device, run_id, options.label_sets
     )
     for out in outputs.values():
         if out.radius_m > params.radius_ceiling_m:
@@ -274,7 +260,7 @@ def release(
         for sid, v in ((out.t1, out.versions.t1), (out.t2, out.versions.t2))
     }
     built = replace(options, pair_ids=chosen, label_sets=used)
-    return build_release(catalog, settings, site, name, params, built, run_id, progress)
+    return build_release(catalog, settings, site, name, choice, built, run_id, progress)
 
 
 def pair_cloud(catalog: Catalog, settings: Settings, doc: Manifest, pair_id: int) -> PairCloud:

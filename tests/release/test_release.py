@@ -27,6 +27,7 @@ from siteline.records.release import ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import read_manifest, verify_files
 from siteline.release.params import ReleaseParams
+from siteline.release.plan import choose_release
 from siteline.release.query import diff_releases
 from siteline.release.stage import build_release, publish_release
 from siteline.schema import validate
@@ -168,14 +169,10 @@ def test_published_release_is_read_only_and_never_republished(built) -> None:
     same = pipeline.release(cat, settings, "demo", "rel", KNOBS, options=ReleaseOptions(version="1.0.0"))
     assert same.up_to_date and same.status == "published" and same.manifest_sha256 == pub.manifest_sha256
     with pytest.raises(ImmutableError, match="already published"):  # other inputs under that version
-        build_release(
-            cat,
-            settings,
-            "demo",
-            "rel",
-            ReleaseParams(replace(PARAMS, seed=9)),
-            options=ReleaseOptions(version="1.0.0"),
-        )
+        with cat.transaction() as s:
+            choice = choose_release(s, "demo", "rel", KNOBS, ReleaseOptions(version="1.0.0"))
+        other = replace(choice, params=ReleaseParams(replace(PARAMS, seed=9)))
+        build_release(cat, settings, "demo", "rel", other, options=ReleaseOptions(version="1.0.0"))
     with pytest.raises(ImmutableError), cat.transaction() as s:
         rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
         rel.parameters = {}

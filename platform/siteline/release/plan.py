@@ -24,7 +24,9 @@ from siteline.catalog.sites import get_site, site_of
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.pairs.params import PairParams
-from siteline.pairs.plan import PairPlan, plan_pair
+from siteline.pairs.plan import PairPlan, pair_change_rule, plan_pair
+from siteline.records.pairs import ChangeRulePlan
+from siteline.records.release import ReleaseOptions
 from siteline.release import layout
 from siteline.release.knobs import ReleaseKnobs, check_coverage, check_image_size, resolve
 from siteline.release.params import ReleaseParams
@@ -279,19 +281,49 @@ class ReleasePlan:
         return output_digests(self.pairs)
 
 
-def plan_release(
-    session: Session, settings: Settings, site_name: str, name: str, params: ReleaseParams,
-    pair_ids: Sequence[int] | None = None, version: str | None = None, pinned: Mapping[int, int] | None = None,
-) -> ReleasePlan:  # fmt: skip
-    """The plan of building draft ``name`` of ``site_name`` (one transaction). The version is the next
-    one (:func:`next_version`; ``up_to_date`` names the latest version when its inputs are these)
-    unless given; a published version is refused, and so are images under the size floor."""
+@dataclass(frozen=True)
+class ReleaseChoice:
+    """What a release is made of, chosen once before any pair is processed: its pairs (ascending), its
+    resolved parameters, and each pair's change rule (stated then, not found in the masks afterwards)."""
+
+    pair_ids: tuple[int, ...]
+    params: ReleaseParams
+    rules: Mapping[int, ChangeRulePlan]
+
+
+def choose_release(
+    session: Session, site_name: str, name: str, knobs: ReleaseKnobs | None, options: ReleaseOptions
+) -> ReleaseChoice:
+    """The choice of release ``name`` of ``site_name`` (one transaction): its pairs (``options.pair_ids``
+    or every pair of the site), refused when one has no cameras; its parameters (the site's release
+    settings with ``knobs`` over them, refused when its images would be too small or the views asked
+    cannot be had); each pair's change rule on the label sets ``options.label_sets`` pins."""
     check_release_name(name)
+    if options.version is not None:
+        semver(options.version)
+    chosen = choose_pairs(session, site_name, options.pair_ids)
+    cameras = pair_cameras(session, chosen)
+    refuse_pairs_without_cameras(cameras, f"release {name}")
+    params = release_params(session, site_name, knobs, f"release {name}")
+    check_view_count(cameras, params.pair, f"release {name}", "views" in params.derived)
+    rules = {
+        pid: pair_change_rule(session, pid, params.pair.change_rule, options.label_sets) for pid in chosen
+    }
+    return ReleaseChoice(tuple(chosen), params, rules)
+
+
+def plan_release(
+    session: Session, settings: Settings, site_name: str, name: str, choice: ReleaseChoice,
+    version: str | None = None, pinned: Mapping[int, int] | None = None,
+) -> ReleasePlan:  # fmt: skip
+    """The plan of building draft ``name`` of ``site_name`` from ``choice`` (:func:`choose_release`; one
+    transaction). The version is the next one (:func:`next_version`; ``up_to_date`` names the latest
+    version when its inputs are these) unless given; a published version is refused, and so are
+    images under the size floor."""
+    params, chosen = choice.params, list(choice.pair_ids)
     if version is not None:
         semver(version)
-    chosen = choose_pairs(session, site_name, pair_ids)
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
-    check_view_count(pair_cameras(session, chosen), params.pair, f"release {name}", "views" in params.derived)
     key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
            "label_sets": used_label_sets(pairs)}  # fmt: skip
     digests = output_digests(pairs)

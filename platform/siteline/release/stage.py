@@ -19,8 +19,7 @@ from siteline.records.runs import StageRun
 from siteline.release import layout
 from siteline.release.build import execute_build
 from siteline.release.manifest import read_manifest
-from siteline.release.params import ReleaseParams
-from siteline.release.plan import ReleasePlan, check_release_name, plan_publish, plan_release, semver
+from siteline.release.plan import ReleaseChoice, ReleasePlan, check_release_name, plan_publish, plan_release
 from siteline.release.publish import make_read_only, move_back, move_into_place
 from siteline.release.repair import inspect_release, mend
 
@@ -32,13 +31,13 @@ def build_release(
     settings: Settings,
     site_name: str,
     name: str,
-    params: ReleaseParams | None = None,
+    choice: ReleaseChoice,
     options: ReleaseOptions = ReleaseOptions(),
     run_id: str | None = None,
     progress: Progress = no_progress,
 ) -> ReleaseInfo:
-    """Assemble a draft release ``name`` from the site's processed pairs (or ``options.pair_ids``) in
-    format 2 (siteline.release.layout) with ``params`` (resolved: siteline.release.knobs), and
+    """Assemble a draft release ``name`` from the processed pairs of ``choice`` (its pairs and resolved
+    parameters: siteline.release.plan.choose_release) in format 2 (siteline.release.layout), and
     publish it when ``options.publish``, holding the release name's lock throughout. Every pair must
     already be processed with these parameters and label sets: :class:`ReleaseError` names the
     command otherwise (``siteline.pipeline.release`` processes what is missing first). Each scene's
@@ -46,19 +45,11 @@ def build_release(
     latest version's inputs are these (pairs, their outputs, label sets, parameters), nothing is
     built: that version is returned with ``up_to_date`` (published now if it is a draft and
     ``options.publish``)."""
-    params = params or ReleaseParams()
     check_release_name(name)  # before anything: a name is a folder name
-    pair_ids, version, label_sets, publish = (
-        options.pair_ids,
-        options.version,
-        options.label_sets,
-        options.publish,
-    )
-    if version is not None:
-        semver(version)
+    version, label_sets, publish = options.version, options.label_sets, options.publish
     with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time
         with catalog.transaction() as s:
-            plan = plan_release(s, settings, site_name, name, params, pair_ids, version, label_sets)
+            plan = plan_release(s, settings, site_name, name, choice, version, label_sets)
         if plan.up_to_date is not None:
             info = _release_info(catalog, name, plan.up_to_date)
             log.info("release %s is up to date: %s %s has these inputs", name, name, info.version)
