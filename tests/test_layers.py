@@ -331,3 +331,53 @@ def test_no_sys_path_edit_anywhere() -> None:
         if any(e in line for e in edits)
     ]
     assert not found, found
+
+
+_JSON_TYPES = ("JsonObject", "dict[str, Any]", "Mapping[str, Any]")
+
+
+def test_no_json_dict_crosses_between_packages() -> None:
+    """What one package of the library hands another is a record, never a JSON dict: no public function
+    or method that another package calls (the CLI, which prints documents, and the catalog, which stores
+    them, aside) takes a JSON dict, but a record's parser (``from_*``), nor returns one, but a record's
+    JSON form (``to_*``) or a document made to be stored or written (``*record``, ``details``)."""
+    defs: dict[tuple[str, str], tuple[str, ast.FunctionDef]] = {}
+    uses: list[tuple[str, str, str]] = []
+    for path, tree in _modules():
+        rel = path.relative_to(PACKAGE).with_suffix("").parts
+        module = ".".join(("siteline", *rel)).removesuffix(".__init__")
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef) and not node.name.startswith("_"):
+                defs[(module, node.name)] = (rel[0], node)
+            elif isinstance(node, ast.ClassDef):
+                for sub in node.body:
+                    if isinstance(sub, ast.FunctionDef) and not sub.name.startswith("_"):
+                        defs[(module, f"{node.name}.{sub.name}")] = (rel[0], sub)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("siteline."):
+                uses += [(rel[0], str(node.module), a.name) for a in node.names]
+    bad = set()
+    for user, module, name in uses:
+        called = [(module, name)] + [k for k in defs if k[0] == module and k[1].startswith(f"{name}.")]
+        for key in called:
+            if key not in defs or user in ("cli", "catalog"):
+                continue
+            owner, fn = defs[key]
+            last = key[1].split(".")[-1]
+            if owner in ("cli", "catalog", user):
+                continue
+            params = [a for a in fn.args.args + fn.args.kwonlyargs if a.annotation is not None]
+            if not last.startswith("from_"):
+                bad |= {
+                    f"{key[0]}.{key[1]}({a.arg}: {ast.unparse(a.annotation)}) called by {user}"  # type: ignore[arg-type]
+                    for a in params
+                    if any(t in ast.unparse(a.annotation) for t in _JSON_TYPES)  # type: ignore[arg-type]
+                }
+            documents = last.startswith("to_") or last.endswith("record") or last == "details"
+            if (
+                fn.returns is not None
+                and not documents
+                and any(t in ast.unparse(fn.returns) for t in _JSON_TYPES)
+            ):
+                bad.add(f"{key[0]}.{key[1]} returns {ast.unparse(fn.returns)} to {user}")
+    assert not bad, sorted(bad)

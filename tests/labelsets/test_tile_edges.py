@@ -13,6 +13,7 @@ from siteline.labelsets.plan import ImportPlan
 from siteline.pointpass import TilingResources, write_las
 from siteline.progress import no_progress
 from siteline.records import LabelSetRef, TileSource
+from siteline.records.labelsets import ExportedLabels
 from siteline.site.spec import make_site_spec
 from siteline.tiles.export import export_las
 from siteline.tiles.reader import SceneTiles
@@ -40,7 +41,7 @@ def test_points_at_tile_edges_match_once(tmp_path) -> None:
     assert tiles.point_count == n and len(tiles.by_tile) >= 9
 
     out = tmp_path / "export.las"
-    export_las(tiles, site, out, labels={"site": "edges", "scene": 7})
+    export_las(tiles, site, out, labels=ExportedLabels("edges", 7, None))
     edited = laspy.read(out)
     edited.classification = np.full(n, 2, np.uint8)  # every ground point (site id 1) becomes building
     edited.points = edited.points[np.random.default_rng(1).permutation(n)]

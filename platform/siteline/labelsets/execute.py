@@ -15,7 +15,6 @@ import logging
 import shutil
 import tempfile
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,7 +39,7 @@ from siteline.pointpass import (
     source_transformer,
 )
 from siteline.progress import Progress, no_progress
-from siteline.records.labelsets import LabelSetImport
+from siteline.records.labelsets import ExportedLabels, LabelSetImport
 from siteline.site.spec import SiteSpec
 from siteline.stores import Store, layout
 from siteline.stores.owners import owner_tag, sweep_stale
@@ -86,15 +85,15 @@ class MatchCounts:
 
 
 def _check_origin(
-    doc: Mapping[str, Any] | None, scene_id: int, site: SiteSpec, path: Path, taxonomy_map: TaxonomyMap
+    about: ExportedLabels | None, scene_id: int, site: SiteSpec, path: Path, taxonomy_map: TaxonomyMap
 ) -> None:
     """Refuse a file whose siteline record says it was exported from another scene or site, and,
     without ``taxonomy_map``, one whose codes cannot be known to be the site's class ids: no siteline
     record (ASPRS codes 2 and 5 would read as the site's classes 2 and 5), or a record of another
     taxonomy (the site's was updated since the export)."""
-    if doc is not None and (doc.get("site") != site.name or doc.get("scene") != scene_id):
+    if about is not None and (about.site != site.name or about.scene != scene_id):
         raise LabelSetError(
-            f"labels file {path} was exported from scene {doc.get('scene')} of site {doc.get('site')}, "
+            f"labels file {path} was exported from scene {about.scene} of site {about.site}, "
             f"not scene {scene_id} of site {site.name}: import it into that scene. Nothing was written."
         )
     if taxonomy_map is not None:
@@ -103,17 +102,17 @@ def _check_origin(
         "Give --taxonomy-map FILE (a JSON map of code -> class), --taxonomy-map las (the site taxonomy's LAS "
         "codes, e.g. ASPRS) or --taxonomy-map site (they are this site's class ids). Nothing was written."
     )
-    if doc is None:
+    if about is None:
         names = {c.id: c.name for c in site.taxonomy.classes}
         raise LabelSetError(
             f"labels file {path} carries no siteline label-set record (`siteline scene export` writes one; an "
             f"editor may drop it), so its class codes cannot be taken as site {site.name}'s class ids (ASPRS 2 "
             f"and 5 would read as {names.get(2, 'nothing')} and {names.get(5, 'nothing')}). {how}"
         )
-    ids = {int(c["id"]): c["name"] for c in (doc.get("taxonomy") or {}).get("classes", [])}
+    ids = {int(c["id"]): c["name"] for c in about.taxonomy.get("classes", [])}
     if ids != {c.id: c.name for c in site.taxonomy.classes}:
         raise LabelSetError(
-            f"labels file {path} was exported under taxonomy {(doc.get('taxonomy') or {}).get('name')!r}, whose "
+            f"labels file {path} was exported under taxonomy {about.taxonomy.get('name')!r}, whose "
             f"class ids differ from site {site.name}'s taxonomy {site.taxonomy.name!r} now. {how}"
         )
 
@@ -156,7 +155,14 @@ def _spill(
     unknown = np.zeros(256, dtype=np.int64)
     n = 0
     with open_las(path) as reader:
-        _check_origin(read_labels_vlr(reader.header, path), plan.scene_id, site, path, taxonomy_map)
+        doc = read_labels_vlr(reader.header, path)
+        _check_origin(
+            ExportedLabels.from_dict(doc) if doc is not None else None,
+            plan.scene_id,
+            site,
+            path,
+            taxonomy_map,
+        )
         has_time = "gps_time" in reader.header.point_format.dimension_names
         crs = file_crs(reader, path) or site.pyproj_crs  # an editor may drop the CRS: it is the export's
         tr = source_transformer(path, site, crs)

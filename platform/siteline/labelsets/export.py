@@ -11,6 +11,7 @@ from siteline.catalog.scenes import get_scene
 from siteline.catalog.sites import site_of
 from siteline.labelsets.store import open_labelled
 from siteline.pointpass import write_changed_classes
+from siteline.records.labelsets import ExportedLabels
 from siteline.tiles.export import export_las
 
 
@@ -28,13 +29,7 @@ def export_label_set(
     with catalog.transaction() as s:
         site = site_of(s, get_scene(s, scene_id).site_id)
         source, label_set = labelled_source(s, scene_id, version)
-    about = {
-        "site": site.name,
-        "scene": scene_id,
-        "label_set_version": label_set.version,
-        "classification": "site class ids",
-        "taxonomy": site.taxonomy.to_dict(),
-    }
+    about = ExportedLabels(site.name, scene_id, label_set.version, "site class ids", site.taxonomy.to_dict())
     tiles = open_labelled(source, label_set)
     return export_las(tiles, site, out, bounds=bounds, level=level, labels=about), label_set.version
 

@@ -18,7 +18,7 @@ from siteline.labelsets.mapping import TaxonomyMap
 from siteline.labelsets.plan import ImportPlan, plan_label_import
 from siteline.pointpass import open_las, read_labels_vlr
 from siteline.progress import Progress, no_progress
-from siteline.records.labelsets import LabelSetImport
+from siteline.records.labelsets import ExportedLabels, LabelSetImport
 from siteline.records.runs import StageRun
 from siteline.stores import layout
 
@@ -71,9 +71,8 @@ def exported_from(path: Path, scene_id: int) -> int | None:
     record, or one of another scene, which the import refuses by name)."""
     with open_las(path) as reader:
         doc = read_labels_vlr(reader.header, path)
-    if doc is None or doc.get("scene") != scene_id or not isinstance(doc.get("label_set_version"), int):
-        return None
-    return int(doc["label_set_version"])
+    about = ExportedLabels.from_dict(doc) if doc is not None else None
+    return about.label_set_version if about is not None and about.scene == scene_id else None
 
 
 def _import(

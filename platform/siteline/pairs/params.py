@@ -153,7 +153,7 @@ class PairParams:
     @classmethod
     def from_dict(cls, doc: JsonObject) -> PairParams:
         """From the JSON form; PairError names an unknown key or a wrongly typed value."""
-        return cls(**parse_spec(cls, doc, "pair parameters", PairError))
+        return parse_spec(cls, doc, "pair parameters", PairError)
 
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""

@@ -2,9 +2,40 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 from siteline.schema import JsonObject
+
+
+@dataclass(frozen=True)
+class ExportedLabels:
+    """What a LAS file's classes mean, as siteline writes it into the file's labels VLR on export
+    (siteline.pointpass.labels_vlr): the site and scene, the label-set version, how the codes read
+    (``site class ids``) and the site's taxonomy then (its JSON form). Read back from a file that may
+    have been edited elsewhere, a value of the wrong type reads as None (and the import refuses it by name)."""
+
+    site: str | None
+    scene: int | None
+    label_set_version: int | None
+    classification: str = "site class ids"
+    taxonomy: JsonObject = field(default_factory=dict)
+
+    def to_dict(self) -> JsonObject:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> ExportedLabels:
+        def of(key: str, kind: type) -> Any:
+            value = doc.get(key)
+            return value if isinstance(value, kind) and not isinstance(value, bool) else None
+
+        taxonomy = doc.get("taxonomy")
+        return cls(
+            of("site", str), of("scene", int), of("label_set_version", int), str(doc.get("classification", "")),
+            dict(taxonomy) if isinstance(taxonomy, Mapping) else {},
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)

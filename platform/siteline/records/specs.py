@@ -5,19 +5,21 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import MISSING, fields
-from typing import Any
+from typing import Any, TypeVar
 
 from siteline.errors import SitelineError
-from siteline.schema import JsonObject
+
+T = TypeVar("T")
 
 
-def parse_spec(cls: type, doc: Any, what: str, error: type[SitelineError]) -> JsonObject:
-    """``doc`` as keyword arguments of the dataclass ``cls``: :class:`error` names ``what`` and the
-    fix when it is not an object, holds unknown keys, or a value has the wrong type for its field
-    (judged by the field's default: bool, int, float, str)."""
+def parse_spec(cls: type[T], doc: Any, what: str, error: type[SitelineError]) -> T:
+    """The dataclass ``cls`` made from ``doc``: :class:`error` names ``what`` and the fix when it is not
+    an object, holds unknown keys, or a value has the wrong type for its field (judged by the field's
+    default: bool, int, float, str; a list where the default is a tuple becomes a tuple). Values are
+    then checked by ``cls`` itself."""
     if not isinstance(doc, Mapping):
         raise error(f"{what} must be a JSON object, got {type(doc).__name__}.")
-    known = {f.name: f for f in fields(cls)}
+    known = {f.name: f for f in fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(set(doc) - set(known))
     if unknown:
         raise error(f"{what}: unknown parameter(s) {unknown}; known: {sorted(known)}.")
@@ -37,4 +39,8 @@ def parse_spec(cls: type, doc: Any, what: str, error: type[SitelineError]) -> Js
             ok = True
         if not ok:
             raise error(f"{what}: {name}={value!r} must be a {type(default).__name__}.")
-    return dict(doc)
+    kwargs = {
+        k: tuple(v) if isinstance(known[k].default, tuple) and isinstance(v, list) else v
+        for k, v in doc.items()
+    }
+    return cls(**kwargs)

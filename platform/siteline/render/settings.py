@@ -88,4 +88,4 @@ class RenderSettings:
     @classmethod
     def from_dict(cls, doc: JsonObject) -> RenderSettings:
         """From the JSON form; RenderError names an unknown key or a wrongly typed value."""
-        return cls(**parse_spec(cls, doc, "render settings", RenderError))
+        return parse_spec(cls, doc, "render settings", RenderError)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline.pointpass import LasWriter, labels_vlr, las_header
-from siteline.schema import JsonObject
+from siteline.records.labelsets import ExportedLabels
 from siteline.site.spec import SiteSpec
 from siteline.stores import atomic_file
 from siteline.tiles.reader import SceneTiles, in_bounds
@@ -22,7 +22,7 @@ def export_las(
     out: Path,
     bounds: Sequence[float] | None = None,
     level: int | None = None,
-    labels: JsonObject | None = None,
+    labels: ExportedLabels | None = None,
 ) -> int:
     """Write the scene's points (in ``bounds``, up to ``level``) to ``out`` (.las or .laz by suffix):
     LAS 1.4 point format 7, classification = site class ids (of the label set attached to ``tiles``),
@@ -31,7 +31,7 @@ def export_las(
     mean (site, scene, label-set version, taxonomy), written as a siteline VLR. Tiles are read and
     written one at a time; returns the point count."""
     lo = tiles.nodes.lo.min(axis=0) + np.asarray(site.origin)
-    vlrs = [labels_vlr(labels)] if labels is not None else []
+    vlrs = [labels_vlr(labels.to_dict())] if labels is not None else []
     header = las_header(site.crs, lo, scale=tiles.spec.quantum_m, point_format=7, version="1.4", vlrs=vlrs)
     n = 0
     origin = np.asarray(site.origin, dtype=np.float64)

@@ -125,8 +125,4 @@ class ViewParams:
     @classmethod
     def from_dict(cls, doc: JsonObject) -> ViewParams:
         """From the JSON form; ViewsError names an unknown key or a wrongly typed value."""
-        doc = parse_spec(cls, doc, "view parameters", ViewsError)
-        for key in ("vertical_fractions", "forward_fractions"):
-            if key in doc:
-                doc[key] = tuple(doc[key])
-        return cls(**doc)
+        return parse_spec(cls, doc, "view parameters", ViewsError)
