@@ -57,5 +57,6 @@ def test_wheel_install_finds_schemas_and_migrations(tmp_path) -> None:
         env=env | {"SITELINE_HOME": str(tmp_path / "home")}, capture_output=True, text=True, cwd=tmp_path, timeout=1200,
     )  # fmt: skip
     assert ran.returncode == 0, ran.stderr[-2000:]
-    row = next(line for line in (out / "trade.md").read_text().splitlines() if line.startswith("| default |"))
+    [table] = out.rglob("trade.md")  # under out/<layout>-<density>/
+    row = next(line for line in table.read_text().splitlines() if line.startswith("| default |"))
     assert "no release" not in row and float(row.split("|")[3]) > 0.5, row
