@@ -143,3 +143,8 @@ def chromium_path() -> Path:
         pytest.skip("SITELINE_SKIP_BROWSER=1: the page tests are skipped")
     pytest.fail("no Chromium to open the pages: `make test` installs Debian's (apt-get install chromium); "
                 "SITELINE_SKIP_BROWSER=1 skips the page tests on purpose")  # fmt: skip
+
+
+def manifest_doc(root: Path | str) -> dict:
+    """A release's manifest.json as the document it is (what a test asserts of the file itself)."""
+    return json.loads((Path(root) / "manifest.json").read_text())

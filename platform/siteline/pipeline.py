@@ -259,7 +259,7 @@ def release(
         for out in outputs.values()
         for sid, v in ((out.t1, out.versions.t1), (out.t2, out.versions.t2))
     }
-    built = replace(options, pair_ids=chosen, label_sets=used)
+    built = replace(options, label_sets=used)  # the pairs are the choice's
     return build_release(catalog, settings, site, name, choice, built, run_id, progress)
 
 

@@ -11,12 +11,11 @@ import sys
 from pathlib import Path
 
 import pytest
-from sitehelpers import SYNTH, epoch_dirs, make_home, run_cli
+from sitehelpers import SYNTH, epoch_dirs, make_home, manifest_doc, run_cli
 
 from siteline.catalog import open_catalog
 from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources
-from siteline.release.manifest import read_manifest
 from siteline.tiles.stage import tile_scene
 
 EXE = str(Path(sys.executable).with_name("siteline"))
@@ -83,7 +82,7 @@ def test_release_build_uses_the_site_settings_and_is_up_to_date_once_built(tmp_p
     assert first.returncode == 0, first.stderr
     info = json.loads(first.stdout)
     assert (info["version"], info["status"], info["reason"]) == ("1.0.0", "published", "first version")
-    doc = read_manifest(Path(info["root"])).doc
+    doc = manifest_doc(Path(info["root"]))
     assert doc["lineage"]["release_params"]["derived"]["scale"].startswith("auto: 512 px long side")
     assert all(max(it["size_px"]) >= 512 for it in doc["items"])  # 515 x 386 renders
     before = sorted((settings.home / "releases").rglob("*"))

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sitehelpers import run_cli
+from sitehelpers import manifest_doc, run_cli
 
 from labelsets.edits import centre_box, export, versions
 from siteline import pipeline
@@ -17,7 +17,6 @@ from siteline.labelsets.stage import ImportOptions, import_labels
 from siteline.pairs.params import PairParams
 from siteline.records.release import ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
-from siteline.release.manifest import read_manifest
 from siteline.release.stage import publish_release
 
 # one candidate view per real camera: the test is about label sets, not the view sample
@@ -45,12 +44,12 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
 
     second = pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(publish=True))
     assert second.version == "2.0.0"  # a label set changed: major bump
-    lineage = read_manifest(second.root).doc["lineage"]
+    lineage = manifest_doc(second.root)["lineage"]
     scenes_ = {sc["id"]: sc for sc in lineage["scenes"]}
     assert scenes_[1]["label_set_version"] == new.version and scenes_[2]["label_set_version"] == pinned[2]
     assert scenes_[1]["label_set_sha256"] == new.source_sha256
     assert lineage["pairs"][0]["label_sets"] == {"t1": new.version, "t2": pinned[2]}
-    old = read_manifest(first.root).doc["lineage"]
+    old = manifest_doc(first.root)["lineage"]
     assert {sc["id"]: sc["label_set_version"] for sc in old["scenes"]} == pinned
     # the old pair outputs were not overwritten: both output folders are complete
     roots = sorted(

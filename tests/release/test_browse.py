@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from sitehelpers import chromium_path, run_exe
+from sitehelpers import chromium_path, manifest_doc, run_exe
 
 from siteline import pipeline
 from siteline.catalog.releases import release_location
@@ -30,7 +30,7 @@ from siteline.release.manifest import read_manifest
 def _cloud(built, pair: int = 1):
     settings, cat, pub = built
     manifest = read_manifest(Path(pub.root))
-    return manifest.doc, pipeline.pair_cloud(cat, settings, manifest, pair)
+    return manifest_doc(pub.root), pipeline.pair_cloud(cat, settings, manifest, pair)
 
 
 def test_viewer_reads_every_point_with_the_labels_the_release_used(built) -> None:
@@ -82,7 +82,7 @@ def test_cameras_are_drawn_where_the_items_were_rendered(built) -> None:
 
 def test_pair_cloud_refuses_a_pair_the_release_lacks(built) -> None:
     settings, cat, pub = built
-    doc = read_manifest(Path(pub.root)).doc
+    doc = manifest_doc(Path(pub.root))
     with pytest.raises(ReleaseError, match=r"has no pair 99 \(its pairs: 1, 2\)"):
         pipeline.pair_cloud(cat, settings, Manifest.from_dict(doc), 99)
 
@@ -121,7 +121,7 @@ def test_server_routes_and_refusals(built, server) -> None:
     status, body = _get(server + "/")
     assert status == 200 and b'href="/browse/rel/1.0.0/"' in body and b'href="/3d/rel/1.0.0/2/"' in body
     status, body = _get(server + "/browse/rel/1.0.0/")
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     assert status == 200 and all(it["id"].encode() in body for it in doc["items"])
     it = doc["items"][0]
     rel = f"{it['split']}/A/{it['id']}.png"
@@ -169,7 +169,7 @@ def test_release_browse_writes_a_page_beside_the_release(built, tmp_path) -> Non
     r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(tmp_path / "page.html"))
     assert r.returncode == 0, r.stderr
     page = (tmp_path / "page.html").read_text()
-    assert "file://" in r.stdout and all(it["id"] in page for it in read_manifest(root).doc["items"])
+    assert "file://" in r.stdout and all(it["id"] in page for it in manifest_doc(root)["items"])
     # images addressed relative to the page, so it opens from the disk
     assert json.loads(page.split('type="application/json">')[1].split("</script>")[0])["images"].startswith(
         "../"

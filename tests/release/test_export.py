@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import torch
 from PIL import Image
-from sitehelpers import writable_copy
+from sitehelpers import manifest_doc, writable_copy
 
 from siteline.data import ChangeDetectionDataset
 from siteline.errors import ReleaseError
 from siteline.release.export import PROFILES, export_release
-from siteline.release.manifest import file_entries, read_manifest, verify_files, write_manifest
+from siteline.release.manifest import file_entries, verify_files, write_manifest
 from siteline.release.metrics import confusion, scores
 from siteline.release.score import score_predictions
 
@@ -119,7 +119,7 @@ def test_every_profile_has_a_loader_test() -> None:
 def test_export_is_read_right_by_the_tools_own_rules(built, tmp_path, profile) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     out = tmp_path / "export" / profile
     result = export_release(root, profile, out)
     by_split: dict[str, list[dict]] = {}
@@ -184,7 +184,7 @@ def test_export_prints_the_setting_and_refuses_a_used_folder(built, tmp_path, ca
 def test_format_2_folders_agree_and_the_loader_reads_0_1_255(built) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     assert doc["format"] == 2 and set(doc["layout"]["folders"]) == {
         "A",
         "B",
@@ -209,7 +209,7 @@ def test_format_2_folders_agree_and_the_loader_reads_0_1_255(built) -> None:
 def test_images_are_padded_to_multiples_of_32_and_recorded(built) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     assert doc["layout"]["padding"]["enabled"] and doc["layout"]["padding"]["multiple_px"] == 32
     for it in doc["items"]:
         w, h = it["size_px"]
@@ -225,7 +225,7 @@ def test_images_are_padded_to_multiples_of_32_and_recorded(built) -> None:
 
 def _predictions(root: Path, split: str, out: Path, rule) -> Path:  # noqa: ANN001
     out.mkdir(parents=True, exist_ok=True)
-    for it in read_manifest(root).doc["items"]:
+    for it in manifest_doc(root)["items"]:
         if it["split"] == split:
             Image.fromarray(rule(_truth(root, it)).astype(np.uint8)).save(out / f"{it['id']}.png")
     return out
@@ -290,7 +290,7 @@ def test_metrics_when_a_class_is_absent() -> None:
 def test_format_1_release_stays_readable_and_verifiable(built, tmp_path) -> None:
     _, _, pub = built
     old = writable_copy(pub.root, tmp_path / "old")
-    doc = read_manifest(old).doc
+    doc = manifest_doc(old)
     for split in ("train", "val", "test"):
         if (old / split).exists():
             shutil.rmtree(old / split / "label")

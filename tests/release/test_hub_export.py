@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 import yaml
 from PIL import Image
+from sitehelpers import manifest_doc
 
 from siteline.records.release import Manifest
 from siteline.release import hub
 from siteline.release.export import export_release
-from siteline.release.manifest import read_manifest, verify_files
+from siteline.release.manifest import verify_files
 
 EXE = str(Path(sys.executable).with_name("siteline"))
 
@@ -38,7 +39,7 @@ def _card(out: Path) -> dict:
 def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     out = tmp_path / "hf"
     result = export_release(root, "hf", out, license=hub.HubLicense("cc-by-4.0"))
     # a cache of its own: the machine's HF cache served another build's rows for the same folder name
@@ -82,7 +83,7 @@ def test_load_dataset_reads_every_item_as_released(built, tmp_path) -> None:
 def test_shards_are_cut_by_size_and_still_load(built, tmp_path, monkeypatch) -> None:
     _, _, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     n_train = sum(it["split"] == "train" for it in doc["items"])
     monkeypatch.setattr(hub, "SHARD_BYTES", 1)  # one item a shard
     out = tmp_path / "hf"
@@ -171,7 +172,7 @@ def test_the_card_is_written_for_the_export_and_its_snippet_runs(built, tmp_path
     ran = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, env=env)
     assert ran.returncode == 0, ran.stderr
     assert ran.stdout.startswith("rel_p") or ran.stdout.split()[0] in {
-        it["id"] for it in read_manifest(Path(pub.root)).doc["items"]
+        it["id"] for it in manifest_doc(Path(pub.root))["items"]
     }
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import sqlalchemy as sa
 from PIL import Image
-from sitehelpers import epoch_dirs, make_home, writable_copy
+from sitehelpers import epoch_dirs, make_home, manifest_doc, writable_copy
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
@@ -25,7 +25,7 @@ from siteline.pairs.render import pair_mask
 from siteline.pointpass import TilingResources
 from siteline.records.release import ReleaseOptions
 from siteline.release.knobs import ReleaseKnobs
-from siteline.release.manifest import read_manifest, verify_files
+from siteline.release.manifest import verify_files
 from siteline.release.params import ReleaseParams
 from siteline.release.plan import choose_release
 from siteline.release.query import diff_releases
@@ -40,7 +40,7 @@ from .conftest import KNOBS, PARAMS
 def test_layout_manifest_and_datasheet(built) -> None:
     settings, cat, pub = built
     root = Path(pub.root)
-    doc = read_manifest(root).doc
+    doc = manifest_doc(root)
     validate(doc, "release.schema.json", "test")
     assert doc["version"] == "1.0.0" and pub.status == "published"
     assert (root / "README.md").read_text().startswith("# rel 1.0.0")
@@ -225,7 +225,7 @@ def test_query_by_change_ratio_and_dates(built) -> None:
     from datetime import UTC, datetime
 
     _, cat, pub = built
-    doc = read_manifest(pub.root).doc
+    doc = manifest_doc(pub.root)
     with cat.transaction() as s:
         everything = query_items(s, "rel", "1.0.0")
         high = query_items(s, "rel", "1.0.0", min_change_ratio=0.05)
@@ -237,7 +237,7 @@ def test_query_by_change_ratio_and_dates(built) -> None:
 
 def test_items_say_how_much_of_their_change_shows_and_query_by_it(built) -> None:
     _, cat, pub = built
-    doc = read_manifest(pub.root).doc
+    doc = manifest_doc(pub.root)
     by_id = {it["id"]: it for it in doc["items"]}
     measured = [it for it in doc["items"] if "change_visible" in it]
     assert measured and all(0.0 <= it["change_visible"] <= 1.0 for it in measured)
@@ -280,7 +280,7 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     from siteline.pairs.render import LabelledPair, render_pair_view
     from siteline.tiles.reader import SceneTiles
 
-    doc = read_manifest(pub.root).doc
+    doc = manifest_doc(pub.root)
     pair = doc["lineage"]["pairs"][0]
     label_uri = settings.store.resolve(pair["labels"]["uri"])  # store:labels/... in the manifest
     with cat.transaction() as s:
@@ -323,7 +323,7 @@ def test_preset_is_applied_and_recorded(built) -> None:
     assert sorted((settings.home / "releases").rglob("*")) == before
     knobs = ReleaseKnobs(preset="fast", pair={"scale": 0.5, "views": 3, "min_coverage": 0.2})
     info = pipeline.release(cat, settings, "demo", "presetrel", knobs)
-    lin = read_manifest(info.root).doc["lineage"]
+    lin = manifest_doc(info.root)["lineage"]
     assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
     assert (lin["parameters"]["scale"], lin["parameters"]["point_size_px"]) == (
         0.5,
@@ -355,7 +355,7 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
 
     def by_item(root: str) -> dict[str, str]:
         """sha256 of every image and mask of pair 1, by item and kind (splits differ with the pairs)."""
-        doc = read_manifest(Path(root)).doc
+        doc = manifest_doc(Path(root))
         sha = {f["path"]: f["sha256"] for f in doc["files"]}
         return {
             (it["id"], sub): sha[f"{it['split']}/{sub}/{it['id']}.png"]
@@ -366,8 +366,8 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
 
     mine = by_item(pub.root)
     assert mine and mine == by_item(local.root)
-    scenes = {sc["id"]: sc for sc in read_manifest(Path(local.root)).doc["lineage"]["scenes"]}
-    assert read_manifest(Path(pub.root)).doc["lineage"]["scenes"] == [scenes[1], scenes[2]]
+    scenes = {sc["id"]: sc for sc in manifest_doc(Path(local.root))["lineage"]["scenes"]}
+    assert manifest_doc(Path(pub.root))["lineage"]["scenes"] == [scenes[1], scenes[2]]
 
 
 def test_reused_change_labels_record_their_points(built) -> None:

@@ -20,7 +20,6 @@ from torch import nn
 from siteline.data import ChangeDetectionDataset
 from siteline.errors import ReleaseError
 from siteline.release.export import PROFILES, export_release
-from siteline.release.manifest import read_manifest
 from siteline.release.score import score_predictions
 
 
@@ -111,11 +110,11 @@ def test_changemamba_reads_ignore_as_its_ignore_index_with_stock_settings(built,
 def test_predictions_under_export_names_and_resized_ones_are_scored(
     built, tmp_path, capsys, monkeypatch
 ) -> None:
-    from sitehelpers import run_cli
+    from sitehelpers import manifest_doc, run_cli
 
     settings, _, pub = built
     root = Path(pub.root)
-    items = [it for it in read_manifest(root).doc["items"] if it["split"] == "test"]
+    items = [it for it in manifest_doc(root)["items"] if it["split"] == "test"]
     truth = {
         it["id"]: np.asarray(Image.open(root / "test" / "label_ignore" / f"{it['id']}.png")) for it in items
     }

@@ -50,18 +50,12 @@ def _run(home: Path, *argv: str) -> subprocess.CompletedProcess:
 )
 def test_a_full_disk_is_one_line_and_leaves_nothing(small_fs, size) -> None:
     home = small_fs(size) / "home"
-    assert _run(home, "init").returncode == 0
-    assert (
-        _run(
-            home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130"
-        ).returncode
-        == 0
-    )
+    _site(home)
     r = _run(home, "ingest", str(AUTZEN), "--site", "a", "--captured-at", "2020-01-01T00:00:00Z")
     assert r.returncode == 1, (r.stdout, r.stderr)
     assert "Traceback" not in r.stderr and "error: the disk is full" in r.stderr, r.stderr
     assert f"the file system holding {home}" in r.stderr and "MB free" in r.stderr
-    left = [p for p in home.rglob("*") if any(t in p.name for t in (".partial", ".tmp-", ".new-"))]
+    left = _leftovers(home)
     assert left == [], left
     assert not [p for p in (home / "stores" / "tiles").rglob("*") if p.is_file()]  # no tile store
     listing = _run(home, "scene", "list", "--site", "a", "--json")
@@ -71,6 +65,13 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(small_fs, size) -> None:
         assert [s["status"] for s in scenes] == ["registered"] and blobs
     else:  # while ingesting: nothing of the mission is kept
         assert blobs == []
+
+
+def _site(home: Path) -> None:
+    """A catalog at ``home`` and site ``a`` (autzen's frame)."""
+    assert _run(home, "init").returncode == 0
+    r = _run(home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130")
+    assert r.returncode == 0, r.stderr
 
 
 def _leftovers(home: Path) -> list[Path]:
@@ -99,13 +100,7 @@ def test_retile_on_a_full_disk_or_stopped_leaves_the_old_store_and_nothing_else(
     the scene's current store as it was and no `.partial`: at once, or (SIGKILL) at the next run."""
     mnt = small_fs("40m")
     home = mnt / "home"
-    assert _run(home, "init").returncode == 0
-    assert (
-        _run(
-            home, "site", "create", "a", "--crs", "EPSG:32610", "--origin", "493000", "4878000", "130"
-        ).returncode
-        == 0
-    )
+    _site(home)
     assert (
         _run(home, "ingest", str(AUTZEN), "--site", "a", "--captured-at", "2020-01-01T00:00:00Z").returncode
         == 0

@@ -73,8 +73,8 @@ class ReleaseItem:
 class Manifest:
     """A release's manifest.json as read back (``schema/release.schema.json``): its format, name and version,
     items, the pairs of each split, the files it lists (path -> sha256), statistics, lineage and split rule
-    (still documents); ``format`` as written (2, or ``siteline-release/1``; None where a manifest has none); ``doc`` is the file's document itself, for what serves or copies it
-    as written."""
+    (still documents); ``format`` as written (2, or ``siteline-release/1``; None where a manifest has
+    none)."""
 
     format: int | str | None
     name: str
@@ -87,7 +87,6 @@ class Manifest:
     stats: JsonObject
     lineage: JsonObject
     split_rule: JsonObject
-    doc: JsonObject
 
     @classmethod
     def from_dict(cls, doc: JsonObject) -> Manifest:
@@ -98,7 +97,7 @@ class Manifest:
             splits={s: tuple(int(p) for p in doc["splits"][s]) for s in SPLITS},
             files={str(f["path"]): str(f["sha256"]) for f in doc["files"]},
             stats=dict(doc.get("stats") or {}), lineage=dict(doc["lineage"]),
-            split_rule=dict(doc.get("split_rule") or {}), doc=doc,
+            split_rule=dict(doc.get("split_rule") or {}),
         )  # fmt: skip
 
     @property
