@@ -227,10 +227,8 @@ def release(
     with catalog.transaction() as s:  # refused before any pair is processed
         choice = choose_release(s, site, name, knobs, options)
     chosen, params = list(choice.pair_ids), choice.params
-    for (
-        pid,
-        rule,
-    ) in choice.rules.items():  # stated before any pair is processed, not found in the masks afterwards
+    # each pair's rule is stated before any pair is processed, not found in the masks afterwards
+    for pid, rule in choice.rules.items():
         if rule.differences:
             other = "geometry" if rule.rule == "semantic" else "semantic"
             log.warning(

@@ -159,7 +159,7 @@ def test_a_publish_killed_after_its_record_is_finished_by_the_next_publish(built
     assert not any(p.stat().st_mode & 0o222 for p in [root, *files])
 
 
-def test_published_release_is_read_only_and_never_republished(built) -> None:
+def test_published_release_is_read_only_and_never_republished(built, monkeypatch) -> None:
     settings, cat, pub = built
     some = next(Path(pub.root).rglob("*.png"))
     assert not os.access(some, os.W_OK) or os.geteuid() == 0  # root ignores permission bits
@@ -173,6 +173,11 @@ def test_published_release_is_read_only_and_never_republished(built) -> None:
             choice = choose_release(s, "demo", "rel", KNOBS, ReleaseOptions(version="1.0.0"))
         other = replace(choice, params=ReleaseParams(replace(PARAMS, seed=9)))
         build_release(cat, settings, "demo", "rel", other, options=ReleaseOptions(version="1.0.0"))
+    # other parameters under that version are refused before any pair is processed
+    monkeypatch.setattr(pipeline, "process_pairs", lambda *a, **k: pytest.fail("a pair was processed"))
+    other_knobs = ReleaseKnobs.exactly(replace(PARAMS, seed=9))
+    with pytest.raises(ImmutableError, match=r"1\.0\.0 is already published .*\(other params\)"):
+        pipeline.release(cat, settings, "demo", "rel", other_knobs, options=ReleaseOptions(version="1.0.0"))
     with pytest.raises(ImmutableError), cat.transaction() as s:
         rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
         rel.parameters = {}

@@ -305,11 +305,42 @@ def choose_release(
     cameras = pair_cameras(session, chosen)
     refuse_pairs_without_cameras(cameras, f"release {name}")
     params = release_params(session, site_name, knobs, f"release {name}")
+    if options.version is not None:
+        refuse_published_version(session, name, options.version, chosen, params)
     check_view_count(cameras, params.pair, f"release {name}", "views" in params.derived)
     rules = {
         pid: pair_change_rule(session, pid, params.pair.change_rule, options.label_sets) for pid in chosen
     }
     return ReleaseChoice(tuple(chosen), params, rules)
+
+
+def refuse_published_version(
+    session: Session, name: str, version: str, pair_ids: Sequence[int], params: ReleaseParams
+) -> None:
+    """Refuse, before any pair is processed, a build asked to be ``version`` of ``name`` when that
+    version is published and the build cannot be it: the version is not the latest (only the latest
+    is ever found up to date), or it was made of other pairs, parameters, format or padding. (Other
+    label sets or remade outputs are found once the pairs are processed: :func:`plan_release`.)"""
+    existing = find_release(session, name, version)
+    if existing is None or existing.status != "published":
+        return
+    latest = max(list_releases(session, name), key=lambda r: semver(r.version))
+    recorded = dict((existing.parameters or {}).get("lineage_key") or {})
+    key = {
+        "pairs": list(pair_ids),
+        "params": params.pair.to_dict(),
+        "format": layout.FORMAT,
+        "pad": params.pad,
+    }
+    differs = [k for k, v in key.items() if recorded.get(k) != v]
+    if latest.version != version or differs:
+        why = (
+            f"{latest.version} is the latest" if latest.version != version else "other " + ", ".join(differs)
+        )
+        raise ImmutableError(
+            f"release {name} {version} is already published and is never rewritten ({why}): build another "
+            "version. Nothing was made."
+        )
 
 
 def plan_release(
