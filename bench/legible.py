@@ -33,11 +33,11 @@ from siteline.catalog.scenes import get_scene
 from siteline.config import Settings, sqlite_url
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.execute import pair_labels, pair_views, scene_ground
-from siteline.pairs.params import PairParams
 from siteline.pairs.plan import plan_pair
 from siteline.pairs.render import LabelledPair, pair_mask
 from siteline.progress import no_progress
 from siteline.records.pairs import ColourPlan
+from siteline.records.params.pairs import PairParams
 from siteline.release.datasheet import colour_mask
 from siteline.render.colour import resolve_colour
 from siteline.render.shading import eye_dome

@@ -76,10 +76,10 @@ def _work(home: Path, threads: str) -> dict[str, float]:
     from siteline.config import Settings, sqlite_url
     from siteline.labelsets.store import open_labelled
     from siteline.pairs import execute as ex
-    from siteline.pairs.params import PairParams
     from siteline.pairs.plan import plan_pair
     from siteline.pairs.render import LabelledPair, render_pair_view
     from siteline.progress import no_progress
+    from siteline.records.params.pairs import PairParams
 
     settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))
     cat = open_catalog(settings)

@@ -15,10 +15,11 @@ from pathlib import Path
 import laspy
 import numpy as np
 
-from siteline.labels.change import CHANGED, Matching, SurfaceTest, change_flags, median_spacing
+from siteline.labels.change import CHANGED, Matching, change_flags, median_spacing
 from siteline.labels.regions import small_regions
+from siteline.records.params.labels import SurfaceTest
 from siteline.site.taxonomy import default_taxonomy
-from siteline.synth import LAS_RELPATH, SynthConfig, write_site
+from siteline.synth import LAS_RELPATH, SynthParams, write_site
 
 
 def _epoch(site: Path, doc: dict, i: int, key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -52,7 +53,7 @@ def main() -> None:
     if not (site / "truth" / "site.json").exists():
         write_site(
             site,
-            SynthConfig(
+            SynthParams(
                 epochs=2,
                 density_pts_m2=args.density,
                 snow_epochs=(),

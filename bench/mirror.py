@@ -27,14 +27,14 @@ def main() -> None:
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.config import Settings, sqlite_url
-    from siteline.pairs.params import PairParams
+    from siteline.records.params.pairs import PairParams
     from siteline.site.fence import load_fence_geojson
     from siteline.site.spec import make_site_spec
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
-        cfg = SynthConfig(epochs=2, density_pts_m2=args.density, seed=0)
+        cfg = SynthParams(epochs=2, density_pts_m2=args.density, seed=0)
         write_site(root / "site", cfg)
         settings = Settings(home=root / "home", database_url=sqlite_url(root / "home" / "catalog.sqlite"))
         engine = make_engine(settings.database_url)

@@ -43,10 +43,10 @@ def _peak_mib() -> float:
 
 
 def stage_synth(work: Path, density: float) -> dict:
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     t0 = time.perf_counter()
-    write_site(work / "site", SynthConfig(epochs=2, density_pts_m2=density, seed=0))
+    write_site(work / "site", SynthParams(epochs=2, density_pts_m2=density, seed=0))
     doc = json.loads((work / "site" / "truth" / "site.json").read_text())
     return {"seconds": time.perf_counter() - t0, "points": [e["points"] for e in doc["epochs"]]}
 
@@ -65,14 +65,14 @@ def stage_ingest(work: Path) -> dict:
     from siteline.catalog.sites import add_site
     from siteline.site.fence import load_fence_geojson
     from siteline.site.spec import make_site_spec
-    from siteline.synth import SynthConfig
+    from siteline.synth import SynthParams
 
     settings = _settings(work)
     engine = make_engine(settings.database_url)
     migrate.upgrade(engine)
     engine.dispose()
     cat = open_catalog(settings)
-    cfg = SynthConfig()
+    cfg = SynthParams()
     ring = load_fence_geojson(work / "site" / "fence.geojson", cfg.origin)
     with cat.transaction() as s:
         add_site(s, make_site_spec("bench", cfg.crs, cfg.origin, [*ring, ring[0]]))
@@ -86,8 +86,8 @@ def stage_ingest(work: Path) -> dict:
 
 def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, knobs: dict) -> dict:
     from siteline.catalog import open_catalog
-    from siteline.pairs.params import PairParams
     from siteline.pairs.stage import process_pair
+    from siteline.records.params.pairs import PairParams
 
     settings = _settings(work)
     cat = open_catalog(settings)
@@ -142,9 +142,9 @@ def stage_labels(work: Path, knobs: dict) -> dict:
     from siteline.catalog import open_catalog
     from siteline.labelsets.store import open_labelled
     from siteline.pairs.execute import pair_labels
-    from siteline.pairs.params import PairParams
     from siteline.pairs.plan import plan_pair
     from siteline.progress import no_progress
+    from siteline.records.params.pairs import PairParams
 
     settings = _settings(work)
     cat = open_catalog(settings)

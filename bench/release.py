@@ -33,17 +33,17 @@ def main() -> None:
     from siteline.camera.pinhole import Camera
     from siteline.labels.change import change_flags
     from siteline.labels.store import write_labels
-    from siteline.pairs.params import PairParams
     from siteline.pairs.render import LabelledPair, render_pair_view
+    from siteline.records.params.pairs import PairParams
     from siteline.site.fence import load_fence_geojson
     from siteline.site.spec import make_site_spec
-    from siteline.synth import LAS_RELPATH, SynthConfig, write_site
+    from siteline.synth import LAS_RELPATH, SynthParams, write_site
     from siteline.tiles.reader import SceneTiles
     from siteline.tiles.writer import write_tiles
 
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)
-        cfg = SynthConfig(epochs=2, density_pts_m2=args.density)
+        cfg = SynthParams(epochs=2, density_pts_m2=args.density)
         write_site(d / "site", cfg)
         doc = json.loads((d / "site" / "truth" / "site.json").read_text())
         ring = load_fence_geojson(d / "site" / "fence.geojson", cfg.origin)

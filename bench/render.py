@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from siteline.camera.pinhole import Camera
-from siteline.render.settings import RenderSettings
+from siteline.records.params.render import RenderParams
 from siteline.render.zbuffer import render_points
 
 W, H, FX = 5645, 4082, 4000.0
@@ -99,7 +99,7 @@ def memory_child(n: int, scale: float) -> None:
     th = threading.Thread(target=sample)
     th.start()
     t = time.perf_counter()
-    render_points(xyz, cam, RenderSettings(scale=scale), {"rgb": rgb})
+    render_points(xyz, cam, RenderParams(scale=scale), {"rgb": rgb})
     done.set()
     th.join()
     input_mib = (xyz.nbytes + rgb.nbytes) / 2**20
@@ -133,9 +133,7 @@ def main() -> None:
     rows = []
     for scale in (1.0, 0.5, 0.25, 0.125):
         for ps, splat in ((1, "fixed"), (3, "fixed"), (1, "world")):
-            s = RenderSettings(
-                scale=scale, point_size_px=ps, splat=splat, fill_px=2 if splat == "world" else 0
-            )
+            s = RenderParams(scale=scale, point_size_px=ps, splat=splat, fill_px=2 if splat == "world" else 0)
             render_points(xyz[:1000], cam, s, device=args.device, spacing_m=spacing[:1000])  # warm-up
             sec, r = timed(
                 lambda s=s: render_points(xyz, cam, s, {"rgb": rgb}, device=args.device, spacing_m=spacing)
@@ -150,7 +148,7 @@ def main() -> None:
         sc = cam.scaled(scale)
         sec, idx = timed(lambda sc=sc: numpy_zbuffer(xyz, sc), repeats=1)
         base[scale] = sec
-        ours = render_points(xyz, cam, RenderSettings(scale=scale, precision="float32"), device=args.device)
+        ours = render_points(xyz, cam, RenderParams(scale=scale, precision="float32"), device=args.device)
         agree = (ours.index == idx).mean()
         print(
             f"numpy baseline at scale {scale}: {sec:.2f} s ({args.points / sec / 1e6:.1f} M points/s); "

@@ -51,9 +51,9 @@ def _start_s3() -> tuple[subprocess.Popen, str]:
 def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, float]:
     from siteline.catalog import open_catalog
     from siteline.ingest.stage import ingest_mission
-    from siteline.pairs.params import PairParams
     from siteline.pairs.stage import process_pair
-    from siteline.release.params import ReleaseParams
+    from siteline.records.params.pairs import PairParams
+    from siteline.records.params.release import ReleaseParams
     from siteline.release.stage import build_release
     from siteline.tiles.stage import tile_scene
     from tests.sitehelpers import epoch_dirs, make_home
@@ -85,7 +85,7 @@ def main() -> None:
     ap.add_argument("--density", type=float, default=10.0)
     ap.add_argument("--views", type=int, default=6)
     args = ap.parse_args()
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     proc, endpoint = _start_s3()
     conf = {"endpoint_url": endpoint, "key": "bench", "secret": "bench"}
@@ -97,7 +97,7 @@ def main() -> None:
     try:
         with tempfile.TemporaryDirectory() as d:
             d = Path(d)
-            write_site(d / "site", SynthConfig(epochs=2, density_pts_m2=args.density, seed=3))
+            write_site(d / "site", SynthParams(epochs=2, density_pts_m2=args.density, seed=3))
             local = _run(d / "local", d / "site", "", args.views)
             remote = _run(d / "s3", d / "site", "s3://bench/stores", args.views)
     finally:

@@ -115,8 +115,8 @@ def view_read(points: int) -> None:
     import pyproj
 
     from siteline.camera.pinhole import Camera
+    from siteline.records.params.render import RenderParams
     from siteline.records.tiling import TileSpec
-    from siteline.render.settings import RenderSettings
     from siteline.render.zbuffer import render_points
     from siteline.site.spec import make_site_spec
     from siteline.tiles.reader import SceneTiles
@@ -147,7 +147,7 @@ def view_read(points: int) -> None:
         for order, tiles in stores.items():
             every = tiles.points_for_view(cam, 0.125, level=None)
             for size in (1, 3):
-                settings = RenderSettings(scale=0.125, point_size_px=size)
+                settings = RenderParams(scale=0.125, point_size_px=size)
                 full = render_points(every.xyz_m.astype(np.float32), cam, settings)
                 for factor in (1.0, 1.41, 2.0, None):
                     t = time.perf_counter()

@@ -77,9 +77,9 @@ def _views(home: Path, copies: int, rules: dict, views: int) -> dict[str, float]
     from siteline.labelsets.store import open_labelled
     from siteline.pairs import execute as pair_execute
     from siteline.pairs import sources
-    from siteline.pairs.params import PairParams
     from siteline.pairs.plan import plan_pair
     from siteline.progress import no_progress
+    from siteline.records.params.pairs import PairParams
     from siteline.site.spec import make_site_spec
 
     settings = Settings(home=home, database_url=sqlite_url(home / "catalog.sqlite"))

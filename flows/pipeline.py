@@ -41,13 +41,13 @@ from siteline.catalog.stages import record_failure
 from siteline.config import Settings, load_settings
 from siteline.errors import SitelineError, StoreError
 from siteline.ingest.options import IngestOptions
-from siteline.pairs.params import PairParams
 from siteline.pointpass import TilingResources
 from siteline.records.pairs import PairOutput
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.records.runs import StageRun
 from siteline.records.tiling import SceneTiling
-from siteline.release.knobs import ReleaseKnobs
 from siteline.stores import join
 from siteline.stores.diskspace import disk_full, full_disk_message
 

@@ -19,9 +19,9 @@ from siteline.config import Settings, sqlite_url
 from siteline.pointpass import TilingResources
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import make_site_spec
-from siteline.synth import SynthConfig
+from siteline.synth import SynthParams
 
-SYNTH = SynthConfig(epochs=3, density_pts_m2=3.0, seed=21)
+SYNTH = SynthParams(epochs=3, density_pts_m2=3.0, seed=21)
 
 
 def epoch_dirs(site: Path) -> list[Path]:

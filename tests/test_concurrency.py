@@ -21,10 +21,10 @@ EXE = Path(sys.executable).with_name("siteline")
 
 @pytest.fixture(scope="module")
 def race_site(tmp_path_factory) -> Path:
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     out = tmp_path_factory.mktemp("race-site")
-    write_site(out, SynthConfig(epochs=2, density_pts_m2=2.0, seed=11))
+    write_site(out, SynthParams(epochs=2, density_pts_m2=2.0, seed=11))
     return out
 
 

@@ -23,16 +23,15 @@ from siteline.errors import LabelSetError, ReleaseError
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import IngestResult, ingest_mission
 from siteline.labelsets.store import open_labelled
-from siteline.pairs.params import PairParams
 from siteline.pairs.render import LabelledPair
 from siteline.pairs.stage import process_pair
 from siteline.pointpass import TilingResources
 from siteline.previews.cloud import PairCloud
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import ColourPlan, PairOutput
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs, ReleaseParams
 from siteline.records.release import Manifest, ReleaseInfo, ReleaseOptions
-from siteline.release.knobs import ReleaseKnobs
-from siteline.release.params import ReleaseParams
 from siteline.release.plan import choose_release, release_params
 from siteline.release.stage import build_release
 from siteline.schema import JsonObject

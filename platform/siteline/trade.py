@@ -29,10 +29,11 @@ from siteline.catalog.scenes import list_scenes
 from siteline.catalog.sites import add_site, get_site
 from siteline.config import Settings, sqlite_url
 from siteline.errors import ConfigError, PairError
-from siteline.pairs.params import PairParams
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import make_site_spec
-from siteline.synth import SynthConfig, write_site
+from siteline.synth import SynthParams, write_site
 from siteline.synth.scoring import score_pair
 
 SITE = "trade"
@@ -117,7 +118,7 @@ def synthetic_pair(
         raise ConfigError(f"layout {layout!r}: use one of {', '.join(LAYOUTS)}.")
     if not (math.isfinite(density) and density > 0):
         raise ConfigError(f"site density {density!r} must be a positive number of points per m2.")
-    cfg = SynthConfig(
+    cfg = SynthParams(
         epochs=2, density_pts_m2=density, seed=seed, snow_epochs=(), projection_error_epochs=(), layout=layout
     )
     site_dir = out / "site"
@@ -136,7 +137,7 @@ def synthetic_pair(
             ring = load_fence_geojson(site_dir / "fence.geojson", cfg.origin)
             with cat.transaction() as s:
                 spec = make_site_spec(SITE, cfg.crs, cfg.origin, [*ring, ring[0]])
-                add_site(s, spec, {"pair": {"views": views, "seed": seed}})
+                add_site(s, spec, ReleaseKnobs(pair={"views": views, "seed": seed}))
         doc = json.loads((site_dir / "truth" / "site.json").read_text())
         for e in doc["epochs"]:
             pipeline.ingest(cat, settings, site_dir / e["mission_dir"], SITE)
@@ -154,7 +155,7 @@ def variant_params(base: PairParams, name: str, knobs: Mapping[str, object]) -> 
     unknown = sorted(set(knobs) - set(base.to_dict()))
     if unknown:
         raise ConfigError(
-            f"variant {name!r}: unknown pair knobs {unknown}; see siteline.pairs.params.PairParams."
+            f"variant {name!r}: unknown pair knobs {unknown}; see siteline.records.params.pairs.PairParams."
         )
     try:
         return PairParams.from_dict(base.to_dict() | dict(knobs))

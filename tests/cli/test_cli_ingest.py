@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from sitehelpers import cli_create_site, run_cli
 
-from siteline.synth import SynthConfig, write_site
+from siteline.synth import SynthParams, write_site
 
 REAL_PHOTO = Path(__file__).resolve().parents[1] / "data" / "DJI_H20T.jpg"
 
@@ -58,7 +58,7 @@ def test_xmp_variants_old_namespace_and_misspelling(tmp_path) -> None:
 
 def test_ingest_cli_scene_and_mission_commands(home, capsys, tmp_path) -> None:
     site = tmp_path / "site"
-    write_site(site, SynthConfig(epochs=2, density_pts_m2=2.0, seed=4))
+    write_site(site, SynthParams(epochs=2, density_pts_m2=2.0, seed=4))
     assert run(capsys, "init")[0] == 0
     code, _, err = cli_create_site(capsys, site / "fence.geojson")
     assert code == 0, err
@@ -95,7 +95,7 @@ def test_a_release_of_a_scene_without_ground_finds_its_ground_and_says_so(home, 
     from siteline.synth import LAS_RELPATH
 
     site = tmp_path / "site"
-    write_site(site, SynthConfig(epochs=2, density_pts_m2=2.0, seed=4))
+    write_site(site, SynthParams(epochs=2, density_pts_m2=2.0, seed=4))
     missions = sorted((site / "missions").iterdir())
     las_path = missions[1] / LAS_RELPATH
     las = laspy.read(las_path)

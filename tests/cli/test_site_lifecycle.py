@@ -25,9 +25,9 @@ from siteline.config import Settings, sqlite_url
 from siteline.ingest.options import IngestOptions
 from siteline.labelsets.export import export_label_set
 from siteline.labelsets.stage import import_labels
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import ReleaseOptions
 from siteline.register.planned import SurveyPlan
-from siteline.release.knobs import ReleaseKnobs
 from siteline.site.spec import make_site_spec
 
 EXE = Path(sys.executable).parent / "siteline"

@@ -11,10 +11,10 @@ from siteline.camera.pinhole import Camera
 from siteline.errors import PointCloudError, RegistrationError, ViewsError
 from siteline.labels.change import CHANGED, IGNORED, change_flags
 from siteline.pointpass import TilingResources, write_las
+from siteline.records.params.render import RenderParams
 from siteline.register.georegister import check_spread
 from siteline.register.icp import point_to_plane_icp
 from siteline.render.georef import render_georeferenced
-from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import render_points
 from siteline.site.spec import make_site_spec
 from siteline.site.taxonomy import default_taxonomy
@@ -42,8 +42,8 @@ def _grid(n_side=60, step=0.25):
 def test_render_is_exact_at_every_origin(origin, crs) -> None:
     local = _grid()
     cam = Camera.look_at((0.0, -20.0, 15.0), (0.0, 0.0, 0.0), 200, 150, fx=180.0)
-    ref = render_points(local.astype(np.float32), cam, RenderSettings(scale=1.0))
-    geo = render_georeferenced(local + np.asarray(origin), origin, cam, RenderSettings(scale=1.0))
+    ref = render_points(local.astype(np.float32), cam, RenderParams(scale=1.0))
+    geo = render_georeferenced(local + np.asarray(origin), origin, cam, RenderParams(scale=1.0))
     assert np.array_equal(ref.index, geo.index) and np.array_equal(ref.depth, geo.depth, equal_nan=True)
     assert ref.hit.any() and not np.isnan(ref.depth[ref.hit]).any()
 
@@ -81,7 +81,7 @@ def test_tiles_round_trip_every_las_scale_and_origin(tmp_path, origin, crs, scal
 
 def test_zero_one_and_duplicated_points() -> None:
     cam = Camera.look_at((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), 32, 32, fx=16.0)
-    s = RenderSettings(scale=1.0)
+    s = RenderParams(scale=1.0)
     zero = render_points(np.zeros((0, 3), np.float32), cam, s)
     assert not zero.hit.any() and np.isnan(zero.depth).all()
     one = render_points(np.zeros((1, 3), np.float32), cam, s)
@@ -127,12 +127,12 @@ def test_cameras_very_near_and_very_far(distance_m) -> None:
     xx, yy = np.meshgrid(g, g)
     plane = np.c_[xx.ravel(), yy.ravel(), np.zeros(xx.size)]
     cam = Camera.look_at((0.0, 0.0, distance_m), (0.0, 0.0, 0.0), 64, 48, fx=32.0)
-    r = render_points(plane.astype(np.float32), cam, RenderSettings(scale=1.0, near_m=distance_m / 10))
+    r = render_points(plane.astype(np.float32), cam, RenderParams(scale=1.0, near_m=distance_m / 10))
     assert r.hit.mean() > 0.9
     assert np.abs(r.depth[r.hit] - distance_m).max() <= 1e-5 * distance_m
     # at the default 1 mm near plane, a surface 1 mm away is exactly on it and is (explicitly) dropped
     if distance_m == 1e-3:
-        assert not render_points(plane.astype(np.float32), cam, RenderSettings(scale=1.0)).hit.any()
+        assert not render_points(plane.astype(np.float32), cam, RenderParams(scale=1.0)).hit.any()
 
 
 def test_grazing_view() -> None:
@@ -143,7 +143,7 @@ def test_grazing_view() -> None:
     cam = Camera.look_at(
         target - 30.0 * np.array([0.0, np.sin(ang), -np.cos(ang)]), target, 128, 96, fx=100.0
     )
-    r = render_points(plane.astype(np.float32), cam, RenderSettings(scale=1.0))
+    r = render_points(plane.astype(np.float32), cam, RenderParams(scale=1.0))
     assert r.hit.any() and np.isfinite(r.depth[r.hit]).all() and (r.depth[r.hit] > 0).all()
 
 

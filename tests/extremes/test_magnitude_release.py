@@ -16,12 +16,12 @@ from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
 from siteline.ingest.stage import ingest_mission
-from siteline.pairs.params import PairParams
 from siteline.pointpass import TilingResources
-from siteline.release.knobs import ReleaseKnobs
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import make_site_spec
-from siteline.synth import SynthConfig, write_site
+from siteline.synth import SynthParams, write_site
 from siteline.tiles.stage import tile_scene
 
 ORIGINS = {"small": (1000.0, 2000.0, 80.0), "large": (-8_400_000.0, 5_600_000.0, 80.0)}
@@ -30,7 +30,7 @@ KNOBS = ReleaseKnobs.exactly(PARAMS, min_image_px=64)
 
 
 def _release(root: Path, origin: tuple[float, float, float]) -> Path:
-    cfg = SynthConfig(epochs=2, density_pts_m2=10.0, seed=7, origin=origin, crs="EPSG:3857")
+    cfg = SynthParams(epochs=2, density_pts_m2=10.0, seed=7, origin=origin, crs="EPSG:3857")
     site_dir = root / "site"
     write_site(site_dir, cfg)
     home = root / "home"

@@ -15,7 +15,7 @@ from siteline.camera.pinhole import Camera, undistorted_pinhole
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Scene, View
 from siteline.catalog.scenes import scene_cameras
-from siteline.pairs.params import PairParams
+from siteline.records.params.pairs import PairParams
 from siteline.register.xmp import camera_from_photo, dewarp_camera
 
 DISTORTED = {
@@ -96,7 +96,7 @@ def test_a_mission_with_a_distorted_colmap_model_goes_to_a_release(tmp_path, syn
             "forward_fractions": [0.0],
             "mirror": False,
         }  # one view per camera
-        from siteline.release.knobs import ReleaseKnobs
+        from siteline.records.params.release import ReleaseKnobs
 
         params = PairParams(scale=0.5, point_size_px=3, views=4, seed=0, min_coverage=0.3, view_params=one)
         info = pipeline.release(cat, settings, "demo", "distorted", ReleaseKnobs.exactly(params))

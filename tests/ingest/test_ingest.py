@@ -24,7 +24,7 @@ from siteline.errors import RegistrationError
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources, write_las
-from siteline.synth import LAS_RELPATH, SynthConfig, write_site
+from siteline.synth import LAS_RELPATH, SynthParams, write_site
 from siteline.tiles.stage import tile_scene
 
 # a bare LAS without an absolute GPS time cannot tell its capture time: the tests give it
@@ -145,7 +145,7 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     """No photos: the cameras are planned from the point cloud over the site's fence, recorded with
     their source, and every one stands over the data at the stated height above its ground."""
     site = tmp_path / "site"
-    write_site(site, SynthConfig(epochs=1, density_pts_m2=1.0, seed=2, photos=False, colmap=False))
+    write_site(site, SynthParams(epochs=1, density_pts_m2=1.0, seed=2, photos=False, colmap=False))
     settings = make_home(tmp_path, site_dir=site)
     cat = open_catalog(settings)
     r = ingest_mission(cat, settings, epoch_dirs(site)[0], "demo")

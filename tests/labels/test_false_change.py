@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from siteline.labels.change import CHANGED, change_flags, median_spacing
-from siteline.labels.params import expected_false_change
-from siteline.pairs.params import PairParams
+from siteline.records.params.labels import expected_false_change
+from siteline.records.params.pairs import PairParams
 from siteline.site.taxonomy import default_taxonomy
 
 

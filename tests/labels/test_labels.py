@@ -154,13 +154,13 @@ def test_labels_agree_with_synthetic_truth(synth_site, pair) -> None:
 
 
 def test_labels_identical_at_origin_and_georeferenced(tmp_path) -> None:
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     outs = []
     for k, origin in enumerate([(0.0, 0.0, 0.0), (445_000.0, 5_030_000.0, 80.0)]):
         d = tmp_path / f"s{k}"
         write_site(
-            d, SynthConfig(epochs=2, density_pts_m2=1.5, seed=9, origin=origin, photos=False, colmap=False)
+            d, SynthParams(epochs=2, density_pts_m2=1.5, seed=9, origin=origin, photos=False, colmap=False)
         )
         xa = laspy.read(epoch_dirs(d)[0] / LAS_RELPATH)
         xb = laspy.read(epoch_dirs(d)[1] / LAS_RELPATH)
@@ -221,7 +221,7 @@ def test_labels_in_slabs_equal_labels_of_whole_tiles(tmp_path, synth_site, monke
     """A tile labelled in slabs of a few thousand points (each against the other scene within the halo)
     gives the flags of the whole tile, with the surface rule and small regions: the same checksum."""
     from siteline.labels import store
-    from siteline.labels.params import LabelParams
+    from siteline.records.params.labels import LabelParams
 
     t1, t2 = _site_tiles(tmp_path, synth_site, 0), _site_tiles(tmp_path, synth_site, 1)
     r = 0.5

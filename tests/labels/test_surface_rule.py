@@ -11,13 +11,12 @@ from siteline.labels.change import (
     IGNORED,
     UNCHANGED,
     Matching,
-    SurfaceTest,
     change_flags,
     hidden_from_other,
     median_spacing,
 )
-from siteline.labels.params import LabelParams
 from siteline.labels.regions import RegionCells, region_sizes, small_regions
+from siteline.records.params.labels import LabelParams, SurfaceTest
 from siteline.site.taxonomy import default_taxonomy
 
 TAX = default_taxonomy()
@@ -143,7 +142,7 @@ def test_label_params_refuse_unknown_rules_and_regions():
 
 def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     from siteline.errors import PairError
-    from siteline.pairs.params import PairParams
+    from siteline.records.params.pairs import PairParams
 
     base = PairParams()
     assert (base.label_rule, base.min_region_points, base.splat_factor) == ("surface", 8, 2.0)

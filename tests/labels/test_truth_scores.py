@@ -11,7 +11,7 @@ import pytest
 from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.labels.accuracy import accuracy_text, density_of_spacing, measured_for
-from siteline.pairs.params import PairParams
+from siteline.records.params.pairs import PairParams
 from siteline.release.datasheet import _radius_lines
 from siteline.synth.scoring import score_pair
 from siteline.trade import SITE, synthetic_pair

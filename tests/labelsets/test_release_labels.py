@@ -14,9 +14,9 @@ from labelsets.edits import centre_box, export, versions
 from siteline import pipeline
 from siteline.errors import ImmutableError, LabelSetError
 from siteline.labelsets.stage import ImportOptions, import_labels
-from siteline.pairs.params import PairParams
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import ReleaseOptions
-from siteline.release.knobs import ReleaseKnobs
 from siteline.release.stage import publish_release
 
 # one candidate view per real camera: the test is about label sets, not the view sample

@@ -23,10 +23,10 @@ def harness(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def small_site(tmp_path_factory):
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     out = tmp_path_factory.mktemp("flow-site")
-    write_site(out, SynthConfig(epochs=2, density_pts_m2=2.0, seed=5))
+    write_site(out, SynthParams(epochs=2, density_pts_m2=2.0, seed=5))
     return out
 
 

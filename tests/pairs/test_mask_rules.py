@@ -7,8 +7,8 @@ import pytest
 
 from siteline.errors import LabelError, PairError
 from siteline.labels.change import CHANGED, IGNORED
-from siteline.pairs.params import PairParams
 from siteline.pairs.render import pair_mask
+from siteline.records.params.pairs import PairParams
 
 # pixels: both unchanged | A changed, B hole | A hole, B unchanged | A ignored class, B changed | both changed
 HIT_A = np.array([True, True, False, True, True])

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from siteline.pairs.params import PairParams
 from siteline.pairs.stage import process_pair
+from siteline.records.params.pairs import PairParams
 
 BASE = {"scale": 0.25, "point_size_px": 3, "views": 4, "seed": 0, "min_coverage": 0.3}
 

@@ -7,16 +7,16 @@ import json
 import pytest
 
 from siteline.errors import PairError, RenderError, ViewsError
-from siteline.pairs.params import PairParams
-from siteline.release.params import ReleaseParams
-from siteline.render.settings import RenderSettings
-from siteline.views.params import ViewParams
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseParams
+from siteline.records.params.render import RenderParams
+from siteline.records.params.views import ViewParams
 
 
 def test_pair_params_are_composed_of_the_stages_specs() -> None:
     p = PairParams(scale=0.5, point_size_px=3, views=6, seed=4, min_coverage=0.3, radius_m=0.2,
                    view_params={"clearance_m": 2.0})  # fmt: skip
-    assert p.render_settings() == RenderSettings(
+    assert p.render_settings() == RenderParams(
         scale=0.5, point_size_px=3, splat="world", splat_max_px=31, fill_px=2, trim_edges=True
     )
     vp = p.view_params_spec()
@@ -57,11 +57,11 @@ def test_json_round_trips_and_unknown_keys_are_named() -> None:
     with pytest.raises(ViewsError, match="unknown parameter"):
         ViewParams.from_dict({"n_views": 3})
     with pytest.raises(RenderError, match="point_size_px='3' must be a int"):
-        RenderSettings.from_dict({"point_size_px": "3"})
+        RenderParams.from_dict({"point_size_px": "3"})
 
 
 def test_one_name_per_knob() -> None:
     shared = {"scale", "views", "seed", "min_coverage"}
     assert shared <= set(PairParams().to_dict()) and shared <= set(ViewParams().to_dict())
-    assert "scale" in RenderSettings().to_dict()
+    assert "scale" in RenderParams().to_dict()
     assert not {"render_scale", "n_views"} & (set(ViewParams().to_dict()) | set(PairParams().to_dict()))

@@ -9,9 +9,9 @@ from sitehelpers import epoch_dirs, make_home
 from siteline import pipeline
 from siteline.catalog import open_catalog
 from siteline.ingest.stage import ingest_mission
-from siteline.pairs.params import PairParams
 from siteline.pointpass import TilingResources
-from siteline.release.knobs import ReleaseKnobs
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs
 from siteline.release.stage import publish_release
 from siteline.tiles.stage import tile_scene
 

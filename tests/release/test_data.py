@@ -74,7 +74,7 @@ def test_baseline_loss_decreases_and_evaluation_cites_the_manifest(built, tmp_pa
     import hashlib
     import json
 
-    from siteline.baseline import FCSiamDiff, TrainConfig, class_weights, evaluate, train
+    from siteline.baseline import FCSiamDiff, TrainParams, class_weights, evaluate, train
 
     _, _, pub = built
     ds = ChangeDetectionDataset(pub.root, "train")
@@ -94,7 +94,7 @@ def test_baseline_loss_decreases_and_evaluation_cites_the_manifest(built, tmp_pa
 
     torch.manual_seed(0)
     before = fixed_loss(FCSiamDiff())  # the initial weights train() starts from (same seed)
-    log = train(pub.root, tmp_path, TrainConfig(max_iters=30, crop=96, seed=0))
+    log = train(pub.root, tmp_path, TrainParams(max_iters=30, crop=96, seed=0))
     trained = FCSiamDiff()
     trained.load_state_dict(torch.load(tmp_path / "model.pt", weights_only=True)["model"])
     assert fixed_loss(trained) < before

@@ -8,15 +8,10 @@ import math
 import pytest
 
 from siteline.errors import ReleaseError
+from siteline.records.params.presets import PRESETS
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import CameraView, SiteSurvey
-from siteline.release.knobs import (
-    ReleaseKnobs,
-    auto_point_size,
-    auto_scale,
-    check_image_size,
-    resolve,
-)
-from siteline.release.presets import PRESETS
+from siteline.release.knobs import auto_point_size, auto_scale, check_image_size, resolve
 
 # the synthetic site's photos: 660 x 495, fx 440, 60 m above the ground
 SYNTH = SiteSurvey((CameraView(1, 660, 495, 440.0, 60.0), CameraView(2, 660, 495, 440.0, 64.0)), 10.0)

@@ -20,13 +20,12 @@ from siteline.catalog.releases import query_items
 from siteline.catalog.sites import add_site
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
 from siteline.ingest.stage import ingest_mission
-from siteline.pairs.params import PairParams
 from siteline.pairs.render import pair_mask
 from siteline.pointpass import TilingResources
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs, ReleaseParams
 from siteline.records.release import ReleaseOptions
-from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import verify_files
-from siteline.release.params import ReleaseParams
 from siteline.release.plan import choose_release
 from siteline.release.query import diff_releases
 from siteline.release.stage import build_release, publish_release
@@ -316,7 +315,7 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
 
 @pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_preset_is_applied_and_recorded(built) -> None:
-    from siteline.release.presets import PRESETS
+    from siteline.records.params.presets import PRESETS
 
     settings, cat, _ = built
     with pytest.raises(ReleaseError, match="unknown preset"):

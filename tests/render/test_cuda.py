@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from siteline.errors import RenderError
-from siteline.render.settings import RenderSettings
+from siteline.records.params.render import RenderParams
 from siteline.render.splats import local_spacing
 from siteline.render.zbuffer import render_points
 
@@ -34,7 +34,7 @@ def _agree(a, b, hit_tol: float = 0.0) -> None:  # noqa: ANN001
 def test_cuda_equals_cpu(scale: float, point_size: int, precision: str) -> None:
     xyz, rgb, cls = box_scene(5, 50_000)
     cam = oblique_camera(706, 510)
-    s = RenderSettings(scale=scale, point_size_px=point_size, precision=precision)
+    s = RenderParams(scale=scale, point_size_px=point_size, precision=precision)
     attrs = {"rgb": rgb, "cls": cls}
     a = render_points(xyz.astype(np.float32), cam, s, attrs)
     b = render_points(xyz.astype(np.float32), cam, s, attrs, device="cuda")
@@ -50,7 +50,7 @@ def test_cuda_world_splats_and_fill_equal_cpu(scale: float, fill: int) -> None:
     xyz, rgb, cls = box_scene(5, 50_000)
     spacing = local_spacing(xyz)
     cam = oblique_camera(706, 510)
-    s = RenderSettings(scale=scale, splat="world", fill_px=fill)
+    s = RenderParams(scale=scale, splat="world", fill_px=fill)
     attrs = {"rgb": rgb, "cls": cls}
     a = render_points(xyz.astype(np.float32), cam, s, attrs, spacing_m=spacing)
     b = render_points(xyz.astype(np.float32), cam, s, attrs, device="cuda", spacing_m=spacing)
@@ -64,9 +64,9 @@ def test_points_already_on_the_device_and_chunks() -> None:
     """Points handed over as CUDA tensors, and split into many projection batches, render the same."""
     xyz, rgb, cls = box_scene(7, 40_000)
     cam = oblique_camera(400, 300)
-    whole = render_points(xyz.astype(np.float32), cam, RenderSettings(scale=1.0), {"cls": cls}, device="cuda")
+    whole = render_points(xyz.astype(np.float32), cam, RenderParams(scale=1.0), {"cls": cls}, device="cuda")
     on_device = render_points(
-        torch.from_numpy(xyz.astype(np.float32)).cuda(), cam, RenderSettings(scale=1.0, chunk_points=7_001),
+        torch.from_numpy(xyz.astype(np.float32)).cuda(), cam, RenderParams(scale=1.0, chunk_points=7_001),
         {"cls": torch.from_numpy(cls).cuda()}, device="cuda",
     )  # fmt: skip
     assert np.array_equal(whole.hit, on_device.hit)
@@ -78,4 +78,4 @@ def test_points_already_on_the_device_and_chunks() -> None:
 def test_cuda_without_a_device_is_refused() -> None:
     xyz, _, _ = box_scene(1, 1_000)
     with pytest.raises(RenderError, match="torch sees no CUDA device"):
-        render_points(xyz.astype(np.float32), oblique_camera(), RenderSettings(), device="cuda")
+        render_points(xyz.astype(np.float32), oblique_camera(), RenderParams(), device="cuda")

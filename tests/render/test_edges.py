@@ -7,13 +7,13 @@ import numpy as np
 from scipy import ndimage
 
 from siteline.camera.pinhole import Camera
-from siteline.render.settings import RenderSettings
+from siteline.records.params.render import RenderParams
 from siteline.render.zbuffer import render_points
 
 from .helpers import plane_points
 
-WORLD = RenderSettings(scale=1.0, splat="world")
-TRIM = RenderSettings(scale=1.0, splat="world", trim_edges=True)
+WORLD = RenderParams(scale=1.0, splat="world")
+TRIM = RenderParams(scale=1.0, splat="world", trim_edges=True)
 
 
 def _plate_over_ground(seed: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,7 +90,7 @@ def test_the_trim_does_not_depend_on_the_batch() -> None:
     b = render_points(
         pts,
         cam,
-        RenderSettings(scale=1.0, splat="world", trim_edges=True, chunk_points=1_777),
+        RenderParams(scale=1.0, splat="world", trim_edges=True, chunk_points=1_777),
         spacing_m=spacing,
     )
     assert np.array_equal(a.index, b.index)
@@ -99,6 +99,6 @@ def test_the_trim_does_not_depend_on_the_batch() -> None:
 def test_fixed_splats_are_not_trimmed() -> None:
     pts, spacing, label = _plate_over_ground()
     cam = _camera()
-    a = render_points(pts, cam, RenderSettings(scale=1.0, point_size_px=3))
-    b = render_points(pts, cam, RenderSettings(scale=1.0, point_size_px=3, trim_edges=True))
+    a = render_points(pts, cam, RenderParams(scale=1.0, point_size_px=3))
+    b = render_points(pts, cam, RenderParams(scale=1.0, point_size_px=3, trim_edges=True))
     assert np.array_equal(a.index, b.index)

@@ -10,14 +10,14 @@ from hypothesis import strategies as st
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
+from siteline.records.params.render import RenderParams
 from siteline.render.georef import render_georeferenced
-from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import render_points
 
 from .helpers import box_scene, oblique_camera, plane_points
 
-S1 = RenderSettings(scale=1.0)
-S1_64 = RenderSettings(scale=1.0, precision="float64")
+S1 = RenderParams(scale=1.0)
+S1_64 = RenderParams(scale=1.0, precision="float64")
 
 
 def test_pixels_follow_pycolmap_projection() -> None:
@@ -32,7 +32,7 @@ def test_pixels_follow_pycolmap_projection() -> None:
     ok &= (uv[:, 0] >= 0) & (uv[:, 0] < 706) & (uv[:, 1] >= 0) & (uv[:, 1] < 510)
     pts, uv = pts[ok], uv[ok]
     for prec in ("float32", "float64"):
-        r = render_points(pts.astype(np.float32), cam, RenderSettings(scale=1.0, precision=prec))
+        r = render_points(pts.astype(np.float32), cam, RenderParams(scale=1.0, precision=prec))
         expect_px = np.floor(uv).astype(int)
         # every winner sits in the pixel pycolmap projects it to
         rows, cols = np.nonzero(r.hit)
@@ -69,7 +69,7 @@ def test_duplicates_are_deterministic_and_smallest_index_wins() -> None:
     pts = np.concatenate([xyz, xyz, xyz]).astype(np.float32)
     rgb3 = np.concatenate([rgb, rgb // 2, rgb // 3])
     a = render_points(pts, cam, S1, {"rgb": rgb3})
-    b = render_points(pts, cam, RenderSettings(scale=1.0, chunk_points=777), {"rgb": rgb3})
+    b = render_points(pts, cam, RenderParams(scale=1.0, chunk_points=777), {"rgb": rgb3})
     assert np.array_equal(a.index, b.index) and np.array_equal(a.attributes["rgb"], b.attributes["rgb"])
     assert (a.index[a.hit] < len(xyz)).all()
 
@@ -106,7 +106,7 @@ def test_point_size_three_covers_a_disk_and_nearer_wins() -> None:
     cam = Camera.look_at((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), 21, 21, fx=10.0)
     far = np.array([[0.0, 0.0, 0.0]], np.float32)
     near = np.array([[0.5, 0.0, 1.0]], np.float32)  # neighbouring pixel, nearer
-    r = render_points(np.concatenate([far, near]), cam, RenderSettings(scale=1.0, point_size_px=3))
+    r = render_points(np.concatenate([far, near]), cam, RenderParams(scale=1.0, point_size_px=3))
     assert r.hit.sum() == 12  # two 3x3 splats overlapping in 6 pixels
     overlap = r.hit & (r.index == 1)
     assert overlap.sum() == 9
@@ -120,7 +120,7 @@ def test_scale_equals_pycolmap_rescaled_camera() -> None:
         pcs = type(pc)(pc.todict())
         pcs.rescale(s)
         ref_cam = Camera.from_pycolmap(pcs, pose)
-        a = render_points(xyz.astype(np.float32), cam, RenderSettings(scale=s), {"rgb": rgb})
+        a = render_points(xyz.astype(np.float32), cam, RenderParams(scale=s), {"rgb": rgb})
         b = render_points(xyz.astype(np.float32), ref_cam, S1, {"rgb": rgb})
         assert np.array_equal(a.index, b.index)
         assert np.array_equal(a.rgb, b.rgb)

@@ -9,15 +9,15 @@ import pytest
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
+from siteline.records.params.render import RenderParams
 from siteline.render.fill import fill_gaps
-from siteline.render.settings import RenderSettings
 from siteline.render.splats import diameters_px, disk_offsets, local_spacing
 from siteline.render.zbuffer import coverage_of, render_points
 
 from .helpers import box_scene, oblique_camera, plane_points
 
-WORLD = RenderSettings(scale=1.0, splat="world")
-FIXED = RenderSettings(scale=1.0)
+WORLD = RenderParams(scale=1.0, splat="world")
+FIXED = RenderParams(scale=1.0)
 
 
 def _jittered_plane(z: float, half: float, step: float, seed: int = 0) -> np.ndarray:
@@ -40,11 +40,11 @@ def test_diameter_follows_spacing_over_depth() -> None:
     z = torch.tensor([5.0, 10.0, 20.0, 80.0, 1e4])
     spacing = torch.full((5,), 0.1)
     d = diameters_px(
-        spacing, z, 400.0, RenderSettings(scale=1.0, splat="world", point_size_px=1, splat_max_px=15)
+        spacing, z, 400.0, RenderParams(scale=1.0, splat="world", point_size_px=1, splat_max_px=15)
     )
     # 2 x 0.1 m x 400 px / z, rounded up, between the point size and splat_max_px
     assert d.tolist() == [15, 8, 4, 1, 1]
-    fixed = diameters_px(spacing, z, 400.0, RenderSettings(scale=1.0, point_size_px=3))
+    fixed = diameters_px(spacing, z, 400.0, RenderParams(scale=1.0, point_size_px=3))
     assert fixed.tolist() == [3] * 5
 
 
@@ -89,10 +89,10 @@ def test_world_render_does_not_depend_on_the_batch() -> None:
     xyz, rgb, _ = box_scene(3, 20_000)
     spacing = local_spacing(xyz)
     cam = oblique_camera(300, 220)
-    s = RenderSettings(scale=1.0, splat="world", fill_px=2)
+    s = RenderParams(scale=1.0, splat="world", fill_px=2)
     a = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb}, spacing_m=spacing)
     b = render_points(
-        xyz.astype(np.float32), cam, RenderSettings(scale=1.0, splat="world", fill_px=2, chunk_points=1_777),
+        xyz.astype(np.float32), cam, RenderParams(scale=1.0, splat="world", fill_px=2, chunk_points=1_777),
         {"rgb": rgb}, spacing_m=spacing,
     )  # fmt: skip
     assert np.array_equal(a.index, b.index) and np.array_equal(a.filled, b.filled)
@@ -112,7 +112,7 @@ def test_world_splats_need_a_spacing_per_point() -> None:
 )
 def test_bad_splat_settings_are_refused(bad: dict) -> None:
     with pytest.raises(RenderError):
-        RenderSettings(**bad)
+        RenderParams(**bad)
 
 
 def test_coverage_probe_equals_the_render_before_the_fill() -> None:
@@ -193,7 +193,7 @@ def test_fill_zero_changes_nothing() -> None:
 
 
 def test_world_splats_of_no_points_render_empty() -> None:
-    r = render_points(np.zeros((0, 3), np.float32), oblique_camera(), RenderSettings(splat="world", fill_px=2),
+    r = render_points(np.zeros((0, 3), np.float32), oblique_camera(), RenderParams(splat="world", fill_px=2),
                       spacing_m=np.zeros(0, np.float32))  # fmt: skip
     assert not r.hit.any() and np.isnan(r.depth).all() and r.filled_share == 0.0
 
@@ -209,8 +209,8 @@ def test_the_cpu_kernels_draw_what_the_tensor_code_draws(monkeypatch, fill) -> N
     cam = oblique_camera(400, 300)
     kept = cls != 2
     for s in (
-        RenderSettings(scale=1.0, point_size_px=3, fill_px=fill),
-        RenderSettings(scale=1.0, splat="world", fill_px=fill),
+        RenderParams(scale=1.0, point_size_px=3, fill_px=fill),
+        RenderParams(scale=1.0, splat="world", fill_px=fill),
     ):
         compiled = render_points(xyz.astype(np.float32), cam, s, {"rgb": rgb}, spacing_m=spacing)
         cov = coverage_of(xyz.astype(np.float32), cam, s, spacing_m=spacing, kept=kept)

@@ -18,10 +18,10 @@ from scipy.spatial.transform import Rotation
 from siteline.camera.photos import read_photo_meta
 from siteline.camera.pinhole import Camera
 from siteline.register.xmp import camera_from_photo
-from siteline.synth import LAS_RELPATH, SynthConfig, write_site
+from siteline.synth import LAS_RELPATH, SynthParams, write_site
 from siteline.synth import model as m
 
-CFG = SynthConfig(epochs=3, density_pts_m2=3.0, seed=3)
+CFG = SynthParams(epochs=3, density_pts_m2=3.0, seed=3)
 
 
 @pytest.fixture(scope="module")
@@ -44,12 +44,12 @@ def _digest(root: Path) -> dict[str, str]:
 
 
 def test_same_seed_same_bytes(tmp_path) -> None:
-    cfg = SynthConfig(epochs=2, density_pts_m2=1.0, seed=11)
+    cfg = SynthParams(epochs=2, density_pts_m2=1.0, seed=11)
     write_site(tmp_path / "a", cfg)
     write_site(tmp_path / "b", cfg)
     a, b = _digest(tmp_path / "a"), _digest(tmp_path / "b")
     assert a == b and any(k.endswith(".las") for k in a) and any(k.endswith(".JPG") for k in a)
-    write_site(tmp_path / "c", SynthConfig(epochs=2, density_pts_m2=1.0, seed=12))
+    write_site(tmp_path / "c", SynthParams(epochs=2, density_pts_m2=1.0, seed=12))
     las = [k for k in a if k.endswith(".las")][0]
     assert _digest(tmp_path / "c")[las] != a[las]
 
@@ -186,8 +186,8 @@ def test_nadir_only_flight_sees_nothing_under_the_top_slab() -> None:
 
 
 def test_origin_moves_the_whole_site(tmp_path) -> None:
-    a = SynthConfig(epochs=1, density_pts_m2=1.0, seed=5, photos=False, colmap=False)
-    b = SynthConfig(
+    a = SynthParams(epochs=1, density_pts_m2=1.0, seed=5, photos=False, colmap=False)
+    b = SynthParams(
         epochs=1,
         density_pts_m2=1.0,
         seed=5,
@@ -209,8 +209,8 @@ def test_origin_moves_the_whole_site(tmp_path) -> None:
 def test_memory_flat_when_density_quadruples(tmp_path) -> None:
     code = (
         "import resource, sys\n"
-        "from siteline.synth import SynthConfig, write_site\n"
-        "write_site(sys.argv[1], SynthConfig(epochs=1, density_pts_m2=float(sys.argv[2]), photos=False, colmap=False))\n"
+        "from siteline.synth import SynthParams, write_site\n"
+        "write_site(sys.argv[1], SynthParams(epochs=1, density_pts_m2=float(sys.argv[2]), photos=False, colmap=False))\n"
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
     )
     peaks = {}

@@ -14,9 +14,9 @@ import numpy as np
 from siteline.catalog import open_catalog
 from siteline.catalog.models import Scene
 from siteline.catalog.scenes import tile_source
-from siteline.pairs.params import PairParams
 from siteline.pairs.stage import find_pair_output, process_pair
 from siteline.pointpass import TilingResources
+from siteline.records.params.pairs import PairParams
 from siteline.records.tiling import TileSpec
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.stage import tile_scene

@@ -17,8 +17,8 @@ import pytest
 from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
 from siteline.pointpass import TilingResources, write_las
+from siteline.records.params.render import RenderParams
 from siteline.records.tiling import TileSpec
-from siteline.render.settings import RenderSettings
 from siteline.render.zbuffer import render_points
 from siteline.site.spec import make_site_spec
 from siteline.tiles.export import export_las
@@ -312,10 +312,10 @@ def _ingested_home(tmp_path, synth_dir, name):
 
 @pytest.fixture(scope="module")
 def synth_dir(tmp_path_factory):
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     out = tmp_path_factory.mktemp("synth-tiles")
-    write_site(out, SynthConfig(epochs=2, density_pts_m2=2.0, seed=8, photos=False, colmap=False))
+    write_site(out, SynthParams(epochs=2, density_pts_m2=2.0, seed=8, photos=False, colmap=False))
     return out
 
 
@@ -445,7 +445,7 @@ def test_partial_levels_read_what_the_footprint_needs(tmp_path) -> None:
     cam = Camera.look_at((0, 0, 40), (0, 0, 0), 150, 125, fx=100.0)  # 0.4 m pixels over 0.1 m data
     every = tiles.points_for_view(cam, 1.0, level=None)
     for size, most in ((1, 6.0), (3, 0.8)):
-        settings = RenderSettings(scale=1.0, point_size_px=size)
+        settings = RenderParams(scale=1.0, point_size_px=size)
         full = render_points(every.xyz_m.astype(np.float32), cam, settings)
         pts = tiles.points_for_view(cam, 1.0, point_size_px=size)
         img = render_points(pts.xyz_m.astype(np.float32), cam, settings)

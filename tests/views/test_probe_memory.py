@@ -14,12 +14,12 @@ import pytest
 from siteline.camera.pinhole import Camera
 from siteline.pairs.sources import TilePointSource
 from siteline.pointpass import TilingResources, write_las
+from siteline.records.params.views import ViewParams
 from siteline.site.spec import make_site_spec
 from siteline.tiles.reader import SceneTiles
 from siteline.tiles.writer import TileInput, write_tiles
 from siteline.views.generate import NamedCamera, generate_views
 from siteline.views.ground import fit_ground_plane
-from siteline.views.params import ViewParams
 
 ORIGIN = (445_000.0, 5_030_000.0, 80.0)
 # probes at 1/8 of 660 x 495 from 45-75 m: a pixel footprint of 0.7-1.2 m, so 30 points/m2 already beat it

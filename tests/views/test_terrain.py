@@ -8,10 +8,10 @@ import pytest
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
+from siteline.records.params.views import ViewParams
 from siteline.views.generate import NamedCamera, generate_views
 from siteline.views.ground import GroundPlane, fit_ground_plane, model_ground
 from siteline.views.groundfilter import morphological_ground
-from siteline.views.params import ViewParams
 from siteline.views.sources import ArrayPointSource
 from siteline.views.terrain import TerrainGrid, terrain_grid
 

@@ -11,10 +11,10 @@ from siteline.catalog.scenes import scene_cameras, tile_source
 from siteline.catalog.sites import site_of
 from siteline.pairs.sources import TilePointSource
 from siteline.records.pairs import ViewStrategy
+from siteline.records.params.views import ViewParams
 from siteline.tiles.reader import SceneTiles
 from siteline.views.generate import NamedCamera, generate_views
 from siteline.views.ground import fit_ground_plane
-from siteline.views.params import ViewParams
 from siteline.views.sources import ProbePoints
 
 PARAMS = ViewParams(scale=0.25, views=12, min_coverage=0.3)
@@ -126,7 +126,7 @@ def test_a_prefetched_batch_serves_each_probe_the_points_of_its_own_read(scenes)
 
 def test_coverage_of_equals_the_renders_coverage() -> None:
     from siteline.camera.pinhole import Camera
-    from siteline.render.settings import RenderSettings
+    from siteline.records.params.render import RenderParams
     from siteline.render.zbuffer import coverage_of, render_points
 
     rng = np.random.default_rng(0)
@@ -136,7 +136,7 @@ def test_coverage_of_equals_the_renders_coverage() -> None:
             xyz[0] = np.nan
         w, h = (int(v) for v in rng.integers(20, 160, 2))
         cam = Camera.look_at(rng.normal(0, 5, 3) + [0, 0, 40], [0, 0, 0], w, h, float(rng.uniform(20, 200)))
-        s = RenderSettings(
+        s = RenderParams(
             scale=float(rng.choice([0.37, 0.5, 1.0])), point_size_px=int(rng.choice([1, 3, 5, 7]))
         )
         assert coverage_of(xyz, cam, s).hit == render_points(xyz, cam, s).coverage

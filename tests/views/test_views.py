@@ -10,6 +10,7 @@ import pytest
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
 from siteline.records.pairs import ViewStrategy
+from siteline.records.params.views import ViewParams
 from siteline.site.fence import inside_fence
 from siteline.views.generate import (
     NamedCamera,
@@ -19,7 +20,6 @@ from siteline.views.generate import (
     stratified_sample,
 )
 from siteline.views.ground import GroundPlane, fit_ground_plane
-from siteline.views.params import ViewParams
 from siteline.views.sources import ArrayPointSource
 from siteline.views.strategies import mirror
 

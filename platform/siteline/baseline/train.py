@@ -39,7 +39,7 @@ def _pad16(x: torch.Tensor, value: float = 0.0) -> torch.Tensor:
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainParams:
     """A training run: ``epochs`` over the train split (or ``max_iters`` iterations when given),
     ``batch_size`` images of ``crop`` px squares at learning rate ``lr``, seeded by ``seed``, on the
     torch ``device``, with ``workers`` data-loading processes (0: in the training process)."""
@@ -57,7 +57,7 @@ class TrainConfig:
 def train(
     root: Path,
     out_dir: Path,
-    config: TrainConfig = TrainConfig(),
+    config: TrainParams = TrainParams(),
     progress: Callable[[int, int, float], None] | None = None,
 ) -> JsonObject:
     """Train on the release's train split with ``config``; write ``model.pt`` and ``train_log.json``

@@ -9,8 +9,9 @@ converts to and from pycolmap.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -339,22 +340,46 @@ def undistorted_pinhole(camera: pycolmap.Camera) -> pycolmap.Camera:
     return out
 
 
-def distortion_record(camera: pycolmap.Camera) -> JsonObject | None:
+@dataclass(frozen=True)
+class CameraModel:
+    """A COLMAP camera model as the catalog records it: pycolmap's model name, the image size (pixels)
+    and the model's parameters in pycolmap's order; ``undistorted``: the pinhole renders use in its
+    place (None for a pinhole itself)."""
+
+    model: str
+    width: int
+    height: int
+    params: tuple[float, ...]
+    undistorted: CameraModel | None = None
+
+    def to_dict(self) -> JsonObject:
+        doc: JsonObject = {
+            "model": self.model,
+            "width": self.width,
+            "height": self.height,
+            "params": list(self.params),
+        }
+        if self.undistorted is not None:
+            doc["undistorted"] = self.undistorted.to_dict()
+        return doc
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> CameraModel:
+        inner = doc.get("undistorted")
+        return cls(
+            str(doc["model"]), int(doc["width"]), int(doc["height"]), tuple(float(v) for v in doc["params"]),
+            cls.from_dict(inner) if inner else None,
+        )  # fmt: skip
+
+
+def distortion_model(camera: pycolmap.Camera) -> CameraModel | None:
     """What the catalog records of a distorted camera: its model, size and parameters, and the
     undistorted pinhole renders use; None for a pinhole camera."""
     name = model_name(camera)
     if name in ("PINHOLE", "SIMPLE_PINHOLE"):
         return None
     pinhole = undistorted_pinhole(camera)
-    return {
-        "model": name,
-        "width": int(camera.width),
-        "height": int(camera.height),
-        "params": [float(v) for v in camera.params],
-        "undistorted": {
-            "model": "PINHOLE",
-            "width": int(pinhole.width),
-            "height": int(pinhole.height),
-            "params": [float(v) for v in pinhole.params],
-        },
-    }
+    return CameraModel(
+        name, int(camera.width), int(camera.height), tuple(float(v) for v in camera.params),
+        CameraModel("PINHOLE", int(pinhole.width), int(pinhole.height), tuple(float(v) for v in pinhole.params)),
+    )  # fmt: skip

@@ -47,7 +47,7 @@ def record_pair_outputs(session: Session, output: PairOutput, run: StageRun) -> 
     status and parameters, a view per rendered view (replacing earlier rows of the same digest), a
     render per view and side, and the stage run."""
     pair = get_pair(session, output.pair_id)
-    params, digest = output.params, output.digest
+    params, digest = output.params.to_dict(), output.digest
     pair.radius_m = output.radius_m
     if pair.status != "superseded":  # a superseded pair stays out of new releases
         pair.status = "processed"

@@ -8,6 +8,7 @@ from sqlalchemy.orm import Session
 from siteline.catalog.base import utcnow
 from siteline.catalog.models import LabelSet, Scene, Site
 from siteline.errors import NotFoundError, SiteError, SiteNotFoundError
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.site import SiteKey, SiteView
 from siteline.schema import JsonObject
 from siteline.site.fence import fence_area_m2
@@ -15,9 +16,9 @@ from siteline.site.spec import SiteSpec
 from siteline.site.taxonomy import Taxonomy
 
 
-def add_site(session: Session, spec: SiteSpec, release_settings: JsonObject | None = None) -> SiteView:
-    """Insert a validated site (with its release settings, siteline.release.knobs, validated by the
-    caller); :class:`SiteError` if the name is taken."""
+def add_site(session: Session, spec: SiteSpec, release_settings: ReleaseKnobs | None = None) -> SiteView:
+    """Insert a validated site with its release settings (siteline.release.knobs); :class:`SiteError`
+    if the name is taken."""
     if session.execute(sa.select(Site.id).where(Site.name == spec.name)).first() is not None:
         raise SiteError(f"site {spec.name!r} already exists: choose another name (see `siteline site list`).")
     fence = None if spec.fence is None else [list(v) for v in spec.fence]
@@ -30,7 +31,7 @@ def add_site(session: Session, spec: SiteSpec, release_settings: JsonObject | No
         fence=fence,
         taxonomy=spec.taxonomy.to_dict(),
         tile_size_m=spec.tile_size_m,
-        release_settings=dict(release_settings or {}),
+        release_settings=(release_settings or ReleaseKnobs()).to_dict(),
     )
     session.add(row)
     session.flush()
@@ -50,10 +51,10 @@ def site_row(session: Session, name: str) -> Site:
     return site
 
 
-def set_release_settings(session: Session, name: str, release_settings: JsonObject) -> SiteView:
-    """Store the site's release settings (validated by the caller: siteline.release.knobs)."""
+def set_release_settings(session: Session, name: str, release_settings: ReleaseKnobs) -> SiteView:
+    """Store the site's release settings (siteline.release.knobs)."""
     site = site_row(session, name)
-    site.release_settings = dict(release_settings)
+    site.release_settings = release_settings.to_dict()
     session.flush()
     return site_view(site)
 
@@ -122,7 +123,8 @@ def get_site(session: Session, name: str) -> SiteView:
 
 def site_view(site: Site) -> SiteView:
     """What the catalog hands out of a site row."""
-    return SiteView(site.id, site_spec(site), dict(site.release_settings or {}), site.created_at)
+    settings = ReleaseKnobs.from_dict(site.release_settings, f"site {site.name} release settings")
+    return SiteView(site.id, site_spec(site), settings, site.created_at)
 
 
 def site_spec(site: Site) -> SiteSpec:
@@ -160,7 +162,7 @@ def site_record(site: SiteView, scenes: int) -> JsonObject:
         "taxonomy": spec.taxonomy.name,
         "classes": {c.name: c.id for c in spec.taxonomy.classes},
         "tile_size_m": spec.tile_size_m,
-        "release_settings": dict(site.release_settings),
+        "release_settings": site.release_settings.to_dict(),
         "scenes": scenes,
         "created_at": site.created_at,
     }

@@ -17,6 +17,7 @@ from siteline.catalog.sites import add_site, get_site, scene_count, site_record
 from siteline.cli.common import console, print_record, print_table, settings
 from siteline.config import Settings
 from siteline.errors import SiteNotFoundError
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import ReleaseOptions
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import make_site_spec
@@ -25,7 +26,7 @@ DEMO_SITE = "demo"
 DEMO_RELEASE = "demo-cd"
 # the demo site's release settings: 24 views a pair; scale and point size stay auto (the synthetic
 # photos are 660 x 495, 1/8 of the L2 sensor: renders of a 512 px long side, points sized to the density)
-DEMO_SETTINGS = {"pair": {"views": 24, "seed": 0}}
+DEMO_SETTINGS = ReleaseKnobs(pair={"views": 24, "seed": 0})
 
 
 def _catalog_at_head(cfg: Settings) -> None:
@@ -70,10 +71,10 @@ def _release(cat: Catalog, cfg: Settings, site_name: str) -> tuple[Path, str]:
 
 
 def _baseline(cfg: Settings, root: Path, version: str, stats: dict, train_iters: int) -> None:
-    from siteline.baseline import TrainConfig, evaluate, train
+    from siteline.baseline import TrainParams, evaluate, train
 
     out = cfg.home / "baseline" / f"{DEMO_RELEASE}-{version}"
-    log = train(root, out, TrainConfig(max_iters=train_iters, crop=128))
+    log = train(root, out, TrainParams(max_iters=train_iters, crop=128))
     split = "test" if stats["class_balance"].get("test") else "train"
     result = evaluate(root, out / "model.pt", out / f"results-{split}.json", split)
     losses = log["losses"]
@@ -98,13 +99,13 @@ def demo(
 ) -> None:
     """Run the whole pipeline on a generated site and print where the release is and its statistics."""
     from siteline import pipeline
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
     t_start = time.perf_counter()
     cfg = settings()
     _catalog_at_head(cfg)
     console.rule("2. synthetic site")
-    synth_dir, synth = cfg.home / "synthetic-site", SynthConfig(epochs=epochs)
+    synth_dir, synth = cfg.home / "synthetic-site", SynthParams(epochs=epochs)
     if not (synth_dir / "truth" / "site.json").exists():
         write_site(synth_dir, synth, progress=lambda name: console.print(f"  generated epoch {name}"))
     epochs_doc = json.loads((synth_dir / "truth" / "site.json").read_text())["epochs"]

@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 import typer
 
 from siteline.errors import ReleaseError
-from siteline.release.knobs import AUTO, ReleaseKnobs
+from siteline.records.params.release import AUTO, ReleaseKnobs
 
 F = TypeVar("F", bound=Callable[..., Any])
 

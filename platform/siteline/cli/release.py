@@ -27,8 +27,8 @@ from siteline.cli.common import (
 )
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
+from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import ReleaseInfo, ReleaseOptions
-from siteline.release.knobs import ReleaseKnobs
 from siteline.release.manifest import verify_files
 from siteline.release.query import diff_releases
 
@@ -409,7 +409,7 @@ def train_cmd(
     as_json: bool = JsonOption,
 ) -> None:
     """Train FC-Siam-diff on a release (SGD 1e-3, momentum 0.9, wd 1e-4, poly 0.9, batch 4)."""
-    from siteline.baseline import TrainConfig, train
+    from siteline.baseline import TrainParams, train
 
     with catalog() as cat, cat.transaction() as s:
         root, _ = release_location(s, name, version)
@@ -417,7 +417,7 @@ def train_cmd(
 
     with Progress(console=console, transient=True, disable=as_json) as bar:
         task = bar.add_task("training", total=None)
-        config = TrainConfig(epochs=epochs, max_iters=max_iters, crop=crop, device=device, workers=workers)
+        config = TrainParams(epochs=epochs, max_iters=max_iters, crop=crop, device=device, workers=workers)
         log = train(
             root,
             out,

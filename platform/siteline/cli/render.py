@@ -72,11 +72,11 @@ def render(
 ) -> None:
     """Render a point cloud through a camera into RGB, hit mask and depth."""
     from siteline.pointpass import read_site_local
+    from siteline.records.params.render import RenderParams
     from siteline.render.outputs import write_render
-    from siteline.render.settings import RenderSettings
     from siteline.render.zbuffer import render_points
 
-    settings = RenderSettings(scale=scale, point_size_px=point_size, precision=precision)
+    settings = RenderParams(scale=scale, point_size_px=point_size, precision=precision)
     cam = _camera_file(camera)[0].camera
     cloud = read_site_local(input, origin)
     attrs = {"rgb": cloud.rgb} if cloud.rgb is not None else {}
@@ -125,9 +125,9 @@ def views_generate(
 ) -> None:
     """Generate synthetic views: 32 candidates per real camera, rejection, stratified sample of N."""
     from siteline.pointpass import read_site_local
+    from siteline.records.params.views import ViewParams
     from siteline.views.generate import generate_views
     from siteline.views.ground import fit_ground_plane
-    from siteline.views.params import ViewParams
     from siteline.views.sources import ArrayPointSource
 
     params = ViewParams(views=n, seed=seed, scale=scale, min_coverage=min_coverage, point_size_px=point_size)

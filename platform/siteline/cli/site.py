@@ -27,7 +27,7 @@ from siteline.cli.common import (
 )
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
-from siteline.release.knobs import ReleaseKnobs
+from siteline.records.params.release import ReleaseKnobs
 from siteline.schema import JsonObject
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import DEFAULT_TILE_SIZE_M, make_site_spec
@@ -63,7 +63,7 @@ def create(
     tax = load_taxonomy(taxonomy) if taxonomy is not None else None
     spec = make_site_spec(name, crs, origin, fence_m, tax, tile_size_m)
     with catalog() as cat, cat.transaction() as session:
-        row = add_site(session, spec, knobs.to_dict())
+        row = add_site(session, spec, knobs)
         record = site_record(row, 0)
     emit(
         as_json,
@@ -146,9 +146,8 @@ def update(
         with cat.transaction() as session:
             site = get_site(session, name)
             origin = site.spec.origin
-            stored = ReleaseKnobs.from_dict(site.release_settings, f"site {name} release settings")
-            new = stored.updated(knobs, unset or ())
-            set_release_settings(session, name, new.to_dict())
+            new = site.release_settings.updated(knobs, unset or ())
+            set_release_settings(session, name, new)
         ring = None
         if fence is not None:
             ring = load_fence_geojson(fence, origin)

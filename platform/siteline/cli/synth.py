@@ -37,9 +37,9 @@ def site(
     as_json: bool = JsonOption,
 ) -> None:
     """Write one DJI mission folder per epoch and a ground-truth sidecar."""
-    from siteline.synth import SynthConfig, write_site
+    from siteline.synth import SynthParams, write_site
 
-    cfg = SynthConfig(
+    cfg = SynthParams(
         epochs=epochs,
         density_pts_m2=density,
         seed=seed,

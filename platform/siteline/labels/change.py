@@ -7,7 +7,7 @@ Two rules, one call (:func:`change_flags`):
   r / median spacing; 1.3 % at the default 2.5) find no neighbour by chance and are flagged.
 - *surface* (the default, :class:`SurfaceTest`): a point the nearest rule flags is looked at again
   against the other scene's local surface: its ``neighbours`` nearest kept points within the search
-  radius (SEARCH_MULTIPLIER x r, siteline.labels.params). Fewer than 3 there: see below. Else a plane is
+  radius (SEARCH_MULTIPLIER x r, siteline.records.params.labels). Fewer than 3 there: see below. Else a plane is
   fitted to them (least squares), and the point is unchanged when its distance along the plane's
   normal is within the level of detection, ``lod_sigmas`` x the neighbours' RMS residual to their
   plane (their roughness) and never under ``lod_floor_m`` (range noise and registration error), as
@@ -39,6 +39,7 @@ if TYPE_CHECKING:
 from siteline.codes import CHANGED, UNCHANGED
 from siteline.codes import IGNORE as IGNORED
 from siteline.errors import LabelError
+from siteline.records.params.labels import SurfaceTest
 
 NN_BACKENDS = ("pykdtree", "ckdtree")
 
@@ -74,19 +75,6 @@ def nearest(
             np.asarray(a_xyz, dtype=np.float64), k=1, distance_upper_bound=radius_m, workers=-1
         )
     raise LabelError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
-
-
-@dataclass(frozen=True)
-class SurfaceTest:
-    """How the surface rule looks again at a point the nearest rule flags (module docstring):
-    ``search_m`` the other scene's neighbourhood radius (metres), ``neighbours`` how many of its
-    points to fit a plane to, the level of detection ``lod_sigmas`` x their RMS residual, at least
-    ``lod_floor_m`` metres."""
-
-    search_m: float
-    neighbours: int = 12
-    lod_sigmas: float = 4.0
-    lod_floor_m: float = 0.05
 
 
 def plane_distances(

@@ -13,10 +13,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from siteline.errors import PairError
+from siteline.records.enums import CHANGE_RULES
 from siteline.records.pairs import ChangeRulePlan
 from siteline.site.taxonomy import Taxonomy
 
-CHANGE_RULES = ("auto", "semantic", "geometry")
 SCHEME_CLASSES = ("ground", "vegetation", "unclassified")
 # a scheme class is present in a scene above this share of its kept points, absent below the other
 PRESENT_SHARE = 0.01

@@ -16,17 +16,10 @@ import zarr
 from numcodecs import Zstd
 
 from siteline.errors import LabelError
-from siteline.labels.change import (
-    CHANGED,
-    IGNORED,
-    UNCHANGED,
-    Matching,
-    SurfaceTest,
-    change_flags,
-    median_spacing,
-)
+from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, Matching, change_flags, median_spacing
 from siteline.labels.regions import RegionCells
 from siteline.records.pairs import ChangeLabels, RadiusChoice
+from siteline.records.params.labels import SurfaceTest
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles

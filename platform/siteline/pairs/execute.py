@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from siteline.errors import PairError, ViewsError
-from siteline.labels.params import expected_false_change
 from siteline.labels.store import auto_radius, write_labels
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.outputs import output_of
@@ -22,6 +21,7 @@ from siteline.pairs.render import LabelledPair, render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import ChangeLabels, PairOutput, RenderedView
+from siteline.records.params.labels import expected_false_change
 from siteline.render.outputs import png_bytes
 from siteline.render.threads import CpuThreads
 from siteline.stores import Store, layout, move

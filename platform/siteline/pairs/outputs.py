@@ -22,7 +22,7 @@ def output_of(plan: PairPlan, doc: JsonObject) -> PairOutput:
     return PairOutput(
         plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
         tuple(RenderedView.from_dict(v) for v in doc["views"]), ChangeLabels.from_dict(doc["labels"]), plan.versions,
-        plan.digest, plan.params.to_dict(), ColourPlan.from_dict(doc.get("colour") or {"source": "rgb"}),
+        plan.digest, plan.params, ColourPlan.from_dict(doc.get("colour") or {"source": "rgb"}),
         doc.get("fence", "site fence"), ChangeRulePlan.from_dict(doc.get("change_rule")), Drawn.from_dict(doc),
         GroundUsed.from_dict(doc.get("ground")),
     )  # fmt: skip

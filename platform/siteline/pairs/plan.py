@@ -15,9 +15,9 @@ from siteline.catalog.scenes import get_scene, scene_cameras, tile_source
 from siteline.catalog.sites import site_of
 from siteline.errors import PairError
 from siteline.labels.rule import resolve_change_rule
-from siteline.pairs.params import PairParams
 from siteline.records.labelsets import LabelSetRef
 from siteline.records.pairs import ChangeRulePlan, ColourPlan, PairVersions
+from siteline.records.params.pairs import PairParams
 from siteline.records.tiling import TileSource
 from siteline.render.colour import resolve_colour
 from siteline.site.spec import SiteSpec

@@ -26,7 +26,7 @@ from siteline.stores import join
 from siteline.tiles.reader import SceneTiles
 
 if TYPE_CHECKING:
-    from siteline.pairs.params import PairParams
+    from siteline.records.params.pairs import PairParams
     from siteline.views.ground import GroundModel
 
 

@@ -11,10 +11,10 @@ from siteline.catalog.pairs import record_pair_outputs
 from siteline.config import Settings
 from siteline.pairs.execute import execute_pair
 from siteline.pairs.outputs import find_outputs
-from siteline.pairs.params import PairParams
 from siteline.pairs.plan import plan_pair
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
+from siteline.records.params.pairs import PairParams
 from siteline.records.runs import StageRun
 
 log = logging.getLogger(__name__)

@@ -22,6 +22,13 @@ MirrorRule = Literal["aim-site", "reflect"]
 Precision = Literal["float32", "float64"]
 TaskRunnerKind = Literal["threads", "processes", "dask"]
 ReleasePolicy = Literal["every-pair", "on-demand"]
+# what A/B show (siteline.render.colour); auto: RGB when both scenes carry it, else intensity, else elevation
+ColourChoice = Literal["auto", "rgb", "height", "intensity", "elevation"]
+# how A/B are shaded: eye-dome lighting (siteline.render.shading) or not; auto: not (measured on a
+# LiDAR-only forest, bench/legible.py: it darkens every splat's rim and brings trees and ground closer)
+ShadingChoice = Literal["auto", "edl", "none"]
+# whether classes take part in change (siteline.labels.rule); auto: geometry where the scenes classify differently
+ChangeRule = Literal["auto", "semantic", "geometry"]
 
 MISSION_STATUSES: tuple[str, ...] = get_args(MissionStatus)
 FILE_KINDS: tuple[str, ...] = get_args(FileKind)
@@ -38,3 +45,6 @@ MIRROR_RULES: tuple[str, ...] = get_args(MirrorRule)
 PRECISIONS: tuple[str, ...] = get_args(Precision)
 TASK_RUNNERS: tuple[str, ...] = get_args(TaskRunnerKind)
 RELEASE_POLICIES: tuple[str, ...] = get_args(ReleasePolicy)
+COLOUR_CHOICES: tuple[str, ...] = get_args(ColourChoice)
+SHADING_CHOICES: tuple[str, ...] = get_args(ShadingChoice)
+CHANGE_RULES: tuple[str, ...] = get_args(ChangeRule)

@@ -11,6 +11,7 @@ import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import PairError
+from siteline.records.params.pairs import PairParams
 from siteline.schema import JsonObject
 from siteline.site.taxonomy import Taxonomy
 
@@ -106,16 +107,10 @@ class RenderedView:
         )
 
 
-ColourChoice = Literal["auto", "rgb", "height", "intensity", "elevation"]
 ColourSource = Literal["rgb", "height", "intensity", "elevation"]
 # height above the pair's ground (siteline.views.ground) on the ramp, metres: one fixed stretch for every
 # pair and release, so a colour is a height everywhere (trees, buildings and cranes up to 25 m apart)
 HEIGHT_RANGE_M = (0.0, 25.0)
-COLOUR_CHOICES: tuple[str, ...] = get_args(ColourChoice)
-# how A/B are shaded: eye-dome lighting (siteline.render.shading) or not; auto: not (measured on a
-# LiDAR-only forest, bench/legible.py: it darkens every splat's rim and brings trees and ground closer)
-ShadingChoice = Literal["auto", "edl", "none"]
-SHADING_CHOICES: tuple[str, ...] = get_args(ShadingChoice)
 # the elevation ramp: low -> high, five stops of viridis (perceptually uniform, readable in grey)
 RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
 
@@ -224,7 +219,7 @@ class ChangeRulePlan:
 class RadiusChoice:
     """How a pair's change radius was chosen: each scene's median point spacing (metres, ``t1``/``t2``),
     the multiplier of the sparser one's, whether the radius was given (the multiplier is then what it
-    amounts to), and the expected false change on unchanged surfaces at that multiplier (siteline.labels.params)."""
+    amounts to), and the expected false change on unchanged surfaces at that multiplier (siteline.records.params.labels)."""
 
     median_spacing_m: Mapping[str, float]
     multiplier: float
@@ -363,7 +358,7 @@ class PairOutput:
     """A processed pair's outputs in the store at ``root``: the scenes (t1, t2 ids), the change radius
     (metres), the rendered views in index order, the 3D label record (store address, counts,
     checksum, radius details), the label-set versions used, the outputs' key (``digest``: parameters,
-    label sets and tilings), the pair parameters (their JSON form), the colour the images show
+    label sets and tilings), the pair parameters, the colour the images show
     (outputs made before it: RGB), the fence views were judged against (the site's, or a scene's
     footprint), the change rule of its labels, how its views were drawn and the ground they stood on
     (None: not recorded)."""
@@ -377,7 +372,7 @@ class PairOutput:
     labels: ChangeLabels
     versions: PairVersions
     digest: str
-    params: JsonObject
+    params: PairParams
     colour: ColourPlan = ColourPlan("rgb")
     fence: str = "site fence"
     change_rule: ChangeRulePlan = ChangeRulePlan()

@@ -10,7 +10,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+import numpy as np
+
 from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intrinsics
+from siteline.camera.pinhole import CameraModel
+from siteline.camera.poses import Sim3
 from siteline.errors import RegistrationError
 from siteline.schema import JsonObject
 
@@ -176,8 +180,8 @@ class Registration:
     over: str | None = None
     survey: SurveyPlan | None = None
     altitude_why: str | None = None
-    camera_models: Mapping[str, Mapping[str, Any] | None] | None = None
-    site_from_model: Mapping[str, Any] | None = None
+    camera_models: Mapping[str, CameraModel | None] | None = None
+    site_from_model: Sim3 | None = None
     residuals_m: Mapping[str, float] | None = None
     rms_m: float | None = None
     alignment: Alignment | None = None
@@ -190,11 +194,21 @@ class Registration:
         survey = doc.pop("survey", None)
         why = survey.get("altitude_why") if survey else None
         alignment = doc.pop("alignment", None)
-        names = {f.name for f in fields(cls)} - {"survey", "alignment", "altitude_why"}
+        models, sim = doc.pop("camera_models", None), doc.pop("site_from_model", None)
+        names = {f.name for f in fields(cls)} - {
+            "survey",
+            "alignment",
+            "altitude_why",
+            "camera_models",
+            "site_from_model",
+        }
         return cls(
             **{"source": "unknown"} | {k: v for k, v in doc.items() if k in names},
             survey=SurveyPlan.from_dict(survey) if survey else None, altitude_why=why,
             alignment=Alignment.from_dict(alignment) if alignment else None,
+            camera_models={k: CameraModel.from_dict(m) if m else None for k, m in models.items()} if models else None,
+            site_from_model=Sim3("site", "model", float(sim["scale"]), np.asarray(sim["rotation"], np.float64),
+                                 np.asarray(sim["translation"], np.float64)) if sim else None,
         )  # fmt: skip
 
     def to_dict(self) -> JsonObject:
@@ -208,6 +222,14 @@ class Registration:
                 value = value.to_dict() | ({"altitude_why": self.altitude_why} if self.altitude_why else {})
             elif f.name == "alignment":
                 value = value.to_dict()
+            elif f.name == "camera_models":
+                value = {k: m.to_dict() if m else None for k, m in value.items()}
+            elif f.name == "site_from_model":
+                value = {
+                    "scale": float(value.scale),
+                    "rotation": value.R.tolist(),
+                    "translation": value.t.tolist(),
+                }
             out[f.name] = value
         return out
 

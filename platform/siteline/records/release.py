@@ -9,6 +9,9 @@ from typing import Any
 from siteline.records.enums import SPLITS, ReleaseStatus, Split
 from siteline.schema import JsonObject
 
+# the release layout this siteline builds (siteline.release.layout)
+FORMAT = 2
+
 
 @dataclass(frozen=True)
 class ReleaseItem:

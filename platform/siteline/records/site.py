@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Protocol
 
-from siteline.schema import JsonObject
+from siteline.records.params.release import ReleaseKnobs
 from siteline.site.spec import SiteSpec
 
 
@@ -20,11 +20,11 @@ class SiteKey(Protocol):
 @dataclass(frozen=True)
 class SiteView:
     """A site: its catalog id, its spec (name, CRS, origin, fence, taxonomy, tile size, version), its
-    stored release settings (siteline.release.knobs' JSON form) and when it was created (UTC)."""
+    stored release settings (a layer of knobs over the defaults, siteline.release.knobs) and when it was created (UTC)."""
 
     id: int
     spec: SiteSpec
-    release_settings: JsonObject
+    release_settings: ReleaseKnobs
     created_at: datetime | None = None
 
     @property

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.camera.pinhole import Camera, distortion_record
+from siteline.camera.pinhole import Camera, CameraModel, distortion_model
 from siteline.camera.poses import Sim3
 from siteline.errors import RegistrationError
 from siteline.records.registration import Registration
@@ -21,7 +21,7 @@ class Georegistration:
     position (site-local)."""
 
     site_from_model: Sim3
-    camera_models: dict[str, dict]
+    camera_models: dict[str, CameraModel]
     residuals_m: dict[str, float]
     cameras: dict[str, Camera]
 
@@ -38,11 +38,7 @@ class Georegistration:
             camera_models=self.camera_models,
             residuals_m=self.residuals_m,
             rms_m=self.rms_m,
-            site_from_model={
-                "scale": float(self.site_from_model.scale),
-                "rotation": self.site_from_model.R.tolist(),
-                "translation": self.site_from_model.t.tolist(),
-            },
+            site_from_model=self.site_from_model,
         )
 
 
@@ -110,7 +106,7 @@ def georegister(
     )
     models = {}
     for cam_id, cam in rec.cameras.items():
-        record = distortion_record(cam)
+        record = distortion_model(cam)
         if record is not None:
             models[str(cam_id)] = record
     result = Georegistration(site_from_model, models, residuals, cameras)

@@ -10,7 +10,7 @@ import numpy as np
 import shapely
 
 from siteline.camera.photos import PhotoMeta
-from siteline.camera.pinhole import Camera, distortion_record
+from siteline.camera.pinhole import Camera, distortion_model
 from siteline.errors import RegistrationError
 from siteline.records.enums import CameraSource
 from siteline.records.registration import Alignment, Registration, SurveyPlan
@@ -57,9 +57,7 @@ def register_cameras(
         reg = georegister(model, locations, max_error_m=ransac_max_error_m, max_rms_m=max_rms_m)
         return reg.cameras, reg.record(), "colmap"
     cams = {name: camera_from_photo(m, crs, spec.origin) for name, m in by_name.items()}
-    models = {
-        name: distortion_record(c) for name, m in by_name.items() if (c := dewarp_camera(m)) is not None
-    }
+    models = {name: distortion_model(c) for name, m in by_name.items() if (c := dewarp_camera(m)) is not None}
     # the DewarpData distortion each undistorted camera came from
     return cams, Registration("xmp", images=len(cams), camera_models=models or None), "xmp"
 

@@ -20,7 +20,7 @@ from siteline import __version__
 from siteline.errors import ReleaseError
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
-from siteline.records.release import DraftRelease, ReleaseItem
+from siteline.records.release import FORMAT, DraftRelease, ReleaseItem
 from siteline.release import datasheet, layout
 from siteline.release.manifest import METRIC_DEFINITION, file_entries, write_manifest
 from siteline.release.plan import ReleasePlan
@@ -105,7 +105,7 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject
         {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
          "labels": o.labels.to_dict() | {"uri": store_relative(o.labels.uri, plan.store_url)}, "colour_source": o.colour.source, "colour": o.colour.to_dict(), "fence": o.fence,
          "change_rule": o.change_rule.to_dict(), **({"ground": o.ground.to_dict()} if o.ground else {}),
-         "views": {"made": len(o.views), "asked": o.params.get("views"), **(o.drawn.to_dict() if o.drawn else {})}}
+         "views": {"made": len(o.views), "asked": o.params.views, **(o.drawn.to_dict() if o.drawn else {})}}
         for o in (outputs[pid] for pid in sorted(outputs))
     ]  # fmt: skip
     return {
@@ -166,7 +166,7 @@ def execute_build(
             work / "montage.png"
         )
         doc = {
-            "format": layout.FORMAT, "layout": layout.layout_record(plan.params.pad), "name": plan.name,
+            "format": FORMAT, "layout": layout.layout_record(plan.params.pad), "name": plan.name,
             "version": plan.version, "created": datetime.now(UTC).isoformat(), "code_version": __version__,
             "files": [], "lineage": _lineage(plan, outputs), "splits": splits, "split_rule": split_plan.rule,
             "items": rows,

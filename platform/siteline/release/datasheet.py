@@ -9,11 +9,11 @@ from PIL import Image
 
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
 from siteline.labels.accuracy import accuracy_text
-from siteline.pairs.params import PairParams
 from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseParams
 from siteline.records.registration import Registration
 from siteline.records.release import ReleaseItem
-from siteline.release.params import ReleaseParams
 from siteline.schema import JsonObject
 
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}

@@ -12,118 +12,24 @@ A build whose images would have a long side under ``min_image_px`` (256 by defau
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
-from typing import Any
+from collections.abc import Sequence
 
 from siteline.errors import ReleaseError, SitelineError
-from siteline.pairs.params import PairParams
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.presets import PRESETS
+from siteline.records.params.release import (
+    AUTO,
+    AUTO_KNOBS,
+    DEFAULT_RADIUS_CEILING_M,
+    ReleaseKnobs,
+    ReleaseParams,
+)
 from siteline.records.release import SiteSurvey
-from siteline.release.params import DEFAULT_RADIUS_CEILING_M, ReleaseParams
-from siteline.release.presets import PRESETS
-from siteline.schema import JsonObject
 
-AUTO = "auto"
-AUTO_KNOBS = ("scale", "point_size_px", "views")
 # views auto: up to this many per pair, as many as the cameras and the acceptance rules give
 AUTO_VIEWS = 300
-# knobs for which "auto" is a value of their own, resolved per pair (colour and shading:
-# siteline.render.colour; change_rule: siteline.labels.rule)
-VALUE_AUTO_KNOBS = ("colour", "change_rule", "shading")
 TARGET_LONG_SIDE_PX = 512
 MIN_IMAGE_PX = 256
-# the release settings beside the pair knobs
-_RELEASE_KEYS = ("preset", "pad", "min_image_px", "radius_ceiling_m")
-_PAIR_KNOBS = tuple(f.name for f in fields(PairParams) if f.name != "sampler")
-
-
-@dataclass(frozen=True)
-class ReleaseKnobs:
-    """One layer of release settings: a preset, any subset of the pair knobs (PairParams fields;
-    ``scale`` and ``point_size_px`` may be ``"auto"``), padding, the smallest long side in pixels a
-    release image may have, and the change radius (metres) above which a build warns. ``None`` and
-    absent knobs leave the layer below in force."""
-
-    preset: str | None = None
-    pair: Mapping[str, Any] = field(default_factory=dict)
-    pad: bool | None = None
-    min_image_px: int | None = None
-    radius_ceiling_m: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.preset is not None and self.preset not in PRESETS:
-            raise ReleaseError(f"unknown preset {self.preset!r}; choose one of {sorted(PRESETS)}.")
-        unknown = sorted(set(self.pair) - set(_PAIR_KNOBS))
-        if unknown:
-            raise ReleaseError(f"release settings: unknown knob(s) {unknown}; known: {sorted(_PAIR_KNOBS)}.")
-        bad_auto = sorted(
-            k for k, v in self.pair.items() if v == AUTO and k not in AUTO_KNOBS + VALUE_AUTO_KNOBS
-        )
-        if bad_auto:
-            raise ReleaseError(
-                f"release settings: only {', '.join(AUTO_KNOBS)} may be 'auto', not {bad_auto}."
-            )
-        try:  # each value checked by the spec that owns it
-            PairParams.from_dict({k: v for k, v in self.pair.items() if v != AUTO or k in VALUE_AUTO_KNOBS})
-        except SitelineError as exc:
-            raise ReleaseError(f"release settings: {exc}") from exc
-        if self.pad is not None and not isinstance(self.pad, bool):
-            raise ReleaseError(f"release settings: pad must be true or false, got {self.pad!r}.")
-        if self.min_image_px is not None and (
-            isinstance(self.min_image_px, bool)
-            or not isinstance(self.min_image_px, int)
-            or self.min_image_px < 1
-        ):
-            raise ReleaseError(
-                f"release settings: min_image_px {self.min_image_px!r} must be a positive integer."
-            )
-        c = self.radius_ceiling_m
-        if c is not None and (isinstance(c, bool) or not isinstance(c, int | float) or not 0 < c < math.inf):
-            raise ReleaseError(
-                f"release settings: radius_ceiling_m {c!r} must be a positive number of metres."
-            )
-
-    @classmethod
-    def exactly(cls, params: PairParams, **kw: Any) -> ReleaseKnobs:
-        """A layer that sets every pair knob to ``params``'s value (nothing auto, nothing inherited)."""
-        return cls(pair={k: v for k, v in params.to_dict().items() if k != "sampler"}, **kw)
-
-    def updated(self, other: ReleaseKnobs, unset: Sequence[str] = ()) -> ReleaseKnobs:
-        """This layer with ``other``'s set fields written over it, then the knobs named in ``unset``
-        (pair knobs, ``preset``, ``pad``, ``min_image_px``, ``radius_ceiling_m``) removed: what
-        ``site update`` stores."""
-        doc = self.to_dict()
-        new = other.to_dict()
-        doc["pair"] = {**doc.get("pair", {}), **new.pop("pair", {})}
-        doc |= new
-        for name in unset:
-            if name in doc["pair"]:
-                del doc["pair"][name]
-            elif name in _RELEASE_KEYS:
-                doc.pop(name, None)
-            elif name not in _PAIR_KNOBS:
-                raise ReleaseError(
-                    f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, {', '.join(_RELEASE_KEYS)}."
-                )
-        return ReleaseKnobs.from_dict(doc)
-
-    def to_dict(self) -> JsonObject:
-        """Only what is set (the site's JSON)."""
-        doc: JsonObject = {"pair": dict(self.pair)} if self.pair else {}
-        for name in _RELEASE_KEYS:
-            if getattr(self, name) is not None:
-                doc[name] = getattr(self, name)
-        return doc
-
-    @classmethod
-    def from_dict(cls, doc: Mapping[str, Any] | None, source: str = "release settings") -> ReleaseKnobs:
-        doc = dict(doc or {})
-        unknown = sorted(set(doc) - {"pair", *_RELEASE_KEYS})
-        if unknown:
-            raise ReleaseError(f"{source}: unknown key(s) {unknown}.")
-        if not isinstance(doc.get("pair", {}), Mapping):
-            raise ReleaseError(f"{source}: 'pair' must be an object of knobs.")
-        return cls(pair=dict(doc.get("pair", {})), **{k: doc.get(k) for k in _RELEASE_KEYS})
 
 
 def auto_scale(survey: SiteSurvey) -> tuple[float, str]:

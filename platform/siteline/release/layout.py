@@ -11,10 +11,9 @@ import numpy as np
 
 from siteline.codes import CHANGED, IGNORE
 from siteline.errors import ReleaseError
-from siteline.records.release import Manifest
+from siteline.records.release import FORMAT, Manifest
 from siteline.schema import JsonObject
 
-FORMAT = 2
 FORMAT_1 = "siteline-release/1"
 
 FOLDERS = {

@@ -23,13 +23,12 @@ from siteline.catalog.scenes import (
 from siteline.catalog.sites import get_site, site_of
 from siteline.config import Settings
 from siteline.errors import ImmutableError, NotFoundError, ReleaseError
-from siteline.pairs.params import PairParams
 from siteline.pairs.plan import PairPlan, pair_change_rule, plan_pair
 from siteline.records.pairs import ChangeRulePlan
-from siteline.records.release import ReleaseOptions
-from siteline.release import layout
-from siteline.release.knobs import ReleaseKnobs, check_coverage, check_image_size, resolve
-from siteline.release.params import ReleaseParams
+from siteline.records.params.pairs import PairParams
+from siteline.records.params.release import ReleaseKnobs, ReleaseParams
+from siteline.records.release import FORMAT, ReleaseOptions
+from siteline.release.knobs import check_coverage, check_image_size, resolve
 from siteline.schema import JsonObject
 from siteline.stores import layout as paths
 
@@ -329,7 +328,7 @@ def refuse_published_version(
     key = {
         "pairs": list(pair_ids),
         "params": params.pair.to_dict(),
-        "format": layout.FORMAT,
+        "format": FORMAT,
         "pad": params.pad,
     }
     differs = [k for k, v in key.items() if recorded.get(k) != v]
@@ -355,7 +354,7 @@ def plan_release(
     if version is not None:
         semver(version)
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
-    key = {"pairs": chosen, "params": params.pair.to_dict(), "format": layout.FORMAT, "pad": params.pad,
+    key = {"pairs": chosen, "params": params.pair.to_dict(), "format": FORMAT, "pad": params.pad,
            "label_sets": used_label_sets(pairs)}  # fmt: skip
     digests = output_digests(pairs)
     auto, reason, up_to_date = next_version(session, name, key, digests)
@@ -389,9 +388,8 @@ def release_params(session: Session, site_name: str, knobs: ReleaseKnobs | None,
     command's) over them, auto knobs worked out from the site's cameras and density; refused when its
     images would be under the size floor."""
     site = get_site(session, site_name)
-    stored = ReleaseKnobs.from_dict(site.release_settings, f"site {site_name} release settings")
     survey = site_survey(session, site)
-    params = resolve([stored, knobs or ReleaseKnobs()], survey)
+    params = resolve([site.release_settings, knobs or ReleaseKnobs()], survey)
     check_image_size(params, survey, what)
     check_coverage(params, survey, what)
     return params

@@ -9,7 +9,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 from siteline.errors import PairError
-from siteline.records.pairs import COLOUR_CHOICES, HEIGHT_RANGE_M, SHADING_CHOICES, ColourPlan
+from siteline.records.enums import COLOUR_CHOICES, SHADING_CHOICES
+from siteline.records.pairs import HEIGHT_RANGE_M, ColourPlan
 from siteline.records.scan import ColourStats
 
 

@@ -12,7 +12,7 @@ import torch
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
-from siteline.render.settings import RenderSettings
+from siteline.records.params.render import RenderParams
 from siteline.render.zbuffer import RenderResult, render_points
 from siteline.site.crs import site_from_crs
 
@@ -34,7 +34,7 @@ def render_georeferenced(
     xyz_crs: np.ndarray,
     origin: Sequence[float],
     camera: Camera,
-    settings: RenderSettings | None = None,
+    settings: RenderParams | None = None,
     attributes: Mapping[str, np.ndarray] | None = None,
     device: str | torch.device = "cpu",
 ) -> RenderResult:

@@ -3,7 +3,7 @@ world seen from the camera (DESIGN.md §6).
 
 A disk of diameter d pixels centred on the pixel a point falls in covers the pixels whose centres lie
 within d / 2 of that pixel's centre: 1 is the point's own pixel, 2 a cross of 5, 3 the 3 x 3 block.
-World splats take ``d = splat_factor x spacing_m x f / depth`` rounded up (siteline.render.settings), clamped to the point
+World splats take ``d = splat_factor x spacing_m x f / depth`` rounded up (siteline.records.params.render), clamped to the point
 size and ``splat_max_px``: near points of a sparse cloud get wide disks, far or dense ones a pixel.
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from siteline.errors import RenderError
-from siteline.render.settings import RenderSettings
+from siteline.records.params.render import RenderParams
 
 
 @functools.lru_cache(maxsize=128)
@@ -76,7 +76,7 @@ def disk_pixels(
 
 
 def diameters_px(
-    spacing_m: torch.Tensor | None, z: torch.Tensor, focal_px: float, settings: RenderSettings
+    spacing_m: torch.Tensor | None, z: torch.Tensor, focal_px: float, settings: RenderParams
 ) -> torch.Tensor:
     """(M,) int64 splat diameter of each point in pixels: the point size for fixed splats; for world
     splats ``settings.splat_factor x spacing_m x focal_px / z`` rounded up, at least the point size and
@@ -90,7 +90,7 @@ def diameters_px(
     return d.clamp_(lo, hi).ceil_().to(torch.int64)
 
 
-def check_spacing(spacing_m: np.ndarray | torch.Tensor | None, n: int, settings: RenderSettings) -> None:
+def check_spacing(spacing_m: np.ndarray | torch.Tensor | None, n: int, settings: RenderParams) -> None:
     """Refuse world splats without one spacing per point (metres, finite, positive)."""
     if settings.splat != "world":
         return

@@ -27,10 +27,10 @@ import torch
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
+from siteline.records.params.render import RenderParams
 from siteline.render import kernels
 from siteline.render.edges import trim_edges
 from siteline.render.fill import fill_gaps
-from siteline.render.settings import RenderSettings
 from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels
 
 EMPTY_KEY = torch.iinfo(torch.int64).max
@@ -81,7 +81,7 @@ def _as_tensor(x: np.ndarray | torch.Tensor) -> torch.Tensor:
 def _check_inputs(
     xyz: np.ndarray | torch.Tensor,
     attributes: Mapping[str, np.ndarray | torch.Tensor],
-    settings: RenderSettings,
+    settings: RenderParams,
     spacing_m: np.ndarray | torch.Tensor | None,
 ) -> int:
     if xyz.ndim != 2 or xyz.shape[1] != 3:
@@ -101,12 +101,12 @@ def _check_inputs(
     return n
 
 
-def _dtype(settings: RenderSettings) -> torch.dtype:
+def _dtype(settings: RenderParams) -> torch.dtype:
     """The float type projections are computed in."""
     return torch.float64 if settings.precision == "float64" else torch.float32
 
 
-def _projector(cam: Camera, settings: RenderSettings, dev: torch.device) -> Callable[[torch.Tensor], tuple]:
+def _projector(cam: Camera, settings: RenderParams, dev: torch.device) -> Callable[[torch.Tensor], tuple]:
     """Projection of (M, 3) site-local points through the scaled camera ``cam``: (valid, u, v, z),
     valid where in front of ``near_m`` and within the image widened by half the widest splat (NaN and
     inf fail every comparison, so they are invalid; nothing is cast yet)."""
@@ -190,7 +190,7 @@ def _splat(
     pts: torch.Tensor,
     spacing: torch.Tensor | None,
     cam: Camera,
-    settings: RenderSettings,
+    settings: RenderParams,
     dev: torch.device,
     zbuf: torch.Tensor,
     depths: torch.Tensor | None = None,
@@ -268,7 +268,7 @@ class Coverage(NamedTuple):
 def coverage_of(
     xyz: np.ndarray | torch.Tensor,
     camera: Camera,
-    settings: RenderSettings,
+    settings: RenderParams,
     device: str | torch.device = "cpu",
     spacing_m: np.ndarray | torch.Tensor | None = None,
     kept: np.ndarray | torch.Tensor | None = None,
@@ -322,7 +322,7 @@ def central_depths(xyz: np.ndarray, camera: Camera, scale: float, fraction: floa
     height) of a one-pixel render of ``xyz`` ((N, 3) float32 site-local) through ``camera`` at
     ``scale``: the nearest point's depth where a point falls, nothing where none does. On the CPU
     (view generation's depth probes)."""
-    settings = RenderSettings(scale=scale)
+    settings = RenderParams(scale=scale)
     cam = camera.scaled(scale)
     H, W = cam.height, cam.width
     fh, fw = max(1, int(round(H * fraction))), max(1, int(round(W * fraction)))
@@ -340,7 +340,7 @@ def central_depths(xyz: np.ndarray, camera: Camera, scale: float, fraction: floa
 
 
 def _within_pixel(
-    pts: torch.Tensor, keys: torch.Tensor, cam: Camera, settings: RenderSettings, dev: torch.device
+    pts: torch.Tensor, keys: torch.Tensor, cam: Camera, settings: RenderParams, dev: torch.device
 ) -> torch.Tensor:
     """(2, H W) float32 where in its pixel the point of each z-buffer key falls (u, v from the pixel's
     corner, 0 to 1; 0.5 where no point): the same projection as the render."""
@@ -398,7 +398,7 @@ def _decode(
 def render_points(
     xyz: np.ndarray | torch.Tensor,
     camera: Camera,
-    settings: RenderSettings | None = None,
+    settings: RenderParams | None = None,
     attributes: Mapping[str, np.ndarray | torch.Tensor] | None = None,
     device: str | torch.device = "cpu",
     spacing_m: np.ndarray | torch.Tensor | None = None,
@@ -410,7 +410,7 @@ def render_points(
     world splats need (a tile read gives it; :func:`siteline.render.splats.local_spacing` estimates
     it for a raw cloud). Returns a :class:`RenderResult` at the scaled camera.
     """
-    settings = settings or RenderSettings()
+    settings = settings or RenderParams()
     attributes = dict(attributes or {})
     n = _check_inputs(xyz, attributes, settings, spacing_m)
     dev = torch.device(device)

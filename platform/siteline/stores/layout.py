@@ -51,7 +51,7 @@ def pair_labels(
 ) -> str:
     """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
     by the change ``rule`` (siteline.labels.rule), the ``label_rule`` and the smallest region kept
-    (siteline.labels.params; the nearest rule keeping every point names no suffix, as before both;
+    (siteline.records.params.labels; the nearest rule keeping every point names no suffix, as before both;
     the surface rule is named with its version)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"

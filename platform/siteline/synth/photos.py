@@ -15,7 +15,7 @@ from scipy.ndimage import distance_transform_edt
 from siteline.camera.dji import cam_from_world_rotation, grid_convergence_deg
 from siteline.camera.photos import dji_xmp, signed
 from siteline.camera.pinhole import Camera
-from siteline.render.settings import RenderSettings
+from siteline.records.params.render import RenderParams
 from siteline.render.zbuffer import render_points
 
 # Zenmuse L2 RGB sensor, full size; photos are written at a fraction of it
@@ -84,7 +84,7 @@ def render_photo(xyz: np.ndarray, rgb: np.ndarray, camera: Camera, spacing_m: fl
     from the nearest hit, and regions with no point nearby are sky."""
     footprint = camera.center[2] / camera.fx
     k = 1 if spacing_m < footprint else 3
-    r = render_points(xyz, camera, RenderSettings(scale=1.0, point_size_px=k), {"rgb": rgb})
+    r = render_points(xyz, camera, RenderParams(scale=1.0, point_size_px=k), {"rgb": rgb})
     dist, (iy, ix) = distance_transform_edt(~r.hit, return_indices=True)
     img = r.rgb[iy, ix]
     img[dist > 3 * k] = SKY

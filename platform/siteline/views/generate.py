@@ -13,6 +13,7 @@ from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
 from siteline.progress import no_step
 from siteline.records.pairs import ViewStrategy
+from siteline.records.params.views import SAMPLER_VERSION, ViewParams
 from siteline.render.zbuffer import central_depths, coverage_of
 from siteline.schema import JsonObject
 from siteline.site.fence import inside_fence
@@ -25,7 +26,6 @@ from siteline.tolerances import (
 )
 from siteline.views import strategies
 from siteline.views.ground import GroundChoice, GroundModel, GroundPlane
-from siteline.views.params import SAMPLER_VERSION, ViewParams
 from siteline.views.sources import PointSource
 
 

@@ -9,6 +9,7 @@ import shapely
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
+from siteline.records.enums import MIRROR_RULES
 from siteline.site.fence import inside_fence, nearest_segment
 from siteline.views.ground import GroundModel
 
@@ -27,9 +28,6 @@ def mirror_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d = np.asarray(b, dtype=np.float64) - np.asarray(a, dtype=np.float64)
     m = np.array([-d[1], d[0], 0.0]) / np.hypot(d[0], d[1])
     return np.eye(3) - 2.0 * np.outer(m, m)
-
-
-MIRROR_RULES = ("aim-site", "reflect")
 
 
 def ground_target(camera: Camera, ground: GroundModel) -> np.ndarray | None:

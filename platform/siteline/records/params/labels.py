@@ -6,11 +6,23 @@ import math
 from dataclasses import dataclass
 
 from siteline.errors import LabelError
-from siteline.labels.change import SurfaceTest
 
 LABEL_RULES = ("surface", "nearest")
-# the surface rule's search radius, in change radii (siteline.labels.change.SurfaceTest)
+# the surface rule's search radius, in change radii (SurfaceTest below)
 SEARCH_MULTIPLIER = 2.0
+
+
+@dataclass(frozen=True)
+class SurfaceTest:
+    """How the surface rule looks again at a point the nearest rule flags (module docstring):
+    ``search_m`` the other scene's neighbourhood radius (metres), ``neighbours`` how many of its
+    points to fit a plane to, the level of detection ``lod_sigmas`` x their RMS residual, at least
+    ``lod_floor_m`` metres."""
+
+    search_m: float
+    neighbours: int = 12
+    lod_sigmas: float = 4.0
+    lod_floor_m: float = 0.05
 
 
 @dataclass(frozen=True)

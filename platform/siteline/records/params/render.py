@@ -6,10 +6,10 @@ import math
 from dataclasses import asdict, dataclass
 
 from siteline.errors import RenderError
+from siteline.records.enums import PRECISIONS
 from siteline.records.specs import parse_spec
 from siteline.schema import JsonObject
 
-PRECISIONS = ("float32", "float64")
 # how big a point is drawn: one diameter for every point, or its local spacing seen from the camera
 SPLAT_MODES = ("fixed", "world")
 # a world splat's diameter as a multiple of the point spacing it stands for: points a spacing apart
@@ -21,7 +21,7 @@ MAX_FILL_PX = 8
 
 
 @dataclass(frozen=True)
-class RenderSettings:
+class RenderParams:
     """scale: fraction of the camera's image size (1, 1/2, 1/4, 1/8 ...).
     point_size_px: 1 (one pixel per point) or an odd disk diameter k (a point covers the pixels whose
     centres lie within k/2 px of its own pixel centre; nearer points still win).
@@ -86,6 +86,6 @@ class RenderSettings:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> RenderSettings:
+    def from_dict(cls, doc: JsonObject) -> RenderParams:
         """From the JSON form; RenderError names an unknown key or a wrongly typed value."""
         return parse_spec(cls, doc, "render settings", RenderError)

@@ -10,14 +10,12 @@ from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 from siteline.errors import PairError, SitelineError
-from siteline.labels.params import LabelParams
-from siteline.labels.rule import CHANGE_RULES
-from siteline.records.enums import HOLE_RULES, HoleRule
-from siteline.records.pairs import COLOUR_CHOICES, SHADING_CHOICES
+from siteline.records.enums import CHANGE_RULES, COLOUR_CHOICES, HOLE_RULES, SHADING_CHOICES, HoleRule
+from siteline.records.params.labels import LabelParams
+from siteline.records.params.render import WORLD_SPLAT_FACTOR, RenderParams
+from siteline.records.params.views import SAMPLER_VERSION, ViewParams
 from siteline.records.specs import parse_spec
-from siteline.render.settings import WORLD_SPLAT_FACTOR, RenderSettings
 from siteline.schema import JsonObject
-from siteline.views.params import SAMPLER_VERSION, ViewParams
 
 # changed regions of fewer points are taken back to unchanged (siteline.labels.regions)
 MIN_REGION_POINTS = 8
@@ -31,7 +29,7 @@ _SHARED_VIEW_KNOBS = (
 class PairParams:
     """Every knob of pair processing, one name each, composed of the stages' own specs:
     :meth:`render_settings` (``scale``, ``point_size_px``, ``splat``, ``splat_max_px``, ``fill_px``;
-    DESIGN.md §6, siteline.render.settings), :meth:`view_params_spec`
+    DESIGN.md §6, siteline.records.params.render), :meth:`view_params_spec`
     (``scale``, ``views``, ``seed``, ``min_coverage``, ``point_size_px`` and any other ViewParams
     field in ``view_params``; §5) and :meth:`label_params` (``radius_m``: metres, or None for ``radius_multiplier`` x the median
     spacing of the sparser scene; §4). Each is validated by its own spec when the PairParams is made.
@@ -116,9 +114,9 @@ class PairParams:
         except SitelineError as exc:
             raise PairError(f"pair parameters: {exc}") from exc
 
-    def render_settings(self) -> RenderSettings:
+    def render_settings(self) -> RenderParams:
         """The render knobs as the renderer's own spec."""
-        return RenderSettings(
+        return RenderParams(
             scale=self.scale,
             point_size_px=self.point_size_px,
             splat=self.splat,

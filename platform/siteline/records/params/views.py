@@ -6,10 +6,10 @@ import math
 from dataclasses import asdict, dataclass
 
 from siteline.errors import RenderError, ViewsError
+from siteline.records.enums import MIRROR_RULES
+from siteline.records.params.render import WORLD_SPLAT_FACTOR, RenderParams
 from siteline.records.specs import parse_spec
-from siteline.render.settings import WORLD_SPLAT_FACTOR, RenderSettings
 from siteline.schema import JsonObject
-from siteline.views.strategies import MIRROR_RULES
 
 # Recorded with every view set (lineage): how the sample was drawn.
 SAMPLER_VERSION = "keyed-sha256-1"
@@ -39,7 +39,7 @@ class ViewParams:
     size, its coverage and valid share stay within a few points of the render's. Fixed splats are
     probed at the view scale (their coverage depends on the pixel size).
     views: views kept per pair (seeded sample, stratified by strategy). ``scale`` and ``views`` are the
-    knobs of the same names in PairParams and RenderSettings.
+    knobs of the same names in PairParams and RenderParams.
     """
 
     vertical_fractions: tuple[float, ...] = (1.0, 0.75, 0.5, 0.25)
@@ -91,14 +91,14 @@ class ViewParams:
         except RenderError as exc:
             raise ViewsError(str(exc)) from exc
 
-    def probe_settings(self, scale: float | None = None) -> RenderSettings:
+    def probe_settings(self, scale: float | None = None) -> RenderParams:
         """The render settings of a probe at ``scale`` (the coverage probe's, ``probe_factor`` x the
         view scale, when None): the renders' splats with their sizes scaled to the probe, no gap fill."""
         factor = (
             (self.probe_factor if self.splat == "world" else 1.0) if scale is None else scale / self.scale
         )
         size = max(1, int(self.point_size_px * factor) | 1) if self.splat == "world" else self.point_size_px
-        return RenderSettings(
+        return RenderParams(
             scale=self.scale * factor,
             point_size_px=size,
             splat=self.splat,
