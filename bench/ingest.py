@@ -28,6 +28,7 @@ from pathlib import Path
 import laspy
 import numpy as np
 
+from siteline.catalog.context import StageContext
 from siteline.config import DEFAULT_TILE_BATCH_POINTS
 from siteline.pointpass import TilingResources
 
@@ -119,9 +120,11 @@ def child(mode: str, path: str, workers: int, batch_points: int, half_m: float) 
         t = time.perf_counter()
         # a generated LAS's GPS times are seconds of an unnamed week: its capture time is given
         opts = IngestOptions(captured_at=datetime(2026, 1, 1, tzinfo=UTC))
-        r = ingest_mission(cat, settings, Path(path).parent, "b", opts)
+        r = ingest_mission(StageContext(cat, settings), Path(path).parent, "b", opts)
         t_ingest = time.perf_counter() - t
-        tiling = tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=workers)).tiling
+        tiling = tile_scene(
+            StageContext(cat, settings), r.scene_id, resources=TilingResources(workers=workers)
+        ).tiling
         assert tiling is not None
         n = tiling.points
         out = {

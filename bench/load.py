@@ -23,6 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from siteline.catalog.context import StageContext
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -57,7 +59,10 @@ def _prepare(home: Path) -> None:
         add_site(s, make_site_spec("az", "EPSG:32610", (493000.0, 4878000.0, 130.0), None))
     for k, path in enumerate((AUTZEN, later)):
         pipeline.ingest(
-            cat, settings, path, "az", IngestOptions(captured_at=datetime(2020 + k, 5, 1, tzinfo=UTC))
+            StageContext(cat, settings),
+            path,
+            "az",
+            IngestOptions(captured_at=datetime(2020 + k, 5, 1, tzinfo=UTC)),
         )
     cat.dispose()
 

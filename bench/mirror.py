@@ -15,6 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from siteline.catalog.context import StageContext
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
@@ -46,7 +48,9 @@ def main() -> None:
             add_site(s, make_site_spec("mirror", cfg.crs, cfg.origin, [*ring, ring[0]]))
         truth = json.loads((root / "site" / "truth" / "site.json").read_text())
         for e in truth["epochs"]:
-            pipeline.ingest(cat, settings, root / "site" / e["mission_dir"], "mirror", workers=1)
+            pipeline.ingest(
+                StageContext(cat, settings), root / "site" / e["mission_dir"], "mirror", workers=1
+            )
         print(
             f"site: 2 epochs at {args.density:g} points/m2, {args.views} views per rule, scale 1/8 of 660 x 495"
         )
@@ -56,7 +60,7 @@ def main() -> None:
         for rule in ("reflect", "aim-site"):
             params = PairParams(views=args.views, view_params={"mirror_rule": rule})
             t0 = time.perf_counter()
-            out = pipeline.process_pairs(cat, settings, [1], params)[1]
+            out = pipeline.process_pairs(StageContext(cat, settings), [1], params)[1]
             sec = time.perf_counter() - t0
             mir = [v for v in out.views if "-mirror-" in v["strategy"]]
             orig = [v for v in out.views if "-orig-" in v["strategy"]]

@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from siteline.catalog.context import StageContext
+
 
 def _peak_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -79,7 +81,7 @@ def stage_ingest(work: Path) -> dict:
     doc = json.loads((work / "site" / "truth" / "site.json").read_text())
     t0 = time.perf_counter()
     for e in doc["epochs"]:
-        pipeline.ingest(cat, settings, work / "site" / e["mission_dir"], "bench", workers=2)
+        pipeline.ingest(StageContext(cat, settings), work / "site" / e["mission_dir"], "bench", workers=2)
     cat.dispose()
     return {"seconds": time.perf_counter() - t0}
 
@@ -102,7 +104,7 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, kn
     extra = {} if min_valid is None else {"min_valid": min_valid}
     params = PairParams(scale=scale, views=views, **knobs, **extra)
     t0 = time.perf_counter()
-    out = process_pair(cat, settings, 1, params, progress=progress)
+    out = process_pair(StageContext(cat, settings, progress=progress), 1, params)
     total = time.perf_counter() - t0
     cat.dispose()
     summary = json.loads((Path(out.root) / "summary.json").read_text())

@@ -18,6 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from siteline.catalog.context import StageContext
 from siteline.pointpass import TilingResources
 from siteline.records.release import ReleaseOptions
 
@@ -64,17 +65,25 @@ def _run(root: Path, site_dir: Path, store_url: str, views: int) -> dict[str, fl
     params = PairParams(scale=0.25, point_size_px=3, views=views, seed=0, min_coverage=0.2)
     t: dict[str, float] = {}
     t0 = time.perf_counter()
-    scenes = [ingest_mission(cat, settings, m, "demo").scene_id for m in epoch_dirs(site_dir)[:2]]
+    scenes = [
+        ingest_mission(StageContext(cat, settings), m, "demo").scene_id for m in epoch_dirs(site_dir)[:2]
+    ]
     t["ingest (2 missions)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     for sid in scenes:
-        tile_scene(cat, settings, sid, resources=TilingResources(workers=1))
+        tile_scene(StageContext(cat, settings), sid, resources=TilingResources(workers=1))
     t["tile (2 scenes)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    process_pair(cat, settings, 1, params)
+    process_pair(StageContext(cat, settings), 1, params)
     t["process pair (labels, views, renders)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    build_release(cat, settings, "demo", "bench", ReleaseParams(params), options=ReleaseOptions(pair_ids=[1]))
+    build_release(
+        StageContext(cat, settings),
+        "demo",
+        "bench",
+        ReleaseParams(params),
+        options=ReleaseOptions(pair_ids=[1]),
+    )
     t["build release (copies renders out)"] = time.perf_counter() - t0
     cat.dispose()
     return t

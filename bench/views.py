@@ -17,6 +17,8 @@ from pathlib import Path
 import laspy
 import numpy as np
 
+from siteline.catalog.context import StageContext
+
 REAL = Path(__file__).resolve().parents[1] / "tests" / "data" / "real" / "autzen_trim.laz"
 
 
@@ -92,7 +94,7 @@ def _views(home: Path, copies: int, rules: dict, views: int) -> dict[str, float]
             add_site(s, make_site_spec("autzen", "EPSG:32610", (493000.0, 4878000.0, 130.0), None))
         for k, path in enumerate(_epochs(home, copies)):
             opts = IngestOptions(captured_at=datetime(2020, 5, 1 + 10 * k, tzinfo=UTC))
-            pipeline.ingest(cat, settings, path, "autzen", opts, workers=2)
+            pipeline.ingest(StageContext(cat, settings), path, "autzen", opts, workers=2)
     else:
         cat = open_catalog(settings)
     points = laspy.open(home / "e1.laz").header.point_count

@@ -35,6 +35,7 @@ from flows.runner import cluster_executor, task_runner
 from flows.ui import RunProgress, ingest_dashboards, note, pair_dashboards, release_dashboards, slug, tag_run
 from siteline import pipeline
 from siteline.catalog import Catalog, open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.pairs import pair_ids_of_scene, site_name_of_pair
 from siteline.catalog.scenes import site_name_of_scene
 from siteline.catalog.stages import record_failure
@@ -42,6 +43,7 @@ from siteline.config import Settings, load_settings
 from siteline.errors import SitelineError, StoreError
 from siteline.ingest.options import IngestOptions
 from siteline.pointpass import TilingResources
+from siteline.progress import Progress
 from siteline.records.pairs import PairOutput
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseKnobs
@@ -122,12 +124,14 @@ def _catalog() -> Iterator[tuple[Catalog, Settings]]:
 
 
 def _stage(
-    stage: str, subject: str, params: dict[str, Any], fn: Callable[..., T], *args: Any, **kwargs: Any
-) -> T:
-    """Run a pipeline step; on failure record it in the catalog (its own transaction) and re-raise."""
+    stage: str, subject: str, params: dict[str, Any], progress: Progress, fn: Callable[..., T], *args: Any,
+    **kwargs: Any,
+) -> T:  # fmt: skip
+    """Run a pipeline step under this flow run, reporting to ``progress``; on failure record it in the
+    catalog (its own transaction) and re-raise."""
     with _catalog() as (cat, settings):
         try:
-            return fn(cat, settings, *args, run_id=_run_id(), **kwargs)
+            return fn(StageContext(cat, settings, progress, _run_id()), *args, **kwargs)
         except Exception as exc:
             with cat.transaction() as s:
                 record_failure(s, StageRun(stage, subject, params, run_id=_run_id()), exc)
@@ -244,8 +248,8 @@ def ingest_task(mission_dir: str, site: str, opts: IngestOptions) -> pipeline.In
     progress = RunProgress(slug("ingest", site, Path(mission_dir).name), f"ingest of {Path(mission_dir).name}",
                            {"hashing": 1.0, "reading points": 1.0, "storing": 1.0, "partitioning": 2.0, "writing tiles": 2.0})  # fmt: skip
     done = _stage(
-        "ingest", f"mission:{mission_dir}", {"site": site, "crs": opts.crs}, pipeline.ingest,
-        Path(mission_dir), site, opts, progress=progress,
+        "ingest", f"mission:{mission_dir}", {"site": site, "crs": opts.crs}, progress, pipeline.ingest,
+        Path(mission_dir), site, opts,
     )  # fmt: skip
     progress.finish(done.ingest.message)
     return done
@@ -257,7 +261,7 @@ def tile_task(scene_id: int) -> SceneTiling | None:
         slug("tile", scene_id), f"tiling of scene {scene_id}", {"partitioning": 1.0, "writing tiles": 2.0}
     )
     with cluster_executor() as executor:  # on a Dask runner, the cluster's workers write the tiles
-        done = _stage("tile", f"scene:{scene_id}", {}, pipeline.tile_scenes, [scene_id], progress=progress,
+        done = _stage("tile", f"scene:{scene_id}", {}, progress, pipeline.tile_scenes, [scene_id],
                       resources=TilingResources(executor=executor))  # fmt: skip
     for outcome in done:
         get_run_logger().info(outcome.message)
@@ -276,10 +280,10 @@ def process_pair_task(pair_id: int, pair_params: dict[str, Any]) -> PairOutput:
             "process_pair",
             f"pair:{pair_id}",
             p.to_dict(),
+            progress,
             pipeline.process_pairs,
             [pair_id],
             p,
-            progress=progress,
         )
     out = outs[pair_id]
     progress.finish(f"{len(out.views)} views at {out.root}")
@@ -294,8 +298,8 @@ def build_release_task(
         progress = RunProgress(slug("release", name), f"release {name}",
                                {"labels": 1.0, "views": 1.0, "renders": 4.0, "release images": 2.0})  # fmt: skip
         info = _stage(
-            "build_release", f"release:{name}", release_settings or {}, pipeline.release, site, name,
-            _knobs(release_settings), ReleaseOptions(publish=publish), progress=progress,
+            "build_release", f"release:{name}", release_settings or {}, progress, pipeline.release, site, name,
+            _knobs(release_settings), ReleaseOptions(publish=publish),
         )  # fmt: skip
     progress.finish(f"{info.version} up to date" if info.up_to_date else f"{info.version} {info.status}")
     return info

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from siteline.catalog.context import StageContext
 from siteline.pointpass import TilingResources
 
 PG_ADMIN_URL = os.environ.get(
@@ -157,7 +158,7 @@ def scenes(tmp_path_factory, synth_site):
     settings = make_home(tmp_path_factory.mktemp("scenes"), site_dir=synth_site)
     cat = open_catalog(settings)
     for m in epoch_dirs(synth_site)[:2]:
-        r = ingest_mission(cat, settings, m, "demo")
-        tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
+        r = ingest_mission(StageContext(cat, settings), m, "demo")
+        tile_scene(StageContext(cat, settings), r.scene_id, resources=TilingResources(workers=1))
     yield settings, cat
     cat.dispose()

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline.catalog import migrate, open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
@@ -126,8 +127,8 @@ def ingest_and_tile(cat, settings: Settings, missions: list[Path], site: str = "
 
     ids = []
     for m in missions:
-        ids.append(ingest_mission(cat, settings, m, site).scene_id)
-        tile_scene(cat, settings, ids[-1], resources=TilingResources(workers=1))
+        ids.append(ingest_mission(StageContext(cat, settings), m, site).scene_id)
+        tile_scene(StageContext(cat, settings), ids[-1], resources=TilingResources(workers=1))
     return ids
 
 

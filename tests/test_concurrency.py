@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 from sitehelpers import epoch_dirs, make_home
 
+from siteline.catalog.context import StageContext
+
 EXE = Path(sys.executable).with_name("siteline")
 
 
@@ -80,7 +82,7 @@ def test_racing_writers_lose_nothing(race_site, tmp_path, db_url) -> None:
         assert len(list_missions(s)) == 1
 
     # one scene tiled twice at once: tiled once, the other run finds nothing to do
-    sid = ingest_mission(cat, settings, Path(e01), "demo").scene_id
+    sid = ingest_mission(StageContext(cat, settings), Path(e01), "demo").scene_id
     outs = _ok(_race(settings, ["scene", "tile", str(sid)], ["scene", "tile", str(sid)]))
     assert sum(f"scene {sid} tiled" in o for o in outs) == 1 and sum("nothing to do" in o for o in outs) == 1
 

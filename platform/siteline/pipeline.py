@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.deletion import Deletion, delete_rows, plan_scene_deletion, plan_site_deletion
 from siteline.catalog.labelsets import labelled_source
 from siteline.catalog.pairs import pair_ids_of_scene, scene_ids_of_pairs, unprocessed_pairs
@@ -27,7 +28,6 @@ from siteline.pairs.render import LabelledPair
 from siteline.pairs.stage import process_pair
 from siteline.pointpass import TilingResources
 from siteline.previews.cloud import PairCloud
-from siteline.progress import Progress, no_progress
 from siteline.records.pairs import ColourPlan, PairOutput
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseKnobs, ReleaseParams
@@ -65,63 +65,43 @@ class Ingested:
 
 
 def ingest(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     mission_dir: Path,
     site: str,
     opts: IngestOptions | None = None,
     workers: int = 2,
-    progress: Progress = no_progress,
-    run_id: str | None = None,
 ) -> Ingested:
     """Ingest ``mission_dir`` as a scene of ``site`` and tile it. A mission already ingested is not
     ingested again; its scene is tiled if it is not yet."""
-    result = ingest_mission(
-        catalog, settings, Path(mission_dir), site, opts, progress, run_id=run_id, workers=workers
-    )
+    result = ingest_mission(ctx, Path(mission_dir), site, opts, workers=workers)
     if result.scene_id is None:
         return Ingested(result, None)
-    tiled = tile_scene(
-        catalog,
-        settings,
-        result.scene_id,
-        resources=TilingResources(workers),
-        progress=progress,
-        run_id=run_id,
-    )
+    tiled = tile_scene(ctx, result.scene_id, resources=TilingResources(workers))
     if tiled.tiling is not None:
         result.message += f"; {tiled.message}"
     return Ingested(result, tiled)
 
 
 def tile_scenes(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     scene_ids: Iterable[int],
     resources: TilingResources = TilingResources(),
-    progress: Progress = no_progress,
-    run_id: str | None = None,
 ) -> list[TileOutcome]:
     """Tile every scene of ``scene_ids`` that is not tiled yet, or was tiled under an earlier version
     of its site's taxonomy or fence, with ``resources`` (workers, or a Dask cluster's executor): what
     each tiling did (the tile stage's plan decides which scenes need it; those left alone are not
     listed)."""
-    outcomes = (
-        tile_scene(catalog, settings, sid, resources=resources, progress=progress, run_id=run_id)
-        for sid in scene_ids
-    )
+    outcomes = (tile_scene(ctx, sid, resources=resources) for sid in scene_ids)
     return [o for o in outcomes if o.tiling is not None]
 
 
 def redefine_site(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     site: str,
     taxonomy: Taxonomy | None = None,
     fence: Sequence[Sequence[float]] | None = None,
     clear_fence: bool = False,
     workers: int = 2,
-    progress: Progress = no_progress,
 ) -> tuple[int, list[TileOutcome]]:
     """Give ``site`` a new taxonomy and/or fence (a closed ring, site-local metres; ``clear_fence``:
     none) as its next version, then tile its scenes again under it (their classes mapped anew from
@@ -139,27 +119,27 @@ def redefine_site(
     ring = None
     if fence is not None:
         ring = [list(v) for v in validate_fence(fence, source=f"site {site} fence")]
-    with catalog.transaction() as s:
+    with ctx.catalog.transaction() as s:
         carry = imported_label_sets(s, site)
         old = get_site(s, site).spec
-    folder = settings.home / "exports" / f"{site}-v{old.version}"
+    folder = ctx.settings.home / "exports" / f"{site}-v{old.version}"
     files = {}
     for sid, version in sorted(carry.items()):
         files[sid] = folder / f"scene-{sid}-label-set-{version}.laz"
         files[sid].parent.mkdir(parents=True, exist_ok=True)
-        if export_corrections(catalog, sid, version, files[sid]) == 0:  # it corrected nothing
+        if export_corrections(ctx.catalog, sid, version, files[sid]) == 0:  # it corrected nothing
             files.pop(sid).unlink(missing_ok=True)
-    with catalog.transaction() as s:
+    with ctx.catalog.transaction() as s:
         row, scene_ids = redefine_catalog_site(s, site, taxonomy, ring, clear_fence)
         version, now = row.spec.version, row.spec
     log.info("site %s is at version %d: tiling its %d scenes again", site, version, len(scene_ids))
-    outcomes = tile_scenes(catalog, settings, scene_ids, TilingResources(workers), progress=progress)
+    outcomes = tile_scenes(ctx, scene_ids, TilingResources(workers))
     kept = {c.name for c in now.taxonomy.classes}  # a class the new taxonomy dropped is named by the import
     by_name: dict[int, str | int] = {c.id: c.name for c in old.taxonomy.classes if c.name in kept}
     for sid, path in files.items():
         try:
             how = ImportOptions(by_name, f"carried to site version {version} from {path.name}", carried=True)
-            done = import_labels(catalog, settings, sid, path, how, progress=progress)
+            done = import_labels(ctx, sid, path, how)
             message = (
                 f"scene {sid}: corrections of label set {carry[sid]} carried over as label set {done.version}"
             )
@@ -173,24 +153,19 @@ def redefine_site(
 
 
 def process_pairs(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     pair_ids: Iterable[int],
     params: PairParams | None = None,
-    progress: Progress = no_progress,
     device: str = "cpu",
-    run_id: str | None = None,
     label_sets: Mapping[int, int] | None = None,
 ) -> dict[int, PairOutput]:
     """Tile the pairs' scenes where needed, then process every pair (outputs are reused when made)
     with each scene's newest label set, or the version ``label_sets`` (scene id -> version) pins."""
     ids = list(pair_ids)
-    with catalog.transaction() as s:
+    with ctx.catalog.transaction() as s:
         scene_ids = scene_ids_of_pairs(s, ids)
-    tile_scenes(catalog, settings, scene_ids, progress=progress, run_id=run_id)
-    return {
-        pid: process_pair(catalog, settings, pid, params, progress, device, run_id, label_sets) for pid in ids
-    }
+    tile_scenes(ctx, scene_ids)
+    return {pid: process_pair(ctx, pid, params, device, label_sets) for pid in ids}
 
 
 def pending_pairs(catalog: Catalog, scene_id: int) -> list[int]:
@@ -208,14 +183,11 @@ def release_parameters(catalog: Catalog, site: str, knobs: ReleaseKnobs | None =
 
 
 def release(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     site: str,
     name: str,
     knobs: ReleaseKnobs | None = None,
     options: ReleaseOptions = ReleaseOptions(),
-    progress: Progress = no_progress,
-    run_id: str | None = None,
 ) -> ReleaseInfo:
     """Everything a release of ``site`` needs, in order: its parameters (the site's release settings
     with ``knobs`` over them, siteline.release.knobs: refused before any work when its images would be
@@ -223,7 +195,7 @@ def release(
     scene's newest label set (or the version ``options.label_sets`` pins), a draft built from exactly
     those outputs, published when ``options.publish``; or the latest version when it already has these
     inputs (``up_to_date``)."""
-    with catalog.transaction() as s:  # refused before any pair is processed
+    with ctx.catalog.transaction() as s:  # refused before any pair is processed
         choice = choose_release(s, site, name, knobs, options)
     chosen, params = list(choice.pair_ids), choice.params
     # each pair's rule is stated before any pair is processed, not found in the masks afterwards
@@ -237,9 +209,7 @@ def release(
             )  # fmt: skip
     log.info("release %s of site %s: %d pairs, scale %g, %d px points, %d views", name, site, len(chosen),
              params.pair.scale, params.pair.point_size_px, params.pair.views)  # fmt: skip
-    outputs = process_pairs(
-        catalog, settings, chosen, params.pair, progress, options.device, run_id, options.label_sets
-    )
+    outputs = process_pairs(ctx, chosen, params.pair, options.device, options.label_sets)
     for out in outputs.values():
         if out.radius_m > params.radius_ceiling_m:
             radius = out.labels.radius
@@ -257,7 +227,7 @@ def release(
         for sid, v in ((out.t1, out.versions.t1), (out.t2, out.versions.t2))
     }
     built = replace(options, label_sets=used)  # the pairs are the choice's
-    return build_release(catalog, settings, site, name, choice, built, run_id, progress)
+    return build_release(ctx, site, name, choice, built)
 
 
 def pair_cloud(catalog: Catalog, settings: Settings, doc: Manifest, pair_id: int) -> PairCloud:

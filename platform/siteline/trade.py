@@ -23,6 +23,7 @@ from PIL import Image
 
 from siteline import pipeline
 from siteline.catalog import Catalog, migrate, open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.engine import make_engine
 from siteline.catalog.pairs import pair_ids_of_scene
 from siteline.catalog.scenes import list_scenes
@@ -140,7 +141,7 @@ def synthetic_pair(
                 add_site(s, spec, ReleaseKnobs(pair={"views": views, "seed": seed}))
         doc = json.loads((site_dir / "truth" / "site.json").read_text())
         for e in doc["epochs"]:
-            pipeline.ingest(cat, settings, site_dir / e["mission_dir"], SITE)
+            pipeline.ingest(StageContext(cat, settings), site_dir / e["mission_dir"], SITE)
         with cat.transaction() as s:
             scenes = list_scenes(s, get_site(s, SITE))
             pid = pair_ids_of_scene(s, scenes[-1].id)[0]
@@ -172,7 +173,7 @@ def measure_variant(
     params = variant_params(pipeline.release_parameters(cat, SITE).pair, name, knobs)
     t = time.perf_counter()
     try:
-        result = pipeline.process_pairs(cat, settings, [pid], params)[pid]
+        result = pipeline.process_pairs(StageContext(cat, settings), [pid], params)[pid]
     except PairError as exc:  # a setting that leaves no usable view is a finding
         return TradeRow(name, dict(knobs), error=str(exc))
     seconds = time.perf_counter() - t

@@ -14,6 +14,7 @@ import pytest
 from sitehelpers import SYNTH, epoch_dirs, make_home, manifest_doc, run_cli
 
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources
 from siteline.tiles.stage import tile_scene
@@ -65,9 +66,8 @@ def test_release_build_uses_the_site_settings_and_is_up_to_date_once_built(tmp_p
     cat = open_catalog(settings)
     for m in epoch_dirs(synth_site)[:2]:
         tile_scene(
-            cat,
-            settings,
-            ingest_mission(cat, settings, m, "demo").scene_id,
+            StageContext(cat, settings),
+            ingest_mission(StageContext(cat, settings), m, "demo").scene_id,
             resources=TilingResources(workers=1),
         )
     cat.dispose()

@@ -19,6 +19,7 @@ from realdata import TOPOGRAPHY, centre_xy, later_epoch
 
 from siteline import pipeline
 from siteline.catalog import migrate, open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
@@ -107,7 +108,7 @@ def topo(tmp_path_factory):
     middle = later_epoch(first, tmp / "middle.laz", days=200)
     settings, cat = _home(tmp, "topo", "other")
     for path in (first, later):
-        pipeline.ingest(cat, settings, path, "topo", OPTS, workers=1)
+        pipeline.ingest(StageContext(cat, settings), path, "topo", OPTS, workers=1)
     yield settings.home, first, middle, (settings, cat)
     cat.dispose()
 
@@ -127,7 +128,7 @@ def test_a_wrong_taxonomy_is_fixed_with_site_update(topo, tmp_path) -> None:
     codes[np.flatnonzero(codes == 11)[:300]] = 4  # unclassified -> material
     las.classification = codes
     las.write(tmp_path / "s1_fixed.laz")
-    assert import_labels(cat, settings, 1, tmp_path / "s1_fixed.laz").version == 2
+    assert import_labels(StageContext(cat, settings), 1, tmp_path / "s1_fixed.laz").version == 2
     out = _ok(home, "site", "update", "topo", "--taxonomy", str(_water_taxonomy(tmp_path / "tax.json")))
     assert "site topo is at version 2" in out and out.count("re-tiled") == 2, out
     # the correction is carried onto the new tiles (its file kept), water mapped anew under it
@@ -153,11 +154,10 @@ def test_a_wrong_taxonomy_is_fixed_with_site_update(topo, tmp_path) -> None:
     x0, y0 = c[0] - 60, c[1] - 60
     ring = [[x0, y0], [x0 + 120, y0], [x0 + 120, y0 + 120], [x0, y0 + 120], [x0, y0]]
     local = [[x - ORIGIN[0], y - ORIGIN[1]] for x, y in ring]
-    assert pipeline.redefine_site(cat, settings, "topo", fence=local, workers=1)[0] == 3
+    assert pipeline.redefine_site(StageContext(cat, settings), "topo", fence=local, workers=1)[0] == 3
     assert _json(home, "scene", "show", "2")["class_histogram"]["ignore"] > 10_000
     pipeline.release(
-        cat,
-        settings,
+        StageContext(cat, settings),
         "topo",
         "topo-cd",
         ReleaseKnobs(pair={"views": 2}),
@@ -171,9 +171,11 @@ def test_a_wrong_taxonomy_is_fixed_with_site_update(topo, tmp_path) -> None:
 
 def test_one_file_goes_into_two_sites(topo) -> None:
     home, first, _, (settings, cat) = topo
-    done = pipeline.ingest(cat, settings, first, "other", OPTS, workers=1).ingest
+    done = pipeline.ingest(StageContext(cat, settings), first, "other", OPTS, workers=1).ingest
     assert done.created and done.scene_id is not None
-    assert not pipeline.ingest(cat, settings, first, "other", OPTS, workers=1).ingest.created  # once per site
+    assert not pipeline.ingest(
+        StageContext(cat, settings), first, "other", OPTS, workers=1
+    ).ingest.created  # once per site
     sites = {s["name"]: s["scenes"] for s in json.loads(_ok(home, "site", "list", "--json"))}
     assert sites["topo"] == 2 and sites["other"] == 1
     _ok(home, "site", "delete", "other", "--yes")
@@ -186,8 +188,8 @@ def test_scenes_and_sites_are_deleted_unless_a_published_release_needs_them(topo
     """A scene between two is deleted: its pairs, stores and the draft built on them go, and the
     scenes around it are paired again; a scene or site a published release was built from is not."""
     home, _, middle, (settings, cat) = topo
-    mid = pipeline.ingest(cat, settings, middle, "topo", OPTS, workers=1).ingest.scene_id
-    pipeline.release(cat, settings, "topo", "mid", ReleaseKnobs(pair={"views": 2}))
+    mid = pipeline.ingest(StageContext(cat, settings), middle, "topo", OPTS, workers=1).ingest.scene_id
+    pipeline.release(StageContext(cat, settings), "topo", "mid", ReleaseKnobs(pair={"views": 2}))
     tiles = Path(_json(home, "scene", "show", str(mid))["tile_store"])
     assert tiles.exists() and (home / "releases" / "mid" / ".drafts" / "1.0.0").exists()
     r = _run(home, "scene", "delete", str(mid))

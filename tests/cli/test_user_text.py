@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from sitehelpers import run_cli
 
+from siteline.catalog.context import StageContext
+
 
 def test_a_path_with_markup_is_printed_not_parsed(capsys, home) -> None:
     assert run_cli(capsys, "init")[0] == 0
@@ -30,7 +32,7 @@ def test_a_note_with_markup_and_escapes_stays_readable(capsys, scenes, tmp_path,
     las.classification = codes
     las.write(tmp_path / "s2_note.las")
     note = "[/bold] formwork \x1b[31mred\x1b[0m"
-    res = import_labels(cat, settings, 2, tmp_path / "s2_note.las", ImportOptions(note=note))
+    res = import_labels(StageContext(cat, settings), 2, tmp_path / "s2_note.las", ImportOptions(note=note))
     monkeypatch.setenv("SITELINE_HOME", str(settings.home))
     monkeypatch.setenv("SITELINE_DATABASE_URL", settings.database_url)
     for argv in (["labels", "list", "2"], ["labels", "show", "2", str(res.version)]):

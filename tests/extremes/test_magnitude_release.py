@@ -12,6 +12,7 @@ import pytest
 
 from siteline import pipeline
 from siteline.catalog import migrate, open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.engine import make_engine
 from siteline.catalog.sites import add_site
 from siteline.config import Settings, sqlite_url
@@ -44,9 +45,9 @@ def _release(root: Path, origin: tuple[float, float, float]) -> Path:
         add_site(s, make_site_spec("mag", cfg.crs, origin, [*ring, ring[0]]))
     truth = json.loads((site_dir / "truth" / "site.json").read_text())
     for e in truth["epochs"]:
-        r = ingest_mission(cat, settings, site_dir / e["mission_dir"], "mag")
-        tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
-    info = pipeline.release(cat, settings, "mag", "rel", KNOBS)
+        r = ingest_mission(StageContext(cat, settings), site_dir / e["mission_dir"], "mag")
+        tile_scene(StageContext(cat, settings), r.scene_id, resources=TilingResources(workers=1))
+    info = pipeline.release(StageContext(cat, settings), "mag", "rel", KNOBS)
     cat.dispose()
     return Path(info.root)
 

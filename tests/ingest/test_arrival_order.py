@@ -6,6 +6,7 @@ from __future__ import annotations
 from sitehelpers import epoch_dirs, make_home
 
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.pairs import list_pairs, pair_ids_of_scene
 from siteline.catalog.sites import get_site
 from siteline.ingest.stage import ingest_mission
@@ -18,7 +19,7 @@ def _home(tmp_path, synth_site, order: list[int], name: str):
     cat = open_catalog(settings)
     ids = {}
     for e in order:
-        ids[e] = ingest_mission(cat, settings, epoch_dirs(synth_site)[e], "demo").scene_id
+        ids[e] = ingest_mission(StageContext(cat, settings), epoch_dirs(synth_site)[e], "demo").scene_id
     return settings, cat, ids
 
 
@@ -29,10 +30,10 @@ def test_pairs_follow_capture_order_and_tiles_do_not_depend_on_arrival(tmp_path,
         around = pair_ids_of_scene(s, ids[0])
     assert pairs == [(ids[0], ids[1]), (ids[1], ids[2])]  # not (e00, e02)
     assert len(around) == 1
-    late = tile_scene(cat, settings, ids[1], resources=TilingResources(workers=1)).tiling
+    late = tile_scene(StageContext(cat, settings), ids[1], resources=TilingResources(workers=1)).tiling
     cat.dispose()
     settings2, cat2, ids2 = _home(tmp_path, synth_site, [1], "alone")
-    alone = tile_scene(cat2, settings2, ids2[1], resources=TilingResources(workers=1)).tiling
+    alone = tile_scene(StageContext(cat2, settings2), ids2[1], resources=TilingResources(workers=1)).tiling
     cat2.dispose()
     assert ids[1] != ids2[1]  # scene 3 there, scene 1 here
     assert late is not None and alone is not None and late.checksum == alone.checksum

@@ -16,6 +16,7 @@ import sqlalchemy as sa
 from PIL import Image
 from sitehelpers import copy_mission
 
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import Camera, Mission, MissionFile, Scene, StageRun
 from siteline.errors import (
     CRSError,
@@ -52,20 +53,20 @@ def _flat_las(path, n=2000, origin=(445000.0, 5030000.0, 80.0), crs="EPSG:32618"
 def test_empty_folder(cat, site_settings, tmp_path) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(MissionError, match="empty"):
-        ingest_mission(cat, site_settings, tmp_path / "empty", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "empty", "demo")
     _assert_nothing_written(cat, site_settings)
 
 
 def test_missing_folder(cat, site_settings, tmp_path) -> None:
     with pytest.raises(MissionError, match="does not exist"):
-        ingest_mission(cat, site_settings, tmp_path / "nope", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "nope", "demo")
 
 
 def test_no_las(cat, site_settings, synth_site, tmp_path) -> None:
     mission = copy_mission(synth_site, 0, tmp_path)
     shutil.rmtree(mission / "lidars")
     with pytest.raises(MissionError, match="no LAS/LAZ"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -76,7 +77,7 @@ def test_truncated_point_cloud(cat, site_settings, tmp_path, suffix) -> None:
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(PointCloudError, match=f"cloud{suffix}"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -85,7 +86,7 @@ def test_corrupt_point_cloud(cat, site_settings, tmp_path) -> None:
     path.parent.mkdir(parents=True)
     path.write_bytes(b"this is not a LAZ file at all" * 10)
     with pytest.raises(PointCloudError, match="cloud.laz"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -96,14 +97,14 @@ def test_nan_coordinates(cat, site_settings, tmp_path) -> None:
     data[155:163] = struct.pack("<d", float("nan"))  # the header's x offset
     path.write_bytes(bytes(data))
     with pytest.raises(PointCloudError, match="not finite"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
 
 
 def test_absurd_coordinates(cat, site_settings, tmp_path) -> None:
     _flat_las(tmp_path / "m" / "cloud.las", origin=(745000.0, 5030000.0, 80.0))
     with pytest.raises(PointCloudError, match="from the site origin") as err:
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     # the message names the file and the origin in plain numbers (not numpy reprs)
     assert "cloud.las" in str(err.value) and "np.float64" not in str(err.value)
     assert re.search(r"origin \(\d+\.\d+, \d+\.\d+, -?\d+\.\d+\)", str(err.value))
@@ -113,11 +114,14 @@ def test_absurd_coordinates(cat, site_settings, tmp_path) -> None:
 def test_no_crs_and_no_override(cat, site_settings, tmp_path) -> None:
     _flat_las(tmp_path / "m" / "cloud.las", crs=None)
     with pytest.raises(CRSError, match="no CRS.*--crs"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
     when = __import__("datetime").datetime(2024, 6, 1, tzinfo=__import__("datetime").UTC)
     r = ingest_mission(
-        cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs="EPSG:32618", captured_at=when)
+        StageContext(cat, site_settings),
+        tmp_path / "m",
+        "demo",
+        IngestOptions(crs="EPSG:32618", captured_at=when),
     )
     assert r.created
 
@@ -129,14 +133,18 @@ def test_untransformable_crs(cat, site_settings, tmp_path) -> None:
     )
     _flat_las(tmp_path / "m" / "cloud.las", crs=None)
     with pytest.raises(CRSError, match="cloud.las.*site grid"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs=engineering))
+        ingest_mission(
+            StageContext(cat, site_settings), tmp_path / "m", "demo", IngestOptions(crs=engineering)
+        )
     _assert_nothing_written(cat, site_settings)
 
 
 def test_conflicting_crs_override(cat, site_settings, tmp_path) -> None:
     _flat_las(tmp_path / "m" / "cloud.las")
     with pytest.raises(CRSError, match="--crs"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo", IngestOptions(crs="EPSG:32617"))
+        ingest_mission(
+            StageContext(cat, site_settings), tmp_path / "m", "demo", IngestOptions(crs="EPSG:32617")
+        )
     _assert_nothing_written(cat, site_settings)
 
 
@@ -145,7 +153,7 @@ def test_photo_without_metadata(cat, site_settings, synth_site, tmp_path) -> Non
     bad = _raw(mission) / "DJI_20241127000000_9999_D.JPG"
     Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(bad)
     with pytest.raises(PhotoError, match="DJI_20241127000000_9999_D.JPG.*no usable position"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -154,7 +162,7 @@ def test_colmap_model_with_too_few_images(cat, site_settings, synth_site, tmp_pa
     for photo in sorted(_raw(mission).glob("*.JPG"))[2:]:
         photo.unlink()
     with pytest.raises(RegistrationError, match="only 2 images"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -163,7 +171,7 @@ def test_colmap_model_with_collinear_positions(cat, site_settings, synth_site, t
     for photo in sorted(_raw(mission).glob("*.JPG"))[5:]:  # keep the first lawnmower line only
         photo.unlink()
     with pytest.raises(RegistrationError, match="collinear"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -172,7 +180,7 @@ def test_symlink_outside_the_folder(cat, site_settings, synth_site, tmp_path) ->
     (tmp_path / "secret.txt").write_text("not yours")
     os.symlink("../../secret.txt", mission / "lidars" / "escape.txt")
     with pytest.raises(MissionError, match="escape.txt.*outside"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -180,7 +188,7 @@ def test_symlink_to_an_absolute_path(cat, site_settings, synth_site, tmp_path) -
     mission = copy_mission(synth_site, 0, tmp_path)
     os.symlink("/etc/hostname", mission / "hostname")
     with pytest.raises(MissionError, match="absolute path"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -200,7 +208,7 @@ def test_unknown_site(cat, site_settings, synth_site) -> None:
     from sitehelpers import epoch_dirs
 
     with pytest.raises(SiteNotFoundError, match="nowhere.*demo"):
-        ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "nowhere")
+        ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "nowhere")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -208,7 +216,7 @@ def test_two_point_clouds_without_a_preferred_one(cat, site_settings, tmp_path) 
     _flat_las(tmp_path / "m" / "a.las")
     _flat_las(tmp_path / "m" / "b.las")
     with pytest.raises(MissionError, match="several point clouds"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -222,7 +230,7 @@ def test_failure_after_copy_removes_new_blobs(cat, site_settings, synth_site, tm
     from sitehelpers import epoch_dirs
 
     with pytest.raises(RuntimeError, match="disk full"):
-        ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+        ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
     _assert_nothing_written(cat, site_settings)
 
 
@@ -263,7 +271,7 @@ def test_laz_whose_header_count_its_chunks_contradict_is_refused(
         crs="EPSG:2994",
     )
     with pytest.raises(PointCloudError, match="LAZ chunks hold 100,001 to 150,000"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo", opts, workers=2)
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo", opts, workers=2)
     _assert_nothing_written(cat, site_settings)
     open_las(_count_patched(AUTZEN, tmp_path / "ok" / "cloud.laz", 110_000)).close()  # the true count
 
@@ -299,7 +307,7 @@ def test_non_finite_gps_times_never_reach_the_catalog(db_url, tmp_path) -> None:
     write_las(path, xyz, crs="EPSG:32618", classification=np.full(n, 2, np.uint8), gps_time=gps)
     cat = open_catalog(settings)
     opts = IngestOptions(captured_at=dt.datetime(2024, 1, 1, tzinfo=dt.UTC))
-    r = ingest_mission(cat, settings, tmp_path / "m", "demo", opts)
+    r = ingest_mission(StageContext(cat, settings), tmp_path / "m", "demo", opts)
     with cat.transaction() as s:
         scan = scene_statistics(s.get(Scene, r.scene_id)).scan
         raw = s.execute(sa.text("SELECT statistics FROM scene WHERE id = :i"), {"i": r.scene_id}).scalar_one()
@@ -326,8 +334,7 @@ def test_a_laz_whose_count_is_short_by_less_than_its_last_chunk_is_refused(
     when = __import__("datetime").datetime(2020, 1, 1, tzinfo=__import__("datetime").UTC)
     with pytest.raises(PointCloudError, match="cloud.laz.*last LAZ chunk holds more than"):
         ingest_mission(
-            cat,
-            site_settings,
+            StageContext(cat, site_settings),
             tmp_path / "m",
             "demo",
             IngestOptions(captured_at=when, crs="EPSG:2994"),

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from sitehelpers import run_cli
 
+from siteline.catalog.context import StageContext
 from siteline.errors import MissionError
 from siteline.ingest.options import IngestOptions
 from siteline.ingest.stage import ingest_mission
@@ -33,7 +34,7 @@ def _undated_mission(root):
 def test_undated_lidar_only_mission_is_refused_naming_the_las(cat, site_settings, tmp_path) -> None:
     mission, las = _undated_mission(tmp_path / "undated")
     with pytest.raises(MissionError) as err:
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     assert str(las) in str(err.value) and "--captured-at" in str(err.value)
     with pytest.raises(MissionError, match="no time zone"):
         IngestOptions(captured_at=__import__("datetime").datetime(2024, 6, 1, 10))

@@ -13,6 +13,7 @@ from siteline import pipeline
 from siteline.camera.photos import PhotoMeta
 from siteline.camera.pinhole import Camera, undistorted_pinhole
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import Scene, View
 from siteline.catalog.scenes import scene_cameras
 from siteline.records.params.pairs import PairParams
@@ -82,7 +83,10 @@ def test_a_mission_with_a_distorted_colmap_model_goes_to_a_release(tmp_path, syn
     pinhole = undistorted_pinhole(cams[1])
     cat = open_catalog(settings)
     try:
-        scenes = [pipeline.ingest(cat, settings, m, "demo", workers=1).ingest.scene_id for m in missions]
+        scenes = [
+            pipeline.ingest(StageContext(cat, settings), m, "demo", workers=1).ingest.scene_id
+            for m in missions
+        ]
         with cat.transaction() as s:
             reg = s.get(Scene, scenes[1]).registration
             stored = scene_cameras(s, scenes[1])
@@ -99,7 +103,9 @@ def test_a_mission_with_a_distorted_colmap_model_goes_to_a_release(tmp_path, syn
         from siteline.records.params.release import ReleaseKnobs
 
         params = PairParams(scale=0.5, point_size_px=3, views=4, seed=0, min_coverage=0.3, view_params=one)
-        info = pipeline.release(cat, settings, "demo", "distorted", ReleaseKnobs.exactly(params))
+        info = pipeline.release(
+            StageContext(cat, settings), "demo", "distorted", ReleaseKnobs.exactly(params)
+        )
         assert info.items > 0
         with cat.transaction() as s:
             sizes = {(v.camera["width"], v.camera["height"]) for v in s.execute(sa.select(View)).scalars()}

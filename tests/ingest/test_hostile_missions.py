@@ -12,6 +12,7 @@ import pytest
 import sqlalchemy as sa
 from sitehelpers import copy_mission
 
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import Mission
 from siteline.errors import MissionError, PointCloudError
 from siteline.ingest.stage import ingest_mission
@@ -52,7 +53,7 @@ def test_headers_that_lose_or_move_points_are_refused(cat, site_settings, tmp_pa
     las = _mission(tmp_path / "m")
     _patch(las, *patch)
     with pytest.raises(PointCloudError, match=match) as err:
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo", opts=None)
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo", opts=None)
     assert str(las) in str(err.value)
     _nothing(cat)
 
@@ -61,7 +62,7 @@ def test_a_fifo_in_the_mission_is_refused_not_waited_on(cat, site_settings, tmp_
     _mission(tmp_path / "m")
     os.mkfifo(tmp_path / "m" / "pipe")
     with pytest.raises(MissionError, match=r"pipe is a FIFO, not a file"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _nothing(cat)
 
 
@@ -70,12 +71,12 @@ def test_symlink_loops_are_refused_by_name(cat, site_settings, tmp_path) -> None
     os.symlink("b.jpg", tmp_path / "m" / "a.jpg")
     os.symlink("a.jpg", tmp_path / "m" / "b.jpg")
     with pytest.raises(MissionError, match=r"a\.jpg is a symlink loop"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     os.remove(tmp_path / "m" / "a.jpg")
     os.remove(tmp_path / "m" / "b.jpg")
     os.symlink("loop", tmp_path / "m" / "loop")  # a directory-like self loop
     with pytest.raises(MissionError, match=r"loop is a symlink loop"):
-        ingest_mission(cat, site_settings, tmp_path / "m", "demo")
+        ingest_mission(StageContext(cat, site_settings), tmp_path / "m", "demo")
     _nothing(cat)
 
 
@@ -84,6 +85,6 @@ def test_the_upload_marker_is_not_mission_content(cat, site_settings, synth_site
     plain = copy_mission(synth_site, 0, tmp_path / "a")
     marked = copy_mission(synth_site, 0, tmp_path / "b")
     (marked / ".upload-complete").write_text("")
-    first = ingest_mission(cat, site_settings, plain, "demo")
-    again = ingest_mission(cat, site_settings, marked, "demo")
+    first = ingest_mission(StageContext(cat, site_settings), plain, "demo")
+    again = ingest_mission(StageContext(cat, site_settings), marked, "demo")
     assert first.created and not again.created and again.manifest_sha256 == first.manifest_sha256

@@ -16,6 +16,7 @@ from sitehelpers import copy_mission, epoch_dirs, make_home
 
 from siteline.camera.pinhole import Camera
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import Camera as CameraRow
 from siteline.catalog.models import Mission, Pair, Scene
 from siteline.catalog.scenes import get_scene, list_scenes, scene_cameras, tile_source
@@ -41,8 +42,8 @@ def _truth_cameras(site, index):
 
 def test_two_epochs_become_two_scenes_and_a_pair(cat, site_settings, synth_site) -> None:
     e0, e1 = epoch_dirs(synth_site)[:2]
-    r0 = ingest_mission(cat, site_settings, e0, "demo")
-    r1 = ingest_mission(cat, site_settings, e1, "demo")
+    r0 = ingest_mission(StageContext(cat, site_settings), e0, "demo")
+    r1 = ingest_mission(StageContext(cat, site_settings), e1, "demo")
     assert r0.created and r1.created and r1.pairs
     with cat.transaction() as s:
         scenes = list_scenes(s, get_site(s, "demo"))
@@ -52,14 +53,14 @@ def test_two_epochs_become_two_scenes_and_a_pair(cat, site_settings, synth_site)
         assert scenes[0].capture_time < scenes[1].capture_time
         alignment = scenes[1].registration.alignment
         assert alignment is not None and alignment.translation_m < 0.5
-    again = ingest_mission(cat, site_settings, e0, "demo")
+    again = ingest_mission(StageContext(cat, site_settings), e0, "demo")
     assert not again.created and "nothing new" in again.message and again.scene_id == r0.scene_id
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Mission.id))).scalar_one() == 2
 
 
 def test_georegistration_recovers_true_poses(cat, site_settings, synth_site) -> None:
-    r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    r = ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
     assert r.registration.source == "colmap" and (r.registration.rms_m or 1) < 0.01
     truth = _truth_cameras(synth_site, 0)
     with cat.transaction() as s:
@@ -95,7 +96,7 @@ def test_files_are_copied_beside_the_scan_and_appear_only_after_the_checks(
         return scan(*args, **kwargs)
 
     monkeypatch.setattr(stage_mod, "execute_ingest", watched)
-    ingest_mission(cat, site_settings, mission, "demo")
+    ingest_mission(StageContext(cat, site_settings), mission, "demo")
     assert len(during[0]) == n_files and all(".tmp-" in name for name in during[0])
     after = [p.name for p in blobs.rglob("*") if p.is_file()]
     assert len(after) == n_files + 1 and not [name for name in after if ".tmp-" in name]
@@ -105,13 +106,13 @@ def test_copy_store_holds_every_file_and_reference_keeps_paths(
     cat, site_settings, synth_site, tmp_path
 ) -> None:
     mission = epoch_dirs(synth_site)[0]
-    ingest_mission(cat, site_settings, mission, "demo")
+    ingest_mission(StageContext(cat, site_settings), mission, "demo")
     blobs = [p for p in (Path(site_settings.store.url) / "blobs").rglob("*") if p.is_file()]
     n_files = sum(1 for p in mission.rglob("*") if p.is_file())
     assert len(blobs) == n_files + 1  # every file, plus the scene's alignment sample
     other = make_home(tmp_path / "ref", site_dir=synth_site)
     c2 = open_catalog(other)
-    ingest_mission(c2, other, mission, "demo", IngestOptions(storage="reference"))
+    ingest_mission(StageContext(c2, other), mission, "demo", IngestOptions(storage="reference"))
     assert len([p for p in (Path(other.store.url) / "blobs").rglob("*") if p.is_file()]) == 1
     with c2.transaction() as s:
         m = s.execute(sa.select(Mission)).scalar_one()
@@ -122,7 +123,7 @@ def test_copy_store_holds_every_file_and_reference_keeps_paths(
 def test_xmp_poses_without_colmap_model(cat, site_settings, synth_site, tmp_path) -> None:
     mission = copy_mission(synth_site, 0, tmp_path)
     shutil.rmtree(mission / "colmap")
-    r = ingest_mission(cat, site_settings, mission, "demo")
+    r = ingest_mission(StageContext(cat, site_settings), mission, "demo")
     assert r.registration.source == "xmp"
     truth = _truth_cameras(synth_site, 0)
     with cat.transaction() as s:
@@ -148,7 +149,7 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     write_site(site, SynthParams(epochs=1, density_pts_m2=1.0, seed=2, photos=False, colmap=False))
     settings = make_home(tmp_path, site_dir=site)
     cat = open_catalog(settings)
-    r = ingest_mission(cat, settings, epoch_dirs(site)[0], "demo")
+    r = ingest_mission(StageContext(cat, settings), epoch_dirs(site)[0], "demo")
     assert r.created and r.registration.source == "planned"
     survey = r.registration.to_dict()["survey"]
     from siteline.register.planned import SurveyPlan, auto_altitude
@@ -182,7 +183,7 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     # the same cloud and settings plan the same cameras (another home, the same mission)
     again = make_home(tmp_path / "again", site_dir=site)
     cat2 = open_catalog(again)
-    r2 = ingest_mission(cat2, again, epoch_dirs(site)[0], "demo")
+    r2 = ingest_mission(StageContext(cat2, again), epoch_dirs(site)[0], "demo")
     with cat2.transaction() as s:
         assert scene_cameras(s, r2.scene_id) == cams
     cat.dispose()
@@ -204,7 +205,7 @@ def test_extreme_las_scale_and_offset_survive_exactly(tmp_path) -> None:
     exact = np.c_[las.x, las.y, las.z] - np.asarray(origin)
     settings = make_home(tmp_path)
     cat = open_catalog(settings)
-    r = ingest_mission(cat, settings, mission, "demo", DATED)
+    r = ingest_mission(StageContext(cat, settings), mission, "demo", DATED)
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
         assert sc.bounds["min"] == exact.min(axis=0).tolist()
@@ -231,7 +232,7 @@ def test_other_crs_is_transformed_in_float64(tmp_path) -> None:
     )
     settings = make_home(tmp_path)
     cat = open_catalog(settings)
-    r = ingest_mission(cat, settings, mission, "demo", DATED)
+    r = ingest_mission(StageContext(cat, settings), mission, "demo", DATED)
     assert r.scan is not None and r.scan.transformed and r.scan.source_crs == "EPSG:32617"
     with cat.transaction() as s:
         sc = s.get(Scene, r.scene_id)
@@ -255,12 +256,12 @@ def test_a_scene_a_metre_off_is_co_registered_and_corrected(cat, site_settings, 
     lie where the previous scene's do (its ground at the same height)."""
     from siteline.tiles.reader import SceneTiles
 
-    r0 = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
-    r = ingest_mission(cat, site_settings, _dropped(synth_site, tmp_path, 1.0), "demo")
+    r0 = ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
+    r = ingest_mission(StageContext(cat, site_settings), _dropped(synth_site, tmp_path, 1.0), "demo")
     a = r.registration.alignment
     assert a is not None and a.applied and 0.95 < a.translation_m < 1.05 and a.residual_m < 0.05
     for sid in (r0.scene_id, r.scene_id):
-        tile_scene(cat, site_settings, sid, resources=TilingResources(workers=1))
+        tile_scene(StageContext(cat, site_settings), sid, resources=TilingResources(workers=1))
     with cat.transaction() as s:
         stores = [tile_source(s, sid) for sid in (r0.scene_id, r.scene_id)]
     z = [np.median(SceneTiles.from_source(src).points(resolution=1.0).xyz_m[:, 2]) for src in stores]
@@ -270,13 +271,15 @@ def test_a_scene_a_metre_off_is_co_registered_and_corrected(cat, site_settings, 
 def test_a_scene_metres_off_is_refused_unless_accepted_then_recorded_not_applied(
     cat, site_settings, synth_site, tmp_path
 ) -> None:
-    ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
     mission = _dropped(synth_site, tmp_path, 10.0)
     with pytest.raises(RegistrationError, match="cannot be co-registered"):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     with cat.transaction() as s:
         assert s.execute(sa.select(sa.func.count(Scene.id))).scalar_one() == 1
-    r = ingest_mission(cat, site_settings, mission, "demo", IngestOptions(accept_misalignment=True))
+    r = ingest_mission(
+        StageContext(cat, site_settings), mission, "demo", IngestOptions(accept_misalignment=True)
+    )
     a = r.registration.alignment
     assert a is not None and a.accepted and not a.applied
 
@@ -288,7 +291,7 @@ def test_concurrent_ingests_into_postgresql_both_land(tmp_path, synth_site, post
     def run(i: int) -> None:
         cat = open_catalog(settings)
         try:
-            ingest_mission(cat, settings, epoch_dirs(synth_site)[i], "demo")
+            ingest_mission(StageContext(cat, settings), epoch_dirs(synth_site)[i], "demo")
         except Exception as exc:  # collected for the assertion below
             errors.append(exc)
         finally:

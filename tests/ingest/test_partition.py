@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from sitehelpers import copy_mission, epoch_dirs
 
+from siteline.catalog.context import StageContext
 from siteline.errors import RegistrationError
 from siteline.ingest.pointcloud import scan_las
 from siteline.ingest.stage import ingest_mission
@@ -26,28 +27,30 @@ def _kept(settings) -> list[str]:
 def test_tiling_takes_the_partition_ingest_kept_and_writes_the_same_store(
     cat, site_settings, synth_site
 ) -> None:
-    r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    r = ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
     kept = _kept(site_settings)
     assert len(kept) == 1 and not kept[0].startswith(".")
-    first = tile_scene(cat, site_settings, r.scene_id, resources=TilingResources(workers=1)).tiling
+    first = tile_scene(
+        StageContext(cat, site_settings), r.scene_id, resources=TilingResources(workers=1)
+    ).tiling
     assert first is not None and _kept(site_settings) == []  # claimed and removed
     # a re-tiling finds no partition, cuts the file itself, and writes the very same arrays
     again = tile_scene(
-        cat, site_settings, r.scene_id, resources=TilingResources(workers=1), retile=True
+        StageContext(cat, site_settings), r.scene_id, resources=TilingResources(workers=1), retile=True
     ).tiling
     assert again is not None and again.generation == first.generation + 1
     assert again.checksum == first.checksum and again.points == first.points
 
 
 def test_a_failed_ingest_keeps_no_partition(cat, site_settings, synth_site, tmp_path) -> None:
-    ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
+    ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
     kept = _kept(site_settings)
     mission = copy_mission(synth_site, 1, tmp_path)
     las = laspy.read(mission / LAS_RELPATH)
     las.z = np.asarray(las.z) - 10.0  # refused (cannot be co-registered), after the scan
     las.write(mission / LAS_RELPATH)
     with pytest.raises(RegistrationError):
-        ingest_mission(cat, site_settings, mission, "demo")
+        ingest_mission(StageContext(cat, site_settings), mission, "demo")
     assert _kept(site_settings) == kept
 
 
@@ -95,10 +98,14 @@ def test_the_batch_setting_reaches_the_tile_stage(cat, site_settings, synth_site
     assert load_settings({"SITELINE_TILE_BATCH_POINTS": "1_000"}).tile_batch_points == 1000
     with pytest.raises(ConfigError, match="SITELINE_TILE_BATCH_POINTS"):
         load_settings({"SITELINE_TILE_BATCH_POINTS": "lots"})
-    r = ingest_mission(cat, site_settings, epoch_dirs(synth_site)[0], "demo")
-    first = tile_scene(cat, site_settings, r.scene_id, resources=TilingResources(workers=1)).tiling
+    r = ingest_mission(StageContext(cat, site_settings), epoch_dirs(synth_site)[0], "demo")
+    first = tile_scene(
+        StageContext(cat, site_settings), r.scene_id, resources=TilingResources(workers=1)
+    ).tiling
     small = replace(site_settings, tile_batch_points=2_000)  # every tile in batches
-    again = tile_scene(cat, small, r.scene_id, resources=TilingResources(workers=1), retile=True).tiling
+    again = tile_scene(
+        StageContext(cat, small), r.scene_id, resources=TilingResources(workers=1), retile=True
+    ).tiling
     assert first is not None and again is not None and again.checksum == first.checksum
 
 

@@ -15,6 +15,7 @@ from sitehelpers import SYNTH, copy_mission, make_home
 
 import siteline.ingest.stage as stage
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import MissionFile, Scene
 from siteline.catalog.sites import add_site
 from siteline.ingest.stage import ingest_mission
@@ -87,7 +88,7 @@ def _race(cat, site_settings, synth_site, tmp_path, monkeypatch, b_records_first
 
     def run(name: str, mission: Path, site: str) -> None:
         try:
-            outcome[name] = ingest_mission(cat, site_settings, mission, site, workers=1)
+            outcome[name] = ingest_mission(StageContext(cat, site_settings), mission, site, workers=1)
         except BaseException as exc:  # noqa: BLE001 - handed to the test thread
             outcome[name] = exc
 

@@ -10,6 +10,7 @@ import pytest
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.labels.accuracy import accuracy_text, density_of_spacing, measured_for
 from siteline.records.params.pairs import PairParams
 from siteline.release.datasheet import _radius_lines
@@ -29,7 +30,7 @@ def test_surface_labels_beat_the_nearest_rule_against_analytic_truth(tmp_path: P
             ("default", base),
             ("nearest", replace(base, label_rule="nearest", min_region_points=1)),
         ):
-            out = pipeline.process_pairs(cat, settings, [pid], params)[pid]
+            out = pipeline.process_pairs(StageContext(cat, settings), [pid], params)[pid]
             scores[name] = score_pair(settings.store, out.root, site_dir, (0, 1))
     finally:
         cat.dispose()

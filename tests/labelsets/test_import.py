@@ -15,6 +15,7 @@ import pytest
 from sitehelpers import run_cli
 
 from labelsets.edits import centre_box, export, shuffled, versions
+from siteline.catalog.context import StageContext
 from siteline.catalog.labelsets import label_set
 from siteline.errors import LabelSetError, PointCloudError
 from siteline.labelsets.stage import ImportOptions, import_labels
@@ -109,7 +110,9 @@ def test_region_export_is_corrected_alone(scenes, tmp_path) -> None:
     region.classification = cls
     region.write(tmp_path / "region_fixed.laz")
 
-    res = import_labels(cat, settings, 1, tmp_path / "region_fixed.laz", ImportOptions(note="formwork"))
+    res = import_labels(
+        StageContext(cat, settings), 1, tmp_path / "region_fixed.laz", ImportOptions(note="formwork")
+    )
     assert res.created and res.parent_version == parent
     assert res.matched == len(region.points) and res.untouched == len(full.points) - len(region.points)
     assert res.changed == int(target.sum())
@@ -140,11 +143,16 @@ def test_taxonomy_map_reads_another_coding(scenes, tmp_path) -> None:
     mapping = {str(v): k for k, v in site_to_asprs.items()}
     (tmp_path / "map.json").write_text(json.dumps(mapping))
     with pytest.raises(LabelSetError, match=r"class codes \[.*65.*\].*--taxonomy-map"):
-        import_labels(cat, settings, 2, tmp_path / "s2_asprs.las")  # ASPRS codes read as site ids
+        import_labels(
+            StageContext(cat, settings), 2, tmp_path / "s2_asprs.las"
+        )  # ASPRS codes read as site ids
     from siteline.labelsets.mapping import read_taxonomy_map
 
     res = import_labels(
-        cat, settings, 2, tmp_path / "s2_asprs.las", ImportOptions(read_taxonomy_map(tmp_path / "map.json"))
+        StageContext(cat, settings),
+        2,
+        tmp_path / "s2_asprs.las",
+        ImportOptions(read_taxonomy_map(tmp_path / "map.json")),
     )
     assert res.changed == int(edit.sum()) and res.changes == {"ground->building": int(edit.sum())}
 
@@ -197,7 +205,7 @@ def _store_listing(settings, scene_id: int) -> list[str]:  # noqa: ANN001
 def _refused(cat, settings, path: Path, error, match: str, **kw) -> None:  # noqa: ANN001
     before, listing = versions(cat, 1), _store_listing(settings, 1)
     with pytest.raises(error, match=match):
-        import_labels(cat, settings, 1, path, ImportOptions(**kw))
+        import_labels(StageContext(cat, settings), 1, path, ImportOptions(**kw))
     assert versions(cat, 1) == before
     assert _store_listing(settings, 1) == listing
     assert not list((settings.home / "tmp").glob("labels-scene-*"))
@@ -244,7 +252,7 @@ def test_bad_files_are_refused_and_leave_nothing(scenes, tmp_path) -> None:
         few.header.scales, few.header.offsets,
     )  # fmt: skip
     few.write(tmp_path / "few.las")
-    res = import_labels(cat, settings, 1, tmp_path / "few.las")
+    res = import_labels(StageContext(cat, settings), 1, tmp_path / "few.las")
     assert res.duplicated == 3 and res.created and res.changed == 10
 
     bad = laspy.read(tmp_path / "scene1.las")
@@ -280,7 +288,7 @@ def test_a_label_set_of_another_tiling_is_refused(scenes, tmp_path) -> None:
     cls[np.flatnonzero((cls != 255) & (cls != 8))[:5]] = 8
     las.classification = cls
     las.write(tmp_path / "s2_fixed.las")
-    res = import_labels(cat, settings, 2, tmp_path / "s2_fixed.las")
+    res = import_labels(StageContext(cat, settings), 2, tmp_path / "s2_fixed.las")
     with cat.transaction() as s:
         scene = s.get(Scene, 2)
         saved = scene.statistics
@@ -329,11 +337,11 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
     write_las(mission / "cloud.las", local + np.asarray(origin), crs="EPSG:32618",
               classification=np.full(len(local), 2, np.uint8), scale=0.0001)  # fmt: skip
     when = dt.datetime(2024, 6, 1, tzinfo=dt.UTC)
-    r = ingest_mission(cat, settings, mission, "fenced", IngestOptions(captured_at=when))
-    tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
+    r = ingest_mission(StageContext(cat, settings), mission, "fenced", IngestOptions(captured_at=when))
+    tile_scene(StageContext(cat, settings), r.scene_id, resources=TilingResources(workers=1))
     assert r.scan is not None and r.scan.outside_fence == 0
     export(cat, r.scene_id, tmp_path / "unchanged.las")
-    res = import_labels(cat, settings, r.scene_id, tmp_path / "unchanged.las")
+    res = import_labels(StageContext(cat, settings), r.scene_id, tmp_path / "unchanged.las")
     assert not res.created and res.changed == 0, res
     assert versions(cat, r.scene_id) == [1]
     cat.dispose()

@@ -12,6 +12,7 @@ from sitehelpers import manifest_doc, run_cli
 
 from labelsets.edits import centre_box, export, versions
 from siteline import pipeline
+from siteline.catalog.context import StageContext
 from siteline.errors import ImmutableError, LabelSetError
 from siteline.labelsets.stage import ImportOptions, import_labels
 from siteline.records.params.pairs import PairParams
@@ -29,7 +30,11 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     settings, cat = scenes
     pinned = {1: versions(cat, 1)[-1], 2: versions(cat, 2)[-1]}
     first = pipeline.release(
-        cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(label_sets=pinned, publish=True)
+        StageContext(cat, settings),
+        "demo",
+        "lab",
+        KNOBS,
+        options=ReleaseOptions(label_sets=pinned, publish=True),
     )
     assert first.version == "1.0.0"
 
@@ -39,10 +44,14 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     cls[edit] = 5  # a fleet of vehicles appears in the correction
     las.classification = cls
     las.write(tmp_path / "s1_fixed.las")
-    new = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las", ImportOptions(note="vehicles"))
+    new = import_labels(
+        StageContext(cat, settings), 1, tmp_path / "s1_fixed.las", ImportOptions(note="vehicles")
+    )
     assert new.created
 
-    second = pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(publish=True))
+    second = pipeline.release(
+        StageContext(cat, settings), "demo", "lab", KNOBS, options=ReleaseOptions(publish=True)
+    )
     assert second.version == "2.0.0"  # a label set changed: major bump
     lineage = manifest_doc(second.root)["lineage"]
     scenes_ = {sc["id"]: sc for sc in lineage["scenes"]}
@@ -60,7 +69,9 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     assert second.reason == f"scene 1 label set v{pinned[1]} -> v{new.version}"
     # the same inputs again: nothing is built or published, the latest version is up to date
     before = sorted((settings.home / "releases").rglob("*"))
-    third = pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(publish=True))
+    third = pipeline.release(
+        StageContext(cat, settings), "demo", "lab", KNOBS, options=ReleaseOptions(publish=True)
+    )
     assert (third.version, third.status, third.up_to_date) == ("2.0.0", "published", True)
     assert sorted((settings.home / "releases").rglob("*")) == before
 
@@ -76,8 +87,10 @@ def test_release_uses_new_label_set_and_bumps_major(scenes, tmp_path, capsys, mo
     code, out, _ = run_cli(capsys, "release", "verify", "lab", "1.0.0")
     assert code == 0
     with pytest.raises(ImmutableError):
-        publish_release(cat, settings, "lab", "2.0.0")
+        publish_release(StageContext(cat, settings), "lab", "2.0.0")
 
     # pinning a version that does not exist is refused before anything is built
     with pytest.raises(LabelSetError, match="no label-set version 42"):
-        pipeline.release(cat, settings, "demo", "lab", KNOBS, options=ReleaseOptions(label_sets={1: 42}))
+        pipeline.release(
+            StageContext(cat, settings), "demo", "lab", KNOBS, options=ReleaseOptions(label_sets={1: 42})
+        )

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from siteline.catalog.context import StageContext
+
 
 @pytest.fixture(scope="module")
 def harness(tmp_path_factory):
@@ -152,7 +154,7 @@ def test_full_chain_to_a_published_release(harness, small_site, tmp_path, monkey
     cls[(cls != 255) & (cls != 5)] = 5
     las.classification = cls
     las.write(tmp_path / "s1_fixed.las")
-    res = import_labels(cat, settings, 1, tmp_path / "s1_fixed.las")
+    res = import_labels(StageContext(cat, settings), 1, tmp_path / "s1_fixed.las")
     cat.dispose()
     event = imported_event(1, res.version, "demo")
     post_events(PREFECT_API_URL.value(), [event])
@@ -175,7 +177,7 @@ def test_retry_then_success_and_permanent_failure_recorded(
 
     settings = _home(tmp_path, small_site, monkeypatch)
     cat = open_catalog(settings)
-    sid = ingest_mission(cat, settings, _missions(small_site)[0], "demo").scene_id
+    sid = ingest_mission(StageContext(cat, settings), _missions(small_site)[0], "demo").scene_id
     real = tiles_pkg.tile_scene
     calls = {"n": 0}
 
@@ -189,7 +191,7 @@ def test_retry_then_success_and_permanent_failure_recorded(
     assert pipeline.tile_scene_flow(sid).points > 0
     assert calls["n"] == 2
 
-    sid2 = ingest_mission(cat, settings, _missions(small_site)[1], "demo").scene_id
+    sid2 = ingest_mission(StageContext(cat, settings), _missions(small_site)[1], "demo").scene_id
 
     def broken(*a, **k):
         raise OSError("store unreachable")
@@ -263,7 +265,7 @@ def test_dask_workers_sharing_only_catalog_and_object_store_match_threads(
             monkeypatch.setenv("SITELINE_STORE_URL", s3_store)
         cat = open_catalog(settings)
         for m in _missions(small_site):
-            ingest_mission(cat, settings, m, "demo")
+            ingest_mission(StageContext(cat, settings), m, "demo")
         cat.dispose()
         if kind == "dask":
             worker_home = tmp_path / "worker-home"
@@ -323,7 +325,7 @@ def test_an_expected_failure_is_logged_without_a_traceback(
 
     settings = _home(tmp_path, small_site, monkeypatch)
     cat = open_catalog(settings)
-    sid = ingest_mission(cat, settings, _missions(small_site)[0], "demo").scene_id
+    sid = ingest_mission(StageContext(cat, settings), _missions(small_site)[0], "demo").scene_id
     cat.dispose()
     records: list[logging.LogRecord] = []
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from siteline.catalog.context import StageContext
 from siteline.pairs.stage import process_pair
 from siteline.records.params.pairs import PairParams
 
@@ -21,7 +22,7 @@ def test_low_valid_views_are_replaced(scenes, monkeypatch) -> None:
     from siteline.views import generate
 
     settings, cat = scenes
-    loose = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=0.0))
+    loose = process_pair(StageContext(cat, settings), 1, PairParams(**BASE, min_valid=0.0))
     valid = sorted(v.valid for v in loose.views)
     threshold = (valid[0] + valid[1]) / 2  # the least valid view falls under it
     # the probes judge min_valid before any render; with them passing every view, the rendered check
@@ -30,7 +31,7 @@ def test_low_valid_views_are_replaced(scenes, monkeypatch) -> None:
     monkeypatch.setattr(
         generate, "probe", lambda view, source, params: judged(view, source, replace(params, min_valid=0.0))
     )
-    strict = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=threshold))
+    strict = process_pair(StageContext(cat, settings), 1, PairParams(**BASE, min_valid=threshold))
     monkeypatch.undo()
     assert strict.root != loose.root
     assert all(v.valid >= threshold for v in strict.views)
@@ -43,7 +44,9 @@ def test_low_valid_views_are_replaced(scenes, monkeypatch) -> None:
             assert (Path(strict.root) / sub / v.file).is_file()
     assert sorted(p.name for p in (Path(strict.root) / "A").iterdir()) == [v.file for v in strict.views]
     # as released: the probes turn the view down first, or the render does; either way it is replaced
-    probed = process_pair(cat, settings, 1, PairParams(**BASE, min_valid=threshold * (1 - 1e-9)))
+    probed = process_pair(
+        StageContext(cat, settings), 1, PairParams(**BASE, min_valid=threshold * (1 - 1e-9))
+    )
     rejected = json.loads((Path(probed.root) / "summary.json").read_text())["rejected"]
     assert rejected.get("low_valid_probe", 0) + rejected.get("low_valid", 0) >= 1, rejected
     assert len(probed.views) == BASE["views"] and all(v.valid >= threshold * (1 - 1e-9) for v in probed.views)

@@ -8,6 +8,7 @@ from sitehelpers import epoch_dirs, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.ingest.stage import ingest_mission
 from siteline.pointpass import TilingResources
 from siteline.records.params.pairs import PairParams
@@ -24,9 +25,9 @@ def built(tmp_path_factory, synth_site):
     settings = make_home(tmp_path_factory.mktemp("release"), site_dir=synth_site)
     cat = open_catalog(settings)
     for m in epoch_dirs(synth_site):
-        r = ingest_mission(cat, settings, m, "demo")
-        tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
-    info = pipeline.release(cat, settings, "demo", "rel", KNOBS)
-    pub = publish_release(cat, settings, "rel", info.version)
+        r = ingest_mission(StageContext(cat, settings), m, "demo")
+        tile_scene(StageContext(cat, settings), r.scene_id, resources=TilingResources(workers=1))
+    info = pipeline.release(StageContext(cat, settings), "demo", "rel", KNOBS)
+    pub = publish_release(StageContext(cat, settings), "rel", info.version)
     yield settings, cat, pub
     cat.dispose()

@@ -8,6 +8,7 @@ from sitehelpers import epoch_dirs, ingest_and_tile, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.errors import ReleaseError
 from siteline.ingest.stage import ingest_mission
 from siteline.release.stage import publish_release
@@ -20,10 +21,10 @@ def test_a_draft_whose_pair_was_superseded_is_not_published(tmp_path, synth_site
     cat = open_catalog(settings)
     e0, e1, e2 = epoch_dirs(synth_site)
     ingest_and_tile(cat, settings, [e0, e2])
-    draft = pipeline.release(cat, settings, "demo", "race", KNOBS)  # the pair e00 -> e02
-    ingest_mission(cat, settings, e1, "demo")  # the middle scene lands before the publish
+    draft = pipeline.release(StageContext(cat, settings), "demo", "race", KNOBS)  # the pair e00 -> e02
+    ingest_mission(StageContext(cat, settings), e1, "demo")  # the middle scene lands before the publish
     with pytest.raises(ReleaseError, match="superseded since.*Build it again"):
-        publish_release(cat, settings, "race", draft.version)
+        publish_release(StageContext(cat, settings), "race", draft.version)
     assert not (settings.home / "releases" / "race" / draft.version).exists()
     cat.dispose()
 
@@ -40,16 +41,16 @@ def test_a_publish_racing_the_ingest_of_a_middle_scene_is_refused_when_it_is_rec
     cat = open_catalog(settings)
     e0, e1, e2 = epoch_dirs(synth_site)
     ingest_and_tile(cat, settings, [e0, e2])
-    draft = pipeline.release(cat, settings, "demo", "race", KNOBS)
+    draft = pipeline.release(StageContext(cat, settings), "demo", "race", KNOBS)
     moved = stage.move_into_place
 
     def move_then_ingest(plan):  # noqa: ANN001, ANN202  (the window: checksums verified, folder renamed)
         moved(plan)
-        ingest_mission(cat, settings, e1, "demo")
+        ingest_mission(StageContext(cat, settings), e1, "demo")
 
     monkeypatch.setattr(stage, "move_into_place", move_then_ingest)
     with pytest.raises(ReleaseError, match="superseded since.*Build it again"):
-        publish_release(cat, settings, "race", draft.version)
+        publish_release(StageContext(cat, settings), "race", draft.version)
     assert not (settings.home / "releases" / "race" / draft.version).exists()
     assert (settings.home / "releases" / "race" / ".drafts" / draft.version / "manifest.json").exists()
     with cat.transaction() as s:
@@ -78,10 +79,13 @@ def test_an_ingest_committing_inside_the_publish_waits_for_it_on_both_engines(
     cat = open_catalog(settings)
     e0, e1, e2 = epoch_dirs(synth_site)
     ingest_and_tile(cat, settings, [e0, e2])
-    draft = pipeline.release(cat, settings, "demo", "race", KNOBS)
+    draft = pipeline.release(StageContext(cat, settings), "demo", "race", KNOBS)
     events: list[str] = []
     ingest = threading.Thread(
-        target=lambda: (ingest_mission(cat, settings, e1, "demo"), events.append("ingest committed"))
+        target=lambda: (
+            ingest_mission(StageContext(cat, settings), e1, "demo"),
+            events.append("ingest committed"),
+        )
     )
     checked = releases.refuse_superseded
 
@@ -93,7 +97,7 @@ def test_an_ingest_committing_inside_the_publish_waits_for_it_on_both_engines(
 
     monkeypatch.setattr(releases, "refuse_superseded", check_then_let_the_ingest_run)
     try:
-        publish_release(cat, settings, "race", draft.version)
+        publish_release(StageContext(cat, settings), "race", draft.version)
         events.append("publish committed")
     finally:
         ingest.join(timeout=120)

@@ -15,6 +15,7 @@ from sitehelpers import epoch_dirs, make_home, manifest_doc, writable_copy
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import Pair, Release, Render, Scene
 from siteline.catalog.releases import query_items
 from siteline.catalog.sites import add_site
@@ -153,7 +154,7 @@ def test_a_publish_killed_after_its_record_is_finished_by_the_next_publish(built
     files = [p for p in root.rglob("*") if p.is_file()]
     for p in [root, *files]:
         os.chmod(p, 0o755 if p.is_dir() else 0o644)
-    info = publish_release(cat, settings, "rel", pub.version)
+    info = publish_release(StageContext(cat, settings), "rel", pub.version)
     assert info.version == pub.version
     assert not any(p.stat().st_mode & 0o222 for p in [root, *files])
 
@@ -164,19 +165,25 @@ def test_published_release_is_read_only_and_never_republished(built, monkeypatch
     assert not os.access(some, os.W_OK) or os.geteuid() == 0  # root ignores permission bits
     assert not (some.stat().st_mode & 0o222)
     with pytest.raises(ImmutableError, match="already published"):
-        publish_release(cat, settings, "rel", "1.0.0")
-    same = pipeline.release(cat, settings, "demo", "rel", KNOBS, options=ReleaseOptions(version="1.0.0"))
+        publish_release(StageContext(cat, settings), "rel", "1.0.0")
+    same = pipeline.release(
+        StageContext(cat, settings), "demo", "rel", KNOBS, options=ReleaseOptions(version="1.0.0")
+    )
     assert same.up_to_date and same.status == "published" and same.manifest_sha256 == pub.manifest_sha256
     with pytest.raises(ImmutableError, match="already published"):  # other inputs under that version
         with cat.transaction() as s:
             choice = choose_release(s, "demo", "rel", KNOBS, ReleaseOptions(version="1.0.0"))
         other = replace(choice, params=ReleaseParams(replace(PARAMS, seed=9)))
-        build_release(cat, settings, "demo", "rel", other, options=ReleaseOptions(version="1.0.0"))
+        build_release(
+            StageContext(cat, settings), "demo", "rel", other, options=ReleaseOptions(version="1.0.0")
+        )
     # other parameters under that version are refused before any pair is processed
     monkeypatch.setattr(pipeline, "process_pairs", lambda *a, **k: pytest.fail("a pair was processed"))
     other_knobs = ReleaseKnobs.exactly(replace(PARAMS, seed=9))
     with pytest.raises(ImmutableError, match=r"1\.0\.0 is already published .*\(other params\)"):
-        pipeline.release(cat, settings, "demo", "rel", other_knobs, options=ReleaseOptions(version="1.0.0"))
+        pipeline.release(
+            StageContext(cat, settings), "demo", "rel", other_knobs, options=ReleaseOptions(version="1.0.0")
+        )
     with pytest.raises(ImmutableError), cat.transaction() as s:
         rel = s.query(Release).filter_by(name="rel", version="1.0.0").one()
         rel.parameters = {}
@@ -188,20 +195,19 @@ def test_bad_requests_write_nothing(built) -> None:
         add_site(s, make_site_spec("lonely", "EPSG:32618", (0.0, 0.0, 0.0)))
     before = {p for p in (settings.home / "releases").rglob("*")}
     with pytest.raises(ReleaseError, match="0 scene"):
-        pipeline.release(cat, settings, "lonely", "x", KNOBS)
+        pipeline.release(StageContext(cat, settings), "lonely", "x", KNOBS)
     with cat.transaction() as s:
         pid = s.query(Pair).first().id
     with pytest.raises(ReleaseError, match="belongs to site demo"):
         pipeline.release(
-            cat,
-            settings,
+            StageContext(cat, settings),
             "lonely2" if False else "lonely",
             "x",
             KNOBS,
             options=ReleaseOptions(pair_ids=[pid]),
         )
     with pytest.raises(NotFoundError):
-        publish_release(cat, settings, "nope", "1.0.0")
+        publish_release(StageContext(cat, settings), "nope", "1.0.0")
     assert {p for p in (settings.home / "releases").rglob("*")} == before
     with cat.transaction() as s:
         assert s.query(Release).filter_by(name="x").count() == 0
@@ -211,14 +217,13 @@ def test_bad_requests_write_nothing(built) -> None:
 def test_new_parameters_bump_the_major_version_and_diff(built) -> None:
     settings, cat, pub = built
     info = pipeline.release(
-        cat,
-        settings,
+        StageContext(cat, settings),
         "demo",
         "rel",
         ReleaseKnobs.exactly(PairParams(scale=0.5, point_size_px=3, views=4, seed=1, min_coverage=0.3)),
     )
     assert info.version == "2.0.0" and info.status == "draft"
-    publish_release(cat, settings, "rel", "2.0.0")
+    publish_release(StageContext(cat, settings), "rel", "2.0.0")
     with cat.transaction() as s:
         d = diff_releases(s, "rel", "1.0.0", "2.0.0")
     assert d["parameters"]["views"] == [6, 4] and d["parameters"]["seed"] == [0, 1]
@@ -323,10 +328,12 @@ def test_preset_is_applied_and_recorded(built) -> None:
     # fast's scale (0.125, for ~5645 px photos) gives 83 x 62 px renders of these 660 px cameras: refused
     before = sorted((settings.home / "releases").rglob("*"))
     with pytest.raises(ReleaseError, match=r"83 x 62 px .* under the 256 px floor: use --scale 0.39"):
-        pipeline.release(cat, settings, "demo", "presetrel", ReleaseKnobs(preset="fast", pair={"views": 3}))
+        pipeline.release(
+            StageContext(cat, settings), "demo", "presetrel", ReleaseKnobs(preset="fast", pair={"views": 3})
+        )
     assert sorted((settings.home / "releases").rglob("*")) == before
     knobs = ReleaseKnobs(preset="fast", pair={"scale": 0.5, "views": 3, "min_coverage": 0.2})
-    info = pipeline.release(cat, settings, "demo", "presetrel", knobs)
+    info = pipeline.release(StageContext(cat, settings), "demo", "presetrel", knobs)
     lin = manifest_doc(info.root)["lineage"]
     assert lin["preset"] == "fast" and lin["parameters"]["lod_factor"] == PRESETS["fast"]["lod_factor"]
     assert (lin["parameters"]["scale"], lin["parameters"]["point_size_px"]) == (
@@ -343,10 +350,10 @@ def test_release_on_s3_matches_the_local_one(built, tmp_path, synth_site, s3_sto
     cat = open_catalog(settings)
     try:
         for m in epoch_dirs(synth_site)[:2]:
-            r = ingest_mission(cat, settings, m, "demo")
-            tile_scene(cat, settings, r.scene_id, resources=TilingResources(workers=1))
-        info = pipeline.release(cat, settings, "demo", "rel", KNOBS)
-        pub = publish_release(cat, settings, "rel", info.version)
+            r = ingest_mission(StageContext(cat, settings), m, "demo")
+            tile_scene(StageContext(cat, settings), r.scene_id, resources=TilingResources(workers=1))
+        info = pipeline.release(StageContext(cat, settings), "demo", "rel", KNOBS)
+        pub = publish_release(StageContext(cat, settings), "rel", info.version)
         with cat.transaction() as s:
             uris = [sc.tile_store_uri for sc in s.execute(sa.select(Scene)).scalars()]
             paths = [r.paths["image"] for r in s.execute(sa.select(Render)).scalars()]

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from siteline import pipeline
+from siteline.catalog.context import StageContext
 from siteline.errors import ReleaseError
 from siteline.release.export import export_release
 
@@ -162,7 +163,7 @@ def _killed(settings, target: str, *argv: str) -> None:
 def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     settings, cat, _ = built
     for name in ("crash-a", "crash-b"):
-        pipeline.release(cat, settings, "demo", name, KNOBS)
+        pipeline.release(StageContext(cat, settings), "demo", name, KNOBS)
     # killed after the move, before the catalog recorded it: the next publish finishes it
     _killed(settings, "record_published", "release", "publish", "crash-a", "1.0.0")
     final = settings.home / "releases" / "crash-a" / "1.0.0"
@@ -186,7 +187,7 @@ def test_a_killed_publish_or_rebuild_is_mended_by_name(built) -> None:
     assert _exe(settings, "release", "verify", "crash-b", "1.0.0").returncode == 0
     # a draft rebuilt with fewer items (one pair of two), killed before its rows: publish refuses,
     # repair removes it
-    pipeline.release(cat, settings, "demo", "crash-c", KNOBS)
+    pipeline.release(StageContext(cat, settings), "demo", "crash-c", KNOBS)
     fewer = ["release", "build", "--site", "demo", "--name", "crash-c", "--version", "1.0.0", "--scale", "0.5",
              "--point-size", "3", "--views", "6", "--min-coverage", "0.3", "--pairs", "1"]  # fmt: skip
     _killed(settings, "record_draft", *fewer)

@@ -10,6 +10,7 @@ from sitehelpers import epoch_dirs, ingest_and_tile, make_home
 
 from siteline import pipeline
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.release.stage import publish_release
 
 from .conftest import KNOBS
@@ -25,10 +26,12 @@ def test_added_pairs_are_a_minor_version_and_move_no_item(tmp_path, synth_site) 
     e0, e1, e2 = epoch_dirs(synth_site)
     ingest_and_tile(cat, settings, [e0, e1])
     first = publish_release(
-        cat, settings, "ver", pipeline.release(cat, settings, "demo", "ver", KNOBS).version
+        StageContext(cat, settings),
+        "ver",
+        pipeline.release(StageContext(cat, settings), "demo", "ver", KNOBS).version,
     )
     ingest_and_tile(cat, settings, [e2])
-    second = pipeline.release(cat, settings, "demo", "ver", KNOBS)
+    second = pipeline.release(StageContext(cat, settings), "demo", "ver", KNOBS)
     assert second.version == "1.1.0" and second.reason.startswith("new items only (pairs added: 2")
     a, b = _manifest(first), _manifest(second)
     before = {it["id"]: it["split"] for it in a["items"]}
@@ -38,7 +41,7 @@ def test_added_pairs_are_a_minor_version_and_move_no_item(tmp_path, synth_site) 
     files_b = {f["path"]: f["sha256"] for f in b["files"]}
     assert all(files_b[p] == h for p, h in files_a.items() if p.endswith(".png") and "montage" not in p)
     assert {it["pair"] for it in b["items"]} == {1, 2}
-    published = publish_release(cat, settings, "ver", second.version)
+    published = publish_release(StageContext(cat, settings), "ver", second.version)
     from siteline.release.query import diff_releases
 
     with cat.transaction() as s:

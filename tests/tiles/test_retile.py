@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline.catalog import open_catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.models import Scene
 from siteline.catalog.scenes import tile_source
 from siteline.pairs.stage import find_pair_output, process_pair
@@ -47,15 +48,20 @@ def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
 
     settings = make_home(tmp_path, site_dir=synth_site)
     cat = open_catalog(settings)
-    ids = [ingest_mission(cat, settings, m, "demo").scene_id for m in epoch_dirs(synth_site)[:2]]
+    ids = [
+        ingest_mission(StageContext(cat, settings), m, "demo").scene_id for m in epoch_dirs(synth_site)[:2]
+    ]
     tile_scene(
-        cat, settings, ids[0], resources=TilingResources(workers=1), spec=TileSpec(node_order="input")
+        StageContext(cat, settings),
+        ids[0],
+        resources=TilingResources(workers=1),
+        spec=TileSpec(node_order="input"),
     )  # as an old store
-    tile_scene(cat, settings, ids[1], resources=TilingResources(workers=1))
-    before = process_pair(cat, settings, 1, PARAMS)
+    tile_scene(StageContext(cat, settings), ids[1], resources=TilingResources(workers=1))
+    before = process_pair(StageContext(cat, settings), 1, PARAMS)
     old_uri, old_points = _points(cat, ids[0])
 
-    hint = tile_scene(cat, settings, ids[0]).message
+    hint = tile_scene(StageContext(cat, settings), ids[0]).message
     assert "nothing to do" in hint and f"`siteline scene tile {ids[0]} --retile`" in hint
 
     done = _exe(settings, "scene", "tile", str(ids[0]), "--retile")
@@ -67,7 +73,7 @@ def test_retile_swaps_in_the_current_layout(tmp_path, synth_site) -> None:
         stats = s.get(Scene, ids[0]).statistics["tiles"]
     assert stats["spec"]["node_order"] == "reversed-morton" and stats["generation"] == 1
 
-    again = tile_scene(cat, settings, ids[0]).message
+    again = tile_scene(StageContext(cat, settings), ids[0]).message
     assert "nothing to do" in again and "--retile" not in again
 
     # outputs aligned with the old order are not reused (process_pair makes new ones); they stay for old releases

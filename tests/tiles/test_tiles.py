@@ -15,6 +15,7 @@ import pyproj
 import pytest
 
 from siteline.camera.pinhole import Camera
+from siteline.catalog.context import StageContext
 from siteline.errors import TileError
 from siteline.pointpass import TilingResources, write_las
 from siteline.records.params.render import RenderParams
@@ -305,7 +306,7 @@ def _ingested_home(tmp_path, synth_dir, name):
 
     settings = make_home(tmp_path / name, site_dir=synth_dir)
     cat = open_catalog(settings)
-    ids = [ingest_mission(cat, settings, m, "demo").scene_id for m in epoch_dirs(synth_dir)[:2]]
+    ids = [ingest_mission(StageContext(cat, settings), m, "demo").scene_id for m in epoch_dirs(synth_dir)[:2]]
     cat.dispose()
     return settings, ids
 
@@ -338,12 +339,12 @@ def test_killed_writer_leaves_nothing_and_rerun_matches(tmp_path, synth_dir) -> 
     cat = open_catalog(settings)
     with cat.transaction() as s:
         assert s.get(Scene, sid).status == "registered" and s.get(Scene, sid).tile_store_uri is None
-    rerun = tile_scene(cat, settings, sid, resources=TilingResources(workers=1)).tiling
+    rerun = tile_scene(StageContext(cat, settings), sid, resources=TilingResources(workers=1)).tiling
     assert not [p for p in tiles_dir.iterdir() if p.name.startswith(".")]  # stale partials were cleared
     cat.dispose()
     clean_settings, (sid2, _) = _ingested_home(tmp_path, synth_dir, "b")
     cat2 = open_catalog(clean_settings)
-    clean = tile_scene(cat2, clean_settings, sid2, resources=TilingResources(workers=1)).tiling
+    clean = tile_scene(StageContext(cat2, clean_settings), sid2, resources=TilingResources(workers=1)).tiling
     cat2.dispose()
     assert rerun.checksum == clean.checksum and rerun.points == clean.points
 

@@ -11,6 +11,7 @@ import numpy as np
 import typer
 
 from siteline.catalog import Catalog, open_catalog, store_roots
+from siteline.catalog.context import StageContext
 from siteline.catalog.engine import make_engine
 from siteline.catalog.releases import get_release, list_releases
 from siteline.catalog.sites import add_site, get_site, scene_count, site_record
@@ -65,7 +66,9 @@ def _release(cat: Catalog, cfg: Settings, site_name: str) -> tuple[Path, str]:
         if published:
             console.print(f"release {DEMO_RELEASE} {published[-1].version} already published: reusing it")
             return Path(str(published[-1].root_uri)), published[-1].version
-    pub = pipeline.release(cat, cfg, site_name, DEMO_RELEASE, options=ReleaseOptions(publish=True))
+    pub = pipeline.release(
+        StageContext(cat, cfg), site_name, DEMO_RELEASE, options=ReleaseOptions(publish=True)
+    )
     console.print(f"release {DEMO_RELEASE} {pub.version}: {pub.reason}")
     return Path(pub.root), pub.version
 
@@ -114,7 +117,7 @@ def demo(
         _site(cat, site_name, synth_dir, synth.origin, synth.crs)
         console.rule("3. ingest and tile")
         for e in epochs_doc:
-            done = pipeline.ingest(cat, cfg, synth_dir / e["mission_dir"], site_name)
+            done = pipeline.ingest(StageContext(cat, cfg), synth_dir / e["mission_dir"], site_name)
             console.print(f"  {done.ingest.message}")
         console.rule("4. release")
         root, version = _release(cat, cfg, site_name)

@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 
 from siteline.camera.photos import read_photo_meta
+from siteline.catalog.context import StageContext
 from siteline.catalog.missions import list_missions
 from siteline.catalog.pairs import list_pairs
 from siteline.catalog.scenes import scene_record, scene_table
@@ -135,7 +136,9 @@ def ingest(
         unmapped_codes=unmapped_codes,
     )
     with catalog() as cat, progress_bars(as_json, "bytes") as bars:
-        done = pipeline.ingest(cat, settings(), mission_dir, site, opts, workers=workers, progress=bars)
+        done = pipeline.ingest(
+            StageContext(cat, settings(), progress=bars), mission_dir, site, opts, workers=workers
+        )
     emit(as_json, done.to_dict(), lambda: console.print(done.summary()))
 
 
@@ -241,7 +244,7 @@ def scene_tile(
     cfg = settings()
     with catalog() as cat, progress_bars(as_json) as bars:
         done = tile_scene(
-            cat, cfg, scene_id, resources=TilingResources(workers), progress=bars, retile=retile
+            StageContext(cat, cfg, progress=bars), scene_id, resources=TilingResources(workers), retile=retile
         )
     emit(
         as_json,

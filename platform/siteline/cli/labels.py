@@ -9,6 +9,7 @@ from pathlib import Path
 
 import typer
 
+from siteline.catalog.context import StageContext
 from siteline.cli.common import (
     JsonOption,
     catalog,
@@ -75,7 +76,9 @@ def import_cmd(
     mapping = parse_taxonomy_map(taxonomy_map) if taxonomy_map else None
     limit = DEFAULT_MAX_UNMATCHED if max_unmatched is None else max_unmatched
     with catalog() as cat, progress_bars(as_json, "count") as bars:
-        result = import_labels(cat, settings(), scene_id, file, ImportOptions(mapping, note, limit), bars)
+        result = import_labels(
+            StageContext(cat, settings(), progress=bars), scene_id, file, ImportOptions(mapping, note, limit)
+        )
         with cat.transaction() as s:
             site = site_name_of_scene(s, scene_id)
     announced = None

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import typer
 
+from siteline.catalog.context import StageContext
 from siteline.catalog.releases import (
     get_release,
     list_releases,
@@ -74,7 +75,7 @@ def build(
 
     with catalog() as cat, progress_bars(as_json) as bars:
         options = ReleaseOptions(pairs or None, version, parse_label_sets(label_set or []), publish, device)
-        info = pipeline.release(cat, settings(), site, name, knobs, options, progress=bars)
+        info = pipeline.release(StageContext(cat, settings(), progress=bars), site, name, knobs, options)
     emit(as_json, info.to_dict(), lambda: console.print(build_message(info)))
 
 
@@ -115,7 +116,7 @@ def publish(
     from siteline.release.stage import publish_release
 
     with catalog() as cat:
-        info = publish_release(cat, settings(), name, version)
+        info = publish_release(StageContext(cat, settings()), name, version)
     emit(as_json, info.to_dict(), lambda: console.print(f"published {name} {version} at {info.root}"))
 
 
@@ -201,7 +202,7 @@ def repair(
     from siteline.release.repair import repair_release
 
     with catalog() as cat:
-        done = repair_release(cat, settings(), name, version)
+        done = repair_release(StageContext(cat, settings()), name, version)
     emit(
         as_json,
         {"name": name, "version": version, "repaired": done},

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 from sqlalchemy.orm import Session
 
+from siteline.catalog.context import StageContext
 from siteline.catalog.sites import (
     add_site,
     get_site,
@@ -158,7 +159,7 @@ def update(
 
             with progress_bars(as_json) as bars:
                 version, tiled = pipeline.redefine_site(
-                    cat, settings(), name, tax, ring, no_fence, workers, bars
+                    StageContext(cat, settings(), progress=bars), name, tax, ring, no_fence, workers
                 )
             lines += [f"site {name} is at version {version}", *(t.message for t in tiled)]
         with cat.transaction() as session:

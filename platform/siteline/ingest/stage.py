@@ -18,10 +18,9 @@ from pathlib import Path
 
 import sqlalchemy as sa
 
-from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.missions import blobs_in_use, record_ingest
 from siteline.catalog.sites import get_site
-from siteline.config import Settings
 from siteline.errors import MissionError
 from siteline.ingest.execute import execute_ingest, restore_blobs, stage_mission, store_mission
 from siteline.ingest.inventory import mission_manifest
@@ -29,7 +28,7 @@ from siteline.ingest.options import IngestOptions
 from siteline.ingest.plan import IngestPlan, plan_ingest
 from siteline.ingest.pointcloud import start_readers
 from siteline.pointpass import PartitionCache
-from siteline.progress import Progress, no_progress, step
+from siteline.progress import step
 from siteline.records.mission import CheckedMission
 from siteline.records.registration import Registration
 from siteline.records.runs import StageRun
@@ -79,29 +78,27 @@ def _already(plan: IngestPlan) -> IngestResult:
 
 
 def _store_and_record(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     plan: IngestPlan,
     checked: CheckedMission,
     run: StageRun,
-    progress: Progress,
     staging: BlobStaging | None,
 ) -> IngestResult:
     new_blobs: list[str] = []
     try:
-        store_mission(checked, settings.store, new_blobs, staging, progress)
+        store_mission(checked, ctx.settings.store, new_blobs, staging, ctx.progress)
         # one registration per site at a time: pairs are formed from the scenes around this one; the
         # blobs lock keeps a failed ingest from removing a shared blob between restore and commit
-        with catalog.lock(f"site:{plan.site_id}:scenes"), catalog.lock(BLOBS_LOCK):
-            restore_blobs(checked, settings.store, new_blobs)
-            with catalog.transaction() as s:
+        with ctx.catalog.lock(f"site:{plan.site_id}:scenes"), ctx.catalog.lock(BLOBS_LOCK):
+            restore_blobs(checked, ctx.settings.store, new_blobs)
+            with ctx.catalog.transaction() as s:
                 ids = record_ingest(s, plan.site_id, checked, run)
     except BaseException as exc:
-        with catalog.lock(BLOBS_LOCK):
-            with catalog.transaction() as s:
+        with ctx.catalog.lock(BLOBS_LOCK):
+            with ctx.catalog.transaction() as s:
                 shared = blobs_in_use(s, new_blobs)
             # content another mission committed meanwhile stays; only this ingest's own blobs go
-            remove_blobs(settings.store, [b for b in new_blobs if b not in shared])
+            remove_blobs(ctx.settings.store, [b for b in new_blobs if b not in shared])
         if isinstance(exc, sa.exc.IntegrityError):
             raise MissionError(
                 f"mission {checked.manifest.root.name} conflicts with one ingested at the same time "
@@ -135,37 +132,34 @@ def _notes(registration: Registration) -> list[str]:
 
 
 def ingest_mission(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     mission_dir: Path,
     site_name: str,
     opts: IngestOptions | None = None,
-    progress: Progress = no_progress,
-    run_id: str | None = None,
     workers: int = 2,
 ) -> IngestResult:
     """Inventory, validate, georegister and register ``mission_dir`` as a scene of ``site_name``; a
     mission already ingested (same manifest) is not ingested again. The point cloud is read over
     ``workers`` processes, and its partition into tile runs is kept for the tile stage."""
     opts = opts or IngestOptions()
-    with catalog.transaction() as s:
+    with ctx.catalog.transaction() as s:
         get_site(s, site_name)  # an unknown site is refused before a byte is hashed
     start_readers(Path(mission_dir), workers)  # they start up while the mission is hashed
-    manifest = mission_manifest(Path(mission_dir), step(progress, "hashing"))
+    manifest = mission_manifest(Path(mission_dir), step(ctx.progress, "hashing"))
     # one ingest of a mission's content at a time: a copy dropped twice at once is ingested once
-    cache = PartitionCache(layout.partitions(settings.home))
-    with catalog.lock(f"mission:{manifest.sha256}"):
-        with catalog.transaction() as s:
+    cache = PartitionCache(layout.partitions(ctx.settings.home))
+    with ctx.catalog.lock(f"mission:{manifest.sha256}"):
+        with ctx.catalog.transaction() as s:
             plan = plan_ingest(s, site_name, manifest)
         if plan.existing is not None:
             cache.sweep_unfinished()  # what a killed run of it left
             return _already(plan)
-        run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=run_id)
+        run = StageRun("ingest", f"mission:{manifest.sha256}", opts.record(site_name), run_id=ctx.run_id)
         runs = cache.new_folder()
-        staging = stage_mission(manifest, opts.storage, settings.store)
+        staging = stage_mission(manifest, opts.storage, ctx.settings.store)
         try:
-            checked = execute_ingest(plan, opts, settings.store, progress, workers, runs)
-            result = _store_and_record(catalog, settings, plan, checked, run, progress, staging)
+            checked = execute_ingest(plan, opts, ctx.settings.store, ctx.progress, workers, runs)
+            result = _store_and_record(ctx, plan, checked, run, staging)
             aligned = checked.registration.alignment
             if aligned is None or not aligned.applied:
                 # the runs were cut before the co-registration: a corrected scene's tiles cut anew

@@ -9,15 +9,13 @@ from pathlib import Path
 
 import sqlalchemy as sa
 
-from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.labelsets import record_label_set
-from siteline.config import Settings
 from siteline.errors import LabelSetError
 from siteline.labelsets.execute import DEFAULT_MAX_UNMATCHED, execute_label_import
 from siteline.labelsets.mapping import TaxonomyMap
 from siteline.labelsets.plan import ImportPlan, plan_label_import
 from siteline.pointpass import open_las, read_labels_vlr
-from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import ExportedLabels, LabelSetImport
 from siteline.records.runs import StageRun
 from siteline.stores import layout
@@ -41,13 +39,10 @@ class ImportOptions:
 
 
 def import_labels(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     scene_id: int,
     path: Path,
     options: ImportOptions = ImportOptions(),
-    progress: Progress = no_progress,
-    run_id: str | None = None,
 ) -> LabelSetImport:
     """Import the classes of ``path`` as the next label-set version of ``scene_id`` (``options``:
     :class:`ImportOptions`). Points are matched by position in tile quanta, GPS time and return
@@ -60,10 +55,10 @@ def import_labels(
     if not 0.0 <= max_unmatched < 1.0:
         raise LabelSetError(f"max_unmatched {max_unmatched}: use a fraction in [0, 1).")
     base = None if carried else exported_from(path, scene_id)
-    with catalog.lock(f"scene:{scene_id}:labels"):  # one import per scene at a time: versions 2, 3, ...
-        with catalog.transaction() as s:
+    with ctx.catalog.lock(f"scene:{scene_id}:labels"):  # one import per scene at a time: versions 2, 3, ...
+        with ctx.catalog.transaction() as s:
             plan = plan_label_import(s, scene_id, base, 1 if carried else None)
-        return _import(catalog, settings, plan, path, options, progress, run_id)
+        return _import(ctx, plan, path, options)
 
 
 def exported_from(path: Path, scene_id: int) -> int | None:
@@ -76,8 +71,7 @@ def exported_from(path: Path, scene_id: int) -> int | None:
 
 
 def _import(
-    catalog: Catalog, settings: Settings, plan: ImportPlan, path: Path, options: ImportOptions,
-    progress: Progress, run_id: str | None,
+    ctx: StageContext, plan: ImportPlan, path: Path, options: ImportOptions,
 ) -> LabelSetImport:  # fmt: skip
     scene_id, taxonomy_map, note, max_unmatched = (
         plan.scene_id,
@@ -86,16 +80,16 @@ def _import(
         options.max_unmatched,
     )
     run = StageRun(
-        "import_labels", f"scene:{scene_id}", {"file": str(path), "version": plan.version}, run_id=run_id
+        "import_labels", f"scene:{scene_id}", {"file": str(path), "version": plan.version}, run_id=ctx.run_id
     )
-    store = settings.store
+    store = ctx.settings.store
     result = execute_label_import(
-        plan, path, store, layout.scratch(settings.home), taxonomy_map, note, max_unmatched, progress
+        plan, path, store, layout.scratch(ctx.settings.home), taxonomy_map, note, max_unmatched, ctx.progress
     )
     if not result.created:
         return result
     try:
-        with catalog.transaction() as s:
+        with ctx.catalog.transaction() as s:
             record_label_set(s, result, run)
     except sa.exc.IntegrityError as exc:
         # a writer outside this lock recorded this version: its store is at the same address, keep it

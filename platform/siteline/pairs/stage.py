@@ -7,12 +7,12 @@ import logging
 from collections.abc import Mapping
 
 from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.pairs import record_pair_outputs
 from siteline.config import Settings
 from siteline.pairs.execute import execute_pair
 from siteline.pairs.outputs import find_outputs
 from siteline.pairs.plan import plan_pair
-from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.params.pairs import PairParams
 from siteline.records.runs import StageRun
@@ -21,13 +21,10 @@ log = logging.getLogger(__name__)
 
 
 def process_pair(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     pair_id: int,
     params: PairParams | None = None,
-    progress: Progress = no_progress,
     device: str = "cpu",
-    run_id: str | None = None,
     label_sets: Mapping[int, int] | None = None,
 ) -> PairOutput:
     """Labels, views and renders of ``pair_id`` with ``params`` and the classes of ``label_sets``
@@ -39,21 +36,21 @@ def process_pair(
     Both scenes must be tiled (:class:`PairError` names the command otherwise); tiling them is the
     pipeline's job (``siteline.pipeline.process_pairs``), not this stage's."""
     params = params or PairParams()
-    started = StageRun("process_pair", f"pair:{pair_id}", run_id=run_id).started
-    with catalog.lock(f"pair:{pair_id}:outputs"):  # one writer of a pair's outputs at a time
-        with catalog.transaction() as s:
-            plan = plan_pair(s, settings.store, pair_id, params, label_sets)
-        found = find_outputs(plan, settings.store)
+    started = StageRun("process_pair", f"pair:{pair_id}", run_id=ctx.run_id).started
+    with ctx.catalog.lock(f"pair:{pair_id}:outputs"):  # one writer of a pair's outputs at a time
+        with ctx.catalog.transaction() as s:
+            plan = plan_pair(s, ctx.settings.store, pair_id, params, label_sets)
+        found = find_outputs(plan, ctx.settings.store)
         if found is not None:
             log.info(
                 "pair %d: outputs %s are already made (%d views)", pair_id, plan.digest, found.view_count
             )
-        output = found or execute_pair(plan, settings.store, device, progress)
+        output = found or execute_pair(plan, ctx.settings.store, device, ctx.progress)
         if found is None or not plan.recorded:
             parameters = params.to_dict() | {"radius_m": output.radius_m}
-            with catalog.transaction() as s:
+            with ctx.catalog.transaction() as s:
                 record_pair_outputs(
-                    s, output, StageRun("process_pair", f"pair:{pair_id}", parameters, started, run_id)
+                    s, output, StageRun("process_pair", f"pair:{pair_id}", parameters, started, ctx.run_id)
                 )
     return output
 

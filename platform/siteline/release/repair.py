@@ -13,7 +13,7 @@ from typing import Literal
 
 from sqlalchemy.orm import Session
 
-from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.releases import get_release, list_releases, record_published, remove_draft
 from siteline.config import Settings
 from siteline.records.runs import StageRun
@@ -68,25 +68,23 @@ def inspect_release(session: Session, settings: Settings, name: str, version: st
     return []
 
 
-def repair_release(
-    catalog: Catalog, settings: Settings, name: str, version: str | None = None, run_id: str | None = None
-) -> list[str]:
+def repair_release(ctx: StageContext, name: str, version: str | None = None) -> list[str]:
     """Mend every version of ``name`` (or just ``version``) found wrong; return one line per change.
     A published folder that is gone cannot be mended here (it is reported, not changed)."""
-    with catalog.lock(f"release:{name}"):
-        with catalog.transaction() as s:
+    with ctx.catalog.lock(f"release:{name}"):
+        with ctx.catalog.transaction() as s:
             versions = [version] if version else [r.version for r in list_releases(s, name)]
-            found = [f for v in versions for f in inspect_release(s, settings, name, v)]
-        return [line for f in found if (line := mend(catalog, settings, f, run_id))]
+            found = [f for v in versions for f in inspect_release(s, ctx.settings, name, v)]
+        return [line for f in found if (line := mend(ctx, f))]
 
 
-def mend(catalog: Catalog, settings: Settings, f: Finding, run_id: str | None) -> str:
-    final = layout.release_published(settings.home, f.name, f.version)
-    draft = layout.release_draft(settings.home, f.name, f.version)
+def mend(ctx: StageContext, f: Finding) -> str:
+    final = layout.release_published(ctx.settings.home, f.name, f.version)
+    draft = layout.release_draft(ctx.settings.home, f.name, f.version)
     if f.kind == "moved-not-recorded":
-        with catalog.transaction() as s:
+        with ctx.catalog.transaction() as s:
             record_published(s, f.name, f.version, final, StageRun("publish_release", f"release:{f.name}:{f.version}",
-                             {"repaired": True}, run_id=run_id))  # fmt: skip
+                             {"repaired": True}, run_id=ctx.run_id))  # fmt: skip
         make_read_only(final)
         done = f"release {f.name} {f.version}: publish recorded and made read-only at {final}"
     elif f.kind == "writable":
@@ -94,7 +92,7 @@ def mend(catalog: Catalog, settings: Settings, f: Finding, run_id: str | None) -
         done = f"release {f.name} {f.version}: made read-only at {final}"
     elif f.kind in ("draft-differs", "draft-missing"):
         shutil.rmtree(draft, ignore_errors=True)
-        with catalog.transaction() as s:
+        with ctx.catalog.transaction() as s:
             remove_draft(s, f.name, f.version)
         done = f"release {f.name} {f.version}: the unrecorded draft removed; build it again"
     else:

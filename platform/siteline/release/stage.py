@@ -8,11 +8,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.releases import get_release, record_draft, record_published, release_item_counts
-from siteline.config import Settings
 from siteline.errors import ReleaseError
 from siteline.pairs.outputs import find_outputs
-from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
 from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.records.runs import StageRun
@@ -27,14 +26,11 @@ log = logging.getLogger(__name__)
 
 
 def build_release(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     site_name: str,
     name: str,
     choice: ReleaseChoice,
     options: ReleaseOptions = ReleaseOptions(),
-    run_id: str | None = None,
-    progress: Progress = no_progress,
 ) -> ReleaseInfo:
     """Assemble a draft release ``name`` from the processed pairs of ``choice`` (its pairs and resolved
     parameters: siteline.release.plan.choose_release) in format 2 (siteline.release.layout), and
@@ -47,16 +43,16 @@ def build_release(
     ``options.publish``)."""
     check_release_name(name)  # before anything: a name is a folder name
     version, label_sets, publish = options.version, options.label_sets, options.publish
-    with catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time
-        with catalog.transaction() as s:
-            plan = plan_release(s, settings, site_name, name, choice, version, label_sets)
+    with ctx.catalog.lock(f"release:{name}"):  # one builder or publisher of a release name at a time
+        with ctx.catalog.transaction() as s:
+            plan = plan_release(s, ctx.settings, site_name, name, choice, version, label_sets)
         if plan.up_to_date is not None:
-            info = _release_info(catalog, name, plan.up_to_date)
+            info = _release_info(ctx.catalog, name, plan.up_to_date)
             log.info("release %s is up to date: %s %s has these inputs", name, name, info.version)
         else:
-            info = _build(catalog, settings, plan, run_id, progress)
+            info = _build(ctx, plan)
         if publish and info.status == "draft":
-            info = _publish(catalog, settings, name, info.version, run_id)
+            info = _publish(ctx, name, info.version)
         return replace(info, reason=plan.reason if plan.up_to_date is None else info.reason,
                        up_to_date=plan.up_to_date is not None)  # fmt: skip
 
@@ -71,16 +67,14 @@ def _release_info(catalog: Catalog, name: str, version: str) -> ReleaseInfo:
     return ReleaseInfo(name, version, status, root, items, sha, read_manifest(Path(root)).stats, reason)  # type: ignore[arg-type]
 
 
-def _build(
-    catalog: Catalog, settings: Settings, plan: ReleasePlan, run_id: str | None, progress: Progress
-) -> ReleaseInfo:
+def _build(ctx: StageContext, plan: ReleasePlan) -> ReleaseInfo:
     params = plan.params
     run = StageRun(
         "build_release", f"release:{plan.name}:{plan.version}",
         {"pair_params": params.pair.to_dict(), "preset": params.preset, "pairs": [p.pair_id for p in plan.pairs]},
-        run_id=run_id,
+        run_id=ctx.run_id,
     )  # fmt: skip
-    found = {p.pair_id: find_outputs(p, settings.store) for p in plan.pairs}
+    found = {p.pair_id: find_outputs(p, ctx.settings.store) for p in plan.pairs}
     missing = [pid for pid, out in found.items() if out is None]
     if missing:
         raise ReleaseError(
@@ -88,8 +82,8 @@ def _build(
             f"{len(found)} pairs): run `siteline release build`, which processes pairs first. Nothing was written."
         )
     outputs: dict[int, PairOutput] = {pid: out for pid, out in found.items() if out is not None}
-    draft = execute_build(plan, outputs, progress)
-    with catalog.transaction() as s:
+    draft = execute_build(plan, outputs, ctx.progress)
+    with ctx.catalog.transaction() as s:
         record_draft(s, draft, tuple(layout.FOLDERS), run)
     return ReleaseInfo(
         plan.name, plan.version, "draft", draft.root, len(draft.items), draft.manifest_sha256, draft.stats,
@@ -97,43 +91,39 @@ def _build(
     )  # fmt: skip
 
 
-def publish_release(
-    catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None = None
-) -> ReleaseInfo:
+def publish_release(ctx: StageContext, name: str, version: str) -> ReleaseInfo:
     """Verify the draft's checksums, move it into place, mark it published, make it read-only; a
     publish an earlier one left half-way (moved but not recorded, or recorded but still writable)
     is finished instead."""
-    with catalog.lock(f"release:{name}"):
-        return _publish(catalog, settings, name, version, run_id)
+    with ctx.catalog.lock(f"release:{name}"):
+        return _publish(ctx, name, version)
 
 
-def _publish(
-    catalog: Catalog, settings: Settings, name: str, version: str, run_id: str | None
-) -> ReleaseInfo:
-    with catalog.transaction() as s:
+def _publish(ctx: StageContext, name: str, version: str) -> ReleaseInfo:
+    with ctx.catalog.transaction() as s:
         # a publish killed after its catalog commit left the version published but writable: finish it
-        writable_left = [f for f in inspect_release(s, settings, name, version) if f.kind == "writable"]
+        writable_left = [f for f in inspect_release(s, ctx.settings, name, version) if f.kind == "writable"]
         if not writable_left:
-            plan = plan_publish(s, settings, name, version)
+            plan = plan_publish(s, ctx.settings, name, version)
             unfinished = [
-                f for f in inspect_release(s, settings, name, version) if f.kind == "moved-not-recorded"
+                f for f in inspect_release(s, ctx.settings, name, version) if f.kind == "moved-not-recorded"
             ]
     if writable_left:
         log.info("%s", writable_left[0].message)
-        mend(catalog, settings, writable_left[0], run_id)
-        return _release_info(catalog, name, version)
+        mend(ctx, writable_left[0])
+        return _release_info(ctx.catalog, name, version)
     if unfinished:  # an earlier publish moved it into place and died: finish that one
         log.info("%s", unfinished[0].message)
-        mend(catalog, settings, unfinished[0], run_id)
-        return _release_info(catalog, name, version)
-    run = StageRun("publish_release", f"release:{name}:{version}", {}, run_id=run_id)
+        mend(ctx, unfinished[0])
+        return _release_info(ctx.catalog, name, version)
+    run = StageRun("publish_release", f"release:{name}:{version}", {}, run_id=ctx.run_id)
     move_into_place(plan)
     try:
-        with catalog.transaction() as s:
+        with ctx.catalog.transaction() as s:
             record_published(s, name, version, plan.final, run)
     except BaseException:
         move_back(plan)
         raise
     make_read_only(plan.final)
     log.info("release %s %s published at %s", name, version, plan.final)
-    return _release_info(catalog, name, version)
+    return _release_info(ctx.catalog, name, version)

@@ -5,11 +5,9 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-from siteline.catalog import Catalog
+from siteline.catalog.context import StageContext
 from siteline.catalog.scenes import record_tiling
-from siteline.config import Settings
 from siteline.pointpass import PartitionCache, TilingResources
-from siteline.progress import Progress, no_progress
 from siteline.records.runs import StageRun
 from siteline.records.tiling import SceneTiling, TileSpec
 from siteline.stores import layout
@@ -30,14 +28,11 @@ class TileOutcome:
 
 
 def tile_scene(
-    catalog: Catalog,
-    settings: Settings,
+    ctx: StageContext,
     scene_id: int,
     *,
     spec: TileSpec | None = None,
     resources: TilingResources = TilingResources(),
-    progress: Progress = no_progress,
-    run_id: str | None = None,
     retile: bool = False,
 ) -> TileOutcome:
     """Tile a registered scene and index its nodes; a scene already tiled is left alone unless
@@ -53,32 +48,31 @@ def tile_scene(
     second caller waits, then finds the scene tiled). ``resources``: workers or an executor (a Dask
     cluster's, whose workers share the store) and the batch budget (None: the settings'); the
     partition ingest kept is looked for in the home."""
-    with catalog.lock(f"scene:{scene_id}:tiles"):
-        return _tile(catalog, settings, scene_id, spec, resources, progress, run_id, retile)
+    with ctx.catalog.lock(f"scene:{scene_id}:tiles"):
+        return _tile(ctx, scene_id, spec, resources, retile)
 
 
 def _tile(
-    catalog: Catalog, settings: Settings, scene_id: int, spec: TileSpec | None, resources: TilingResources,
-    progress: Progress, run_id: str | None, retile: bool,
+    ctx: StageContext, scene_id: int, spec: TileSpec | None, resources: TilingResources, retile: bool,
 ) -> TileOutcome:  # fmt: skip
-    with catalog.transaction() as s:
+    with ctx.catalog.transaction() as s:
         plan = plan_tiling(s, scene_id)
-    store = settings.store
+    store = ctx.settings.store
     done = plan.tiled and plan.current is not None and store.is_complete(plan.current.uri)
     if done and not retile and not plan.stale:
         log.info("scene %d is already tiled", scene_id)
         return TileOutcome(None, plan.already_tiled())
     spec = spec or TileSpec.for_site(plan.site)
     run = StageRun(
-        "tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": resources.workers}, run_id=run_id
+        "tile", f"scene:{scene_id}", {"spec": spec.to_dict(), "workers": resources.workers}, run_id=ctx.run_id
     )
-    cache = PartitionCache(layout.partitions(settings.home))
+    cache = PartitionCache(layout.partitions(ctx.settings.home))
     cache.sweep_unfinished()  # a partition an ingest killed after its commit was writing
-    resources = resources.completed(batch_points=settings.tile_batch_points, partitions=cache)
-    tiling = execute_tiling(plan, store, spec, plan.generation(done), resources, progress)
+    resources = resources.completed(batch_points=ctx.settings.tile_batch_points, partitions=cache)
+    tiling = execute_tiling(plan, store, spec, plan.generation(done), resources, ctx.progress)
     try:
         counts = class_counts(SceneTiles.open(tiling.uri)) if done else None
-        with catalog.transaction() as s:
+        with ctx.catalog.transaction() as s:
             record_tiling(s, scene_id, tiling, run, counts)
     except BaseException:
         store.remove(tiling.uri)
