@@ -23,8 +23,6 @@ import tempfile
 import time
 from pathlib import Path
 
-from siteline.catalog.context import StageContext
-
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -39,6 +37,7 @@ def _prepare(home: Path) -> None:
 
     from siteline import pipeline
     from siteline.catalog import migrate, open_catalog
+    from siteline.catalog.context import StageContext
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.config import Settings, sqlite_url

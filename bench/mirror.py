@@ -15,8 +15,6 @@ import tempfile
 import time
 from pathlib import Path
 
-from siteline.catalog.context import StageContext
-
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
@@ -26,6 +24,7 @@ def main() -> None:
 
     from siteline import pipeline
     from siteline.catalog import migrate, open_catalog
+    from siteline.catalog.context import StageContext
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.config import Settings, sqlite_url

@@ -37,8 +37,6 @@ from pathlib import Path
 
 import numpy as np
 
-from siteline.catalog.context import StageContext
-
 
 def _peak_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
@@ -63,6 +61,7 @@ def _settings(work: Path):  # noqa: ANN202
 def stage_ingest(work: Path) -> dict:
     from siteline import pipeline
     from siteline.catalog import migrate, open_catalog
+    from siteline.catalog.context import StageContext
     from siteline.catalog.engine import make_engine
     from siteline.catalog.sites import add_site
     from siteline.site.fence import load_fence_geojson
@@ -88,6 +87,7 @@ def stage_ingest(work: Path) -> dict:
 
 def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, knobs: dict) -> dict:
     from siteline.catalog import open_catalog
+    from siteline.catalog.context import StageContext
     from siteline.pairs.stage import process_pair
     from siteline.records.params.pairs import PairParams
 
