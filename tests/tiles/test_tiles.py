@@ -284,6 +284,7 @@ KILL_SCRIPT = textwrap.dedent("""
     from siteline.catalog import open_catalog
     from siteline.config import load_settings
     from siteline.pointpass import TilingResources
+    from siteline.catalog.context import StageContext
     from siteline.tiles.stage import tile_scene
     real = w.write_tile
     done = []
@@ -294,7 +295,7 @@ KILL_SCRIPT = textwrap.dedent("""
         return real(*a, **k)
     w.write_tile = dying
     settings = load_settings()
-    tile_scene(open_catalog(settings), settings, int(sys.argv[1]), resources=TilingResources(workers=1))
+    tile_scene(StageContext(open_catalog(settings), settings), int(sys.argv[1]), resources=TilingResources(workers=1))
 """)
 
 
@@ -358,7 +359,8 @@ def test_two_processes_tile_two_scenes_at_once(tmp_path, synth_dir) -> None:
     code = (
         "import sys\nfrom siteline.catalog import open_catalog\nfrom siteline.config import load_settings\n"
         "from siteline.tiles.stage import tile_scene\nfrom siteline.pointpass import TilingResources\ns = load_settings()\n"
-        "tile_scene(open_catalog(s), s, int(sys.argv[1]), resources=TilingResources(workers=1))\n"
+        "from siteline.catalog.context import StageContext\n"
+        "tile_scene(StageContext(open_catalog(s), s), int(sys.argv[1]), resources=TilingResources(workers=1))\n"
     )
     procs = [subprocess.Popen([sys.executable, "-c", code, str(i)], env=_env(settings)) for i in ids]
     assert [p.wait(timeout=300) for p in procs] == [0, 0]
