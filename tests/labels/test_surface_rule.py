@@ -131,8 +131,39 @@ def test_region_cells_gathered_by_parts_equal_the_regions_of_all_points():
     assert not np.concatenate(cells.small(1)).any()
 
 
+def test_ground_deepened_by_less_than_the_radius_is_found_by_the_probe_and_even_ground_stays():
+    # 100 points/m2 of ground; in B a 4 m wide strip is dug down by 0.85 r (0.17 m at r = 0.2 m): most
+    # of its points find A's ground within the radius, so the nearest test (and the surface rule behind
+    # it) call them unchanged; their nearest lies beyond the probe (0.7 r), and probed against A's
+    # surface they lie 0.17 m off it (its level of detection: 5 cm): changed. The ground beside is not.
+    rng = np.random.default_rng(6)
+    a, b = plane(rng, 40_000, noise=0.005), plane(rng, 40_000, noise=0.005)
+    strip = (b[:, 0] > 8) & (b[:, 0] < 12)
+    inner = strip & (b[:, 0] > 8.5) & (b[:, 0] < 11.5)  # away from the steps at the strip's edges
+    away = (b[:, 0] < 7) | (b[:, 0] > 13)
+    r = 0.2
+    cls = np.full(len(a), GROUND, np.uint8)
+    probe = Matching(surface=LabelParams(surface_probe=0.7).surface_test(r))
+    b[strip, 2] -= 0.85 * r
+    without = flags(b, cls, a, cls, r, surface=True)
+    probed = change_flags(b, cls, a, cls, r, IGN, probe)
+    assert (without[inner] == CHANGED).mean() < 0.2
+    assert (probed[inner] == CHANGED).mean() > 0.95
+    assert (probed[away] == CHANGED).mean() < 0.001
+    # what it hardly sees: a change of half the radius, nearer than the probe, is found only at the few
+    # points whose nearest neighbour happens to lie beyond it
+    b[strip, 2] += 0.35 * r
+    assert (change_flags(b, cls, a, cls, r, IGN, probe)[inner] == CHANGED).mean() < 0.1
+
+
 def test_label_params_refuse_unknown_rules_and_regions():
     assert LabelParams().surface_test(0.3) == SurfaceTest(search_m=0.6)
+    probe = LabelParams(surface_probe=0.7).surface_test(0.3)
+    assert probe == SurfaceTest(search_m=0.6, probe_m=pytest.approx(0.21), offset_m=pytest.approx(0.075))
+    assert LabelParams(rule="nearest", surface_probe=0.7).surface_test(0.3) is None
+    for bad in (1.0, -0.1, True, "0.7"):
+        with pytest.raises(Exception, match="surface_probe"):
+            LabelParams(surface_probe=bad)
     assert LabelParams(rule="nearest").surface_test(0.3) is None
     with pytest.raises(Exception, match="label rule"):
         LabelParams(rule="m3c2")
@@ -159,6 +190,17 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     assert base.trim_edges and base.render_settings().trim_edges
     assert PairParams(trim_edges=False).digest() != base.digest()
     assert PairParams.BEFORE["trim_edges"] is False
+    # the probe is on by default and names other labels; without it (or with the nearest rule, which
+    # has none) the key is the one of before the probe existed
+    assert base.surface_probe == 0.7 and base.label_params().surface_probe == 0.7
+    assert PairParams.BEFORE["surface_probe"] == 0.0
+    no_probe = PairParams(surface_probe=0.0)
+    assert no_probe.digest() != base.digest() and no_probe.digest() != PairParams(surface_probe=0.5).digest()
+    # the default key and the nearest rule's as they were before the probe existed (siteline at 5b710e2)
+    assert no_probe.digest() == "b089ba124b36"
+    assert PairParams(label_rule="nearest").digest() == "1f8b3442bcd8"
+    with pytest.raises(PairError, match="surface_probe"):
+        PairParams(surface_probe=1.5)
     with pytest.raises(PairError, match="trim_edges"):
         PairParams.from_dict({"trim_edges": "yes"})
 

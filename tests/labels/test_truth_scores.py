@@ -51,8 +51,11 @@ def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
     assert measured_for("surface", 8, True, 0.015).density == 1000
     assert measured_for("surface", 3, True, 0.15) is None
     assert measured_for("surface", 8, False, 0.15) is None  # not measured without the trim
-    text = accuracy_text("surface", 8, True, 0.15)
-    assert "precision 0.98" in text and "synthetic site at 10 points/m2" in text
+    assert measured_for("surface", 8, True, 0.15, 0.7).recall > measured_for("surface", 8, True, 0.15).recall
+    assert measured_for("surface", 8, True, 0.15, 0.5) is None  # a probe not measured
+    assert measured_for("nearest", 1, False, 0.15, 0.7) == measured_for("nearest", 1, False, 0.15)  # no probe
+    text = accuracy_text("surface", 8, True, 0.15, 0.7)
+    assert "precision 0.98" in text and "recall 0.97" in text and "synthetic site at 10 points/m2" in text
     pair = {"id": 1, "radius_m": 0.37, "labels": {"radius_m": 0.37, "radius": {
         "median_spacing_m": {"t1": 0.15, "t2": 0.148}, "multiplier": 2.5,
         "expected_false_change": {"multiplier": 2.5, "per_direction": 0.0131, "union": 0.026},

@@ -42,6 +42,7 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "trim_edges": (bool | None, typer.Option(None, "--trim-edges/--no-trim-edges", help="Give the pixels where a world splat reaches past its surface's edge to the surface behind (the default; docs/performance.md).")),
     "label_rule": (str | None, typer.Option(None, "--label-rule", help="3D change rule: surface (the default: a flagged point is checked against the other scene's local surface) or nearest (nearest neighbour alone).")),
     "min_region_points": (int | None, typer.Option(None, "--min-region", help="Changed regions of fewer points are taken back to unchanged (default 8; 1 keeps every point).")),
+    "surface_probe": (float | None, typer.Option(None, "--surface-probe", help="Surface rule: also probe points whose nearest neighbour in the other scene lies beyond this many change radii, changed when off its surface (default 0.7; 0: only points the nearest test flags; docs/performance.md).")),
     "one_side_hole": (str | None, typer.Option(None, "--one-side-hole", help="Changed on one side, a hole on the other: ignore or changed.")),
     "all_points": (bool | None, typer.Option(None, "--all-points/--lod", help="Render every point (no level of detail; slower).")),
     "lod_factor": (float | None, typer.Option(None, "--lod-factor", help="Level of detail read per view (1 = half a drawn point).")),
@@ -68,7 +69,7 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
         pair["radius_m"] = None if radius == AUTO else radius
     for name in (
         "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "shading", "change_rule", "splat",
-        "splat_factor", "trim_edges", "label_rule", "min_region_points",
+        "splat_factor", "trim_edges", "label_rule", "min_region_points", "surface_probe",
     ):  # fmt: skip
         if values.get(name) is not None:
             pair[name] = values[name]

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Measured:
-    """One bench run: the scene, its density (points per m2), the rule, smallest region kept and
-    whether splats were trimmed at edges, and the changed class's precision, recall and F1 over every
+    """One bench run: the scene, its density (points per m2), the rule, smallest region kept,
+    whether splats were trimmed at edges and the surface rule's probe (change radii; 0: none), and
+    the changed class's precision, recall and F1 over every
     scored pixel, with the median number of isolated false-change specks (components under 30 px
     away from any true change) per view."""
 
@@ -25,19 +26,25 @@ class Measured:
     recall: float
     f1: float
     specks_median: float
+    surface_probe: float = 0.0
 
 
-# bench/trade.py, 2026-11-28, this 2-core machine (one run each; docs/performance.md): the nearest
-# rule as releases made it before, and the defaults since
+# `siteline bench trade`, one run each (docs/performance.md): the nearest rule as releases made it
+# before, the surface rule without the probe (2026-11-28, the defaults until the probe), and the
+# defaults since (2026-11-28 later, with the probe at 0.7; the runs without it repeated the rows above)
 MEASURED: tuple[Measured, ...] = (
     Measured("synthetic site", 10, "nearest", 1, False, 0.928, 0.978, 0.952, 246),
     Measured("synthetic site", 10, "surface", 8, True, 0.977, 0.963, 0.970, 1),
+    Measured("synthetic site", 10, "surface", 8, True, 0.977, 0.969, 0.973, 1, 0.7),
     Measured("synthetic site", 100, "nearest", 1, False, 0.942, 0.990, 0.966, 524),
     Measured("synthetic site", 100, "surface", 8, True, 0.984, 0.983, 0.983, 0),
+    Measured("synthetic site", 100, "surface", 8, True, 0.983, 0.986, 0.985, 0, 0.7),
     Measured("synthetic site", 1000, "nearest", 1, False, 0.901, 0.994, 0.945, 2051),
     Measured("synthetic site", 1000, "surface", 8, True, 0.985, 0.990, 0.988, 0),
+    Measured("synthetic site", 1000, "surface", 8, True, 0.985, 0.990, 0.988, 0, 0.7),
     Measured("box scene", 40, "nearest", 1, False, 0.536, 0.986, 0.694, 693),
     Measured("box scene", 40, "surface", 8, True, 0.953, 0.956, 0.955, 0),
+    Measured("box scene", 40, "surface", 8, True, 0.953, 0.960, 0.956, 0, 0.7),
 )
 
 
@@ -47,29 +54,31 @@ def density_of_spacing(spacing_m: float) -> float:
     return math.log(2) / (math.pi * spacing_m**2) if spacing_m > 0 else float("nan")
 
 
-def measured_for(rule: str, min_region_points: int, trim_edges: bool, spacing_m: float) -> Measured | None:
+def measured_for(
+    rule: str, min_region_points: int, trim_edges: bool, spacing_m: float, surface_probe: float = 0.0
+) -> Measured | None:
     """The measurement nearest (in log density) to a pair labelled by ``rule`` keeping regions of
-    ``min_region_points``, its splats trimmed at edges or not, at the median spacing ``spacing_m``;
-    None when those settings were not measured."""
-    rows = [
-        m
-        for m in MEASURED
-        if (m.rule, m.min_region_points, m.trim_edges) == (rule, min_region_points, trim_edges)
-    ]
+    ``min_region_points``, its splats trimmed at edges or not, with the surface rule's
+    ``surface_probe``, at the median spacing ``spacing_m``; None when those settings were not measured."""
+    probe = surface_probe if rule == "surface" else 0.0
+    key = (rule, min_region_points, trim_edges, probe)
+    rows = [m for m in MEASURED if (m.rule, m.min_region_points, m.trim_edges, m.surface_probe) == key]
     density = density_of_spacing(spacing_m)
     if not rows or not math.isfinite(density):
         return None
     return min(rows, key=lambda m: (abs(math.log(m.density / density)), m.scene != "synthetic site"))
 
 
-def accuracy_text(rule: str, min_region_points: int, trim_edges: bool, spacing_m: float) -> str | None:
+def accuracy_text(
+    rule: str, min_region_points: int, trim_edges: bool, spacing_m: float, surface_probe: float = 0.0
+) -> str | None:
     """One sentence for a datasheet: what the settings measured nearest this pair's density."""
-    m = measured_for(rule, min_region_points, trim_edges, spacing_m)
+    m = measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe)
     if m is None:
         return None
     return (
-        f"measured against analytic truth ({m.scene} at {m.density:g} points/m2, this rule, smallest region and "
-        f"edge trim, "
+        f"measured against analytic truth ({m.scene} at {m.density:g} points/m2, this rule, smallest region, "
+        f"edge trim and probe, "
         f"release defaults; this pair is at about {density_of_spacing(spacing_m):.0f} points/m2): changed-class "
         f"precision {m.precision:.2f}, recall {m.recall:.2f}, F1 {m.f1:.2f}, {m.specks_median:g} isolated false "
         "specks (under 30 px) per view (median)"

@@ -23,6 +23,12 @@ Two rules, one call (:func:`change_flags`):
   moved along itself or by less than the level of detection; a change within r of an unchanged
   surface of the same class; and it takes for change a wall or mast face one scan saw and the
   other's scan shadow hid (the other scene's ground below it shows through in plan).
+  With a probe (``SurfaceTest.probe_m``, ``surface_probe`` x r; the releases' default 0.7) a point
+  the nearest rule finds a neighbour for, but not a near one (farther than the probe), is probed
+  against the other scene's surface the same way, and is changed when it lies off it by more than
+  the level of detection and ``offset_m`` (r / 4): ground deepened or raised by less than r (a
+  pit's ramps near its rim) is found where the nearest rule alone sees a neighbour within r. On an
+  unchanged surface few points are probed (their neighbours lie near) and fewer are off it.
 """
 
 from __future__ import annotations
@@ -223,9 +229,15 @@ def change_flags(
     found = np.isfinite(dist)
     uncovered = np.zeros(len(dist), dtype=bool)
     surface = matching.surface
-    if surface is not None and not found.all():
-        again = np.flatnonzero(~found)
+    again = (
+        np.flatnonzero(~found | (dist > surface.probe_m)) if surface is not None else np.zeros(0, np.int64)
+    )
+    if surface is not None and len(again):
         d, lod, first = plane_distances(b_kept, a_pts[again], surface, tree)
+        near = found[again]  # found within the radius, but not near: changed when off the surface
+        off = near & np.isfinite(d) & (d > np.maximum(lod, surface.offset_m))
+        found[again[off]] = False
+        again, d, lod, first = again[~near], d[~near], lod[~near], first[~near]
         on = d <= lod
         found[again[on]] = True
         idx[again[on]] = first[on]

@@ -55,6 +55,7 @@ def pair_labels(
         plan.change_rule.rule,
         label_params.rule,
         label_params.min_region_points,
+        label_params.surface_probe,
     )
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
         labels = ChangeLabels.from_dict(dict(store.open_group(uri).attrs) | {"uri": uri})

@@ -130,7 +130,7 @@ def _radius_lines(pairs: list[JsonObject], ceiling: float, params: PairParams) -
             if radius is not None
             else float("nan")
         )
-        measured = accuracy_text(rule, regions, params.trim_edges, spacing)
+        measured = accuracy_text(rule, regions, params.trim_edges, spacing, params.surface_probe)
         if fc and rule == "surface":
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
@@ -351,8 +351,14 @@ def _source_lines(lin: JsonObject) -> list[str]:
         f"share {p.min_valid}",
         f"- change radius: {radius}",
         *_radius_lines(lin["pairs"], release.radius_ceiling_m, p),
-        f"- change labels: the {p.label_rule} rule (siteline.labels.change), changed regions under "
-        f"{p.min_region_points} points taken back (siteline.labels.regions)",
+        f"- change labels: the {p.label_rule} rule (siteline.labels.change)"
+        + (
+            f", points beyond {p.surface_probe:g} radii of their nearest neighbour probed against the other scene's "
+            "surface"
+            if p.label_rule == "surface" and p.surface_probe
+            else ""
+        )
+        + f", changed regions under {p.min_region_points} points taken back (siteline.labels.regions)",
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
         f"**{p.one_side_hole}**; change is the union (OR) of the two directions.",

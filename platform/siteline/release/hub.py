@@ -282,6 +282,7 @@ def _made_lines(doc: Manifest) -> list[str]:
             int(p.get("min_region_points", 1)),
             bool(p.get("trim_edges")),
             spacing,
+            float(p.get("surface_probe", 0.0)),
         )
         if measured:
             said.setdefault(measured, []).append(str(q["id"]))

@@ -19,6 +19,10 @@ from siteline.schema import JsonObject
 
 # changed regions of fewer points are taken back to unchanged (siteline.labels.regions)
 MIN_REGION_POINTS = 8
+# points whose nearest neighbour lies over this many change radii away are probed against the other
+# scene's surface (LabelParams.surface_probe): the pit's ramps at 10 points/m2 recalled 0.89 -> 0.92,
+# for 1.2-1.5x the labels' seconds (docs/performance.md)
+SURFACE_PROBE = 0.7
 # knobs view generation shares with the renders, set once on the pair parameters
 _SHARED_VIEW_KNOBS = (
     "scale", "views", "seed", "min_coverage", "min_valid", "point_size_px", "splat", "splat_max_px", "splat_factor",
@@ -80,12 +84,13 @@ class PairParams:
     splat_factor: float = WORLD_SPLAT_FACTOR
     trim_edges: bool = True
     shading: str = "auto"
+    surface_probe: float = SURFACE_PROBE
 
     # what each knob added after the first release meant before it existed (a record without it)
     BEFORE: ClassVar[Mapping[str, object]] = {
         "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
         "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR, "trim_edges": False,
-        "shading": "none",
+        "shading": "none", "surface_probe": 0.0,
     }  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -143,7 +148,9 @@ class PairParams:
 
     def label_params(self) -> LabelParams:
         """The change-label knobs as LabelParams."""
-        return LabelParams(self.radius_m, self.radius_multiplier, self.label_rule, self.min_region_points)
+        return LabelParams(
+            self.radius_m, self.radius_multiplier, self.label_rule, self.min_region_points, self.surface_probe
+        )
 
     def to_dict(self) -> JsonObject:
         return asdict(self)
@@ -156,13 +163,12 @@ class PairParams:
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""
         doc = self.to_dict()
-        for knob in (
-            "colour",
-            "change_rule",
-            "shading",
-        ):  # auto: resolved per pair, outputs made before keep their key
+        # auto: resolved per pair, outputs made before keep their key
+        for knob in ("colour", "change_rule", "shading"):
             if doc[knob] == "auto":
                 del doc[knob]
         if doc["splat_factor"] == WORLD_SPLAT_FACTOR:  # the renders of before: their key is kept
             del doc["splat_factor"]
+        if doc["surface_probe"] == 0 or doc["label_rule"] == "nearest":  # no probe: the labels of before
+            del doc["surface_probe"]
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
