@@ -206,9 +206,9 @@ class Registration:
             **{"source": "unknown"} | {k: v for k, v in doc.items() if k in names},
             survey=SurveyPlan.from_dict(survey) if survey else None, altitude_why=why,
             alignment=Alignment.from_dict(alignment) if alignment else None,
-            camera_models={k: CameraModel.from_dict(m) if m else None for k, m in models.items()} if models else None,
+            camera_models={k: CameraModel.from_dict(m) if m else None for k, m in models.items()} if models is not None else None,
             site_from_model=Sim3("site", "model", float(sim["scale"]), np.asarray(sim["rotation"], np.float64),
-                                 np.asarray(sim["translation"], np.float64)) if sim else None,
+                                 np.asarray(sim["translation"], np.float64)) if sim is not None else None,
         )  # fmt: skip
 
     def to_dict(self) -> JsonObject:
