@@ -12,7 +12,7 @@ With ``--splat world`` (the default) points are drawn as world splats and gaps f
 Scale 2.0 renders 1320 x 990: the paper's 1/4 of a frame, twice its pixels per side.
 
     python bench/paper_scale.py [--density 1000] [--views 300] [--scale 1.0] [--splat world]
-        [--fill 2] [--labels-only] [--json out.json] [--work DIR]
+        [--fill 2] [--labels-only] [--knobs JSON] [--json out.json] [--work DIR]
 
 ``--work DIR`` keeps the generated sites and their catalog, and a later run with the same folder skips
 their synthesis and ingest (the 8000 points/m2 site takes about 20 minutes to make).
@@ -216,6 +216,7 @@ def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
         "lod_factor": args.lod_factor,
         "splat": args.splat,
         "fill_px": args.fill,
+        **args.knobs,
     }
     if args.labels_only:
         out["pair"] = _run(
@@ -249,6 +250,10 @@ def main() -> None:
         action="store_true",
         help="of the pair, its change labels only (their time and peak memory)",
     )
+    ap.add_argument(
+        "--knobs", type=json.loads, default={},
+        help='more pair knobs as JSON, e.g. \'{"surface_probe": 0}\' (the labels without the probe)',
+    )  # fmt: skip
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument(
         "--work", type=Path, default=None,
