@@ -161,6 +161,8 @@ def test_label_params_refuse_unknown_rules_and_regions():
     probe = LabelParams(surface_probe=0.7).surface_test(0.3)
     assert probe == SurfaceTest(search_m=0.6, probe_m=pytest.approx(0.21), offset_m=pytest.approx(0.075))
     assert LabelParams(rule="nearest", surface_probe=0.7).surface_test(0.3) is None
+    # under the level of detection's floor (5 cm) a probed point could not lie off the surface by more
+    assert LabelParams(surface_probe=0.7).surface_test(0.04) == SurfaceTest(search_m=0.08)
     for bad in (1.0, -0.1, True, "0.7"):
         with pytest.raises(Exception, match="surface_probe"):
             LabelParams(surface_probe=bad)
