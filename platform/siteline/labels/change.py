@@ -229,10 +229,9 @@ def change_flags(
     found = np.isfinite(dist)
     uncovered = np.zeros(len(dist), dtype=bool)
     surface = matching.surface
-    again = (
-        np.flatnonzero(~found | (dist > surface.probe_m)) if surface is not None else np.zeros(0, np.int64)
-    )
-    if surface is not None and len(again):
+    # the points looked at again: those the nearest test flags, and those it finds only far (the probe)
+    again = None if surface is None else np.flatnonzero(~found | (dist > surface.probe_m))
+    if surface is not None and again is not None and len(again):
         d, lod, first = plane_distances(b_kept, a_pts[again], surface, tree)
         near = found[again]  # found within the radius, but not near: changed when off the surface
         off = near & np.isfinite(d) & (d > np.maximum(lod, surface.offset_m))
