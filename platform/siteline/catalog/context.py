@@ -3,7 +3,7 @@ it reports progress, and the orchestrator's run id its stage runs are recorded u
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from siteline.catalog import Catalog
 from siteline.config import Settings
@@ -19,7 +19,3 @@ class StageContext:
     settings: Settings
     progress: Progress = no_progress
     run_id: str | None = None
-
-    def reporting(self, progress: Progress) -> StageContext:
-        """This context reporting to ``progress`` instead."""
-        return replace(self, progress=progress)
