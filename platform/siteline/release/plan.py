@@ -220,6 +220,12 @@ def choose_pairs(session: Session, site_name: str, pair_ids: Sequence[int] | Non
     return chosen
 
 
+def choice_key(pair_ids: Sequence[int], params: ReleaseParams) -> JsonObject:
+    """What of a build's lineage key (:func:`next_version`) its choice decides: the pairs, the pair
+    parameters, the format and the padding (the label sets are known once the pairs are planned)."""
+    return {"pairs": list(pair_ids), "params": params.pair.to_dict(), "format": FORMAT, "pad": params.pad}
+
+
 def used_label_sets(pairs: Sequence[PairPlan]) -> dict[str, int]:
     """Scene id (as text, a JSON key) -> the label-set version the pairs use, by scene id."""
     used = {str(sc.id): sc.label_set.version for p in pairs for sc in (p.t1, p.t2)}
@@ -325,13 +331,7 @@ def refuse_published_version(
         return
     latest = max(list_releases(session, name), key=lambda r: semver(r.version))
     recorded = dict((existing.parameters or {}).get("lineage_key") or {})
-    key = {
-        "pairs": list(pair_ids),
-        "params": params.pair.to_dict(),
-        "format": FORMAT,
-        "pad": params.pad,
-    }
-    differs = [k for k, v in key.items() if recorded.get(k) != v]
+    differs = [k for k, v in choice_key(pair_ids, params).items() if recorded.get(k) != v]
     if latest.version != version or differs:
         why = (
             f"{latest.version} is the latest" if latest.version != version else "other " + ", ".join(differs)
@@ -354,8 +354,7 @@ def plan_release(
     if version is not None:
         semver(version)
     pairs = tuple(plan_pair(session, settings.store, pid, params.pair, pinned) for pid in chosen)
-    key = {"pairs": chosen, "params": params.pair.to_dict(), "format": FORMAT, "pad": params.pad,
-           "label_sets": used_label_sets(pairs)}  # fmt: skip
+    key = choice_key(chosen, params) | {"label_sets": used_label_sets(pairs)}
     digests = output_digests(pairs)
     auto, reason, up_to_date = next_version(session, name, key, digests)
     if version is not None and version != up_to_date:  # a given version is built as asked

@@ -21,7 +21,7 @@ from siteline.schema import JsonObject
 MIN_REGION_POINTS = 8
 # points whose nearest neighbour lies over this many change radii away are probed against the other
 # scene's surface (LabelParams.surface_probe): the pit's ramps at 10 points/m2 recalled 0.89 -> 0.92,
-# for 1.2-1.5x the labels' seconds (docs/performance.md)
+# for 1.1-1.3x the labels' seconds (docs/performance.md)
 SURFACE_PROBE = 0.7
 # knobs view generation shares with the renders, set once on the pair parameters
 _SHARED_VIEW_KNOBS = (
