@@ -34,7 +34,7 @@ from siteline.records.params.release import ReleaseKnobs, ReleaseParams
 from siteline.records.release import Manifest, ReleaseInfo, ReleaseOptions
 from siteline.release.plan import choose_release, release_params
 from siteline.release.stage import build_release
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.site.fence import validate_fence
 from siteline.site.taxonomy import Taxonomy
 from siteline.stores import layout
@@ -50,7 +50,7 @@ class Ingested:
     ingest: IngestResult
     tiles: TileOutcome | None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         """The ingest's record with the tiling's (``tiles``: None when nothing was tiled)."""
         tiling = self.tiles.tiling if self.tiles is not None else None
         return self.ingest.to_dict() | {"tiles": tiling.to_dict() if tiling is not None else None}
@@ -253,7 +253,7 @@ def pair_cloud(catalog: Catalog, settings: Settings, doc: Manifest, pair_id: int
         for key in ("t1", "t2"):
             sid = int(pair[key])
             source, ref = labelled_source(s, sid, int(pair["label_sets"][key]))
-            made = scenes.get(sid, {}).get("tile_checksum")
+            made = scenes[sid].get("tile_checksum") if sid in scenes else None
             if made is not None and made != source.checksum:
                 raise ReleaseError(
                     f"{what}, pair {pair_id}: scene {sid} was tiled again since the release was built; its points no "

@@ -32,6 +32,7 @@ from siteline.config import Settings, sqlite_url
 from siteline.errors import ConfigError, PairError
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseKnobs
+from siteline.schema import JSON
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import make_site_spec
 from siteline.synth import SynthParams, write_site
@@ -42,7 +43,7 @@ LAYOUTS = ("site", "boxes")
 # named sets of variants (pair knobs over the release defaults: on the synthetic site, 3 px world
 # splats at the auto scale 0.78 of its 660 x 495 photos). The photos are 1/8 of a Zenmuse L2 frame, so
 # scale 1 renders the paper's 1/8 of a frame and scale 2 its 1/4.
-GRIDS: dict[str, dict[str, dict[str, object]]] = {
+GRIDS: dict[str, dict[str, dict[str, JSON]]] = {
     "quick": {"default": {}, "no gap fill": {"fill_px": 0}},
     "full": {
         "default": {},
@@ -65,7 +66,7 @@ class TradeRow:
     dict), or why it made no release (``error``)."""
 
     variant: str
-    knobs: Mapping[str, object]
+    knobs: Mapping[str, JSON]
     seconds: float = math.nan
     label_seconds: float = math.nan
     radius_m: float = math.nan
@@ -97,7 +98,7 @@ def _seconds(s: float) -> str:
     return "reused" if math.isnan(s) else f"{s:.1f} s"
 
 
-def parse_variant(text: str) -> tuple[str, dict[str, object]]:
+def parse_variant(text: str) -> tuple[str, dict[str, JSON]]:
     """``NAME=JSON`` (pair knobs over the defaults, e.g. ``r4={"radius_multiplier": 4}``)."""
     name, sep, knobs = text.partition("=")
     try:
@@ -150,7 +151,7 @@ def synthetic_pair(
     return settings, site_dir, pid
 
 
-def variant_params(base: PairParams, name: str, knobs: Mapping[str, object]) -> PairParams:
+def variant_params(base: PairParams, name: str, knobs: Mapping[str, JSON]) -> PairParams:
     """``base`` with variant ``name``'s ``knobs`` over it; :class:`ConfigError` naming the variant for
     an unknown knob or a bad value."""
     unknown = sorted(set(knobs) - set(base.to_dict()))
@@ -165,7 +166,7 @@ def variant_params(base: PairParams, name: str, knobs: Mapping[str, object]) -> 
 
 
 def measure_variant(
-    cat: Catalog, settings: Settings, site_dir: Path, pid: int, name: str, knobs: Mapping[str, object],
+    cat: Catalog, settings: Settings, site_dir: Path, pid: int, name: str, knobs: Mapping[str, JSON],
     pictures: Callable[[str, int, np.ndarray, np.ndarray], None] | None = None,
 ) -> TradeRow:  # fmt: skip
     """Pair ``pid`` processed with ``knobs`` over the site's release defaults, scored against the
@@ -190,7 +191,7 @@ def measure_variant(
 
 def run_trade(
     out: Path, layout: str = "site", density: float = 10.0, views: int = 24,
-    variants: Mapping[str, Mapping[str, object]] | None = None, seed: int = 0,
+    variants: Mapping[str, Mapping[str, JSON]] | None = None, seed: int = 0,
     progress: Callable[[str], None] = print, pictures: int = 0,
 ) -> list[TradeRow]:  # fmt: skip
     """Every variant (name -> pair knobs; the full grid when None) measured on the synthetic site of

@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypedDict
 
 import numpy as np
 import torch
@@ -19,8 +20,8 @@ from siteline.data import ChangeDetectionDataset, TrainTransforms
 from siteline.errors import ReleaseError
 from siteline.release.manifest import read_manifest
 from siteline.release.metrics import IGNORE, confusion, scores
-from siteline.release.score import score_record
-from siteline.schema import JsonObject
+from siteline.release.score import ScoreRecord, score_record
+from siteline.schema import JSON
 
 
 def class_weights(root: Path, split: str = "train") -> torch.Tensor:
@@ -54,12 +55,24 @@ class TrainParams:
     workers: int = 0
 
 
+class TrainLog(TypedDict):
+    """``train_log.json``: the release trained on, iterations, each iteration's loss, seconds, the
+    model's parameter count and the training set-up."""
+
+    release: str
+    iterations: int
+    losses: list[float]
+    seconds: float
+    parameters: int
+    setup: dict[str, JSON]
+
+
 def train(
     root: Path,
     out_dir: Path,
     config: TrainParams = TrainParams(),
     progress: Callable[[int, int, float], None] | None = None,
-) -> JsonObject:
+) -> TrainLog:
     """Train on the release's train split with ``config``; write ``model.pt`` and ``train_log.json``
     into ``out_dir``."""
     epochs, max_iters, batch_size, lr = config.epochs, config.max_iters, config.batch_size, config.lr
@@ -109,7 +122,7 @@ def train(
         {"model": model.state_dict(), "release": manifest.title},
         out_dir / "model.pt",
     )
-    log = {
+    log: TrainLog = {
         "release": manifest.title,
         "iterations": it,
         "losses": losses,
@@ -134,7 +147,7 @@ def train(
 @torch.no_grad()
 def evaluate(
     root: Path, checkpoint: Path, out_json: Path, split: str = "test", device: str = "cpu"
-) -> JsonObject:
+) -> ScoreRecord:
     """Predict every image of ``split`` (padded to a multiple of 16), accumulate one confusion matrix,
     and write the scores with the release's manifest hash and the metric definition, beside those of
     predicting every pixel unchanged (``trivial_scores``: the floor a model that learned must clear)."""
@@ -151,12 +164,14 @@ def evaluate(
         h, w = s["mask"].shape[-2:]
         logits = model(_pad16(s["image"])[None].to(device))[..., :h, :w]
         per_image.append(confusion(logits.argmax(1)[0].cpu(), s["mask"][0]))
-    result = score_record(root, split, per_image) | {"checkpoint": str(checkpoint), "model": "FC-Siam-diff"}
+    result = score_record(root, split, per_image)
+    result["checkpoint"], result["model"] = str(checkpoint), "FC-Siam-diff"
     # the floor a model must clear: every pixel predicted unchanged (mIoU about half the unchanged share)
     cm = np.asarray(result["confusion"], dtype=np.int64)
-    result["trivial_scores"] = scores(np.array([[cm[0].sum(), 0], [cm[1].sum(), 0]])).to_dict() | {
-        "predicts": "all unchanged"
+    trivial: dict[str, float | int | str | None] = {
+        **scores(np.array([[cm[0].sum(), 0], [cm[1].sum(), 0]])).to_dict()
     }
+    result["trivial_scores"] = trivial | {"predicts": "all unchanged"}
     Path(out_json).parent.mkdir(parents=True, exist_ok=True)
     Path(out_json).write_text(json.dumps(result, indent=1) + "\n")
     return result

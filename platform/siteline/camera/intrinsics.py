@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from siteline.errors import CameraError
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class Intrinsics:
         width across the flight line, height along it)."""
         return altitude_m * self.width / self.fx, altitude_m * self.height / self.fy
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {"name": self.name} | {k: v for k, v in asdict(self).items() if k != "name"}
 
 

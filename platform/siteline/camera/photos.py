@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from siteline.errors import PhotoError
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 # compared without a trailing slash: legacy cameras write both "http://www.dji.com" and ".../"
 DJI_NAMESPACES = ("http://www.dji.com/drone-dji/1.0", "http://www.dji.com")
@@ -98,7 +98,7 @@ class PhotoMeta:
     def rtk_fixed(self) -> bool:
         return self.rtk_flag == 50
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         d = asdict(self)
         d["capture_time"] = self.capture_time.isoformat() if self.capture_time else None
         d["dewarp"] = list(self.dewarp) if self.dewarp else None

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -19,7 +19,7 @@ import numpy.typing as npt
 from siteline.camera.intrinsics import Intrinsics
 from siteline.camera.poses import Rigid
 from siteline.errors import CameraError
-from siteline.schema import JsonObject, validate
+from siteline.schema import JSON, validated
 from siteline.tolerances import snap
 
 if TYPE_CHECKING:
@@ -31,6 +31,27 @@ ORTHONORMAL_TOL = 1e-6
 def _round_half_up(x: float) -> int:
     # COLMAP's Camera::Rescale uses std::round (half away from zero); Python's round() is banker's.
     return int(math.floor(x + 0.5))
+
+
+class PoseDoc(TypedDict):
+    """A camera's pose: ``rotation`` (3 x 3, rows) and ``translation`` (3) of cam_from_world."""
+
+    rotation: list[list[float]]
+    translation: list[float]
+
+
+class CameraDoc(TypedDict):
+    """A camera as ``schema/camera.schema.json`` states it: model, image size (pixels), intrinsics
+    (pixels) and pose (site-local frame, metres)."""
+
+    model: NotRequired[str]
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    cam_from_world: PoseDoc
 
 
 @dataclass(frozen=True)
@@ -276,7 +297,7 @@ class Camera:
             cam_from_world.translation,
         )
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         """JSON form (``schema/camera.schema.json``); floats round-trip exactly."""
         return {
             "model": "PINHOLE",
@@ -293,8 +314,8 @@ class Camera:
         }
 
     @classmethod
-    def from_dict(cls, doc: JsonObject, source: str = "camera") -> Camera:
-        validate(doc, "camera.schema.json", source)
+    def from_dict(cls, raw: object, source: str = "camera") -> Camera:
+        doc = validated(raw, "camera.schema.json", source, CameraDoc)
         pose = doc["cam_from_world"]
         try:
             return cls.from_pose(
@@ -352,8 +373,8 @@ class CameraModel:
     params: tuple[float, ...]
     undistorted: CameraModel | None = None
 
-    def to_dict(self) -> JsonObject:
-        doc: JsonObject = {
+    def to_dict(self) -> dict[str, JSON]:
+        doc: dict[str, JSON] = {
             "model": self.model,
             "width": self.width,
             "height": self.height,

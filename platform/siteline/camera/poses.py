@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from siteline.errors import GeometryError
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 ORTHONORMAL_TOL = 1e-6
 
@@ -78,7 +78,7 @@ class Sim3:
         m[:3, 3] = self.t
         return m
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {"frames": self.name, "scale": float(self.scale), "rotation": self.R.tolist(),
                 "translation": self.t.tolist()}  # fmt: skip
 
@@ -102,5 +102,5 @@ class Rigid(Sim3):
         out = Sim3.__matmul__(self, other)
         return Rigid(out.dst, out.src, out.R, out.t) if isinstance(other, Rigid) else out
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {"frames": self.name, "rotation": self.R.tolist(), "translation": self.t.tolist()}

@@ -13,7 +13,6 @@ from siteline.errors import LabelSetError
 from siteline.records.labelsets import LabelSetImport, LabelSetRef
 from siteline.records.runs import StageRun
 from siteline.records.tiling import TileSource
-from siteline.schema import JsonObject
 
 
 def label_sets(session: Session, scene_id: int) -> list[LabelSet]:
@@ -78,7 +77,7 @@ def record_label_set(session: Session, result: LabelSetImport, run: StageRun) ->
     return row
 
 
-def label_set_record(row: LabelSet) -> JsonObject:
+def label_set_record(row: LabelSet) -> dict[str, object]:
     """A label-set row as plain values (for the CLI and the lineage)."""
     return {
         "scene": row.scene_id,

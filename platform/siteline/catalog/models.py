@@ -13,6 +13,7 @@ origin is float64 in the site CRS. Poses are COLMAP ``cam_from_world`` (row-majo
 from __future__ import annotations
 
 from datetime import datetime
+from typing import TypedDict
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Mapped, mapped_column, relationship
@@ -28,11 +29,22 @@ from siteline.records.enums import (
     SPLITS,
     STAGE_STATUSES,
 )
-from siteline.schema import JsonObject
+from siteline.records.release import ReleaseRecord
+from siteline.schema import JSON
+from siteline.site.taxonomy import TaxonomyDoc
 
 
 def _in(column: str, values: tuple[str, ...]) -> str:
     return f"{column} IN ({', '.join(repr(v) for v in values)})"
+
+
+class SiteVersion(TypedDict):
+    """An earlier version of a site's taxonomy and fence (site-local metres), and when it was replaced."""
+
+    version: int
+    taxonomy: TaxonomyDoc
+    fence: list[list[float]] | None
+    replaced_at: str
 
 
 class Site(Base):
@@ -45,15 +57,15 @@ class Site(Base):
     origin_y: Mapped[float] = mapped_column(Float64)
     origin_z: Mapped[float] = mapped_column(Float64)
     fence: Mapped[list[list[float]] | None] = mapped_column(sa.JSON, nullable=True)
-    taxonomy: Mapped[JsonObject] = mapped_column(sa.JSON)
+    taxonomy: Mapped[TaxonomyDoc] = mapped_column(sa.JSON)
     tile_size_m: Mapped[float] = mapped_column(Float64)
     # siteline.release.knobs.ReleaseKnobs.to_dict(): preset and knobs; {} means auto from the cameras
-    release_settings: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict, server_default="{}")
+    release_settings: Mapped[dict[str, JSON]] = mapped_column(sa.JSON, default=dict, server_default="{}")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     # the version of the taxonomy and fence above (1 at creation; `site update --taxonomy/--fence`
     # adds one) and the earlier versions: [{"version", "taxonomy", "fence", "replaced_at"}]
     version: Mapped[int] = mapped_column(sa.Integer, default=1, server_default="1")
-    history: Mapped[list[JsonObject]] = mapped_column(sa.JSON, default=list, server_default="[]")
+    history: Mapped[list[SiteVersion]] = mapped_column(sa.JSON, default=list, server_default="[]")
 
     @property
     def origin(self) -> tuple[float, float, float]:
@@ -113,10 +125,10 @@ class Scene(Base):
     capture_time: Mapped[datetime] = mapped_column(UTCDateTime)
     point_count: Mapped[int] = mapped_column(sa.BigInteger)
     # {"min": [x, y, z], "max": [x, y, z]} site-local metres
-    bounds: Mapped[JsonObject] = mapped_column(sa.JSON)
+    bounds: Mapped[dict[str, JSON]] = mapped_column(sa.JSON)
     # georegistration (Sim3, residuals) and alignment check against the previous scene
-    registration: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict)
-    statistics: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict)
+    registration: Mapped[dict[str, JSON]] = mapped_column(sa.JSON, default=dict)
+    statistics: Mapped[dict[str, JSON]] = mapped_column(sa.JSON, default=dict)
     tile_store_uri: Mapped[str | None] = mapped_column(StoreAddress, nullable=True)
     status: Mapped[str] = mapped_column(sa.String(16), default="registered")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
@@ -168,7 +180,7 @@ class LabelSet(Base):
     note: Mapped[str | None] = mapped_column(sa.Text, nullable=True)
     changed_points: Mapped[int | None] = mapped_column(sa.BigInteger, nullable=True)
     # matching statistics and the changed points per (old class, new class)
-    details: Mapped[JsonObject | None] = mapped_column(sa.JSON, nullable=True)
+    details: Mapped[dict[str, JSON] | None] = mapped_column(sa.JSON, nullable=True)
 
 
 class Pair(Base):
@@ -183,7 +195,7 @@ class Pair(Base):
     t1_scene_id: Mapped[int] = mapped_column(sa.ForeignKey("scene.id", ondelete="RESTRICT"))
     t2_scene_id: Mapped[int] = mapped_column(sa.ForeignKey("scene.id", ondelete="RESTRICT"))
     radius_m: Mapped[float | None] = mapped_column(Float64, nullable=True)
-    parameters: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict)
+    parameters: Mapped[dict[str, JSON]] = mapped_column(sa.JSON, default=dict)
     status: Mapped[str] = mapped_column(sa.String(16), default="new")
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
 
@@ -201,9 +213,9 @@ class View(Base):
     parent_camera_id: Mapped[int | None] = mapped_column(
         sa.ForeignKey("camera.id", ondelete="SET NULL"), nullable=True
     )
-    parameters: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict)
+    parameters: Mapped[dict[str, JSON]] = mapped_column(sa.JSON, default=dict)
     # full camera (schema/camera.schema.json)
-    camera: Mapped[JsonObject] = mapped_column(sa.JSON)
+    camera: Mapped[dict[str, JSON]] = mapped_column(sa.JSON)
 
 
 class Render(Base):
@@ -235,7 +247,7 @@ class Release(Base):
     version: Mapped[str] = mapped_column(sa.String(32))
     status: Mapped[str] = mapped_column(sa.String(16), default="draft")
     manifest_sha256: Mapped[str | None] = mapped_column(sa.String(64), nullable=True)
-    parameters: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict)
+    parameters: Mapped[ReleaseRecord] = mapped_column(sa.JSON, default=dict)
     root_uri: Mapped[str | None] = mapped_column(StoreAddress, nullable=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     published_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
@@ -274,7 +286,7 @@ class StageRun(Base):
     id: Mapped[int] = mapped_column(primary_key=True)
     stage: Mapped[str] = mapped_column(sa.String(64))
     subject: Mapped[str] = mapped_column(sa.String(256))
-    parameters: Mapped[JsonObject] = mapped_column(sa.JSON, default=dict)
+    parameters: Mapped[dict[str, JSON]] = mapped_column(sa.JSON, default=dict)
     status: Mapped[str] = mapped_column(sa.String(16), default="running")
     started_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
     finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)

@@ -16,7 +16,6 @@ from siteline.catalog.stages import add_completed
 from siteline.errors import NotFoundError, ReleaseError
 from siteline.records.release import DraftRelease
 from siteline.records.runs import StageRun
-from siteline.schema import JsonObject
 
 
 def find_release(session: Session, name: str, version: str) -> Release | None:
@@ -80,7 +79,7 @@ def release_item_files(session: Session, release_id: int) -> list[str]:
     return sorted(path for files in rows for path in files.values())
 
 
-def release_record(session: Session, rel: Release) -> JsonObject:
+def release_record(session: Session, rel: Release) -> dict[str, object]:
     items = release_item_counts(session, rel.id)
     return {
         "name": rel.name,

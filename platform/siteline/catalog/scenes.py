@@ -23,7 +23,6 @@ from siteline.records.runs import StageRun
 from siteline.records.scene import SceneStatistics, SceneView
 from siteline.records.site import SiteKey
 from siteline.records.tiling import SceneTiling, TileSource
-from siteline.schema import JsonObject
 
 
 def scene_row(session: Session, scene_id: int) -> Scene:
@@ -158,7 +157,7 @@ def mission_of_scene(session: Session, scene_id: int) -> Mission:
     return mission
 
 
-def scene_table(s: Session, site: SiteKey) -> list[JsonObject]:
+def scene_table(s: Session, site: SiteKey) -> list[dict[str, object]]:
     """The site's scenes in capture order as plain values (for the CLI's list): id, capture time,
     points, status, mission, camera source and the co-registration's translation (m)."""
     rows = []
@@ -172,7 +171,7 @@ def scene_table(s: Session, site: SiteKey) -> list[JsonObject]:
     return rows
 
 
-def scene_record(s: Session, scene_id: int) -> JsonObject:
+def scene_record(s: Session, scene_id: int) -> dict[str, object]:
     """Scene ``scene_id`` as plain values: statistics, registration, tiles, label sets (for the CLI)."""
     scene = scene_row(s, scene_id)
     nodes = node_summary(scene)

@@ -10,7 +10,7 @@ from siteline.catalog.models import LabelSet, Scene, Site
 from siteline.errors import NotFoundError, SiteError, SiteNotFoundError
 from siteline.records.params.release import ReleaseKnobs
 from siteline.records.site import SiteKey, SiteView
-from siteline.schema import JsonObject
+from siteline.schema import json_object
 from siteline.site.fence import fence_area_m2
 from siteline.site.spec import SiteSpec
 from siteline.site.taxonomy import Taxonomy
@@ -78,7 +78,7 @@ def redefine_site(
     if taxonomy is not None:
         _, known = taxonomy.code_lut("las") if "las" in taxonomy.source_codes else (None, None)
         for sc in scenes:
-            codes = (sc.statistics or {}).get("code_histogram") or {}
+            codes = json_object((sc.statistics or {}).get("code_histogram") or {}, "code_histogram")
             missing = sorted(int(c) for c in codes if known is None or not known[int(c)])
             if missing:
                 raise SiteError(
@@ -149,7 +149,7 @@ def site_of(session: Session, site_id: int) -> SiteSpec:
     return site_spec(site)
 
 
-def site_record(site: SiteView, scenes: int) -> JsonObject:
+def site_record(site: SiteView, scenes: int) -> dict[str, object]:
     """A site as plain values (for the CLI): CRS, origin, fence and its area, classes, scenes."""
     spec = site.spec
     return {

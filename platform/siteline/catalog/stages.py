@@ -19,7 +19,6 @@ from sqlalchemy.orm import Session
 
 from siteline.catalog.models import StageRun as StageRunRow
 from siteline.records.runs import StageRun
-from siteline.schema import JsonObject
 
 
 def _row(run: StageRun, status: str, error: BaseException | None = None) -> StageRunRow:
@@ -48,7 +47,9 @@ def record_failure(session: Session, run: StageRun, error: BaseException) -> int
     return row.id
 
 
-def stage_runs(session: Session, subject: str | None = None, stage: str | None = None) -> list[JsonObject]:
+def stage_runs(
+    session: Session, subject: str | None = None, stage: str | None = None
+) -> list[dict[str, object]]:
     """Stage runs (optionally of one subject or stage), oldest first, as dicts."""
     q = sa.select(StageRunRow).order_by(StageRunRow.started_at, StageRunRow.id)
     if subject:

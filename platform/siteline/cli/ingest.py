@@ -25,7 +25,7 @@ from siteline.cli.common import (
     settings,
 )
 from siteline.errors import MissionError
-from siteline.schema import JsonObject
+from siteline.schema import json_object
 
 
 def parse_time(text: str, option: str) -> datetime:
@@ -149,7 +149,7 @@ def mission_list(
     """List ingested missions."""
     with catalog() as cat, cat.transaction() as s:
         rows = list_missions(s, get_site(s, site) if site else None)
-        records: list[JsonObject] = [
+        records: list[dict[str, object]] = [
             {
                 "id": m.id,
                 "site_id": m.site_id,
@@ -162,16 +162,14 @@ def mission_list(
             }
             for m in rows
         ]
+        table = [[m.id, m.name, m.status, m.storage, m.received_at, m.manifest_sha256[:12]] for m in rows]
     emit(
         as_json,
         records,
         lambda: print_table(
             "missions",
             ["id", "name", "status", "storage", "received", "manifest"],
-            [
-                [r["id"], r["name"], r["status"], r["storage"], r["received_at"], r["manifest_sha256"][:12]]
-                for r in records
-            ],
+            table,
         ),
     )
 
@@ -215,7 +213,7 @@ def photo_inspect(
     """Print the DJI XMP (or EXIF) metadata siteline reads from a photo."""
     meta = read_photo_meta(file)
     record = meta.to_dict()
-    sources = record.pop("sources")
+    sources = json_object(record.pop("sources"), "sources")
     rows = [(k, v, sources.get(k, "")) for k, v in record.items() if v is not None]
     emit(
         as_json,

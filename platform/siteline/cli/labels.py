@@ -20,6 +20,7 @@ from siteline.cli.common import (
     progress_bars,
     settings,
 )
+from siteline.schema import json_object
 
 app = typer.Typer(help="Label-set versions of a scene's semantic classes.", no_args_is_help=True)
 
@@ -188,7 +189,9 @@ def diff_cmd(
             f"scene {scene_id}: label set {va} -> {vb}: {record['changed']:,} of {record['points']:,} points changed class"
         )
         print_table(
-            "changed points", ["old -> new", "points"], [[k, f"{n:,}"] for k, n in record["changes"].items()]
+            "changed points",
+            ["old -> new", "points"],
+            [[k, f"{n:,}"] for k, n in json_object(record["changes"]).items()],
         )
 
     emit(as_json, record, human)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -32,11 +33,15 @@ from siteline.records.params.release import ReleaseKnobs
 from siteline.records.release import ReleaseInfo, ReleaseOptions
 from siteline.release.manifest import verify_files
 from siteline.release.query import diff_releases
+from siteline.schema import json_int, json_object
+
+if TYPE_CHECKING:
+    from siteline.release.score import ScoreRecord
 
 app = typer.Typer(help="Versioned, immutable dataset releases.", no_args_is_help=True)
 
 
-def _both_metrics(result: dict) -> dict:
+def _both_metrics(result: ScoreRecord) -> dict[str, float | int | None]:
     """Split-level scores (one confusion matrix) and the paper's per-image mIoU, each named."""
     split = {f"{k} (split)": v for k, v in result["scores"].items()}
     paper = result["scores_per_image"]
@@ -131,7 +136,16 @@ def list_(name: str | None = typer.Option(None, "--name"), as_json: bool = JsonO
         lambda: print_table(
             "releases",
             ["name", "version", "status", "items", "root"],
-            [[r["name"], r["version"], r["status"], sum(r["items"].values()), r["root"]] for r in records],
+            [
+                [
+                    r["name"],
+                    r["version"],
+                    r["status"],
+                    sum(map(json_int, json_object(r["items"]).values())),
+                    r["root"],
+                ]
+                for r in records
+            ],
         ),
     )
 
@@ -427,10 +441,12 @@ def train_cmd(
                 task, completed=it, total=total, description=f"training loss {loss:.3f}"
             ),
         )
-    summary = {k: log[k] for k in ("release", "iterations", "seconds", "parameters")} | {
-        "first_loss": log["losses"][0] if log["losses"] else None,
-        "last_loss": log["losses"][-1] if log["losses"] else None,
-    }
+    losses = log["losses"]
+    summary = {
+        "release": log["release"], "iterations": log["iterations"], "seconds": log["seconds"],
+        "parameters": log["parameters"], "first_loss": losses[0] if losses else None,
+        "last_loss": losses[-1] if losses else None,
+    }  # fmt: skip
     emit(as_json, summary, lambda: print_record("training", summary))
 
 

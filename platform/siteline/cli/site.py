@@ -29,7 +29,7 @@ from siteline.cli.common import (
 from siteline.cli.knobs import with_knob_options
 from siteline.errors import ReleaseError
 from siteline.records.params.release import ReleaseKnobs
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_list
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import DEFAULT_TILE_SIZE_M, make_site_spec
 from siteline.site.taxonomy import default_taxonomy, load_taxonomy
@@ -88,7 +88,7 @@ def list_(as_json: bool = JsonOption) -> None:
                 [
                     r["name"],
                     r["crs"],
-                    " ".join(f"{v:.3f}" for v in r["origin"]),
+                    " ".join(f"{v:.3f}" for v in json_list(r["origin"], "origin")),
                     f"{r['fence_area_m2']:.0f}" if r["fence_area_m2"] else "-",
                     r["scenes"],
                 ]
@@ -189,7 +189,7 @@ def delete(
     emit(as_json, asdict(done), lambda: console.print(done.message(f"site {name}")))
 
 
-def _release_now(session: Session, name: str) -> JsonObject | str:
+def _release_now(session: Session, name: str) -> dict[str, JSON] | str:
     """The knobs a release of the site built now would use (auto ones worked out), or why none can."""
     from siteline.release.plan import release_params
 

@@ -8,7 +8,7 @@ from datetime import datetime
 from siteline.errors import MissionError
 from siteline.records.enums import STORAGES, Storage
 from siteline.register.planned import SurveyPlan
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.site.crs import parse_z_unit
 
 UNMAPPED_CODES = ("refuse", "ignore")
@@ -58,7 +58,7 @@ class IngestOptions:
         if self.storage not in STORAGES:
             raise MissionError(f"storage must be 'copy' or 'reference', got {self.storage!r}.")
 
-    def record(self, site: str) -> JsonObject:
+    def record(self, site: str) -> dict[str, JSON]:
         """What the stage run records of these options."""
         return {
             "site": site,

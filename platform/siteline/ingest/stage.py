@@ -33,7 +33,7 @@ from siteline.records.mission import CheckedMission
 from siteline.records.registration import Registration
 from siteline.records.runs import StageRun
 from siteline.records.scan import LasScan
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.stores import layout
 from siteline.stores.blobs import BlobStaging, remove_blobs
 
@@ -58,7 +58,7 @@ class IngestResult:
     registration: Registration = field(default_factory=lambda: Registration("unknown"))
     pairs: list[int] = field(default_factory=list)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         doc = {f.name: getattr(self, f.name) for f in fields(self)}
         return doc | {
             "scan": self.scan.to_dict() if self.scan is not None else {},

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
@@ -33,7 +33,7 @@ def histogram(counts: np.ndarray, taxonomy: Taxonomy) -> dict[str, int]:
     return {names.get(int(i), str(int(i))): int(per_id[i]) for i in np.nonzero(per_id)[0]}
 
 
-def diff_tiles(a: SceneTiles, b: SceneTiles, taxonomy: Taxonomy) -> JsonObject:
+def diff_tiles(a: SceneTiles, b: SceneTiles, taxonomy: Taxonomy) -> dict[str, JSON]:
     """How the classes of one scene's tiles under two label sets differ, read tile by tile: points,
     changed points, changed points per ``"old->new"`` class pair and both class histograms."""
     counts = np.zeros((256, 256), dtype=np.int64)

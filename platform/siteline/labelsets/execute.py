@@ -41,6 +41,7 @@ from siteline.pointpass import (
 from siteline.progress import Progress, no_progress
 from siteline.records.labelsets import ExportedLabels, LabelSetImport
 from siteline.site.spec import SiteSpec
+from siteline.site.taxonomy import Taxonomy
 from siteline.stores import Store, layout
 from siteline.stores.owners import owner_tag, sweep_stale
 from siteline.tiles.layout import parse_tile_key, tile_index, tile_key, tile_origin_local
@@ -109,7 +110,8 @@ def _check_origin(
             f"editor may drop it), so its class codes cannot be taken as site {site.name}'s class ids (ASPRS 2 "
             f"and 5 would read as {names.get(2, 'nothing')} and {names.get(5, 'nothing')}). {how}"
         )
-    ids = {int(c["id"]): c["name"] for c in about.taxonomy.get("classes", [])}
+    recorded = Taxonomy.from_dict(about.taxonomy, f"labels file {path}'s label-set record: its taxonomy")
+    ids = {c.id: c.name for c in recorded.classes}
     if ids != {c.id: c.name for c in site.taxonomy.classes}:
         raise LabelSetError(
             f"labels file {path} was exported under taxonomy {about.taxonomy.get('name')!r}, whose "

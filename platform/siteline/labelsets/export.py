@@ -12,6 +12,7 @@ from siteline.catalog.sites import site_of
 from siteline.labelsets.store import open_labelled
 from siteline.pointpass import write_changed_classes
 from siteline.records.labelsets import ExportedLabels
+from siteline.schema import json_doc
 from siteline.tiles.export import export_las
 
 
@@ -29,7 +30,9 @@ def export_label_set(
     with catalog.transaction() as s:
         site = site_of(s, get_scene(s, scene_id).site_id)
         source, label_set = labelled_source(s, scene_id, version)
-    about = ExportedLabels(site.name, scene_id, label_set.version, "site class ids", site.taxonomy.to_dict())
+    about = ExportedLabels(
+        site.name, scene_id, label_set.version, "site class ids", json_doc(site.taxonomy.to_dict())
+    )
     tiles = open_labelled(source, label_set)
     return export_las(tiles, site, out, bounds=bounds, level=level, labels=about), label_set.version
 

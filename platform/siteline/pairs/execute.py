@@ -20,7 +20,7 @@ from siteline.pairs.plan import PairPlan
 from siteline.pairs.render import LabelledPair, render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
-from siteline.records.pairs import ChangeLabels, PairOutput, RenderedView
+from siteline.records.pairs import ChangeLabels, PairOutput, PairSummary, RenderedView
 from siteline.records.params.labels import expected_false_change
 from siteline.render.outputs import png_bytes
 from siteline.render.threads import CpuThreads
@@ -232,7 +232,7 @@ def execute_pair(
     with store.publish(plan.root) as work:
         kept, rejected = _render_all(plan, scenes, views, work, device, progress)
         records = _index(kept, work, plan.params.seed)
-        summary = {
+        summary: PairSummary = {
             "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
             "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.to_dict(),
             "ground_plane": views.ground_choice.plane.to_dict() if views.ground_choice else views.ground.to_dict(),

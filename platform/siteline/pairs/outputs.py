@@ -12,15 +12,16 @@ from siteline.records.pairs import (
     Drawn,
     GroundUsed,
     PairOutput,
+    PairSummary,
     RenderedView,
 )
-from siteline.schema import JsonObject
 from siteline.stores import Store, join
 
 
-def output_of(plan: PairPlan, doc: JsonObject) -> PairOutput:
+def output_of(plan: PairPlan, doc: PairSummary) -> PairOutput:
+    """The outputs of ``plan`` its summary ``doc`` describes."""
     return PairOutput(
-        plan.pair_id, plan.t1.id, plan.t2.id, doc["radius_m"], plan.root,
+        plan.pair_id, plan.t1.id, plan.t2.id, float(doc["radius_m"]), plan.root,
         tuple(RenderedView.from_dict(v) for v in doc["views"]), ChangeLabels.from_dict(doc["labels"]), plan.versions,
         plan.digest, plan.params, ColourPlan.from_dict(doc.get("colour") or {"source": "rgb"}),
         doc.get("fence", "site fence"), ChangeRulePlan.from_dict(doc.get("change_rule")), Drawn.from_dict(doc),

@@ -32,7 +32,7 @@ from siteline.pointpass.sitestream import Correction, SiteChunk, SiteReading, si
 from siteline.pointpass.workers import pool_map, process_pool
 from siteline.progress import Progress, no_progress
 from siteline.records.tiling import TileSpec
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_doc
 from siteline.site.crs import ZUnit, parse_source_crs
 from siteline.site.spec import SiteSpec
 from siteline.stores.directio import append_blocks, finish_blocks
@@ -62,12 +62,12 @@ class PassSource:
     eight_bit: bool | None
     correction: Correction | None = None
 
-    def made_from(self, spec: TileSpec) -> JsonObject:
+    def made_from(self, spec: TileSpec) -> dict[str, JSON]:
         """Everything but the file's content that decides the records of a partition of this source
         cut on ``spec``'s grid: the site frame, the source CRS and z unit, the colour depth, the tile
         grid and quantum, the record layout and the co-registration (when there is one)."""
-        doc: JsonObject = {
-            "site": self.site.to_dict(), "crs": self.crs,
+        doc: dict[str, JSON] = {
+            "site": json_doc(self.site.to_dict()), "crs": self.crs,
             "z_unit": self.z_unit.to_dict() if self.z_unit is not None else None,
             "eight_bit": bool(self.eight_bit), "tile_size_m": spec.tile_size_m, "quantum_m": spec.quantum_m,
             "block": block_edge(spec), "record": RECORD.descr, "format": 2,
@@ -77,7 +77,7 @@ class PassSource:
         return doc
 
 
-def _key(made_from: JsonObject, content_sha256: str) -> str:
+def _key(made_from: dict[str, JSON], content_sha256: str) -> str:
     """The name of a partition: a digest of its file's content and of what else made its records."""
     doc = {**made_from, "sha256": content_sha256}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:32]
@@ -303,7 +303,7 @@ class Partition:
             )
         return out
 
-    def save(self, made_from: JsonObject | None = None) -> None:
+    def save(self, made_from: dict[str, JSON] | None = None) -> None:
         """Write the index of the runs beside them, and what made them (:meth:`PassSource.made_from`:
         how a :class:`PartitionCache` names the partition it keeps)."""
         if made_from is not None:

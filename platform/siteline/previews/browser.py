@@ -20,7 +20,7 @@ import numpy as np
 from siteline.errors import ReleaseError
 from siteline.records.release import Manifest
 from siteline.release.manifest import read_manifest
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.stores import atomic_file
 
 COLUMNS = (
@@ -29,7 +29,7 @@ COLUMNS = (
 )  # fmt: skip
 
 
-def camera_figures(camera: Mapping[str, Any]) -> JsonObject:
+def camera_figures(camera: Mapping[str, Any]) -> dict[str, JSON]:
     """What a person reads of a synthetic camera (``schema/camera.schema.json``): its centre in
     site-local metres, heading (degrees clockwise from site north, +y), down-tilt (degrees below the
     horizon, 90 = nadir), focal length (pixels) and horizontal field of view (degrees)."""
@@ -49,11 +49,11 @@ def camera_figures(camera: Mapping[str, Any]) -> JsonObject:
     }
 
 
-def browser_data(doc: Manifest, images: str, viewer: str | None) -> JsonObject:
+def browser_data(doc: Manifest, images: str, viewer: str | None) -> dict[str, JSON]:
     """The page's data: the items as rows of :data:`COLUMNS` (compact: 5,000 items are ~1.5 MB),
     where the images are (``images``: a URL or a path relative to the page, the release's root) and
     the 3D viewer's base URL for the release's pairs (None where no server is behind the page)."""
-    rows = []
+    rows: list[JSON] = []
     for it in sorted(doc.items, key=lambda it: it.id):
         cam = it.camera
         rows.append([

@@ -15,7 +15,7 @@ from siteline.camera.pinhole import Camera
 from siteline.pairs.render import LabelledPair
 from siteline.records.pairs import ColourPlan
 from siteline.records.release import ReleaseItem
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.site.taxonomy import Taxonomy
 from siteline.tiles.reader import SceneTiles
 
@@ -190,7 +190,7 @@ class CloudPlan:
                 self.cloud.side(side), self.chunks[side - 1][k], side, self.cloud.colour, self.centre, floor
             )
 
-    def to_dict(self, browser: str | None) -> JsonObject:
+    def to_dict(self, browser: str | None) -> dict[str, JSON]:
         """The viewer's plan (JSON): chunk counts and sizes, the centre, the classes, and each camera
         of the pair's items as a frustum relative to the centre (depth: 6 % of the scenes' extent),
         with the URL of its item in the release browser (``browser``: the page's URL; None: none)."""

@@ -3,14 +3,16 @@ of the data (images, why a version exists, sizes, coverage, valid fractions, whe
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from urllib.parse import quote
 
 from siteline.records.enums import SPLITS
-from siteline.records.pairs import PairOutput
+from siteline.records.pairs import PairOutput, PairVersions
+from siteline.records.params.pairs import PairParams
 from siteline.records.release import Manifest, ReleaseInfo, ReleaseItem
+from siteline.schema import JSON, json_object
 
 
 @dataclass(frozen=True)
@@ -22,6 +24,11 @@ class RunEvent:
     state: str
     message: str
     run_count: int
+
+
+def _derived(derived: Mapping[str, JSON], knob: str) -> str:
+    """``(why)`` where the release worked ``knob`` out for itself (its ``derived`` reasons), else nothing."""
+    return f"({derived[knob]})" if knob in derived else ""
 
 
 def _spread(values: Sequence[float]) -> str:
@@ -47,8 +54,8 @@ def release_markdown(
     label sets and class balance (``doc``: the release's manifest)."""
     items = doc.items
     lineage = doc.lineage
-    params = lineage.get("parameters", {})
-    derived = lineage.get("release_params", {}).get("derived", {})
+    params = PairParams.from_record(lineage["parameters"])
+    derived = json_object(lineage["release_params"].get("derived") or {}, "derived")
     splits = {s: sum(1 for it in items if it.split == s) for s in SPLITS}
     lines = [
         f"# Release {info.name} {info.version} ({info.status})",
@@ -62,9 +69,9 @@ def release_markdown(
         f"| where | `{info.root}` (`siteline release show {info.name} {info.version}`) |",
         f"| images | {len(items)} (" + ", ".join(f"{k} {v}" for k, v in splits.items()) + ") |",
         f"| image size | {_sizes(items) if items else '-'} |",
-        f"| scale | {params.get('scale')} {('(' + derived['scale'] + ')') if 'scale' in derived else ''} |",
-        f"| point size | {params.get('point_size_px')} px {('(' + derived['point_size_px'] + ')') if 'point_size_px' in derived else ''} |",
-        f"| views per pair | {params.get('views')} asked, min coverage {params.get('min_coverage')}, min valid {params.get('min_valid')} |",
+        f"| scale | {params.scale} {_derived(derived, 'scale')} |",
+        f"| point size | {params.point_size_px} px {_derived(derived, 'point_size_px')} |",
+        f"| views per pair | {params.views} asked, min coverage {params.min_coverage}, min valid {params.min_valid} |",
         f"| coverage | {_spread([it.coverage for it in items])} |",
         f"| valid fraction | {_spread([it.valid for it in items])} |",
         f"| change ratio | {_spread([it.change_ratio for it in items])} |",
@@ -75,11 +82,11 @@ def release_markdown(
         "| pair | scenes | label sets (t1, t2) | views | radius m |",
         "|---|---|---|---|---|",
     ]
-    for q in lineage.get("pairs", []):
+    for q in lineage["pairs"]:
         views = sum(1 for it in items if it.pair == q["id"])
-        ls = q.get("label_sets", {})
+        ls = PairVersions.from_dict(q.get("label_sets"))
         lines.append(
-            f"| {q['id']} | {q['t1']} -> {q['t2']} | v{ls.get('t1')}, v{ls.get('t2')} | {views} | {q['radius_m']:.3f} |"
+            f"| {q['id']} | {q['t1']} -> {q['t2']} | v{ls.t1}, v{ls.t2} | {views} | {q['radius_m']:.3f} |"
         )
     lines += [
         "",
@@ -88,9 +95,9 @@ def release_markdown(
         "| scene | captured | label set | source |",
         "|---|---|---|---|",
     ]
-    for sc in lineage.get("scenes", []):
+    for sc in lineage["scenes"]:
         lines.append(
-            f"| {sc['id']} | {sc['capture_time']} | v{sc['label_set_version']} | {sc['label_set_source']} |"
+            f"| {sc['id']} | {sc['capture_time']} | v{sc.get('label_set_version', 1)} | {sc.get('label_set_source')} |"
         )
     balance = doc.stats.get("class_balance", {})
     lines += [
@@ -112,9 +119,7 @@ def _see_links(info: ReleaseInfo, doc: Manifest, preview_url: str | None) -> lis
         return []
     base = f"{preview_url.rstrip('/')}"
     release = f"{quote(info.name)}/{quote(info.version)}"
-    pairs = " ".join(
-        f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.lineage.get("pairs", [])
-    )
+    pairs = " ".join(f"[pair {q['id']}]({base}/3d/{release}/{q['id']}/)" for q in doc.lineage["pairs"])
     return [
         f"**See it:** [browse every item]({base}/browse/{release}/) (A | B swipe, mask, filters) · in 3D, change in red: {pairs}",
         "",

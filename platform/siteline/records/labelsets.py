@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 
 @dataclass(frozen=True)
@@ -20,9 +20,9 @@ class ExportedLabels:
     scene: int | None
     label_set_version: int | None
     classification: str = "site class ids"
-    taxonomy: JsonObject = field(default_factory=dict)
+    taxonomy: dict[str, JSON] = field(default_factory=dict)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
 
     @classmethod
@@ -69,10 +69,10 @@ class LabelSetImport:
     max_unmatched: float = 0.001
     merged_from: int | None = None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
 
-    def details(self) -> JsonObject:
+    def details(self) -> dict[str, JSON]:
         """What the catalog keeps of the match (``label_set.details``)."""
         keep = ("file", "points_in_file", "matched", "unmatched", "duplicated", "untouched", "changes", "key",
                 "merged_from")  # fmt: skip

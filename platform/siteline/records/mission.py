@@ -12,7 +12,7 @@ from siteline.camera.pinhole import Camera
 from siteline.records.enums import CameraSource, FileKind, Storage
 from siteline.records.registration import Registration
 from siteline.records.scan import LasScan
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 
 @dataclass(frozen=True)
@@ -24,7 +24,7 @@ class FileEntry:
     sha256: str
     kind: FileKind
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
 
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal, NamedTuple, get_args
+from typing import Any, Literal, NamedTuple, NotRequired, TypedDict, get_args
 
 import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import PairError
 from siteline.records.params.pairs import PairParams
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_list, json_number
 from siteline.site.taxonomy import Taxonomy
 
 
@@ -47,7 +47,7 @@ class ViewStrategy:
     central_depth_m: float | None = None
     forward_m: float | None = None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
@@ -91,7 +91,7 @@ class RenderedView:
     probe_valid: float | None = None
     change_visible: float | None = None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {f.name: getattr(self, f.name) for f in fields(self)} | {
             "params": self.params.to_dict(),
             "camera": self.camera.to_dict(),
@@ -163,23 +163,26 @@ class ColourPlan:
         parts += ["height"] if self.source == "height" else []
         return ":".join(parts) or "none"
 
-    def to_dict(self) -> JsonObject:
-        return {
+    def to_dict(self) -> dict[str, JSON]:
+        doc: dict[str, JSON] = {
             "source": self.source,
             "stretch_t1": list(self.stretch_t1) if self.stretch_t1 else None,
             "stretch_t2": list(self.stretch_t2) if self.stretch_t2 else None,
             "why": self.why,
-        } | ({"shading": self.shading} if self.shading != "none" else {})  # unshaded plans as before
+        }
+        return doc | ({"shading": self.shading} if self.shading != "none" else {})  # unshaded plans as before
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> ColourPlan:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ColourPlan:
         """From :meth:`to_dict`'s form (a pair's or a release lineage's ``colour``)."""
-        source = doc.get("source", "rgb")
-        if source not in get_args(ColourSource):
-            raise PairError(f"colour source {source!r}: use one of {', '.join(get_args(ColourSource))}.")
+        source = next((c for c in get_args(ColourSource) if c == doc.get("source", "rgb")), None)
+        if source is None:
+            raise PairError(
+                f"colour source {doc.get('source')!r}: use one of {', '.join(get_args(ColourSource))}."
+            )
 
-        def bounds(v: Any) -> tuple[float, float] | None:
-            return (float(v[0]), float(v[1])) if v else None
+        def bounds(v: JSON) -> tuple[float, float] | None:
+            return (json_number(json_list(v)[0]), json_number(json_list(v)[1])) if v else None
 
         return cls(
             source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")),
@@ -204,7 +207,7 @@ class ChangeRulePlan:
             return np.ones(256, dtype=bool)
         return taxonomy.geometry_only_lut()
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {"rule": self.rule, "why": self.why, "differences": list(self.differences)}
 
     @classmethod
@@ -226,8 +229,11 @@ class RadiusChoice:
     given: bool = False
     expected_false_change: Mapping[str, float | str] | None = None
 
-    def to_dict(self) -> JsonObject:
-        doc: JsonObject = {"median_spacing_m": dict(self.median_spacing_m), "multiplier": self.multiplier}
+    def to_dict(self) -> dict[str, JSON]:
+        doc: dict[str, JSON] = {
+            "median_spacing_m": dict(self.median_spacing_m),
+            "multiplier": self.multiplier,
+        }
         if self.given:
             doc["given"] = True
         if self.expected_false_change is not None:
@@ -256,8 +262,8 @@ class ChangeLabels:
     points: int
     radius: RadiusChoice | None = None
 
-    def to_dict(self) -> JsonObject:
-        doc: JsonObject = {"uri": self.uri, "radius_m": self.radius_m, "counts": {k: dict(v) for k, v in self.counts.items()},
+    def to_dict(self) -> dict[str, JSON]:
+        doc: dict[str, JSON] = {"uri": self.uri, "radius_m": self.radius_m, "counts": {k: dict(v) for k, v in self.counts.items()},
                                "checksum": self.checksum}  # fmt: skip
         if self.seconds is not None:
             doc["seconds"] = self.seconds
@@ -277,6 +283,14 @@ class ChangeLabels:
         )  # fmt: skip
 
 
+class DrawnDoc(TypedDict):
+    """:class:`Drawn` as a pair's summary and a release's lineage hold it."""
+
+    candidates: int
+    probed: NotRequired[int]
+    rejected: NotRequired[dict[str, int]]
+
+
 @dataclass(frozen=True)
 class Drawn:
     """How a pair's views were drawn: candidates made, how many were probed (None: not recorded), and
@@ -286,11 +300,12 @@ class Drawn:
     probed: int | None
     rejected: Mapping[str, int]
 
-    def to_dict(self) -> JsonObject:
-        doc: JsonObject = {"candidates": self.candidates}
+    def to_dict(self) -> DrawnDoc:
+        doc: DrawnDoc = {"candidates": self.candidates}
         if self.probed is not None:
             doc["probed"] = self.probed
-        return doc | {"rejected": dict(self.rejected)}
+        doc["rejected"] = dict(self.rejected)
+        return doc
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any]) -> Drawn | None:
@@ -316,7 +331,7 @@ class GroundUsed:
     filter: Mapping[str, Any] | None = None
     cell_m: float | None = None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {
             "model": self.model, "source": self.source, "ground_points": self.ground_points, "share": self.share,
             "residual_m": self.residual_m, "tolerance_m": self.tolerance_m,
@@ -351,6 +366,31 @@ class GroundUsed:
             f"{self.residual_m:.1f} m, over the {self.tolerance_m:g} m tolerance)"
         )
         return f"views stand on {shape}, from {found}: {self.ground_points:,} points, {self.share:.0%} of those read"
+
+
+class PairSummary(TypedDict):
+    """A pair's ``summary.json`` (siteline.pairs.execute): its scenes, radius (metres), the documents of
+    its parameters (PairParams), label sets, labels (ChangeLabels), ground (GroundUsed, and the plane
+    its views stood on), fence, colour (ColourPlan), change rule (ChangeRulePlan), how its views were
+    drawn (DrawnDoc's keys) and each rendered view (RenderedView). Keys added since the first outputs
+    may be absent from earlier ones."""
+
+    pair: int
+    t1: int
+    t2: int
+    radius_m: float
+    params: dict[str, JSON]
+    label_sets: NotRequired[dict[str, int]]
+    labels: dict[str, JSON]
+    ground_plane: NotRequired[dict[str, JSON]]
+    ground: NotRequired[dict[str, JSON] | None]
+    fence: NotRequired[str]
+    colour: NotRequired[dict[str, JSON]]
+    change_rule: NotRequired[dict[str, JSON] | None]
+    candidates: NotRequired[int]
+    probed: NotRequired[int | None]
+    rejected: NotRequired[dict[str, int]]
+    views: list[dict[str, JSON]]
 
 
 @dataclass(frozen=True)

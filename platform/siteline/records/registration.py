@@ -16,7 +16,7 @@ from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intr
 from siteline.camera.pinhole import CameraModel
 from siteline.camera.poses import Sim3
 from siteline.errors import RegistrationError
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 # the six directions of a rigid correction
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -71,7 +71,7 @@ class Alignment:
             | values
         )
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         """The JSON form (None-valued optional fields left out; ``free`` named for readers)."""
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["correction"] = [list(row) for row in self.correction]
@@ -136,7 +136,7 @@ class SurveyPlan:
                 f"planned cameras: oblique pitch {self.oblique_pitch_deg} must lie in [0, 90) degrees."
             )
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {
             "camera": self.camera.to_dict(), "altitude_m": self.altitude_m,
             "forward_overlap": self.forward_overlap, "side_overlap": self.side_overlap,
@@ -211,9 +211,9 @@ class Registration:
                                  np.asarray(sim["translation"], np.float64)) if sim is not None else None,
         )  # fmt: skip
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         """The JSON form the catalog keeps (fields that do not apply left out)."""
-        out: JsonObject = {}
+        out: dict[str, JSON] = {}
         for f in fields(self):
             value = getattr(self, f.name)
             if value is None or f.name == "altitude_why":

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 
 @dataclass(frozen=True)
@@ -16,6 +16,6 @@ class StageRun:
 
     stage: str
     subject: str
-    parameters: JsonObject = field(default_factory=dict)
+    parameters: dict[str, JSON] = field(default_factory=dict)
     started: datetime = field(default_factory=lambda: datetime.now(UTC))
     run_id: str | None = None

@@ -10,7 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.site.crs import ZUnit
 
 # how a scan names a file's colour, and whether it is 0-255 in 16-bit fields
@@ -31,7 +31,7 @@ class ColourStats:
     intensity_range: tuple[float, float] | None
     z_range_m: tuple[float, float]
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {
             "rgb": self.rgb,
             "intensity_range": list(self.intensity_range) if self.intensity_range else None,
@@ -117,7 +117,7 @@ class LasScan:
         """This scan with ``path`` recorded instead (the file's path inside its mission)."""
         return replace(self, path=path)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         """The JSON form (the samples are left out)."""
         doc = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in _SAMPLES}
         doc["unknown_codes"] = {str(k): v for k, v in self.unknown_codes.items()}

@@ -10,7 +10,7 @@ from typing import Any
 from siteline.records.registration import Registration
 from siteline.records.scan import LasScan
 from siteline.records.tiling import SceneTiling
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 # keys the ingest adds beside the scan's own fields
 _INGEST_KEYS = ("las_file", "las_sha256", "stable_sample_sha256", "photos", "cameras")
@@ -39,8 +39,8 @@ class SceneStatistics:
     def with_tiling(self, tiling: SceneTiling) -> SceneStatistics:
         return replace(self, tiling=tiling)
 
-    def to_json(self) -> JsonObject:
-        doc: JsonObject = self.scan.to_dict() if self.scan is not None else {}
+    def to_json(self) -> dict[str, JSON]:
+        doc: dict[str, JSON] = self.scan.to_dict() if self.scan is not None else {}
         doc |= {k: getattr(self, k) for k in _INGEST_KEYS}
         if self.capture_time_source is not None:
             doc["capture_time_source"] = self.capture_time_source

@@ -12,7 +12,7 @@ import numpy as np
 
 from siteline.errors import TileError
 from siteline.records.enums import NODE_ORDERS, NodeOrder
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 if TYPE_CHECKING:
     from siteline.site.spec import SiteSpec
@@ -100,7 +100,7 @@ class TileSpec:
     def spacing(self, level: int) -> float:
         return self.level0_spacing_m / 2.0**level
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
 
     @classmethod
@@ -284,7 +284,7 @@ class SceneTiling:
     def source_bytes_per_point(self) -> float:
         return self.source_bytes / max(self.points, 1)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         doc = {f.name: getattr(self, f.name) for f in fields(self)}
         return doc | {
             "spec": self.spec.to_dict(),

@@ -11,7 +11,6 @@ import logging
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -20,12 +19,21 @@ from siteline import __version__
 from siteline.errors import ReleaseError
 from siteline.progress import Progress, no_progress
 from siteline.records.pairs import PairOutput
-from siteline.records.release import FORMAT, DraftRelease, ReleaseItem
+from siteline.records.release import (
+    FORMAT,
+    DraftRelease,
+    Lineage,
+    ManifestDoc,
+    PairLineage,
+    ReleaseItem,
+    ReleaseRecord,
+    ReleaseStats,
+    ViewsLineage,
+)
 from siteline.release import datasheet, layout
 from siteline.release.manifest import METRIC_DEFINITION, file_entries, write_manifest
 from siteline.release.plan import ReleasePlan
 from siteline.release.splits import assign_splits
-from siteline.schema import JsonObject
 from siteline.stores import join, open_store, publish_folder
 from siteline.stores.base import store_relative
 
@@ -99,15 +107,24 @@ def _write_items(
     return items
 
 
-def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject:
+def _pair_lineage(o: PairOutput, store_url: str) -> PairLineage:
+    views: ViewsLineage = {"made": len(o.views), "asked": o.params.views}
+    if o.drawn:
+        views.update(o.drawn.to_dict())
+    doc: PairLineage = {
+        "id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
+        "labels": o.labels.to_dict() | {"uri": store_relative(o.labels.uri, store_url)}, "colour_source": o.colour.source,
+        "colour": o.colour.to_dict(), "fence": o.fence, "change_rule": o.change_rule.to_dict(),
+    }  # fmt: skip
+    if o.ground:
+        doc["ground"] = o.ground.to_dict()
+    doc["views"] = views
+    return doc
+
+
+def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> Lineage:
     params = plan.params
-    pairs = [
-        {"id": o.pair_id, "t1": o.t1, "t2": o.t2, "radius_m": o.radius_m, "label_sets": o.versions.to_dict(),
-         "labels": o.labels.to_dict() | {"uri": store_relative(o.labels.uri, plan.store_url)}, "colour_source": o.colour.source, "colour": o.colour.to_dict(), "fence": o.fence,
-         "change_rule": o.change_rule.to_dict(), **({"ground": o.ground.to_dict()} if o.ground else {}),
-         "views": {"made": len(o.views), "asked": o.params.views, **(o.drawn.to_dict() if o.drawn else {})}}
-        for o in (outputs[pid] for pid in sorted(outputs))
-    ]  # fmt: skip
+    pairs = [_pair_lineage(outputs[pid], plan.store_url) for pid in sorted(outputs)]
     return {
         "sites": [plan.site_lineage],
         "scenes": list(plan.scenes),
@@ -120,9 +137,12 @@ def _lineage(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject
     }
 
 
-def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> JsonObject:
-    """What the catalog records of a release's parameters (``release.parameters``), with the
-    smallest change each pair resolves (its change radius, metres)."""
+def catalog_parameters(
+    plan: ReleasePlan, outputs: Mapping[int, PairOutput], stats: ReleaseStats, left_out: list[list[int]]
+) -> ReleaseRecord:
+    """What the catalog records of a release (``release.parameters``): its parameters, the smallest
+    change each pair resolves (its change radius, metres), where its ignore pixels come from
+    (``release show``: ``stats``) and the items ``left_out`` of every split."""
     params = plan.params
     pairs = sorted(outputs)
     return {
@@ -131,18 +151,14 @@ def catalog_parameters(plan: ReleasePlan, outputs: Mapping[int, PairOutput]) -> 
         "release_params": params.to_dict(),
         "lineage_key": plan.lineage_key,
         "pairs": pairs,
-        "label_sets": plan.lineage_key["label_sets"],
+        "label_sets": plan.lineage_key.get("label_sets", {}),
         "output_digests": plan.output_digests,
         "version_reason": plan.reason,
         "smallest_change_m": {str(pid): outputs[pid].radius_m for pid in pairs},
         "radius_ceiling_m": params.radius_ceiling_m,
+        "ignore": stats["ignore"],
+        "left_out": left_out,
     }
-
-
-def _catalog_figures(stats: Mapping[str, Any]) -> JsonObject:
-    """What the catalog records of a release's figures beside its parameters: where its ignore
-    pixels come from (``release show``)."""
-    return {"ignore": stats["ignore"]}
 
 
 def execute_build(
@@ -165,7 +181,7 @@ def execute_build(
         datasheet.montage(work, [it for it in items if it.valid > 0.2] or list(items)).save(
             work / "montage.png"
         )
-        doc = {
+        doc: ManifestDoc = {
             "format": FORMAT, "layout": layout.layout_record(plan.params.pad), "name": plan.name,
             "version": plan.version, "created": datetime.now(UTC).isoformat(), "code_version": __version__,
             "files": [], "lineage": _lineage(plan, outputs), "splits": splits, "split_rule": split_plan.rule,
@@ -185,6 +201,6 @@ def execute_build(
     )
     return DraftRelease(
         plan.name, plan.version, str(plan.draft), manifest_sha, tuple(items), stats,
-        catalog_parameters(plan, outputs) | _catalog_figures(stats) | {"left_out": [list(i) for i in sorted(split_plan.left_out)]},
+        catalog_parameters(plan, outputs, stats, [list(i) for i in sorted(split_plan.left_out)]),
         {pid: o.digest for pid, o in outputs.items()},
     )  # fmt: skip

@@ -13,8 +13,16 @@ from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Dra
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseParams
 from siteline.records.registration import Registration
-from siteline.records.release import ReleaseItem
-from siteline.schema import JsonObject
+from siteline.records.release import (
+    ClassBalance,
+    IgnoreBreakdown,
+    IgnoreTally,
+    Lineage,
+    ManifestDoc,
+    PairLineage,
+    ReleaseItem,
+    ReleaseStats,
+)
 
 MASK_COLOURS = {0: (40, 170, 60), 1: (220, 40, 40), 255: (255, 255, 255)}
 
@@ -59,7 +67,7 @@ def _shares(px: dict[str, float], total: float) -> dict[str, float]:
     return {k: (v / total if total else 0.0) for k, v in px.items()}
 
 
-def ignore_breakdown(items: list[ReleaseItem], ignored_px: dict[str, int]) -> JsonObject:
+def ignore_breakdown(items: list[ReleaseItem], ignored_px: dict[str, int]) -> IgnoreBreakdown:
     """Where a release's ignore pixels come from: per cause (siteline.codes.RELEASE_IGNORE_CAUSES) the
     share of all stored pixels and of the rendered ones, overall and per split, and the share of
     rendered pixels whose point came from the gap fill. ``items``: the manifest's items (their
@@ -67,7 +75,7 @@ def ignore_breakdown(items: list[ReleaseItem], ignored_px: dict[str, int]) -> Js
     pixels counted in its ``label_ignore/`` images, so what no item accounts for (outputs made before
     causes were recorded) is ``unaccounted``."""
 
-    def tally(rows: list[ReleaseItem], counted: int) -> JsonObject:
+    def tally(rows: list[ReleaseItem], counted: int) -> IgnoreTally:
         rendered = sum(it.size_px[0] * it.size_px[1] for it in rows)
         stored = sum(it.padded_px[0] * it.padded_px[1] for it in rows)
         px = {c: sum(it.ignore.get(c, 0.0) * it.size_px[0] * it.size_px[1] for it in rows)
@@ -85,18 +93,17 @@ def ignore_breakdown(items: list[ReleaseItem], ignored_px: dict[str, int]) -> Js
             "filled_of_rendered": filled / rendered if rendered else 0.0,
         }
 
-    out = tally(items, sum(ignored_px.values()))
     splits = sorted({it.split for it in items})
-    out["per_split"] = {
+    per_split: dict[str, IgnoreTally] = {
         sp: tally([it for it in items if it.split == sp], ignored_px.get(sp, 0)) for sp in splits
     }
-    return out
+    return {**tally(items, sum(ignored_px.values())), "per_split": per_split}
 
 
-def statistics(root: Path, items: list[ReleaseItem]) -> JsonObject:
+def statistics(root: Path, items: list[ReleaseItem]) -> ReleaseStats:
     """Pixel class balance per split (from ``label_ignore/``; padding counts as ignore), coverage,
     per-pair change ratio and where the ignore pixels come from (:func:`ignore_breakdown`)."""
-    per_split: dict[str, dict[str, int]] = {}
+    per_split: dict[str, ClassBalance] = {}
     per_pair: dict[int, list[float]] = {}
     for it in items:
         m = np.asarray(Image.open(root / it.split / "label_ignore" / f"{it.id}.png"))
@@ -116,7 +123,7 @@ def statistics(root: Path, items: list[ReleaseItem]) -> JsonObject:
     }
 
 
-def _radius_lines(pairs: list[JsonObject], ceiling: float, params: PairParams) -> list[str]:
+def _radius_lines(pairs: list[PairLineage], ceiling: float, params: PairParams) -> list[str]:
     """One line per pair: its radius, the false change it implies on unchanged surfaces, what its
     rule measured against analytic truth (siteline.labels.accuracy) and, when it is above the
     release's radius ceiling (metres), that it is."""
@@ -152,13 +159,13 @@ def _radius_lines(pairs: list[JsonObject], ceiling: float, params: PairParams) -
     return out
 
 
-def _ignore_share(stats: JsonObject) -> float:
+def _ignore_share(stats: ReleaseStats) -> float:
     s = stats["class_balance"].values()
     total = sum(v["unchanged"] + v["changed"] + v["ignore"] for v in s)
     return sum(v["ignore"] for v in s) / max(total, 1)
 
 
-def _layout_lines(doc: JsonObject, stats: JsonObject) -> list[str]:
+def _layout_lines(doc: ManifestDoc, stats: ReleaseStats) -> list[str]:
     padding = doc["layout"]["padding"]
     return [
         "## Layout (format 2: LEVIR-CD, with the ignore information beside it)",
@@ -199,7 +206,7 @@ _REJECTED_WORDS = {
 }  # fmt: skip
 
 
-def _views_text(q: JsonObject) -> str:
+def _views_text(q: PairLineage) -> str:
     """How many views a pair gave of those asked, and why not more."""
     v = q["views"]
     text = f"- pair {q['id']}: {v['made']} views of the {v['asked']} asked"
@@ -211,7 +218,7 @@ def _views_text(q: JsonObject) -> str:
     return text
 
 
-def _camera_lines(lin: JsonObject) -> list[str]:
+def _camera_lines(lin: Lineage) -> list[str]:
     """Where each scene's cameras came from, and each pair's colour and fence."""
     regs = {s["id"]: Registration.from_dict(s.get("registration")) for s in lin["scenes"]}
     sources = {sid: r.source for sid, r in regs.items()}
@@ -240,7 +247,7 @@ def _camera_lines(lin: JsonObject) -> list[str]:
     return lines
 
 
-def _colour_text(q: JsonObject) -> str:
+def _colour_text(q: PairLineage) -> str:
     """A pair's colour, its fence and its change rule, in words."""
     colour = ColourPlan.from_dict(q["colour"])
     return (
@@ -293,7 +300,7 @@ _CAUSE_WORDS = {
 }
 
 
-def _ignore_lines(stats: JsonObject) -> list[str]:
+def _ignore_lines(stats: ReleaseStats) -> list[str]:
     """Where the ignore pixels come from, a row per cause."""
     ig = stats.get("ignore")
     if not ig:
@@ -318,7 +325,7 @@ def _ignore_lines(stats: JsonObject) -> list[str]:
     ]
 
 
-def _source_lines(lin: JsonObject) -> list[str]:
+def _source_lines(lin: Lineage) -> list[str]:
     release = ReleaseParams.from_dict(lin["release_params"])
     p = release.pair
     radius = f"auto ({p.radius_multiplier} x median spacing)" if p.radius_m is None else f"{p.radius_m} m"
@@ -367,7 +374,7 @@ def _source_lines(lin: JsonObject) -> list[str]:
     ]
 
 
-def _split_lines(doc: JsonObject, stats: JsonObject) -> list[str]:
+def _split_lines(doc: ManifestDoc, stats: ReleaseStats) -> list[str]:
     rule = doc.get("split_rule") or {"rule": "whole pairs, seeded"}
     lines = ["## Splits", "", f"- rule: {rule['rule']}"]
     if "max_shared_footprint" in rule:
@@ -401,7 +408,7 @@ def _split_lines(doc: JsonObject, stats: JsonObject) -> list[str]:
     return [*lines, "", f"Mean coverage (both renders hit) {stats['coverage']['mean']:.2%}.", ""]
 
 
-def _use_lines(doc: JsonObject) -> list[str]:
+def _use_lines(doc: ManifestDoc) -> list[str]:
     return [
         "## Use",
         "",
@@ -424,7 +431,7 @@ def _use_lines(doc: JsonObject) -> list[str]:
     ]
 
 
-def datasheet(doc: JsonObject, stats: JsonObject) -> str:
+def datasheet(doc: ManifestDoc, stats: ReleaseStats) -> str:
     """README.md of a release: what it is, where it comes from, how it was made, how to use it."""
     head = [
         f"# {doc['name']} {doc['version']}",

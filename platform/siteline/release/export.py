@@ -24,7 +24,7 @@ from siteline.records.release import Manifest
 from siteline.release.hub import HubLicense
 from siteline.release.layout import manifest_format
 from siteline.release.manifest import SAFE_ITEM_ID, read_manifest
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.stores import publish_folder
 
 SPLITS = ("train", "val", "test")
@@ -186,7 +186,7 @@ class ExportResult:
     note: str = ""
     names: dict[str, str] = field(default_factory=dict)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return dict(self.__dict__)
 
 

@@ -15,15 +15,17 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
 from siteline.codes import IGNORE_CAUSES, SYNTHETIC_SOFTWARE
 from siteline.errors import ReleaseError
 from siteline.labels.accuracy import accuracy_text
-from siteline.records.release import Manifest, ReleaseItem
-from siteline.schema import JsonObject
+from siteline.records.pairs import ChangeLabels
+from siteline.records.params.pairs import PairParams
+from siteline.records.release import Manifest, ReleaseItem, ReleaseStats
+from siteline.schema import json_object
 
 HUB_SPLITS = {"train": "train", "val": "validation", "test": "test"}
 SHARD_BYTES = 256 * 2**20  # images per shard, bytes: the hub's viewer and streaming like 100-500 MB files
@@ -77,8 +79,9 @@ def features() -> Any:
     )
 
 
-def _row(root: Path, it: ReleaseItem) -> JsonObject:
-    images = {}
+def _row(root: Path, it: ReleaseItem) -> dict[str, object]:
+    """The hub row of item ``it``: its images (PNG bytes), figures and camera."""
+    images: dict[str, dict[str, object]] = {}
     for name, folder in IMAGE_FOLDERS.items():
         path = root / it.split / folder / f"{it.id}.png"
         if not path.is_file():
@@ -95,7 +98,7 @@ def _row(root: Path, it: ReleaseItem) -> JsonObject:
         "change_ratio": it.change_ratio, "filled": it.filled,
         "width": it.size_px[0], "height": it.size_px[1],
         "ignore_causes": {c: float(it.ignore.get(c, 0.0)) for c in IGNORE_CAUSES} if it.ignore else None,
-        "camera": {k: cam[k] for k in ("fx", "fy", "cx", "cy")} | cam["cam_from_world"] if cam else None,
+        "camera": {**{k: cam[k] for k in ("fx", "fy", "cx", "cy")}, **json_object(cam["cam_from_world"])} if cam else None,
     }  # fmt: skip
 
 
@@ -182,6 +185,14 @@ def write_shards(root: Path, doc: Manifest, work: Path) -> Shards:
     return Shards(written, rows, num_bytes, file_bytes)
 
 
+class CardLicence(TypedDict, total=False):
+    """The licence fields of a hub dataset card (huggingface_hub's ``DatasetCardData``)."""
+
+    license: str
+    license_name: str | None
+    license_link: str | None
+
+
 @dataclass(frozen=True)
 class HubLicense:
     """The card's licence: a hub licence id (``cc-by-4.0``, ``mit``, ...) or ``other`` with the
@@ -202,10 +213,11 @@ class HubLicense:
         if self.link is not None and not self.link.startswith(("https://", "http://")):
             raise ReleaseError(f"--license-link {self.link!r}: an http(s) address of the licence's text.")
 
-    def card_fields(self) -> JsonObject:
-        return {"license": self.id} | (
-            {"license_name": self.name, "license_link": self.link} if self.id == "other" else {}
-        )
+    def card_fields(self) -> CardLicence:
+        """The dataset card's licence fields (``license_name`` and ``license_link`` for ``other`` only)."""
+        if self.id == "other":
+            return {"license": self.id, "license_name": self.name, "license_link": self.link}
+        return {"license": self.id}
 
     def text(self) -> str:
         if self.id == "other":
@@ -259,31 +271,25 @@ def _split_rule(doc: Manifest) -> str:
 
 def _made_lines(doc: Manifest) -> list[str]:
     lin = doc.lineage
-    p = lin["parameters"]
+    p = PairParams.from_record(lin["parameters"])
     pairs = lin["pairs"]
     radii = [q["radius_m"] for q in pairs]
     lines = [
         f"- {len(lin['scenes'])} scenes (epochs) of one site, {len(pairs)} pairs of consecutive scenes, "
-        f"{p['views']} synthetic views asked per pair (seed {p['seed']}); each view rendered from both scenes' "
+        f"{p.views} synthetic views asked per pair (seed {p.seed}); each view rendered from both scenes' "
         "point clouds with the same camera, so A and B are pixel-aligned.",
-        f"- render scale {p['scale']}, points drawn as {p.get('splat', 'fixed')} splats"
-        + (", edges trimmed" if p.get("trim_edges") else "")
-        + f", gaps up to {p.get('fill_px', 0)} px filled; level-of-detail factor {p['lod_factor']}.",
-        f"- change labels: the {p.get('label_rule', 'nearest')} rule on the 3D points at a radius of "
+        f"- render scale {p.scale}, points drawn as {p.splat} splats"
+        + (", edges trimmed" if p.trim_edges else "")
+        + f", gaps up to {p.fill_px} px filled; level-of-detail factor {p.lod_factor}.",
+        f"- change labels: the {p.label_rule} rule on the 3D points at a radius of "
         f"{min(radii):.3f}-{max(radii):.3f} m (a change smaller than the radius is not labelled), then projected "
         "into both views and OR-ed (symmetric masks).",
     ]
     said: dict[str, list[str]] = {}  # one sentence for the pairs it holds for
     for q in pairs:
-        info = (q.get("labels") or {}).get("radius") or {}
-        spacing = max((info.get("median_spacing_m") or {}).values(), default=float("nan"))
-        measured = accuracy_text(
-            p.get("label_rule", "nearest"),
-            int(p.get("min_region_points", 1)),
-            bool(p.get("trim_edges")),
-            spacing,
-            float(p.get("surface_probe", 0.0)),
-        )
+        radius = ChangeLabels.from_dict(q["labels"]).radius
+        spacing = max(radius.median_spacing_m.values(), default=float("nan")) if radius else float("nan")
+        measured = accuracy_text(p.label_rule, p.min_region_points, p.trim_edges, spacing, p.surface_probe)
         if measured:
             said.setdefault(measured, []).append(str(q["id"]))
     lines += [f"- pair{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {text}." for text, ids in said.items()]
@@ -385,7 +391,7 @@ def _card_data(doc: Manifest, shards: Shards, license: HubLicense, kind: str) ->
     )
 
 
-def card(doc: Manifest, shards: Shards, license: HubLicense, stats: JsonObject | None = None) -> str:
+def card(doc: Manifest, shards: Shards, license: HubLicense, stats: ReleaseStats | None = None) -> str:
     """README.md of the export, written for the parquet layout: the hub's YAML header (licence, task,
     sizes, splits and their files, features), what the data is and where it comes from, how to load
     it (a snippet that runs on this folder as written), splits, fields and label meanings, how it was
@@ -393,7 +399,7 @@ def card(doc: Manifest, shards: Shards, license: HubLicense, stats: JsonObject |
     kind, source = provenance(doc)
     counts = shards.rows
     data = _card_data(doc, shards, license, kind)
-    ignore = (stats or {}).get("ignore", {}).get("share")
+    ignore = stats["ignore"]["share"] if stats and "ignore" in stats else None
     ignore_text = f"{ignore:.1%} of all pixels" if ignore is not None else "a share of the pixels"
     first = next(iter(counts), "train")
     body = [
@@ -440,7 +446,9 @@ def export_hf(root: Path, doc: Manifest, work: Path, license: HubLicense) -> Sha
     """Write the hub export of the release at ``root`` (manifest ``doc``) into the new folder ``work``:
     parquet shards and README.md (the release's montage copied beside it)."""
     shards = write_shards(root, doc, work)
-    stats = json.loads((root / "stats.json").read_text()) if (root / "stats.json").is_file() else None
+    stats: ReleaseStats | None = (
+        json.loads((root / "stats.json").read_text()) if (root / "stats.json").is_file() else None
+    )
     if (root / "montage.png").is_file():
         (work / "montage.png").write_bytes((root / "montage.png").read_bytes())
     (work / "README.md").write_text(card(doc, shards, license, stats))

@@ -25,6 +25,7 @@ from siteline.records.params.release import (
     ReleaseParams,
 )
 from siteline.records.release import SiteSurvey
+from siteline.schema import json_number
 
 # views auto: up to this many per pair, as many as the cameras and the acceptance rules give
 AUTO_VIEWS = 300
@@ -94,7 +95,9 @@ def resolve(layers: Sequence[ReleaseKnobs], survey: SiteSurvey) -> ReleaseParams
     if "scale" in auto:
         doc["scale"], derived["scale"] = auto_scale(survey)
     if "point_size_px" in auto:
-        doc["point_size_px"], derived["point_size_px"] = auto_point_size(survey, doc["scale"])
+        doc["point_size_px"], derived["point_size_px"] = auto_point_size(
+            survey, json_number(doc["scale"], "scale")
+        )
     try:
         pair = PairParams.from_dict(doc)
     except SitelineError as exc:

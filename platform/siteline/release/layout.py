@@ -11,8 +11,7 @@ import numpy as np
 
 from siteline.codes import CHANGED, IGNORE
 from siteline.errors import ReleaseError
-from siteline.records.release import FORMAT, Manifest
-from siteline.schema import JsonObject
+from siteline.records.release import FORMAT, Layout, Manifest
 
 FORMAT_1 = "siteline-release/1"
 
@@ -95,7 +94,7 @@ def item_images(a: np.ndarray, b: np.ndarray, mask: np.ndarray, padded: bool) ->
     return out
 
 
-def layout_record(padded: bool) -> JsonObject:
+def layout_record(padded: bool) -> Layout:
     """What the manifest says about the layout: the folders and the padding rule."""
     return {
         "folders": FOLDERS,

@@ -7,14 +7,15 @@ import json
 import re
 from collections.abc import Sequence
 from pathlib import Path
+from typing import cast
 
 from siteline.errors import ReleaseError
 from siteline.hashing import sha256_file
-from siteline.records.release import Manifest
-from siteline.schema import JsonObject, validate
+from siteline.records.release import FileEntry, Manifest, ManifestDoc
+from siteline.schema import JSON, validate
 
 MANIFEST = "manifest.json"
-METRIC_DEFINITION = {
+METRIC_DEFINITION: dict[str, JSON] = {
     "name": "siteline-cd-metrics/1",
     "confusion": "one 2x2 confusion matrix accumulated over every pixel of the split; label 255 excluded",
     "reported": [
@@ -32,9 +33,9 @@ METRIC_DEFINITION = {
 }
 
 
-def file_entries(root: Path) -> list[JsonObject]:
+def file_entries(root: Path) -> list[FileEntry]:
     """Every file under ``root`` except the manifest: POSIX path, size, sha256, sorted by path."""
-    out = []
+    out: list[FileEntry] = []
     for p in sorted(root.rglob("*")):
         if p.is_file() and p.name != MANIFEST:
             out.append(
@@ -43,7 +44,7 @@ def file_entries(root: Path) -> list[JsonObject]:
     return out
 
 
-def write_manifest(root: Path, doc: JsonObject) -> str:
+def write_manifest(root: Path, doc: ManifestDoc) -> str:
     """Validate and write ``manifest.json``; return its sha256."""
     validate(doc, "release.schema.json", f"manifest of {root}")
     data = (json.dumps(doc, indent=1, sort_keys=False) + "\n").encode()
@@ -64,7 +65,7 @@ def read_manifest(root: Path) -> Manifest:
         ) from exc
 
 
-def _read_document(root: Path) -> JsonObject:
+def _read_document(root: Path) -> ManifestDoc:
     """The manifest of ``root`` as the JSON document it is (verification reads it so: a tampered one
     is reported, not refused)."""
     path = Path(root) / MANIFEST
@@ -76,7 +77,7 @@ def _read_document(root: Path) -> JsonObject:
         raise ReleaseError(f"{path} is not valid JSON: {exc}") from exc
     if not isinstance(doc, dict):
         raise ReleaseError(f"{path} holds a JSON {type(doc).__name__}, not a release manifest.")
-    return doc
+    return cast(ManifestDoc, doc)  # read as the format states it; verification reports what is not
 
 
 SAFE_ITEM_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,200}")

@@ -47,7 +47,7 @@ class Scores:
     kappa: float
     pixels: int
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, float | int | None]:
         return asdict(self)
 
 

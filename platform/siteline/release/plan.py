@@ -6,7 +6,6 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from sqlalchemy.orm import Session
 
@@ -27,9 +26,8 @@ from siteline.pairs.plan import PairPlan, pair_change_rule, plan_pair
 from siteline.records.pairs import ChangeRulePlan
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseKnobs, ReleaseParams
-from siteline.records.release import FORMAT, ReleaseOptions
+from siteline.records.release import FORMAT, LineageKey, ReleaseOptions, SceneLineage, SiteLineage
 from siteline.release.knobs import check_coverage, check_image_size, resolve
-from siteline.schema import JsonObject
 from siteline.stores import layout as paths
 
 RELEASE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}")
@@ -57,7 +55,7 @@ def semver(version: str) -> tuple[int, int, int]:
     return int(m.group(1)), int(m.group(2)), int(m.group(3))
 
 
-def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
+def _changes(previous: LineageKey, key: LineageKey) -> list[str]:
     """What differs between two lineage keys, in words."""
     out = []
     added = sorted(set(key["pairs"]) - set(previous.get("pairs", [])))
@@ -67,7 +65,7 @@ def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
     before = previous.get("label_sets", {})
     out += [
         f"scene {sid} label set v{before.get(sid, 1)} -> v{v}"
-        for sid, v in key["label_sets"].items()
+        for sid, v in key.get("label_sets", {}).items()
         if sid in before and before[sid] != v
     ]
     # a knob added since the previous version had the value it meant before it existed
@@ -77,15 +75,14 @@ def _changes(previous: Mapping[str, Any], key: Mapping[str, Any]) -> list[str]:
         for k, v in key["params"].items()
         if k in old_params and old_params[k] != v
     ]
-    out += [
-        f"{k} {previous.get(k)!r} -> {key[k]!r}"
-        for k in ("format", "pad")
-        if k in previous and previous[k] != key[k]
-    ]
+    if "format" in previous and previous["format"] != key["format"]:
+        out.append(f"format {previous['format']!r} -> {key['format']!r}")
+    if "pad" in previous and previous["pad"] != key["pad"]:
+        out.append(f"pad {previous['pad']!r} -> {key['pad']!r}")
     return out or ["lineage changed"]
 
 
-def _only_added(previous: Mapping[str, Any], key: Mapping[str, Any], old_digests: Mapping[str, str],
+def _only_added(previous: LineageKey, key: LineageKey, old_digests: Mapping[str, str],
                 digests: Mapping[str, str]) -> bool:  # fmt: skip
     """Whether ``key`` only adds pairs to ``previous``: every earlier pair kept with the same label
     sets and outputs, the same parameters, format and padding (its items are then unchanged, and
@@ -93,10 +90,14 @@ def _only_added(previous: Mapping[str, Any], key: Mapping[str, Any], old_digests
     old_pairs, new_pairs = set(previous.get("pairs", [])), set(key["pairs"])
     if not old_pairs < new_pairs:
         return False
-    if any(previous.get(k) != key.get(k) for k in ("params", "format", "pad")):
+    if (previous.get("params"), previous.get("format"), previous.get("pad")) != (
+        key["params"],
+        key["format"],
+        key["pad"],
+    ):
         return False
     before = previous.get("label_sets", {})
-    if any(key["label_sets"].get(sid) != v for sid, v in before.items()):
+    if any(key.get("label_sets", {}).get(sid) != v for sid, v in before.items()):
         return False
     return all(old_digests.get(str(p)) == digests.get(str(p)) for p in old_pairs)
 
@@ -157,7 +158,7 @@ def check_view_count(
 
 
 def next_version(
-    session: Session, name: str, lineage_key: Mapping[str, Any], digests: Mapping[str, str]
+    session: Session, name: str, lineage_key: LineageKey, digests: Mapping[str, str]
 ) -> tuple[str, str, str | None]:
     """(version, why, up to date with) for a build of ``name``, by semantic versioning for datasets:
     1.0.0 first; a minor bump when it only adds items (pairs added, every earlier item unchanged and
@@ -173,7 +174,10 @@ def next_version(
     latest = max(rows, key=lambda r: semver(r.version))
     major, minor, _ = semver(latest.version)
     recorded = latest.parameters or {}
-    previous = dict(recorded.get("lineage_key") or {})
+    # a copy (the row's own document stays as stored); none recorded: nothing in common but format and padding
+    previous: LineageKey = {**recorded["lineage_key"]} if recorded.get("lineage_key") else {
+        "pairs": [], "params": {}, "format": lineage_key["format"], "pad": lineage_key["pad"]
+    }  # fmt: skip
     previous.setdefault("label_sets", dict.fromkeys(lineage_key.get("label_sets", {}), 1))
     old_digests = dict(recorded.get("output_digests") or {})
     if previous != dict(lineage_key):
@@ -220,7 +224,7 @@ def choose_pairs(session: Session, site_name: str, pair_ids: Sequence[int] | Non
     return chosen
 
 
-def choice_key(pair_ids: Sequence[int], params: ReleaseParams) -> JsonObject:
+def choice_key(pair_ids: Sequence[int], params: ReleaseParams) -> LineageKey:
     """What of a build's lineage key (:func:`next_version`) its choice decides: the pairs, the pair
     parameters, the format and the padding (the label sets are known once the pairs are planned)."""
     return {"pairs": list(pair_ids), "params": params.pair.to_dict(), "format": FORMAT, "pad": params.pad}
@@ -237,10 +241,10 @@ def output_digests(pairs: Sequence[PairPlan]) -> dict[str, str]:
     return {str(p.pair_id): p.digest for p in pairs}
 
 
-def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[JsonObject]:
+def scene_lineage(session: Session, pairs: Sequence[PairPlan]) -> list[SceneLineage]:
     """The lineage record of every scene the pairs join: capture time, mission, label set, registration
     and tile checksum."""
-    out = []
+    out: list[SceneLineage] = []
     for sid in sorted({sc.id for p in pairs for sc in (p.t1, p.t2)}):
         scene = get_scene(session, sid)
         version = next(sc.label_set.version for p in pairs for sc in (p.t1, p.t2) if sc.id == sid)
@@ -268,13 +272,13 @@ class ReleasePlan:
     root (the manifest records its addresses relative to it)."""
 
     site_name: str
-    site_lineage: JsonObject
+    site_lineage: SiteLineage
     name: str
     version: str
     params: ReleaseParams
     pairs: tuple[PairPlan, ...]
-    scenes: tuple[JsonObject, ...]
-    lineage_key: JsonObject
+    scenes: tuple[SceneLineage, ...]
+    lineage_key: LineageKey
     draft: Path
     reason: str
     up_to_date: str | None
@@ -372,7 +376,7 @@ def plan_release(
         )
     semver(version)
     spec = get_site(session, site_name).spec
-    record = {"name": spec.name, "crs": spec.crs, "origin": list(spec.origin),
+    record: SiteLineage = {"name": spec.name, "crs": spec.crs, "origin": list(spec.origin),
               "fence_m": [list(v) for v in spec.fence] if spec.fence is not None else None,
               "version": spec.version, "taxonomy": spec.taxonomy.name}  # fmt: skip
     return ReleasePlan(

@@ -3,26 +3,27 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 from sqlalchemy.orm import Session
 
 from siteline.catalog.releases import get_release
 from siteline.records.enums import SPLITS
+from siteline.records.pairs import ChangeLabels
 from siteline.release.manifest import read_manifest
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 
-def _flat(d: Any, prefix: str = "") -> JsonObject:
+def _flat(d: JSON, prefix: str = "") -> dict[str, JSON]:
+    """``d`` with its nested objects' keys joined by dots (``a.b``)."""
     if isinstance(d, dict):
-        out = {}
+        out: dict[str, JSON] = {}
         for k, v in d.items():
             out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
         return out
     return {prefix: d}
 
 
-def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
+def diff_releases(session: Session, name: str, v1: str, v2: str) -> dict[str, object]:
     """Pairs, parameters, label sets (each scene's label-set version; each pair's change labels) and
     files that differ between two versions."""
     a, b = get_release(session, name, v1), get_release(session, name, v2)
@@ -34,8 +35,9 @@ def diff_releases(session: Session, name: str, v1: str, v2: str) -> JsonObject:
     pair_labels = {
         pid: {"radius_m": [pa[pid]["radius_m"], pb[pid]["radius_m"]]}
         for pid in sorted(set(pa) & set(pb))
-        if pa[pid].get("radius_m") != pb[pid].get("radius_m")
-        or pa[pid].get("labels", {}).get("checksum") != pb[pid].get("labels", {}).get("checksum")
+        if pa[pid]["radius_m"] != pb[pid]["radius_m"]
+        or ChangeLabels.from_dict(pa[pid]["labels"]).checksum
+        != ChangeLabels.from_dict(pb[pid]["labels"]).checksum
     }
     # a lineage written before label sets were versioned used version 1 of every scene
     sa_ = {sc["id"]: sc for sc in ma.lineage["scenes"]}

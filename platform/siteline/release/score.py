@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from typing import NotRequired, TypedDict
 
 import numpy as np
 from PIL import Image
@@ -14,7 +15,7 @@ from siteline.release.export import prediction_names
 from siteline.release.layout import ignore_aware_folder
 from siteline.release.manifest import MANIFEST, METRIC_DEFINITION, read_manifest
 from siteline.release.metrics import confusion, per_image_scores, scores
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 
 def read_prediction(path: Path) -> np.ndarray:
@@ -54,6 +55,26 @@ def find_predictions(pred_dir: Path, split: str, items: list[ReleaseItem]) -> di
     return found
 
 
+class ScoreRecord(TypedDict):
+    """A split's scores (``siteline release score``, ``siteline evaluate``): the release (name, version,
+    manifest sha256), the split, its image count, the metric definition, the 2 x 2 confusion matrix,
+    split-level and per-image scores; a model's evaluation adds its checkpoint, name and the scores
+    of predicting every pixel unchanged."""
+
+    release: dict[str, str]
+    split: str
+    images: int
+    metric_definition: dict[str, JSON]
+    confusion: list[list[int]]
+    scores: dict[str, float | int | None]
+    scores_per_image: dict[str, float | int | None]
+    checkpoint: NotRequired[str]
+    model: NotRequired[str]
+    trivial_scores: NotRequired[dict[str, float | int | str | None]]
+    predictions: NotRequired[str]
+    pred_size: NotRequired[tuple[int, int] | None]
+
+
 def parse_size(text: str) -> tuple[int, int]:
     """(width, height) of ``WxH`` pixels."""
     w, sep, h = text.lower().partition("x")
@@ -64,7 +85,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 def score_predictions(
     root: Path, split: str, pred_dir: Path, pred_size: tuple[int, int] | None = None
-) -> JsonObject:
+) -> ScoreRecord:
     """Scores of the prediction PNGs in ``pred_dir`` against ``split`` of the release at ``root``.
 
     Every item of the split needs a prediction (:func:`find_predictions`) of the stored (padded)
@@ -87,7 +108,9 @@ def score_predictions(
         truth = np.asarray(Image.open(root / split / folder / f"{it.id}.png"), dtype=np.int64)
         pred = _sized(read_prediction(paths[it.id]), paths[it.id], truth.shape, pred_size)
         per_image.append(confusion(pred, truth))
-    return score_record(root, split, per_image) | {"predictions": str(pred_dir), "pred_size": pred_size}
+    record = score_record(root, split, per_image)
+    record["predictions"], record["pred_size"] = str(pred_dir), pred_size
+    return record
 
 
 def _sized(
@@ -109,7 +132,7 @@ def _sized(
     return np.asarray(back, dtype=np.int64)
 
 
-def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> JsonObject:
+def score_record(root: Path, split: str, per_image: list[np.ndarray]) -> ScoreRecord:
     """The results of scoring ``split`` of the release at ``root`` from each image's 2x2 confusion
     matrix: the release and its manifest hash, the metric definition, the split's confusion matrix,
     the split-level scores and the paper's per-image ones (the same record for every scorer)."""

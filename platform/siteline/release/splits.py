@@ -26,7 +26,7 @@ import numpy as np
 import shapely
 
 from siteline.records.pairs import RenderedView
-from siteline.schema import JsonObject
+from siteline.records.release import SplitRule
 
 SPLITS = ("train", "val", "test")
 # an item an earlier version left out of every split (it stays out)
@@ -45,7 +45,7 @@ class SplitPlan:
 
     of: dict[Item, str]
     left_out: tuple[Item, ...] = ()
-    rule: JsonObject = field(default_factory=dict)
+    rule: SplitRule = field(default_factory=lambda: SplitRule())
 
     def stated(self, views: Mapping[int, Sequence[RenderedView]]) -> SplitPlan:
         """This plan with its rule stating the largest share of a val or test view's footprint that
@@ -244,7 +244,7 @@ def _bands(
                 left.append((p, vs[worst].index))
                 budget -= 1
         of |= {(p, vs[k].index): str(split[k]) for k in range(len(vs)) if split[k] != "train" or k in train}
-    rule = {
+    rule: SplitRule = {
         "rule": "fewer pairs than splits: each pair's views in spatial bands along an axis of their ground "
         f"anchors (test the first {test_fraction:.0%}, val the last {val_fraction:.0%}; the long axis unless "
         "another direction gives both more of the pair's change); train views left out while a val or test "

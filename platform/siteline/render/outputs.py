@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image
 
 from siteline.render.zbuffer import RenderResult
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.stores import write_file
 
 
@@ -29,7 +29,7 @@ def png_bytes(image: np.ndarray) -> bytes:
 
 
 def write_render(
-    result: RenderResult, out_dir: Path, extra_stats: JsonObject | None = None
+    result: RenderResult, out_dir: Path, extra_stats: dict[str, JSON] | None = None
 ) -> dict[str, Path]:
     """Write ``rgb.png`` (black where no hit; see hit.png), ``hit.png`` (white = hit), ``depth.npy``
     (float32 metres, NaN where no hit) and ``stats.json`` into ``out_dir``."""
@@ -45,7 +45,7 @@ def write_render(
     buf = io.BytesIO()
     np.save(buf, result.depth)
     atomic_write_bytes(paths["depth"], buf.getvalue())
-    stats: JsonObject = dict(result.stats)
+    stats: dict[str, JSON] = dict(result.stats)
     stats.update(extra_stats or {})
     stats["camera"] = result.camera.to_dict()
     atomic_write_bytes(paths["stats"], (json.dumps(stats, indent=2) + "\n").encode())

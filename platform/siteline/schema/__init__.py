@@ -1,13 +1,14 @@
 """JSON documents: the JSON Schemas of siteline's contracts (the ``*.schema.json`` files beside this
 module, shipped inside the package; the repository's top-level ``schema/`` links here), the validation
-of documents against them, and :data:`JsonObject`, the type of a JSON object."""
+of documents against them, :data:`JSON`, the type of a JSON value, and the checked reads of one."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from functools import cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar, cast
 
 from siteline.errors import SchemaError
 
@@ -16,10 +17,49 @@ if TYPE_CHECKING:
 
 SCHEMA_DIR = Path(__file__).resolve().parent
 
-JsonObject = dict[str, Any]
-"""A JSON object: a record's JSON form (its ``to_dict``, what its ``from_dict`` reads), a file read or
-written as JSON (a manifest, a pair's summary, stats), a catalog JSON column, a store's attributes,
-or a command's ``--json`` record. What crosses between stages is a typed record, not one of these."""
+JSON: TypeAlias = str | int | float | bool | None | Sequence["JSON"] | Mapping[str, "JSON"]
+"""A JSON value (as zarr-python 3 types it; read-only containers, so a ``list[float]`` is one): a
+record's JSON form, a file read or written as JSON, a catalog JSON column, a store's attributes, a
+command's ``--json`` record. A document of fixed shape has a ``TypedDict`` (siteline.records); what
+crosses between stages is a typed record, not one of these. A value read from one is narrowed by
+:func:`json_object`, :func:`json_list`, :func:`json_number`, :func:`json_int` or :func:`json_str`."""
+
+
+def json_object(value: object, what: str = "value") -> Mapping[str, JSON]:
+    """``value`` as a JSON object; TypeError naming ``what`` where it is not one."""
+    if not isinstance(value, Mapping):
+        raise TypeError(f"{what} is a {type(value).__name__}, not a JSON object")
+    return value
+
+
+def json_list(value: object, what: str = "value") -> Sequence[JSON]:
+    """``value`` as a JSON array; TypeError naming ``what`` where it is not one."""
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise TypeError(f"{what} is a {type(value).__name__}, not a JSON array")
+    return value
+
+
+def json_number(value: object, what: str = "value") -> float:
+    """``value`` as a float (a JSON number); TypeError naming ``what`` where it is not one."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{what} is a {type(value).__name__}, not a number")
+    return float(value)
+
+
+def json_int(value: object, what: str = "value") -> int:
+    """``value`` as an int (a JSON number without a fraction); TypeError naming ``what`` where not."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{what} is a {type(value).__name__}, not an integer")
+    return value
+
+
+def json_str(value: object, what: str = "value") -> str:
+    """``value`` as a str; TypeError naming ``what`` where it is not one."""
+    if not isinstance(value, str):
+        raise TypeError(f"{what} is a {type(value).__name__}, not a string")
+    return value
 
 
 def schema_path(name: str) -> Path:
@@ -33,7 +73,7 @@ def schema_path(name: str) -> Path:
 
 
 @cache
-def load_schema(name: str) -> JsonObject:
+def load_schema(name: str) -> dict[str, JSON]:
     """The parsed schema ``schema/<name>``, with its ``$ref``s resolvable against ``schema/``."""
     return json.loads(schema_path(name).read_text())
 
@@ -54,7 +94,7 @@ def _validator(name: str) -> Validator:
     return cls(schema, registry=registry)
 
 
-def validate(doc: Any, schema_name: str, source: str) -> None:
+def validate(doc: object, schema_name: str, source: str) -> None:
     """Raise :class:`SchemaError` naming ``source`` (a file or a description) and every violation."""
     errors = sorted(_validator(schema_name).iter_errors(doc), key=lambda e: list(e.absolute_path))
     if errors:
@@ -64,6 +104,23 @@ def validate(doc: Any, schema_name: str, source: str) -> None:
             lines.append(f"  at {where}: {err.message}")
         more = f"\n  ... and {len(errors) - 10} more" if len(errors) > 10 else ""
         raise SchemaError(f"{source} does not satisfy {schema_name}:\n" + "\n".join(lines) + more)
+
+
+T = TypeVar("T")
+
+
+def json_doc(doc: Mapping[str, object]) -> dict[str, JSON]:
+    """A ``TypedDict`` document (siteline.records) as the JSON it is, to store or nest in another: mypy
+    takes a TypedDict for a ``Mapping[str, object]``, never for a ``Mapping[str, JSON]``, although every
+    TypedDict of siteline holds JSON values only (python/mypy#4976). The same object, not a copy."""
+    return cast(dict[str, JSON], doc)
+
+
+def validated(doc: object, schema_name: str, source: str, shape: type[T]) -> T:
+    """``doc`` validated against ``schema_name`` (:func:`validate`), as the ``TypedDict`` ``shape``
+    that schema describes."""
+    validate(doc, schema_name, source)
+    return cast(T, doc)
 
 
 def load_json(path: Path, what: str) -> Any:

@@ -7,7 +7,7 @@ Georeferenced coordinates are float64 in the site CRS; site-local = georeference
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +15,7 @@ import pyproj
 from pyproj.exceptions import CRSError as PyprojCRSError
 
 from siteline.errors import CRSError, GeometryError
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_number
 
 # A site origin further than this from the CRS' own origin is almost certainly a unit or axis mistake.
 MAX_ABS_COORDINATE_M = 1.0e8
@@ -120,12 +120,12 @@ class ZUnit:
     metres: float
     source: str
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {"name": self.name, "metres": self.metres, "source": self.source}
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> ZUnit:
-        return cls(str(doc["name"]), float(doc["metres"]), str(doc["source"]))
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ZUnit:
+        return cls(str(doc["name"]), json_number(doc["metres"], "metres"), str(doc["source"]))
 
 
 def parse_z_unit(text: str) -> ZUnit:

@@ -5,17 +5,30 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NotRequired, TypedDict
 
 import pyproj
 
 from siteline.errors import SiteError
-from siteline.schema import JsonObject, validate
+from siteline.schema import validated
 from siteline.site.crs import crs_text, parse_crs, parse_origin
 from siteline.site.fence import validate_fence
-from siteline.site.taxonomy import Taxonomy, default_taxonomy
+from siteline.site.taxonomy import Taxonomy, TaxonomyDoc, default_taxonomy
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")  # used with fullmatch: no trailing newline
 DEFAULT_TILE_SIZE_M = 50.0
+
+
+class SiteDoc(TypedDict):
+    """A site config (``schema/site.schema.json``): name, CRS, origin (CRS units), fence (site-local
+    metres, closed ring; None: none), taxonomy and tile size (metres)."""
+
+    name: str
+    crs: str
+    origin: list[float]
+    fence: NotRequired[list[list[float]] | None]
+    taxonomy: TaxonomyDoc
+    tile_size_m: float
 
 
 @dataclass(frozen=True)
@@ -41,7 +54,7 @@ class SiteSpec:
     def pyproj_crs(self) -> pyproj.CRS:
         return parse_crs(self.crs)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> SiteDoc:
         fence = None
         if self.fence is not None:
             fence = [list(v) for v in self.fence] + [list(self.fence[0])]
@@ -55,8 +68,8 @@ class SiteSpec:
         }
 
     @classmethod
-    def from_dict(cls, doc: JsonObject, source: str = "site config") -> SiteSpec:
-        validate(doc, "site.schema.json", source)
+    def from_dict(cls, raw: object, source: str = "site config") -> SiteSpec:
+        doc = validated(raw, "site.schema.json", source, SiteDoc)
         return make_site_spec(
             doc["name"],
             doc["crs"],

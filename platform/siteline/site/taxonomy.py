@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NotRequired, TypedDict
 
 import numpy as np
 
 from siteline.errors import SchemaError
-from siteline.schema import SCHEMA_DIR, JsonObject, load_json, validate
+from siteline.schema import SCHEMA_DIR, load_json, validated
 
 DEFAULT_TAXONOMY_PATH = SCHEMA_DIR / "taxonomy.default.json"
 
@@ -17,6 +18,26 @@ DEFAULT_TAXONOMY_PATH = SCHEMA_DIR / "taxonomy.default.json"
 def _rgb(values: list[int]) -> tuple[int, int, int]:
     r, g, b = (int(v) for v in values)
     return r, g, b
+
+
+class ClassDoc(TypedDict):
+    """A class of ``schema/taxonomy.schema.json``: id, name, whether it is ignored, colour (RGB 0-255)
+    and whether it takes part in geometry only."""
+
+    id: int
+    name: str
+    ignore: bool
+    color: list[int]
+    geometry_only: NotRequired[bool]
+
+
+class TaxonomyDoc(TypedDict):
+    """A taxonomy document (``schema/taxonomy.schema.json``)."""
+
+    name: str
+    classes: list[ClassDoc]
+    source_codes: NotRequired[dict[str, dict[str, str]]]
+    default_class: NotRequired[str]
 
 
 @dataclass(frozen=True)
@@ -137,14 +158,16 @@ class Taxonomy:
             known[int(code)] = True
         return lut, known
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> TaxonomyDoc:
+        classes: list[ClassDoc] = []
+        for c in self.classes:
+            doc: ClassDoc = {"id": c.id, "name": c.name, "ignore": c.ignore, "color": list(c.color)}
+            if c.geometry_only:
+                doc["geometry_only"] = True
+            classes.append(doc)
         return {
             "name": self.name,
-            "classes": [
-                {"id": c.id, "name": c.name, "ignore": c.ignore, "color": list(c.color)}
-                | ({"geometry_only": True} if c.geometry_only else {})
-                for c in self.classes
-            ],
+            "classes": classes,
             "source_codes": {
                 source: {str(code): target for code, target in sorted(table.items())}
                 for source, table in sorted(self.source_codes.items())
@@ -153,9 +176,9 @@ class Taxonomy:
         }
 
     @classmethod
-    def from_dict(cls, doc: JsonObject, source: str = "taxonomy") -> Taxonomy:
-        """Validate ``doc`` against ``schema/taxonomy.schema.json`` and build the taxonomy."""
-        validate(doc, "taxonomy.schema.json", source)
+    def from_dict(cls, raw: object, source: str = "taxonomy") -> Taxonomy:
+        """Validate ``raw`` against ``schema/taxonomy.schema.json`` and build the taxonomy."""
+        doc = validated(raw, "taxonomy.schema.json", source, TaxonomyDoc)
         try:
             return cls(
                 name=doc["name"],

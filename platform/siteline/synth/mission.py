@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 from siteline.codes import SYNTHETIC_SOFTWARE
 from siteline.errors import SynthError
 from siteline.pointpass import LasWriter, las_header
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 from siteline.site.crs import parse_crs, parse_origin
 from siteline.site.fence import fence_geojson
 from siteline.stores import publish_folder
@@ -137,7 +137,7 @@ def _model_from_world(rng: np.random.Generator) -> tuple[float, np.ndarray, np.n
     return scale, R, t
 
 
-def _write_colmap(out: Path, poses: list[PhotoPose], rng: np.random.Generator) -> JsonObject:
+def _write_colmap(out: Path, poses: list[PhotoPose], rng: np.random.Generator) -> dict[str, JSON]:
     """A sparse model of the photos, moved by a random similarity (model_from_world) so that
     georegistration has something to recover; returns that similarity."""
     rec = pycolmap.Reconstruction()
@@ -168,7 +168,7 @@ def _write_colmap(out: Path, poses: list[PhotoPose], rng: np.random.Generator) -
 
 def _write_mission(
     tmp: Path, site: m.SiteModel, e: int, cfg: SynthParams, spec: LidarSpec, crs: pyproj.CRS, truth: Path
-) -> tuple[int, list[PhotoPose], JsonObject | None]:
+) -> tuple[int, list[PhotoPose], dict[str, JSON] | None]:
     """Epoch ``e``'s mission folder (LAS, raw files, photos, COLMAP model) built in ``tmp``; returns the
     point count, the photo poses and the COLMAP model's similarity to the site."""
     ep = site.epochs[e]

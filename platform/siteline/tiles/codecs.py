@@ -20,13 +20,13 @@ bench/ingest.py reports the bytes per point against the source LAZ.
 from __future__ import annotations
 
 import warnings
+from typing import Any, TypedDict
 
 import numpy as np
 from zarr.codecs import BloscCodec, BloscShuffle, TransposeCodec
 from zarr.errors import ZarrUserWarning
 
 from siteline.records.tiling import TileSpec
-from siteline.schema import JsonObject
 
 # zarr warns on every numcodecs codec it builds, reading included; the one siteline uses
 # (fixedscaleoffset) is read by zarr-python >= 3.1.3, the range siteline requires
@@ -57,12 +57,19 @@ def time_scale(values: np.ndarray) -> float | None:
     return next((s for s in TIME_SCALES if round_trips(probe, s) and round_trips(values, s)), None)
 
 
-def array_codecs(name: str, dtype: np.dtype, ndim: int, spec: TileSpec, scale: float | None) -> JsonObject:
+class ArrayCodecs(TypedDict, total=False):
+    """``create_array``'s codec keyword arguments for one tile array (absent: zarr's default)."""
+
+    compressors: BloscCodec
+    filters: list[Any]
+
+
+def array_codecs(name: str, dtype: np.dtype, ndim: int, spec: TileSpec, scale: float | None) -> ArrayCodecs:
     """``create_array`` keyword arguments (filters, compressors) for tile array ``name`` of ``dtype``
     and ``ndim`` dimensions; ``scale``: the gps_time scale (:func:`time_scale` of all its values)."""
     from zarr.codecs.numcodecs import FixedScaleOffset
 
-    out: JsonObject = {
+    out: ArrayCodecs = {
         "compressors": BloscCodec(cname="zstd", clevel=spec.clevel, shuffle=BloscShuffle.bitshuffle)
     }
     if ndim == 2:

@@ -10,7 +10,7 @@ from zarr.codecs import BloscCodec, BloscShuffle
 
 from siteline.errors import TileError
 from siteline.records.tiling import NodeTable, TileSpec
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_int, json_list, json_object
 
 FORMAT_VERSION = 2
 
@@ -30,9 +30,9 @@ def write_index(root: zarr.Group, nodes: NodeTable) -> None:
             arr[...] = values
 
 
-def read_index(root: zarr.Group, attrs: JsonObject, spec: TileSpec, uri: str) -> NodeTable:
+def read_index(root: zarr.Group, attrs: dict[str, JSON], spec: TileSpec, uri: str) -> NodeTable:
     """The node index of the store ``root`` (attributes ``attrs``) at ``uri``."""
-    version = int(attrs.get("siteline_tiles", 0) or 0)
+    version = json_int(attrs.get("siteline_tiles", 0) or 0, "siteline_tiles")
     if version >= 2:
         try:
             group = root["nodes"]
@@ -48,4 +48,4 @@ def read_index(root: zarr.Group, attrs: JsonObject, spec: TileSpec, uri: str) ->
         return NodeTable.from_columns(tiles, columns)
     if "nodes" not in attrs:
         raise TileError(f"{uri} is not a siteline tile store.")
-    return NodeTable.from_legacy(list(attrs["nodes"]), spec)
+    return NodeTable.from_legacy([json_object(n, "node") for n in json_list(attrs["nodes"], "nodes")], spec)

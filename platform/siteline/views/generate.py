@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 from collections import Counter, defaultdict
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -15,7 +15,7 @@ from siteline.progress import no_step
 from siteline.records.pairs import ViewStrategy
 from siteline.records.params.views import SAMPLER_VERSION, ViewParams
 from siteline.render.zbuffer import central_depths, coverage_of
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_int, json_number, json_object, json_str
 from siteline.site.fence import inside_fence
 from siteline.tolerances import (
     LENGTH_TOL_M,
@@ -53,7 +53,7 @@ class SyntheticView:
     index: int | None = None
     probe_valid: float | None = None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {
             "index": self.index,
             "parent": self.parent,
@@ -65,16 +65,18 @@ class SyntheticView:
         }
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> SyntheticView:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> SyntheticView:
+        """From :meth:`to_dict`'s form; TypeError or KeyError where it is not one."""
+        coverage, index, probe = doc.get("coverage"), doc.get("index"), doc.get("probe_valid")
         return cls(
-            doc["parent"],
-            doc["strategy"],
-            ViewStrategy.from_dict(doc["params"]),
+            json_str(doc["parent"], "parent"),
+            json_str(doc["strategy"], "strategy"),
+            ViewStrategy.from_dict(json_object(doc["params"], "params")),
             Camera.from_dict(doc["camera"]),
-            doc.get("coverage"),
+            None if coverage is None else json_number(coverage, "coverage"),
             None,
-            doc.get("index"),
-            doc.get("probe_valid"),
+            None if index is None else json_int(index, "index"),
+            None if probe is None else json_number(probe, "probe_valid"),
         )
 
 
@@ -172,7 +174,7 @@ class ViewSet:
         """The next view of the stratified order beyond those drawn (None when none is left)."""
         return self.reserve.next() if self.reserve is not None else None
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return {
             "params": self.params.to_dict(),
             "sampler": SAMPLER_VERSION,

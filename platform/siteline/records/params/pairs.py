@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import ClassVar
 
 from siteline.errors import PairError, SitelineError
@@ -15,7 +15,7 @@ from siteline.records.params.labels import LabelParams
 from siteline.records.params.render import WORLD_SPLAT_FACTOR, RenderParams
 from siteline.records.params.views import SAMPLER_VERSION, ViewParams
 from siteline.records.specs import parse_spec
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 # changed regions of fewer points are taken back to unchanged (siteline.labels.regions)
 MIN_REGION_POINTS = 8
@@ -70,7 +70,7 @@ class PairParams:
     seed: int = 0
     min_coverage: float = 0.5
     min_valid: float = 0.7
-    view_params: JsonObject = field(default_factory=dict)
+    view_params: dict[str, JSON] = field(default_factory=dict)
     one_side_hole: HoleRule = "ignore"
     all_points: bool = False
     sampler: str = SAMPLER_VERSION
@@ -133,7 +133,7 @@ class PairParams:
 
     def view_params_spec(self) -> ViewParams:
         """The view-generation knobs as ViewParams (``view_params`` holds the less common ones)."""
-        base = {
+        base: dict[str, JSON] = {
             "views": self.views,
             "seed": self.seed,
             "scale": self.scale,
@@ -152,13 +152,22 @@ class PairParams:
             self.radius_m, self.radius_multiplier, self.label_rule, self.min_region_points, self.surface_probe
         )
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> PairParams:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> PairParams:
         """From the JSON form; PairError names an unknown key or a wrongly typed value."""
         return parse_spec(cls, doc, "pair parameters", PairError)
+
+    @classmethod
+    def from_record(cls, doc: Mapping[str, JSON]) -> PairParams:
+        """The parameters a record (a release's lineage or catalog row) says outputs were made with, to
+        describe them: a knob it lacks has the value it meant before it existed (:attr:`BEFORE`), and
+        its sampler is not checked (the outputs are read, not rebuilt). PairError as :meth:`from_dict`."""
+        known = {f.name for f in fields(cls)}
+        before = {k: v for k, v in cls.BEFORE.items() if k in known}
+        return parse_spec(cls, {**before, **doc, "sampler": SAMPLER_VERSION}, "pair parameters", PairError)
 
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""

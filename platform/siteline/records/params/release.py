@@ -12,7 +12,7 @@ from siteline.errors import ReleaseError, SitelineError
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.presets import PRESETS
 from siteline.records.release import FORMAT
-from siteline.schema import JsonObject
+from siteline.schema import JSON, json_int, json_number, json_object, json_str
 
 # the change radius above which a build warns: a pair then labels smaller changes unchanged
 DEFAULT_RADIUS_CEILING_M = 1.0
@@ -42,8 +42,8 @@ class ReleaseParams:
         if not isinstance(self.pad, bool):
             raise ReleaseError(f"pad must be true or false, got {self.pad!r}.")
 
-    def to_dict(self) -> JsonObject:
-        doc: JsonObject = {
+    def to_dict(self) -> dict[str, JSON]:
+        doc: dict[str, JSON] = {
             "pair": self.pair.to_dict(), "preset": self.preset, "pad": self.pad, "format": self.format,
             "min_image_px": self.min_image_px, "derived": dict(self.derived),
         }  # fmt: skip
@@ -52,20 +52,27 @@ class ReleaseParams:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> ReleaseParams:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ReleaseParams:
         unknown = sorted(
             set(doc) - {"pair", "preset", "pad", "format", "min_image_px", "derived", "radius_ceiling_m"}
         )
         if unknown:
             raise ReleaseError(f"release parameters: unknown key(s) {unknown}.")
+        preset = doc.get("preset")
+        pad = doc.get("pad", True)
+        if not isinstance(pad, bool):
+            raise ReleaseError(f"release parameters: pad must be true or false, got {pad!r}.")
         return cls(
-            PairParams.from_dict(doc.get("pair", {})),
-            doc.get("preset"),
-            doc.get("pad", True),
-            doc.get("format", FORMAT),
-            doc.get("min_image_px", 256),
-            dict(doc.get("derived") or {}),
-            float(doc.get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M)),
+            PairParams.from_dict(json_object(doc.get("pair", {}), "pair")),
+            None if preset is None else json_str(preset, "preset"),
+            pad,
+            json_int(doc.get("format", FORMAT), "format"),
+            json_int(doc.get("min_image_px", 256), "min_image_px"),
+            {
+                k: json_str(v, f"derived.{k}")
+                for k, v in json_object(doc.get("derived") or {}, "derived").items()
+            },
+            json_number(doc.get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), "radius_ceiling_m"),
         )
 
 
@@ -134,24 +141,23 @@ class ReleaseKnobs:
         """This layer with ``other``'s set fields written over it, then the knobs named in ``unset``
         (pair knobs, ``preset``, ``pad``, ``min_image_px``, ``radius_ceiling_m``) removed: what
         ``site update`` stores."""
-        doc = self.to_dict()
-        new = other.to_dict()
-        doc["pair"] = {**doc.get("pair", {}), **new.pop("pair", {})}
-        doc |= new
+        pair = {**self.pair, **other.pair}
+        doc = {k: v for k, v in self.to_dict().items() if k != "pair"}
+        doc |= {k: v for k, v in other.to_dict().items() if k != "pair"}
         for name in unset:
-            if name in doc["pair"]:
-                del doc["pair"][name]
+            if name in pair:
+                del pair[name]
             elif name in _RELEASE_KEYS:
                 doc.pop(name, None)
             elif name not in _PAIR_KNOBS:
                 raise ReleaseError(
                     f"--unset {name!r}: not a release setting; known: {sorted(_PAIR_KNOBS)}, {', '.join(_RELEASE_KEYS)}."
                 )
-        return ReleaseKnobs.from_dict(doc)
+        return ReleaseKnobs.from_dict({"pair": pair, **doc})
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         """Only what is set (the site's JSON)."""
-        doc: JsonObject = {"pair": dict(self.pair)} if self.pair else {}
+        doc: dict[str, JSON] = {"pair": dict(self.pair)} if self.pair else {}
         for name in _RELEASE_KEYS:
             if getattr(self, name) is not None:
                 doc[name] = getattr(self, name)

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 from siteline.errors import RenderError
 from siteline.records.enums import PRECISIONS
 from siteline.records.specs import parse_spec
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 # how big a point is drawn: one diameter for every point, or its local spacing seen from the camera
 SPLAT_MODES = ("fixed", "world")
@@ -82,10 +82,10 @@ class RenderParams:
         if not isinstance(self.trim_edges, bool):
             raise RenderError(f"trim_edges {self.trim_edges!r} must be true or false.")
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> RenderParams:
+    def from_dict(cls, doc: dict[str, JSON]) -> RenderParams:
         """From the JSON form; RenderError names an unknown key or a wrongly typed value."""
         return parse_spec(cls, doc, "render settings", RenderError)

@@ -9,7 +9,7 @@ from siteline.errors import RenderError, ViewsError
 from siteline.records.enums import MIRROR_RULES
 from siteline.records.params.render import WORLD_SPLAT_FACTOR, RenderParams
 from siteline.records.specs import parse_spec
-from siteline.schema import JsonObject
+from siteline.schema import JSON
 
 # Recorded with every view set (lineage): how the sample was drawn.
 SAMPLER_VERSION = "keyed-sha256-1"
@@ -116,13 +116,13 @@ class ViewParams:
         """Candidate views per real camera before rejection."""
         return len(self.vertical_fractions) * (2 if self.mirror else 1) * len(self.forward_fractions)
 
-    def to_dict(self) -> JsonObject:
+    def to_dict(self) -> dict[str, JSON]:
         d = asdict(self)
         d["vertical_fractions"] = list(self.vertical_fractions)
         d["forward_fractions"] = list(self.forward_fractions)
         return d
 
     @classmethod
-    def from_dict(cls, doc: JsonObject) -> ViewParams:
+    def from_dict(cls, doc: dict[str, JSON]) -> ViewParams:
         """From the JSON form; ViewsError names an unknown key or a wrongly typed value."""
         return parse_spec(cls, doc, "view parameters", ViewsError)
