@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -19,7 +19,7 @@ import numpy.typing as npt
 from siteline.camera.intrinsics import Intrinsics
 from siteline.camera.poses import Rigid
 from siteline.errors import CameraError
-from siteline.schema import JSON, validated
+from siteline.schema import JSON, json_int, json_numbers, json_object, json_or_none, validated
 from siteline.tolerances import snap
 
 if TYPE_CHECKING:
@@ -385,11 +385,11 @@ class CameraModel:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> CameraModel:
-        inner = doc.get("undistorted")
+    def from_dict(cls, doc: Mapping[str, JSON]) -> CameraModel:
+        inner = json_or_none(json_object, doc.get("undistorted"), "undistorted")
         return cls(
-            str(doc["model"]), int(doc["width"]), int(doc["height"]), tuple(float(v) for v in doc["params"]),
-            cls.from_dict(inner) if inner else None,
+            str(doc["model"]), json_int(doc["width"], "width"), json_int(doc["height"], "height"),
+            tuple(float(v) for v in json_numbers(doc["params"], "params")), cls.from_dict(inner) if inner else None,
         )  # fmt: skip
 
 

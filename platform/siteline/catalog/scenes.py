@@ -198,7 +198,7 @@ def scene_record(s: Session, scene_id: int) -> dict[str, object]:
         # the co-registration onto the previous scene in words (None for a first scene)
         "alignment": reg.alignment.summary() if reg.alignment else None,
         # how planned cameras were flown, and why at that altitude (None: photo cameras)
-        "survey": reg.to_dict().get("survey"),
+        "survey": reg.survey_record(),
         "cameras": len(scene_cameras(s, scene.id)),
         "tile_store": scene.tile_store_uri,
         "tiles": nodes["tiles"],

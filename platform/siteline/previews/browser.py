@@ -13,14 +13,13 @@ import os
 from collections.abc import Mapping
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from siteline.errors import ReleaseError
 from siteline.records.release import Manifest
 from siteline.release.manifest import read_manifest
-from siteline.schema import JSON
+from siteline.schema import JSON, json_number, json_object
 from siteline.stores import atomic_file
 
 COLUMNS = (
@@ -29,22 +28,24 @@ COLUMNS = (
 )  # fmt: skip
 
 
-def camera_figures(camera: Mapping[str, Any]) -> dict[str, JSON]:
+def camera_figures(camera: Mapping[str, JSON]) -> dict[str, JSON]:
     """What a person reads of a synthetic camera (``schema/camera.schema.json``): its centre in
     site-local metres, heading (degrees clockwise from site north, +y), down-tilt (degrees below the
     horizon, 90 = nadir), focal length (pixels) and horizontal field of view (degrees)."""
-    r = np.asarray(camera["cam_from_world"]["rotation"], dtype=np.float64)
-    t = np.asarray(camera["cam_from_world"]["translation"], dtype=np.float64)
+    pose = json_object(camera["cam_from_world"], "cam_from_world")
+    r = np.asarray(pose["rotation"], dtype=np.float64)
+    t = np.asarray(pose["translation"], dtype=np.float64)
     centre = -r.T @ t
     axis = r[2]  # the optical axis (camera +z) in the site frame
     heading = math.degrees(math.atan2(axis[0], axis[1])) % 360.0
     tilt = math.degrees(math.asin(max(-1.0, min(1.0, -axis[2]))))
-    hfov = math.degrees(2 * math.atan(camera["width"] / (2 * camera["fx"])))
+    width, fx = json_number(camera["width"], "width"), json_number(camera["fx"], "fx")
+    hfov = math.degrees(2 * math.atan(width / (2 * fx)))
     return {
         "centre": [round(float(v), 4) for v in centre],
         "heading": round(heading, 2),
         "tilt": round(tilt, 2),
-        "fx": round(float(camera["fx"]), 3),
+        "fx": round(float(fx), 3),
         "hfov": round(hfov, 2),
     }
 

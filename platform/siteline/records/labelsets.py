@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any
 
 from siteline.schema import JSON
 
@@ -26,15 +25,18 @@ class ExportedLabels:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> ExportedLabels:
-        def of(key: str, kind: type) -> Any:
-            value = doc.get(key)
-            return value if isinstance(value, kind) and not isinstance(value, bool) else None
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ExportedLabels:
+        """From a file's VLR, which an editor may have mangled: a field of the wrong type reads as None
+        (the taxonomy as empty), for the importer to refuse naming what is missing."""
 
-        taxonomy = doc.get("taxonomy")
+        def count(key: str) -> int | None:
+            value = doc.get(key)
+            return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+        site, taxonomy = doc.get("site"), doc.get("taxonomy")
         return cls(
-            of("site", str), of("scene", int), of("label_set_version", int), str(doc.get("classification", "")),
-            dict(taxonomy) if isinstance(taxonomy, Mapping) else {},
+            site if isinstance(site, str) else None, count("scene"), count("label_set_version"),
+            str(doc.get("classification", "")), dict(taxonomy) if isinstance(taxonomy, Mapping) else {},
         )  # fmt: skip
 
 

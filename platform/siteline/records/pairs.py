@@ -5,14 +5,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal, NamedTuple, NotRequired, TypedDict, get_args
+from typing import Literal, NamedTuple, NotRequired, TypedDict, get_args
 
 import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import PairError
 from siteline.records.params.pairs import PairParams
-from siteline.schema import JSON, json_list, json_number
+from siteline.schema import JSON, json_int, json_list, json_number, json_object, json_or_none, json_str
 from siteline.site.taxonomy import Taxonomy
 
 
@@ -51,14 +51,21 @@ class ViewStrategy:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> ViewStrategy:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ViewStrategy:
         seg = doc.get("mirror_segment_m")
-        segment = (
-            ((float(seg[0][0]), float(seg[0][1])), (float(seg[1][0]), float(seg[1][1]))) if seg else None
-        )
+        segment = None
+        if seg:
+            a, b = (json_list(end, "mirror_segment_m") for end in json_list(seg, "mirror_segment_m"))
+            segment = (
+                (float(json_number(a[0])), float(json_number(a[1]))),
+                (float(json_number(b[0])), float(json_number(b[1]))),
+            )
         return cls(
-            float(doc["vertical_fraction"]), bool(doc["mirrored"]), float(doc["forward_fraction"]), segment,
-            doc.get("mirror_rule"), doc.get("central_depth_m"), doc.get("forward_m"),
+            float(json_number(doc["vertical_fraction"], "vertical_fraction")), bool(doc["mirrored"]),
+            float(json_number(doc["forward_fraction"], "forward_fraction")), segment,
+            json_or_none(json_str, doc.get("mirror_rule"), "mirror_rule"),
+            json_or_none(json_number, doc.get("central_depth_m"), "central_depth_m"),
+            json_or_none(json_number, doc.get("forward_m"), "forward_m"),
         )  # fmt: skip
 
 
@@ -98,13 +105,22 @@ class RenderedView:
         }
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> RenderedView:
-        names = {f.name for f in fields(cls)}
-        values = {k: v for k, v in doc.items() if k in names}
+    def from_dict(cls, doc: Mapping[str, JSON]) -> RenderedView:
+        """From :meth:`to_dict`'s form; KeyError or TypeError where it is not one."""
         return cls(
-            **values
-            | {"params": ViewStrategy.from_dict(doc["params"]), "camera": Camera.from_dict(doc["camera"])}
-        )
+            index=json_int(doc["index"], "index"), parent=json_str(doc["parent"], "parent"),
+            strategy=json_str(doc["strategy"], "strategy"),
+            params=ViewStrategy.from_dict(json_object(doc["params"], "params")),
+            coverage=json_or_none(json_number, doc.get("coverage"), "coverage"),
+            camera=Camera.from_dict(doc["camera"]), file=json_str(doc["file"], "file"),
+            coverage_a=json_number(doc["coverage_a"], "coverage_a"), coverage_b=json_number(doc["coverage_b"], "coverage_b"),
+            valid=json_number(doc["valid"], "valid"), change_ratio=json_number(doc["change_ratio"], "change_ratio"),
+            points_read=json_int(doc["points_read"], "points_read"),
+            ignore={k: json_number(v, f"ignore.{k}") for k, v in json_object(doc.get("ignore") or {}, "ignore").items()},
+            filled=json_number(doc.get("filled", 0.0), "filled"),
+            probe_valid=json_or_none(json_number, doc.get("probe_valid"), "probe_valid"),
+            change_visible=json_or_none(json_number, doc.get("change_visible"), "change_visible"),
+        )  # fmt: skip
 
 
 ColourSource = Literal["rgb", "height", "intensity", "elevation"]
@@ -182,7 +198,7 @@ class ColourPlan:
             )
 
         def bounds(v: JSON) -> tuple[float, float] | None:
-            return (json_number(json_list(v)[0]), json_number(json_list(v)[1])) if v else None
+            return (float(json_number(json_list(v)[0])), float(json_number(json_list(v)[1]))) if v else None
 
         return cls(
             source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")),
@@ -211,11 +227,14 @@ class ChangeRulePlan:
         return {"rule": self.rule, "why": self.why, "differences": list(self.differences)}
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any] | None) -> ChangeRulePlan:
+    def from_dict(cls, doc: Mapping[str, JSON] | None) -> ChangeRulePlan:
         """From the JSON form; outputs made before the rule was recorded used the semantic rule."""
         if not doc:
             return cls("semantic", "made before the change rule was recorded")
-        return cls(str(doc["rule"]), str(doc.get("why", "")), tuple(doc.get("differences", ())))
+        differences = tuple(
+            json_str(d, "differences") for d in json_list(doc.get("differences", ()), "differences")
+        )
+        return cls(str(doc["rule"]), str(doc.get("why", "")), differences)
 
 
 @dataclass(frozen=True)
@@ -241,10 +260,14 @@ class RadiusChoice:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> RadiusChoice:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> RadiusChoice:
+        spacing = json_object(doc.get("median_spacing_m") or {}, "median_spacing_m")
+        false_change = json_or_none(json_object, doc.get("expected_false_change"), "expected_false_change")
         return cls(
-            dict(doc.get("median_spacing_m") or {}), float(doc.get("multiplier", float("nan"))),
-            bool(doc.get("given", False)), doc.get("expected_false_change"),
+            {k: json_number(v, f"median_spacing_m.{k}") for k, v in spacing.items()},
+            float(json_number(doc.get("multiplier", float("nan")), "multiplier")), bool(doc.get("given", False)),
+            None if false_change is None else
+            {k: v if isinstance(v, str) else json_number(v, f"expected_false_change.{k}") for k, v in false_change.items()},
         )  # fmt: skip
 
 
@@ -273,13 +296,21 @@ class ChangeLabels:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> ChangeLabels:
-        counts = {k: dict(v) for k, v in (doc.get("counts") or {}).items()}
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ChangeLabels:
+        counts = {
+            k: {
+                label: json_int(n, f"counts.{k}.{label}")
+                for label, n in json_object(v, f"counts.{k}").items()
+            }
+            for k, v in json_object(doc.get("counts") or {}, "counts").items()
+        }
         points = doc.get("points")
+        radius = doc.get("radius")
         return cls(
-            str(doc.get("uri", "")), float(doc["radius_m"]), counts, str(doc.get("checksum", "")), doc.get("seconds"),
-            int(points) if points is not None else sum(n for side in counts.values() for n in side.values()),
-            RadiusChoice.from_dict(doc["radius"]) if doc.get("radius") else None,
+            str(doc.get("uri", "")), float(json_number(doc["radius_m"], "radius_m")), counts,
+            str(doc.get("checksum", "")), json_or_none(json_number, doc.get("seconds"), "seconds"),
+            json_int(points, "points") if points is not None else sum(n for side in counts.values() for n in side.values()),
+            RadiusChoice.from_dict(json_object(radius, "radius")) if radius else None,
         )  # fmt: skip
 
 
@@ -308,11 +339,16 @@ class Drawn:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> Drawn | None:
+    def from_dict(cls, doc: Mapping[str, object]) -> Drawn | None:
         """From a pair summary's ``candidates``, ``probed`` and ``rejected``; None when it has none."""
         if "candidates" not in doc:
             return None
-        return cls(int(doc["candidates"]), doc.get("probed"), dict(doc.get("rejected") or {}))
+        rejected = json_object(doc.get("rejected") or {}, "rejected")
+        return cls(
+            json_int(doc["candidates"], "candidates"),
+            json_or_none(json_int, doc.get("probed"), "probed"),
+            {k: json_int(n, f"rejected.{k}") for k, n in rejected.items()},
+        )
 
 
 @dataclass(frozen=True)
@@ -328,7 +364,7 @@ class GroundUsed:
     share: float
     residual_m: float
     tolerance_m: float
-    filter: Mapping[str, Any] | None = None
+    filter: Mapping[str, JSON] | None = None
     cell_m: float | None = None
 
     def to_dict(self) -> dict[str, JSON]:
@@ -339,14 +375,16 @@ class GroundUsed:
         }  # fmt: skip
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any] | None) -> GroundUsed | None:
+    def from_dict(cls, doc: Mapping[str, JSON] | None) -> GroundUsed | None:
         """From a pair summary's ``ground``; None for outputs made before it was recorded."""
         if not doc:
             return None
-        cell = doc.get("cell_m", (doc.get("terrain") or {}).get("cell_m"))
+        cell = doc.get("cell_m", json_object(doc.get("terrain") or {}, "terrain").get("cell_m"))
         return cls(
-            str(doc["model"]), str(doc["source"]), int(doc["ground_points"]), float(doc["share"]),
-            float(doc["residual_m"]), float(doc["tolerance_m"]), doc.get("filter"), None if cell is None else float(cell),
+            str(doc["model"]), str(doc["source"]), json_int(doc["ground_points"], "ground_points"),
+            float(json_number(doc["share"], "share")), float(json_number(doc["residual_m"], "residual_m")),
+            float(json_number(doc["tolerance_m"], "tolerance_m")), json_or_none(json_object, doc.get("filter"), "filter"),
+            None if cell is None else float(json_number(cell, "cell_m")),
         )  # fmt: skip
 
     def summary(self) -> str:

@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
 
 import numpy as np
 
@@ -16,7 +15,16 @@ from siteline.camera.intrinsics import CAMERA_MODELS, DEFAULT_CAMERA_MODEL, Intr
 from siteline.camera.pinhole import CameraModel
 from siteline.camera.poses import Sim3
 from siteline.errors import RegistrationError
-from siteline.schema import JSON
+from siteline.schema import (
+    JSON,
+    json_bool,
+    json_int,
+    json_list,
+    json_number,
+    json_object,
+    json_or_none,
+    json_str,
+)
 
 # the six directions of a rigid correction
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -55,21 +63,33 @@ class Alignment:
     apply_above_m: float | None = None
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> Alignment:
-        names = {f.name for f in fields(cls)}
-        values = {k: v for k, v in doc.items() if k in names}
-        values["correction"] = tuple(tuple(float(v) for v in row) for row in doc.get("correction") or ())
-        values["axes"] = dict(doc.get("axes") or {})
+    def from_dict(cls, doc: Mapping[str, JSON]) -> Alignment:
+        """From :meth:`to_dict`'s form (a record made before a field existed lacks it)."""
+
+        def number(key: str, default: float | None = None) -> float | None:
+            return json_or_none(json_number, doc.get(key, default), key)
+
+        def count(key: str) -> int | None:
+            return json_or_none(json_int, doc.get(key), key)
+
+        def text(key: str) -> str | None:
+            return json_or_none(json_str, doc.get(key), key)
+
+        axes = json_object(doc.get("axes") or {}, "axes")
+        rows = json_list(doc.get("correction") or (), "correction")
         return cls(
-            **{
-                "against_scene": None,
-                "translation_m": 0.0,
-                "rotation_deg": 0.0,
-                "applied": False,
-                "residual_m": float("inf"),
-            }
-            | values
-        )
+            against_scene=count("against_scene"), translation_m=json_number(doc.get("translation_m", 0.0), "translation_m"),
+            rotation_deg=json_number(doc.get("rotation_deg", 0.0), "rotation_deg"),
+            applied=json_bool(doc.get("applied", False), "applied"),
+            residual_m=json_number(doc.get("residual_m", float("inf")), "residual_m"), residual_xy_m=number("residual_xy_m"),
+            axes={a: json_or_none(json_str, v, f"axes.{a}") for a, v in axes.items()},
+            correction=tuple(tuple(float(json_number(v, "correction")) for v in json_list(row, "correction")) for row in rows),
+            accepted=json_bool(doc.get("accepted", True), "accepted"), residual_z_m=number("residual_z_m"),
+            correction_frames=text("correction_frames"), matched=count("matched"),
+            structure_matched=count("structure_matched"), surfaces=text("surfaces"),
+            degenerate=json_or_none(json_bool, doc.get("degenerate"), "degenerate"), iterations=count("iterations"),
+            overlap=number("overlap"), apply_above_m=number("apply_above_m"),
+        )  # fmt: skip
 
     def to_dict(self) -> dict[str, JSON]:
         """The JSON form (None-valued optional fields left out; ``free`` named for readers)."""
@@ -144,14 +164,22 @@ class SurveyPlan:
         }  # fmt: skip
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> SurveyPlan:
-        cam = dict(doc["camera"])
+    def from_dict(cls, doc: Mapping[str, JSON]) -> SurveyPlan:
+        cam = json_object(doc["camera"], "camera")
         camera = Intrinsics(
-            **{k: cam[k] for k in ("width", "height", "fx", "fy", "cx", "cy")}, name=cam.get("name", "")
+            json_int(cam["width"], "camera.width"),
+            json_int(cam["height"], "camera.height"),
+            json_number(cam["fx"], "camera.fx"),
+            json_number(cam["fy"], "camera.fy"),
+            json_number(cam["cx"], "camera.cx"),
+            json_number(cam["cy"], "camera.cy"),
+            name=json_str(cam.get("name", ""), "camera.name"),
         )
         return cls(
-            camera, doc.get("altitude_m"), float(doc["forward_overlap"]), float(doc["side_overlap"]),
-            float(doc["oblique_pitch_deg"]),
+            camera, json_or_none(json_number, doc.get("altitude_m"), "altitude_m"),
+            float(json_number(doc["forward_overlap"], "forward_overlap")),
+            float(json_number(doc["side_overlap"], "side_overlap")),
+            float(json_number(doc["oblique_pitch_deg"], "oblique_pitch_deg")),
         )  # fmt: skip
 
     def nadir_cameras(self, altitude_m: float, area_m2: float) -> float:
@@ -187,28 +215,27 @@ class Registration:
     alignment: Alignment | None = None
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any] | None) -> Registration:
+    def from_dict(cls, doc: Mapping[str, JSON] | None) -> Registration:
         """From the catalog's JSON form; an empty record (a scene made before registration was
         recorded) reads as source ``unknown``."""
-        doc = dict(doc or {})
-        survey = doc.pop("survey", None)
-        why = survey.get("altitude_why") if survey else None
-        alignment = doc.pop("alignment", None)
-        models, sim = doc.pop("camera_models", None), doc.pop("site_from_model", None)
-        names = {f.name for f in fields(cls)} - {
-            "survey",
-            "alignment",
-            "altitude_why",
-            "camera_models",
-            "site_from_model",
-        }
+        doc = doc or {}
+        survey = json_or_none(json_object, doc.get("survey"), "survey")
+        alignment = json_or_none(json_object, doc.get("alignment"), "alignment")
+        models = json_or_none(json_object, doc.get("camera_models"), "camera_models")
+        sim = json_or_none(json_object, doc.get("site_from_model"), "site_from_model")
+        residuals = json_or_none(json_object, doc.get("residuals_m"), "residuals_m")
         return cls(
-            **{"source": "unknown"} | {k: v for k, v in doc.items() if k in names},
-            survey=SurveyPlan.from_dict(survey) if survey else None, altitude_why=why,
+            source=json_str(doc.get("source", "unknown"), "source"), images=json_or_none(json_int, doc.get("images"), "images"),
+            note=json_or_none(json_str, doc.get("note"), "note"), planned=json_or_none(json_bool, doc.get("planned"), "planned"),
+            over=json_or_none(json_str, doc.get("over"), "over"),
+            survey=SurveyPlan.from_dict(survey) if survey else None,
+            altitude_why=json_or_none(json_str, survey.get("altitude_why"), "altitude_why") if survey else None,
             alignment=Alignment.from_dict(alignment) if alignment else None,
-            camera_models={k: CameraModel.from_dict(m) if m else None for k, m in models.items()} if models is not None else None,
-            site_from_model=Sim3("site", "model", float(sim["scale"]), np.asarray(sim["rotation"], np.float64),
+            camera_models={k: CameraModel.from_dict(json_object(m, f"camera_models.{k}")) if m else None for k, m in models.items()} if models is not None else None,
+            site_from_model=Sim3("site", "model", float(json_number(sim["scale"], "scale")), np.asarray(sim["rotation"], np.float64),
                                  np.asarray(sim["translation"], np.float64)) if sim is not None else None,
+            residuals_m={k: json_number(v, f"residuals_m.{k}") for k, v in residuals.items()} if residuals is not None else None,
+            rms_m=json_or_none(json_number, doc.get("rms_m"), "rms_m"),
         )  # fmt: skip
 
     def to_dict(self) -> dict[str, JSON]:
@@ -219,7 +246,7 @@ class Registration:
             if value is None or f.name == "altitude_why":
                 continue
             if f.name == "survey":
-                value = value.to_dict() | ({"altitude_why": self.altitude_why} if self.altitude_why else {})
+                value = self.survey_record()
             elif f.name == "alignment":
                 value = value.to_dict()
             elif f.name == "camera_models":
@@ -232,6 +259,12 @@ class Registration:
                 }
             out[f.name] = value
         return out
+
+    def survey_record(self) -> dict[str, JSON] | None:
+        """How planned cameras were flown and why at that altitude (None: photo cameras)."""
+        if self.survey is None:
+            return None
+        return self.survey.to_dict() | ({"altitude_why": self.altitude_why} if self.altitude_why else {})
 
     @property
     def correction(self) -> tuple[tuple[float, ...], ...] | None:

@@ -6,11 +6,21 @@ import hashlib
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
-from typing import Any, Literal
+from typing import Literal, cast, get_args
 
 import numpy as np
 
-from siteline.schema import JSON
+from siteline.schema import (
+    JSON,
+    json_bool,
+    json_int,
+    json_list,
+    json_number,
+    json_numbers,
+    json_object,
+    json_or_none,
+    json_str,
+)
 from siteline.site.crs import ZUnit
 
 # how a scan names a file's colour, and whether it is 0-255 in 16-bit fields
@@ -39,10 +49,16 @@ class ColourStats:
         }
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> ColourStats:
-        ir = doc.get("intensity_range")
-        z = doc["z_range_m"]
-        return cls(doc["rgb"], (float(ir[0]), float(ir[1])) if ir else None, (float(z[0]), float(z[1])))
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ColourStats:
+        rgb = doc["rgb"]
+        if rgb not in get_args(RgbContent):
+            raise ValueError(f"rgb {rgb!r} is none of {', '.join(get_args(RgbContent))}")
+        ir = json_list(doc.get("intensity_range") or (), "intensity_range")
+        z = json_list(doc["z_range_m"], "z_range_m")
+        return cls(
+            cast(RgbContent, rgb), (float(json_number(ir[0])), float(json_number(ir[1]))) if ir else None,
+            (float(json_number(z[0])), float(json_number(z[1]))),
+        )  # fmt: skip
 
 
 # the kind of surface of each point of a co-registration sample (its fourth column): stable surfaces
@@ -127,15 +143,39 @@ class LasScan:
         return doc
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> LasScan:
-        names = {f.name for f in fields(cls)} - _SAMPLES
-        values = {k: v for k, v in doc.items() if k in names}
-        values["unknown_codes"] = {int(k): int(v) for k, v in doc.get("unknown_codes", {}).items()}
-        values["code_histogram"] = {int(k): int(v) for k, v in doc.get("code_histogram", {}).items()}
-        stats = doc.get("colour_stats")
-        values["colour_stats"] = ColourStats.from_dict(stats) if stats else None
-        values["z_unit"] = ZUnit.from_dict(doc["z_unit"]) if doc.get("z_unit") else None
-        return cls(**values)
+    def from_dict(cls, doc: Mapping[str, JSON]) -> LasScan:
+        """From :meth:`to_dict`'s form (a scan recorded before a field existed lacks it)."""
+
+        def numbers(key: str) -> list[float]:
+            return json_numbers(doc[key], key)
+
+        def codes(key: str) -> dict[int, int]:
+            return {int(k): json_int(v, key) for k, v in json_object(doc.get(key, {}), key).items()}
+
+        def text(key: str) -> str | None:
+            return json_or_none(json_str, doc.get(key), key)
+
+        stats = json_or_none(json_object, doc.get("colour_stats"), "colour_stats")
+        z_unit = json_or_none(json_object, doc.get("z_unit"), "z_unit")
+        gps = doc.get("gps_time_range")
+        footprint = doc.get("footprint")
+        return cls(
+            path=json_str(doc["path"], "path"), source_crs=json_str(doc["source_crs"], "source_crs"),
+            transformed=json_bool(doc["transformed"], "transformed"), point_count=json_int(doc["point_count"], "point_count"),
+            bounds_min=numbers("bounds_min"), bounds_max=numbers("bounds_max"),
+            class_histogram={k: json_int(v, "class_histogram") for k, v in json_object(doc["class_histogram"], "class_histogram").items()},
+            unknown_codes=codes("unknown_codes"), outside_fence=json_int(doc["outside_fence"], "outside_fence"),
+            colour=json_str(doc["colour"], "colour"), density_pts_m2=json_number(doc["density_pts_m2"], "density_pts_m2"),
+            version=json_str(doc["version"], "version"), point_format=json_int(doc["point_format"], "point_format"),
+            scale=numbers("scale"), offset=numbers("offset"),
+            gps_time_range=None if gps is None else numbers("gps_time_range"),
+            z_unit=ZUnit.from_dict(z_unit) if z_unit else None, creation_date=text("creation_date"),
+            colour_stats=ColourStats.from_dict(stats) if stats else None,
+            gps_time_standard=json_or_none(json_bool, doc.get("gps_time_standard"), "gps_time_standard"),
+            footprint=None if footprint is None else [json_numbers(p, "footprint") for p in json_list(footprint, "footprint")],
+            code_histogram=codes("code_histogram"), class_scheme=text("class_scheme"),
+            generating_software=text("generating_software"),
+        )  # fmt: skip
 
 
 _SAMPLES = frozenset({"stable_sample", "survey_sample"})

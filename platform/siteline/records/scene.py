@@ -5,12 +5,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from datetime import datetime
-from typing import Any
 
 from siteline.records.registration import Registration
 from siteline.records.scan import LasScan
 from siteline.records.tiling import SceneTiling
-from siteline.schema import JSON
+from siteline.schema import JSON, json_int, json_object, json_or_none, json_str
 
 # keys the ingest adds beside the scan's own fields
 _INGEST_KEYS = ("las_file", "las_sha256", "stable_sample_sha256", "photos", "cameras")
@@ -49,18 +48,20 @@ class SceneStatistics:
         return doc
 
     @classmethod
-    def from_json(cls, doc: Mapping[str, Any] | None) -> SceneStatistics:
-        doc = dict(doc or {})
-        tiles = doc.get("tiles")
+    def from_json(cls, doc: Mapping[str, JSON] | None) -> SceneStatistics:
+        doc = doc or {}
+        tiles = json_or_none(json_object, doc.get("tiles"), "tiles")
         return cls(
             scan=LasScan.from_dict(doc) if "point_count" in doc else None,
-            las_file=doc.get("las_file"),
-            las_sha256=doc.get("las_sha256"),
-            stable_sample_sha256=doc.get("stable_sample_sha256"),
-            photos=int(doc.get("photos", 0)),
-            cameras=int(doc.get("cameras", 0)),
+            las_file=json_or_none(json_str, doc.get("las_file"), "las_file"),
+            las_sha256=json_or_none(json_str, doc.get("las_sha256"), "las_sha256"),
+            stable_sample_sha256=json_or_none(
+                json_str, doc.get("stable_sample_sha256"), "stable_sample_sha256"
+            ),
+            photos=json_int(doc.get("photos", 0), "photos"),
+            cameras=json_int(doc.get("cameras", 0), "cameras"),
             tiling=SceneTiling.from_dict(tiles) if tiles else None,
-            capture_time_source=doc.get("capture_time_source"),
+            capture_time_source=json_or_none(json_str, doc.get("capture_time_source"), "capture_time_source"),
         )
 
 

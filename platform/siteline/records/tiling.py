@@ -6,13 +6,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from siteline.errors import TileError
 from siteline.records.enums import NODE_ORDERS, NodeOrder
-from siteline.schema import JSON
+from siteline.records.specs import parse_spec
+from siteline.schema import JSON, json_int, json_number, json_object, json_str
 
 if TYPE_CHECKING:
     from siteline.site.spec import SiteSpec
@@ -104,9 +105,10 @@ class TileSpec:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> TileSpec:
-        """The spec a store recorded; one written before ``node_order`` existed kept input order."""
-        return cls(**{"node_order": "input", **doc})
+    def from_dict(cls, doc: Mapping[str, JSON]) -> TileSpec:
+        """The spec a store recorded; one written before ``node_order`` existed kept input order.
+        TileError names an unknown key or a wrongly typed value."""
+        return parse_spec(cls, {"node_order": "input", **doc}, "tile spec", TileError)
 
 
 # the columns of a node index, in storage order: name -> (dtype, values per row; 0: one per level)
@@ -163,7 +165,7 @@ class NodeTable:
         return {name: getattr(self, name) for name in NODE_COLUMNS}
 
     @classmethod
-    def from_columns(cls, tiles: Sequence[str], columns: Mapping[str, Any]) -> NodeTable:
+    def from_columns(cls, tiles: Sequence[str], columns: Mapping[str, np.ndarray | None]) -> NodeTable:
         """The table of stored columns; :class:`TileError` when one is missing or they disagree."""
         missing = [c for c in NODE_COLUMNS if c not in columns]
         if missing:
@@ -218,7 +220,7 @@ class NodeTable:
         return f"{tile}/{levels}/{x}_{y}_{z}"
 
     @classmethod
-    def from_legacy(cls, docs: Sequence[Mapping[str, Any]], spec: TileSpec) -> NodeTable:
+    def from_legacy(cls, docs: Sequence[Mapping[str, JSON]], spec: TileSpec) -> NodeTable:
         """The table of the node list a store written before node tables kept as JSON in its
         attributes (one level per node; ``cell`` null: a whole-tile level)."""
         if not docs:
@@ -226,8 +228,8 @@ class NodeTable:
         try:
             tiles = sorted({str(d["tile"]) for d in docs})
             ids = {t: k for k, t in enumerate(tiles)}
-            level = np.array([int(d["level"]) for d in docs], np.uint8)
-            count = np.array([int(d["count"]) for d in docs], np.int64)
+            level = np.array([json_int(d["level"], "level") for d in docs], np.uint8)
+            count = np.array([json_int(d["count"], "count") for d in docs], np.int64)
             cells = [d.get("cell") for d in docs]
             lc = np.zeros((len(docs), max(spec.max_levels, int(level.max()) + 1)), np.int64)
             lc[np.arange(len(docs)), level] = count
@@ -244,7 +246,7 @@ class NodeTable:
                     np.int8,
                 ),
                 cell=np.array([c if c is not None else (0, 0, 0) for c in cells], np.int32).reshape(-1, 3),
-                start=np.array([int(d["start"]) for d in docs], np.int64),
+                start=np.array([json_int(d["start"], "start") for d in docs], np.int64),
                 count=count,
                 lo=np.array([d["bounds_min"] for d in docs], np.float64).reshape(-1, 3),
                 hi=np.array([d["bounds_max"] for d in docs], np.float64).reshape(-1, 3),
@@ -293,20 +295,20 @@ class SceneTiling:
         }
 
     @classmethod
-    def from_dict(cls, doc: Mapping[str, Any]) -> SceneTiling:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> SceneTiling:
         return cls(
-            uri=doc["uri"],
-            spec=TileSpec.from_dict(doc["spec"]),
-            checksum=doc["checksum"],
-            generation=int(doc.get("generation", 0)),
-            points=int(doc["points"]),
-            tiles=int(doc["tiles"]),
-            levels=int(doc["levels"]),
-            bytes=int(doc["bytes"]),
-            seconds=float(doc.get("seconds", 0.0)),
-            nodes=int(doc.get("nodes", 0)),
-            source_bytes=int(doc.get("source_bytes", 0)),
-            site_version=int(doc.get("site_version", 1)),
+            uri=json_str(doc["uri"], "uri"),
+            spec=TileSpec.from_dict(json_object(doc["spec"], "spec")),
+            checksum=json_str(doc["checksum"], "checksum"),
+            generation=json_int(doc.get("generation", 0), "generation"),
+            points=json_int(doc["points"], "points"),
+            tiles=json_int(doc["tiles"], "tiles"),
+            levels=json_int(doc["levels"], "levels"),
+            bytes=json_int(doc["bytes"], "bytes"),
+            seconds=float(json_number(doc.get("seconds", 0.0), "seconds")),
+            nodes=json_int(doc.get("nodes", 0), "nodes"),
+            source_bytes=json_int(doc.get("source_bytes", 0), "source_bytes"),
+            site_version=json_int(doc.get("site_version", 1), "site_version"),
         )
 
 

@@ -5,7 +5,7 @@ of documents against them, :data:`JSON`, the type of a JSON value, and the check
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeAlias, TypeVar, cast
@@ -40,10 +40,16 @@ def json_list(value: object, what: str = "value") -> Sequence[JSON]:
 
 
 def json_number(value: object, what: str = "value") -> float:
-    """``value`` as a float (a JSON number); TypeError naming ``what`` where it is not one."""
+    """``value`` as a number (an int stays an int, as JSON wrote it); TypeError naming ``what`` where
+    it is not one."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise TypeError(f"{what} is a {type(value).__name__}, not a number")
-    return float(value)
+    return value
+
+
+def json_numbers(value: object, what: str = "value") -> list[float]:
+    """``value`` as a list of numbers (:func:`json_number` each); TypeError naming ``what`` where not."""
+    return [json_number(v, what) for v in json_list(value, what)]
 
 
 def json_int(value: object, what: str = "value") -> int:
@@ -52,6 +58,13 @@ def json_int(value: object, what: str = "value") -> int:
         return int(value)
     if isinstance(value, bool) or not isinstance(value, int):
         raise TypeError(f"{what} is a {type(value).__name__}, not an integer")
+    return value
+
+
+def json_bool(value: object, what: str = "value") -> bool:
+    """``value`` as a bool; TypeError naming ``what`` where it is not one."""
+    if not isinstance(value, bool):
+        raise TypeError(f"{what} is a {type(value).__name__}, not true or false")
     return value
 
 
@@ -107,6 +120,11 @@ def validate(doc: object, schema_name: str, source: str) -> None:
 
 
 T = TypeVar("T")
+
+
+def json_or_none(read: Callable[[object, str], T], value: object, what: str = "value") -> T | None:
+    """``read(value, what)`` (one of the checked reads above), or None where ``value`` is None."""
+    return None if value is None else read(value, what)
 
 
 def json_doc(doc: Mapping[str, object]) -> dict[str, JSON]:

@@ -125,7 +125,7 @@ class ZUnit:
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, JSON]) -> ZUnit:
-        return cls(str(doc["name"]), json_number(doc["metres"], "metres"), str(doc["source"]))
+        return cls(str(doc["name"]), float(json_number(doc["metres"], "metres")), str(doc["source"]))
 
 
 def parse_z_unit(text: str) -> ZUnit:

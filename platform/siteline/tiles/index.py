@@ -40,7 +40,7 @@ def read_index(root: zarr.Group, attrs: dict[str, JSON], spec: TileSpec, uri: st
             raise TileError(f"tile store {uri} has no node index: tile the scene again.") from exc
         if not isinstance(group, zarr.Group):
             raise TileError(f"tile store {uri}: its node index is not a group: the store is damaged.")
-        tiles = [str(t) for t in group.attrs.get("tiles", [])]  # type: ignore[union-attr]
+        tiles = [str(t) for t in json_list(group.attrs.get("tiles", []), "tiles")]
         columns = {}
         for name in group.array_keys():
             arr = group[name]

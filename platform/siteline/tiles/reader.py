@@ -16,6 +16,7 @@ from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
 from siteline.pointpass import dequantise
 from siteline.records.tiling import NodeTable, TileSource, TileSpec
+from siteline.schema import json_object
 from siteline.stores import join, open_store
 from siteline.tiles import codecs as _codecs  # noqa: F401  (quiets zarr's warning on the codecs it reads)
 from siteline.tiles.index import read_index
@@ -261,7 +262,7 @@ class SceneTiles:
             attrs = dict(self.root.attrs)
             if "spec" not in attrs:
                 raise TileError(f"{uri} is not a siteline tile store.")
-            spec = spec or TileSpec.from_dict(dict(attrs["spec"]))  # type: ignore[arg-type]
+            spec = spec or TileSpec.from_dict(json_object(attrs["spec"], f"tile store {uri}: spec"))
             nodes = nodes if nodes is not None else read_index(self.root, attrs, spec, self.uri)
         self.spec = spec
         self.nodes = nodes

@@ -72,7 +72,7 @@ class ReleaseParams:
                 k: json_str(v, f"derived.{k}")
                 for k, v in json_object(doc.get("derived") or {}, "derived").items()
             },
-            json_number(doc.get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), "radius_ceiling_m"),
+            float(json_number(doc.get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), "radius_ceiling_m")),
         )
 
 
@@ -94,7 +94,7 @@ class ReleaseKnobs:
     absent knobs leave the layer below in force."""
 
     preset: str | None = None
-    pair: Mapping[str, Any] = field(default_factory=dict)
+    pair: Mapping[str, JSON] = field(default_factory=dict)
     pad: bool | None = None
     min_image_px: int | None = None
     radius_ceiling_m: float | None = None
@@ -165,6 +165,8 @@ class ReleaseKnobs:
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any] | None, source: str = "release settings") -> ReleaseKnobs:
+        """A layer as a site's settings or a user's file state it: each value is checked by the
+        layer itself (ReleaseError naming it), so any JSON may come in (hence ``Any``)."""
         doc = dict(doc or {})
         unknown = sorted(set(doc) - {"pair", *_RELEASE_KEYS})
         if unknown:
