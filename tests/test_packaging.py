@@ -3,6 +3,7 @@ with their vendored three.js, and the trade measurement (`siteline bench trade` 
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -34,13 +35,22 @@ assert siteline.trade.__file__.startswith({target!r}), siteline.trade.__file__
 
 @pytest.mark.slow  # builds and installs a wheel (about a minute); `make test-all` runs it
 def test_wheel_install_finds_schemas_and_migrations(tmp_path) -> None:
-    wheels, target = tmp_path / "wheels", tmp_path / "target"
+    wheels, target, src = tmp_path / "wheels", tmp_path / "target", tmp_path / "src"
+    # built from a copy of what the wheel is made of: setuptools leaves build/ beside the sources it builds
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy2(REPO / name, src / name)
+    shutil.copytree(
+        REPO / "platform", src / "platform", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info")
+    )
     pip = [sys.executable, "-m", "pip", "-q"]
     subprocess.run(
-        [*pip, "wheel", "--no-deps", "--no-build-isolation", str(REPO), "-w", str(wheels)],
+        [*pip, "wheel", "--no-deps", "--no-build-isolation", str(src), "-w", str(wheels)],
         check=True,
         cwd=tmp_path,
     )
+    # nothing written into the checkout (a build/ there, if any, is older than this test's copy)
+    assert not (REPO / "build").exists() or (REPO / "build").stat().st_mtime < src.stat().st_mtime
     wheel = next(wheels.glob("siteline-*.whl"))
     subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)], check=True)
     env = {"PYTHONPATH": str(target), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
