@@ -345,3 +345,20 @@ def test_reimporting_an_unchanged_export_makes_no_version_even_at_the_fence(tmp_
     assert not res.created and res.changed == 0, res
     assert versions(cat, r.scene_id) == [1]
     cat.dispose()
+
+
+@pytest.mark.parametrize("taxonomy", [{}, {"name": "edited"}, {"name": "x", "classes": "ground"}])
+def test_a_record_whose_taxonomy_an_editor_mangled_is_refused_as_another_taxonomy(tmp_path, taxonomy) -> None:
+    """The record's taxonomy is read as the site's record type; one that is not a taxonomy any more is
+    refused like another taxonomy (the fix named), not with a schema error about the file's record."""
+    from siteline.labelsets.execute import _check_origin
+    from siteline.records.labelsets import ExportedLabels
+    from siteline.schema import json_doc
+    from siteline.site.spec import make_site_spec
+
+    site = make_site_spec("yard", "EPSG:32618", (445_000.0, 5_030_000.0, 80.0))
+    path = tmp_path / "edited.las"
+    own = ExportedLabels("yard", 3, 1, "site class ids", json_doc(site.taxonomy.to_dict()))
+    _check_origin(own, 3, site, path, None)  # the site's own taxonomy: its class ids are the site's
+    with pytest.raises(LabelSetError, match=r"edited\.las .*class ids differ.*--taxonomy-map"):
+        _check_origin(ExportedLabels("yard", 3, 1, "site class ids", taxonomy), 3, site, path, None)

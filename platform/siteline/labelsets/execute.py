@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import zarr
 
-from siteline.errors import LabelSetError
+from siteline.errors import LabelSetError, SchemaError
 from siteline.hashing import sha256_file
 from siteline.labelsets.compare import changes_by_class, histogram, pair_counts
 from siteline.labelsets.mapping import TaxonomyMap, coding_lut
@@ -110,8 +110,11 @@ def _check_origin(
             f"editor may drop it), so its class codes cannot be taken as site {site.name}'s class ids (ASPRS 2 "
             f"and 5 would read as {names.get(2, 'nothing')} and {names.get(5, 'nothing')}). {how}"
         )
-    recorded = Taxonomy.from_dict(about.taxonomy, f"labels file {path}'s label-set record: its taxonomy")
-    ids = {c.id: c.name for c in recorded.classes}
+    try:
+        recorded = Taxonomy.from_dict(about.taxonomy, f"labels file {path}'s label-set record: its taxonomy")
+        ids = {c.id: c.name for c in recorded.classes}
+    except SchemaError:  # a taxonomy an editor mangled (or dropped) is not the site's: refused below
+        ids = {}
     if ids != {c.id: c.name for c in site.taxonomy.classes}:
         raise LabelSetError(
             f"labels file {path} was exported under taxonomy {about.taxonomy.get('name')!r}, whose "

@@ -12,7 +12,16 @@ import numpy as np
 from siteline.camera.pinhole import Camera
 from siteline.errors import PairError
 from siteline.records.params.pairs import PairParams
-from siteline.schema import JSON, json_int, json_list, json_number, json_object, json_or_none, json_str
+from siteline.schema import (
+    JSON,
+    json_float,
+    json_int,
+    json_list,
+    json_number,
+    json_object,
+    json_or_none,
+    json_str,
+)
 from siteline.site.taxonomy import Taxonomy
 
 
@@ -57,12 +66,12 @@ class ViewStrategy:
         if seg:
             a, b = (json_list(end, "mirror_segment_m") for end in json_list(seg, "mirror_segment_m"))
             segment = (
-                (float(json_number(a[0])), float(json_number(a[1]))),
-                (float(json_number(b[0])), float(json_number(b[1]))),
+                (json_float(a[0]), json_float(a[1])),
+                (json_float(b[0]), json_float(b[1])),
             )
         return cls(
-            float(json_number(doc["vertical_fraction"], "vertical_fraction")), bool(doc["mirrored"]),
-            float(json_number(doc["forward_fraction"], "forward_fraction")), segment,
+            json_float(doc["vertical_fraction"], "vertical_fraction"), bool(doc["mirrored"]),
+            json_float(doc["forward_fraction"], "forward_fraction"), segment,
             json_or_none(json_str, doc.get("mirror_rule"), "mirror_rule"),
             json_or_none(json_number, doc.get("central_depth_m"), "central_depth_m"),
             json_or_none(json_number, doc.get("forward_m"), "forward_m"),
@@ -198,7 +207,7 @@ class ColourPlan:
             )
 
         def bounds(v: JSON) -> tuple[float, float] | None:
-            return (float(json_number(json_list(v)[0])), float(json_number(json_list(v)[1]))) if v else None
+            return (json_float(json_list(v)[0]), json_float(json_list(v)[1])) if v else None
 
         return cls(
             source, bounds(doc.get("stretch_t1")), bounds(doc.get("stretch_t2")), str(doc.get("why", "")),
@@ -265,7 +274,7 @@ class RadiusChoice:
         false_change = json_or_none(json_object, doc.get("expected_false_change"), "expected_false_change")
         return cls(
             {k: json_number(v, f"median_spacing_m.{k}") for k, v in spacing.items()},
-            float(json_number(doc.get("multiplier", float("nan")), "multiplier")), bool(doc.get("given", False)),
+            json_float(doc.get("multiplier", float("nan")), "multiplier"), bool(doc.get("given", False)),
             None if false_change is None else
             {k: v if isinstance(v, str) else json_number(v, f"expected_false_change.{k}") for k, v in false_change.items()},
         )  # fmt: skip
@@ -307,7 +316,7 @@ class ChangeLabels:
         points = doc.get("points")
         radius = doc.get("radius")
         return cls(
-            str(doc.get("uri", "")), float(json_number(doc["radius_m"], "radius_m")), counts,
+            str(doc.get("uri", "")), json_float(doc["radius_m"], "radius_m"), counts,
             str(doc.get("checksum", "")), json_or_none(json_number, doc.get("seconds"), "seconds"),
             json_int(points, "points") if points is not None else sum(n for side in counts.values() for n in side.values()),
             RadiusChoice.from_dict(json_object(radius, "radius")) if radius else None,
@@ -382,9 +391,9 @@ class GroundUsed:
         cell = doc.get("cell_m", json_object(doc.get("terrain") or {}, "terrain").get("cell_m"))
         return cls(
             str(doc["model"]), str(doc["source"]), json_int(doc["ground_points"], "ground_points"),
-            float(json_number(doc["share"], "share")), float(json_number(doc["residual_m"], "residual_m")),
-            float(json_number(doc["tolerance_m"], "tolerance_m")), json_or_none(json_object, doc.get("filter"), "filter"),
-            None if cell is None else float(json_number(cell, "cell_m")),
+            json_float(doc["share"], "share"), json_float(doc["residual_m"], "residual_m"),
+            json_float(doc["tolerance_m"], "tolerance_m"), json_or_none(json_object, doc.get("filter"), "filter"),
+            None if cell is None else json_float(cell, "cell_m"),
         )  # fmt: skip
 
     def summary(self) -> str:

@@ -18,6 +18,7 @@ from siteline.errors import RegistrationError
 from siteline.schema import (
     JSON,
     json_bool,
+    json_float,
     json_int,
     json_list,
     json_number,
@@ -83,7 +84,7 @@ class Alignment:
             applied=json_bool(doc.get("applied", False), "applied"),
             residual_m=json_number(doc.get("residual_m", float("inf")), "residual_m"), residual_xy_m=number("residual_xy_m"),
             axes={a: json_or_none(json_str, v, f"axes.{a}") for a, v in axes.items()},
-            correction=tuple(tuple(float(json_number(v, "correction")) for v in json_list(row, "correction")) for row in rows),
+            correction=tuple(tuple(json_float(v, "correction") for v in json_list(row, "correction")) for row in rows),
             accepted=json_bool(doc.get("accepted", True), "accepted"), residual_z_m=number("residual_z_m"),
             correction_frames=text("correction_frames"), matched=count("matched"),
             structure_matched=count("structure_matched"), surfaces=text("surfaces"),
@@ -177,9 +178,9 @@ class SurveyPlan:
         )
         return cls(
             camera, json_or_none(json_number, doc.get("altitude_m"), "altitude_m"),
-            float(json_number(doc["forward_overlap"], "forward_overlap")),
-            float(json_number(doc["side_overlap"], "side_overlap")),
-            float(json_number(doc["oblique_pitch_deg"], "oblique_pitch_deg")),
+            json_float(doc["forward_overlap"], "forward_overlap"),
+            json_float(doc["side_overlap"], "side_overlap"),
+            json_float(doc["oblique_pitch_deg"], "oblique_pitch_deg"),
         )  # fmt: skip
 
     def nadir_cameras(self, altitude_m: float, area_m2: float) -> float:
@@ -232,7 +233,7 @@ class Registration:
             altitude_why=json_or_none(json_str, survey.get("altitude_why"), "altitude_why") if survey else None,
             alignment=Alignment.from_dict(alignment) if alignment else None,
             camera_models={k: CameraModel.from_dict(json_object(m, f"camera_models.{k}")) if m else None for k, m in models.items()} if models is not None else None,
-            site_from_model=Sim3("site", "model", float(json_number(sim["scale"], "scale")), np.asarray(sim["rotation"], np.float64),
+            site_from_model=Sim3("site", "model", json_float(sim["scale"], "scale"), np.asarray(sim["rotation"], np.float64),
                                  np.asarray(sim["translation"], np.float64)) if sim is not None else None,
             residuals_m={k: json_number(v, f"residuals_m.{k}") for k, v in residuals.items()} if residuals is not None else None,
             rms_m=json_or_none(json_number, doc.get("rms_m"), "rms_m"),

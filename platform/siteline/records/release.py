@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass, field
 from typing import NotRequired, TypedDict, cast
 
 from siteline.records.enums import SPLITS, ReleaseStatus, Split
-from siteline.schema import JSON, json_int, json_list, json_number, json_object, json_str
+from siteline.schema import JSON, json_float, json_int, json_list, json_object, json_str
 
 # the release layout this siteline builds (siteline.release.layout)
 FORMAT = 2
@@ -278,13 +278,13 @@ class ReleaseItem:
         return cls(
             id=json_str(doc["id"], "id"), split=cast(Split, split), pair=json_int(doc["pair"], "pair"),
             view=json_int(doc["view"], "view"), strategy=json_str(doc.get("strategy", ""), "strategy"),
-            coverage=float(json_number(doc["coverage"], "coverage")),
-            change_ratio=float(json_number(doc["change_ratio"], "change_ratio")), valid=float(json_number(doc["valid"], "valid")),
+            coverage=json_float(doc["coverage"], "coverage"),
+            change_ratio=json_float(doc["change_ratio"], "change_ratio"), valid=json_float(doc["valid"], "valid"),
             size_px=size, padded_px=(json_int(padded[0]), json_int(padded[1])),
-            ignore={k: float(json_number(v, f"ignore.{k}")) for k, v in json_object(doc.get("ignore") or {}, "ignore").items()},
-            filled=float(json_number(doc.get("filled", 0.0), "filled")),
+            ignore={k: json_float(v, f"ignore.{k}") for k, v in json_object(doc.get("ignore") or {}, "ignore").items()},
+            filled=json_float(doc.get("filled", 0.0), "filled"),
             camera=None if camera is None else json_object(camera, "camera"),
-            change_visible=None if visible is None else float(json_number(visible, "change_visible")),
+            change_visible=None if visible is None else json_float(visible, "change_visible"),
         )  # fmt: skip
 
 

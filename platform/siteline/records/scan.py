@@ -13,6 +13,7 @@ import numpy as np
 from siteline.schema import (
     JSON,
     json_bool,
+    json_float,
     json_int,
     json_list,
     json_number,
@@ -56,8 +57,8 @@ class ColourStats:
         ir = json_list(doc.get("intensity_range") or (), "intensity_range")
         z = json_list(doc["z_range_m"], "z_range_m")
         return cls(
-            cast(RgbContent, rgb), (float(json_number(ir[0])), float(json_number(ir[1]))) if ir else None,
-            (float(json_number(z[0])), float(json_number(z[1]))),
+            cast(RgbContent, rgb), (json_float(ir[0]), json_float(ir[1])) if ir else None,
+            (json_float(z[0]), json_float(z[1])),
         )  # fmt: skip
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from siteline.errors import TileError
 from siteline.records.enums import NODE_ORDERS, NodeOrder
 from siteline.records.specs import parse_spec
-from siteline.schema import JSON, json_int, json_number, json_object, json_str
+from siteline.schema import JSON, json_float, json_int, json_object, json_str
 
 if TYPE_CHECKING:
     from siteline.site.spec import SiteSpec
@@ -305,7 +305,7 @@ class SceneTiling:
             tiles=json_int(doc["tiles"], "tiles"),
             levels=json_int(doc["levels"], "levels"),
             bytes=json_int(doc["bytes"], "bytes"),
-            seconds=float(json_number(doc.get("seconds", 0.0), "seconds")),
+            seconds=json_float(doc.get("seconds", 0.0), "seconds"),
             nodes=json_int(doc.get("nodes", 0), "nodes"),
             source_bytes=json_int(doc.get("source_bytes", 0), "source_bytes"),
             site_version=json_int(doc.get("site_version", 1), "site_version"),

@@ -45,7 +45,7 @@ class SplitPlan:
 
     of: dict[Item, str]
     left_out: tuple[Item, ...] = ()
-    rule: SplitRule = field(default_factory=lambda: SplitRule())
+    rule: SplitRule = field(default_factory=SplitRule)
 
     def stated(self, views: Mapping[int, Sequence[RenderedView]]) -> SplitPlan:
         """This plan with its rule stating the largest share of a val or test view's footprint that

@@ -21,8 +21,9 @@ JSON: TypeAlias = str | int | float | bool | None | Sequence["JSON"] | Mapping[s
 """A JSON value (as zarr-python 3 types it; read-only containers, so a ``list[float]`` is one): a
 record's JSON form, a file read or written as JSON, a catalog JSON column, a store's attributes, a
 command's ``--json`` record. A document of fixed shape has a ``TypedDict`` (siteline.records); what
-crosses between stages is a typed record, not one of these. A value read from one is narrowed by
-:func:`json_object`, :func:`json_list`, :func:`json_number`, :func:`json_int` or :func:`json_str`."""
+crosses between stages is a typed record, not one of these. A value read from one is narrowed by the
+checked reads below (``json_object``, ``json_list``, ``json_number``, ``json_float``, ``json_numbers``,
+``json_int``, ``json_bool``, ``json_str``, ``json_or_none``), each a TypeError naming the key."""
 
 
 def json_object(value: object, what: str = "value") -> Mapping[str, JSON]:
@@ -45,6 +46,11 @@ def json_number(value: object, what: str = "value") -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise TypeError(f"{what} is a {type(value).__name__}, not a number")
     return value
+
+
+def json_float(value: object, what: str = "value") -> float:
+    """``value`` as a float (:func:`json_number`, an int made a float); TypeError naming ``what``."""
+    return float(json_number(value, what))
 
 
 def json_numbers(value: object, what: str = "value") -> list[float]:

@@ -15,7 +15,7 @@ import pyproj
 from pyproj.exceptions import CRSError as PyprojCRSError
 
 from siteline.errors import CRSError, GeometryError
-from siteline.schema import JSON, json_number
+from siteline.schema import JSON, json_float
 
 # A site origin further than this from the CRS' own origin is almost certainly a unit or axis mistake.
 MAX_ABS_COORDINATE_M = 1.0e8
@@ -125,7 +125,7 @@ class ZUnit:
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, JSON]) -> ZUnit:
-        return cls(str(doc["name"]), float(json_number(doc["metres"], "metres")), str(doc["source"]))
+        return cls(str(doc["name"]), json_float(doc["metres"], "metres"), str(doc["source"]))
 
 
 def parse_z_unit(text: str) -> ZUnit:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 from siteline.errors import PairError, SitelineError
@@ -165,9 +165,9 @@ class PairParams:
         """The parameters a record (a release's lineage or catalog row) says outputs were made with, to
         describe them: a knob it lacks has the value it meant before it existed (:attr:`BEFORE`), and
         its sampler is not checked (the outputs are read, not rebuilt). PairError as :meth:`from_dict`."""
-        known = {f.name for f in fields(cls)}
-        before = {k: v for k, v in cls.BEFORE.items() if k in known}
-        return parse_spec(cls, {**before, **doc, "sampler": SAMPLER_VERSION}, "pair parameters", PairError)
+        return parse_spec(
+            cls, {**cls.BEFORE, **doc, "sampler": SAMPLER_VERSION}, "pair parameters", PairError
+        )
 
     def digest(self) -> str:
         """Short stable hash naming this parameter set's outputs."""

@@ -12,7 +12,7 @@ from siteline.errors import ReleaseError, SitelineError
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.presets import PRESETS
 from siteline.records.release import FORMAT
-from siteline.schema import JSON, json_int, json_number, json_object, json_str
+from siteline.schema import JSON, json_float, json_int, json_object, json_str
 
 # the change radius above which a build warns: a pair then labels smaller changes unchanged
 DEFAULT_RADIUS_CEILING_M = 1.0
@@ -72,7 +72,7 @@ class ReleaseParams:
                 k: json_str(v, f"derived.{k}")
                 for k, v in json_object(doc.get("derived") or {}, "derived").items()
             },
-            float(json_number(doc.get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), "radius_ceiling_m")),
+            json_float(doc.get("radius_ceiling_m", DEFAULT_RADIUS_CEILING_M), "radius_ceiling_m"),
         )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 from siteline.errors import RenderError
@@ -86,6 +87,6 @@ class RenderParams:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, doc: dict[str, JSON]) -> RenderParams:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> RenderParams:
         """From the JSON form; RenderError names an unknown key or a wrongly typed value."""
         return parse_spec(cls, doc, "render settings", RenderError)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 from siteline.errors import RenderError, ViewsError
@@ -123,6 +124,6 @@ class ViewParams:
         return d
 
     @classmethod
-    def from_dict(cls, doc: dict[str, JSON]) -> ViewParams:
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ViewParams:
         """From the JSON form; ViewsError names an unknown key or a wrongly typed value."""
         return parse_spec(cls, doc, "view parameters", ViewsError)
