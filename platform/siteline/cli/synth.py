@@ -34,6 +34,21 @@ def site(
     no_photos: bool = typer.Option(
         False, "--no-photos", help="LiDAR-only missions (no photos, no COLMAP model)."
     ),
+    layout: str = typer.Option(
+        "site",
+        "--layout",
+        help="site (the construction site), boxes (the analytic box scene) or slope (a sloped scene).",
+    ),
+    scan: str = typer.Option(
+        "flown",
+        "--scan",
+        help="flown (an airborne scanner's first returns along flight lines that differ epoch to epoch) or sampled (every surface sampled alike, as sites were before).",
+    ),
+    flight_variation: float = typer.Option(
+        1.0,
+        "--flight-variation",
+        help="How far each epoch's flight strays from the plan, in units of up to 2 degrees turned, 2.5 m shifted and 3 m higher or lower (0: every epoch flies the same lines).",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Write one DJI mission folder per epoch and a ground-truth sidecar."""
@@ -50,6 +65,9 @@ def site(
         projection_error_epochs=tuple(projection_error),
         photos=not no_photos,
         colmap=not no_photos,
+        layout=layout,
+        scan=scan,
+        flight_variation=flight_variation,
     )
     t0 = time.perf_counter()
     with progress_bars(as_json) as bars:

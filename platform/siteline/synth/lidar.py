@@ -77,7 +77,7 @@ def directions(tilts_deg: tuple[float, ...]) -> list[np.ndarray]:
     return out
 
 
-def _bounds(prim: Primitive) -> np.ndarray:
+def surface_bounds(prim: Primitive) -> np.ndarray:
     """(8, 3) corners of a box that holds ``prim``'s surface (site-local metres)."""
     if prim.kind == "terrain":
         rect, slope, pit, _ = prim.params
@@ -98,8 +98,8 @@ def _bounds(prim: Primitive) -> np.ndarray:
         c = np.array(
             [[cx + sx * r, cy + sy * r, z] for sx in (-1, 1) for sy in (-1, 1) for z in (z0, z0 + h)]
         )
-    else:  # sphere
-        cx, cy, cz, r = prim.params
+    else:  # sphere or canopy
+        cx, cy, cz, r = prim.params[:4]
         c = np.array(
             [[cx + sx * r, cy + sy * r, cz + sz * r] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
         )
@@ -121,7 +121,7 @@ class Visibility:
     def __init__(self, prims: list[Primitive], spec: LidarSpec) -> None:
         self.prims = prims
         self.dirs = directions(spec.oblique_tilts_deg)
-        corners = np.stack([_bounds(p) for p in prims]) if prims else np.zeros((0, 8, 3))
+        corners = np.stack([surface_bounds(p) for p in prims]) if prims else np.zeros((0, 8, 3))
         # per direction: its plane's axes and each surface's shadow rectangle and nearest depth on it
         self.frames = []
         for d in self.dirs:
@@ -173,8 +173,8 @@ class Visibility:
         return ~blocked
 
 
-def flight_lines_y(spec: LidarSpec) -> np.ndarray:
-    x0, x1, y0, y1 = m.TERRAIN_M
+def flight_lines_y(spec: LidarSpec, rect: tuple[float, float, float, float] = m.TERRAIN_M) -> np.ndarray:
+    x0, x1, y0, y1 = rect
     return np.arange(y0 + spec.line_spacing_m / 2, y1, spec.line_spacing_m)
 
 
@@ -182,10 +182,12 @@ def gps_week_seconds(t_unix: float) -> float:
     return (t_unix - GPS_EPOCH_UNIX_S) % SECONDS_PER_WEEK
 
 
-def _times_and_sensors(xyz: np.ndarray, spec: LidarSpec, t0: float) -> tuple[np.ndarray, np.ndarray]:
+def _times_and_sensors(
+    xyz: np.ndarray, spec: LidarSpec, t0: float, rect: tuple[float, float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
     """GPS time (week seconds) of the pass that saw each point, and the sensor position then."""
-    x0, x1, _, _ = m.TERRAIN_M
-    lines = flight_lines_y(spec)
+    x0, x1, _, _ = rect
+    lines = flight_lines_y(spec, rect)
     k = np.abs(xyz[:, 1:2] - lines[None, :]).argmin(axis=1)
     line_s = (x1 - x0) / spec.speed_m_s + 20.0
     along = np.where(k % 2 == 0, xyz[:, 0] - x0, x1 - xyz[:, 0]) / spec.speed_m_s
@@ -194,14 +196,14 @@ def _times_and_sensors(xyz: np.ndarray, spec: LidarSpec, t0: float) -> tuple[np.
     return t, sensors
 
 
-def _keys(prims: list[Primitive]) -> set[tuple[str, str]]:
+def surface_keys(prims: list[Primitive]) -> set[tuple[str, str]]:
     return {(p.key, p.signature) for p in prims}
 
 
 MARGIN_DENSITY_PTS_M2 = 60.0
 
 
-def _margin(
+def change_margin(
     xyz: np.ndarray, prim: Primitive, changed: bool, others: dict[str, Primitive] | None, cache: dict
 ) -> np.ndarray:
     """Distance (m) from each point of a changed surface to that surface's version in the other epoch
@@ -228,8 +230,8 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
     prims = site.primitives(e)
     prev_prims = site.primitives(e - 1) if e > 0 else None
     next_prims = site.primitives(e + 1) if e + 1 < len(site.epochs) else None
-    prev = _keys(prev_prims) if prev_prims is not None else None
-    nxt = _keys(next_prims) if next_prims is not None else None
+    prev = surface_keys(prev_prims) if prev_prims is not None else None
+    nxt = surface_keys(next_prims) if next_prims is not None else None
     prev_by_key = {p.key: p for p in prev_prims} if prev_prims else None
     next_by_key = {p.key: p for p in next_prims} if next_prims else None
     cache_prev: dict = {}
@@ -250,35 +252,53 @@ def sample_epoch(site: m.SiteModel, e: int, spec: LidarSpec) -> Iterator[EpochCh
             if not len(xyz):
                 continue
             chunk = _finish(
-                xyz, prim, rng, spec, t0, ep, (occ, (jib_c, jib_d, jib_len)), (changed_prev, changed_next)
-            )
-            chunk.margin_previous_m = _margin(chunk.xyz, prim, changed_prev, prev_by_key, cache_prev)
-            chunk.margin_next_m = _margin(chunk.xyz, prim, changed_next, next_by_key, cache_next)
+                xyz, prim, rng, spec, (t0, site.terrain_m), ep, (occ, (jib_c, jib_d, jib_len)),
+                (changed_prev, changed_next),
+            )  # fmt: skip
+            chunk.margin_previous_m = change_margin(chunk.xyz, prim, changed_prev, prev_by_key, cache_prev)
+            chunk.margin_next_m = change_margin(chunk.xyz, prim, changed_next, next_by_key, cache_next)
             yield chunk
     if ep.snow:
         rng = np.random.default_rng([base_seed, 99_991])
-        x0, x1, y0, y1 = m.TERRAIN_M
-        n = int(rng.poisson(0.02 * (x1 - x0) * (y1 - y0)))
-        xyz = np.c_[rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(3, 35, n)]
-        flake = Primitive("snow:airborne", f"e{e}", 900, m.SNOW, "sphere", (0, 0, 0, 1), (245, 245, 250))
-        yield _finish(xyz, flake, rng, spec, t0, ep, None, (False, False))
+        yield airborne_snow(site, e, spec, t0, rng)
+
+
+def airborne_snow(
+    site: m.SiteModel, e: int, spec: LidarSpec, t0: float, rng: np.random.Generator
+) -> EpochChunk:
+    """Snowflakes in the air over the terrain (3-35 m), 0.02 a square metre of it."""
+    x0, x1, y0, y1 = site.terrain_m
+    n = int(rng.poisson(0.02 * (x1 - x0) * (y1 - y0)))
+    xyz = np.c_[rng.uniform(x0, x1, n), rng.uniform(y0, y1, n), rng.uniform(3, 35, n)]
+    flake = Primitive("snow:airborne", f"e{e}", 900, m.SNOW, "sphere", (0, 0, 0, 1), (245, 245, 250))
+    return _finish(xyz, flake, rng, spec, (t0, site.terrain_m), site.epochs[e], None, (False, False))
 
 
 def _finish(
-    xyz: np.ndarray, prim: Primitive, rng: np.random.Generator, spec: LidarSpec, t0: float, ep: m.EpochSpec,
+    xyz: np.ndarray, prim: Primitive, rng: np.random.Generator, spec: LidarSpec,
+    clock: tuple[float, tuple[float, float, float, float]], ep: m.EpochSpec,
     seen: tuple[Visibility, tuple[np.ndarray, np.ndarray, float]] | None, changed: tuple[bool, bool],
 ) -> EpochChunk:  # fmt: skip
-    """A primitive's sampled points as a LiDAR chunk: times, range noise, colour, returns,
-    intensity; ``seen``: the epoch's visibility (siteline.synth.lidar.Visibility) and the crane jib's ground footprint (snow on
-    what is seen from above, the jib's projection error smeared on the ground; None: neither);
-    ``changed``: whether the surface changed since the previous epoch and until the next."""
+    """A primitive's sampled points as a LiDAR chunk: times (``clock``: the epoch's first GPS time and
+    the terrain the lawnmower lines cross), range noise, then :func:`dress`."""
+    t, sensors = _times_and_sensors(xyz, spec, *clock)
+    ray = xyz - sensors
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True) + 1e-12
+    xyz = xyz + ray * rng.normal(0.0, spec.noise_m, (len(xyz), 1))
+    return dress(xyz, t, prim, rng, ep, seen, changed)
+
+
+def dress(
+    xyz: np.ndarray, t: np.ndarray, prim: Primitive, rng: np.random.Generator, ep: m.EpochSpec,
+    seen: tuple[Visibility, tuple[np.ndarray, np.ndarray, float]] | None, changed: tuple[bool, bool],
+) -> EpochChunk:  # fmt: skip
+    """Returns on ``prim`` at GPS times ``t`` as a LiDAR chunk: colour, returns, intensity; ``seen``:
+    the epoch's visibility (siteline.synth.lidar.Visibility) and the crane jib's ground footprint
+    (snow on what is seen from above, the jib's projection error smeared on the ground; None:
+    neither); ``changed``: whether the surface changed since the previous epoch and until the next."""
     n = len(xyz)
     occ, jib = seen if seen is not None else (None, None)
     changed_prev, changed_next = changed
-    t, sensors = _times_and_sensors(xyz, spec, t0)
-    ray = xyz - sensors
-    ray /= np.linalg.norm(ray, axis=1, keepdims=True) + 1e-12
-    xyz = xyz + ray * rng.normal(0.0, spec.noise_m, (n, 1))
     rgb = np.clip(np.asarray(prim.colour, float) + rng.normal(0, 8, (n, 3)), 0, 255)
     if occ is not None and ep.snow and prim.upward:
         top = occ.visible_from_above(xyz)

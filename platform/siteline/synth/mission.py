@@ -33,6 +33,7 @@ from siteline.stores import publish_folder
 from siteline.synth import model as m
 from siteline.synth.lidar import LidarSpec, sample_epoch
 from siteline.synth.photos import PhotoPose, mission_poses, photo_jpeg, render_photo
+from siteline.synth.scanner import SCANS, epoch_flight, fly_epoch
 from siteline.synth.truth import NpyAppender
 
 RAW_EXTENSIONS = ("LDR", "IMU", "RTK", "CLC", "CLI", "RTS", "RTL", "RTB", "SIG", "LDRT", "RPT", "RPOS")
@@ -58,10 +59,19 @@ class SynthParams:
     photos: bool = True
     colmap: bool = True
     layout: str = "site"
+    # "flown": an airborne scanner's first returns along flight lines that differ epoch to epoch by up to
+    # flight_variation x siteline.synth.scanner.VARIATION; "sampled": every surface sampled alike at the
+    # density and kept where a fixed set of directions sees it (the epochs before flown scans)
+    scan: str = "flown"
+    flight_variation: float = 1.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.density_pts_m2) and 0.1 <= self.density_pts_m2 <= 10_000):
             raise SynthError(f"density {self.density_pts_m2} points/m2 must be between 0.1 and 10000.")
+        if self.scan not in SCANS:
+            raise SynthError(f"scan {self.scan!r}: use one of {', '.join(SCANS)}.")
+        if not (math.isfinite(self.flight_variation) and 0 <= self.flight_variation <= 10):
+            raise SynthError(f"flight variation {self.flight_variation!r} must be between 0 and 10.")
         if not 0.01 <= self.photo_scale <= 1:
             raise SynthError(f"photo scale {self.photo_scale} must be between 0.01 and 1.")
         parse_origin(self.origin)
@@ -89,7 +99,7 @@ def _write_las(
     """Stream epoch ``e`` into a LAS file and the truth arrays; return the point count and the photo
     subsample (site-local float32 xyz, rgb)."""
     origin = np.asarray(cfg.origin)
-    x0, _, y0, _ = m.TERRAIN_M
+    x0, _, y0, _ = site.terrain_m
     header = las_header(
         cfg.crs, origin + np.array([x0, y0, -20.0]), LAS_SCALE_M, 3, "1.2", created=site.epochs[e].time.date(),
         software=(SYNTHETIC_SOFTWARE, "DJI Terra (simulated by siteline)"),
@@ -106,7 +116,11 @@ def _write_las(
         NpyAppender(truth_dir / "margin_previous_m.npy", np.float32) as mprev,
         NpyAppender(truth_dir / "margin_next_m.npy", np.float32) as mnext,
     ):
-        for chunk in sample_epoch(site, e, spec):
+        if cfg.scan == "flown":
+            chunks = fly_epoch(site, e, spec, epoch_flight(cfg.layout, cfg.seed, e, cfg.flight_variation))
+        else:
+            chunks = sample_epoch(site, e, spec)
+        for chunk in chunks:
             # on the LAS's millimetre grid in site-local metres first, so the stored integers are the
             # same at any origin (adding a large origin and rounding there would move a point lying
             # within float64's rounding of a half millimetre to one side or the other)
@@ -262,7 +276,7 @@ def write_site(
         layout=cfg.layout,
     )
     spec = LidarSpec(density_pts_m2=cfg.density_pts_m2)
-    fence = [list(v) for v in m.FENCE_M]
+    fence = [list(v) for v in site.fence_m]
     (out / "fence.geojson").write_text(json.dumps(fence_geojson(fence, cfg.origin)) + "\n")
     summaries = []
     for e in range(cfg.epochs):

@@ -24,6 +24,12 @@ CRANE, SNOW, MATERIAL, VEHICLE, TEMPORARY, WORKER = 19, 21, 24, 25, 26, 27
 
 TERRAIN_M = (-80.0, 80.0, -65.0, 65.0)
 FENCE_M = ((-60.0, -45.0), (60.0, -45.0), (60.0, 45.0), (-60.0, 45.0))
+# the sloped scene (layout "slope"): a smaller site on a 6 % / 2 % slope
+SLOPE_TERRAIN_M = (-45.0, 45.0, -35.0, 35.0)
+SLOPE_FENCE_M = ((-40.0, -30.0), (40.0, -30.0), (40.0, 30.0), (-40.0, 30.0))
+SLOPE_GRADE = (0.06, 0.02)
+SLOPE_TRENCH_M = (-30.0, -12.0, -22.6, -21.4)  # 18 m x 1.2 m, dug 1.5 m deep in odd epochs
+SLOPE_TRENCH_DEPTH_M, SLOPE_TRENCH_RAMP_M = 1.5, 0.3
 PIT_M = (15.0, 40.0, -35.0, -10.0)
 PIT_DEPTHS_M = (2.0, 4.0, 4.0, 0.0)
 BUILDING_M = (-40.0, -5.0, -15.0, 20.0)
@@ -32,8 +38,10 @@ CRANE_BASE_M = (5.0, 28.0)
 CRANE_HEIGHT_M = 42.0
 SLOPE = (0.01, 0.005)
 FIRST_EPOCH = datetime(2024, 11, 27, 15, 0, tzinfo=UTC)
-# "site": the construction site above; "boxes": the analytic box scene (box_scene)
-LAYOUTS = ("site", "boxes")
+# "site": the construction site above; "boxes": the analytic box scene (box_scene); "slope": a sloped
+# site with a building, a machine and a tree that stay and a car, a stockpile, a trench, a pole and a
+# fence panel that change (slope_scene)
+LAYOUTS = ("site", "boxes", "slope")
 BOX_MAST_M = (0.0, 5.0)
 BOX_JIB_HEIGHT_M = 18.0
 BOX_JIB_LENGTH_M = 24.0
@@ -103,10 +111,22 @@ class SiteModel:
                 )
             )
 
+    @property
+    def terrain_m(self) -> tuple[float, float, float, float]:
+        """The terrain's rectangle (x0, x1, y0, y1), site-local metres."""
+        return SLOPE_TERRAIN_M if self.layout == "slope" else TERRAIN_M
+
+    @property
+    def fence_m(self) -> tuple[tuple[float, float], ...]:
+        """The site fence (a ring without its closing vertex), site-local metres."""
+        return SLOPE_FENCE_M if self.layout == "slope" else FENCE_M
+
     def primitives(self, e: int) -> list[Primitive]:
         """Every surface of epoch ``e``."""
         if self.layout == "boxes":
             return box_scene(e)
+        if self.layout == "slope":
+            return slope_scene(e)
         ep = self.epochs[e]
         out: list[Primitive] = []
         x0, x1, y0, y1 = TERRAIN_M
@@ -370,16 +390,21 @@ class SiteModel:
                     "v1",
                     800 + i,
                     VEG_HIGH,
-                    "sphere",
-                    (float(x), float(y), z + h - r * 0.5, r),
+                    "canopy",
+                    (float(x), float(y), z + h - r * 0.5, r, CANOPY_DEPTH_M),
                     (40, 120, 45),
                     upward=True,
                 )
             )
+        # one tree inside the fence, which stays: its leaves are other leaves in every scan
+        out.extend(tree("tree:yard", 814, (45.0, 35.0), float(SLOPE[0] * 45.0 + SLOPE[1] * 35.0), 8.0, 3.0))
         return out
 
     def jib_ground_footprint(self, e: int) -> tuple[np.ndarray, np.ndarray, float]:
-        """Centre (2,), direction (2,) and length (m) of the jib projected onto the ground."""
+        """Centre (2,), direction (2,) and length (m) of the jib projected onto the ground (the sloped
+        scene has no crane: a zero-length footprint)."""
+        if self.layout == "slope":
+            return np.zeros(2), np.array([1.0, 0.0]), 0.0
         if self.layout == "boxes":
             a = math.radians(30.0 + 60.0 * e)
             d = np.array([math.cos(a), math.sin(a)])
@@ -389,13 +414,30 @@ class SiteModel:
         return np.array(CRANE_BASE_M) + d * 25.0, d, 50.0
 
 
+# mean depth (metres) of a canopy's returns under its crown's surface
+CANOPY_DEPTH_M = 0.3
+
+
+def tree(
+    key: str, object_id: int, xy: tuple[float, float], z: float, height_m: float, crown_m: float
+) -> list[Primitive]:
+    """A trunk and a canopy crown of radius ``crown_m`` topping out at ``height_m`` above ``z``."""
+    x, y = xy
+    return [
+        Primitive(f"{key}:trunk", "v1", object_id, VEG_MED, "cylinder", (x, y, z, 0.25, height_m - crown_m), (90, 60, 40)),
+        Primitive(f"{key}:crown", "v1", object_id, VEG_HIGH, "canopy", (x, y, z + height_m - crown_m, crown_m, CANOPY_DEPTH_M),
+                  (40, 120, 45), True),
+    ]  # fmt: skip
+
+
 def box_scene(e: int) -> list[Primitive]:
     """Epoch ``e`` of the analytic box scene: boxes on flat ground, every change known in closed form.
 
     Kept in every epoch: flat ground over the terrain, a shed (6 x 4 x 3 m) and a mast (1.5 m square,
     18 m). A 24 m jib (1 m square) on the mast turns 60 degrees an epoch; a container (12 x 2.5 x
     2.6 m) stands in even epochs and a block (4 x 4 x 3 m) in odd ones; a pole (0.4 m wide, 4 m)
-    moves 6 m east an epoch: a thin beam that turns and a thin post that moves."""
+    moves 6 m east an epoch: a thin beam that turns and a thin post that moves. A tree (8 m, a 3 m
+    crown) stays, its leaves other leaves in every scan."""
     mx, my = BOX_MAST_M
     a = math.radians(30.0 + 60.0 * e)
     jib_c = (
@@ -411,6 +453,7 @@ def box_scene(e: int) -> list[Primitive]:
         Primitive("jib", f"{math.degrees(a) % 360:.1f}", 21, CRANE, "box", (jib_c, (BOX_JIB_LENGTH_M, 1.0, 1.0), a),
                   (230, 50, 35), True),
         Primitive("pole", f"x={pole_x:g}", 30, TEMPORARY, "cylinder", (pole_x, -30.0, 0.0, 0.2, 4.0), (250, 200, 30)),
+        *tree("tree", 60, (-40.0, -10.0), 0.0, 8.0, 3.0),
     ]  # fmt: skip
     if e % 2 == 0:
         out.append(
@@ -419,5 +462,67 @@ def box_scene(e: int) -> list[Primitive]:
     else:
         out.append(
             Primitive("block", "v1", 50, BUILDING, "box", ((30.0, -20.0, 0.0), (4.0, 4.0, 3.0), 0.0), (170, 170, 165), True)
+        )  # fmt: skip
+    return out
+
+
+def _slope_z(x: float, y: float) -> float:
+    return float(SLOPE_GRADE[0] * x + SLOPE_GRADE[1] * y)
+
+
+def _on_slope(
+    xy: tuple[float, float], size: tuple[float, float, float], yaw: float
+) -> tuple[float, float, float]:
+    """A box's base centre standing on the slope: its base at the lowest ground under its footprint
+    (the uphill part of its sides is buried, as a building's is)."""
+    x, y = xy
+    c, s = math.cos(yaw), math.sin(yaw)
+    corners = [(x + a * c * size[0] / 2 - b * s * size[1] / 2, y + a * s * size[0] / 2 + b * c * size[1] / 2)
+               for a in (-1, 1) for b in (-1, 1)]  # fmt: skip
+    return (x, y, min(_slope_z(*p) for p in corners))
+
+
+def slope_scene(e: int) -> list[Primitive]:
+    """Epoch ``e`` of the sloped scene (even epochs: before, odd: after), every change known in closed form.
+
+    Stay: the ground on a 6 % / 2 % slope, an 8 m building (14 x 10 m), an excavator, a 9 m tree (its
+    leaves other leaves in every scan) and a fence of five 5 cm panels. Change: a car moves 6 m east,
+    a stockpile grows (3 -> 3.8 m radius, 2 -> 2.8 m high), a trench (18 x 1.2 m) is dug 1.5 m deep, a
+    6 m pole (0.2 m wide) is put up and the fence's middle panel is taken away."""
+    after = e % 2 == 1
+    x0, x1, y0, y1 = SLOPE_TERRAIN_M
+    trench = (*SLOPE_TRENCH_M, SLOPE_TRENCH_DEPTH_M if after else 0.0, SLOPE_TRENCH_RAMP_M)
+    car_x = 1.0 if after else -5.0
+    pile_r, pile_h = (3.8, 2.8) if after else (3.0, 2.0)
+    bsize, byaw = (14.0, 10.0, 8.0), 0.15
+    out = [
+        Primitive("ground", "v1", 1, GROUND, "terrain", (SLOPE_TERRAIN_M, SLOPE_GRADE, None, SLOPE_TRENCH_M), (120, 100, 80), True),
+        Primitive("trench", f"depth={trench[4]:g}", 2, GROUND, "terrain", (SLOPE_TRENCH_M, SLOPE_GRADE, trench, None), (110, 85, 60), True),
+        Primitive("building", "v1", 100, BUILDING, "box", (_on_slope((-18.0, 8.0), bsize, byaw), bsize, byaw), (175, 170, 160), True),
+        Primitive("excavator:body", "v1", 310, VEHICLE, "box", (_on_slope((8.0, -10.0), (4.0, 2.6, 1.4), 0.6), (4.0, 2.6, 1.4), 0.6),
+                  (240, 190, 20), True),
+        Primitive("excavator:cab", "v1", 310, VEHICLE, "box",
+                  ((8.0, -10.0, _on_slope((8.0, -10.0), (4.0, 2.6, 1.4), 0.6)[2] + 1.4), (1.8, 2.2, 1.6), 0.6), (60, 60, 70), True),
+        Primitive("excavator:arm", "v1", 310, VEHICLE, "box",
+                  ((8.0 + 3.2 * math.cos(0.6), -10.0 + 3.2 * math.sin(0.6), _slope_z(8.0, -10.0) + 1.8), (3.6, 0.5, 0.6), 0.6),
+                  (240, 190, 20), True),
+        *tree("tree", 800, (24.0, 14.0), _slope_z(24.0, 14.0) - 0.1, 9.0, 3.0),
+        Primitive("car", f"x={car_x:g}", 320, VEHICLE, "box", (_on_slope((car_x, -18.0), (4.5, 1.8, 1.5), 0.0), (4.5, 1.8, 1.5), 0.0),
+                  (200, 30, 40), True),
+        Primitive("stockpile", f"r={pile_r:g},h={pile_h:g}", 500, MATERIAL, "cone",
+                  (25.0, -14.0, _slope_z(25.0, -14.0) - 0.2, pile_r, pile_h), (150, 140, 120), True),
+    ]  # fmt: skip
+    if after:
+        out.append(
+            Primitive("pole", "v1", 700, TEMPORARY, "cylinder", (8.0, 18.0, _slope_z(8.0, 18.0) - 0.1, 0.1, 6.0), (250, 200, 30))
+        )  # fmt: skip
+    for i in range(5):
+        if after and i == 2:
+            continue
+        cx = -20.0 + 2.5 * i + 1.25
+        size = (2.5, 0.05, 2.0)
+        out.append(
+            Primitive(f"fence:{i}", "v1", 710 + i, TEMPORARY, "box", (_on_slope((cx, -26.0), size, 0.0), size, 0.0),
+                      (90, 90, 100))
         )  # fmt: skip
     return out

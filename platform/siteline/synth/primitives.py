@@ -20,7 +20,8 @@ class Primitive:
     key: stable name of the surface (its identity across epochs). signature: its geometry; the same
     key and signature in two epochs means the same surface. object_id: the object it belongs to.
     las_class: ASPRS/siteline source code written to LAS. kind + params: the geometry (site-local
-    metres). colour: RGB uint8. upward: whether snow settles on it.
+    metres; a ``canopy`` is a crown (cx, cy, cz, r, depth_m) whose returns lie inside its sphere at an
+    exponential depth of mean depth_m, the sphere being its surface for the truth). colour: RGB uint8. upward: whether snow settles on it.
     """
 
     key: str
@@ -118,28 +119,50 @@ def _sphere(n: int, rng: Rng, cx: float, cy: float, cz: float, r: float) -> np.n
     return np.array([cx, cy, cz]) + r * v
 
 
+def _canopy_area(cx: float, cy: float, cz: float, r: float, depth_m: float) -> float:
+    return _sphere_area(cx, cy, cz, r)
+
+
+def _canopy(n: int, rng: Rng, cx: float, cy: float, cz: float, r: float, depth_m: float) -> np.ndarray:
+    """Leaves of a crown: points on its sphere pushed inwards by an exponential depth of mean
+    ``depth_m`` (the returns of a canopy lie in a shell, not on a surface; each draw is other leaves)."""
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True) + 1e-300
+    depth = np.minimum(rng.exponential(depth_m, n), r)
+    return np.array([cx, cy, cz]) + (r - depth)[:, None] * v
+
+
 def _terrain_area(rect: tuple[float, float, float, float], *rest: object) -> float:
     x0, x1, y0, y1 = rect
     return (x1 - x0) * (y1 - y0)
 
 
+# the width (metres) over which a pit's sides ramp down to its floor, unless the pit gives its own
+PIT_RAMP_M = 2.0
+
+
+def pit_ramp_m(pit: tuple) -> float:
+    """The ramp width (metres) of a pit (x0, x1, y0, y1, depth[, ramp_m])."""
+    return float(pit[5]) if len(pit) > 5 else PIT_RAMP_M
+
+
 def terrain_height(x: np.ndarray, y: np.ndarray, slope: tuple[float, float], pit: tuple | None) -> np.ndarray:
-    """Ground height (metres) of the terrain: a gentle plane minus the excavation pit, whose sides
-    ramp over 2 m. pit: (x0, x1, y0, y1, depth) or None."""
+    """Ground height (metres) of the terrain: a plane minus the excavation pit, whose sides ramp
+    over its ramp width (2 m unless given). pit: (x0, x1, y0, y1, depth[, ramp_m]) or None."""
     z = slope[0] * x + slope[1] * y
     if pit is not None:
-        px0, px1, py0, py1, depth = pit
+        px0, px1, py0, py1, depth = pit[:5]
         if depth > 0:
             dx = np.minimum(x - px0, px1 - x)
             dy = np.minimum(y - py0, py1 - y)
-            inside = np.clip(np.minimum(dx, dy) / 2.0, 0.0, 1.0)
+            inside = np.clip(np.minimum(dx, dy) / pit_ramp_m(pit), 0.0, 1.0)
             z = z - depth * inside
     return z
 
 
 def _terrain(
     n: int, rng: Rng, rect: tuple[float, float, float, float], slope: tuple[float, float],
-    pit: tuple[float, float, float, float, float] | None, exclude: tuple[float, float, float, float] | None,
+    pit: tuple[float, ...] | None, exclude: tuple[float, float, float, float] | None,
 ) -> np.ndarray:  # fmt: skip
     """Terrain over the rectangle ``rect`` (x0, x1, y0, y1), optionally only inside (pit region) or
     outside (``exclude``) a box."""
@@ -160,6 +183,7 @@ AREA: dict[str, Callable[..., float]] = {
     "cylinder": _cyl_area,
     "cone": _cone_area,
     "sphere": _sphere_area,
+    "canopy": _canopy_area,
     "terrain": _terrain_area,
 }
 SAMPLE: dict[str, Callable[..., np.ndarray]] = {
@@ -168,5 +192,6 @@ SAMPLE: dict[str, Callable[..., np.ndarray]] = {
     "cylinder": _cyl,
     "cone": _cone,
     "sphere": _sphere,
+    "canopy": _canopy,
     "terrain": _terrain,
 }

@@ -19,7 +19,7 @@ import numpy as np
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import SynthError
-from siteline.synth.primitives import Primitive, _box_faces, terrain_height
+from siteline.synth.primitives import Primitive, _box_faces, pit_ramp_m, terrain_height
 
 MISS = -1
 # hits nearer than this (metres along the ray) are not surfaces in front of the camera
@@ -140,15 +140,15 @@ def _sphere(o: np.ndarray, d: np.ndarray, cx: float, cy: float, cz: float, r: fl
 
 
 def _terrain_pieces(
-    slope: tuple[float, float], pit: tuple[float, float, float, float, float] | None
+    slope: tuple[float, float], pit: tuple[float, ...] | None
 ) -> list[tuple[float, float, float]]:
     """The planes z = a x + b y + c the terrain's height field is made of: its slope, and with a pit
-    the four ramps (2 m wide) and the floor."""
+    the four ramps (siteline.synth.primitives.pit_ramp_m wide) and the floor."""
     sx, sy = slope
     pieces = [(sx, sy, 0.0)]
     if pit is not None and pit[4] > 0:
-        px0, px1, py0, py1, depth = pit
-        k = depth / 2.0  # the ramp drops depth over 2 m
+        px0, px1, py0, py1, depth = pit[:5]
+        k = depth / pit_ramp_m(pit)  # the ramp drops depth over its width
         pieces += [
             (sx - k, sy, k * px0),  # west ramp: - depth (x - px0) / 2
             (sx + k, sy, -k * px1),  # east ramp
@@ -161,7 +161,7 @@ def _terrain_pieces(
 
 def _terrain(
     o: np.ndarray, d: np.ndarray, rect: tuple[float, float, float, float], slope: tuple[float, float],
-    pit: tuple[float, float, float, float, float] | None, exclude: tuple[float, float, float, float] | None,
+    pit: tuple[float, ...] | None, exclude: tuple[float, float, float, float] | None,
 ) -> np.ndarray:  # fmt: skip
     """The first hit on the height field (siteline.synth.primitives.terrain_height) over ``rect``,
     less ``exclude``: each planar piece's hit kept where the height field passes through it."""
@@ -186,12 +186,20 @@ def _terrain(
     return out
 
 
+def _canopy(
+    o: np.ndarray, d: np.ndarray, cx: float, cy: float, cz: float, r: float, depth_m: float
+) -> np.ndarray:
+    """A crown's outer surface: its sphere (the leaves inside it are the scanner's, not the truth's)."""
+    return _sphere(o, d, cx, cy, cz, r)
+
+
 _CAST: dict[str, Callable[..., np.ndarray]] = {
     "quad": _quad,
     "box": _box,
     "cylinder": _cylinder,
     "cone": _cone,
     "sphere": _sphere,
+    "canopy": _canopy,
     "terrain": _terrain,
 }
 
