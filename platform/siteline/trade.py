@@ -1,11 +1,13 @@
 """The speed/accuracy trade, measured against a truth the renderer did not draw.
 
-A 2-epoch synthetic site (the construction site, or the analytic box scene ``boxes``) is made, ingested
+A 2-epoch synthetic site (the construction site, the analytic box scene ``boxes`` or the sloped scene
+``slope``, flown by the airborne scanner unless ``scan="sampled"``) is made, ingested
 and run through the pipeline with its release defaults and with named variants of the pair knobs
 (label radius, splats, gap fill, render scale, level of detail, ...); each variant's masks are scored
 per pixel against the site's analytic surfaces ray-cast through the same cameras
 (siteline.synth.scoring): precision, recall and F1 of changed, boundary F (2 px), each changed object's
-recall, false-change specks per view, seconds. ``siteline bench trade`` and ``bench/trade.py`` run it.
+recall, the false change on each object that stayed, false-change specks per view, the share of the
+truth's pixels the mask ignores, seconds. ``siteline bench trade`` and ``bench/trade.py`` run it.
 A variant that leaves no usable view is reported as such, not dropped.
 """
 
@@ -29,17 +31,20 @@ from siteline.catalog.pairs import pair_ids_of_scene
 from siteline.catalog.scenes import list_scenes
 from siteline.catalog.sites import add_site, get_site
 from siteline.config import Settings, sqlite_url
-from siteline.errors import ConfigError, PairError
+from siteline.errors import ConfigError, PairError, SynthError
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseKnobs
 from siteline.schema import JSON
 from siteline.site.fence import load_fence_geojson
 from siteline.site.spec import make_site_spec
 from siteline.synth import SynthParams, write_site
+from siteline.synth.scanner import SCANS
 from siteline.synth.scoring import score_pair
 
 SITE = "trade"
-LAYOUTS = ("site", "boxes")
+LAYOUTS = ("site", "boxes", "slope")
+# the sloped scene is a survey team's LiDAR-only scan: its cameras are planned from the scan
+LIDAR_ONLY = ("slope",)
 # named sets of variants (pair knobs over the release defaults: on the synthetic site, 3 px world
 # splats at the auto scale 0.78 of its 660 x 495 photos). The photos are 1/8 of a Zenmuse L2 frame, so
 # scale 1 renders the paper's 1/8 of a frame and scale 2 its 1/4.
@@ -57,6 +62,34 @@ GRIDS: dict[str, dict[str, dict[str, JSON]]] = {
         "LOD x2": {"lod_factor": 2.0},
     },
 }
+
+
+@dataclass(frozen=True)
+class TradeScene:
+    """The synthetic scene a trade runs on: its ``layout`` (:data:`LAYOUTS`), LiDAR ``density`` (points
+    per m2), ``scan`` (``flown`` or ``sampled``, siteline.synth.SynthParams), ``views`` a pair and
+    ``seed``; refused with a ConfigError naming the value."""
+
+    layout: str = "site"
+    density: float = 10.0
+    scan: str = "flown"
+    views: int = 24
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.layout not in LAYOUTS:
+            raise ConfigError(f"layout {self.layout!r}: use one of {', '.join(LAYOUTS)}.")
+        if not (math.isfinite(self.density) and self.density > 0):
+            raise ConfigError(f"site density {self.density!r} must be a positive number of points per m2.")
+        if self.scan not in SCANS:
+            raise ConfigError(f"scan {self.scan!r}: use one of {', '.join(SCANS)}.")
+
+    def folder(self, out: Path) -> Path:
+        """Where the scene and its tables are kept under ``out``: ``<layout>-<density>`` (``-sampled``
+        added for sampled epochs)."""
+        return Path(out) / (
+            f"{self.layout}-{self.density:g}" + ("" if self.scan == "flown" else f"-{self.scan}")
+        )
 
 
 @dataclass(frozen=True)
@@ -85,12 +118,20 @@ class TradeRow:
             return f"{self.variant:>12}: no release: {self.error}"
         s = self.scores
         objects = ", ".join(f"{k} {v:.2f}" for k, v in dict(s["object_recall"]).items())  # type: ignore[call-overload]
+        kept = ", ".join(f"{k} {v:.1%}" for k, v in dict(s.get("false_change", {})).items())  # type: ignore[call-overload]
         return (
             f"{self.variant:>12}: P {s['precision']:.3f} R {s['recall']:.3f} F1 {s['f1']:.3f} boundary F "
             f"{s['boundary_f']:.3f} specks/view median {s['specks_median']:.0f} (max {s['specks_max']}), rim "
-            f"pieces/view median {s['rims_median']:.0f}, scored {s['scored_share']:.1%} of pixels, labels "
-            f"{_seconds(self.label_seconds)}, pair {self.seconds:.0f} s; {objects}"
+            f"pieces/view median {s['rims_median']:.0f} ({s.get('rim_px', '-')} of {dict(s['confusion'])['fp']} false-changed px "  # type: ignore[call-overload]
+            f"within 2 px of a change), scored {s['scored_share']:.1%} of pixels, ignored "
+            f"{_share(s.get('dropped_share'))} of the truth's, labels "
+            f"{_seconds(self.label_seconds)}, pair {self.seconds:.0f} s; recall: {objects}; false change: {kept}"
         )
+
+
+def _share(value: object) -> str:
+    """A share as a percentage, "-" for rows measured before it was (no such figure)."""
+    return f"{value:.1%}" if isinstance(value, float) else "-"
 
 
 def _seconds(s: float) -> str:
@@ -110,19 +151,20 @@ def parse_variant(text: str) -> tuple[str, dict[str, JSON]]:
     return name, parsed
 
 
-def synthetic_pair(
-    out: Path, layout: str, density: float, views: int, seed: int = 0
-) -> tuple[Settings, Path, int]:
-    """A 2-epoch synthetic site at ``density`` points/m2 under ``out`` (made once: a later call reuses
-    it), its home with the site registered (``views`` views a pair) and both epochs ingested; the
-    settings, the site's folder and the pair's id."""
-    if layout not in LAYOUTS:
-        raise ConfigError(f"layout {layout!r}: use one of {', '.join(LAYOUTS)}.")
-    if not (math.isfinite(density) and density > 0):
-        raise ConfigError(f"site density {density!r} must be a positive number of points per m2.")
-    cfg = SynthParams(
-        epochs=2, density_pts_m2=density, seed=seed, snow_epochs=(), projection_error_epochs=(), layout=layout
-    )
+def synthetic_pair(out: Path, scene: TradeScene) -> tuple[Settings, Path, int]:
+    """A 2-epoch synthetic site of ``scene`` under ``out`` (made once: a later call reuses it), with
+    photos unless its layout is LiDAR-only (:data:`LIDAR_ONLY`), its home with the site registered
+    (``scene.views`` views a pair) and both epochs ingested; the settings, the site's folder and the
+    pair's id."""
+    photos = scene.layout not in LIDAR_ONLY
+    try:
+        cfg = SynthParams(
+            epochs=2, density_pts_m2=scene.density, seed=scene.seed, snow_epochs=(), projection_error_epochs=(),
+            layout=scene.layout, scan=scene.scan, photos=photos, colmap=photos,
+        )  # fmt: skip
+    except SynthError as exc:
+        raise ConfigError(str(exc)) from None
+    views, seed = scene.views, scene.seed
     site_dir = out / "site"
     if not (site_dir / "truth" / "site.json").exists():
         write_site(site_dir, cfg)
@@ -190,23 +232,25 @@ def measure_variant(
 
 
 def run_trade(
-    out: Path, layout: str = "site", density: float = 10.0, views: int = 24,
-    variants: Mapping[str, Mapping[str, JSON]] | None = None, seed: int = 0,
+    out: Path, scene: TradeScene | None = None, variants: Mapping[str, Mapping[str, JSON]] | None = None,
     progress: Callable[[str], None] = print, pictures: int = 0,
 ) -> list[TradeRow]:  # fmt: skip
-    """Every variant (name -> pair knobs; the full grid when None) measured on the synthetic site of
-    ``layout`` at ``density`` points/m2 kept under ``out/<layout>-<density>``; writes trade.json and
-    trade.md there (and ``pictures`` mask | truth | disagreement images a variant) and returns the rows."""
+    """Every variant (name -> pair knobs; the full grid when None) measured on the synthetic ``scene``
+    (the construction site flown at 10 points/m2 when None) kept under ``scene.folder(out)``; writes
+    trade.json and trade.md there (and ``pictures`` mask | truth | disagreement images a variant) and
+    returns the rows."""
+    scene = scene if scene is not None else TradeScene()
     variants = variants if variants is not None else GRIDS["full"]
     for name, knobs in variants.items():  # refused before anything is made
         variant_params(PairParams(), name, knobs)
-    if layout not in LAYOUTS:
-        raise ConfigError(f"layout {layout!r}: use one of {', '.join(LAYOUTS)}.")
-    folder = Path(out) / f"{layout}-{density:g}"
+    folder = scene.folder(out)
     folder.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    settings, site_dir, pid = synthetic_pair(folder, layout, density, views, seed)
-    progress(f"synthetic {layout} at {density:g} points/m2 ingested ({time.perf_counter() - t0:.0f} s)")
+    settings, site_dir, pid = synthetic_pair(folder, scene)
+    progress(
+        f"synthetic {scene.layout} ({scene.scan}) at {scene.density:g} points/m2 ingested "
+        f"({time.perf_counter() - t0:.0f} s)"
+    )
     saved: dict[str, int] = {}
 
     def picture(name: str, index: int, mask: np.ndarray, truth: np.ndarray) -> None:
@@ -225,30 +269,34 @@ def run_trade(
     finally:
         cat.dispose()
     (folder / "trade.json").write_text(json.dumps([r.to_dict() for r in rows], indent=1) + "\n")
-    (folder / "trade.md").write_text(trade_markdown(rows, layout, density))
+    (folder / "trade.md").write_text(trade_markdown(rows, scene.layout, scene.density, scene.scan))
     return rows
 
 
-def trade_markdown(rows: list[TradeRow], layout: str, density: float) -> str:
-    """The rows as a Markdown table (the least-scoring object's recall beside the totals; a variant's
-    pair seconds leave out labels it reused)."""
+def trade_markdown(rows: list[TradeRow], layout: str, density: float, scan: str = "flown") -> str:
+    """The rows as a Markdown table (the least-scoring changed object's recall and the most falsely
+    changed object that stayed beside the totals; a variant's pair seconds leave out labels it reused)."""
     head = (
-        f"Trade on the synthetic {layout} at {density:g} points/m2, against the analytic truth\n\n"
-        "| variant | knobs | precision | recall | F1 | boundary F | specks / view | lowest object recall | scored | pair s | labels s |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n"
+        f"Trade on the synthetic {layout} ({scan}) at {density:g} points/m2, against the analytic truth\n\n"
+        "| variant | knobs | precision | recall | F1 | boundary F | specks / view | lowest object recall "
+        "| most false change | ignored of truth | scored | pair s | labels s |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
         knobs = ", ".join(f"{k}={v}" for k, v in r.knobs.items()) or "release defaults"
         if r.error:
-            lines.append(f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |")
+            lines.append(f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |  |  |")
             continue
         s = r.scores
         objects: dict[str, float] = dict(s["object_recall"])  # type: ignore[call-overload]
         low = min(objects.items(), key=lambda kv: kv[1]) if objects else ("-", math.nan)
+        kept: dict[str, float] = dict(s.get("false_change", {}))  # type: ignore[call-overload]
+        worst = "-" if not kept else "{} {:.1%}".format(*max(kept.items(), key=lambda kv: kv[1]))
         lines.append(
             f"| {r.variant} | {knobs} | {s['precision']:.3f} | {s['recall']:.3f} | {s['f1']:.3f} | "
-            f"{s['boundary_f']:.3f} | {s['specks_median']:.0f} | {low[0]} {low[1]:.2f} | {s['scored_share']:.1%} | "
+            f"{s['boundary_f']:.3f} | {s['specks_median']:.0f} | {low[0]} {low[1]:.2f} | {worst} | "
+            f"{_share(s.get('dropped_share'))} | {s['scored_share']:.1%} | "
             f"{r.seconds:.0f} | {_seconds(r.label_seconds)} |"
         )
     return head + "\n".join(lines) + "\n"

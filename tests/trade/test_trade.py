@@ -27,16 +27,23 @@ def test_variants_are_parsed_and_bad_ones_named() -> None:
 
 def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     scores = {"precision": 0.9, "recall": 0.8, "f1": 0.85, "boundary_f": 0.7, "specks_median": 1.0,
-              "scored_share": 0.9, "object_recall": {"jib#21": 0.95, "pole#60": 0.62}}  # fmt: skip
+              "scored_share": 0.9, "object_recall": {"jib#21": 0.95, "pole#60": 0.62},
+              "false_change": {"shed#10": 0.004, "tree#60": 0.031}, "dropped_share": 0.052}  # fmt: skip
     rows = [
         TradeRow("default", {}, 10.0, 1.0, 0.3, scores),
         TradeRow("fill 0", {"fill_px": 0}, 8.0, math.nan, 0.3, scores),
         TradeRow("fixed 1 px", {"splat": "fixed"}, error="every view rejected"),
     ]
     md = trade_markdown(rows, "boxes", 40.0)
+    assert "synthetic boxes (flown) at 40 points/m2" in md
     assert (
-        "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | 90.0% | 10 | 1.0 s |"
-        in md
+        "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | tree#60 3.1% | 5.2% "
+        "| 90.0% | 10 | 1.0 s |" in md
+    )
+    # a row measured before false change and the ignored share were scored says so, not 0
+    old = {k: v for k, v in scores.items() if k not in ("false_change", "dropped_share")}
+    assert "| pole#60 0.62 | - | - |" in trade_markdown(
+        [TradeRow("old", {}, 10.0, 1.0, 0.3, old)], "site", 10.0, "sampled"
     )
     assert "| fill 0 | fill_px=0 |" in md and md.count("| reused |") == 1
     assert "| fixed 1 px | splat=fixed | no release: every view rejected |" in md

@@ -20,7 +20,13 @@ def trade(
     layout: str = typer.Option(
         "site",
         "--layout",
-        help="site (the construction site) or boxes (the analytic box scene with a turning jib).",
+        help="site (the construction site), boxes (the analytic box scene with a turning jib) or slope "
+        "(a sloped LiDAR-only scan: building, machine and tree that stay; car, stockpile, trench, pole, fence panel that change).",
+    ),
+    scan: str = typer.Option(
+        "flown",
+        "--scan",
+        help="flown (an airborne scanner's lines, other lines each epoch) or sampled (every surface sampled alike, as before).",
     ),
     views: int = typer.Option(24, "--views", help="Views a pair."),
     grid: str = typer.Option(
@@ -44,21 +50,13 @@ def trade(
     """Each variant's masks scored per pixel against the ray-cast truth: precision, recall, F1, boundary F,
     each changed object's recall, specks per view, seconds."""
     from siteline.errors import ConfigError
-    from siteline.trade import GRIDS, parse_variant, run_trade
+    from siteline.trade import GRIDS, TradeScene, parse_variant, run_trade
 
     if grid not in GRIDS:
         raise ConfigError(f"grid {grid!r}: use one of {', '.join(GRIDS)}.")
     variants = dict(parse_variant(v) for v in variant) if variant else GRIDS[grid]
-    rows = run_trade(
-        out,
-        layout,
-        site_density,
-        views,
-        variants,
-        seed,
-        lambda m: console.print(m, highlight=False),
-        pictures,
-    )
-    folder = out / f"{layout}-{site_density:g}"
+    scene = TradeScene(layout, site_density, scan, views, seed)
+    rows = run_trade(out, scene, variants, lambda m: console.print(m, highlight=False), pictures)
+    folder = scene.folder(out)
     console.print((folder / "trade.md").read_text(), highlight=False)
     console.print(f"{len(rows)} settings measured; trade.json and trade.md in {folder}")

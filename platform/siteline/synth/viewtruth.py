@@ -39,11 +39,18 @@ BOUNDARY_PX = 2
 class ViewTruth:
     """mask: (H, W) uint8 0 unchanged, 1 changed, 255 ignore. changed_object: (H, W) int64, the
     object id of the changed surface a changed pixel sees (the first epoch's when both changed), -1
-    elsewhere. names: object id -> a readable name (``<key prefix>#<id>``)."""
+    elsewhere; unchanged_object: the object id an unchanged pixel sees (the first epoch's) when none of
+    that object's surfaces changed (an object that stayed), -1 elsewhere. names: object id -> a
+    readable name (``<key prefix>#<id>``)."""
 
     mask: np.ndarray
     changed_object: np.ndarray
     names: dict[int, str]
+    unchanged_object: np.ndarray | None = None
+
+
+def _signatures(prims: Iterable[Primitive]) -> set[tuple[str, str]]:
+    return {(p.key, p.signature) for p in prims}
 
 
 def _object_names(prims: Iterable[Primitive]) -> dict[int, str]:
@@ -107,7 +114,11 @@ def view_truth(
     ignore = bad_a | bad_b | (~changed & ~(hit_a & hit_b))
     mask = np.where(ignore, IGNORE, np.where(changed, CHANGED, UNCHANGED)).astype(np.uint8)
     obj = np.where(mask == CHANGED, np.where(changed_a, obj_a, obj_b), -1)
-    return ViewTruth(mask, obj, _object_names(first) | _object_names(second))
+    sig_a, sig_b = _signatures(first), _signatures(second)
+    moved = [p.object_id for p in first if (p.key, p.signature) not in sig_b]
+    moved += [p.object_id for p in second if (p.key, p.signature) not in sig_a]
+    kept = np.where((mask == UNCHANGED) & ~np.isin(obj_a, moved), obj_a, -1)
+    return ViewTruth(mask, obj, _object_names(first) | _object_names(second), kept)
 
 
 def _boundary(region: np.ndarray) -> np.ndarray:
@@ -125,7 +136,11 @@ class MaskScore:
     unchanged ground, more than BOUNDARY_PX from any truly changed pixel (a speck a model would learn
     as change); rims: per view, those under SPECK_PX within BOUNDARY_PX of a truly changed pixel (an
     edge drawn a pixel too far, in pieces: counted, and already in precision and boundary F).
-    scored: pixels both label; pixels: every pixel."""
+    kept_objects: object name -> [its truly unchanged pixels labelled changed, its truly unchanged
+    pixels the mask labels] (false change per object that stayed). rim_px: the false-changed pixels
+    within BOUNDARY_PX of a truly changed one (a change drawn too wide; of ``fp``). scored: pixels
+    both label; pixels: every pixel; defined: pixels the truth labels; dropped: those of them the mask
+    ignores."""
 
     tp: int = 0
     fp: int = 0
@@ -137,6 +152,10 @@ class MaskScore:
     rims: list[int] = field(default_factory=list)
     scored: int = 0
     pixels: int = 0
+    kept_objects: dict[str, list[int]] = field(default_factory=dict)
+    defined: int = 0
+    dropped: int = 0
+    rim_px: int = 0
 
     def add(self, predicted: np.ndarray, truth: ViewTruth) -> None:
         """Score one view's mask (H, W) 0/1/255 against its truth."""
@@ -150,6 +169,18 @@ class MaskScore:
         self.tn += int((both & ~p & ~t).sum())
         self.scored += int(both.sum())
         self.pixels += int(predicted.size)
+        defined = truth.mask != IGNORE
+        self.defined += int(defined.sum())
+        self.dropped += int((defined & (predicted == IGNORE)).sum())
+        if truth.unchanged_object is not None:
+            kept = both & (truth.mask == UNCHANGED) & (truth.unchanged_object >= 0)
+            ids, inverse = np.unique(truth.unchanged_object[kept], return_inverse=True)
+            total = np.bincount(inverse, minlength=len(ids))
+            false = np.bincount(inverse, weights=p[kept], minlength=len(ids))
+            for oid, n, f in zip(ids, total, false, strict=True):
+                got = self.kept_objects.setdefault(truth.names.get(int(oid), f"object#{int(oid)}"), [0, 0])
+                got[0] += int(f)
+                got[1] += int(n)
         bp, bt = _boundary(p), _boundary(t)
         near_t = ndimage.distance_transform_edt(~bt) <= BOUNDARY_PX if bt.any() else np.zeros_like(bt)
         near_p = ndimage.distance_transform_edt(~bp) <= BOUNDARY_PX if bp.any() else np.zeros_like(bp)
@@ -166,6 +197,7 @@ class MaskScore:
         labels, n = ndimage.label(p & ~t, structure=np.ones((3, 3), bool))
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         near_change = ndimage.distance_transform_edt(~t) <= BOUNDARY_PX if t.any() else np.zeros_like(t)
+        self.rim_px += int((p & ~t & near_change).sum())
         touching = np.zeros(n + 1, bool)
         touching[np.unique(labels[near_change & (labels > 0)])] = True
         small = sizes < SPECK_PX
@@ -196,8 +228,20 @@ class MaskScore:
         """Recall of each changed object seen on at least ``min_pixels`` scored pixels."""
         return {k: v[0] / v[1] for k, v in sorted(self.objects.items()) if v[1] >= min_pixels}
 
+    def false_change(self, min_pixels: int = 1) -> dict[str, float]:
+        """Per object that stayed (seen unchanged on at least ``min_pixels`` scored pixels), the share of
+        its truly unchanged pixels the mask labels changed."""
+        return {k: v[0] / v[1] for k, v in sorted(self.kept_objects.items()) if v[1] >= min_pixels}
+
+    @property
+    def dropped_share(self) -> float:
+        """The share of the pixels the truth labels that the mask ignores."""
+        return self.dropped / self.defined if self.defined else float("nan")
+
     def to_dict(self) -> dict[str, object]:
         return {
+            "false_change": self.false_change(),
+            "dropped_share": self.dropped_share,
             "precision": self.precision,
             "recall": self.recall,
             "f1": self.f1,
@@ -209,4 +253,5 @@ class MaskScore:
             "views": len(self.specks),
             "scored_share": self.scored / self.pixels if self.pixels else float("nan"),
             "confusion": {"tp": self.tp, "fp": self.fp, "fn": self.fn, "tn": self.tn},
+            "rim_px": self.rim_px,
         }
