@@ -4,6 +4,9 @@
 UNCHANGED = 0
 CHANGED = 1
 IGNORE = 255
+# per point only: the other scene did not observe the point's place (siteline.labels.change, the
+# adaptive rule); a mask ignores its pixels (255) under the cause "not_observed"
+NOT_OBSERVED = 254
 
 # why a pixel is IGNORE, in the order a pixel is put under the first that holds:
 # no_surface: neither scene has a point there, nor points around it (sky, the unscanned);
@@ -11,8 +14,10 @@ IGNORE = 255
 #   fill left open: a 7 px closing of its render's hit mask fills it);
 # one_side: one scene shows a surface where the other has none (a hole in one render only);
 # outside_fence: a winning point lies outside the site fence;
+# not_observed: a winning point's place the other scan did not observe (a wall it grazed or never saw,
+#   ground where it has no point: siteline.labels.change, the adaptive rule);
 # ignored_class: a winning point is of an ignored class (noise, snow, ignore) inside the fence.
-IGNORE_CAUSES = ("no_surface", "gap", "one_side", "outside_fence", "ignored_class")
+IGNORE_CAUSES = ("no_surface", "gap", "one_side", "outside_fence", "not_observed", "ignored_class")
 # a release adds the padding it writes around the rendered image (siteline.release.layout), and
 # counts as unaccounted the ignore of outputs made before causes were recorded
 RELEASE_IGNORE_CAUSES = (*IGNORE_CAUSES, "padding", "unaccounted")

@@ -84,16 +84,24 @@ def _site_tiles(tmp_path, synth_site, index, origin=SYNTH.origin, name="s"):
     return SceneTiles.open(r.uri)
 
 
-def test_tiled_labels_equal_whole_cloud_labels(tmp_path, synth_site) -> None:
+@pytest.mark.parametrize("rule", ["nearest", "adaptive"])
+def test_tiled_labels_equal_whole_cloud_labels(tmp_path, synth_site, rule) -> None:
+    """Each tile against the other scene's halo gives the flags of the whole clouds: the nearest
+    rule, and the adaptive rule, whose fit and plan cells reach farther (its halo, SurfaceTest.halo_m)."""
+    from siteline.labels.change import Matching
+    from siteline.records.params.labels import LabelParams
+
     t1, t2 = _site_tiles(tmp_path, synth_site, 0), _site_tiles(tmp_path, synth_site, 1)
     r = 0.5
-    res = write_labels(t1, t2, r, IGN, tmp_path / "labels.zarr")
+    test = LabelParams(rule=rule, surface_probe=0.7).surface_test(r)
+    matching = Matching(surface=test, ground=TAX.ground_lut() if test is not None else None)
+    res = write_labels(t1, t2, r, IGN, tmp_path / "labels.zarr", matching=matching)
     for tiles, other, side in ((t1, t2, "t1"), (t2, t1, "t2")):
         labelled = tiles.with_attribute("change", str(tmp_path / "labels.zarr" / side))
         mine = labelled.points(attributes=("class", "change"))
         theirs = other.points(attributes=("class",))
         a, b = mine.xyz_m.astype(np.float32), theirs.xyz_m.astype(np.float32)  # as points() gave them before
-        whole = change_flags(a, mine.attributes["class"], b, theirs.attributes["class"], r, IGN)
+        whole = change_flags(a, mine.attributes["class"], b, theirs.attributes["class"], r, IGN, matching)
         assert np.array_equal(mine.attributes["change"], whole)
     assert res.counts["t1"]["changed"] > 0 and res.counts["t2"]["unchanged"] > 0
 
@@ -219,18 +227,23 @@ def test_labelling_holds_a_few_whole_tiles_whatever_the_site(tmp_path, synth_sit
 
 def test_labels_in_slabs_equal_labels_of_whole_tiles(tmp_path, synth_site, monkeypatch) -> None:
     """A tile labelled in slabs of a few thousand points (each against the other scene within the halo)
-    gives the flags of the whole tile, with the surface rule and small regions: the same checksum."""
+    gives the flags of the whole tile, with the surface rule and small regions, and with the adaptive
+    rule (whose fit reaches 8 radii and plan cells two cells' width): the same checksum."""
     from siteline.labels import store
+    from siteline.labels.change import Matching
     from siteline.records.params.labels import LabelParams
 
     t1, t2 = _site_tiles(tmp_path, synth_site, 0), _site_tiles(tmp_path, synth_site, 1)
     r = 0.5
-    rule = {"surface": LabelParams(rule="surface").surface_test(r), "min_region_points": 8}
-    whole = write_labels(t1, t2, r, IGN, tmp_path / "whole.zarr", **rule)
-    monkeypatch.setattr(store, "BLOCK_POINTS", 1_000)
-    slabs = write_labels(t1, t2, r, IGN, tmp_path / "slabs.zarr", **rule)
-    assert max(t.prefix(k) for t in (t1, t2) for k in t.by_tile) > 1_000 * 5  # tiles of several slabs
-    assert slabs.checksum == whole.checksum and slabs.counts == whole.counts
+    for name in ("surface", "adaptive"):
+        test = LabelParams(rule=name, surface_probe=0.7).surface_test(r)
+        rule = {"matching": Matching(surface=test, ground=TAX.ground_lut()), "min_region_points": 3}
+        monkeypatch.setattr(store, "BLOCK_POINTS", 2_000_000)
+        whole = write_labels(t1, t2, r, IGN, tmp_path / f"{name}-whole.zarr", **rule)
+        monkeypatch.setattr(store, "BLOCK_POINTS", 1_000)
+        slabs = write_labels(t1, t2, r, IGN, tmp_path / f"{name}-slabs.zarr", **rule)
+        assert max(t.prefix(k) for t in (t1, t2) for k in t.by_tile) > 1_000 * 5  # tiles of several slabs
+        assert slabs.checksum == whole.checksum and slabs.counts == whole.counts, name
 
 
 def test_slabs_take_every_point_once_in_bounded_runs_along_x() -> None:

@@ -85,12 +85,12 @@ def test_a_point_the_other_scan_could_not_see_is_not_change():
     under = np.c_[rng.uniform(5, 6, 200), rng.uniform(5, 6, 200), np.zeros(200)]
     a_beam = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, 10.0)]
     test = SurfaceTest(search_m=0.5)
-    covered, hidden = hidden_from_other(a_beam, under, test)
-    assert covered.all() and hidden.all()
+    cells = hidden_from_other(a_beam, under, test)
+    assert cells.covered.all() and cells.hidden.all()
     # the same points with A's ground under them as well: A saw through, they are not hidden
     a_ground = np.c_[rng.uniform(4, 7, 2000), rng.uniform(4, 7, 2000), np.full(2000, -3.0)]
-    covered, hidden = hidden_from_other(np.concatenate([a_beam, a_ground]), under, test)
-    assert covered.all() and not hidden.any()
+    cells = hidden_from_other(np.concatenate([a_beam, a_ground]), under, test)
+    assert cells.covered.all() and not cells.hidden.any()
     b_flags = flags(
         under, np.full(200, GROUND, np.uint8), a_beam, np.full(2000, CRANE, np.uint8), 0.2, surface=True
     )
@@ -157,12 +157,20 @@ def test_ground_deepened_by_less_than_the_radius_is_found_by_the_probe_and_even_
 
 
 def test_label_params_refuse_unknown_rules_and_regions():
-    assert LabelParams().surface_test(0.3) == SurfaceTest(search_m=0.6)
-    probe = LabelParams(surface_probe=0.7).surface_test(0.3)
+    assert LabelParams(rule="surface").surface_test(0.3) == SurfaceTest(search_m=0.6)
+    probe = LabelParams(rule="surface", surface_probe=0.7).surface_test(0.3)
     assert probe == SurfaceTest(search_m=0.6, probe_m=pytest.approx(0.21), offset_m=pytest.approx(0.075))
     assert LabelParams(rule="nearest", surface_probe=0.7).surface_test(0.3) is None
     # under the level of detection's floor (5 cm) a probed point could not lie off the surface by more
-    assert LabelParams(surface_probe=0.7).surface_test(0.04) == SurfaceTest(search_m=0.08)
+    assert LabelParams(rule="surface", surface_probe=0.7).surface_test(0.04) == SurfaceTest(search_m=0.08)
+    # the adaptive rule (the default) reaches 8 radii for at least 6 points around the point, and
+    # ignores what the other scan did not observe
+    adaptive = LabelParams(surface_probe=0.7).surface_test(0.3)
+    assert LabelParams().rule == "adaptive" and adaptive == SurfaceTest(
+        search_m=0.6, probe_m=pytest.approx(0.21), offset_m=pytest.approx(0.075), reach_m=pytest.approx(2.4),
+        min_fit=6, surround=1.0, gap=3.0, anchored=True, observed=True,
+    )  # fmt: skip
+    assert adaptive.fit_m == pytest.approx(2.4) and SurfaceTest(search_m=0.6).fit_m == 0.6
     for bad in (1.0, -0.1, True, "0.7"):
         with pytest.raises(Exception, match="surface_probe"):
             LabelParams(surface_probe=bad)
@@ -178,7 +186,7 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     from siteline.records.params.pairs import PairParams
 
     base = PairParams()
-    assert (base.label_rule, base.min_region_points, base.splat_factor) == ("surface", 8, 2.0)
+    assert (base.label_rule, base.min_region_points, base.splat_factor) == ("adaptive", 3, 2.0)
     with pytest.raises(PairError, match="label rule 'm3c2'"):
         PairParams.from_dict({"label_rule": "m3c2"})
     with pytest.raises(PairError, match="splat_factor"):
@@ -198,9 +206,13 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     assert PairParams.BEFORE["surface_probe"] == 0.0
     no_probe = PairParams(surface_probe=0.0)
     assert no_probe.digest() != base.digest() and no_probe.digest() != PairParams(surface_probe=0.5).digest()
-    # the default key and the nearest rule's as they were before the probe existed (siteline at 5b710e2)
-    assert no_probe.digest() == "b089ba124b36"
-    assert PairParams(label_rule="nearest").digest() == "1f8b3442bcd8"
+    # the surface rule's key and the nearest rule's as they were before the probe existed (siteline at
+    # 5b710e2), and the surface rule with its probe as it was the default before the adaptive rule
+    before = {"label_rule": "surface", "min_region_points": 8}
+    assert PairParams(**before, surface_probe=0.0).digest() == "b089ba124b36"
+    assert PairParams(label_rule="nearest", min_region_points=8).digest() == "1f8b3442bcd8"
+    assert PairParams(**before).digest() == "c37dfb211d03"  # the default at 5b710e2-dae2f5c
+    assert base.digest() not in {PairParams(**before).digest(), no_probe.digest()}
     with pytest.raises(PairError, match="surface_probe"):
         PairParams(surface_probe=1.5)
     with pytest.raises(PairError, match="trim_edges"):
@@ -249,10 +261,14 @@ def test_the_plan_cell_test_agrees_with_a_brute_force_count():
     b = np.c_[rng.uniform(0, 20, 5000), rng.uniform(0, 10, 5000), rng.uniform(-1, 3, 5000)]
     q = np.c_[rng.uniform(-2, 22, 400), rng.uniform(-2, 12, 400), rng.uniform(-1, 3, 400)]
     test = SurfaceTest(search_m=0.7, lod_floor_m=0.05)
-    covered, hidden = hidden_from_other(b, q, test)
+    cells = hidden_from_other(b, q, test)
     bc, qc = np.floor(b[:, :2] / 0.7).astype(int), np.floor(q[:, :2] / 0.7).astype(int)
     for k in range(len(q)):
         mine = (bc == qc[k]).all(axis=1)
-        assert covered[k] == mine.any()
-        assert hidden[k] == (mine.any() and b[mine, 2].min() > q[k, 2] + 0.05)
-    assert covered.any() and (~covered).any() and hidden.any()
+        assert cells.covered[k] == mine.any()
+        assert cells.hidden[k] == (mine.any() and b[mine, 2].min() > q[k, 2] + 0.05)
+        ring = (np.abs(bc - qc[k]) <= 1).all(axis=1)
+        over = mine.any() and (b[mine, 2].max() >= q[k, 2] - 0.05 or b[ring, 2].max() > q[k, 2] + 0.7)
+        assert cells.above[k] == over
+    assert cells.covered.any() and (~cells.covered).any() and cells.hidden.any() and cells.above.any()
+    assert (cells.covered & ~cells.above).any()

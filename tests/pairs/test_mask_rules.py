@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from siteline.errors import LabelError, PairError
-from siteline.labels.change import CHANGED, IGNORED
+from siteline.labels.change import CHANGED, IGNORED, NOT_OBSERVED
 from siteline.pairs.render import pair_mask
 from siteline.records.params.pairs import PairParams
 
@@ -27,6 +27,16 @@ def test_one_side_hole_changed_keeps_what_the_seeing_side_saw_change() -> None:
     assert np.array_equal(m, pair_mask(HIT_B, CH_B, HIT_A, CH_A, "changed"))  # still symmetric
     with pytest.raises(LabelError):
         pair_mask(HIT_A, CH_A, HIT_B, CH_B, "sometimes")
+
+
+def test_a_place_the_other_scan_did_not_observe_is_ignore_unless_the_other_side_changed() -> None:
+    # A not observed | A not observed, B changed | A not observed, B a hole | A changed, B not observed
+    hit_a, hit_b = np.array([True, True, True, True]), np.array([True, True, False, True])
+    ch_a = np.array([NOT_OBSERVED, NOT_OBSERVED, NOT_OBSERVED, CHANGED], np.uint8)
+    ch_b = np.array([0, CHANGED, 0, NOT_OBSERVED], np.uint8)
+    assert pair_mask(hit_a, ch_a, hit_b, ch_b).tolist() == [255, 1, 255, 1]
+    assert pair_mask(hit_b, ch_b, hit_a, ch_a).tolist() == [255, 1, 255, 1]  # symmetric
+    assert pair_mask(hit_a, ch_a, hit_b, ch_b, "changed").tolist() == [255, 1, 255, 1]
 
 
 def test_mask_knobs_are_recorded_parameters() -> None:

@@ -81,7 +81,8 @@ def _render(hit: np.ndarray, change: np.ndarray) -> RenderResult:
 
 def test_causes_on_a_hand_made_view() -> None:
     """Sky on top (no surface in either), a one-pixel gap in A, a block only B shows, a pixel of an
-    ignored class, one outside the fence."""
+    ignored class, one outside the fence, one whose place B's scan did not observe (and one such
+    whose other side changed: changed)."""
     h, w = 12, 12
     hit_a = np.ones((h, w), bool)
     hit_a[:3] = False  # sky
@@ -92,6 +93,8 @@ def test_causes_on_a_hand_made_view() -> None:
     change_b = np.zeros((h, w), np.uint8)
     change_b[4, 1] = 255  # an ignored class
     change_b[4, 2] = 255  # ... outside the fence
+    change_a[7, 3] = 254  # B did not observe A's point's place
+    change_a[7, 5], change_b[7, 5] = 254, 1  # ... but B's own point there changed
     outside = np.zeros((h, w), bool)
     outside[4, 2] = True
     from siteline.pairs.render import pair_mask
@@ -100,12 +103,14 @@ def test_causes_on_a_hand_made_view() -> None:
     causes = ignore_causes(_render(hit_a, change_a), _render(hit_b, change_b), mask, outside)
     n = h * w
     assert small_gaps(hit_a)[6, 6] and not small_gaps(hit_a)[0, 0]
+    assert mask[7, 5] == 1 and mask[7, 3] == 255
     assert causes == pytest.approx(
         {
             "no_surface": 36 / n,
             "gap": 1 / n,
             "one_side": 9 / n,
             "outside_fence": 1 / n,
+            "not_observed": 1 / n,
             "ignored_class": 1 / n,
         }
     )

@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from siteline.records.params.labels import SURFACE_RULES
+
 
 @dataclass(frozen=True)
 class Measured:
@@ -15,7 +17,9 @@ class Measured:
     whether splats were trimmed at edges and the surface rule's probe (change radii; 0: none), and
     the changed class's precision, recall and F1 over every
     scored pixel, with the median number of isolated false-change specks (components under 30 px
-    away from any true change) per view."""
+    away from any true change) per view. Rows of flown scans (``scan``, siteline.synth.scanner) also
+    give the largest share of an object that stayed labelled changed (``false_change``) and the share
+    of the truth's pixels the masks ignore (``ignored``); NaN where not measured."""
 
     scene: str
     density: float
@@ -27,6 +31,9 @@ class Measured:
     f1: float
     specks_median: float
     surface_probe: float = 0.0
+    scan: str = "sampled"
+    false_change: float = math.nan
+    ignored: float = math.nan
 
 
 # `siteline bench trade`, one run each (docs/performance.md): the nearest rule as releases made it
@@ -60,7 +67,7 @@ def measured_for(
     """The measurement nearest (in log density) to a pair labelled by ``rule`` keeping regions of
     ``min_region_points``, its splats trimmed at edges or not, with the surface rule's
     ``surface_probe``, at the median spacing ``spacing_m``; None when those settings were not measured."""
-    probe = surface_probe if rule == "surface" else 0.0
+    probe = surface_probe if rule in SURFACE_RULES else 0.0
     key = (rule, min_region_points, trim_edges, probe)
     rows = [m for m in MEASURED if (m.rule, m.min_region_points, m.trim_edges, m.surface_probe) == key]
     density = density_of_spacing(spacing_m)
@@ -76,10 +83,16 @@ def accuracy_text(
     m = measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe)
     if m is None:
         return None
+    flown = (
+        f"; on the objects that stayed at most {m.false_change:.1%} of pixels called changed, "
+        f"{m.ignored:.1%} of the truth's pixels ignored"
+        if math.isfinite(m.false_change) and math.isfinite(m.ignored)
+        else ""
+    )
     return (
-        f"measured against analytic truth ({m.scene} at {m.density:g} points/m2, this rule, smallest region, "
-        f"edge trim and probe, "
+        f"measured against analytic truth ({m.scene} at {m.density:g} points/m2, {m.scan} epochs, this rule, "
+        f"smallest region, edge trim and probe, "
         f"release defaults; this pair is at about {density_of_spacing(spacing_m):.0f} points/m2): changed-class "
         f"precision {m.precision:.2f}, recall {m.recall:.2f}, F1 {m.f1:.2f}, {m.specks_median:g} isolated false "
-        "specks (under 30 px) per view (median)"
+        "specks (under 30 px) per view (median)" + flown
     )

@@ -42,7 +42,7 @@ from scipy.spatial import cKDTree
 if TYPE_CHECKING:
     from pykdtree.kdtree import KDTree
 
-from siteline.codes import CHANGED, UNCHANGED
+from siteline.codes import CHANGED, NOT_OBSERVED, UNCHANGED
 from siteline.codes import IGNORE as IGNORED
 from siteline.errors import LabelError
 from siteline.records.params.labels import SurfaceTest
@@ -83,23 +83,85 @@ def nearest(
     raise LabelError(f"nearest-neighbour backend {backend!r}: use one of {NN_BACKENDS}.")
 
 
+# the planes tried through a point pass through one of its first 3 neighbours as given (30 planes of
+# 12 neighbours, where every pair gave 66; plane_distances gives those off the plane fitted to all of
+# them first, nearest first: the other surface the point may lie on)
+ANCHORS = 3
+
+
+def planes_through(
+    q: np.ndarray, pts: np.ndarray, valid: np.ndarray, tol_m: float, test: SurfaceTest
+) -> np.ndarray:
+    """(m,) bool: whether some plane through each query point (q (m, 3)) holds at least
+    ``test.min_fit`` of its neighbours (pts (m, k, 3), those ``valid`` (m, k)) within ``tol_m`` of it,
+    around the point (its offset from their mean within ``test.surround`` x their RMS spread, its
+    nearest of them within ``test.gap`` x their own spacing: not across a trench). The planes tried
+    pass through the point, one of its first :data:`ANCHORS` neighbours and another of them: a wall
+    the other scan sampled thinly is found among the ground's many points at its foot, where one
+    plane fitted to all of them is the ground's. Site-local metres, float64 (a compiled loop,
+    siteline.labels.kernels)."""
+    from siteline.labels import kernels
+
+    out = np.zeros(len(q), bool)
+    if len(q) and valid.shape[1] >= 2:
+        limits = np.array([tol_m, test.min_fit, test.surround, test.gap], np.float64)
+        kernels.planes_through(
+            np.ascontiguousarray(q, np.float64), np.ascontiguousarray(pts, np.float64),
+            np.ascontiguousarray(valid), ANCHORS, limits, out,
+        )  # fmt: skip
+    return out
+
+
+@dataclass(frozen=True)
+class SurfaceFit:
+    """The other scene's surface at each query point, (M,) each: ``distance`` (metres) along the normal
+    of the plane fitted to its neighbours (inf where too few), the level of detection ``lod`` there
+    (metres), the index of its ``nearest`` neighbour (the other scene's point count where none),
+    whether it lies ``around`` among them (True where no plane or no bound), and whether a plane
+    ``through`` it holds enough of them (:func:`planes_through`; False where not tried)."""
+
+    distance: np.ndarray
+    lod: np.ndarray
+    nearest: np.ndarray
+    around: np.ndarray
+    through: np.ndarray
+
+    def take(self, rows: np.ndarray) -> SurfaceFit:
+        return SurfaceFit(
+            *(a[rows] for a in (self.distance, self.lod, self.nearest, self.around, self.through))
+        )
+
+
 def plane_distances(
-    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest, tree: KDTree | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For each query point: its distance (metres) along the normal of the plane fitted to its
-    ``test.neighbours`` nearest points of ``b_xyz`` within ``test.search_m`` (inf where fewer than 3
-    lie there), the level of detection there (metres) and the index of its nearest point (len(b_xyz)
-    where none). Site-local coordinates; the fit is in float64 about the neighbours' mean. ``tree``:
-    :func:`float32_tree` of ``b_xyz`` when already built."""
+    b_xyz: np.ndarray,
+    q_xyz: np.ndarray,
+    test: SurfaceTest,
+    tree: KDTree | None = None,
+    probed: np.ndarray | None = None,
+) -> SurfaceFit:
+    """For each query point, the other scene's surface (:class:`SurfaceFit`): the plane fitted to its
+    ``test.neighbours`` nearest points of ``b_xyz`` within ``test.fit_m`` (none where fewer than
+    ``test.min_fit``, and 3, lie there), the point's distance along its normal and the level of
+    detection, the point among them when its offset from their mean along the plane is within
+    ``test.surround`` x their in-plane RMS spread and its nearest of them within ``test.gap`` x their
+    own spacing; with ``test.anchored``, where that plane does not pass the point, whether some plane
+    through it does (:func:`planes_through`, within the level-of-detection floor). Site-local metres;
+    the fit is in float64 about the neighbours' mean. ``tree``: :func:`float32_tree` of ``b_xyz`` when
+    already built. ``probed``: (M,) bool, the queries the nearest test found a neighbour for within the
+    radius (the probe): they have a neighbour near, so the gap is not tested for them, and only their
+    distance decides (changed when off the plane), so a plane through them is looked for only where
+    they lie off it."""
     k = max(3, min(test.neighbours, len(b_xyz)))
     tree = tree if tree is not None else float32_tree(b_xyz)
-    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=test.search_m)
+    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=test.fit_m)
     d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
-    valid = d <= test.search_m
+    valid = d <= test.fit_m
     count = valid.sum(axis=1)
     dist = np.full(len(q_xyz), np.inf)
     lod = np.full(len(q_xyz), test.lod_floor_m)
-    ok = np.flatnonzero(count >= 3)
+    around = np.ones(len(q_xyz), bool)
+    through = np.zeros(len(q_xyz), bool)
+    ok = np.flatnonzero(count >= max(3, test.min_fit))
     if len(ok):
         w = valid[ok].astype(np.float64)
         pts = np.asarray(np.asarray(b_xyz)[np.where(valid[ok], i[ok], 0)], np.float64)  # (m, k, 3)
@@ -109,57 +171,125 @@ def plane_distances(
         cov = np.einsum("mki,mkj->mij", centred, centred) / n[:, None, None]
         vals, vecs = np.linalg.eigh(cov)  # ascending: the first vector is the plane's normal
         normal = vecs[:, :, 0]
-        dist[ok] = np.abs(np.einsum("mi,mi->m", np.asarray(q_xyz, np.float64)[ok] - mean, normal))
+        rel = np.asarray(q_xyz, np.float64)[ok] - mean
+        along = np.einsum("mi,mi->m", rel, normal)
+        dist[ok] = np.abs(along)
         lod[ok] = np.maximum(test.lod_floor_m, test.lod_sigmas * np.sqrt(np.clip(vals[:, 0], 0.0, None)))
+        spread = np.sqrt(np.clip(vals[:, 1] + vals[:, 2], 0.0, None))
+        if np.isfinite(test.surround):
+            offset = np.linalg.norm(rel - along[:, None] * normal, axis=1)
+            around[ok] = offset <= test.surround * spread
+        near = np.zeros(len(ok), bool) if probed is None else np.asarray(probed)[ok]
+        if np.isfinite(test.gap):
+            # the query lies in a hole of that surface's sampling when its nearest point lies farther
+            # than `gap` of the surface's own spacings: the median over the fitted points of the
+            # distance from each to the nearest other (taken from their spread, a hole's own width
+            # would count in); not for probed points (a neighbour within the radius: no hole)
+            rows = np.flatnonzero(~near & around[ok])
+            around[ok[rows]] = d[ok[rows], 0] <= test.gap * _own_spacing(pts[rows], valid[ok[rows]])
+        if test.anchored:
+            passed = np.where(
+                near, dist[ok] <= np.maximum(lod[ok], test.offset_m), around[ok] & (dist[ok] <= lod[ok])
+            )
+            fails = np.flatnonzero(~passed)
+            # the neighbours off the plane fitted to all of them first (another surface's: a wall
+            # beside the ground or under a roof), nearest first: the planes tried pass through them
+            f_pts, f_valid = pts[fails], valid[ok][fails]
+            on_fit = (
+                np.abs(np.einsum("mkc,mc->mk", f_pts - mean[fails, None, :], normal[fails]))
+                <= test.lod_floor_m
+            )
+            order = np.argsort(on_fit | ~f_valid, axis=1, kind="stable")
+            f_pts = np.take_along_axis(f_pts, order[..., None], axis=1)
+            f_valid = np.take_along_axis(f_valid, order, axis=1)
+            through[ok[fails]] = planes_through(
+                np.asarray(q_xyz, np.float64)[ok[fails]], f_pts, f_valid, test.lod_floor_m, test
+            )
     first = np.where(valid[:, 0], i[:, 0], len(b_xyz))
-    return dist, lod, first
+    return SurfaceFit(dist, lod, first, around, through)
 
 
-# a plan grid of up to this many cells is looked up in a dense array (64 MiB of bool at most)
-DENSE_CELLS = 1 << 26
+def _own_spacing(pts: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(m,) the median over each row's valid points of (m, k, 3) ``pts`` of the distance from each to
+    the nearest other valid point of its row (metres; siteline.labels.kernels.spacing_of)."""
+    from siteline.labels import kernels
+
+    out = np.full(len(pts), np.nan)
+    if len(pts):
+        kernels.own_spacings(np.ascontiguousarray(pts, np.float64), np.ascontiguousarray(valid), out)
+    return out
+
+
+@dataclass(frozen=True)
+class PlanCells:
+    """What the other scene holds in each query point's cell of a plan grid, (M,) bool each:
+    ``covered``, points; ``hidden``, points, the lowest more than the level-of-detection floor above
+    the query point (it could not have seen the point from above); ``above``, points, the highest no
+    lower than that floor below the query point, or in the cells around it more than a cell's width
+    above it (structure at or over its height)."""
+
+    covered: np.ndarray
+    hidden: np.ndarray
+    above: np.ndarray
+    buried: np.ndarray | None = None
+
+
+# a plan grid of up to this many cells is held whole (2 float64 and a bool a cell: 68 MiB); the
+# queries of a wider extent are taken in bands of columns of grid rows
+BAND_CELLS = 1 << 22
 
 
 def hidden_from_other(
-    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest
-) -> tuple[np.ndarray, np.ndarray]:
-    """Two (M,) bool arrays about the query points, from the other scene (``b_xyz``) in each query
-    point's cell of a plan grid of ``test.search_m``: ``covered``, it has points there; ``hidden``, it
-    has, and its lowest lies more than the level-of-detection floor above the query point (it could
-    not have seen the point from above)."""
+    b_xyz: np.ndarray, q_xyz: np.ndarray, test: SurfaceTest, b_ground: np.ndarray | None = None
+) -> PlanCells:
+    """:class:`PlanCells` of the query points ``q_xyz`` from the other scene ``b_xyz`` (site-local
+    metres), on a plan grid of ``test.search_m``: ``covered`` and ``hidden`` of the point's own cell,
+    ``above`` of it, or of the 8 around it for structure over the point (a roof's edge over a wall may
+    leave the wall's own cell empty; the ground beside a trench lies at the height of the ground
+    that was dug, not over it). ``b_ground``: (N,) bool, the other scene's ground points; given,
+    ``buried`` says where the lowest point of a hidden query's cell is one (the query lies under
+    that scene's ground). A compiled pass (siteline.labels.kernels.plan_cells) over a dense grid of
+    the queries' extent, in bands of rows where it is wide."""
     cell = test.search_m
     q = np.asarray(q_xyz, np.float64)
-    q_ij = np.floor(q[:, :2] / cell).astype(np.int64)
-    lo, hi = q_ij.min(axis=0), q_ij.max(axis=0)
-    span = hi - lo + 1
-    b = np.asarray(b_xyz)
-    # the other scene's points near the queries' extent first (a cell's margin: every point of their
-    # cells is among them), so the floor below is not taken of the whole neighbourhood per call
-    box_lo, box_hi = lo * cell - cell, (hi + 1) * cell + cell
-    near = (b[:, 0] >= box_lo[0]) & (b[:, 0] <= box_hi[0]) & (b[:, 1] >= box_lo[1]) & (b[:, 1] <= box_hi[1])
-    b = b[near]
-    b_ij = np.floor(b[:, :2].astype(np.float64) / cell).astype(np.int64)
-    # only the other scene's points in the queries' cells matter: a lookup over the queries' extent
-    # picks them without sorting every point of the other scene
-    within = ((b_ij >= lo) & (b_ij <= hi)).all(axis=1)
-    q_key = (q_ij[:, 0] - lo[0]) * span[1] + (q_ij[:, 1] - lo[1])
-    b_key = (b_ij[within, 0] - lo[0]) * span[1] + (b_ij[within, 1] - lo[1])
-    b_z = b[within, 2].astype(np.float64)
-    if int(span[0]) * int(span[1]) <= DENSE_CELLS:
-        present = np.zeros(int(span[0]) * int(span[1]), dtype=bool)
-        present[q_key] = True
-        pick = present[b_key]
-    else:
-        pick = np.isin(b_key, np.unique(q_key))
-    b_key, b_z = b_key[pick], b_z[pick]
-    order = np.argsort(b_key, kind="stable")
-    keys, starts = np.unique(b_key[order], return_index=True)
-    lowest = np.minimum.reduceat(b_z[order], starts) if len(keys) else np.zeros(0)
-    at = np.clip(np.searchsorted(keys, q_key), 0, max(len(keys) - 1, 0))
-    if not len(keys):
-        none = np.zeros(len(q_key), dtype=bool)
-        return none, none.copy()
-    has = keys[at] == q_key
-    return has, has & (lowest[at] > q[:, 2] + test.lod_floor_m)
+    out = np.zeros((len(q), 4), bool)
+    if len(q):
+        q_ij = np.floor(q[:, :2] / cell).astype(np.int64)
+        b = np.asarray(b_xyz)
+        g = np.zeros(len(b), bool) if b_ground is None else np.asarray(b_ground, bool)
+        span_j = int(q_ij[:, 1].max() - q_ij[:, 1].min()) + 3
+        rows = max(1, BAND_CELLS // span_j - 2)
+        order = np.argsort(q_ij[:, 0], kind="stable")
+        starts = np.searchsorted(q_ij[order, 0], np.arange(q_ij[:, 0].min(), q_ij[:, 0].max() + 1, rows))
+        for lo, hi in zip(starts, [*starts[1:], len(order)], strict=True):
+            _plan_band(b, g, q, q_ij, order[lo:hi], test, out)
+    return PlanCells(out[:, 0], out[:, 1], out[:, 2], None if b_ground is None else out[:, 3])
+
+
+def _plan_band(
+    b: np.ndarray, g: np.ndarray, q: np.ndarray, q_ij: np.ndarray, rows: np.ndarray, test: SurfaceTest,
+    out: np.ndarray,
+) -> None:  # fmt: skip
+    """:func:`hidden_from_other` of the queries ``rows`` (their cells' rows one band of the grid)."""
+    if not len(rows):
+        return
+    from siteline.labels import kernels
+
+    cell = test.search_m
+    lo, hi = q_ij[rows].min(axis=0) - 1, q_ij[rows].max(axis=0) + 1  # a cell to spare around each
+    near = (b[:, 0] >= lo[0] * cell) & (b[:, 0] < (hi[0] + 1) * cell) & (b[:, 1] >= lo[1] * cell)
+    near &= b[:, 1] < (hi[1] + 1) * cell
+    b_ij = np.floor(np.asarray(b[near, :2], np.float64) / cell).astype(np.int64)
+    inside = ((b_ij >= lo) & (b_ij <= hi)).all(axis=1)  # float32 at a cell's edge
+    b_ij = b_ij[inside] - lo
+    res = np.zeros((len(rows), 4), bool)
+    kernels.plan_cells(
+        np.ascontiguousarray(b_ij), np.asarray(b[near, 2][inside], np.float64),
+        np.ascontiguousarray(g[near][inside]), np.ascontiguousarray(q_ij[rows] - lo),
+        np.ascontiguousarray(q[rows, 2]), (int(hi[0] - lo[0] + 1), int(hi[1] - lo[1] + 1)),
+        (float(test.lod_floor_m), float(cell)), res,
+    )  # fmt: skip
+    out[rows] = res
 
 
 def class_within(
@@ -186,10 +316,13 @@ def class_within(
 @dataclass(frozen=True)
 class Matching:
     """How a point looks for its match in the other scene: the nearest-neighbour ``backend``
-    (:data:`NN_BACKENDS`) and, for the surface rule, the :class:`SurfaceTest` (None: the nearest rule)."""
+    (:data:`NN_BACKENDS`), for the surface rules the :class:`SurfaceTest` (None: the nearest rule)
+    and, for the adaptive rule, the (256,) bool lookup of the ``ground`` classes (a point under the
+    other scene's ground was not hidden from it: the ground was dug; None: no class says so)."""
 
     backend: str = "pykdtree"
     surface: SurfaceTest | None = None
+    ground: np.ndarray | None = None
 
 
 def change_flags(
@@ -228,27 +361,36 @@ def change_flags(
     dist, idx = nearest(b_kept, a_pts, radius_m, matching.backend, tree)
     found = np.isfinite(dist)
     uncovered = np.zeros(len(dist), dtype=bool)
+    unobserved = np.zeros(len(dist), dtype=bool)
     surface = matching.surface
     # the points looked at again: those the nearest test flags, and those it finds only far (the probe)
     again = None if surface is None else np.flatnonzero(~found | (dist > surface.probe_m))
     if surface is not None and again is not None and len(again):
-        d, lod, first = plane_distances(b_kept, a_pts[again], surface, tree)
+        fit = plane_distances(b_kept, a_pts[again], surface, tree, found[again])
         near = found[again]  # found within the radius, but not near: changed when off the surface
-        off = near & np.isfinite(d) & (d > np.maximum(lod, surface.offset_m))
-        found[again[off]] = False
-        again, d, lod, first = again[~near], d[~near], lod[~near], first[~near]
-        on = d <= lod
+        off = near & np.isfinite(fit.distance) & (fit.distance > np.maximum(fit.lod, surface.offset_m))
+        found[again[off & ~fit.through]] = False
+        again, fit = again[~near], fit.take(~near)
+        on = ((fit.distance <= fit.lod) & fit.around) | fit.through
         found[again[on]] = True
-        idx[again[on]] = first[on]
-        alone = np.flatnonzero(~np.isfinite(d))
+        idx[again[on]] = fit.nearest[on]
+        # no surface of the other scene to judge against (none fitted; with the adaptive rule also
+        # one that does not surround the point: it ends before it, or is another surface near it, a
+        # roof over a wall): what that scene holds in the point's plan cell decides
+        alone = np.flatnonzero(~np.isfinite(fit.distance) | (surface.observed & ~fit.around & ~on))
         if len(alone):
-            covered, unseen = hidden_from_other(b_kept, a_pts[again[alone]], surface)
-            # nothing to compare with: unchanged from this side, whatever the classes say
-            seen_not = again[alone[unseen]]
+            b_ground = None if matching.ground is None or not surface.observed else matching.ground[b_classes]
+            cells = hidden_from_other(b_kept, a_pts[again[alone]], surface, b_ground)
+            # nothing to compare with: unchanged from this side, whatever the classes say; but a
+            # point under the other scene's ground was not hidden from it: that ground was dug
+            hidden = cells.hidden if cells.buried is None else cells.hidden & ~cells.buried
+            seen_not = again[alone[hidden]]
             found[seen_not] = True
             idx[seen_not] = -1
-            # the other scene has nothing in the point's plan cell: it never covered the place
-            uncovered[again[alone[~covered]]] = True
+            if surface.observed:  # structure at or over the point, or nothing at all: not observed
+                unobserved[again[alone[~cells.covered | (cells.above & ~cells.hidden)]]] = True
+            else:  # the other scene has nothing in the point's plan cell: it never covered the place
+                uncovered[again[alone[~cells.covered]]] = True
     same = np.zeros(len(dist), dtype=bool)
     compared = found & (idx >= 0)
     b_near, a_here = b_classes[idx[compared]], a_classes[compared]
@@ -260,11 +402,14 @@ def change_flags(
         # foot): the class is compared with any of the other scene's points within the radius
         differ = np.flatnonzero(compared)[~same[compared]]
         if len(differ):
+            reach = radius_m if surface.reach_m is None else surface.reach_m
             same[differ] = class_within(
-                b_kept, b_classes, a_pts[differ], a_classes[differ], radius_m, surface, tree
+                b_kept, b_classes, a_pts[differ], a_classes[differ], reach, surface, tree
             )
     same[found & (idx < 0)] = True
-    out[live] = np.where(uncovered, IGNORED, np.where(same, UNCHANGED, CHANGED))
+    out[live] = np.where(
+        uncovered, IGNORED, np.where(unobserved, NOT_OBSERVED, np.where(same, UNCHANGED, CHANGED))
+    )
     return out
 
 

@@ -16,10 +16,17 @@ import zarr
 from numcodecs import Zstd
 
 from siteline.errors import LabelError
-from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, Matching, change_flags, median_spacing
+from siteline.labels.change import (
+    CHANGED,
+    IGNORED,
+    NOT_OBSERVED,
+    UNCHANGED,
+    Matching,
+    change_flags,
+    median_spacing,
+)
 from siteline.labels.regions import RegionCells
 from siteline.records.pairs import ChangeLabels, RadiusChoice
-from siteline.records.params.labels import SurfaceTest
 from siteline.records.tiling import TileSpec
 from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
@@ -228,6 +235,9 @@ def _count(flags: np.ndarray, counts: dict[str, int]) -> None:
     counts["unchanged"] += int((flags == UNCHANGED).sum())
     counts["changed"] += int((flags == CHANGED).sum())
     counts["ignored"] += int((flags == IGNORED).sum())
+    unseen = int((flags == NOT_OBSERVED).sum())
+    if unseen:  # the adaptive rule's (stores of the other rules keep the three counts they had)
+        counts["not_observed"] = counts.get("not_observed", 0) + unseen
 
 
 def write_labels(
@@ -237,7 +247,7 @@ def write_labels(
     ignored: np.ndarray,
     out: Path,
     geometric: np.ndarray | None = None,
-    surface: SurfaceTest | None = None,
+    matching: Matching = Matching(),
     min_region_points: int = 1,
 ) -> ChangeLabels:
     """Compute both directions in one pass over the site grid (each tile of each scene against the
@@ -245,7 +255,7 @@ def write_labels(
     search radius) into the new Zarr group ``out`` (removed again on an error; publish it through
     ``siteline.stores.Store.publish`` for all-or-nothing). Tiles are decoded whole only while they
     are labelled, and as edge strips for their neighbours' halos (:class:`_Decoded`): a tile of the
-    next column is decoded twice, and memory stays at a few tiles and the strips whatever the site. ``ignored``, ``geometric`` and ``surface``: the rule
+    next column is decoded twice, and memory stays at a few tiles and the strips whatever the site. ``ignored``, ``geometric`` and ``matching``: the rule
     (siteline.labels.change.change_flags); then changed regions of fewer than ``min_region_points``
     points are taken back to unchanged, each scene's changed points linked across its whole grid
     (siteline.labels.regions, linked through cells of REGION_CELL_RADII x r). The flags of both scenes are held (a byte a point) until written."""
@@ -258,7 +268,7 @@ def write_labels(
     out.parent.mkdir(parents=True, exist_ok=True)
     import zarr
 
-    halo_m = max(radius_m, surface.search_m if surface is not None else 0.0)
+    halo_m = max(radius_m, matching.surface.halo_m if matching.surface is not None else 0.0)
     try:
         root = zarr.open_group(str(out), mode="w")
         sides = {"t1": (t1, _Decoded(t1, halo_m)), "t2": (t2, _Decoded(t2, halo_m))}
@@ -266,7 +276,7 @@ def write_labels(
             change_flags,
             radius_m=radius_m,
             ignored=ignored,
-            matching=Matching(surface=surface),
+            matching=matching,
             geometric=geometric,
         )
         flags_of, changed = _flag_grid(sides, rule, halo_m, radius_m)

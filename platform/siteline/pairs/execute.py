@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from siteline.errors import PairError, ViewsError
+from siteline.labels.change import Matching
 from siteline.labels.store import auto_radius, write_labels
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.outputs import output_of
@@ -65,7 +66,8 @@ def pair_labels(
         with store.publish(uri) as work:
             labels = write_labels(
                 t1, t2, radius, taxonomy.ignored_lut(), work, geometric=plan.change_rule.geometric_lut(taxonomy),
-                surface=label_params.surface_test(radius), min_region_points=label_params.min_region_points,
+                matching=Matching(surface=label_params.surface_test(radius), ground=plan.change_rule.ground_lut(taxonomy)),
+                min_region_points=label_params.min_region_points,
             )  # fmt: skip
     log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
     return replace(labels, uri=uri, radius=info)

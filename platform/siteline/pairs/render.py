@@ -16,7 +16,7 @@ from siteline.codes import IGNORE as MASK_IGNORE
 from siteline.codes import IGNORE_CAUSES
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError, PairError
-from siteline.labels.change import CHANGED, IGNORED
+from siteline.labels.change import CHANGED, IGNORED, NOT_OBSERVED
 from siteline.records.enums import HOLE_RULES
 from siteline.records.pairs import ColourPlan
 from siteline.render.shading import eye_dome
@@ -81,7 +81,9 @@ def pair_mask(
     change_b: np.ndarray,
     one_side_hole: str = "ignore",
 ) -> np.ndarray:
-    """Union of the two change renders; 255 where either missed or its winner is ignored.
+    """Union of the two change renders; 255 where either missed or its winner is ignored, and where
+    either winner's place the other scan did not observe (NOT_OBSERVED) unless the other render's
+    winner is changed (that side's own evidence).
 
     ``one_side_hole``: a pixel whose one render hit a *changed* point while the other render has a
     hole (no point) is ``ignore`` (the default: the hole leaves the pixel unverified), or ``changed``
@@ -89,10 +91,12 @@ def pair_mask(
     points/m2 are such pixels). Holes next to unchanged points stay ignore either way."""
     if one_side_hole not in HOLE_RULES:
         raise LabelError(f"one_side_hole {one_side_hole!r}: use one of {HOLE_RULES}.")
-    ok_a = hit_a & (change_a != IGNORED)
-    ok_b = hit_b & (change_b != IGNORED)
-    valid = ok_a & ok_b
-    changed = (change_a == CHANGED) | (change_b == CHANGED)
+    seen_a = hit_a & (change_a != IGNORED)
+    seen_b = hit_b & (change_b != IGNORED)
+    ok_a = seen_a & (change_a != NOT_OBSERVED)
+    ok_b = seen_b & (change_b != NOT_OBSERVED)
+    changed = (ok_a & (change_a == CHANGED)) | (ok_b & (change_b == CHANGED))
+    valid = (ok_a & ok_b) | (changed & seen_a & seen_b)
     if one_side_hole == "changed":
         seen_change = (ok_a & (change_a == CHANGED) & ~hit_b) | (ok_b & (change_b == CHANGED) & ~hit_a)
         valid = valid | seen_change
@@ -117,15 +121,19 @@ def ignore_causes(
     left = mask == MASK_IGNORE
     gap = small_gaps(ra.hit) | small_gaps(rb.hit)
     empty_a, empty_b = ~ra.hit, ~rb.hit
+    unseen = (ra.hit & (ra.attributes["change"] == NOT_OBSERVED)) | (
+        rb.hit & (rb.attributes["change"] == NOT_OBSERVED)
+    )
     found = {
         "gap": gap,
         "no_surface": empty_a & empty_b,
         "one_side": empty_a | empty_b,
         "outside_fence": outside,
+        "not_observed": unseen,
         "ignored_class": np.ones_like(left),
     }
     out = {}
-    for cause in ("gap", "no_surface", "one_side", "outside_fence", "ignored_class"):
+    for cause in ("gap", "no_surface", "one_side", "outside_fence", "not_observed", "ignored_class"):
         mine = left & found[cause]
         out[cause] = float(mine.sum() / mask.size) if mask.size else 0.0
         left &= ~mine

@@ -232,6 +232,11 @@ class ChangeRulePlan:
             return np.ones(256, dtype=bool)
         return taxonomy.geometry_only_lut()
 
+    def ground_lut(self, taxonomy: Taxonomy) -> np.ndarray | None:
+        """(256,) bool of the ground classes the adaptive rule may trust (siteline.labels.change), None
+        under the geometry rule (the scenes' classes disagree)."""
+        return None if self.rule == "geometry" else taxonomy.ground_lut()
+
     def to_dict(self) -> dict[str, JSON]:
         return {"rule": self.rule, "why": self.why, "differences": list(self.differences)}
 

@@ -10,6 +10,7 @@ from PIL import Image
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
 from siteline.labels.accuracy import accuracy_text
 from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed
+from siteline.records.params.labels import REACH_MULTIPLIER, SURFACE_RULES
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseParams
 from siteline.records.registration import Registration
@@ -138,12 +139,19 @@ def _radius_lines(pairs: list[PairLineage], ceiling: float, params: PairParams) 
             else float("nan")
         )
         measured = accuracy_text(rule, regions, params.trim_edges, spacing, params.surface_probe)
-        if fc and rule == "surface":
+        if fc and rule in SURFACE_RULES:
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
                 f"neighbour test flags {fc['per_direction']:.2%} of unchanged surfaces per direction (2^(-k^2)), and "
-                "the surface rule keeps only those off the other scene's local surface by more than its level of "
-                f"detection; changed regions under {regions} points are taken back"
+                f"the {rule} rule keeps only those off the other scene's local surface by more than its level of "
+                "detection"
+                + (
+                    " (that surface as the other scan sampled it, within "
+                    f"{REACH_MULTIPLIER:g} radii; a place it did not observe is ignored)"
+                    if rule == "adaptive"
+                    else ""
+                )
+                + f"; changed regions under {regions} points are taken back"
                 + (f"; {measured}" if measured else "")
                 + (f"; ABOVE the radius ceiling of {ceiling:.2f} m" if q["radius_m"] > ceiling else "")
             )
@@ -362,7 +370,7 @@ def _source_lines(lin: Lineage) -> list[str]:
         + (
             f", points beyond {p.surface_probe:g} radii of their nearest neighbour probed against the other scene's "
             "surface"
-            if p.label_rule == "surface" and p.surface_probe
+            if p.label_rule in SURFACE_RULES and p.surface_probe
             else ""
         )
         + f", changed regions under {p.min_region_points} points taken back (siteline.labels.regions)",

@@ -113,6 +113,13 @@ class Taxonomy:
             lut[c.id] = c.ignore
         return lut
 
+    def ground_lut(self) -> np.ndarray:
+        """(256,) bool: True at the id of the class named ``ground`` (none when the taxonomy has none)."""
+        lut = np.zeros(256, dtype=bool)
+        for c in self.classes:
+            lut[c.id] = c.name == "ground"
+        return lut
+
     def geometry_only_lut(self) -> np.ndarray:
         """(256,) bool: True at the ids of classes compared by geometry only."""
         lut = np.zeros(256, dtype=bool)

@@ -53,12 +53,13 @@ def pair_labels(
     """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
     by the change ``rule`` (siteline.labels.rule), the ``label_rule`` and the smallest region kept
     (siteline.records.params.labels; the nearest rule keeping every point names no suffix, as before both;
-    the surface rule is named with its version, and its probe when it has one)."""
+    the surface rule is named with its version, the adaptive rule by its name, each with its probe
+    when it has one)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"
     # the surface rule's second version ignores points the other scene never covered (stores of the
-    # first, "-surface", are not reused)
-    by += "" if label_rule == "nearest" else f"-{label_rule}2"
+    # first, "-surface", are not reused); the adaptive rule is named as it is
+    by += {"nearest": "", "surface": "-surface2"}.get(label_rule, f"-{label_rule}")
     by += "" if min_region_points <= 1 else f"-m{min_region_points}"
     by += "" if label_rule == "nearest" or not surface_probe else f"-p{surface_probe:g}"
     return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um{by}.zarr")

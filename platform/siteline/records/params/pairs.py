@@ -17,8 +17,11 @@ from siteline.records.params.views import SAMPLER_VERSION, ViewParams
 from siteline.records.specs import parse_spec
 from siteline.schema import JSON
 
-# changed regions of fewer points are taken back to unchanged (siteline.labels.regions)
-MIN_REGION_POINTS = 8
+# changed regions of fewer points are taken back to unchanged (siteline.labels.regions): 3 (on flown
+# scans the adaptive rule's few chance flags are single points and pairs, which regions of 3 take back
+# as regions of 8 did, while a worker flown at 10 points/m2 has 5-8 returns and a 6 m pole at 80 has
+# 24 in pieces, which regions of 8 took back)
+MIN_REGION_POINTS = 3
 # points whose nearest neighbour lies over this many change radii away are probed against the other
 # scene's surface (LabelParams.surface_probe): the pit's ramps at 10 points/m2 recalled 0.89 -> 0.92,
 # for 1.1-1.3x the labels' seconds (docs/performance.md)
@@ -79,7 +82,7 @@ class PairParams:
     splat: str = "world"
     splat_max_px: int = 31
     fill_px: int = 2
-    label_rule: str = "surface"
+    label_rule: str = "adaptive"
     min_region_points: int = MIN_REGION_POINTS
     splat_factor: float = WORLD_SPLAT_FACTOR
     trim_edges: bool = True
