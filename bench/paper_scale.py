@@ -18,7 +18,10 @@ Scale 2.0 renders 1320 x 990: the paper's 1/4 of a frame, twice its pixels per s
 their synthesis and ingest (the 8000 points/m2 site takes about 20 minutes to make).
 
 ``--labels-only`` stops each pair after its change labels (the stage that held the pair's peak
-memory): their seconds and peak RSS, without the views and renders.
+memory): their seconds and peak RSS, without the views and renders. ``--tree NAME=PATH`` (with it,
+repeatable) labels the same tiles again with the library of the siteline checkout at PATH (each at its
+own defaults, in its own process) and prints each tree's seconds and peak beside this one's: today's
+rule against another's, measured in one run.
     make bench-scale
 """
 
@@ -27,6 +30,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import resource
 import shutil
 import subprocess
@@ -180,9 +184,14 @@ def child(stage: str, work: str, args: list[str]) -> None:
     print("RESULT " + json.dumps(res))
 
 
-def _run(stage: str, work: Path, *args: str) -> dict:
+def _run(stage: str, work: Path, *args: str, tree: str | None = None) -> dict:
+    """``stage`` in a process of its own; ``tree``: a siteline checkout whose library it runs."""
+    env = os.environ | ({"PYTHONPATH": str(Path(tree) / "platform")} if tree else {})
     proc = subprocess.run(
-        [sys.executable, __file__, "--child", stage, str(work), *args], capture_output=True, text=True
+        [sys.executable, __file__, "--child", stage, str(work), *args],
+        capture_output=True,
+        text=True,
+        env=env,
     )
     if proc.returncode:
         sys.stderr.write(proc.stderr[-4000:])
@@ -219,11 +228,13 @@ def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
         **args.knobs,
     }
     if args.labels_only:
-        out["pair"] = _run(
-            "labels",
-            work,
-            json.dumps({k: v for k, v in knobs.items() if k not in ("point_size_px", "splat", "fill_px")}),
+        label_knobs = json.dumps(
+            {k: v for k, v in knobs.items() if k not in ("point_size_px", "splat", "fill_px")}
         )
+        out["pair"] = _run("labels", work, label_knobs)
+        for name, tree in args.tree:
+            shutil.rmtree(work / "home" / "stores" / "labels", ignore_errors=True)
+            out.setdefault("trees", {})[name] = _run("labels", work, label_knobs, tree=tree)
     else:
         out["pair"] = _run("pair", work, str(args.views), str(args.scale), mv, json.dumps(knobs))
     return out
@@ -254,6 +265,10 @@ def main() -> None:
         "--knobs", type=json.loads, default={},
         help='more pair knobs as JSON, e.g. \'{"surface_probe": 0}\' (the labels without the probe)',
     )  # fmt: skip
+    ap.add_argument(
+        "--tree", action="append", default=[], type=lambda s: tuple(s.split("=", 1)),
+        help="with --labels-only: NAME=PATH, label the same tiles with the siteline checkout at PATH too",
+    )  # fmt: skip
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument(
         "--work", type=Path, default=None,
@@ -278,7 +293,11 @@ def main() -> None:
             print(
                 f"{r['density_pts_m2']:g} pts/m2 ({sum(r['synth']['points']):,} points): synth {r['synth']['seconds']:.0f} s, "
                 f"ingest+tile {r['ingest_tile']['seconds']:.0f} s ({r['ingest_tile']['peak_mib']:.0f} MiB), "
-                f"labels {p['labels_s']:.0f} s at r = {p['radius_m']:.3f} m ({p['peak_mib']:.0f} MiB peak)"
+                f"labels {p['labels_s']:.1f} s at r = {p['radius_m']:.3f} m ({p['peak_mib']:.0f} MiB peak)"
+                + "".join(
+                    f"; {name}: {t['labels_s']:.1f} s ({t['peak_mib']:.0f} MiB), this tree {p['labels_s'] / t['labels_s']:.2f}x"
+                    for name, t in r.get("trees", {}).items()
+                )
             )
             continue
         p = r["pair"]
