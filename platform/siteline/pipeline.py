@@ -61,7 +61,15 @@ class Ingested:
         if not r.created:
             return r.message
         points = r.scan.point_count if r.scan else 0
-        return f"{r.message}: {points:,} points, {r.registration.images or 0} {r.registration.source} cameras, pairs {r.pairs}"
+        reg = r.registration
+        flown = (
+            f" at {reg.survey.altitude_m:g} m ({reg.altitude_why})"
+            if reg.source == "planned" and reg.survey is not None and reg.survey.altitude_m
+            else ""
+        )
+        return (
+            f"{r.message}: {points:,} points, {reg.images or 0} {reg.source} cameras{flown}, pairs {r.pairs}"
+        )
 
 
 def ingest(

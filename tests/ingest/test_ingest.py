@@ -152,13 +152,18 @@ def test_lidar_only_mission_gets_planned_cameras_over_its_data(tmp_path) -> None
     r = ingest_mission(StageContext(cat, settings), epoch_dirs(site)[0], "demo")
     assert r.created and r.registration.source == "planned"
     survey = r.registration.to_dict()["survey"]
-    from siteline.register.planned import SurveyPlan, auto_altitude
+    from siteline.register.planned import SurveyPlan, auto_altitude, tallest_structure
     from siteline.site.fence import fence_area_m2
+    from siteline.site.taxonomy import default_taxonomy
 
-    # no --altitude: chosen from the cloud's density and the fence's area, and the reason recorded
+    # no --altitude: chosen from the cloud's tallest structure (the 42 m crane), density and the
+    # fence's area, and the reason recorded
+    tallest = tallest_structure(r.scan.survey_sample, default_taxonomy().ignored_lut())
+    assert tallest is not None and 40 < tallest.height_m < 46
     altitude, why = auto_altitude(
-        SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings))
+        SurveyPlan(), r.scan.density_pts_m2, fence_area_m2(settings_site_fence(settings)), (tallest, "crane")
     )
+    assert altitude >= tallest.height_m + 15.0 and "crane" in why
     assert (
         r.registration.over == "site fence"
         and survey["altitude_m"] == altitude

@@ -99,8 +99,14 @@ def ingest(
     altitude_m: float | None = typer.Option(
         None,
         "--altitude",
-        help="Planned cameras' height above the ground, metres (default: chosen from the "
-        "cloud's density and area, 20-120 m).",
+        help="Planned cameras' height above the ground, metres (default: the scene's tallest structure plus "
+        "--clearance, raised to what its density and area ask, 20-120 m; one under the tallest structure is refused).",
+    ),
+    clearance_m: float = typer.Option(
+        15.0,
+        "--clearance",
+        help="How far over the scene's tallest structure (a crane, a roof: the highest kept surface above the "
+        "ground under it) a chosen altitude flies, metres.",
     ),
     overlap: tuple[float, float] = typer.Option(
         (0.7, 0.6), "--overlap", help="Planned survey's forward and side overlap (0-0.95)."
@@ -123,7 +129,7 @@ def ingest(
     from siteline.ingest.options import IngestOptions
     from siteline.register.planned import SurveyPlan
 
-    survey = SurveyPlan(camera_model(camera), altitude_m, overlap[0], overlap[1], oblique_pitch)
+    survey = SurveyPlan(camera_model(camera), altitude_m, overlap[0], overlap[1], oblique_pitch, clearance_m)
     opts = IngestOptions(
         plan_cameras=plan_cameras,
         survey=survey,

@@ -76,7 +76,7 @@ def execute_ingest(
         photos, colmap_dir(entries, root), plan.site, opts.ransac_max_error_m, opts.max_georegistration_rms_m
     )
     if not cameras or opts.plan_cameras:
-        survey = scan.survey_sample if scan.survey_sample is not None else np.zeros((0, 4))
+        survey = scan.survey_sample if scan.survey_sample is not None else np.zeros((0, 5))
         cameras, registration, source = planned_cameras(
             survey, scan.footprint, plan.site, opts.survey, len(photos), scan.density_pts_m2
         )

@@ -149,7 +149,8 @@ class _Totals:
         self.samples: list[np.ndarray] = []
         self.colour = "none" if eight_bit is None else COLOUR_NAMES[eight_bit]
         # every stride-th point of the file (by its index: the same whatever the workers or origin),
-        # all classes, with its intensity: for planned cameras, the footprint and colour statistics
+        # all classes, with its intensity and site class: for planned cameras (the flight clears the
+        # tallest structure), the footprint and colour statistics
         self.index, self.stride = first, stride
         self.survey: list[np.ndarray] = []
         self.rgb_lo, self.rgb_hi = np.full(3, 255), np.zeros(3, np.int64)
@@ -175,7 +176,7 @@ class _Totals:
         sampled = sampled[self.rng.random(len(sampled)) < self.keep_p]
         self.samples.append(np.c_[local[sampled], kind[sampled]])
         take = np.arange(-self.index % self.stride, len(local), self.stride)
-        self.survey.append(np.c_[local[take], chunk.intensity[take]])
+        self.survey.append(np.c_[local[take], chunk.intensity[take], cls[take]])
         self.index += len(local)
         if chunk.rgb is not None and len(local):
             self.rgb_lo = np.minimum(self.rgb_lo, chunk.rgb.min(axis=0))
@@ -219,7 +220,7 @@ def _scan(
     t: _Totals,
 ) -> LasScan:
     area = max(float((t.hi[0] - t.lo[0]) * (t.hi[1] - t.lo[1])), 1e-6)
-    survey = np.concatenate(t.survey) if t.survey else np.zeros((0, 4))
+    survey = np.concatenate(t.survey) if t.survey else np.zeros((0, 5))
     outline = footprint(survey)
     names = {c.id: c.name for c in site.taxonomy.classes}
     codes = {i: int(v) for i, v in enumerate(t.codes) if v}

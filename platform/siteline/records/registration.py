@@ -136,13 +136,15 @@ class SurveyPlan:
     percentile of the sample's z around it), or None to choose it from the scene (:func:`siteline.register.planned.auto_altitude`);
     forward_overlap / side_overlap: of consecutive images on a line and of neighbouring lines (0-1);
     oblique_pitch_deg: downward tilt of the oblique cameras looking into the area from around its
-    edge (0: no oblique pass)."""
+    edge (0: no oblique pass). clearance_m: how far over the scene's tallest structure an altitude
+    chosen from the scene flies (siteline.register.planned.auto_altitude)."""
 
     camera: Intrinsics = CAMERA_MODELS[DEFAULT_CAMERA_MODEL]
     altitude_m: float | None = None
     forward_overlap: float = 0.7
     side_overlap: float = 0.6
     oblique_pitch_deg: float = 45.0
+    clearance_m: float = 15.0
 
     def __post_init__(self) -> None:
         h = self.altitude_m
@@ -152,17 +154,22 @@ class SurveyPlan:
             v = getattr(self, name)
             if not 0.0 <= v <= 0.95:
                 raise RegistrationError(f"planned cameras: {name} {v} must lie in [0, 0.95].")
+        if not (math.isfinite(self.clearance_m) and 0.0 <= self.clearance_m <= 200.0):
+            raise RegistrationError(f"planned cameras: clearance {self.clearance_m} m must lie in [0, 200].")
         if not 0.0 <= self.oblique_pitch_deg < 90.0:
             raise RegistrationError(
                 f"planned cameras: oblique pitch {self.oblique_pitch_deg} must lie in [0, 90) degrees."
             )
 
     def to_dict(self) -> dict[str, JSON]:
-        return {
+        doc: dict[str, JSON] = {
             "camera": self.camera.to_dict(), "altitude_m": self.altitude_m,
             "forward_overlap": self.forward_overlap, "side_overlap": self.side_overlap,
             "oblique_pitch_deg": self.oblique_pitch_deg,
         }  # fmt: skip
+        if self.clearance_m:  # a survey planned before the clearance existed keeps its JSON
+            doc["clearance_m"] = self.clearance_m
+        return doc
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, JSON]) -> SurveyPlan:
@@ -181,6 +188,8 @@ class SurveyPlan:
             json_float(doc["forward_overlap"], "forward_overlap"),
             json_float(doc["side_overlap"], "side_overlap"),
             json_float(doc["oblique_pitch_deg"], "oblique_pitch_deg"),
+            # surveys planned before the clearance existed cleared nothing
+            json_float(doc.get("clearance_m", 0.0), "clearance_m"),
         )  # fmt: skip
 
     def nadir_cameras(self, altitude_m: float, area_m2: float) -> float:

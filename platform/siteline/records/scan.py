@@ -82,8 +82,8 @@ class LasScan:
     synth; ..." for a generated site; None when blank or scanned before it was recorded).
     stable_sample: (N, 4) float64 the co-registration sample: site-local x, y, z of points of stable
     surfaces (4th column 1: ground, building) and of structure (2: vegetation, unclassified);
-    survey_sample: (N, 4) x, y, z (site-local) and intensity of every k-th point of the file (both
-    never persisted)."""
+    survey_sample: (N, 5) x, y, z (site-local), intensity and site class of every k-th point of the file
+    (both never persisted)."""
 
     path: str
     source_crs: str

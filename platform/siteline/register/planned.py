@@ -7,6 +7,7 @@ are snapped to the pose quanta)."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
@@ -30,12 +31,76 @@ AUTO_LONG_SIDE_PX = 512
 # and lowers the flight (more, smaller images) until the nadir grid holds at least this many
 # cameras: each gives up to 32 candidate views, and about a third pass their probes
 MIN_NADIR_CAMERAS = 16
+# the tallest structure is found on a plan grid of this many metres: a cell's top is the 98th
+# percentile of its kept points' heights (a jib or a roof, not a stray return), its ground the lowest
+# 10th percentile of the cells within 12.5 m (under a roof the cell itself holds no ground), and a
+# cell of fewer than 8 sample points (the survey sample holds 2-3 a square metre) says nothing
+STRUCTURE_CELL_M = 5.0
+STRUCTURE_TOP_PERCENTILE = 98.0
+STRUCTURE_GROUND_CELLS = 2
+MIN_STRUCTURE_POINTS = 8
 
 
-def auto_altitude(plan: SurveyPlan, density_pts_m2: float, area_m2: float) -> tuple[float, str]:
-    """The altitude (metres above the ground) planned cameras fly at when none is given, and why: the
-    one that puts neighbouring points :data:`AUTO_SPACING_PX` apart in images of the release's auto
-    scale (ground sample distance following the point spacing 1 / sqrt(density)), within
+@dataclass(frozen=True)
+class Structure:
+    """The tallest structure of a scene: its top's height above the ground under it (metres), where
+    (the cell's centre, site-local metres) and the site class most of its top points have."""
+
+    height_m: float
+    xy: tuple[float, float]
+    class_id: int
+
+    def describe(self, class_name: str) -> str:
+        """``the 18.8 m crane at (10, 5)``."""
+        return f"the {self.height_m:.1f} m {class_name} at ({self.xy[0]:.0f}, {self.xy[1]:.0f})"
+
+
+def tallest_structure(sample: np.ndarray, ignored: np.ndarray) -> Structure | None:
+    """The highest kept surface above the ground under it (:data:`STRUCTURE_CELL_M` cells, see there)
+    in a (N, 5) survey sample (site-local x, y, z, intensity, site class), its ``ignored`` (256,) bool
+    classes (noise, snow, outside the fence) left out; None when no cell holds enough points."""
+    pts = np.asarray(sample, np.float64)
+    if pts.ndim != 2 or pts.shape[1] < 5 or not len(pts):
+        return None
+    pts = pts[~ignored[pts[:, 4].astype(np.int64)]]
+    if not len(pts):
+        return None
+    ij = np.floor(pts[:, :2] / STRUCTURE_CELL_M).astype(np.int64)
+    lo = ij.min(axis=0)
+    shape = tuple(int(v) for v in ij.max(axis=0) - lo + 1)
+    key = (ij[:, 0] - lo[0]) * shape[1] + (ij[:, 1] - lo[1])
+    order = np.lexsort((pts[:, 2], key))
+    keys, starts, counts = np.unique(key[order], return_index=True, return_counts=True)
+    z = pts[order, 2]
+    full = counts >= MIN_STRUCTURE_POINTS
+    floor = np.full(shape[0] * shape[1], np.inf)
+    top = np.full(shape[0] * shape[1], -np.inf)
+    for k, s, n in zip(keys[full], starts[full], counts[full], strict=True):
+        floor[k] = np.percentile(z[s : s + n], 10)
+        top[k] = np.percentile(z[s : s + n], STRUCTURE_TOP_PERCENTILE)
+    if not np.isfinite(top).any():
+        return None
+    from scipy.ndimage import minimum_filter
+
+    size = 2 * STRUCTURE_GROUND_CELLS + 1
+    ground = minimum_filter(floor.reshape(shape), size=size, mode="constant", cval=np.inf).ravel()
+    height = np.where(np.isfinite(top) & np.isfinite(ground), top - ground, -np.inf)
+    best = int(np.argmax(height))
+    i, j = divmod(best, shape[1])
+    xy = ((lo[0] + i + 0.5) * STRUCTURE_CELL_M, (lo[1] + j + 0.5) * STRUCTURE_CELL_M)
+    cell = pts[key == best]
+    high = cell[cell[:, 2] >= np.percentile(cell[:, 2], 90), 4].astype(np.int64)
+    return Structure(float(height[best]), xy, int(np.bincount(high).argmax()))
+
+
+def auto_altitude(
+    plan: SurveyPlan, density_pts_m2: float, area_m2: float, tallest: tuple[Structure, str] | None = None
+) -> tuple[float, str]:
+    """The altitude (metres above the ground) planned cameras fly at when none is given, and why: at
+    least the ``tallest`` structure's height (with its class's name) plus ``plan.clearance_m`` (a pilot
+    flies over the crane, not under its jib), raised by the resolution rule only: the altitude that
+    puts neighbouring points :data:`AUTO_SPACING_PX` apart in images of the release's auto scale
+    (ground sample distance following the point spacing 1 / sqrt(density)), within
     [:data:`MIN_AUTO_ALTITUDE_M`, :data:`MAX_AUTO_ALTITUDE_M`], then lowered until the nadir grid over
     ``area_m2`` holds :data:`MIN_NADIR_CAMERAS` cameras (a small site is flown low, in more lines)."""
     model = plan.camera
@@ -54,6 +119,15 @@ def auto_altitude(plan: SurveyPlan, density_pts_m2: float, area_m2: float) -> tu
         lower = max(MIN_AUTO_ALTITUDE_M, h * math.sqrt(plan.nadir_cameras(h, area_m2) / MIN_NADIR_CAMERAS))
         why += f"; lowered to {lower:.0f} m for at least {MIN_NADIR_CAMERAS} nadir cameras over {area_m2:,.0f} m2"
         h = lower
+    if tallest is not None:
+        structure, name = tallest
+        clear = structure.height_m + plan.clearance_m
+        if clear >= h:
+            return float(round(clear, 1)), (
+                f"auto: {clear:.1f} m clears {structure.describe(name)} by {plan.clearance_m:g} m (the resolution "
+                f"rule asked for {h:.0f} m: {why.removeprefix('auto: ')})"
+            )
+        why += f"; it clears {structure.describe(name)} by {h - structure.height_m:.1f} m"
     return float(round(h, 1)), why
 
 

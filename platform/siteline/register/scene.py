@@ -17,7 +17,7 @@ from siteline.records.registration import Alignment, Registration, SurveyPlan
 from siteline.records.scan import SAMPLE_STABLE, SAMPLE_STRUCTURE
 from siteline.register.georegister import georegister
 from siteline.register.icp import register_samples
-from siteline.register.planned import auto_altitude, plan_cameras
+from siteline.register.planned import auto_altitude, plan_cameras, tallest_structure
 from siteline.register.xmp import camera_from_photo, dewarp_camera, photo_center_crs
 from siteline.site.spec import SiteSpec
 
@@ -87,10 +87,18 @@ def planned_cameras(
         why = "its points span no area (they lie on a line or a point) and the site has no fence"
         return {}, Registration("none", planned=False, note=f"no cameras could be planned: {why}"), None
     area_m2 = float(shapely.Polygon(area).area)
+    found = tallest_structure(sample, spec.taxonomy.ignored_lut())
+    tallest = None if found is None else (found, spec.taxonomy.name_of(found.class_id))
     altitude_why = "given (--altitude)"
     if survey.altitude_m is None:
-        altitude, altitude_why = auto_altitude(survey, density_pts_m2, area_m2)
+        altitude, altitude_why = auto_altitude(survey, density_pts_m2, area_m2, tallest)
         survey = replace(survey, altitude_m=altitude)
+    elif tallest is not None and survey.altitude_m < tallest[0].height_m:
+        raise RegistrationError(
+            f"planned cameras: --altitude {survey.altitude_m:g} m flies under {tallest[0].describe(tallest[1])} "
+            f"(site-local metres, above the ground under it): give at least {tallest[0].height_m + survey.clearance_m:.0f} m "
+            f"(its height and the {survey.clearance_m:g} m clearance), or leave --altitude out to have it chosen"
+        )
     record = Registration("planned", note=note, over=where, survey=survey, altitude_why=altitude_why)
     try:
         cams = plan_cameras(sample[:, :3], area, survey)

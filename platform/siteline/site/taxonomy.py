@@ -98,6 +98,10 @@ class Taxonomy:
     def id_of(self, name: str) -> int:
         return self.by_name(name).id
 
+    def name_of(self, class_id: int) -> str:
+        """The name of class ``class_id`` (``class <id>`` for an id the taxonomy lacks)."""
+        return next((c.name for c in self.classes if c.id == class_id), f"class {class_id}")
+
     @property
     def ignore_id(self) -> int:
         return self.id_of("ignore")
