@@ -3,6 +3,8 @@ changes (a box removed, a thin beam moved, a slab lowered) are found, scan shado
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -171,6 +173,10 @@ def test_label_params_refuse_unknown_rules_and_regions():
         min_fit=6, surround=1.0, gap=3.0, anchored=True, observed=True,
     )  # fmt: skip
     assert adaptive.fit_m == pytest.approx(2.4) and SurfaceTest(search_m=0.6).fit_m == 0.6
+    # it probes only at a radius of two floors (10 cm) or more; the surface rule from one floor
+    assert LabelParams(surface_probe=0.7).surface_test(0.08).probe_m == math.inf
+    assert LabelParams(rule="surface", surface_probe=0.7).surface_test(0.08).probe_m == pytest.approx(0.056)
+    assert LabelParams(surface_probe=0.7).surface_test(0.12).probe_m == pytest.approx(0.084)
     for bad in (1.0, -0.1, True, "0.7"):
         with pytest.raises(Exception, match="surface_probe"):
             LabelParams(surface_probe=bad)
