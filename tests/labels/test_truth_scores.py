@@ -53,6 +53,11 @@ def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
     assert measured_for("surface", 8, False, 0.15) is None  # not measured without the trim
     assert measured_for("surface", 8, True, 0.15, 0.7).recall > measured_for("surface", 8, True, 0.15).recall
     assert measured_for("surface", 8, True, 0.15, 0.5) is None  # a probe not measured
+    # the adaptive rule (the default) was measured on flown epochs, and says so with its two figures
+    flown = accuracy_text("adaptive", 3, True, 0.15, 0.7)
+    assert flown is not None and "flown epochs" in flown and "at most 1.2% of pixels called changed" in flown
+    assert measured_for("adaptive", 3, True, 0.06, 0.7).scene == "sloped scene"  # ~61 points/m2: nearest 80
+    assert measured_for("adaptive", 8, True, 0.15, 0.7) is None
     assert measured_for("nearest", 1, False, 0.15, 0.7) == measured_for("nearest", 1, False, 0.15)  # no probe
     text = accuracy_text("surface", 8, True, 0.15, 0.7)
     assert "precision 0.98" in text and "recall 0.97" in text and "synthetic site at 10 points/m2" in text

@@ -37,8 +37,9 @@ class Measured:
 
 
 # `siteline bench trade`, one run each (docs/performance.md): the nearest rule as releases made it
-# before, the surface rule without the probe (2026-11-28, the defaults until the probe), and the
-# defaults since (2026-11-28 later, with the probe at 0.7; the runs without it repeated the rows above)
+# before, the surface rule without the probe (2026-11-28, the defaults until the probe), the surface
+# rule with the probe at 0.7 (2026-11-28 later; the runs without it repeated the rows above), all on
+# sampled epochs
 MEASURED: tuple[Measured, ...] = (
     Measured("synthetic site", 10, "nearest", 1, False, 0.928, 0.978, 0.952, 246),
     Measured("synthetic site", 10, "surface", 8, True, 0.977, 0.963, 0.970, 1),
@@ -52,6 +53,13 @@ MEASURED: tuple[Measured, ...] = (
     Measured("box scene", 40, "nearest", 1, False, 0.536, 0.986, 0.694, 693),
     Measured("box scene", 40, "surface", 8, True, 0.953, 0.956, 0.955, 0),
     Measured("box scene", 40, "surface", 8, True, 0.953, 0.960, 0.956, 0, 0.7),
+    # the adaptive rule, the default since 2026-11-29, on epochs flown as real flights are (issue 68):
+    # the largest false change on an object that stayed (seen on 100 pixels or more), the share of the
+    # truth's pixels the masks ignore
+    Measured("synthetic site", 10, "adaptive", 3, True, 0.989, 0.953, 0.971, 0, 0.7, "flown", 0.012, 0.043),
+    Measured("box scene", 40, "adaptive", 3, True, 0.974, 0.799, 0.878, 0, 0.7, "flown", 0.003, 0.007),
+    Measured("sloped scene", 80, "adaptive", 3, True, 0.977, 0.970, 0.973, 0, 0.7, "flown", 0.001, 0.023),
+    Measured("synthetic site", 1000, "adaptive", 3, True, 0.992, 0.973, 0.982, 2, 0.7, "flown", 0.010, 0.025),
 )
 
 
