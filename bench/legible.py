@@ -145,7 +145,7 @@ def main() -> None:
         t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
         labels = pair_labels(plan, t1, t2, settings.store, no_progress)
         pair = LabelledPair.with_labels(t1, t2, labels.uri)
-        views = pair_views(plan, t2, no_progress).views
+        views = pair_views(plan, t1, t2, no_progress).views
         with cat.transaction() as s:
             stats = [get_scene(s, sc.id).statistics.scan.colour_stats for sc in (plan.t1, plan.t2)]
         auto = plan.colour

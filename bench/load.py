@@ -94,7 +94,7 @@ def _work(home: Path, threads: str) -> dict[str, float]:
     t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
     labels = ex.pair_labels(plan, t1, t2, settings.store, no_progress)
     t_labels = time.perf_counter()
-    views = ex.pair_views(plan, t2, no_progress, governor)
+    views = ex.pair_views(plan, t1, t2, no_progress, governor)
     t_views = time.perf_counter()
     pair = LabelledPair.with_labels(t1, t2, labels.uri)
     for v in views.views[:40]:

@@ -101,7 +101,7 @@ def _views(home: Path, copies: int, rules: dict, views: int) -> dict[str, float]
     params = PairParams(scale=0.1, point_size_px=5, views=views, **rules)
     with cat.transaction() as s:
         plan = plan_pair(s, settings.store, 1, params)
-    t2 = open_labelled(plan.t2.tiles, plan.t2.label_set)
+    t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
     made: list[sources.TilePointSource] = []
 
     class Recorded(sources.TilePointSource):
@@ -112,7 +112,7 @@ def _views(home: Path, copies: int, rules: dict, views: int) -> dict[str, float]
     pair_execute.TilePointSource = Recorded  # type: ignore[misc]
     try:
         t0 = time.perf_counter()
-        drawn = pair_execute.pair_views(plan, t2, no_progress)
+        drawn = pair_execute.pair_views(plan, t1, t2, no_progress)
         seconds = time.perf_counter() - t0
     finally:
         pair_execute.TilePointSource = sources.TilePointSource  # type: ignore[misc]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from siteline.catalog.scenes import scene_cameras, tile_source
 from siteline.catalog.sites import site_of
@@ -140,3 +141,44 @@ def test_coverage_of_equals_the_renders_coverage() -> None:
             scale=float(rng.choice([0.37, 0.5, 1.0])), point_size_px=int(rng.choice([1, 3, 5, 7]))
         )
         assert coverage_of(xyz, cam, s).hit == render_points(xyz, cam, s).coverage
+
+
+def test_clearance_is_measured_on_both_scenes_at_full_density(scenes) -> None:
+    """A camera's distance to the nearest point is exact (the brute force over both scenes' every
+    point), read only near the camera, in memory or from the store; the coarse copy it replaced
+    misses points, and the earlier scene's points count (a camera inside what was removed)."""
+    _, cat = scenes
+    tiles, _, _, _ = _inputs(cat)
+    with cat.transaction() as s:
+        earlier = SceneTiles.from_source(tile_source(s, 1))
+    solid = []
+    for scene in (tiles, earlier):
+        p = scene.points(attributes=("class",))
+        solid.append(p.xyz_m[~np.isin(p.attributes["class"], SKIP)])
+    rng = np.random.default_rng(3)
+    near_points = np.concatenate([a[rng.choice(len(a), 300, replace=False)] for a in solid])
+    step = rng.normal(size=near_points.shape)
+    q = near_points + step / np.linalg.norm(step, axis=1, keepdims=True) * rng.uniform(
+        0.2, 4.0, (len(step), 1)
+    )
+    truth_both = cKDTree(np.concatenate(solid)).query(q)[0]
+    truth_later = cKDTree(solid[0]).query(q)[0]
+    for source in (
+        TilePointSource(tiles, SKIP, others=(earlier,)),
+        TilePointSource(tiles, SKIP, others=(earlier,), memory_points=0),
+    ):
+        got = source.nearest_within(q, 3.0)
+        within = truth_both < 3.0
+        assert within.sum() > 100 and (~within).sum() > 10
+        np.testing.assert_allclose(got[within], truth_both[within], atol=1e-4)
+        assert np.all(np.isinf(got[~within]))
+    # the earlier scene's points alone hold some cameras back (a removed object's place)
+    alone = TilePointSource(tiles, SKIP).nearest_within(q, 3.0)
+    assert np.sum(np.isinf(alone) & (truth_both < 3.0)) > 0
+    assert np.all(np.isinf(alone[truth_later >= 3.0]))
+    # the coarse copy finds the nearest point farther than it is (a few here: this scene is sparse)
+    coarse = source._coarse.nearest_within(q, 10.0)
+    assert np.sum(coarse > truth_later + 0.05) > 0
+    # a camera high above the site reads nothing
+    reads = source.reads
+    assert np.isinf(source.nearest_within(np.array([[0.0, 0.0, 500.0]]), 3.0)[0]) and source.reads == reads

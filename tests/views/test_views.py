@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
@@ -17,6 +19,8 @@ from siteline.views.generate import (
     SyntheticView,
     candidate_views,
     generate_views,
+    probe,
+    sparse_share,
     stratified_sample,
 )
 from siteline.views.ground import GroundPlane, fit_ground_plane
@@ -76,7 +80,8 @@ def test_thirty_two_candidates_per_real_camera() -> None:
     assert (
         len(candidate_views(_real_cameras()[0], plane, None, lambda c: 30.0, ViewParams(mirror=False))) == 16
     )
-    assert source.nearest_distance(np.zeros((1, 3)))[0] < 1.0
+    assert source.nearest_within(np.zeros((1, 3)), 1.0)[0] < 1.0
+    assert source.nearest_within(np.array([[0.0, 0.0, 500.0]]), 1.0)[0] == np.inf  # none that near
 
 
 def test_mirroring_twice_gives_the_original() -> None:
@@ -115,7 +120,7 @@ def test_generated_views_are_valid_seeded_and_recorded() -> None:
     assert [v.index for v in a.views] == list(range(len(a.views)))
     for v in a.views:
         assert plane.height(v.camera.center) >= PARAMS.min_height_m
-        assert source.nearest_distance(v.camera.center[None])[0] >= PARAMS.clearance_m
+        assert cKDTree(xyz).query(v.camera.center)[0] >= PARAMS.clearance_m
         assert v.coverage is not None and v.coverage >= PARAMS.min_coverage
         if v.params.mirrored:
             assert inside_fence(v.camera.center[None, :2], FENCE)[0]
@@ -294,3 +299,44 @@ def test_mirror_rule_is_recorded_in_the_view_parameters() -> None:
     assert ViewParams(mirror_rule="reflect").to_dict()["mirror_rule"] == "reflect"
     with pytest.raises(ViewsError, match="mirror_rule"):
         ViewParams(mirror_rule="sideways")
+
+
+def test_sparse_share_weighs_each_point_by_the_pixels_its_spacing_spans() -> None:
+    """Ground points 0.5 m apart under a nadir camera of focal 200 px: 10 px apart from 10 m up,
+    2 px apart from 50 m; a mixed set weighs each part by its pixels."""
+    g = np.arange(-20.0, 20.0, 0.5)
+    xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    xyz = np.c_[xy, np.zeros(len(xy))]
+    spacing = np.full(len(xyz), 0.5)
+    low = Camera.look_at((0, 0, 10.0), (0, 0, 0), 200, 200, fx=200.0)
+    high = Camera.look_at((0, 0, 50.0), (0, 0, 0), 200, 200, fx=200.0)
+    assert sparse_share(xyz, spacing, low, 1.0, 8.0) == 1.0
+    assert sparse_share(xyz, spacing, low, 1.0, 10.5) == 0.0
+    assert sparse_share(xyz, spacing, low, 0.5, 8.0) == 0.0  # 5 px apart at half the scale
+    assert sparse_share(xyz, spacing, high, 1.0, 8.0) == 0.0
+    # half the points stand for 4x the spacing: 16x the pixels each
+    mixed = np.where(np.arange(len(xyz)) % 2 == 0, 0.5, 2.0)
+    assert sparse_share(xyz, mixed, high, 1.0, 4.0) == pytest.approx(16 / 17, abs=0.01)
+    assert sparse_share(xyz[:0], spacing[:0], low, 1.0, 8.0) == 0.0  # nothing in the frame
+
+
+def test_views_that_draw_their_surface_from_sparse_points_are_rejected() -> None:
+    """A probe whose points stand for 0.5 m each: the camera 10 m up sees them 12 px apart at the
+    render scale and is rejected as sparse_points; 40 m up, 3 px: kept; max_spacing_px 0 keeps both."""
+    g = np.arange(-30.0, 30.0, 0.5)
+    xy = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    xyz = np.c_[xy, np.zeros(len(xy))].astype(np.float32)
+    source = ArrayPointSource(xyz, np.full(len(xyz), 0.5, np.float32))
+    params = ViewParams(scale=1.0, splat="world", min_coverage=0.0, max_spacing_px=8.0)
+    strategy = ViewStrategy(1.0, False, 0.0)
+    view = {
+        h: SyntheticView(
+            "p", "v1-orig-f0", strategy, Camera.look_at((0, 0, h), (0, 0, 0), 240, 240, fx=240.0)
+        )
+        for h in (10.0, 40.0)
+    }
+    assert probe(view[10.0], source, params).rejected == "sparse_points"
+    assert probe(view[40.0], source, params).rejected is None
+    assert probe(view[10.0], source, replace(params, max_spacing_px=0.0)).rejected is None
+    with pytest.raises(ViewsError, match="max_spacing_px"):
+        ViewParams(max_spacing_px=-1.0)

@@ -99,10 +99,10 @@ def scene_ground(plan: PairPlan, t2: SceneTiles) -> GroundChoice:
 
 
 def pair_views(
-    plan: PairPlan, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None
+    plan: PairPlan, t1: SceneTiles, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None
 ) -> ViewSet:
     """Synthetic views of the later scene (DESIGN.md §5): probes read its tiles at the pair's point
-    size, torch's threads following the machine's load (``threads``; a new one when None);
+    size, no camera within the clearance of a point of either scene, torch's threads following the machine's load (``threads``; a new one when None);
     :class:`PairError` when it has no cameras or every candidate is rejected."""
     threads = threads or CpuThreads()
     if not plan.cameras:
@@ -116,7 +116,12 @@ def pair_views(
     names = {c.name for c in taxonomy.classes}
     skip = np.array([taxonomy.id_of(c) for c in ("snow", "noise") if c in names], dtype=np.uint8)
     source = TilePointSource(
-        t2, skip, taxonomy.ignored_ids(), lod_factor=params.lod_factor, point_size_px=params.point_size_px
+        t2,
+        skip,
+        taxonomy.ignored_ids(),
+        (t1,),
+        lod_factor=params.lod_factor,
+        point_size_px=params.point_size_px,
     )
     cams = [NamedCamera(n, c) for n, c in plan.cameras]
 
@@ -228,7 +233,7 @@ def execute_pair(
     scenes = LabelledPair.with_labels(t1, t2, labels.uri)
     threads = CpuThreads()
     try:
-        views = pair_views(plan, t2, progress, threads)
+        views = pair_views(plan, t1, t2, progress, threads)
     finally:
         threads.restore()
     with store.publish(plan.root) as work:

@@ -6,11 +6,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from siteline.camera.pinhole import Camera
 from siteline.tiles.reader import SceneTiles, ViewNodes, node_positions
-from siteline.views.sources import ArrayPointSource, ProbePoints
+from siteline.views.sources import ArrayPointSource, ProbePoints, nearest_within
 
+# the coarse copy of the solid geometry that overhead checks use, spacing in metres (its size grows
+# with the site's area, not its density)
+COARSE_M = 0.25
 # a scene of at most this many points is read once into memory (13 bytes a point: float32
 # site-local xyz and two flags) and every probe judged from there
 MEMORY_POINTS = 25_000_000
@@ -45,22 +49,24 @@ class TilePointSource:
     each tile's own spacing), so view generation reads the scene once whatever the candidates. A
     larger one is read per batch: the probes of one parent camera together (:meth:`prefetch`), per node the
     longest prefix any of them needs, once, so a batch reads about its frusta's union once.
-    Clearance and overhead checks use a coarse copy (``coarse_m``) of the solid geometry, whose size
-    grows with the site's area, not its density. Airborne snow and noise (``skip_classes``) are
-    left out of all of it."""
+    Clearance is measured exactly, on the full-density points of this scene and of ``others`` (the
+    pair's earlier scene) near each camera (:meth:`SceneTiles.points_near`: nothing is read for a
+    camera no node comes near); overhead checks use a coarse copy (:data:`COARSE_M`) of the solid
+    geometry. Airborne snow and noise (``skip_classes``) are left out of all of it."""
 
     def __init__(
         self,
         tiles: SceneTiles,
         skip_classes: np.ndarray,
         ignored_classes: np.ndarray | None = None,
-        coarse_m: float = 0.25,
+        others: Sequence[SceneTiles] = (),
         lod_factor: float = 1.0,
         point_size_px: int = 1,
         memory_points: int = MEMORY_POINTS,
         whole_points: int = WHOLE_POINTS,
     ) -> None:
         self.tiles = tiles
+        self.others = tuple(others)
         self.skip = np.asarray(skip_classes, dtype=np.uint8)
         self.ignored = np.asarray(ignored_classes if ignored_classes is not None else [], dtype=np.uint8)
         self.lod_factor = lod_factor
@@ -73,13 +79,13 @@ class TilePointSource:
         if tiles.point_count <= memory_points:
             self._held = self._hold()
             self._coarse = ArrayPointSource(
-                self._from_memory(self._held, *self._coarse_selection(coarse_m)).xyz
+                self._from_memory(self._held, *self._coarse_selection(COARSE_M)).xyz
             )
             if tiles.point_count <= min(memory_points, whole_points):
                 h = self._held
                 self._whole = ProbePoints(h.xyz[h.draw], h.spacing[h.draw], h.kept[h.draw])
         else:
-            read = tiles.points(resolution=coarse_m, attributes=("class",))
+            read = tiles.points(resolution=COARSE_M, attributes=("class",))
             self.points_read += read.stats.points_read
             self.reads += 1
             self._coarse = ArrayPointSource(
@@ -215,8 +221,23 @@ class TilePointSource:
             out.xyz_m[keep].astype(np.float32), spacing[keep], ~np.isin(cls[keep], self.ignored)
         )
 
-    def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
-        return self._coarse.nearest_distance(xyz)
+    def nearest_within(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
+        q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+        best = np.full(len(q), np.inf)
+        for scene in (self.tiles, *self.others):
+            if scene is self.tiles and self._held is not None:  # from memory
+                rows = scene.nodes_near(q, radius_m)
+                at = node_positions(self._held.node_start[rows], scene.all_nodes.count[rows])
+                solid = self._held.xyz[at[self._held.draw[at]]]
+            else:
+                near = scene.points_near(q, radius_m, ("class",))
+                if len(near.xyz_m):
+                    self.points_read += near.stats.points_read
+                    self.reads += 1
+                solid = near.xyz_m[~np.isin(near.attributes["class"], self.skip)]
+            if len(solid):
+                best = np.minimum(best, nearest_within(cKDTree(solid), q, radius_m))
+        return best
 
     def count_above(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
         return self._coarse.count_above(xyz, radius_m)

@@ -208,9 +208,10 @@ def _layout_lines(doc: ManifestDoc, stats: ReleaseStats) -> list[str]:
 
 _REJECTED_WORDS = {
     "outside_fence": "outside the fence after mirroring", "underground": "underground",
-    "near_surface": "too near a surface", "under_geometry": "under geometry", "low_coverage": "too little coverage",
+    "near_surface": "too near a point of either scene", "under_geometry": "under geometry", "low_coverage": "too little coverage",
     "low_valid_probe": "too few valid pixels in their probe", "low_valid": "too few valid pixels rendered",
     "no_fence": "no fence to mirror across", "nothing_ahead": "nothing ahead to step towards",
+    "sparse_points": "drawn from points too far apart",
 }  # fmt: skip
 
 

@@ -540,6 +540,33 @@ class SceneTiles:
             out = self.read({t: self.prefix(t) for t in tiles}, attributes)
         return out.select(in_bounds(out.xyz_m, bounds)) if bounds is not None else out
 
+    def nodes_near(self, centers: np.ndarray, radius_m: float) -> np.ndarray:
+        """Positions into :attr:`all_nodes` (ascending) of the nodes whose bounds lie within
+        ``radius_m`` of one of ``centers`` ((M, 3) site-local metres)."""
+        a = self.all_nodes
+        q = np.atleast_2d(np.asarray(centers, dtype=np.float64))
+        near = np.zeros(len(a.lo), bool)
+        for start in range(0, len(q), 64):  # (64, K, 3) at a time
+            c = q[start : start + 64, None, :]
+            gap = np.maximum(np.maximum(a.lo[None] - c, 0.0), c - a.hi[None])
+            near |= (np.einsum("mkd,mkd->mk", gap, gap) <= radius_m**2).any(axis=0)
+        return np.flatnonzero(near)
+
+    def points_near(
+        self, centers: np.ndarray, radius_m: float, attributes: Sequence[str] = ("class",)
+    ) -> Points:
+        """Every point (all levels, full density) of the nodes whose bounds lie within ``radius_m`` of
+        one of ``centers`` ((M, 3) site-local metres): a superset of the points within ``radius_m`` of
+        them, read in one pass; nothing is read where no node is near (a camera high above the
+        site). Bounds enclose their nodes' points, so no point within the radius is missed."""
+        a = self.all_nodes
+        rows = self.nodes_near(centers, radius_m)
+        selection: Selection = {}
+        for k in np.unique(a.tile[rows]):
+            mine = rows[a.tile[rows] == k]
+            selection[a.tiles[k]] = (a.index[mine], a.count[mine])
+        return self.read_nodes(selection, attributes)
+
     def view_nodes(
         self, camera: Camera, scale: float, spacing_px: float = 0.5, near_m: float = 1e-3
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

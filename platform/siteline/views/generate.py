@@ -28,6 +28,10 @@ from siteline.views import strategies
 from siteline.views.ground import GroundChoice, GroundModel, GroundPlane
 from siteline.views.sources import PointSource
 
+# a view may draw at most this share of its surface from points farther apart than
+# ViewParams.max_spacing_px (its nearest tenth, where nearer is sparser)
+SPARSE_SHARE = 0.1
+
 
 @dataclass(frozen=True)
 class NamedCamera:
@@ -251,8 +255,9 @@ def reject_geometric(
     params: ViewParams,
 ) -> list[SyntheticView]:
     """``views`` with ``rejected`` set on those underground, outside the fence after mirroring, within
-    ``clearance_m`` of a surface or under geometry (cheap tests on a coarse copy of the scene; views
-    rejected before keep their reason).
+    ``clearance_m`` of a point (of either scene of a pair, at full density: the source's
+    ``nearest_within``) or under geometry (a coarse copy of the scene); views rejected before keep
+    their reason.
 
     Each threshold is compared with the tolerances of :mod:`siteline.tolerances`: a view on the fence,
     or at exactly ``clearance_m`` or ``min_height_m`` is kept."""
@@ -261,7 +266,7 @@ def reject_geometric(
         return list(views)
     centers = np.array([v.camera.center for v in live])
     heights = ground.height(centers)
-    near = source.nearest_distance(centers)
+    near = source.nearest_within(centers, params.clearance_m)
     above = source.count_above(centers, params.overhead_radius_m)
     inside = inside_fence(centers[:, :2], fence_m) if fence_m is not None else np.ones(len(live), bool)
     judged: dict[int, SyntheticView] = {}
@@ -278,18 +283,45 @@ def reject_geometric(
     return [judged.get(id(v), v) for v in views]
 
 
+def sparse_share(
+    xyz: np.ndarray, spacing_m: np.ndarray, camera: Camera, scale: float, max_spacing_px: float
+) -> float:
+    """The share of the surface a render of ``camera`` at ``scale`` draws that comes from points more
+    than ``max_spacing_px`` pixels apart: each point in the frame weighted by the pixels its spacing
+    spans there ((spacing x focal / depth)^2), hidden or not. ``xyz`` (N, 3) site-local metres,
+    ``spacing_m`` (N,) the metres each point stands for; 0 when nothing is in the frame."""
+    cam = camera.scaled(scale)
+    uv, z = cam.project(xyz)
+    on = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+    if not on.any():
+        return 0.0
+    px = np.asarray(spacing_m, np.float64)[on] * max(cam.fx, cam.fy) / z[on]
+    area = px * px
+    return float(area[px > max_spacing_px].sum() / area.sum())
+
+
 def probe(view: SyntheticView, source: PointSource, params: ViewParams) -> SyntheticView:
     """``view`` with its probe's ``coverage`` and ``probe_valid`` (the share of pixels kept points
     cover) at the render scale, ``rejected`` when under ``min_coverage`` or ``min_valid`` (exactly
-    at a threshold passes: siteline.tolerances)."""
+    at a threshold passes: siteline.tolerances), or when more than :data:`SPARSE_SHARE` of the
+    surface it shows is drawn from points more than ``max_spacing_px`` apart at the render scale
+    (:func:`sparse_share`; a probe reads points about half a probe pixel apart where the data are
+    denser, 2 render pixels at ``probe_factor`` 1/4, so spacings are exact from there up, and the
+    bound is met below). A source without spacings (fixed splats) is not judged by spacing."""
     settings = params.probe_settings()
     points = source.points_for_view(view.camera, params.probe_scale)
     if points.spacing_m is None:
         settings = replace(settings, splat="fixed")
     cov = coverage_of(points.xyz, view.camera, settings, spacing_m=points.spacing_m, kept=points.kept)
+    sparse = (
+        sparse_share(points.xyz, points.spacing_m, view.camera, params.scale, params.max_spacing_px)
+        if points.spacing_m is not None and params.max_spacing_px > 0
+        else 0.0
+    )
     reason = (
         "low_coverage" if not at_least(cov.hit, params.min_coverage, RATIO_TOL)
         else "low_valid_probe" if not at_least(cov.kept, params.min_valid, RATIO_TOL)
+        else "sparse_points" if sparse > SPARSE_SHARE + RATIO_TOL
         else None
     )  # fmt: skip
     return replace(view, coverage=cov.hit, probe_valid=cov.kept, rejected=reason)

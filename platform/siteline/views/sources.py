@@ -31,11 +31,23 @@ class PointSource(Protocol):
     def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
         """Say that probes of ``cameras`` at ``scale`` come next (a source may read them at once)."""
 
-    def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
-        """(M,) distance in metres from each query (M, 3) to the nearest point."""
+    def nearest_within(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
+        """(M,) distance in metres from each query (M, 3) to the nearest point of the scene at full
+        density (of both scenes of a pair where the source knows both), inf where none lies within
+        ``radius_m``."""
 
     def count_above(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
         """(M,) number of points higher than each query within ``radius_m`` horizontally."""
+
+
+def nearest_within(tree: cKDTree | None, xyz: np.ndarray, radius_m: float) -> np.ndarray:
+    """(M,) distance in metres from each query (M, 3) to the nearest point of ``tree``, inf where
+    none lies within ``radius_m`` (or the tree is None: no points)."""
+    q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
+    if tree is None:
+        return np.full(len(q), np.inf)
+    d, _ = tree.query(q, k=1, distance_upper_bound=radius_m)
+    return np.asarray(d, dtype=np.float64)
 
 
 class ArrayPointSource:
@@ -57,12 +69,8 @@ class ArrayPointSource:
     def prefetch(self, cameras: Sequence[Camera], scale: float) -> None:
         return None
 
-    def nearest_distance(self, xyz: np.ndarray) -> np.ndarray:
-        q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))
-        if self._tree3 is None:
-            return np.full(len(q), np.inf)
-        d, _ = self._tree3.query(q, k=1)
-        return d
+    def nearest_within(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
+        return nearest_within(self._tree3, xyz, radius_m)
 
     def count_above(self, xyz: np.ndarray, radius_m: float) -> np.ndarray:
         q = np.atleast_2d(np.asarray(xyz, dtype=np.float64))

@@ -13,7 +13,9 @@ from siteline.records.specs import parse_spec
 from siteline.schema import JSON
 
 # Recorded with every view set (lineage): how the sample was drawn.
-SAMPLER_VERSION = "keyed-sha256-1"
+# 2: cameras clear both scenes' full-density points by clearance_m (3 m; before: 1 m of the later
+# scene's coarse copy), so the same parameters draw other views
+SAMPLER_VERSION = "keyed-sha256-2"
 
 
 @dataclass(frozen=True)
@@ -26,7 +28,9 @@ class ViewParams:
     forward_fractions: steps along the optical axis, as fractions of the median depth of the central
     image region (``central_fraction`` of the width and height).
     depth_probe_scale: render scale of the depth probe that measures that median (of the real image).
-    clearance_m: reject views whose centre is within this distance of a point.
+    clearance_m: reject views whose centre is within this distance (metres) of a point of either scene
+    of the pair, at full density (3 m: a camera nearer draws a surface from points tens of pixels
+    apart, and a drone would not fly there).
     min_height_m: reject views lower than this above the ground plane (underground).
     overhead_radius_m: reject views with points above them within this horizontal radius (under a
     slab, inside a building).
@@ -34,6 +38,11 @@ class ViewParams:
     min_valid: reject views whose probe shows less than this share of pixels of kept points (a class
     that is not ignored, inside the fence): the pair's valid share can only be lower.
     point_size_px, splat, splat_max_px, splat_factor: the renders' splats, which the coverage probes draw.
+    max_spacing_px: with world splats, reject views that draw more than a tenth of their surface from
+    points farther apart than this many pixels at ``scale`` (siteline.views.generate.sparse_share:
+    a close-up of a sparse roof is a mosaic of disks); 0: no such test. 15 by default, about the
+    largest spacing the default splats close (31 px at most, 2 x the spacing); 8 keeps sharper
+    views at the cost of farther ones (docs/performance.md measures both).
     probe_factor: with world splats, coverage probes render at this fraction of ``scale`` (a
     sixteenth of the pixels at 0.25), with point sizes scaled alike (at least 1 px): a probe then
     costs about a sixteenth of a render, and since each splat spans its spacing whatever the pixel
@@ -49,7 +58,7 @@ class ViewParams:
     forward_fractions: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75)
     central_fraction: float = 0.5
     depth_probe_scale: float = 0.0625
-    clearance_m: float = 1.0
+    clearance_m: float = 3.0
     min_height_m: float = 1.0
     overhead_radius_m: float = 1.0
     scale: float = 0.125
@@ -62,6 +71,7 @@ class ViewParams:
     splat_max_px: int = 31
     probe_factor: float = 0.25
     splat_factor: float = WORLD_SPLAT_FACTOR
+    max_spacing_px: float = 15.0
 
     def __post_init__(self) -> None:
         for name in ("vertical_fractions", "forward_fractions"):
@@ -84,6 +94,10 @@ class ViewParams:
             raise ViewsError(f"views must be at least 1, got {self.views}.")
         if not 0 < self.probe_factor <= 1:
             raise ViewsError(f"probe_factor {self.probe_factor} must lie in (0, 1].")
+        if not self.max_spacing_px >= 0:
+            raise ViewsError(
+                f"max_spacing_px {self.max_spacing_px} must be a number of pixels (0: no such test)."
+            )
         for name in ("clearance_m", "overhead_radius_m", "scale", "depth_probe_scale"):
             if not getattr(self, name) > 0:
                 raise ViewsError(f"{name} must be positive.")
