@@ -21,6 +21,8 @@ Environment variables (read here and nowhere else):
   value (siteline.tiles.batches; docs/performance.md).
 - ``SITELINE_PREVIEW_URL``: where ``siteline previews serve`` answers (default
   ``http://127.0.0.1:4201``); the flows' image artifacts point there.
+- ``SITELINE_CATALOG_WAIT_S``: how long a writer waits for a SQLite catalog another writer holds
+  (default 30 s; siteline.catalog.engine), then stops with one line and exit status 1.
 """
 
 from __future__ import annotations

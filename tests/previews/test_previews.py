@@ -3,6 +3,7 @@ releases only; release and pair artifacts say what a person watching the service
 
 from __future__ import annotations
 
+import json
 import threading
 
 import httpx
@@ -164,7 +165,7 @@ def test_idle_and_half_sent_connections_are_closed_and_their_number_capped(tmp_p
 
     monkeypatch.setattr(srv.PreviewHandler, "timeout", 0.5)
     home = tmp_path / "home"
-    server = make_server(home, "127.0.0.1", 0, limit=3)
+    server = make_server(home, "127.0.0.1", 0, pending=3)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     port = server.server_address[1]
     try:
@@ -198,4 +199,150 @@ def test_a_client_gone_mid_answer_is_one_line_in_the_log(tmp_path, caplog) -> No
         [record] = caplog.records
         assert "went away" in record.getMessage() and record.exc_info is None
     finally:
+        server.server_close()
+
+
+def test_clients_that_trickle_never_lock_out_a_normal_request(tmp_path, caplog) -> None:
+    """80 sockets that send a request's bytes one at a time, every 0.3 s, and 20 that send nothing:
+    a normal request is answered at once all along, each of them is closed at the request deadline
+    (1.5 s here) however it trickles, and each is one line in the log, never a traceback."""
+    import logging
+    import socket
+    import time
+
+    server = make_server(tmp_path / "home", "127.0.0.1", 0, deadline_s=1.5)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    port = server.server_address[1]
+    try:
+        with caplog.at_level(logging.INFO, logger="siteline.previews.server"):
+            slow = [socket.create_connection(("127.0.0.1", port), timeout=5) for _ in range(100)]
+            started = time.monotonic()
+            answered, closed = [], set()
+            request = b"GET / HTTP/1.1\r\nHost: x\r\n" + b"X-Slow: " + b"a" * 200
+            for k in range(12):  # 3.6 s of trickling
+                for i, sock in enumerate(slow[:80]):
+                    if i in closed:
+                        continue
+                    try:
+                        sock.sendall(request[k : k + 1])
+                    except OSError:
+                        closed.add(i)
+                t0 = time.monotonic()
+                answered.append(
+                    (httpx.get(f"http://127.0.0.1:{port}/", timeout=5).status_code, time.monotonic() - t0)
+                )
+                time.sleep(0.3)
+            assert all(code == 200 and took < 1.0 for code, took in answered), answered
+            for sock in slow:  # each was closed by the server at its deadline
+                sock.settimeout(3.0)
+                try:
+                    assert sock.recv(65536) == b""
+                except ConnectionResetError:
+                    pass
+                sock.close()
+            assert time.monotonic() - started < 8.0
+            time.sleep(0.3)
+        late = [r for r in caplog.records if "did not send a whole request" in r.getMessage()]
+        assert len(late) == 100 and all(r.exc_info is None for r in caplog.records)
+        assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_requests_answered_at_once_are_capped_and_the_next_gets_503(tmp_path, monkeypatch) -> None:
+    import time
+
+    from siteline.previews import server as srv
+
+    index = srv.PreviewHandler._index
+
+    def slow_index(self):  # noqa: ANN001, ANN202
+        time.sleep(1.0)
+        return index(self)
+
+    monkeypatch.setattr(srv.PreviewHandler, "_index", slow_index)
+    server = make_server(tmp_path / "home", "127.0.0.1", 0, limit=1)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    base = f"http://127.0.0.1:{server.server_address[1]}/"
+    try:
+        first = threading.Thread(target=httpx.get, args=(base,), kwargs={"timeout": 5})
+        first.start()
+        time.sleep(0.3)
+        busy = httpx.get(base, timeout=5)
+        assert busy.status_code == 503 and "try again" in busy.text
+        first.join()
+        assert httpx.get(base, timeout=5).status_code == 200  # the slot is free again
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_numbers_are_ascii_digits_and_segments_are_capped_in_bytes(served, caplog) -> None:
+    """A pair index in another script's digits (superscripts, circled, Arabic-Indic, full-width,
+    mathematical) is 400, never pair 1 or a 500; a path segment of 200 x 'é' (400 bytes) is 400;
+    none of it is more than one log line."""
+    import logging
+    from urllib.parse import quote
+
+    base, _ = served
+    with caplog.at_level(logging.DEBUG, logger="siteline.previews.server"):
+        for digit in ("²", "¹", "①", "١", "１", "𝟏"):
+            for path in (f"/3d/r/1.0.0/{digit}/", f"/3d/r/1.0.0/{digit}/plan.json"):
+                answer = _raw(base, f"GET {quote(path)} HTTP/1.0\r\n\r\n".encode())
+                assert answer.startswith(b"HTTP/1.0 400"), (path, answer[:60])
+        answer = _raw(base, f"GET /static/{quote('é' * 200)}.js HTTP/1.0\r\n\r\n".encode())
+        assert answer.startswith(b"HTTP/1.0 400") and b"bytes a segment" in answer
+        assert _raw(base, f"GET /static/{quote('é' * 100)}.js HTTP/1.0\r\n\r\n".encode()).startswith(
+            b"HTTP/1.0 404"
+        )
+    assert all(r.exc_info is None and "Traceback" not in r.getMessage() for r in caplog.records)
+
+
+def test_not_found_bodies_and_log_lines_never_name_the_disk(tmp_path, caplog) -> None:
+    """A draft whose manifest is missing, not JSON or a list, a release folder gone, a pair whose
+    tile store is gone: 404 naming the release and version, never a path outside the release, in
+    the body or the log."""
+    import logging
+
+    from siteline.errors import TileError
+    from siteline.previews.server import ReleaseAccess
+
+    home = tmp_path / "home"
+    drafts = tmp_path / "home" / "releases" / "r" / ".drafts"
+    for v, text in (("1.0.0", None), ("2.0.0", "{not json"), ("3.0.0", "[1, 2]")):
+        (drafts / v).mkdir(parents=True)
+        if text is not None:
+            (drafts / v / "manifest.json").write_text(text)
+    (drafts / "5.0.0").mkdir()
+    good = {"format": 2, "name": "r", "version": "5.0.0", "created": "2026-11-28T00:00:00+00:00",
+            "code_version": "test", "files": [], "splits": {"train": [], "val": [], "test": []}, "items": [],
+            "lineage": {"pairs": []}}  # fmt: skip
+    (drafts / "5.0.0" / "manifest.json").write_text(json.dumps(good))
+
+    def locate(name: str, version: str):  # noqa: ANN202
+        if version == "4.0.0":
+            return home / "releases" / name / version, "published"  # its folder is gone
+        return drafts / version, "draft"
+
+    def open_pair(doc, pair):  # noqa: ANN001, ANN202
+        raise TileError(f"{home}/stores/tiles/scene-{pair}.zarr is not a siteline tile store.")
+
+    server = make_server(home, "127.0.0.1", 0, access=ReleaseAccess(locate, open_pair))
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    base = f"http://127.0.0.1:{server.server_address[1]}"
+    try:
+        with caplog.at_level(logging.DEBUG, logger="siteline.previews.server"):
+            for path in ("/browse/r/1.0.0/", "/browse/r/2.0.0/", "/browse/r/3.0.0/", "/browse/r/4.0.0/",
+                         "/3d/r/4.0.0/1/plan.json", "/3d/r/5.0.0/1/plan.json"):  # fmt: skip
+                r = httpx.get(base + path, timeout=5)
+                assert r.status_code == 404, (path, r.status_code, r.text)
+                assert "release r" in r.text and str(tmp_path) not in r.text and "/tmp" not in r.text, (
+                    path,
+                    r.text,
+                )
+        assert good and all(str(tmp_path) not in rec.getMessage() for rec in caplog.records)
+        assert all(rec.exc_info is None for rec in caplog.records)
+    finally:
+        server.shutdown()
         server.server_close()

@@ -5,6 +5,8 @@ it, and both pages in headless Chromium judged by the pixels of a screenshot."""
 from __future__ import annotations
 
 import json
+import os
+import stat
 import threading
 import time
 import urllib.error
@@ -183,6 +185,24 @@ def test_release_browse_writes_a_page_beside_the_release(built, tmp_path) -> Non
     r = run_exe(settings.home, "release", "browse", "rel", "7.7.7")
     assert r.returncode == 2 and "no release rel 7.7.7" in r.stderr + r.stdout
     assert sorted(p.name for p in root.parent.iterdir()) == before
+    # a folder given as --out that already holds an unrelated rel-1.0.0.html: refused like a file
+    folder = tmp_path / "pages"
+    folder.mkdir()
+    (folder / "rel-1.0.0.html").write_text("my notes")
+    r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(folder))
+    assert (
+        r.returncode == 2 and "--force" in r.stderr and (folder / "rel-1.0.0.html").read_text() == "my notes"
+    )
+    r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(folder), "--force")
+    assert r.returncode == 0 and "<html" in (folder / "rel-1.0.0.html").read_text().lower()
+    # a FIFO is never replaced, --force or not
+    fifo = tmp_path / "pipe.html"
+    os.mkfifo(fifo)
+    for extra in ((), ("--force",)):
+        r = run_exe(settings.home, "release", "browse", "rel", "1.0.0", "--out", str(fifo), *extra)
+        assert (
+            r.returncode == 2 and "not a regular file" in r.stderr and stat.S_ISFIFO(os.lstat(fifo).st_mode)
+        )
 
 
 # --- in headless Chromium --------------------------------------------------------------------------

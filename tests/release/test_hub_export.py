@@ -190,3 +190,28 @@ def test_provenance_is_read_from_what_wrote_the_scenes(made, kind) -> None:
            "items": [], "splits": {"train": [], "val": [], "test": []}, "files": [],
            "lineage": {"scenes": [{"id": k, "las_software": m} for k, m in enumerate(made)]}}  # fmt: skip
     assert hub.provenance(Manifest.from_dict(doc))[0] == kind
+
+
+def test_a_full_destination_is_named_when_pyarrow_says_errno_28_without_a_file(
+    built, tmp_path, monkeypatch
+) -> None:
+    """pyarrow's full-disk error names no file: the export says the destination's disk filled (not
+    the home's), and leaves nothing there."""
+    import errno
+
+    from siteline.stores.diskspace import disk_full, full_disk_message
+
+    _, _, pub = built
+
+    def full(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        raise OSError(errno.ENOSPC, "Error writing bytes to file. Detail: [errno 28] No space left on device")
+
+    monkeypatch.setattr(hub, "export_hf", full)
+    out = tmp_path / "elsewhere" / "hf"
+    out.parent.mkdir()
+    with pytest.raises(OSError) as caught:
+        export_release(Path(pub.root), "hf", out, license=hub.HubLicense("cc-by-4.0"))
+    assert caught.value.filename == str(out) and disk_full(caught.value)
+    line = full_disk_message(caught.value, tmp_path / "home")
+    assert f"writing {out}" in line and f"the file system holding {out.parent} has" in line
+    assert list(out.parent.iterdir()) == []  # nothing half-written

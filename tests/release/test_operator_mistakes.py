@@ -70,6 +70,7 @@ def test_bad_ports_urls_and_public_addresses_are_refused_in_one_line(tmp_path) -
     for argv, env, words in (
         (["--port", "70000"], {}, "from 1 to 65535"),
         ([], {"SITELINE_PREVIEW_URL": "http://127.0.0.1:99999"}, "SITELINE_PREVIEW_URL"),
+        ([], {"SITELINE_PREVIEW_URL": "http://127.0.0.1:0"}, "port 0: give one from 1 to 65535"),
         ([], {"SITELINE_PREVIEW_URL": "http://127.0.0.1:port"}, "SITELINE_PREVIEW_URL"),
         (["--host", "0.0.0.0"], {}, "--public"),
     ):

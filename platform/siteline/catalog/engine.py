@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -15,13 +16,40 @@ from sqlalchemy.orm import Session, sessionmaker
 import siteline.catalog.guards  # noqa: F401  (registers the flush guards)
 from siteline.errors import CatalogError
 
+# how long a writer waits for a SQLite catalog another writer holds (seconds; SITELINE_CATALOG_WAIT_S)
+CATALOG_WAIT_S = 30.0
+
+
+def catalog_wait_s() -> float:
+    """Seconds a SQLite writer waits for the catalog: SITELINE_CATALOG_WAIT_S, else
+    :data:`CATALOG_WAIT_S`; :class:`CatalogError` when it is not a number of seconds."""
+    raw = os.environ.get("SITELINE_CATALOG_WAIT_S")
+    if raw is None:
+        return CATALOG_WAIT_S
+    try:
+        wait = float(raw)
+    except ValueError:
+        wait = -1.0
+    if not 0 <= wait < 86400:
+        raise CatalogError(f"SITELINE_CATALOG_WAIT_S={raw!r}: a number of seconds from 0 to 86400.")
+    return wait
+
+
+def catalog_busy_message() -> str:
+    """One line for a command whose catalog write waited its whole wait behind another writer."""
+    return (
+        f"the catalog was held by another writer (a publish, an ingest or a build) for {catalog_wait_s():g} s, "
+        "longer than this command waits (SITELINE_CATALOG_WAIT_S): nothing of this run was stored; "
+        "run it again when the other one has finished."
+    )
+
 
 def _sqlite_pragmas(dbapi_connection: Any, connection_record: Any) -> None:
     cur = dbapi_connection.cursor()
     cur.execute("PRAGMA foreign_keys=ON")
     cur.execute("PRAGMA journal_mode=WAL")
     cur.execute("PRAGMA synchronous=NORMAL")
-    cur.execute("PRAGMA busy_timeout=30000")
+    cur.execute(f"PRAGMA busy_timeout={int(catalog_wait_s() * 1000)}")
     cur.close()
 
 
@@ -34,7 +62,7 @@ def make_engine(url: str) -> sa.Engine:
     if parsed.get_backend_name() == "sqlite":
         if parsed.database and parsed.database != ":memory:":
             Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
-        engine = sa.create_engine(url, connect_args={"timeout": 30})
+        engine = sa.create_engine(url, connect_args={"timeout": catalog_wait_s()})
         event.listen(engine, "connect", _sqlite_pragmas)
         return engine
     if parsed.get_backend_name() == "postgresql" and parsed.get_driver_name() in ("", "psycopg2"):

@@ -36,7 +36,7 @@ def _bind(preview_url: str, host: str | None, port: int | None, public: bool) ->
         raise ConfigError(
             f"SITELINE_PREVIEW_URL {preview_url!r} has no valid port ({exc}); give one such as http://127.0.0.1:4201."
         ) from exc
-    chosen = port if port is not None else (url_port or 4201)
+    chosen = port if port is not None else (url_port if url_port is not None else 4201)
     if not 1 <= chosen <= 65535:
         raise ConfigError(f"port {chosen}: give one from 1 to 65535 (--port or SITELINE_PREVIEW_URL).")
     address = host or url.hostname or "127.0.0.1"

@@ -233,7 +233,11 @@ def browse(
         "--out",
         help="HTML file (or folder) to write (default: <version>.html beside the release's folder).",
     ),
-    force: bool = typer.Option(False, "--force", help="Replace an existing file given with --out."),
+    force: bool = typer.Option(
+        False,
+        "--force",
+        help="Replace an existing page at --out (or <name>-<version>.html in the --out folder).",
+    ),
     as_json: bool = JsonOption,
 ) -> None:
     """Write the release browser (draft or published) as one HTML page beside the release: a grid of
@@ -243,9 +247,7 @@ def browse(
 
     with catalog() as cat, cat.transaction() as s:
         root, status = release_location(s, name, version)
-    if out is not None and out.is_file() and not force:
-        raise ReleaseError(f"{out} exists: pass --force to replace it, or give another --out.")
-    page = write_browser(root, out, status)
+    page = write_browser(root, out, status, replace=force or out is None)
     emit(
         as_json,
         {"name": name, "version": version, "status": status, "page": str(page)},

@@ -85,11 +85,15 @@ def default_page_path(root: Path) -> Path:
     return root.parent / f"{root.name}.html"
 
 
-def write_browser(root: Path, out: Path | None = None, status: str = "published") -> Path:
+def write_browser(
+    root: Path, out: Path | None = None, status: str = "published", replace: bool = True
+) -> Path:
     """Write the browser of the release at ``root`` to the HTML file ``out`` (default
-    :func:`default_page_path`), its images addressed relative to ``out``'s folder so the page opens
-    from the disk (file://) or wherever the two are served together. Written whole (a temporary
-    file renamed into place, siteline.stores.atomic_file). :class:`ReleaseError` when ``out`` lies inside the release."""
+    :func:`default_page_path`; a folder: ``<name>-<version>.html`` in it), its images addressed
+    relative to ``out``'s folder so the page opens from the disk (file://) or wherever the two are
+    served together. Written whole (a temporary file renamed into place, siteline.stores.atomic_file).
+    :class:`ReleaseError` when ``out`` lies inside the release, when it exists and ``replace`` is
+    False, or when it is not a regular file (a FIFO, a device, a socket: never replaced)."""
     root = Path(root).resolve()
     out = Path(out).absolute() if out is not None else default_page_path(root)
     if Path(os.path.realpath(out)).is_relative_to(root):
@@ -98,6 +102,10 @@ def write_browser(root: Path, out: Path | None = None, status: str = "published"
         )
     if out.is_dir():
         out = out / f"{root.parent.name}-{root.name}.html"
+    if os.path.lexists(out) and not (out.is_file() and not out.is_symlink()):
+        raise ReleaseError(f"{out} exists and is not a regular file: give another --out.")
+    if out.exists() and not replace:
+        raise ReleaseError(f"{out} exists: pass --force to replace it, or give another --out.")
     doc = read_manifest(root)
     images = Path(os.path.relpath(root, out.parent)).as_posix()
     page = browser_page(doc, images, None, status)

@@ -15,14 +15,16 @@ import logging
 import mimetypes
 import os
 import re
+import socket
 import threading
+import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 from importlib.resources import files
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 from urllib.parse import parse_qs, quote, unquote, urlsplit
 
 from siteline.errors import SitelineError
@@ -40,11 +42,23 @@ MAX_BUDGET = 20_000_000
 # how many pairs' plans (open readers and their node plans) the server keeps
 OPEN_PAIRS = 4
 _ROUTE = re.compile(r"^/(browse|3d)/([^/]+)/([^/]+)/(.*)$")
-# a connection idle or half-sent this long is closed (seconds)
+# a number in a path: ASCII digits only (str.isdigit and int() take superscripts and other scripts)
+_NUMBER = re.compile(r"[0-9]+", re.ASCII)
+# an absolute path in an error's text (told by its last part only: a response never names the disk)
+_ABSOLUTE = re.compile(r"(?:[A-Za-z]:)?(?:[/\\][^/\\\s'\"]+)+[/\\]?")
+# a connection idle this long between two reads is closed (seconds)
 IDLE_TIMEOUT_S = 20.0
-# connections served at once; more are answered 503 and closed
+# a request (its line and headers) must arrive whole within this many seconds of the server's
+# starting to wait for it, however slowly its bytes trickle in; then its connection is closed
+REQUEST_DEADLINE_S = 10.0
+# how often the server looks for requests past their deadline (seconds)
+REAP_EVERY_S = 0.25
+# requests answered at once (a request holds one of these only once it has arrived whole); more are
+# answered 503
 MAX_CONNECTIONS = 64
-# the longest path and path segment a request may name (characters)
+# connections open at once, waiting for their request or answered; more are answered 503 and closed
+MAX_PENDING = 512
+# the longest path (characters) and path segment (UTF-8 bytes, a file name's limit) a request may name
 MAX_PATH = 2048
 MAX_SEGMENT = 255
 # a pair or chunk number has at most this many digits
@@ -128,6 +142,17 @@ class _Manifests:
         return doc
 
 
+def _public(text: str) -> str:
+    """An error's text as a response or a log line may hold it: each absolute path replaced by its
+    last part (a file's name, never where the disk keeps it)."""
+    return _ABSOLUTE.sub(lambda m: Path(m[0].rstrip("/\\")).name or "/", text)
+
+
+def _number(text: str) -> int | None:
+    """The number ``text`` spells in ASCII digits, at most :data:`MAX_DIGITS` of them; else None."""
+    return int(text) if len(text) <= MAX_DIGITS and _NUMBER.fullmatch(text) else None
+
+
 def _inside(root: Path, rel: str) -> Path | None:
     """``root/rel`` when ``rel`` names a file that lies inside ``root`` (no hidden part, no way out)."""
     parts = [p for p in rel.split("/") if p]
@@ -144,6 +169,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
 
     home: Path
     timeout = IDLE_TIMEOUT_S  # socket timeout: an idle or half-sent request is closed
+    _serving = False  # whether this request holds one of the server's answer slots
 
     def __init__(
         self, *args: Any, home: Path, access: ReleaseAccess | None = None, plans: _Plans | None = None,
@@ -154,6 +180,43 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         self.plans = plans or _Plans()
         self.manifests = manifests or _Manifests()
         super().__init__(*args, directory=str(home), **kwargs)
+
+    def handle_one_request(self) -> None:
+        """One request: it must arrive whole within the server's deadline (:class:`PreviewServer`
+        closes its connection after), then holds an answer slot while it is answered."""
+        server = self._server
+        server.watch(self.connection, self.client_address)
+        try:
+            super().handle_one_request()
+        finally:
+            server.unwatch(self.connection)
+            if self._serving:
+                self._serving = False
+                server.answering.release()
+
+    def parse_request(self) -> bool:
+        """The request line and headers, read: answered 503 when every answer slot is taken, nothing
+        when the server closed the connection at its deadline."""
+        server = self._server
+        if not server.unwatch(self.connection):  # closed at the deadline: nothing more to say
+            self.close_connection = True
+            return False
+        if not super().parse_request():
+            return False
+        if not server.answering.acquire(blocking=False):
+            log.info(
+                "previews: %s answered 503: %d requests are being answered",
+                self.client_address[0],
+                server.limit,
+            )
+            self.send_error(503, "too many requests at once: try again")
+            return False
+        self._serving = True
+        return True
+
+    @property
+    def _server(self) -> PreviewServer:
+        return cast(PreviewServer, self.server)  # only that server makes these handlers
 
     def _send(self, body: bytes, content_type: str, status: int = 200, cache: bool = False) -> io.BytesIO:
         self.send_response(status)
@@ -217,15 +280,21 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
 
     def _release_route(self, kind: str, name: str, version: str, rest: str) -> io.BytesIO:
         head, _, tail = rest.partition("/")
-        if kind == "3d" and (not head.isdigit() or len(head) > MAX_DIGITS):
+        pair_id = _number(head)
+        if kind == "3d" and pair_id is None:
             return self._text(
-                400, f"/3d/{name}/{version}/<pair>/: the pair is a number of at most {MAX_DIGITS} digits"
+                400,
+                f"/3d/{name}/{version}/<pair>/: the pair is a number of at most {MAX_DIGITS} digits (0-9)",
             )
         try:
             root, status = self._locate(name, version)
+        except LookupError:
+            return self._text(404, f"no release {name} {version}")
+        try:
             doc = self.manifests.read(root)
-        except (LookupError, SitelineError) as exc:
-            return self._text(404, str(exc))
+        except (SitelineError, OSError) as exc:
+            log.info("previews: release %s %s: %s", name, version, _public(str(exc)))
+            return self._text(404, f"release {name} {version} cannot be read: {_public(str(exc))}")
         base = f"/{kind}/{quote(name)}/{quote(version)}"
         browse = f"/browse/{quote(name)}/{quote(version)}/"
         if kind == "browse":
@@ -236,7 +305,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
                 kind_ = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
                 return self._send(path.read_bytes(), kind_, cache=status == "published")
             return self._text(404, f"release {name} {version} has no {rest}")
-        pair = int(head)
+        pair = int(pair_id or 0)
         if tail == "":
             page = _viewer_page(f"{name} {version} ({status}): pair {pair} in 3D", f"{base}/{pair}")
             return self._send(page.encode(), "text/html; charset=utf-8")
@@ -256,25 +325,41 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
                 (str(root), doc.created, pair, budget),
                 lambda: self.access.open_pair(doc, pair).plan(budget),  # type: ignore[union-attr]
             )
-        except SitelineError as exc:
-            return self._text(404, str(exc))
+        except (SitelineError, OSError) as exc:
+            log.info("previews: release %s %s pair %d: %s", name, version, pair, _public(str(exc)))
+            return self._text(
+                404, f"release {name} {version}: pair {pair} cannot be shown: {_public(str(exc))}"
+            )
         if tail == "plan.json":
             return self._send(json.dumps(plan.to_dict(browse)).encode(), "application/json")
-        m = re.fullmatch(rf"t([12])/(\d{{1,{MAX_DIGITS}}})\.bin", tail)
+        m = re.fullmatch(rf"t([12])/([0-9]{{1,{MAX_DIGITS}}})\.bin", tail, re.ASCII)
         if m is None:
             return self._text(404, f"pair {pair} in 3D has no {tail}")
         try:
             data = plan.chunk(int(m[1]), int(m[2]))
-        except IndexError as exc:
-            return self._text(404, str(exc))
+        except (IndexError, SitelineError, OSError) as exc:
+            return self._text(404, f"release {name} {version} pair {pair}: {_public(str(exc))}")
         return self._send(data, "application/octet-stream", cache=status == "published")
 
     def send_head(self) -> io.BufferedIOBase | io.BytesIO | None:  # type: ignore[override]
         path = unquote(urlsplit(self.path).path)
-        if "\x00" in path or len(path) > MAX_PATH or any(len(p) > MAX_SEGMENT for p in path.split("/")):
+        if (
+            "\x00" in path
+            or len(path) > MAX_PATH
+            or any(len(p.encode("utf-8", "surrogatepass")) > MAX_SEGMENT for p in path.split("/"))
+        ):
             return self._text(
-                400, f"a path without NUL bytes, of at most {MAX_PATH} characters and {MAX_SEGMENT} a segment"
+                400,
+                f"a path without NUL bytes, of at most {MAX_PATH} characters and {MAX_SEGMENT} bytes a segment",
             )
+        try:
+            return self._route(path)
+        except Exception as exc:  # a request must get an answer, and the log one line without the disk
+            log.error("previews: %s failed: %s: %s", _public(path), type(exc).__name__, _public(str(exc)))
+            log.debug("previews: %s failed", path, exc_info=True)
+            return self._text(500, f"{type(exc).__name__}: the server could not answer this request")
+
+    def _route(self, path: str) -> io.BufferedIOBase | io.BytesIO | None:
         if path in ("/", ""):
             return self._index()
         if path == "/favicon.ico":
@@ -282,11 +367,7 @@ class PreviewHandler(http.server.SimpleHTTPRequestHandler):
         if path.startswith(STATIC + "/"):
             return self._static(path[len(STATIC) + 1 :])
         if (m := _ROUTE.match(path)) is not None:
-            try:
-                return self._release_route(*m.groups())
-            except Exception as exc:  # a page's request must get an answer, and the log the cause
-                log.exception("previews: %s failed", self.path)
-                return self._text(500, f"{type(exc).__name__}: {exc}")
+            return self._release_route(*m.groups())
         if path in ("/browse", "/3d") or path.startswith(("/browse/", "/3d/")):
             return self._text(404, f"{path}: use /browse/<name>/<version>/ or /3d/<name>/<version>/<pair>/")
         if _allowed(self.home, self.path) is None:
@@ -328,16 +409,74 @@ def _viewer_page(title: str, base: str) -> str:
 
 
 class PreviewServer(http.server.ThreadingHTTPServer):
-    """A thread per connection, at most MAX_CONNECTIONS at once (the next is answered 503 and
-    closed); a client that goes away mid-answer is one line in the log, not a traceback."""
+    """A thread per connection, at most ``pending`` connections open (the next is answered 503 and
+    closed) and ``limit`` requests answered at once (a request takes a slot only once it has
+    arrived whole; the next is answered 503). A request must arrive whole within ``deadline_s`` of
+    the server's starting to wait for it: a watcher thread closes the connection of one that has
+    not, so clients that trickle their bytes (or send none) hold a connection for ``deadline_s`` at
+    most and never an answer slot. A client that goes away mid-answer, or is closed at its
+    deadline, is one line in the log, not a traceback."""
 
     daemon_threads = True
+    # connections the kernel queues before they are accepted (the standard library's 5 made a burst of
+    # 100 wait seconds for SYN retries)
+    request_queue_size = 256
 
     def __init__(
-        self, address: tuple[str, int], handler: Callable[..., Any], limit: int = MAX_CONNECTIONS
+        self,
+        address: tuple[str, int],
+        handler: Callable[..., Any],
+        limit: int = MAX_CONNECTIONS,
+        pending: int = MAX_PENDING,
+        deadline_s: float = REQUEST_DEADLINE_S,
     ) -> None:
         super().__init__(address, handler)
-        self.slots = threading.BoundedSemaphore(limit)
+        self.limit = limit
+        self.slots = threading.BoundedSemaphore(pending)
+        self.answering = threading.BoundedSemaphore(limit)
+        self.deadline_s = deadline_s
+        self._waiting: dict[socket.socket, tuple[float, str]] = {}
+        self._closed_at_deadline: set[socket.socket] = set()
+        self._guard = threading.Lock()
+        self._stop = threading.Event()
+        threading.Thread(target=self._close_late, name="previews-deadline", daemon=True).start()
+
+    def watch(self, conn: socket.socket, client_address: Any) -> None:
+        """Start the deadline of the request ``conn`` is about to send."""
+        with self._guard:
+            self._waiting[conn] = (time.monotonic() + self.deadline_s, str(client_address[0]))
+
+    def unwatch(self, conn: socket.socket) -> bool:
+        """Stop ``conn``'s deadline; False when the server already closed it there."""
+        with self._guard:
+            self._waiting.pop(conn, None)
+            return conn not in self._closed_at_deadline
+
+    def _close_late(self) -> None:
+        while not self._stop.wait(REAP_EVERY_S):
+            now = time.monotonic()
+            with self._guard:
+                late = [(c, who) for c, (due, who) in self._waiting.items() if due <= now]
+                for conn, _ in late:
+                    del self._waiting[conn]
+                    self._closed_at_deadline.add(conn)
+            for conn, who in late:
+                log.info(
+                    "previews: %s did not send a whole request within %g s: closed", who, self.deadline_s
+                )
+                try:
+                    conn.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+
+    def server_close(self) -> None:
+        self._stop.set()
+        super().server_close()
+
+    def shutdown_request(self, request: Any) -> None:
+        with self._guard:
+            self._closed_at_deadline.discard(request)
+        super().shutdown_request(request)
 
     def process_request(self, request: Any, client_address: Any) -> None:
         if not self.slots.acquire(blocking=False):
@@ -364,6 +503,9 @@ class PreviewServer(http.server.ThreadingHTTPServer):
         import sys
 
         exc = sys.exc_info()[1]
+        with self._guard:
+            if request in self._closed_at_deadline:  # said when it was closed
+                return
         if isinstance(exc, ConnectionError | TimeoutError):
             log.info("previews: %s went away (%s)", client_address[0], type(exc).__name__)
             return
@@ -371,12 +513,14 @@ class PreviewServer(http.server.ThreadingHTTPServer):
 
 
 def make_server(
-    home: Path, host: str, port: int, access: ReleaseAccess | None = None, limit: int = MAX_CONNECTIONS
-) -> PreviewServer:
+    home: Path, host: str, port: int, access: ReleaseAccess | None = None, limit: int = MAX_CONNECTIONS,
+    pending: int = MAX_PENDING, deadline_s: float = REQUEST_DEADLINE_S,
+) -> PreviewServer:  # fmt: skip
     """A server of ``home``'s previews and releases on ``host``:``port`` (not started); ``access``:
     how to reach drafts and the scenes behind a release (None: published releases, no 3D viewer);
-    ``limit``: connections served at once."""
+    ``limit``: requests answered at once, ``pending``: connections open at once, ``deadline_s``:
+    seconds a request has to arrive whole (:class:`PreviewServer`)."""
     layout.previews(home).mkdir(parents=True, exist_ok=True)
     layout.releases(home).mkdir(parents=True, exist_ok=True)
     handler = partial(PreviewHandler, home=Path(home), access=access, plans=_Plans(), manifests=_Manifests())
-    return PreviewServer((host, port), handler, limit)
+    return PreviewServer((host, port), handler, limit, pending, deadline_s)

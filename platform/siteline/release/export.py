@@ -9,6 +9,7 @@ The loading rules below were read in each tool's own loader (DESIGN.md §8).
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -21,7 +22,7 @@ from PIL import Image
 
 from siteline.errors import ReleaseError
 from siteline.records.release import Manifest
-from siteline.release.hub import HubLicense
+from siteline.release.hub import HubLicense, Shards
 from siteline.release.layout import manifest_format
 from siteline.release.manifest import SAFE_ITEM_ID, read_manifest
 from siteline.schema import JSON
@@ -262,26 +263,40 @@ PROFILE_NAMES = (*PROFILES, HF_PROFILE)
 
 
 def _export_hf(root: Path, out: Path, doc: Manifest, license: HubLicense | None) -> ExportResult:
-    from siteline.release.hub import HUB_SPLITS, export_hf
+    from siteline.release.hub import export_hf
 
     if license is None:
         raise ReleaseError(
             "the hf export needs a licence for its card: --license with a hub licence id (cc-by-4.0, mit, ...), "
             "or --license other with --license-name and --license-link."
         )
-    with publish_folder(out) as work:
-        shards = export_hf(root, doc, work, license)
-        result = ExportResult(
+    try:
+        with publish_folder(out) as work:
+            return _write_hf(root, out, work, doc, license, export_hf(root, doc, work, license))
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT) and not exc.filename:
+            # pyarrow says errno 28 without a file: the disk that filled is the destination's
+            raise OSError(exc.errno, exc.strerror or os.strerror(exc.errno), str(out)) from exc
+        raise
+
+
+def _write_hf(
+    root: Path, out: Path, work: Path, doc: Manifest, license: HubLicense, shards: Shards
+) -> ExportResult:
+    """The hf export's record, written beside its shards in ``work``."""
+    from siteline.release.hub import HUB_SPLITS
+
+    result = ExportResult(
             HF_PROFILE, str(out), sum(len(v) for v in shards.files.values()), shards.rows,
             dict(HUB_SPLITS), "label holds 0 unchanged, 1 changed, 255 ignore (from label_ignore/)",
             "ignore is carried: train with ignore_index=255 on the label field (or mask with the ignore field)",
             f"load it with datasets.load_dataset({str(out)!r}); licence in the card: {license.id}",
-        )  # fmt: skip
-        record = result.to_dict() | {
-            "release": {"name": doc.name, "version": doc.version, "root": str(root)},
-            "tool": HF_LOADER, "links": "images copied into the parquet shards", "shards": shards.files,
-        }  # fmt: skip
-        (work / EXPORT_RECORD).write_text(json.dumps(record, indent=1) + "\n")
+    )  # fmt: skip
+    record = result.to_dict() | {
+        "release": {"name": doc.name, "version": doc.version, "root": str(root)},
+        "tool": HF_LOADER, "links": "images copied into the parquet shards", "shards": shards.files,
+    }  # fmt: skip
+    (work / EXPORT_RECORD).write_text(json.dumps(record, indent=1) + "\n")
     return result
 
 

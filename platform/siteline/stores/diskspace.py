@@ -5,41 +5,68 @@ from __future__ import annotations
 import errno
 import re
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT}
-# what SQLite and PostgreSQL say (through SQLAlchemy) when their disk is full
-_FULL_TEXTS = ("database or disk is full", "no space left on device", "could not extend file")
-# a short write with no errno (numpy's tofile: "15321 requested and 8763 written"): the disk took
-# less than it was given, which on a local file system means it is full
-_SHORT_WRITE = re.compile(r"\b\d+ requested and \d+ written\b")
+# the databases' own codes for a full disk: SQLite's SQLITE_FULL (sqlite3 errors carry it as
+# sqlite_errorcode), PostgreSQL's SQLSTATE 53100 disk_full (psycopg errors carry it as sqlstate);
+# their messages are never read (a database or file may be named with those words)
+_SQLITE_FULL = 13
+_POSTGRES_DISK_FULL = "53100"
+# SQLite's codes for a database another connection holds (SQLITE_BUSY, SQLITE_LOCKED)
+_SQLITE_BUSY = (5, 6)
+# a short write with no errno: numpy's tofile raises OSError("15321 requested and 8763 written")
+# when the disk took less than it was given, which on a local file system means it is full; the
+# whole message must be that (a path holding those words is not one)
+_SHORT_WRITE = re.compile(r"\d+ requested and \d+ written")
 
 
-# the drivers whose errors carry no errno and say a full disk in words
-_DATABASE_MODULES = ("sqlalchemy", "sqlite3", "psycopg", "psycopg2")
+def _chain(exc: BaseException) -> Iterator[BaseException]:
+    """``exc``, the exceptions it was raised from, and a database error's driver error (``orig``)."""
+    seen: set[int] = set()
+    todo: list[BaseException] = [exc]
+    while todo:
+        cur = todo.pop()
+        if id(cur) in seen:
+            continue
+        seen.add(id(cur))
+        yield cur
+        todo.extend(
+            e
+            for e in (getattr(cur, "orig", None), cur.__cause__, cur.__context__)
+            if isinstance(e, BaseException)
+        )
+
+
+def _sqlite_code(exc: BaseException) -> int | None:
+    """A sqlite3 error's primary result code (its extended code's low byte), None for others."""
+    code = getattr(exc, "sqlite_errorcode", None)
+    return code & 0xFF if isinstance(code, int) else None
 
 
 def _says_full(exc: BaseException) -> bool:
-    """Whether this one exception reports a full disk: by its errno when it has one (never by its
-    text, which may hold a file name), by a database driver's words, or by a short write."""
+    """Whether this one exception reports a full disk: by its errno when it has one, by a database's
+    own error code, or by a short write's whole message; never by words in a longer text, which may
+    hold a file's or a database's name."""
     if isinstance(exc, OSError) and exc.errno is not None:
         return exc.errno in _FULL_ERRNOS
-    text = str(exc).lower()
-    if type(exc).__module__.split(".")[0] in _DATABASE_MODULES:
-        return any(t in text for t in _FULL_TEXTS)
-    return isinstance(exc, OSError | ValueError) and bool(_SHORT_WRITE.search(text))
+    if _sqlite_code(exc) == _SQLITE_FULL:
+        return True
+    if getattr(exc, "sqlstate", None) == _POSTGRES_DISK_FULL:
+        return True
+    return type(exc) is OSError and bool(_SHORT_WRITE.fullmatch(str(exc).strip()))
 
 
 def disk_full(exc: BaseException) -> bool:
     """Whether ``exc`` (or an exception it was raised from) says a disk is full."""
-    seen: set[int] = set()
-    cur: BaseException | None = exc
-    while cur is not None and id(cur) not in seen:
-        seen.add(id(cur))
-        if _says_full(cur):
-            return True
-        cur = cur.__cause__ or cur.__context__
-    return False
+    return any(_says_full(e) for e in _chain(exc))
+
+
+def catalog_busy(exc: BaseException) -> bool:
+    """Whether ``exc`` (or an exception it was raised from) is SQLite's "database is locked": another
+    writer held the catalog past the busy timeout (told by SQLite's code, not its words)."""
+    return any(_sqlite_code(e) in _SQLITE_BUSY for e in _chain(exc))
 
 
 def full_disk_message(exc: BaseException, home: Path) -> str:
