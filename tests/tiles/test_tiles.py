@@ -24,7 +24,7 @@ from siteline.render.zbuffer import render_points
 from siteline.site.spec import make_site_spec
 from siteline.tiles.export import export_las
 from siteline.tiles.layout import parse_tile_key, tile_origin_local
-from siteline.tiles.reader import SceneTiles
+from siteline.tiles.reader import SceneTiles, boxes_inside_frustum
 from siteline.tiles.writer import TileInput, write_tiles
 
 ALL = ("rgb", "class", "intensity", "gps_time", "return_number")
@@ -192,6 +192,15 @@ def test_frustum_read_equals_brute_force(tmp_path) -> None:
     planes = cam.scaled(0.5).frustum_planes(1e-3)
     brute = np.flatnonzero(np.all(local @ planes[:, :3].T + planes[:, 3] >= 0, axis=1))
     assert set(got.attributes["gps_time"].astype(int)) == set(brute)
+    # ... though only the points of nodes that cross a plane were tested (both kinds are here)
+    full = tiles._frustum_nodes(cam, 0.5, None, 1e-3)
+    inside = np.concatenate(
+        [
+            boxes_inside_frustum(full.planes, tiles.by_tile[t].lo[s], tiles.by_tile[t].hi[s])
+            for t, (s, _) in full.selection.items()
+        ]
+    )
+    assert inside.any() and (~inside).any()
     assert got.xyz_m.dtype == np.float64  # xyz_m is float64 site-local metres from every read
     assert got.stats.points_read < 30_000  # culled tiles were not read
     auto = tiles.points_for_view(cam, 0.125, attributes=("gps_time",))

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import zarr
+from zarr.core.sync import sync
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
@@ -93,15 +95,33 @@ def box_in_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
     return bool((vals >= 0).any(axis=0).all())
 
 
-def boxes_in_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(M,) bool, vectorised :func:`box_in_frustum` over M boxes (M, 3) lo and hi."""
+def _corner_values(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M, 8, P): each plane's value at each corner of M boxes (M, 3) lo and hi."""
     corners = np.stack(
         [np.stack([lo[:, 0] if a == 0 else hi[:, 0], lo[:, 1] if b == 0 else hi[:, 1], lo[:, 2] if c == 0 else hi[:, 2]], axis=1)
          for a in (0, 1) for b in (0, 1) for c in (0, 1)],
         axis=1,
     )  # (M, 8, 3)  # fmt: skip
-    vals = corners @ planes[:, :3].T + planes[:, 3]  # (M, 8, 6)
-    return (vals >= 0).any(axis=1).all(axis=1)
+    return corners @ planes[:, :3].T + planes[:, 3]
+
+
+def boxes_in_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M,) bool, vectorised :func:`box_in_frustum` over M boxes (M, 3) lo and hi."""
+    inside: np.ndarray = np.all(np.any(_corner_values(planes, lo, hi) >= 0, axis=1), axis=1)
+    return inside
+
+
+# a box counts as wholly inside a frustum when every corner is at least this far (metres) inside
+# every plane: float64 rounding of a point's test (about 1e-12 m here) cannot then put a point of
+# the box outside
+INSIDE_MARGIN_M = 1e-6
+
+
+def boxes_inside_frustum(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M,) bool: the boxes (M, 3) lo and hi that lie wholly inside the frustum ``planes`` (with
+    :data:`INSIDE_MARGIN_M`): every point in them passes its test, so none needs one."""
+    inside: np.ndarray = np.all(_corner_values(planes, lo, hi) >= INSIDE_MARGIN_M, axis=(1, 2))
+    return inside
 
 
 def box_distance(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -341,52 +361,89 @@ class SceneTiles:
             arr = self._handles[key] = found
         return arr
 
-    def _values(self, tile: str, name: str, k: int, idx: np.ndarray | None, stats: ReadStats) -> np.ndarray:
-        """Values ``idx`` (ascending; the first ``k`` when None) of ``tiles/<tile>/<name>``, read by
-        the array's inner chunks: only the chunks they touch are decoded, each kept in the reader's
-        LRU cache, so a view that needs a few nodes of a tile never decodes the rest of it."""
-        arr = self._handle(tile, name)
-        c = int(arr.chunks[0])
-        if (k if idx is None else len(idx)) == 0:
-            return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
+    def _chunk_plan(self, tile: str, k: int, idx: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The inner chunks (ascending) that values ``idx`` (ascending; the first ``k`` when None) of
+        ``tile``'s arrays lie in, and each value's position in those chunks laid end to end (None:
+        the first ``k``). Every array of a tile has the same chunk length (``spec.chunk_points``)."""
+        c = int(self._handle(tile, COUNTS).chunks[0])
         if idx is None:
-            blocks = self._chunks(tile, name, arr, c, np.arange(-(-k // c)), stats)
-            return (blocks[0] if len(blocks) == 1 else np.concatenate(blocks))[:k]
+            return np.arange(-(-k // c)), None
         q = idx // c
         if len(q) and np.any(q[1:] < q[:-1]):
             raise TileError("node reads must come in array order.")
-        first = np.ones(len(q), dtype=bool)
-        first[1:] = q[1:] != q[:-1]
-        blocks = self._chunks(tile, name, arr, c, q[first], stats)
-        buf = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
-        # every chunk but the array's last is full, so chunk j of the read starts at j * c in buf
-        return buf[(np.cumsum(first) - 1) * c + (idx - q * c)]
+        first = np.empty(len(q), dtype=bool)
+        first[:1] = True
+        np.not_equal(q[1:], q[:-1], out=first[1:])
+        # every chunk but the array's last is full, so chunk j of the read starts at j * c
+        return q[first], (np.cumsum(first) - 1) * c + (idx - q * c)
 
-    def _chunks(
-        self, tile: str, name: str, arr: zarr.Array, c: int, ids: np.ndarray, stats: ReadStats
-    ) -> list[np.ndarray]:
-        """Inner chunks ``ids`` of ``arr`` from the cache; each run of missing ones in one zarr call."""
-        out: list[np.ndarray | None] = [self._cache.get((tile, name, int(i))) for i in ids]
-        missing = [q for q, v in enumerate(out) if v is None]
-        runs = np.split(np.array(missing), np.flatnonzero(np.diff(ids[missing]) != 1) + 1) if missing else []
-        for run in runs:
-            first, last = int(ids[run[0]]), int(ids[run[-1]])
-            values = np.asarray(arr[first * c : (last + 1) * c])
-            stats.points_decoded += len(values)
-            for q in run:
-                lo = (int(ids[q]) - first) * c
-                block = values[lo : lo + c]
-                out[q] = block = block.copy() if len(run) > 1 else block  # evictable one by one
-                self._cache[(tile, name, int(ids[q]))] = block
-                self._cached += block.nbytes
-        fresh = set(missing)
-        for q, i in enumerate(ids):
-            if q not in fresh:
-                self._cache.move_to_end((tile, name, int(i)))
-        while self._cached > self.cache_bytes and len(self._cache) > len(ids):
+    def _values(
+        self,
+        tile: str,
+        name: str,
+        k: int,
+        plan: tuple[np.ndarray, np.ndarray | None],
+        blocks: dict[tuple[str, str, int], np.ndarray],
+    ) -> np.ndarray:
+        """Values of ``tiles/<tile>/<name>`` at ``plan`` (:meth:`_chunk_plan` of its first ``k`` or
+        its chosen values), from the decoded inner chunks ``blocks`` (:meth:`_load`)."""
+        ids, at = plan
+        if (k if at is None else len(at)) == 0:
+            arr = self._handle(tile, name)
+            return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
+        parts = [blocks[(tile, name, i)] for i in ids.tolist()]
+        buf = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        return buf[:k] if at is None else buf[at]
+
+    def _load(
+        self, wanted: Sequence[tuple[str, str, np.ndarray]], stats: ReadStats
+    ) -> dict[tuple[str, str, int], np.ndarray]:
+        """The decoded inner chunks ``(tile, name, ids)`` of ``wanted``: from the reader's LRU cache,
+        the rest read in one concurrent zarr call (each run of consecutive missing chunks of an array
+        one selection, all of them decoded at once by zarr's codec pipeline and its threads), then
+        cached. A view's read of dozens of tiles and attributes waits for the slowest chunk, not
+        for the sum of them."""
+        out: dict[tuple[str, str, int], np.ndarray] = {}
+        runs: list[tuple[str, str, int, int, int]] = []  # tile, name, chunk length, first, last
+        for tile, name, ids in wanted:
+            c = int(self._handle(tile, name).chunks[0])
+            missing = []
+            for i in ids.tolist():
+                key = (tile, name, i)
+                hit = self._cache.get(key)
+                if hit is None:
+                    missing.append(i)
+                else:
+                    self._cache.move_to_end(key)
+                    out[key] = hit
+            if missing:
+                m = np.array(missing)
+                for run in np.split(m, np.flatnonzero(np.diff(m) != 1) + 1):
+                    runs.append((tile, name, c, int(run[0]), int(run[-1])))
+        if runs:
+            arrays = [self._handle(tile, name).async_array for tile, name, _, _, _ in runs]
+
+            async def read_all() -> list[Any]:
+                return await asyncio.gather(
+                    *(
+                        a.getitem(slice(first * c, (last + 1) * c))
+                        for a, (_, _, c, first, last) in zip(arrays, runs, strict=True)
+                    )
+                )
+
+            for (tile, name, c, first, last), got in zip(runs, sync(read_all()), strict=True):
+                values = np.asarray(got)
+                stats.points_decoded += len(values)
+                for i in range(first, last + 1):
+                    lo = (i - first) * c
+                    block = values[lo : lo + c]
+                    block = block.copy() if last > first else block  # evictable one by one
+                    out[(tile, name, i)] = self._cache[(tile, name, i)] = block
+                    self._cached += block.nbytes
+        while self._cached > self.cache_bytes and self._cache:
             _, old = self._cache.popitem(last=False)
             self._cached -= old.nbytes
-        return out  # type: ignore[return-value]
+        return out
 
     @property
     def point_count(self) -> int:
@@ -466,25 +523,57 @@ class SceneTiles:
                 f"(positions always come back as {METRES!r})."
             )
 
-    def _gather(self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]) -> Points:
+    def _gather(
+        self,
+        plan: dict[str, tuple[int, np.ndarray | None]],
+        attributes: Sequence[str],
+        view: ViewNodes | None = None,
+    ) -> Points:
         """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
         cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres;
-        concatenate over tiles."""
+        concatenate over tiles. With the ``view`` whose selection made ``plan``: each point gets its
+        node's spacing (``spacing_m``), and the points of nodes that cross a plane of its frustum are
+        tested against it (float64) and dropped outside, before the other attributes are gathered."""
         self._check_attributes(attributes)
         stats = ReadStats()
         parts: dict[str, list[np.ndarray]] = {a: [] for a in (METRES, *attributes)}
+        spacings: list[np.ndarray] = []
+        names = [COUNTS if a == METRES else a for a in (METRES, *attributes)]
+        chunks = {t: self._chunk_plan(t, *plan[t]) for t in sorted(plan)}
+        blocks = self._load([(t, n, chunks[t][0]) for t in sorted(plan) for n in names], stats)
         for tile in sorted(plan):
             k, idx = plan[tile]
             i, j = parse_tile_key(tile)
-            for a in (METRES, *attributes):
-                values = self._values(tile, COUNTS if a == METRES else a, k, idx, stats)
-                if a == METRES:
-                    values = dequantise(
-                        values, tile_origin_local(i, j, self.spec.tile_size_m), self.spec.quantum_m
+            ids, at = chunks[tile]
+            xyz = dequantise(
+                self._values(tile, COUNTS, k, (ids, at), blocks),
+                tile_origin_local(i, j, self.spec.tile_size_m),
+                self.spec.quantum_m,
+            )
+            if view is not None:
+                sel, take = view.selection[tile]
+                spacing = np.repeat(view.spacing_m[tile], take).astype(np.float32)
+                crossing = np.repeat(
+                    ~boxes_inside_frustum(
+                        view.planes, self.by_tile[tile].lo[sel], self.by_tile[tile].hi[sel]
+                    ),
+                    take,
+                )
+                if crossing.any():
+                    keep = np.ones(len(xyz), bool)
+                    keep[crossing] = np.all(
+                        xyz[crossing] @ view.planes[:, :3].T + view.planes[:, 3] >= 0, axis=1
                     )
-                parts[a].append(values)
+                    if not keep.all():
+                        xyz, spacing = xyz[keep], spacing[keep]
+                        at = np.flatnonzero(keep) if at is None else at[keep]
+                        k = len(at)
+                spacings.append(spacing)
+            parts[METRES].append(xyz)
+            for a in attributes:
+                parts[a].append(self._values(tile, a, k, (ids, at), blocks))
             stats.tiles_read += 1
-            stats.points_read += k if idx is None else len(idx)
+            stats.points_read += plan[tile][0] if idx is None else len(idx)
         # one tile's metres are a fresh array: no copy (its attributes may be the cache's own chunks)
         out = {
             a: (chunks[0] if len(chunks) == 1 and a == METRES else np.concatenate(chunks))
@@ -494,7 +583,9 @@ class SceneTiles:
         }
         stats.points_returned = len(out[METRES])
         xyz = out.pop(METRES)
-        return Points(xyz, out, stats)
+        if view is None:
+            return Points(xyz, out, stats)
+        return Points(xyz, out, stats, np.concatenate(spacings) if spacings else np.zeros(0, np.float32))
 
     def _empty(self, attribute: str) -> np.ndarray:
         if attribute == METRES:
@@ -667,15 +758,18 @@ class SceneTiles:
         k = np.searchsorted(-self._spacing[levels], -np.asarray(resolution_m, dtype=np.float64), side="left")
         return levels[np.minimum(k, len(levels) - 1)]
 
-    def read_nodes(self, selection: Selection, attributes: Sequence[str]) -> Points:
+    def read_nodes(
+        self, selection: Selection, attributes: Sequence[str], view: ViewNodes | None = None
+    ) -> Points:
         """Read, per tile, the first ``take[k]`` points of each node ``indices[k]`` of
         ``selection[tile] = (indices, take)`` (indices into ``by_tile[tile]``, ascending): only
-        the inner chunks those ranges touch are decoded (:meth:`_values`)."""
+        the inner chunks those ranges touch are decoded (:meth:`_values`). ``view``: the view
+        whose selection this is, to keep only the points in its frustum (:meth:`_gather`)."""
         plan: dict[str, tuple[int, np.ndarray | None]] = {}
         for tile, (sel, take) in selection.items():
             starts = self.by_tile[tile].start[sel]
             plan[tile] = (int((starts + take).max()), node_positions(starts, take))
-        out = self._gather(plan, attributes)
+        out = self._gather(plan, attributes, view)
         out.stats.levels = {t: self._deepest(t, sel, take) for t, (sel, take) in selection.items()}
         return out
 
@@ -707,11 +801,8 @@ class SceneTiles:
             view = self.levels_for_view(camera, scale, lod_factor * point_size_px / 2, near_m)
         else:
             view = self._frustum_nodes(camera, scale, level, near_m)
-        out = replace(self.read_nodes(view.selection, attributes), spacing_m=self.spacing_of(view))
-        xyz = out.xyz_m
-        planes = view.planes
-        keep = np.all(xyz @ planes[:, :3].T + planes[:, 3] >= 0, axis=1) if len(xyz) else np.zeros(0, bool)
-        return out.select(keep)
+        # only the points of nodes that cross a plane are tested: a node wholly inside keeps all
+        return self.read_nodes(view.selection, attributes, view)
 
     @staticmethod
     def spacing_of(view: ViewNodes) -> np.ndarray:
