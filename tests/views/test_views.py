@@ -15,6 +15,7 @@ from siteline.records.pairs import ViewStrategy
 from siteline.records.params.views import ViewParams
 from siteline.site.fence import inside_fence
 from siteline.views.generate import (
+    SPARSE_SAMPLE,
     NamedCamera,
     SyntheticView,
     candidate_views,
@@ -318,6 +319,13 @@ def test_sparse_share_weighs_each_point_by_the_pixels_its_spacing_spans() -> Non
     mixed = np.where(np.arange(len(xyz)) % 2 == 0, 0.5, 2.0)
     assert sparse_share(xyz, mixed, high, 1.0, 4.0) == pytest.approx(16 / 17, abs=0.01)
     assert sparse_share(xyz[:0], spacing[:0], low, 1.0, 8.0) == 0.0  # nothing in the frame
+    # a cloud past SPARSE_SAMPLE points is judged on every k-th: the share it would have, within 0.01
+    rng = np.random.default_rng(1)
+    big = np.c_[rng.uniform(-20, 20, (3 * SPARSE_SAMPLE, 2)), np.zeros(3 * SPARSE_SAMPLE)]
+    mixed_big = rng.choice([0.3, 1.0], len(big))
+    every = sparse_share(big, mixed_big, high, 1.0, 4.0)
+    px = mixed_big * 200.0 / 50.0
+    assert every == pytest.approx((px[px > 4] ** 2).sum() / (px**2).sum(), abs=0.01)
 
 
 def test_views_that_draw_their_surface_from_sparse_points_are_rejected() -> None:
