@@ -16,19 +16,20 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
+from scipy.spatial import cKDTree
 
 from siteline import pipeline
 from siteline.catalog import Catalog, migrate, open_catalog
 from siteline.catalog.context import StageContext
 from siteline.catalog.engine import make_engine
 from siteline.catalog.pairs import pair_ids_of_scene
-from siteline.catalog.scenes import list_scenes
+from siteline.catalog.scenes import list_scenes, tile_source
 from siteline.catalog.sites import add_site, get_site
 from siteline.config import Settings, sqlite_url
 from siteline.errors import ConfigError, PairError, SynthError
@@ -40,6 +41,7 @@ from siteline.site.spec import make_site_spec
 from siteline.synth import SynthParams, write_site
 from siteline.synth.scanner import SCANS
 from siteline.synth.scoring import score_pair
+from siteline.tiles.reader import SceneTiles
 
 SITE = "trade"
 LAYOUTS = ("site", "boxes", "slope")
@@ -119,19 +121,35 @@ class TradeRow:
         s = self.scores
         objects = ", ".join(f"{k} {v:.2f}" for k, v in dict(s["object_recall"]).items())  # type: ignore[call-overload]
         kept = ", ".join(f"{k} {v:.1%}" for k, v in dict(s.get("false_change", {})).items())  # type: ignore[call-overload]
+        shown = ", ".join(f"{k} {v}" for k, v in dict(s.get("object_views", {})).items())  # type: ignore[call-overload]
+        dropped = ", ".join(f"{k} {v:.1%}" for k, v in dict(s.get("object_ignored", {})).items())  # type: ignore[call-overload]
+        cams: dict[str, float] = dict(s.get("camera_nearest_m", {}))  # type: ignore[call-overload]
         return (
             f"{self.variant:>12}: P {s['precision']:.3f} R {s['recall']:.3f} F1 {s['f1']:.3f} boundary F "
             f"{s['boundary_f']:.3f} specks/view median {s['specks_median']:.0f} (max {s['specks_max']}), rim "
             f"pieces/view median {s['rims_median']:.0f} ({s.get('rim_px', '-')} of {dict(s['confusion'])['fp']} false-changed px "  # type: ignore[call-overload]
             f"within 2 px of a change), scored {s['scored_share']:.1%} of pixels, ignored "
             f"{_share(s.get('dropped_share'))} of the truth's, labels "
-            f"{_seconds(self.label_seconds)}, pair {self.seconds:.0f} s; recall: {objects}; false change: {kept}"
+            f"{_seconds(self.label_seconds)}, pair {self.seconds:.0f} s; recall: {objects}; false change: {kept}; "
+            f"views showing each changed object: {shown or '-'}; its pixels ignored: {dropped or '-'}; "
+            f"nearest point to a camera: {_metres(cams)}"
         )
 
 
 def _share(value: object) -> str:
     """A share as a percentage, "-" for rows measured before it was (no such figure)."""
     return f"{value:.1%}" if isinstance(value, float) else "-"
+
+
+def _metres(cams: Mapping[str, float]) -> str:
+    """A camera-distance summary, "-" for rows measured before it was."""
+    if not cams:
+        return "-"
+
+    def far(v: float) -> str:
+        return f">= {CAMERA_REACH_M:g}" if v >= CAMERA_REACH_M else f"{v:.2f}"
+
+    return f"min {far(cams['min'])} m, 10th pct {far(cams['p10'])} m, median {far(cams['median'])} m"
 
 
 def _seconds(s: float) -> str:
@@ -193,6 +211,22 @@ def synthetic_pair(out: Path, scene: TradeScene) -> tuple[Settings, Path, int]:
     return settings, site_dir, pid
 
 
+# a camera's nearest point is looked for within this distance (metres); none nearer reads as this
+CAMERA_REACH_M = 20.0
+
+
+def camera_clearance(scenes: Sequence[SceneTiles], centers: np.ndarray) -> np.ndarray:
+    """(M,) metres from each camera centre (M, 3, site-local) to the nearest point of any of
+    ``scenes`` at full density (every class), :data:`CAMERA_REACH_M` where none is nearer."""
+    best = np.full(len(centers), CAMERA_REACH_M)
+    for scene in scenes:
+        near = scene.points_near(centers, CAMERA_REACH_M, ())
+        if len(near.xyz_m):
+            d, _ = cKDTree(near.xyz_m).query(centers, distance_upper_bound=CAMERA_REACH_M)
+            best = np.minimum(best, d)
+    return best
+
+
 def variant_params(base: PairParams, name: str, knobs: Mapping[str, JSON]) -> PairParams:
     """``base`` with variant ``name``'s ``knobs`` over it; :class:`ConfigError` naming the variant for
     an unknown knob or a bad value."""
@@ -226,9 +260,18 @@ def measure_variant(
             pictures(name, view.index, mask, truth.mask)
 
     score = score_pair(settings.store, result.root, site_dir, (0, 1), keep)
+    with cat.transaction() as s:
+        scenes = [SceneTiles.from_source(tile_source(s, sid)) for sid in (result.t1, result.t2)]
+    near = camera_clearance(scenes, np.array([v.camera.center for v in result.views]))
+    cameras = {
+        "min": float(near.min()),
+        "p10": float(np.percentile(near, 10)),
+        "median": float(np.median(near)),
+    }
     return TradeRow(
-        name, dict(knobs), seconds, result.labels.seconds or math.nan, result.radius_m, score.to_dict()
-    )
+        name, dict(knobs), seconds, result.labels.seconds or math.nan, result.radius_m,
+        score.to_dict() | {"camera_nearest_m": cameras},
+    )  # fmt: skip
 
 
 def run_trade(
@@ -279,24 +322,31 @@ def trade_markdown(rows: list[TradeRow], layout: str, density: float, scan: str 
     head = (
         f"Trade on the synthetic {layout} ({scan}) at {density:g} points/m2, against the analytic truth\n\n"
         "| variant | knobs | precision | recall | F1 | boundary F | specks / view | lowest object recall "
-        "| most false change | ignored of truth | scored | pair s | labels s |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| most false change | ignored of truth | scored | fewest views of a changed object | nearest camera m "
+        "| pair s | labels s |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
         knobs = ", ".join(f"{k}={v}" for k, v in r.knobs.items()) or "release defaults"
         if r.error:
-            lines.append(f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |  |  |")
+            lines.append(
+                f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |  |  |  |  |"
+            )
             continue
         s = r.scores
         objects: dict[str, float] = dict(s["object_recall"])  # type: ignore[call-overload]
         low = min(objects.items(), key=lambda kv: kv[1]) if objects else ("-", math.nan)
         kept: dict[str, float] = dict(s.get("false_change", {}))  # type: ignore[call-overload]
         worst = "-" if not kept else "{} {:.1%}".format(*max(kept.items(), key=lambda kv: kv[1]))
+        shown: dict[str, int] = dict(s.get("object_views", {}))  # type: ignore[call-overload]
+        fewest = "-" if not shown else "{} {}".format(*min(shown.items(), key=lambda kv: kv[1]))
+        cams: dict[str, float] = dict(s.get("camera_nearest_m", {}))  # type: ignore[call-overload]
+        nearest = f"{cams['min']:.2f}" if cams else "-"
         lines.append(
             f"| {r.variant} | {knobs} | {s['precision']:.3f} | {s['recall']:.3f} | {s['f1']:.3f} | "
             f"{s['boundary_f']:.3f} | {s['specks_median']:.0f} | {low[0]} {low[1]:.2f} | {worst} | "
-            f"{_share(s.get('dropped_share'))} | {s['scored_share']:.1%} | "
+            f"{_share(s.get('dropped_share'))} | {s['scored_share']:.1%} | {fewest} | {nearest} | "
             f"{r.seconds:.0f} | {_seconds(r.label_seconds)} |"
         )
     return head + "\n".join(lines) + "\n"

@@ -11,7 +11,7 @@ from siteline.camera.pinhole import Camera
 from siteline.codes import CHANGED, IGNORE, UNCHANGED
 from siteline.synth.primitives import Primitive
 from siteline.synth.raycast import MISS, camera_rays, cast, ray_distances
-from siteline.synth.viewtruth import MaskScore, view_truth
+from siteline.synth.viewtruth import SHOWN_MIN_PX, MaskScore, view_truth
 
 F = 100.0  # focal length, pixels
 
@@ -188,6 +188,20 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     assert s.fp == 104
     assert s.object_recall()["removed#2"] == pytest.approx(0.5, abs=0.05)
     assert 0 < s.boundary_f < 1
+    # the views that show each changed object, and the share of its pixels the mask ignores
+    assert s.object_views() == {"removed#2": 1} and s.object_ignored() == {"removed#2": 0.0}
+    hidden = truth.mask.copy()
+    hidden[rows[: len(rows) // 4]] = np.where(
+        half[rows[: len(rows) // 4]], IGNORE, hidden[rows[: len(rows) // 4]]
+    )
+    s.add(hidden, truth)
+    assert s.object_views() == {"removed#2": 2}
+    assert s.object_ignored()["removed#2"] == pytest.approx(0.125, abs=0.03)
+    tiny = view_truth(nadir(400.0, 121), first, [ground()])  # the box on a few pixels: not shown
+    n_px = int((tiny.mask == CHANGED).sum())
+    assert 0 < n_px < SHOWN_MIN_PX
+    s.add(tiny.mask.copy(), tiny)
+    assert s.object_views() == {"removed#2": 2} and s.to_dict()["object_views"] == {"removed#2": 2}
 
 
 def test_a_surface_that_hardly_moved_is_not_changed_where_it_did_not():

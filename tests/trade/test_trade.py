@@ -28,7 +28,8 @@ def test_variants_are_parsed_and_bad_ones_named() -> None:
 def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     scores = {"precision": 0.9, "recall": 0.8, "f1": 0.85, "boundary_f": 0.7, "specks_median": 1.0,
               "scored_share": 0.9, "object_recall": {"jib#21": 0.95, "pole#60": 0.62},
-              "false_change": {"shed#10": 0.004, "tree#60": 0.031}, "dropped_share": 0.052}  # fmt: skip
+              "false_change": {"shed#10": 0.004, "tree#60": 0.031}, "dropped_share": 0.052,
+              "object_views": {"jib#21": 3, "pole#60": 9}, "camera_nearest_m": {"min": 3.2, "p10": 4.0, "median": 9.0}}  # fmt: skip
     rows = [
         TradeRow("default", {}, 10.0, 1.0, 0.3, scores),
         TradeRow("fill 0", {"fill_px": 0}, 8.0, math.nan, 0.3, scores),
@@ -38,11 +39,15 @@ def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     assert "synthetic boxes (flown) at 40 points/m2" in md
     assert (
         "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | tree#60 3.1% | 5.2% "
-        "| 90.0% | 10 | 1.0 s |" in md
+        "| 90.0% | jib#21 3 | 3.20 | 10 | 1.0 s |" in md
     )
-    # a row measured before false change and the ignored share were scored says so, not 0
-    old = {k: v for k, v in scores.items() if k not in ("false_change", "dropped_share")}
-    assert "| pole#60 0.62 | - | - |" in trade_markdown(
+    # a row measured before false change, the ignored share, views and cameras were scored says so, not 0
+    old = {
+        k: v
+        for k, v in scores.items()
+        if k not in ("false_change", "dropped_share", "object_views", "camera_nearest_m")
+    }
+    assert "| pole#60 0.62 | - | - | 90.0% | - | - |" in trade_markdown(
         [TradeRow("old", {}, 10.0, 1.0, 0.3, old)], "site", 10.0, "sampled"
     )
     assert "| fill 0 | fill_px=0 |" in md and md.count("| reused |") == 1
@@ -81,5 +86,11 @@ def test_bench_trade_from_the_installed_command(tmp_path) -> None:
     for r in rows:
         assert r["error"] is None and 0 < r["precision"] <= 1 and 0 < r["recall"] <= 1 and r["views"] == 3
         assert r["object_recall"] and all(0 <= v <= 1 for v in r["object_recall"].values())
+        # no camera nearer than the views' 3 m clearance to a point of either scene, measured apart
+        cams = r["camera_nearest_m"]
+        assert 3.0 - 1e-6 <= cams["min"] <= cams["p10"] <= cams["median"]
+        assert set(r["object_views"]) <= set(r["object_ignored"]) and all(
+            0 <= n <= 3 for n in r["object_views"].values()
+        )
     assert "| default | release defaults |" in (folder / "trade.md").read_text()
     assert len(list(folder.glob("*.png"))) == 2

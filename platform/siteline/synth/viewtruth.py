@@ -36,6 +36,8 @@ BOUNDARY_PX = 2
 # an object's false change is quoted when the views show it unchanged on at least this many scored
 # pixels (a stockpile seen on 13 pixels of one view, one of them labelled changed, is not 7.7 %)
 KEPT_MIN_PX = 100
+# a view shows a changed object when the truth has at least this many of its changed pixels there
+SHOWN_MIN_PX = 50
 
 
 @dataclass(frozen=True)
@@ -143,7 +145,9 @@ class MaskScore:
     pixels the mask labels] (false change per object that stayed). rim_px: the false-changed pixels
     within BOUNDARY_PX of a truly changed one (a change drawn too wide; of ``fp``). scored: pixels
     both label; pixels: every pixel; defined: pixels the truth labels; dropped: those of them the mask
-    ignores."""
+    ignores. shown: changed object name -> the views whose truth shows at least SHOWN_MIN_PX of its
+    changed pixels, and [its truly changed pixels the mask ignores, its truly changed pixels] over
+    all views (``ignored``)."""
 
     tp: int = 0
     fp: int = 0
@@ -159,6 +163,8 @@ class MaskScore:
     defined: int = 0
     dropped: int = 0
     rim_px: int = 0
+    shown: dict[str, int] = field(default_factory=dict)
+    ignored: dict[str, list[int]] = field(default_factory=dict)
 
     def add(self, predicted: np.ndarray, truth: ViewTruth) -> None:
         """Score one view's mask (H, W) 0/1/255 against its truth."""
@@ -191,6 +197,15 @@ class MaskScore:
         self.boundary[1] += int(bp.sum())
         self.boundary[2] += int((bt & near_p).sum())
         self.boundary[3] += int(bt.sum())
+        truly = truth.mask == CHANGED
+        for oid in np.unique(truth.changed_object[truly]):
+            name = truth.names.get(int(oid), f"object#{int(oid)}")
+            mine = truly & (truth.changed_object == oid)
+            n = int(mine.sum())
+            self.shown[name] = self.shown.get(name, 0) + (n >= SHOWN_MIN_PX)
+            dropped = self.ignored.setdefault(name, [0, 0])
+            dropped[0] += int((mine & (predicted == IGNORE)).sum())
+            dropped[1] += n
         for oid in np.unique(truth.changed_object[t]):
             name = truth.names.get(int(oid), f"object#{int(oid)}")
             mine = t & (truth.changed_object == oid)
@@ -236,6 +251,14 @@ class MaskScore:
         its truly unchanged pixels the mask labels changed."""
         return {k: v[0] / v[1] for k, v in sorted(self.kept_objects.items()) if v[1] >= min_pixels}
 
+    def object_views(self) -> dict[str, int]:
+        """Per changed object, the views that show it (:data:`SHOWN_MIN_PX` truly changed pixels)."""
+        return dict(sorted(self.shown.items()))
+
+    def object_ignored(self) -> dict[str, float]:
+        """Per changed object, the share of its truly changed pixels the mask ignores."""
+        return {k: v[0] / v[1] for k, v in sorted(self.ignored.items()) if v[1]}
+
     @property
     def dropped_share(self) -> float:
         """The share of the pixels the truth labels that the mask ignores."""
@@ -250,6 +273,8 @@ class MaskScore:
             "f1": self.f1,
             "boundary_f": self.boundary_f,
             "object_recall": self.object_recall(),
+            "object_views": self.object_views(),
+            "object_ignored": self.object_ignored(),
             "specks_median": float(np.median(self.specks)) if self.specks else float("nan"),
             "specks_max": max(self.specks, default=0),
             "rims_median": float(np.median(self.rims)) if self.rims else float("nan"),
