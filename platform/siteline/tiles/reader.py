@@ -392,8 +392,18 @@ class SceneTiles:
             arr = self._handle(tile, name)
             return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
         parts = [blocks[(tile, name, i)] for i in ids.tolist()]
-        buf = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        return buf[:k] if at is None else buf[at]
+        if at is None or len(parts) == 1:
+            buf = parts[0] if len(parts) == 1 else np.concatenate(parts)
+            return buf[:k] if at is None else buf[at]
+        # chunk by chunk: a view takes a part of each, and copying whole chunks end to end first cost
+        # more than the gather
+        c = len(parts[0])
+        edges = np.searchsorted(at, np.arange(len(parts) + 1) * c)
+        out = np.empty((len(at), *parts[0].shape[1:]), dtype=parts[0].dtype)
+        for m, part in enumerate(parts):
+            lo, hi = edges[m], edges[m + 1]
+            np.take(part, at[lo:hi] - m * c, axis=0, out=out[lo:hi])
+        return out
 
     def _load(
         self, wanted: Sequence[tuple[str, str, np.ndarray]], stats: ReadStats
