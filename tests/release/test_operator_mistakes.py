@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from sitehelpers import run_cli, run_exe
@@ -67,14 +68,16 @@ def test_browse_refuses_an_existing_page_unless_forced(built, tmp_path) -> None:
 def test_bad_ports_urls_and_public_addresses_are_refused_in_one_line(tmp_path) -> None:
     home = tmp_path / "home"
     assert run_exe(home, "init").returncode == 0
-    for argv, env, words in (
+    cases = (
         (["--port", "70000"], {}, "from 1 to 65535"),
         ([], {"SITELINE_PREVIEW_URL": "http://127.0.0.1:99999"}, "SITELINE_PREVIEW_URL"),
         ([], {"SITELINE_PREVIEW_URL": "http://127.0.0.1:0"}, "port 0: give one from 1 to 65535"),
         ([], {"SITELINE_PREVIEW_URL": "http://127.0.0.1:port"}, "SITELINE_PREVIEW_URL"),
         (["--host", "0.0.0.0"], {}, "--public"),
-    ):
-        r = run_exe(home, "previews", "serve", *argv, env=env)
+    )
+    with ThreadPoolExecutor(len(cases)) as pool:  # each a process start-up: run them at once
+        runs = list(pool.map(lambda c: run_exe(home, "previews", "serve", *c[0], env=c[1]), cases))
+    for (argv, env, words), r in zip(cases, runs, strict=True):
         assert r.returncode == 2, (argv, env, r.stderr)
         assert words in r.stderr and "Traceback" not in r.stderr, r.stderr
 

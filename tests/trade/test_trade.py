@@ -8,6 +8,7 @@ import math
 import os
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -62,10 +63,15 @@ def test_bench_trade_refuses_a_bad_grid_and_variant_in_one_line(tmp_path) -> Non
         (["--variant", 'big={"radius_multipler": 4}'], "unknown pair knobs ['radius_multipler']"),
         (["--variant", 'neg={"scale": -1}'], "variant 'neg'"),
     )
-    for args, words in cases:
-        proc = subprocess.run(
+
+    def run(args: list[str]) -> subprocess.CompletedProcess:
+        return subprocess.run(
             [str(SITELINE), "bench", "trade", "--out", str(tmp_path), *args], capture_output=True, text=True
         )
+
+    with ThreadPoolExecutor(len(cases)) as pool:  # each a process start-up: run them at once
+        procs = list(pool.map(run, [args for args, _ in cases]))
+    for (_, words), proc in zip(cases, procs, strict=True):
         assert proc.returncode != 0 and words in proc.stderr + proc.stdout
         assert "Traceback" not in proc.stderr
     assert not any(tmp_path.iterdir())  # nothing made before the refusal

@@ -647,8 +647,8 @@ class SceneTiles:
         a = self.all_nodes
         q = np.atleast_2d(np.asarray(centers, dtype=np.float64))
         near = np.zeros(len(a.lo), bool)
-        for start in range(0, len(q), 64):  # (64, K, 3) at a time
-            c = q[start : start + 64, None, :]
+        for start in range(0, len(q), 8):  # (8, K, 3) at a time: a few MB with 30k nodes
+            c = q[start : start + 8, None, :]
             gap = np.maximum(np.maximum(a.lo[None] - c, 0.0), c - a.hi[None])
             near |= (np.einsum("mkd,mkd->mk", gap, gap) <= radius_m**2).any(axis=0)
         return np.flatnonzero(near)
