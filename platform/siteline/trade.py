@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
-from scipy.spatial import cKDTree
 
 from siteline import pipeline
 from siteline.catalog import Catalog, migrate, open_catalog
@@ -33,6 +32,7 @@ from siteline.catalog.scenes import list_scenes, tile_source
 from siteline.catalog.sites import add_site, get_site
 from siteline.config import Settings, sqlite_url
 from siteline.errors import ConfigError, PairError, SynthError
+from siteline.pairs.sources import nearest_point
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseKnobs
 from siteline.schema import JSON
@@ -218,13 +218,7 @@ CAMERA_REACH_M = 20.0
 def camera_clearance(scenes: Sequence[SceneTiles], centers: np.ndarray) -> np.ndarray:
     """(M,) metres from each camera centre (M, 3, site-local) to the nearest point of any of
     ``scenes`` at full density (every class), :data:`CAMERA_REACH_M` where none is nearer."""
-    best = np.full(len(centers), CAMERA_REACH_M)
-    for scene in scenes:
-        near = scene.points_near(centers, CAMERA_REACH_M, ())
-        if len(near.xyz_m):
-            d, _ = cKDTree(near.xyz_m).query(centers, distance_upper_bound=CAMERA_REACH_M)
-            best = np.minimum(best, d)
-    return best
+    return np.minimum(nearest_point(scenes, centers, CAMERA_REACH_M, np.zeros(0, np.uint8)), CAMERA_REACH_M)
 
 
 def variant_params(base: PairParams, name: str, knobs: Mapping[str, JSON]) -> PairParams:

@@ -11,7 +11,8 @@ import psycopg
 import pytest
 import sqlalchemy as sa
 
-from siteline.stores.diskspace import catalog_busy, disk_full, full_disk_message
+from siteline.catalog.engine import catalog_busy
+from siteline.stores.diskspace import disk_full, full_disk_message
 
 
 def _raised_from(cause: BaseException) -> RuntimeError:

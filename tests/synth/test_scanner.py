@@ -43,12 +43,17 @@ def test_open_ground_is_sampled_at_the_density_asked(slope) -> None:
     assert len(slope[0]["xyz"]) / ((x1 - x0) * (y1 - y0)) == pytest.approx(20.0, rel=0.1)
 
 
+def _building_frame(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Plan coordinates (metres) along and across the sloped layout's building (centre (-18, 8),
+    turned 0.15 rad)."""
+    yaw = 0.15
+    rel = xyz[:, :2] - np.array([-18.0, 8.0])
+    return rel @ np.array([math.cos(yaw), math.sin(yaw)]), rel @ np.array([-math.sin(yaw), math.cos(yaw)])
+
+
 def test_walls_are_sampled_by_how_squarely_the_lines_face_them(slope) -> None:
     b = slope[0]["xyz"][slope[0]["oid"] == 100]
-    yaw = 0.15
-    rel = b[:, :2] - np.array([-18.0, 8.0])
-    u = rel @ np.array([math.cos(yaw), math.sin(yaw)])
-    v = rel @ np.array([-math.sin(yaw), math.cos(yaw)])
+    u, v = _building_frame(b)
     roof = b[:, 2] > b[:, 2].max() - 0.2
     across = (np.abs(np.abs(v) - 5.0) < 0.1) & ~roof  # faces whose normal points across the ~20 degree lines
     along = (np.abs(np.abs(u) - 7.0) < 0.1) & ~roof
@@ -60,10 +65,7 @@ def test_walls_are_sampled_by_how_squarely_the_lines_face_them(slope) -> None:
 def test_what_no_line_sees_has_no_points(slope) -> None:
     # the ground under the building and under the car
     g = slope[0]["xyz"][slope[0]["oid"] == 1]
-    yaw = 0.15
-    rel = g[:, :2] - np.array([-18.0, 8.0])
-    u = rel @ np.array([math.cos(yaw), math.sin(yaw)])
-    v = rel @ np.array([-math.sin(yaw), math.cos(yaw)])
+    u, v = _building_frame(g)
     assert ((np.abs(u) < 6.5) & (np.abs(v) < 4.5)).sum() == 0
     under_car = (np.abs(g[:, 0] + 5.0) < 2.0) & (np.abs(g[:, 1] + 18.0) < 0.7)
     assert under_car.sum() == 0

@@ -15,6 +15,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 import siteline.catalog.guards  # noqa: F401  (registers the flush guards)
 from siteline.errors import CatalogError
+from siteline.stores.diskspace import error_chain, sqlite_code
 
 # how long a writer waits for a SQLite catalog another writer holds (seconds; SITELINE_CATALOG_WAIT_S)
 CATALOG_WAIT_S = 30.0
@@ -33,6 +34,16 @@ def catalog_wait_s() -> float:
     if not 0 <= wait < 86400:
         raise CatalogError(f"SITELINE_CATALOG_WAIT_S={raw!r}: a number of seconds from 0 to 86400.")
     return wait
+
+
+# SQLite's codes for a database another connection holds (SQLITE_BUSY, SQLITE_LOCKED)
+_SQLITE_BUSY = (5, 6)
+
+
+def catalog_busy(exc: BaseException) -> bool:
+    """Whether ``exc`` (or an exception it was raised from) is SQLite's "database is locked": another
+    writer held the catalog past the wait (told by SQLite's code, not its words)."""
+    return any(sqlite_code(e) in _SQLITE_BUSY for e in error_chain(exc))
 
 
 def catalog_busy_message() -> str:

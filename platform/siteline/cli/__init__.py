@@ -165,8 +165,8 @@ def _run(argv: list[str] | None) -> int:
         usage.show()
         return int(usage.exit_code)
     except Exception as exc:
-        from siteline.catalog.engine import catalog_busy_message
-        from siteline.stores.diskspace import catalog_busy, disk_full, full_disk_message
+        from siteline.catalog.engine import catalog_busy, catalog_busy_message
+        from siteline.stores.diskspace import disk_full, full_disk_message
 
         if isinstance(exc, OSError) and exc.errno in _NOT_WRITABLE and not disk_full(exc):
             # an operator's mistake (a read-only or foreign destination), told in one line

@@ -226,7 +226,8 @@ class PlanCells:
     ``covered``, points; ``hidden``, points, the lowest more than the level-of-detection floor above
     the query point (it could not have seen the point from above); ``above``, points, the highest no
     lower than that floor below the query point, or in the cells around it more than a cell's width
-    above it (structure at or over its height)."""
+    above it (structure at or over its height); ``buried``, the lowest point of its cell is of that
+    scene's ground (None where the ground was not given)."""
 
     covered: np.ndarray
     hidden: np.ndarray

@@ -37,6 +37,31 @@ class _Held:
     node_start: np.ndarray
 
 
+def solid_points_near(
+    scene: SceneTiles, centers: np.ndarray, radius_m: float, skip_classes: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """The full-density points of ``scene`` that may lie within ``radius_m`` of ``centers`` ((M, 3)
+    site-local metres; :meth:`SceneTiles.points_near`), those of ``skip_classes`` left out, as (N, 3)
+    float64, and how many points were read for them."""
+    near = scene.points_near(centers, radius_m, ("class",))
+    return near.xyz_m[~np.isin(near.attributes["class"], skip_classes)], near.stats.points_read
+
+
+def nearest_point(
+    scenes: Sequence[SceneTiles], centers: np.ndarray, radius_m: float, skip_classes: np.ndarray
+) -> np.ndarray:
+    """(M,) exact distance in metres from each of ``centers`` ((M, 3) site-local) to the nearest
+    full-density point of any of ``scenes`` (``skip_classes`` left out), inf where none lies within
+    ``radius_m``."""
+    q = np.atleast_2d(np.asarray(centers, dtype=np.float64))
+    best = np.full(len(q), np.inf)
+    for scene in scenes:
+        solid, _ = solid_points_near(scene, q, radius_m, skip_classes)
+        if len(solid):
+            best = np.minimum(best, nearest_within(cKDTree(solid), q, radius_m))
+    return best
+
+
 class TilePointSource:
     """A :class:`siteline.views.sources.PointSource` over a tiled scene for view generation, which renders
     hundreds of probes per real camera. Each probe draws what its render needs: the nodes its
@@ -230,11 +255,9 @@ class TilePointSource:
                 at = node_positions(self._held.node_start[rows], scene.all_nodes.count[rows])
                 solid = self._held.xyz[at[self._held.draw[at]]]
             else:
-                near = scene.points_near(q, radius_m, ("class",))
-                if len(near.xyz_m):
-                    self.points_read += near.stats.points_read
-                    self.reads += 1
-                solid = near.xyz_m[~np.isin(near.attributes["class"], self.skip)]
+                solid, read = solid_points_near(scene, q, radius_m, self.skip)
+                self.points_read += read
+                self.reads += read > 0
             if len(solid):
                 best = np.minimum(best, nearest_within(cKDTree(solid), q, radius_m))
         return best

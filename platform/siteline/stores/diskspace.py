@@ -1,4 +1,5 @@
-"""A full disk, told in one line: which file system, how much is free, what to do."""
+"""A full disk, told in one line: which file system, how much is free, what to do. Errors are told
+apart by their codes along their chain (:func:`error_chain`, :func:`sqlite_code`), never by words."""
 
 from __future__ import annotations
 
@@ -14,15 +15,13 @@ _FULL_ERRNOS = {errno.ENOSPC, errno.EDQUOT}
 # their messages are never read (a database or file may be named with those words)
 _SQLITE_FULL = 13
 _POSTGRES_DISK_FULL = "53100"
-# SQLite's codes for a database another connection holds (SQLITE_BUSY, SQLITE_LOCKED)
-_SQLITE_BUSY = (5, 6)
 # a short write with no errno: numpy's tofile raises OSError("15321 requested and 8763 written")
 # when the disk took less than it was given, which on a local file system means it is full; the
 # whole message must be that (a path holding those words is not one)
 _SHORT_WRITE = re.compile(r"\d+ requested and \d+ written")
 
 
-def _chain(exc: BaseException) -> Iterator[BaseException]:
+def error_chain(exc: BaseException) -> Iterator[BaseException]:
     """``exc``, the exceptions it was raised from, and a database error's driver error (``orig``)."""
     seen: set[int] = set()
     todo: list[BaseException] = [exc]
@@ -39,7 +38,7 @@ def _chain(exc: BaseException) -> Iterator[BaseException]:
         )
 
 
-def _sqlite_code(exc: BaseException) -> int | None:
+def sqlite_code(exc: BaseException) -> int | None:
     """A sqlite3 error's primary result code (its extended code's low byte), None for others."""
     code = getattr(exc, "sqlite_errorcode", None)
     return code & 0xFF if isinstance(code, int) else None
@@ -51,7 +50,7 @@ def _says_full(exc: BaseException) -> bool:
     hold a file's or a database's name."""
     if isinstance(exc, OSError) and exc.errno is not None:
         return exc.errno in _FULL_ERRNOS
-    if _sqlite_code(exc) == _SQLITE_FULL:
+    if sqlite_code(exc) == _SQLITE_FULL:
         return True
     if getattr(exc, "sqlstate", None) == _POSTGRES_DISK_FULL:
         return True
@@ -60,13 +59,7 @@ def _says_full(exc: BaseException) -> bool:
 
 def disk_full(exc: BaseException) -> bool:
     """Whether ``exc`` (or an exception it was raised from) says a disk is full."""
-    return any(_says_full(e) for e in _chain(exc))
-
-
-def catalog_busy(exc: BaseException) -> bool:
-    """Whether ``exc`` (or an exception it was raised from) is SQLite's "database is locked": another
-    writer held the catalog past the busy timeout (told by SQLite's code, not its words)."""
-    return any(_sqlite_code(e) in _SQLITE_BUSY for e in _chain(exc))
+    return any(_says_full(e) for e in error_chain(exc))
 
 
 def full_disk_message(exc: BaseException, home: Path) -> str:
