@@ -69,6 +69,29 @@ def test_flat_ground_alone_reports_the_free_directions() -> None:
     assert "yaw, x, y NOT CHECKED" in text and "m across" not in text
 
 
+def _one_tree(seed: int, n: int = 300) -> np.ndarray:
+    """A tree at (-40, -10): a 3 m crown of leaves sampled afresh per seed (other leaves each flight)
+    on a trunk."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    crown = np.c_[np.array([-40.0, -10.0]) + d[:, :2] * 3.0, 6.5 + d[:, 2] * 1.5]
+    a = rng.uniform(0, 2 * np.pi, n // 4)
+    trunk = np.c_[-40 + 0.25 * np.cos(a), -10 + 0.25 * np.sin(a), rng.uniform(0, 5, n // 4)]
+    return np.r_[crown, trunk]
+
+
+def test_one_tree_fixes_the_shift_but_never_claims_the_yaw() -> None:
+    """A tree alone turns the scene about itself as freely as it shifts it: its leaves turned a flown
+    box scene by 7.8 degrees (5 degrees here before the rule), 5.6 m at the site's edge."""
+    g1, _ = _forest(1, size=100.0)
+    g2, _ = _forest(2, size=100.0)
+    res = register_samples(_moved(g2), g1, _moved(_one_tree(5)), _one_tree(6))
+    assert res.axes["yaw"] is None and {res.axes["x"], res.axes["y"]} == {STRUCTURE}
+    assert res.rotation_deg < 0.05  # nothing turned about the tree
+    assert np.abs(np.asarray(res.correction)[:2, 3] + SHIFT[:2]).max() < 0.3  # the shift found at the tree
+
+
 def test_a_cloud_without_ground_or_building_registers_on_every_class() -> None:
     g1, t1 = _forest(1)
     g2, t2 = _forest(2)

@@ -24,6 +24,12 @@ STRUCTURE = "structure of any kept class"
 _FIXED_SHARE = 5e-4
 # the fewest matched points a stage solves from
 _MIN_POINTS = 30
+# the structure fixes yaw only when its points spread horizontally (RMS about their own centre) over at
+# least this share of the sample's radius: one tree (a 3 m crown on a 100 m site: 0.03) turns the
+# scene about itself as freely as it shifts it, and its leaves, other leaves each flight, turned a
+# flown box scene by 7.8 degrees (5.6 m at the site's edge); trees along two sides spread over 0.5
+_YAW_SPREAD_SHARE = 0.2
+_YAW = 2  # AXES: roll, pitch, yaw, x, y, z
 
 
 @dataclass
@@ -277,6 +283,9 @@ def register_samples(
         structure = _Fit(s_src, s_tgt, scale, False, max_distance_m)
         moved, _ = structure.run(T, _axes_basis(free), 40)
         by_structure = structure.fixes(moved, free)
+        spread = float(np.sqrt(((s_tgt[:, :2] - s_tgt[:, :2].mean(axis=0)) ** 2).sum(axis=1).mean()))
+        if _YAW in by_structure and spread < _YAW_SPREAD_SHARE * scale:
+            by_structure.remove(_YAW)
         if by_structure:
             T, _ = structure.run(T, _axes_basis(by_structure), 40)
     axes = {
