@@ -16,8 +16,19 @@ NOT_OBSERVED = 254
 # outside_fence: a winning point lies outside the site fence;
 # not_observed: a winning point's place the other scan did not observe (a wall it grazed or never saw,
 #   ground where it has no point: siteline.labels.change, the adaptive rule);
+# unsure_edge: the edge trim gave the pixel to a farther surface whose change differs from the nearer
+#   one's whose splat reached it: which of them it shows is within a point spacing of an edge
+#   (siteline.pairs.render.unsure_edges; a thin beam's sides, a moved car's rim);
 # ignored_class: a winning point is of an ignored class (noise, snow, ignore) inside the fence.
-IGNORE_CAUSES = ("no_surface", "gap", "one_side", "outside_fence", "not_observed", "ignored_class")
+IGNORE_CAUSES = (
+    "no_surface",
+    "gap",
+    "one_side",
+    "outside_fence",
+    "not_observed",
+    "unsure_edge",
+    "ignored_class",
+)
 # a release adds the padding it writes around the rendered image (siteline.release.layout), and
 # counts as unaccounted the ignore of outputs made before causes were recorded
 RELEASE_IGNORE_CAUSES = (*IGNORE_CAUSES, "padding", "unaccounted")

@@ -123,6 +123,7 @@ class TradeRow:
         kept = ", ".join(f"{k} {v:.1%}" for k, v in dict(s.get("false_change", {})).items())  # type: ignore[call-overload]
         shown = ", ".join(f"{k} {v}" for k, v in dict(s.get("object_views", {})).items())  # type: ignore[call-overload]
         dropped = ", ".join(f"{k} {v:.1%}" for k, v in dict(s.get("object_ignored", {})).items())  # type: ignore[call-overload]
+        through = ", ".join(f"{k} {v:.1%}" for k, v in dict(s.get("object_through", {})).items())  # type: ignore[call-overload]
         cams: dict[str, float] = dict(s.get("camera_nearest_m", {}))  # type: ignore[call-overload]
         return (
             f"{self.variant:>12}: P {s['precision']:.3f} R {s['recall']:.3f} F1 {s['f1']:.3f} boundary F "
@@ -132,7 +133,7 @@ class TradeRow:
             f"{_share(s.get('dropped_share'))} of the truth's, labels "
             f"{_seconds(self.label_seconds)}, pair {self.seconds:.0f} s; recall: {objects}; false change: {kept}; "
             f"views showing each changed object: {shown or '-'}; its pixels ignored: {dropped or '-'}; "
-            f"nearest point to a camera: {_metres(cams)}"
+            f"labelled unchanged (see-through): {through or '-'}; nearest point to a camera: {_metres(cams)}"
         )
 
 
@@ -316,16 +317,16 @@ def trade_markdown(rows: list[TradeRow], layout: str, density: float, scan: str 
     head = (
         f"Trade on the synthetic {layout} ({scan}) at {density:g} points/m2, against the analytic truth\n\n"
         "| variant | knobs | precision | recall | F1 | boundary F | specks / view | lowest object recall "
-        "| most false change | ignored of truth | scored | fewest views of a changed object | nearest camera m "
-        "| pair s | labels s |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| most false change | ignored of truth | scored | fewest views of a changed object | most see-through "
+        "| nearest camera m | pair s | labels s |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
         knobs = ", ".join(f"{k}={v}" for k, v in r.knobs.items()) or "release defaults"
         if r.error:
             lines.append(
-                f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |  |  |  |  |"
+                f"| {r.variant} | {knobs} | no release: {r.error} |  |  |  |  |  |  |  |  |  |  |  |  |  |"
             )
             continue
         s = r.scores
@@ -335,12 +336,14 @@ def trade_markdown(rows: list[TradeRow], layout: str, density: float, scan: str 
         worst = "-" if not kept else "{} {:.1%}".format(*max(kept.items(), key=lambda kv: kv[1]))
         shown: dict[str, int] = dict(s.get("object_views", {}))  # type: ignore[call-overload]
         fewest = "-" if not shown else "{} {}".format(*min(shown.items(), key=lambda kv: kv[1]))
+        through: dict[str, float] = dict(s.get("object_through", {}))  # type: ignore[call-overload]
+        most = "-" if not through else "{} {:.1%}".format(*max(through.items(), key=lambda kv: kv[1]))
         cams: dict[str, float] = dict(s.get("camera_nearest_m", {}))  # type: ignore[call-overload]
         nearest = f"{cams['min']:.2f}" if cams else "-"
         lines.append(
             f"| {r.variant} | {knobs} | {s['precision']:.3f} | {s['recall']:.3f} | {s['f1']:.3f} | "
             f"{s['boundary_f']:.3f} | {s['specks_median']:.0f} | {low[0]} {low[1]:.2f} | {worst} | "
-            f"{_share(s.get('dropped_share'))} | {s['scored_share']:.1%} | {fewest} | {nearest} | "
+            f"{_share(s.get('dropped_share'))} | {s['scored_share']:.1%} | {fewest} | {most} | {nearest} | "
             f"{r.seconds:.0f} | {_seconds(r.label_seconds)} |"
         )
     return head + "\n".join(lines) + "\n"

@@ -54,15 +54,20 @@ def test_site_settings_are_stored_shown_updated_and_checked(home, capsys) -> Non
         "1.5",
         "--surface-probe",
         "0",
+        "--change-views",
+        "3",
+        "--no-unsure-edges",
         "--json",
     )
     assert code == 0, err
     assert json.loads(out)["release_settings"]["pair"] == {
         "scale": "auto", "min_valid": 0.3, "trim_edges": False, "splat_factor": 1.5, "surface_probe": 0.0,
+        "view_params": {"change_views": 3}, "unsure_edges": False,
     }  # fmt: skip
     for bad, message in ((["--views", "0"], "views"), (["--scale", "big"], "--scale 'big'"),
                          (["--unset", "hue"], "not a release setting"), (["--preset", "turbo"], "unknown preset"),
-                         (["--surface-probe", "1.2"], "surface_probe 1.2")):  # fmt: skip
+                         (["--surface-probe", "1.2"], "surface_probe 1.2"),
+                         (["--change-views", "-1"], "change_views must be a number of views")):  # fmt: skip
         code, _, err = run_cli(capsys, "site", "update", "s", *bad)
         assert code == 2 and message in err, err
     assert (

@@ -206,6 +206,9 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     assert base.trim_edges and base.render_settings().trim_edges
     assert PairParams(trim_edges=False).digest() != base.digest()
     assert PairParams.BEFORE["trim_edges"] is False
+    # unsure edges are ignored by default, and name other outputs; off, the masks of before keep their key
+    assert base.unsure_edges and PairParams.BEFORE["unsure_edges"] is False
+    assert PairParams(unsure_edges=False).digest() != base.digest()
     # the probe is on by default and names other labels; without it (or with the nearest rule, which
     # has none) the key is the one of before the probe existed
     assert base.surface_probe == 0.7 and base.label_params().surface_probe == 0.7
@@ -217,8 +220,9 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     # (under the sampler of then: keyed-sha256-2 draws other views, so every key moved with it)
     before = {"label_rule": "surface", "min_region_points": 8}
 
-    def key_then(params: PairParams) -> str:
+    def key_then(params: PairParams) -> str:  # nor were unsure edges ignored then
         object.__setattr__(params, "sampler", "keyed-sha256-1")
+        object.__setattr__(params, "unsure_edges", False)
         return params.digest()
 
     assert key_then(PairParams(**before, surface_probe=0.0)) == "b089ba124b36"

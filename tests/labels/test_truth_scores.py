@@ -58,6 +58,13 @@ def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
     assert flown is not None and "flown epochs" in flown and "at most 1.2% of pixels called changed" in flown
     assert measured_for("adaptive", 3, True, 0.06, 0.7).scene == "sloped scene"  # ~61 points/m2: nearest 80
     assert measured_for("adaptive", 8, True, 0.15, 0.7) is None
+    # with unsure edges ignored (the default) its own rows, which say so; without the trim no such rows
+    unsure = measured_for("adaptive", 3, True, 0.06, 0.7, True)
+    assert unsure is not None and unsure.unsure_edges and unsure.scene == "sloped scene"
+    assert measured_for("adaptive", 3, False, 0.06, 0.7, True) is None
+    assert "unsure edges" in accuracy_text("adaptive", 3, True, 0.15, 0.7, True)
+    # a rule not measured with them quotes its row without them, and says so
+    assert "measured before unsure edges were ignored" in accuracy_text("surface", 8, True, 0.15, 0.7, True)
     assert measured_for("nearest", 1, False, 0.15, 0.7) == measured_for("nearest", 1, False, 0.15)  # no probe
     text = accuracy_text("surface", 8, True, 0.15, 0.7)
     assert "precision 0.98" in text and "recall 0.97" in text and "synthetic site at 10 points/m2" in text

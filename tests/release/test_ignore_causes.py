@@ -82,7 +82,7 @@ def _render(hit: np.ndarray, change: np.ndarray) -> RenderResult:
 def test_causes_on_a_hand_made_view() -> None:
     """Sky on top (no surface in either), a one-pixel gap in A, a block only B shows, a pixel of an
     ignored class, one outside the fence, one whose place B's scan did not observe (and one such
-    whose other side changed: changed)."""
+    whose other side changed: changed), and one the edge rule made unsure."""
     h, w = 12, 12
     hit_a = np.ones((h, w), bool)
     hit_a[:3] = False  # sky
@@ -100,7 +100,10 @@ def test_causes_on_a_hand_made_view() -> None:
     from siteline.pairs.render import pair_mask
 
     mask = pair_mask(hit_a, change_a, hit_b, change_b)
-    causes = ignore_causes(_render(hit_a, change_a), _render(hit_b, change_b), mask, outside)
+    unsure = np.zeros((h, w), bool)
+    unsure[10, 2] = True  # a farther surface drawn where a nearer one of other change may lie
+    mask[unsure] = IGNORE
+    causes = ignore_causes(_render(hit_a, change_a), _render(hit_b, change_b), mask, outside, unsure)
     n = h * w
     assert small_gaps(hit_a)[6, 6] and not small_gaps(hit_a)[0, 0]
     assert mask[7, 5] == 1 and mask[7, 3] == 255
@@ -111,6 +114,7 @@ def test_causes_on_a_hand_made_view() -> None:
             "one_side": 9 / n,
             "outside_fence": 1 / n,
             "not_observed": 1 / n,
+            "unsure_edge": 1 / n,
             "ignored_class": 1 / n,
         }
     )

@@ -129,6 +129,16 @@ def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
     _ok(autzen, "release", "verify", "autzen-cd", "1.0.0")
     shown = json.loads(_ok(autzen, "release", "show", "autzen-cd", "1.0.0", "--json"))
     assert shown["radius_ceiling_m"] == 0.5 and 0.5 < shown["smallest_change_m"]["1"] < 1.5
+    # the planted 24 x 24 x 6 m structure is one region (its roof's points lie 0.7 m apart: 0.5 m cells
+    # cut it into 39 pieces of 17 m2 at most; cells of the change radius link it) views were planned
+    # around, listed with the views that show it, in the record and in words (the clearing is a hole
+    # in the data: not observed, not changed)
+    seen = shown["changes_seen"]["1"]
+    (built,) = [r for r in seen["regions"] if r["size_m"][0] > 20 and r["size_m"][1] > 20]
+    assert seen["asked_views"] == 5 and 300 <= built["area_m2"] <= 1300 and len(built["views"]) >= 5, seen
+    assert all(len(r["views"]) >= 5 or r["reason"] for r in seen["regions"])
+    words = _ok(autzen, "release", "show", "autzen-cd", "1.0.0")
+    assert "changes seen, pair 1" in words and "changed regions of 1 m2 or more" in words
     root = autzen / "releases" / "autzen-cd" / "1.0.0"
     manifest = json.loads((root / "manifest.json").read_text())
     (pair,) = manifest["lineage"]["pairs"]
@@ -147,6 +157,7 @@ def test_bare_laz_with_rgb_is_released_with_planned_cameras(autzen) -> None:
     # not the 2.2 m offset (uncorrected, at r = 0.9 m nearly every pixel would be changed)
     assert np.median([it["change_ratio"] for it in items]) < 0.1
     assert "co-registered onto scene 1" in (root / "README.md").read_text()
+    assert "changes seen: " in (root / "README.md").read_text()
     assert "planned" in (root / "README.md").read_text()
     readme = (root / "README.md").read_text()
     assert "change rule geometry (the scenes classify differently (auto)): vegetation is 75.6%" in readme

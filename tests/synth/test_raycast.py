@@ -190,6 +190,8 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     assert 0 < s.boundary_f < 1
     # the views that show each changed object, and the share of its pixels the mask ignores
     assert s.object_views() == {"removed#2": 1} and s.object_ignored() == {"removed#2": 0.0}
+    # the half whose rows were labelled unchanged is what lies behind labelled in its place
+    assert s.object_through()["removed#2"] == pytest.approx(0.5, abs=0.05)
     hidden = truth.mask.copy()
     hidden[rows[: len(rows) // 4]] = np.where(
         half[rows[: len(rows) // 4]], IGNORE, hidden[rows[: len(rows) // 4]]
@@ -197,6 +199,7 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     s.add(hidden, truth)
     assert s.object_views() == {"removed#2": 2}
     assert s.object_ignored()["removed#2"] == pytest.approx(0.125, abs=0.03)
+    assert s.object_through()["removed#2"] == pytest.approx(0.25, abs=0.03)  # 0.5 of one view, 0 of the other
     tiny = view_truth(nadir(400.0, 121), first, [ground()])  # the box on a few pixels: not shown
     n_px = int((tiny.mask == CHANGED).sum())
     assert 0 < n_px < SHOWN_MIN_PX

@@ -95,6 +95,9 @@ def test_bench_trade_from_the_installed_command(tmp_path) -> None:
         # no camera nearer than the views' 3 m clearance to a point of either scene, measured apart
         cams = r["camera_nearest_m"]
         assert 3.0 - 1e-6 <= cams["min"] <= cams["p10"] <= cams["median"]
+        assert set(r["object_through"]) == set(r["object_ignored"]) and all(
+            0 <= v <= 1 - r["object_ignored"][k] + 1e-9 for k, v in r["object_through"].items()
+        )
         assert set(r["object_views"]) <= set(r["object_ignored"]) and all(
             0 <= n <= 3 for n in r["object_views"].values()
         )

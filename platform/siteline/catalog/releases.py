@@ -98,6 +98,8 @@ def release_record(session: Session, rel: Release) -> dict[str, object]:
         "radius_ceiling_m": (rel.parameters or {}).get("radius_ceiling_m"),
         # where the ignore pixels come from, by cause (releases built before causes were recorded: None)
         "ignore": (rel.parameters or {}).get("ignore"),
+        # per pair, its changed regions and the views that show each (releases built before: None)
+        "changes_seen": (rel.parameters or {}).get("changes_seen"),
     }
 
 

@@ -157,7 +157,19 @@ def show(
     """Show one release."""
     with catalog() as cat, cat.transaction() as s:
         record = release_record(s, get_release(s, name, version))
-    emit(as_json, record, lambda: print_record(f"release {name} {version}", record))
+    emit(as_json, record, lambda: print_record(f"release {name} {version}", _in_words(record)))
+
+
+def _in_words(record: dict[str, object]) -> dict[str, object]:
+    """``record`` with each pair's changes seen in words (one row a pair), not as a document."""
+    from siteline.records.pairs import ChangesSeen
+
+    seen = record.get("changes_seen")
+    out = {k: v for k, v in record.items() if k != "changes_seen"}
+    if isinstance(seen, dict):
+        for pid, doc in seen.items():
+            out[f"changes seen, pair {pid}"] = ChangesSeen.from_dict(doc).summary()
+    return out
 
 
 @app.command("diff")

@@ -19,7 +19,9 @@ class Measured:
     scored pixel, with the median number of isolated false-change specks (components under 30 px
     away from any true change) per view. Rows of flown scans (``scan``, siteline.synth.scanner) also
     give the largest share of an object that stayed labelled changed (``false_change``) and the share
-    of the truth's pixels the masks ignore (``ignored``); NaN where not measured."""
+    of the truth's pixels the masks ignore (``ignored``); NaN where not measured. ``unsure_edges``:
+    the masks ignored a farther surface drawn where a nearer one of other change may lie (the pair
+    knob of that name, with the trim)."""
 
     scene: str
     density: float
@@ -34,6 +36,7 @@ class Measured:
     scan: str = "sampled"
     false_change: float = math.nan
     ignored: float = math.nan
+    unsure_edges: bool = False
 
 
 # `siteline bench trade`, one run each (docs/performance.md): the nearest rule as releases made it
@@ -60,6 +63,18 @@ MEASURED: tuple[Measured, ...] = (
     Measured("box scene", 40, "adaptive", 3, True, 0.974, 0.799, 0.878, 0, 0.7, "flown", 0.003, 0.007),
     Measured("sloped scene", 80, "adaptive", 3, True, 0.977, 0.970, 0.973, 0, 0.7, "flown", 0.001, 0.023),
     Measured("synthetic site", 1000, "adaptive", 3, True, 0.992, 0.973, 0.982, 2, 0.7, "flown", 0.010, 0.025),
+    # unsure edges ignored (the default since issue 67's fourth item, 2026-11-29), views chosen around
+    # the changes (sampler keyed-sha256-3): 24 views a pair on the site, 48 on the others
+    Measured(
+        "synthetic site", 10, "adaptive", 3, True, 0.988, 0.947, 0.967, 4, 0.7, "flown", 0.018, 0.045, True
+    ),
+    Measured("box scene", 40, "adaptive", 3, True, 0.973, 0.863, 0.915, 0, 0.7, "flown", 0.004, 0.011, True),
+    Measured(
+        "sloped scene", 80, "adaptive", 3, True, 0.959, 0.935, 0.947, 0, 0.7, "flown", 0.013, 0.013, True
+    ),
+    Measured(
+        "synthetic site", 1000, "adaptive", 3, True, 0.992, 0.965, 0.979, 9, 0.7, "flown", 0.019, 0.049, True
+    ),
 )
 
 
@@ -70,14 +85,24 @@ def density_of_spacing(spacing_m: float) -> float:
 
 
 def measured_for(
-    rule: str, min_region_points: int, trim_edges: bool, spacing_m: float, surface_probe: float = 0.0
+    rule: str,
+    min_region_points: int,
+    trim_edges: bool,
+    spacing_m: float,
+    surface_probe: float = 0.0,
+    unsure_edges: bool = False,
 ) -> Measured | None:
     """The measurement nearest (in log density) to a pair labelled by ``rule`` keeping regions of
     ``min_region_points``, its splats trimmed at edges or not, with the surface rule's
-    ``surface_probe``, at the median spacing ``spacing_m``; None when those settings were not measured."""
+    ``surface_probe`` and unsure edges ignored or not (only with the trim), at the median spacing
+    ``spacing_m``; None when those settings were not measured."""
     probe = surface_probe if rule in SURFACE_RULES else 0.0
-    key = (rule, min_region_points, trim_edges, probe)
-    rows = [m for m in MEASURED if (m.rule, m.min_region_points, m.trim_edges, m.surface_probe) == key]
+    key = (rule, min_region_points, trim_edges, probe, unsure_edges and trim_edges)
+    rows = [
+        m
+        for m in MEASURED
+        if (m.rule, m.min_region_points, m.trim_edges, m.surface_probe, m.unsure_edges) == key
+    ]
     density = density_of_spacing(spacing_m)
     if not rows or not math.isfinite(density):
         return None
@@ -85,12 +110,24 @@ def measured_for(
 
 
 def accuracy_text(
-    rule: str, min_region_points: int, trim_edges: bool, spacing_m: float, surface_probe: float = 0.0
+    rule: str,
+    min_region_points: int,
+    trim_edges: bool,
+    spacing_m: float,
+    surface_probe: float = 0.0,
+    unsure_edges: bool = False,
 ) -> str | None:
-    """One sentence for a datasheet: what the settings measured nearest this pair's density."""
-    m = measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe)
+    """One sentence for a datasheet: what the settings measured nearest this pair's density (with
+    unsure edges ignored where those settings were measured so, else without, saying so)."""
+    m = measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe, unsure_edges)
+    m = m or measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe)
     if m is None:
         return None
+    before = (
+        "; measured before unsure edges were ignored"
+        if unsure_edges and trim_edges and not m.unsure_edges
+        else ""
+    )
     flown = (
         f"; on the objects that stayed at most {m.false_change:.1%} of pixels called changed, "
         f"{m.ignored:.1%} of the truth's pixels ignored"
@@ -99,8 +136,8 @@ def accuracy_text(
     )
     return (
         f"measured against analytic truth ({m.scene} at {m.density:g} points/m2, {m.scan} epochs, this rule, "
-        f"smallest region, edge trim and probe, "
+        f"smallest region, edge trim{', unsure edges' if m.unsure_edges else ''} and probe, "
         f"release defaults; this pair is at about {density_of_spacing(spacing_m):.0f} points/m2): changed-class "
         f"precision {m.precision:.2f}, recall {m.recall:.2f}, F1 {m.f1:.2f}, {m.specks_median:g} isolated false "
-        "specks (under 30 px) per view (median)" + flown
+        "specks (under 30 px) per view (median)" + flown + before
     )

@@ -72,9 +72,25 @@ def _cells_of(xyz: np.ndarray, cell_m: float) -> tuple[np.ndarray, np.ndarray, n
     return _unpack(uniq, lo, dims), inverse, counts
 
 
-def cell_region_sizes(cells: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """(C,) the points in the region of each of ``cells`` ((C, 3) distinct int64 cell indices holding
-    ``counts`` points each), cells linked when they touch (26-neighbourhood)."""
+def region_ids(xyz: np.ndarray, cell_m: float) -> np.ndarray:
+    """(N,) int64 the region of each point (points linked through touching cells of ``cell_m``
+    metres), numbered 0.. by size, the largest first (ties by their first point's order).
+    xyz: (N, 3) site-local metres."""
+    if len(xyz) == 0:
+        return np.zeros(0, np.int64)
+    cells, inverse, counts = _cells_of(xyz, cell_m)
+    label = cell_regions(cells)[inverse]
+    sizes = np.bincount(label)
+    first = np.full(len(sizes), len(label))
+    np.minimum.at(first, label, np.arange(len(label)))
+    rank = np.empty(len(sizes), np.int64)
+    rank[np.lexsort((first, -sizes))] = np.arange(len(sizes))
+    return rank[label]
+
+
+def cell_regions(cells: np.ndarray) -> np.ndarray:
+    """(C,) the region (a connected-component number) of each of ``cells`` ((C, 3) distinct int64
+    cell indices), cells linked when they touch (26-neighbourhood)."""
     lo = cells.min(axis=0) - 1  # every cell and its neighbours at non-negative indices
     dims = cells.max(axis=0) - lo + 2
     key = _keys(cells, lo, dims)
@@ -91,10 +107,16 @@ def cell_region_sizes(cells: np.ndarray, counts: np.ndarray) -> np.ndarray:
     r, c = np.concatenate(rows), np.concatenate(cols)
     graph = coo_matrix((np.ones(len(r), np.int8), (r, c)), shape=(len(key), len(key)))
     _, label = connected_components(graph, directed=False)
-    sizes = np.bincount(label, weights=counts[order]).astype(np.int64)
     out = np.empty(len(cells), np.int64)
-    out[order] = sizes[label]
+    out[order] = label
     return out
+
+
+def cell_region_sizes(cells: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """(C,) the points in the region of each of ``cells`` ((C, 3) distinct int64 cell indices holding
+    ``counts`` points each), cells linked when they touch (26-neighbourhood)."""
+    label = cell_regions(cells)
+    return np.bincount(label, weights=counts).astype(np.int64)[label]
 
 
 class RegionCells:

@@ -18,10 +18,18 @@ from siteline.labels.store import auto_radius, write_labels
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.outputs import output_of
 from siteline.pairs.plan import PairPlan
+from siteline.pairs.regions import PairChanges, pair_changes
 from siteline.pairs.render import LabelledPair, render_pair_view
 from siteline.pairs.sources import TilePointSource
 from siteline.progress import Progress, no_progress
-from siteline.records.pairs import ChangeLabels, PairOutput, PairSummary, RenderedView
+from siteline.records.pairs import (
+    ChangedRegion,
+    ChangeLabels,
+    ChangesSeen,
+    PairOutput,
+    PairSummary,
+    RenderedView,
+)
 from siteline.records.params.labels import expected_false_change
 from siteline.render.outputs import png_bytes
 from siteline.render.threads import CpuThreads
@@ -99,10 +107,17 @@ def scene_ground(plan: PairPlan, t2: SceneTiles) -> GroundChoice:
 
 
 def pair_views(
-    plan: PairPlan, t1: SceneTiles, t2: SceneTiles, progress: Progress, threads: CpuThreads | None = None
+    plan: PairPlan,
+    t1: SceneTiles,
+    t2: SceneTiles,
+    progress: Progress,
+    threads: CpuThreads | None = None,
+    changes: PairChanges | None = None,
 ) -> ViewSet:
     """Synthetic views of the later scene (DESIGN.md §5): probes read its tiles at the pair's point
-    size, no camera within the clearance of a point of either scene, torch's threads following the machine's load (``threads``; a new one when None);
+    size, no camera within the clearance of a point of either scene, each of the pair's changed
+    regions (``changes``) in ``change_views`` views where candidates show it, torch's threads
+    following the machine's load (``threads``; a new one when None);
     :class:`PairError` when it has no cameras or every candidate is rejected."""
     threads = threads or CpuThreads()
     if not plan.cameras:
@@ -136,6 +151,7 @@ def pair_views(
         source,
         params.view_params_spec(),
         progress=step,
+        changes=changes.sample if changes is not None else None,
     )
     views.ground_choice = choice
     if not views.views:
@@ -209,7 +225,9 @@ def _render_queue(
     return kept, dict(sorted(rejected.items()))
 
 
-def _index(kept: list[tuple[SyntheticView, RenderedView]], work: Path, seed: int) -> list[RenderedView]:
+def _index(
+    kept: list[tuple[SyntheticView, RenderedView]], work: Path, seed: int
+) -> list[tuple[SyntheticView, RenderedView]]:
     """The kept views in key order, indexed 0..n-1 (an order that does not depend on the pool), their
     files renamed to ``<index>.png``."""
     by_view = {id(v): rec for v, rec in kept}
@@ -219,8 +237,27 @@ def _index(kept: list[tuple[SyntheticView, RenderedView]], work: Path, seed: int
         name = f"{i:04d}.png"
         for sub in FOLDERS:
             move(work / sub / rec.file, work / sub / name)
-        out.append(replace(rec, index=i, file=name))
+        out.append((v, replace(rec, index=i, file=name)))
     return out
+
+
+def changes_seen(
+    changes: PairChanges, views: ViewSet, kept: list[tuple[SyntheticView, RenderedView]]
+) -> ChangesSeen:
+    """Which rendered views show each changed region (planned from their probes), and why a region
+    in fewer than asked is (the views' reason; ``low_valid`` when views planned for it were
+    rendered with too few valid pixels and replaced)."""
+    p = views.params
+    regions = []
+    for r, region in enumerate(changes.regions):
+        shown = tuple(rec.index for v, rec in kept if r in v.shows)
+        reason = None
+        if len(shown) < p.change_views:
+            reason = views.unseen.get(r, "low_valid")
+        regions.append(ChangedRegion(
+            region.id, region.sides, region.area_m2, region.center_m, region.size_m, shown, reason,
+        ))  # fmt: skip
+    return ChangesSeen(p.change_views, p.change_min_px, p.change_min_m2, changes.smaller, tuple(regions))
 
 
 def execute_pair(
@@ -231,14 +268,23 @@ def execute_pair(
     t1, t2 = (open_labelled(sc.tiles, sc.label_set) for sc in (plan.t1, plan.t2))
     labels = pair_labels(plan, t1, t2, store, progress)
     scenes = LabelledPair.with_labels(t1, t2, labels.uri)
+    view_params = plan.params.view_params_spec()
+    changes = None
+    if view_params.change_views > 0:
+        changes = pair_changes(scenes, plan.fence, view_params.change_min_m2, labels.radius_m)
+        log.info(
+            "pair %d: %d changed regions of %g m2 or more (%d smaller)",
+            plan.pair_id, len(changes.regions), view_params.change_min_m2, changes.smaller,
+        )  # fmt: skip
     threads = CpuThreads()
     try:
-        views = pair_views(plan, t1, t2, progress, threads)
+        views = pair_views(plan, t1, t2, progress, threads, changes)
     finally:
         threads.restore()
     with store.publish(plan.root) as work:
         kept, rejected = _render_all(plan, scenes, views, work, device, progress)
-        records = _index(kept, work, plan.params.seed)
+        indexed = _index(kept, work, plan.params.seed)
+        records = [rec for _, rec in indexed]
         summary: PairSummary = {
             "pair": plan.pair_id, "t1": plan.t1.id, "t2": plan.t2.id, "radius_m": labels.radius_m,
             "params": plan.params.to_dict(), "label_sets": plan.versions.to_dict(), "labels": labels.to_dict(),
@@ -248,6 +294,8 @@ def execute_pair(
             "candidates": views.candidates, "probed": views.probed, "rejected": rejected,
             "views": [r.to_dict() for r in records],
         }  # fmt: skip
+        if changes is not None:
+            summary["changes"] = changes_seen(changes, views, indexed).to_dict()
         (work / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     log.info(
         "pair %d: %d views rendered (%s rejected) into %s",

@@ -112,8 +112,25 @@ def small_gaps(hit: np.ndarray) -> np.ndarray:
     return closed & ~hit
 
 
+def unsure_edges(r: RenderResult, change: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels of render ``r`` that show a farther surface where a nearer one may lie
+    (``RenderResult.unsure_of``: the edge trim gave them away, or they are holes between the nearer
+    surface's samples) and whose change differs from that nearer surface's (``change``: (N,) the
+    rendered points' codes). Which of the two such a pixel shows is closer than the points can say:
+    a jib three points wide lost a third of its width to the ground behind it, labelled unchanged
+    (issue 67), so the mask ignores them."""
+    out = np.zeros(r.hit.shape, bool)
+    if r.unsure_of is None:
+        return out
+    at = r.unsure_of >= 0
+    near = change[r.unsure_of[at]] == CHANGED
+    shown = r.attributes["change"][at] == CHANGED
+    out[at] = near != shown
+    return out
+
+
 def ignore_causes(
-    ra: RenderResult, rb: RenderResult, mask: np.ndarray, outside: np.ndarray
+    ra: RenderResult, rb: RenderResult, mask: np.ndarray, outside: np.ndarray, unsure: np.ndarray
 ) -> dict[str, float]:
     """The share of the view's pixels that ``mask`` ignores for each of
     :data:`siteline.codes.IGNORE_CAUSES`, each pixel under the first cause that holds. ra, rb: the two renders (``change`` attribute);
@@ -130,10 +147,12 @@ def ignore_causes(
         "one_side": empty_a | empty_b,
         "outside_fence": outside,
         "not_observed": unseen,
+        "unsure_edge": unsure,
         "ignored_class": np.ones_like(left),
     }
     out = {}
-    for cause in ("gap", "no_surface", "one_side", "outside_fence", "not_observed", "ignored_class"):
+    order = ("gap", "no_surface", "one_side", "outside_fence", "not_observed", "unsure_edge", "ignored_class")
+    for cause in order:
         mine = left & found[cause]
         out[cause] = float(mine.sum() / mask.size) if mask.size else 0.0
         left &= ~mine
@@ -178,7 +197,8 @@ def render_pair_view(
     ground: GroundModel | None = None,
 ) -> PairRender:
     """Render ``camera`` on both scenes with ``params`` (scale, point size, splats and gap fill,
-    level of detail or ``all_points``, ``one_side_hole``: :func:`pair_mask`) in ``colour`` (the
+    level of detail or ``all_points``, ``one_side_hole``: :func:`pair_mask`, ``unsure_edges``:
+    :func:`unsure_edges` ignored) in ``colour`` (the
     pair's RGB, intensity or elevation: siteline.render.colour), build the mask and say why each
     ignored pixel is ignored (``fence``: the site's, site-local metres, which made points outside it
     ignore; None when it has none). A height colour needs the pair's ``ground`` (the views' model)."""
@@ -187,6 +207,7 @@ def render_pair_view(
     settings = params.render_settings()
     out = []
     outside = []
+    unsure = []
     read = 0
     source = colour.attribute
     for side, tiles in ((1, pair.t1), (2, pair.t2)):
@@ -209,8 +230,11 @@ def render_pair_view(
             r.attributes["rgb"] = eye_dome(r.rgb, r.depth)
         out.append(r)
         outside.append(_outside(r, pts.xyz_m, fence))
+        unsure.append(unsure_edges(r, pts.attributes["change"]))
     ra, rb = out
     mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole)
+    edge = (unsure[0] | unsure[1]) & (mask != MASK_IGNORE) & params.unsure_edges
+    mask[edge] = MASK_IGNORE
     n_valid = int((mask != MASK_IGNORE).sum())
     filled = (ra.filled | rb.filled) if ra.filled is not None and rb.filled is not None else None
     return PairRender(
@@ -222,7 +246,7 @@ def render_pair_view(
         n_valid / mask.size,
         float((mask == MASK_CHANGED).sum() / n_valid) if n_valid else 0.0,
         read,
-        ignore_causes(ra, rb, mask, outside[0] | outside[1]),
+        ignore_causes(ra, rb, mask, outside[0] | outside[1], edge),
         float(filled.mean()) if filled is not None and filled.size else 0.0,
         change_visibility(ra.rgb, rb.rgb, mask),
     )

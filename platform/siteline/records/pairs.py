@@ -328,40 +328,183 @@ class ChangeLabels:
         )  # fmt: skip
 
 
+# why candidate views were rejected, in words (siteline.views.generate; the datasheet's)
+REJECTED_WORDS = {
+    "outside_fence": "outside the fence after mirroring", "underground": "underground",
+    "near_surface": "too near a point of either scene", "under_geometry": "under geometry", "low_coverage": "too little coverage",
+    "low_valid_probe": "too few valid pixels in their probe", "low_valid": "too few valid pixels rendered",
+    "no_fence": "no fence to mirror across", "nothing_ahead": "nothing ahead to step towards",
+    "sparse_points": "drawn from points too far apart",
+}  # fmt: skip
+# why a changed region is in fewer views than asked (siteline.views.generate.cover_changes); and
+# ``only:<rejection>``: every candidate that frames it was rejected, most of them for that reason
+UNSEEN_REASONS = {
+    "too_small": "too small or too far to reach the pixels asked from any candidate",
+    "outside_fence": "outside the fence",
+    "hidden": "hidden from every candidate that frames it (behind other surfaces)",
+    "view_budget": "the views that may be chosen for changes were spent on others",
+    "low_valid": "views that showed it rendered too few valid pixels",
+}
+
+
+def unseen_words(reason: str) -> str:
+    """A region's ``reason`` (:data:`UNSEEN_REASONS`, or ``only:<rejection>``) in words."""
+    if reason.startswith("only:"):
+        why = reason.removeprefix("only:")
+        return f"the candidates that frame it were rejected ({REJECTED_WORDS.get(why, why)})"
+    return UNSEEN_REASONS.get(reason, reason)
+
+
+@dataclass(frozen=True)
+class ChangedRegion:
+    """One changed region of a pair as its views were planned around it (siteline.pairs.regions):
+    its number (1 = the largest), the scenes whose changed points it holds (``t1``: gone or moved
+    away, ``t2``: new or moved in), its surface (m2: the 0.5 m cells, or change-radius cells where larger, its points
+    fill, with those a sparse scan left empty between them; a small region's is rounded up to
+    cells), its
+    centre and extent (site-local metres), the indices of the views planned to show it (at least
+    the pixels asked, in front of what the later scene's probe drew), and why fewer than asked do
+    (None: enough; :func:`unseen_words`)."""
+
+    id: int
+    sides: tuple[str, ...]
+    area_m2: float
+    center_m: tuple[float, float, float]
+    size_m: tuple[float, float, float]
+    views: tuple[int, ...] = ()
+    reason: str | None = None
+
+    def to_dict(self) -> dict[str, JSON]:
+        return {
+            "id": self.id, "sides": list(self.sides), "area_m2": round(self.area_m2, 2),
+            "center_m": [round(v, 2) for v in self.center_m], "size_m": [round(v, 2) for v in self.size_m],
+            "views": list(self.views), "reason": self.reason,
+        }  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ChangedRegion:
+        center = [json_number(v, "center_m") for v in json_list(doc["center_m"], "center_m")]
+        size = [json_number(v, "size_m") for v in json_list(doc["size_m"], "size_m")]
+        return cls(
+            json_int(doc["id"], "id"), tuple(json_str(v, "sides") for v in json_list(doc["sides"], "sides")),
+            json_number(doc["area_m2"], "area_m2"), (center[0], center[1], center[2]), (size[0], size[1], size[2]),
+            tuple(json_int(v, "views") for v in json_list(doc.get("views") or [], "views")),
+            json_or_none(json_str, doc.get("reason"), "reason"),
+        )  # fmt: skip
+
+
+class ChangesDoc(TypedDict):
+    """:class:`ChangesSeen` as JSON."""
+
+    asked_views: int
+    min_px: int
+    min_m2: float
+    smaller: int
+    regions: list[dict[str, JSON]]
+
+
+@dataclass(frozen=True)
+class ChangesSeen:
+    """How a pair's views cover its changes: each region of at least ``min_m2`` square metres was to
+    be in ``asked_views`` views at ``min_px`` pixels or more (at the render scale); ``smaller``:
+    regions under ``min_m2`` (not planned for)."""
+
+    asked_views: int
+    min_px: int
+    min_m2: float
+    smaller: int
+    regions: tuple[ChangedRegion, ...]
+
+    def to_dict(self) -> ChangesDoc:
+        return {
+            "asked_views": self.asked_views, "min_px": self.min_px, "min_m2": self.min_m2, "smaller": self.smaller,
+            "regions": [r.to_dict() for r in self.regions],
+        }  # fmt: skip
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, JSON]) -> ChangesSeen:
+        return cls(
+            json_int(doc["asked_views"], "asked_views"), json_int(doc["min_px"], "min_px"),
+            json_number(doc["min_m2"], "min_m2"), json_int(doc["smaller"], "smaller"),
+            tuple(ChangedRegion.from_dict(json_object(r, "regions")) for r in json_list(doc["regions"], "regions")),
+        )  # fmt: skip
+
+    @property
+    def short(self) -> list[ChangedRegion]:
+        """The regions in fewer views than asked."""
+        return [r for r in self.regions if len(r.views) < self.asked_views]
+
+    def summary(self, most: int = 12) -> str:
+        """In words: the regions, the views that show each, and why some show in fewer than asked."""
+        if not self.regions:
+            return f"no changed region of {self.min_m2:g} m2 or more" + (
+                f" ({self.smaller} smaller)" if self.smaller else ""
+            )
+        fewest = min(len(r.views) for r in self.regions)
+        head = (
+            f"{len(self.regions)} changed regions of {self.min_m2:g} m2 or more, each asked in "
+            f"{self.asked_views} views at {self.min_px} px or more; "
+            + (
+                f"all shown (fewest views {fewest})"
+                if not self.short
+                else f"{len(self.regions) - len(self.short)} shown, {len(self.short)} in fewer"
+            )
+        )
+        listed = sorted(self.regions, key=lambda r: (len(r.views) >= self.asked_views, r.id))[:most]
+        parts = [
+            f"#{r.id} {r.area_m2:.1f} m2 at ({r.center_m[0]:.1f}, {r.center_m[1]:.1f}, {r.center_m[2]:.1f}) "
+            f"[{'+'.join(r.sides)}]: {len(r.views)} views"
+            + (f" ({unseen_words(r.reason)})" if r.reason else "")
+            for r in listed
+        ]
+        more = len(self.regions) - len(listed)
+        tail = f"; {more} more" if more else ""
+        small = f"; {self.smaller} smaller regions not planned for" if self.smaller else ""
+        return head + ": " + "; ".join(parts) + tail + small
+
+
 class DrawnDoc(TypedDict):
     """:class:`Drawn` as a pair's summary and a release's lineage hold it."""
 
     candidates: int
     probed: NotRequired[int]
     rejected: NotRequired[dict[str, int]]
+    changes: NotRequired[ChangesDoc]
 
 
 @dataclass(frozen=True)
 class Drawn:
-    """How a pair's views were drawn: candidates made, how many were probed (None: not recorded), and
-    the rejected candidates by reason."""
+    """How a pair's views were drawn: candidates made, how many were probed (None: not recorded), the
+    rejected candidates by reason, and how the views cover the pair's changed regions (None: drawn
+    without them)."""
 
     candidates: int
     probed: int | None
     rejected: Mapping[str, int]
+    changes: ChangesSeen | None = None
 
     def to_dict(self) -> DrawnDoc:
         doc: DrawnDoc = {"candidates": self.candidates}
         if self.probed is not None:
             doc["probed"] = self.probed
         doc["rejected"] = dict(self.rejected)
+        if self.changes is not None:
+            doc["changes"] = self.changes.to_dict()
         return doc
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, object]) -> Drawn | None:
-        """From a pair summary's ``candidates``, ``probed`` and ``rejected``; None when it has none."""
+        """From a pair summary's ``candidates``, ``probed``, ``rejected`` and ``changes``; None when it
+        has none."""
         if "candidates" not in doc:
             return None
         rejected = json_object(doc.get("rejected") or {}, "rejected")
+        changes = doc.get("changes")
         return cls(
             json_int(doc["candidates"], "candidates"),
             json_or_none(json_int, doc.get("probed"), "probed"),
             {k: json_int(n, f"rejected.{k}") for k, n in rejected.items()},
+            ChangesSeen.from_dict(json_object(changes, "changes")) if changes else None,
         )
 
 
@@ -442,6 +585,7 @@ class PairSummary(TypedDict):
     candidates: NotRequired[int]
     probed: NotRequired[int | None]
     rejected: NotRequired[dict[str, int]]
+    changes: NotRequired[ChangesDoc]
     views: list[dict[str, JSON]]
 
 

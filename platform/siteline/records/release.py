@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import NotRequired, TypedDict, cast
+from typing import TYPE_CHECKING, NotRequired, TypedDict, cast
 
 from siteline.records.enums import SPLITS, ReleaseStatus, Split
 from siteline.schema import JSON, json_float, json_int, json_list, json_object, json_str
+
+if TYPE_CHECKING:  # records.pairs reads this module's format through the pair parameters
+    from siteline.records.pairs import ChangesDoc
 
 # the release layout this siteline builds (siteline.release.layout)
 FORMAT = 2
@@ -87,13 +90,15 @@ class SceneLineage(TypedDict):
 
 class ViewsLineage(TypedDict):
     """A pair's views in a release's lineage: how many were made of those asked, and how they were drawn
-    (siteline.records.pairs.DrawnDoc: candidates, probed, rejected; absent from earlier manifests)."""
+    (siteline.records.pairs.DrawnDoc: candidates, probed, rejected, changes; absent from earlier
+    manifests)."""
 
     made: int
     asked: int | None
     candidates: NotRequired[int]
     probed: NotRequired[int]
     rejected: NotRequired[dict[str, int]]
+    changes: NotRequired[ChangesDoc]
 
 
 class PairLineage(TypedDict):
@@ -186,8 +191,9 @@ class ReleaseRecord(TypedDict, total=False):
     """What the catalog records of a release (``release.parameters``; siteline.release.build): its pair
     and release parameters (documents), preset, lineage key, pairs, label sets, each pair's output
     digest and smallest change resolved (metres), the radius ceiling, why this version, where its ignore
-    pixels come from and the items left out of every split ([pair, view]). Keys may be absent from a
-    release built by an earlier version."""
+    pixels come from, the items left out of every split ([pair, view]) and how each pair's views cover
+    its changed regions (siteline.records.pairs.ChangesDoc). Keys may be absent from a release built by
+    an earlier version."""
 
     pair_params: dict[str, JSON]
     preset: str | None
@@ -201,6 +207,7 @@ class ReleaseRecord(TypedDict, total=False):
     radius_ceiling_m: float
     ignore: IgnoreBreakdown
     left_out: list[list[int]]
+    changes_seen: dict[str, ChangesDoc]
 
 
 class ManifestDoc(TypedDict):

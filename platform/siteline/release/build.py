@@ -158,6 +158,11 @@ def catalog_parameters(
         "radius_ceiling_m": params.radius_ceiling_m,
         "ignore": stats["ignore"],
         "left_out": left_out,
+        "changes_seen": {
+            str(pid): d.changes.to_dict()
+            for pid in pairs
+            if (d := outputs[pid].drawn) and d.changes is not None
+        },
     }
 
 

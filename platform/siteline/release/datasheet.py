@@ -9,7 +9,7 @@ from PIL import Image
 
 from siteline.codes import IGNORE_CAUSES, RELEASE_IGNORE_CAUSES
 from siteline.labels.accuracy import accuracy_text
-from siteline.records.pairs import ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed
+from siteline.records.pairs import REJECTED_WORDS, ChangeLabels, ChangeRulePlan, ColourPlan, Drawn, GroundUsed
 from siteline.records.params.labels import REACH_MULTIPLIER, SURFACE_RULES
 from siteline.records.params.pairs import PairParams
 from siteline.records.params.release import ReleaseParams
@@ -138,7 +138,9 @@ def _radius_lines(pairs: list[PairLineage], ceiling: float, params: PairParams) 
             if radius is not None
             else float("nan")
         )
-        measured = accuracy_text(rule, regions, params.trim_edges, spacing, params.surface_probe)
+        measured = accuracy_text(
+            rule, regions, params.trim_edges, spacing, params.surface_probe, params.unsure_edges
+        )
         if fc and rule in SURFACE_RULES:
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
@@ -206,24 +208,17 @@ def _layout_lines(doc: ManifestDoc, stats: ReleaseStats) -> list[str]:
     ]
 
 
-_REJECTED_WORDS = {
-    "outside_fence": "outside the fence after mirroring", "underground": "underground",
-    "near_surface": "too near a point of either scene", "under_geometry": "under geometry", "low_coverage": "too little coverage",
-    "low_valid_probe": "too few valid pixels in their probe", "low_valid": "too few valid pixels rendered",
-    "no_fence": "no fence to mirror across", "nothing_ahead": "nothing ahead to step towards",
-    "sparse_points": "drawn from points too far apart",
-}  # fmt: skip
-
-
 def _views_text(q: PairLineage) -> str:
     """How many views a pair gave of those asked, and why not more."""
     v = q["views"]
     text = f"- pair {q['id']}: {v['made']} views of the {v['asked']} asked"
     if (drawn := Drawn.from_dict(v)) is not None:
-        rejected = ", ".join(f"{n} {_REJECTED_WORDS.get(k, k)}" for k, n in sorted(drawn.rejected.items()))
+        rejected = ", ".join(f"{n} {REJECTED_WORDS.get(k, k)}" for k, n in sorted(drawn.rejected.items()))
         unprobed = drawn.candidates - sum(drawn.rejected.values()) - v["made"]
         text += f" from {drawn.candidates} candidates ({rejected or 'none rejected'}"
         text += f"; {unprobed} not needed)" if unprobed > 0 and v["made"] >= (v["asked"] or 0) else ")"
+        if drawn.changes is not None:
+            text += f"\n  - changes seen: {drawn.changes.summary()}"
     return text
 
 
@@ -303,6 +298,8 @@ _CAUSE_WORDS = {
     "gap": "a gap between points in one scene",
     "one_side": "a surface in one scene only (a hole in the other render)",
     "outside_fence": "a point outside the site fence",
+    "not_observed": "a place the other scan did not observe (a wall it grazed, ground in a shadow)",
+    "unsure_edge": "an object's edge closer than its points can place it, between a changed and an unchanged surface",
     "ignored_class": "a point of an ignored class (noise, snow, ignore)",
     "padding": "padding to the stored size",
     "unaccounted": "not accounted (outputs made before causes were recorded)",
@@ -377,7 +374,13 @@ def _source_lines(lin: Lineage) -> list[str]:
         + f", changed regions under {p.min_region_points} points taken back (siteline.labels.regions)",
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
-        f"**{p.one_side_hole}**; change is the union (OR) of the two directions.",
+        f"**{p.one_side_hole}**; change is the union (OR) of the two directions"
+        + (
+            "; a pixel where the edge trim, or a hole between a sparse surface's points, shows a surface whose "
+            "change differs from the nearer one that may lie there is ignore (unsure edge)."
+            if p.unsure_edges and p.trim_edges and p.splat == "world"
+            else "."
+        ),
         f"- level of detail: {lod}",
         "",
     ]

@@ -18,6 +18,10 @@ surface, when:
 Where no farther point is near, the splat stays (sky beyond a roof edge is ignore in every mask). Cost:
 one extra one-pixel scatter per point and one pass over the pixels; it grows with pixels, not
 points. Measured against analytic truth in docs/performance.md.
+
+Both the trim and a sparse surface's holes can show a farther surface where the nearer one may lie
+(within a point spacing of its edge, or between its samples): :func:`see_through` finds the holes,
+and a pair's mask ignores such pixels where the two surfaces' change differs (siteline.pairs.render).
 """
 
 from __future__ import annotations
@@ -83,3 +87,40 @@ def trim_edges(
         torch.from_numpy(out_depth).to(dev),
         torch.from_numpy(done).to(dev),
     )
+
+
+def see_through(
+    index: torch.Tensor,
+    depth: torch.Tensor,
+    centres: torch.Tensor,
+    spacing_m: torch.Tensor,
+    focal_px: float,
+    width: int,
+    max_radius_px: int,
+) -> torch.Tensor:
+    """(H W,) int64: for each pixel whose winner lies behind a nearer surface's samples, which enclose
+    it (one-pixel centres of points at least :data:`SAME_SURFACE` nearer than the winner, of one
+    surface, within :data:`REACH_SPACINGS` of their spacing, leave no run of more than
+    MAX_EMPTY_SECTORS of the eight sectors around it empty: the gap fill's test at the surface's own
+    reach), that surface's nearest sample; -1 elsewhere. A sparse beam's splats leave holes wider
+    than the gap fill closes; through them the ground is drawn where the beam is.
+
+    index, depth: (H W,) the render's winners (after the gap fill) and their depths (metres);
+    centres: (H W,) int64 z-buffer keys of one-pixel points (as :func:`trim_edges`); spacing_m: (N,)
+    every point's spacing (metres); focal_px: the render's focal length; max_radius_px: the widest
+    reach looked at."""
+    empty = centres == torch.iinfo(torch.int64).max
+    centre_index = torch.where(empty, -1, centres & 0xFFFFFFFF)
+    centre_depth = torch.where(empty, float("inf"), (centres >> 32).to(torch.int32).view(torch.float32))
+    centre_depth = centre_depth.to(torch.float32)
+    spx = torch.where(
+        empty, 0.0, spacing_m[centre_index.clamp(min=0)].to(torch.float32) * focal_px / centre_depth
+    )
+    knobs = np.array([SAME_SURFACE, REACH_SPACINGS], dtype=np.float32)
+    centre = torch.stack([centre_depth, torch.nan_to_num(spx, nan=0.0)]).cpu().numpy()
+    found = kernels.see_through(
+        index.cpu().numpy(), torch.nan_to_num(depth.to(torch.float32), nan=float("inf")).cpu().numpy(),
+        centre_index.cpu().numpy(), np.ascontiguousarray(centre), ring(max(1, int(max_radius_px)) + 1),
+        np.array(enclosed_table(), dtype=bool), knobs, width,
+    )  # fmt: skip
+    return torch.from_numpy(found).to(index.device)

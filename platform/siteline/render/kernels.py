@@ -243,3 +243,64 @@ def trim_edges(
     index[:] = out_index
     drawn[0] = out_depth
     return trimmed
+
+
+@kernel
+def see_through(
+    index: np.ndarray,
+    depth: np.ndarray,
+    centre_index: np.ndarray,
+    centre: np.ndarray,
+    ring: np.ndarray,
+    enclosed: np.ndarray,
+    knobs: np.ndarray,
+    width: int,
+) -> np.ndarray:
+    """The holes of siteline.render.edges.see_through, in one pass (see there): per pixel of (H W,)
+    ``index`` (winning point, -1 none) and ``depth`` (its depth, metres), the nearer point whose
+    surface its winner shows through, -1 elsewhere. centre_index: (H W,) the point drawn as a
+    one-pixel centre there (-1 none); centre: (2, H W) float32 its depth (inf none) and spacing in
+    pixels;
+    ring: (M, 4) int64 rows (du, dv, squared distance, sector) sorted by distance, as far as any
+    reach; enclosed: (256,) bool per set of occupied sectors; knobs: (2,) float32 SAME_SURFACE and
+    REACH_SPACINGS."""
+    n = len(index)
+    height = n // width
+    centre_depth, centre_spacing_px = centre[0], centre[1]
+    widen = np.float32(1.0) + knobs[0]
+    reach_spacings = knobs[1]
+    radius = 0
+    for k in range(len(ring)):
+        radius = max(radius, abs(ring[k, 0]), abs(ring[k, 1]))
+    near, _ = square_nearest(centre_depth, centre_depth < np.inf, radius, width)
+    # the widest reach of any centre around a pixel bounds how far its scan goes: a dense surface's
+    # holes are looked for within a few pixels, a sparse one's as far as its spacing reaches
+    widest, _ = square_nearest(-centre_spacing_px, centre_depth < np.inf, radius, width)
+    out = np.full(n, -1, np.int64)
+    for p in range(n):
+        if index[p] < 0 or not near[p] * widen < depth[p]:
+            continue
+        x, y = p % width, p // width
+        bound2 = (reach_spacings * -widest[p]) ** 2
+        first, front, reach2, bits = -1, np.float32(np.inf), np.float32(0.0), 0
+        for k in range(len(ring)):
+            if ring[k, 2] > bound2 or (first >= 0 and ring[k, 2] > reach2):
+                break
+            u, v = x + ring[k, 0], y + ring[k, 1]
+            if u < 0 or u >= width or v < 0 or v >= height:
+                continue
+            q = v * width + u
+            c = centre_depth[q]
+            if not c * widen < depth[p]:  # not nearer than the winner
+                continue
+            if first < 0:
+                first, front = q, c
+                reach2 = (reach_spacings * centre_spacing_px[q]) ** 2
+                if ring[k, 2] > reach2:
+                    break
+            if c <= front * widen:
+                bits |= 1 << ring[k, 3]
+                if enclosed[bits]:
+                    out[p] = centre_index[first]
+                    break
+    return out

@@ -29,7 +29,7 @@ from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
 from siteline.records.params.render import RenderParams
 from siteline.render import kernels
-from siteline.render.edges import trim_edges
+from siteline.render.edges import see_through, trim_edges
 from siteline.render.fill import fill_gaps
 from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels
 
@@ -45,8 +45,11 @@ class RenderResult:
     hit: bool, a point landed (drawn or filled). depth: float32 z_cam in metres of the winning point,
     NaN where no hit. index: int64 winning point index into the input, -1 where no hit. attributes:
     each input attribute gathered at the winner, zero where no hit (check ``hit``). filled: bool, the
-    pixels the gap fill gave a neighbour's point (a subset of ``hit``). camera: the camera at the
-    render scale.
+    pixels the gap fill gave a neighbour's point (a subset of ``hit``). unsure_of: int64, the nearer
+    point whose surface may lie where a farther one is drawn, -1 elsewhere: where the edge trim gave
+    the pixel to the farther surface, the point whose splat reached it, and where the winner shows
+    through a nearer surface's hole (siteline.render.edges.see_through), that surface's nearest
+    sample; None without the trim. camera: the camera at the render scale.
     """
 
     camera: Camera
@@ -56,6 +59,7 @@ class RenderResult:
     attributes: dict[str, np.ndarray]
     stats: dict[str, float] = field(default_factory=dict)
     filled: np.ndarray | None = None
+    unsure_of: np.ndarray | None = None
 
     @property
     def filled_share(self) -> float:
@@ -395,6 +399,25 @@ def _decode(
     return hit, depth_flat.numpy().reshape(H, W), index_cpu.numpy().reshape(H, W), out_attrs
 
 
+def _trimmed(
+    index: torch.Tensor,
+    depth: torch.Tensor,
+    pts: torch.Tensor,
+    spacing: torch.Tensor,
+    centres: torch.Tensor,
+    cam: Camera,
+    settings: RenderParams,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The render's winners after the edge trim (siteline.render.edges.trim_edges), and per pixel the
+    point whose splat reached a pixel the trim gave away (-1 elsewhere)."""
+    spacing_px = torch.where(index >= 0, spacing[index.clamp(min=0)] * _focal(cam) / depth, 0.0)
+    centre_uv = _within_pixel(pts, centres, cam, settings, index.device)
+    out_index, out_depth, trimmed = trim_edges(
+        index, depth, spacing_px, centres, centre_uv, cam.width, settings.splat_max_px
+    )
+    return out_index, out_depth, torch.where(trimmed, index, -1)
+
+
 def render_points(
     xyz: np.ndarray | torch.Tensor,
     camera: Camera,
@@ -430,17 +453,19 @@ def render_points(
     index, depth = _winners(zbuf, npix)
     if depths is not None and n:  # the winners' own depth, not their splat's
         depth = torch.where(index >= 0, depths[index.clamp(min=0)], float("nan"))
-    trimmed = torch.zeros(npix, dtype=torch.bool, device=dev)
+    reached = torch.full((npix,), -1, dtype=torch.int64, device=dev)
     if trim and centres is not None and spacing is not None and n:
-        spacing_px = torch.where(index >= 0, spacing[index.clamp(min=0)] * _focal(cam) / depth, 0.0)
-        centre_uv = _within_pixel(pts, centres[:npix], cam, settings, dev)
-        index, depth, trimmed = trim_edges(
-            index, depth, spacing_px, centres[:npix], centre_uv, cam.width, settings.splat_max_px
-        )
+        index, depth, reached = _trimmed(index, depth, pts, spacing, centres[:npix], cam, settings)
     drawn = int((index >= 0).sum())
     filled = torch.zeros(npix, dtype=torch.bool, device=dev)
     if settings.fill_px:
         index, depth, filled = fill_gaps(index, depth, cam.width, cam.height, settings.fill_px, CPU_KERNELS)
+    unsure_of = None
+    if trim and centres is not None and spacing is not None:
+        holes = see_through(
+            index, depth, centres[:npix], spacing, _focal(cam), cam.width, settings.splat_max_px
+        )
+        unsure_of = torch.where(reached >= 0, reached, holes).cpu().numpy().reshape(cam.height, cam.width)
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
     t_splat = time.perf_counter() - t0
@@ -452,7 +477,7 @@ def render_points(
         "coverage": float(hit.mean()) if hit.size else 0.0,
         "drawn": drawn / npix if npix else 0.0,
         "filled": float(filled_img.mean()) if filled_img.size else 0.0,
-        "trimmed": int(trimmed.sum()) / npix if npix else 0.0,
+        "trimmed": int((reached >= 0).sum()) / npix if npix else 0.0,
         "seconds": time.perf_counter() - t0,
         "seconds_splat": t_splat,
         "width": cam.width,
@@ -466,4 +491,5 @@ def render_points(
         attributes=out_attrs,
         stats=stats,
         filled=filled_img,
+        unsure_of=unsure_of,
     )

@@ -146,8 +146,9 @@ class MaskScore:
     within BOUNDARY_PX of a truly changed one (a change drawn too wide; of ``fp``). scored: pixels
     both label; pixels: every pixel; defined: pixels the truth labels; dropped: those of them the mask
     ignores. shown: changed object name -> the views whose truth shows at least SHOWN_MIN_PX of its
-    changed pixels, and [its truly changed pixels the mask ignores, its truly changed pixels] over
-    all views (``ignored``)."""
+    changed pixels, and [its truly changed pixels the mask ignores, its truly changed pixels, those
+    the mask labels unchanged] over all views (``ignored``; the last: what lies behind it labelled
+    in its place, see-through, where it stands before an unchanged surface)."""
 
     tp: int = 0
     fp: int = 0
@@ -203,9 +204,10 @@ class MaskScore:
             mine = truly & (truth.changed_object == oid)
             n = int(mine.sum())
             self.shown[name] = self.shown.get(name, 0) + (n >= SHOWN_MIN_PX)
-            dropped = self.ignored.setdefault(name, [0, 0])
+            dropped = self.ignored.setdefault(name, [0, 0, 0])
             dropped[0] += int((mine & (predicted == IGNORE)).sum())
             dropped[1] += n
+            dropped[2] += int((mine & (predicted == UNCHANGED)).sum())
         for oid in np.unique(truth.changed_object[t]):
             name = truth.names.get(int(oid), f"object#{int(oid)}")
             mine = t & (truth.changed_object == oid)
@@ -259,6 +261,13 @@ class MaskScore:
         """Per changed object, the share of its truly changed pixels the mask ignores."""
         return {k: v[0] / v[1] for k, v in sorted(self.ignored.items()) if v[1]}
 
+    def object_through(self) -> dict[str, float]:
+        """Per changed object, the share of its truly changed pixels the mask labels unchanged: where
+        it stands before an unchanged surface (a pole, a jib, a fence panel over the ground), the
+        surface behind labelled in its place (see-through; an upper bound of it: a 3D label that
+        missed the object counts too)."""
+        return {k: v[2] / v[1] for k, v in sorted(self.ignored.items()) if v[1]}
+
     @property
     def dropped_share(self) -> float:
         """The share of the pixels the truth labels that the mask ignores."""
@@ -275,6 +284,7 @@ class MaskScore:
             "object_recall": self.object_recall(),
             "object_views": self.object_views(),
             "object_ignored": self.object_ignored(),
+            "object_through": self.object_through(),
             "specks_median": float(np.median(self.specks)) if self.specks else float("nan"),
             "specks_max": max(self.specks, default=0),
             "rims_median": float(np.median(self.rims)) if self.rims else float("nan"),

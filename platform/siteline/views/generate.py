@@ -25,6 +25,7 @@ from siteline.tolerances import (
     at_least,
 )
 from siteline.views import strategies
+from siteline.views.changes import ChangeSample, framed_pixels, shown_pixels
 from siteline.views.ground import GroundChoice, GroundModel, GroundPlane
 from siteline.views.sources import PointSource
 
@@ -34,6 +35,9 @@ SPARSE_SHARE = 0.1
 # the share is judged on at most this many of a probe's points (every k-th): a probe of a whole
 # scene of a million points then costs ~5 ms more, not ~30
 SPARSE_SAMPLE = 200_000
+# a changed region short of views has at most this many of the candidates that frame it probed
+# (nearest first is not asked: in key order, as the sample), so its cost is bounded per region
+CHANGE_TRIES = 40
 
 
 @dataclass(frozen=True)
@@ -49,7 +53,8 @@ class SyntheticView:
     """One synthetic view: its parent real camera, the strategy key, the parameters that made it, the
     camera (site-local), after rejection its probe's coverage at the render scale and the share of
     pixels its kept points cover (``probe_valid``: an upper bound of the view's valid share), or
-    why it was rejected, and once sampled its index in the pair's sample."""
+    why it was rejected, once sampled its index in the pair's sample, and the pair's changed
+    regions its probe shows at ``change_min_px`` or more (``shows``: numbers of the ChangeSample)."""
 
     parent: str
     strategy: str
@@ -59,6 +64,7 @@ class SyntheticView:
     rejected: str | None = None
     index: int | None = None
     probe_valid: float | None = None
+    shows: tuple[int, ...] = ()
 
     def to_dict(self) -> dict[str, JSON]:
         return {
@@ -155,7 +161,9 @@ class ViewSet:
     tests rejected (``rejected``) and the picker that drew the sample (``reserve``: its next views
     replace views a later stage rejects, siteline.pairs: too few valid pixels; its ``rejected``
     counts the probes' verdicts); ``ground_choice``: how the ground was found and modelled, when the
-    caller chose it (siteline.views.ground.model_ground)."""
+    caller chose it (siteline.views.ground.model_ground). With a pair's changes: ``unseen`` says
+    why a region (a ChangeSample number) is in fewer views than asked, and ``change_probes`` counts
+    the candidates probed for them (``probed``) and their rejections by reason."""
 
     views: list[SyntheticView]
     params: ViewParams
@@ -164,22 +172,32 @@ class ViewSet:
     rejected: dict[str, int] = field(default_factory=dict)
     reserve: Picker | None = None
     ground_choice: GroundChoice | None = None
+    unseen: dict[int, str] = field(default_factory=dict)
+    change_probes: Counter[str] = field(default_factory=Counter)
 
     def all_rejected(self) -> dict[str, int]:
         """Every rejection so far by reason: the geometric tests' and the probes'."""
         out = Counter(self.rejected)
         if self.reserve is not None:
             out.update(self.reserve.rejected)
+        out.update({k: n for k, n in self.change_probes.items() if k != "probed" and n})
         return dict(sorted(out.items()))
 
     @property
     def probed(self) -> int:
         """Candidates probed so far (the rest passed the geometric tests but were never needed)."""
-        return self.reserve.probed if self.reserve is not None else 0
+        return (self.reserve.probed if self.reserve is not None else 0) + self.change_probes["probed"]
 
     def next_reserve(self) -> SyntheticView | None:
-        """The next view of the stratified order beyond those drawn (None when none is left)."""
-        return self.reserve.next() if self.reserve is not None else None
+        """The next view of the stratified order beyond those drawn (None when none is left); views
+        added for a change are in the sample already and are passed over."""
+        if self.reserve is None:
+            return None
+        sampled = {(v.parent, v.strategy) for v in self.views}
+        while (v := self.reserve.next()) is not None:
+            if (v.parent, v.strategy) not in sampled:
+                return v
+        return None
 
     def to_dict(self) -> dict[str, JSON]:
         return {
@@ -306,14 +324,18 @@ def sparse_share(
     return float(area[px > max_spacing_px].sum() / area.sum())
 
 
-def probe(view: SyntheticView, source: PointSource, params: ViewParams) -> SyntheticView:
+def probe(
+    view: SyntheticView, source: PointSource, params: ViewParams, changes: ChangeSample | None = None
+) -> SyntheticView:
     """``view`` with its probe's ``coverage`` and ``probe_valid`` (the share of pixels kept points
     cover) at the render scale, ``rejected`` when under ``min_coverage`` or ``min_valid`` (exactly
     at a threshold passes: siteline.tolerances), or when more than :data:`SPARSE_SHARE` of the
     surface it shows is drawn from points more than ``max_spacing_px`` apart at the render scale
     (:func:`sparse_share`; a probe reads points about half a probe pixel apart where the data are
     denser, 2 render pixels at ``probe_factor`` 1/4, so spacings are exact from there up, and the
-    bound is met below). A source without spacings (fixed splats) is not judged by spacing."""
+    bound is met below). A source without spacings (fixed splats) is not judged by spacing. With
+    the pair's ``changes``, a view that passes says which regions it shows (``shows``:
+    siteline.views.changes.shown_pixels at ``change_min_px`` or more)."""
     settings = params.probe_settings()
     points = source.points_for_view(view.camera, params.probe_scale)
     if points.spacing_m is None:
@@ -327,7 +349,11 @@ def probe(view: SyntheticView, source: PointSource, params: ViewParams) -> Synth
     if reason is None and points.spacing_m is not None and params.max_spacing_px > 0:
         sparse = sparse_share(points.xyz, points.spacing_m, view.camera, params.scale, params.max_spacing_px)
         reason = "sparse_points" if sparse > SPARSE_SHARE + RATIO_TOL else None
-    return replace(view, coverage=cov.hit, probe_valid=cov.kept, rejected=reason)
+    shows: tuple[int, ...] = ()
+    if reason is None and changes is not None and changes.count:
+        px = shown_pixels(changes, points.xyz, view.camera, params.scale)
+        shows = tuple(int(r) for r in np.flatnonzero(px >= params.change_min_px))
+    return replace(view, coverage=cov.hit, probe_valid=cov.kept, rejected=reason, shows=shows)
 
 
 def reject(
@@ -396,6 +422,101 @@ def stratified_sample(views: Sequence[SyntheticView], n: int, seed: int) -> list
     return key_sorted(stratified_order(views, seed)[:n], seed)
 
 
+def _victim(views: list[SyntheticView], added: set[int], counts: np.ndarray, k: int) -> SyntheticView | None:
+    """The last drawn view of the stratified sample that no region needs (each region it shows is in
+    more than ``k`` views), or None."""
+    for v in reversed(views):
+        if id(v) not in added and all(counts[q] > k for q in v.shows):
+            return v
+    return None
+
+
+def _why_unseen(framing: Sequence[SyntheticView], tried: Sequence[SyntheticView]) -> str:
+    """Why a region stays short of views: no candidate frames it (too small), every candidate that
+    does was rejected (the most common reason), or those probed do not show it (hidden)."""
+    if any(v.rejected is None for v in tried) or any(v.rejected is None for v in framing):
+        return "hidden"
+    reasons = Counter(v.rejected for v in (*tried, *framing) if v.rejected)
+    return f"only:{reasons.most_common(1)[0][0]}" if reasons else "too_small"
+
+
+def cover_changes(
+    drawn: list[SyntheticView],
+    candidates: Sequence[SyntheticView],
+    changes: ChangeSample,
+    judge: Callable[[SyntheticView], SyntheticView],
+    params: ViewParams,
+    batch: Callable[[list[SyntheticView]], None] = lambda vs: None,
+) -> tuple[list[SyntheticView], dict[int, str]]:
+    """``drawn`` (the stratified sample, in the order drawn) with views added until each changed
+    region is in ``change_views`` of them, where candidates show it, and why some are not.
+
+    Regions are served largest first. A region short of views has the candidates not yet in the
+    sample that frame it at ``change_min_px`` or more (siteline.views.changes.framed_pixels: its
+    points in the frame, nothing in front considered) judged in candidate-key order (``judge``: the
+    probe, which says what each passing view shows; at most :data:`CHANGE_TRIES` of them), and each
+    that passes and shows it takes the place of the last drawn view that no region needs (the
+    sample keeps its size; a sample short of ``views`` grows instead), until ``change_share`` of
+    ``views`` were chosen so. ``candidates``: every
+    candidate, those the geometric tests rejected with their reasons (they say why a region no
+    passing candidate frames is unseen). Returns the views and, per region left short, why
+    (``too_small``, ``outside_fence``, ``hidden``, ``view_budget``, or ``only:<rejection>`` when
+    every candidate framing it was rejected: siteline.records.pairs.unseen_words)."""
+    k = params.change_views
+    views = list(drawn)
+    counts = np.zeros(changes.count, np.int64)
+    for v in views:
+        counts[list(v.shows)] += 1
+    if k <= 0 or not changes.count or (counts >= k).all():
+        return views, {}
+    pool = key_sorted(candidates, params.seed)
+    framed = framed_pixels(changes, [v.camera for v in pool], params.scale) >= params.change_min_px
+    taken = {(v.parent, v.strategy) for v in views}
+    added: set[int] = set()
+    most = int(params.change_share * params.views)
+    unseen: dict[int, str] = {}
+    for r in range(changes.count):
+        if counts[r] >= k:
+            continue
+        if not changes.inside[r]:
+            unseen[r] = "outside_fence"
+            continue
+        framing = [v for v, f in zip(pool, framed[:, r], strict=True) if f]
+        live = [v for v in framing if v.rejected is None and (v.parent, v.strategy) not in taken][
+            :CHANGE_TRIES
+        ]
+        batch(live)
+        tried = []
+        for v in live:
+            if counts[r] >= k:
+                break
+            j = judge(v)
+            tried.append(j)
+            if j.rejected is not None or r not in j.shows:
+                continue
+            if len(added) >= most:
+                unseen[r] = "view_budget"
+                break
+            if len(views) >= params.views:
+                victim = _victim(views, added, counts, k)
+                if victim is None:
+                    unseen[r] = "view_budget"
+                    break
+                views.remove(victim)
+                counts[list(victim.shows)] -= 1
+            views.append(j)
+            added.add(id(j))
+            taken.add((j.parent, j.strategy))
+            counts[list(j.shows)] += 1
+        if counts[r] < k and r not in unseen:
+            unseen[r] = (
+                _why_unseen([v for v in framing if v.rejected is not None], tried)
+                if tried or framing
+                else "too_small"
+            )
+    return views, {r: why for r, why in unseen.items() if counts[r] < k}
+
+
 def generate_views(
     cameras: Iterable[NamedCamera],
     ground: GroundModel,
@@ -403,10 +524,12 @@ def generate_views(
     source: PointSource,
     params: ViewParams | None = None,
     progress: Callable[[int], None] = no_step,
+    changes: ChangeSample | None = None,
 ) -> ViewSet:
     """Synthetic views of one scene (the later scene of a pair): candidates for every real camera,
     the geometric tests, then a seeded stratified sample of ``params.views`` of those that pass their
-    probe (:class:`Picker`: probed in the sample's order until enough pass), indexed 0..n-1.
+    probe (:class:`Picker`: probed in the sample's order until enough pass), indexed 0..n-1; with
+    the pair's ``changes``, views added so that each changed region is seen (:func:`cover_changes`).
     ``progress`` gets 1 per real camera and per view drawn.
 
     Real camera poses are snapped first (siteline.tolerances), so the same site at any coordinate
@@ -427,13 +550,38 @@ def generate_views(
         candidates.extend(reject_geometric(cands, ground, fence_m, source, params))
         progress(1)
     survivors = [v for v in candidates if v.rejected is None]
+    verdicts: dict[tuple[str, str], SyntheticView] = {}
+    extra: Counter[str] = Counter()  # the verdicts of candidates probed for a change
 
-    def judge(v: SyntheticView) -> SyntheticView:
-        return probe(v, source, params)
+    def judge(v: SyntheticView) -> SyntheticView:  # the picker's: counted by the picker
+        key = (v.parent, v.strategy)
+        out = verdicts.get(key)
+        if out is None:
+            verdicts[key] = out = probe(v, source, params, changes)
+        elif key in extra_keys:  # probed for a change first: the picker counts it now
+            extra_keys.discard(key)
+            extra["probed"] -= 1
+            if out.rejected:
+                extra[out.rejected] -= 1
+        return out
 
-    picker = Picker(
-        survivors, params.seed, judge, lambda vs: source.prefetch([v.camera for v in vs], params.probe_scale)
-    )
+    extra_keys: set[tuple[str, str]] = set()
+
+    def judge_again(v: SyntheticView) -> SyntheticView:
+        key = (v.parent, v.strategy)
+        if key in verdicts:
+            return verdicts[key]
+        verdicts[key] = out = probe(v, source, params, changes)
+        extra_keys.add(key)
+        extra["probed"] += 1
+        if out.rejected:
+            extra[out.rejected] += 1
+        return out
+
+    def prefetch(vs: list[SyntheticView]) -> None:
+        source.prefetch([v.camera for v in vs], params.probe_scale)
+
+    picker = Picker(survivors, params.seed, judge, prefetch)
     drawn = []
     for _ in range(params.views):
         v = picker.next()
@@ -441,6 +589,11 @@ def generate_views(
             break
         drawn.append(v)
         progress(1)
+    unseen: dict[int, str] = {}
+    if changes is not None:
+        drawn, unseen = cover_changes(drawn, candidates, changes, judge_again, params, prefetch)
     sample = [replace(v, index=i) for i, v in enumerate(key_sorted(drawn, params.seed))]
     rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))
-    return ViewSet(sample, params, ground, len(candidates), rejected, picker)
+    return ViewSet(
+        sample, params, ground, len(candidates), rejected, picker, unseen=unseen, change_probes=extra
+    )

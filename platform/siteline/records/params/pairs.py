@@ -59,7 +59,10 @@ class PairParams:
     geometry for a pair whose scenes classify differently (siteline.labels.rule), and is left out of
     the digest like ``colour``. shading: eye-dome lighting of A/B (``edl``, siteline.render.shading;
     ``auto`` and ``none``: none, bench/legible.py); ``auto`` is left out of the digest, and shaded
-    outputs get a key of their own (siteline.pairs.plan.output_digest).
+    outputs get a key of their own (siteline.pairs.plan.output_digest). unsure_edges: with the edge
+    trim, a pixel it gave to a farther surface whose change differs from the nearer surface's that
+    reached it is ignore (cause ``unsure_edge``: which of the two it shows lies within a point spacing
+    of an edge, siteline.pairs.render.unsure_edges), not labelled as the farther surface.
 
     The persisted JSON stays flat (the knobs above), so the catalog, the lineage and ``release diff``
     show each knob once under its one name."""
@@ -88,12 +91,13 @@ class PairParams:
     trim_edges: bool = True
     shading: str = "auto"
     surface_probe: float = SURFACE_PROBE
+    unsure_edges: bool = True
 
     # what each knob added after the first release meant before it existed (a record without it)
     BEFORE: ClassVar[Mapping[str, object]] = {
         "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
         "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR, "trim_edges": False,
-        "shading": "none", "surface_probe": 0.0,
+        "shading": "none", "surface_probe": 0.0, "unsure_edges": False,
     }  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -183,4 +187,6 @@ class PairParams:
             del doc["splat_factor"]
         if doc["surface_probe"] == 0 or doc["label_rule"] == "nearest":  # no probe: the labels of before
             del doc["surface_probe"]
+        if not doc["unsure_edges"]:  # the masks of before
+            del doc["unsure_edges"]
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]

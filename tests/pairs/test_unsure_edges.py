@@ -1,0 +1,96 @@
+"""Thin surfaces said unsure, never seen through: where the edge trim gives a sparse beam's side to the
+ground behind it, the mask ignores the pixel (cause ``unsure_edge``) instead of labelling the changed
+beam as the unchanged ground."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from siteline.camera.pinhole import Camera
+from siteline.codes import CHANGED as MASK_CHANGED
+from siteline.codes import IGNORE as MASK_IGNORE
+from siteline.codes import UNCHANGED as MASK_UNCHANGED
+from siteline.labels.change import CHANGED, UNCHANGED
+from siteline.pairs.render import ignore_causes, pair_mask, unsure_edges
+from siteline.records.params.render import RenderParams
+from siteline.render.zbuffer import render_points
+
+TRIM = RenderParams(scale=1.0, splat="world", trim_edges=True)
+BEAM_Z, CAMERA_Z = 18.0, 31.0
+
+
+def _scenes(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The earlier scene: ground at 11 points/m2 (random, as a flight samples it); the later: other
+    ground samples and a jib 1 m wide at 18 m along y with the same density. xyz and change codes
+    of each (the jib changed)."""
+    rng = np.random.default_rng(seed)
+
+    def ground(n: int) -> np.ndarray:
+        return np.c_[rng.uniform(-20, 20, (n, 2)), np.zeros(n)]
+
+    a = ground(17600)
+    jib = np.c_[rng.uniform(-0.5, 0.5, 330), rng.uniform(-15, 15, 330), np.full(330, BEAM_Z)]
+    b = np.concatenate([ground(17600), jib])
+    code_b = np.r_[np.full(17600, UNCHANGED), np.full(330, CHANGED)].astype(np.uint8)
+    return a, np.zeros(len(a), np.uint8) + UNCHANGED, b, code_b
+
+
+def _camera() -> Camera:
+    return Camera.look_at((0.0, 0.0, CAMERA_Z), (0.0, 0.0, 0.0), 400, 300, fx=340.0)
+
+
+def _true_jib(cam: Camera) -> np.ndarray:
+    """Pixels whose centre's ray meets the jib's top (|x| <= 0.5 m at 18 m), exactly."""
+    u, v = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    x = (u - cam.cx) / cam.fx * (CAMERA_Z - BEAM_Z)
+    y = (v - cam.cy) / cam.fy * (CAMERA_Z - BEAM_Z)
+    return (np.abs(x) <= 0.5) & (np.abs(y) <= 15.0)
+
+
+def _mask(unsure: bool) -> tuple[np.ndarray, dict[str, float]]:
+    a, code_a, b, code_b = _scenes()
+    cam = _camera()
+    renders, edges = [], []
+    for xyz, code in ((a, code_a), (b, code_b)):
+        spacing = np.full(len(xyz), 0.3, np.float32)
+        r = render_points(xyz.astype(np.float32), cam, TRIM, {"change": code}, spacing_m=spacing)
+        renders.append(r)
+        edges.append(unsure_edges(r, code))
+    ra, rb = renders
+    mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"])
+    edge = (edges[0] | edges[1]) & (mask != MASK_IGNORE) & unsure
+    mask[edge] = MASK_IGNORE
+    return mask, ignore_causes(ra, rb, mask, np.zeros(mask.shape, bool), edge)
+
+
+def test_a_sparse_beam_is_not_seen_through_its_sides_are_said_unsure() -> None:
+    truth = _true_jib(_camera())
+    before, causes_before = _mask(unsure=False)
+    after, causes_after = _mask(unsure=True)
+    # see-through: the beam's true pixels labelled as the unchanged ground behind it, over the whole
+    # beam and over its pixels 3 px or more inside its edge (the outermost ones lie beyond its last
+    # samples, where neither the splats nor the tests reach: about half a spacing)
+    inner = ndimage.distance_transform_cdt(truth, metric="chessboard") >= 3
+
+    def through(mask: np.ndarray, where: np.ndarray) -> float:
+        return float(((mask == MASK_UNCHANGED) & where).sum() / where.sum())
+
+    assert through(before, truth) > 0.3 and through(before, inner) > 0.2  # trimmed away, or holes
+    assert through(after, truth) <= 0.06 and through(after, inner) <= 0.03
+    # what is labelled changed stays the beam's, and only pixels near its sides became unsure
+    assert ((after == MASK_CHANGED) & ~truth).sum() <= ((before == MASK_CHANGED) & ~truth).sum()
+    near = ndimage.binary_dilation(truth, iterations=12)
+    assert ((after == MASK_IGNORE) & (before != MASK_IGNORE) & ~near).sum() == 0
+    assert causes_after["unsure_edge"] > 0 and causes_before["unsure_edge"] == 0
+    assert sum(causes_after.values()) == pytest.approx(float((after == MASK_IGNORE).mean()))
+
+
+def test_a_render_without_the_trim_has_no_unsure_edges() -> None:
+    _, _, b, code_b = _scenes()
+    r = render_points(
+        b.astype(np.float32), _camera(), RenderParams(scale=1.0, splat="world"), {"change": code_b},
+        spacing_m=np.full(len(b), 0.3, np.float32),
+    )  # fmt: skip
+    assert r.unsure_of is None and not unsure_edges(r, code_b).any()
