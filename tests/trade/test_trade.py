@@ -30,7 +30,8 @@ def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     scores = {"precision": 0.9, "recall": 0.8, "f1": 0.85, "boundary_f": 0.7, "specks_median": 1.0,
               "scored_share": 0.9, "object_recall": {"jib#21": 0.95, "pole#60": 0.62},
               "false_change": {"shed#10": 0.004, "tree#60": 0.031}, "dropped_share": 0.052,
-              "object_views": {"jib#21": 3, "pole#60": 9}, "camera_nearest_m": {"min": 3.2, "p10": 4.0, "median": 9.0}}  # fmt: skip
+              "object_views": {"jib#21": 3, "pole#60": 9}, "camera_nearest_m": {"min": 3.2, "p10": 4.0, "median": 9.0},
+              "object_through": {"jib#21": 0.02, "pole#60": 0.31}}  # fmt: skip
     rows = [
         TradeRow("default", {}, 10.0, 1.0, 0.3, scores),
         TradeRow("fill 0", {"fill_px": 0}, 8.0, math.nan, 0.3, scores),
@@ -40,15 +41,15 @@ def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     assert "synthetic boxes (flown) at 40 points/m2" in md
     assert (
         "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | tree#60 3.1% | 5.2% "
-        "| 90.0% | jib#21 3 | 3.20 | 10 | 1.0 s |" in md
+        "| 90.0% | jib#21 3 | pole#60 31.0% | 3.20 | 10 | 1.0 s |" in md
     )
     # a row measured before false change, the ignored share, views and cameras were scored says so, not 0
     old = {
         k: v
         for k, v in scores.items()
-        if k not in ("false_change", "dropped_share", "object_views", "camera_nearest_m")
+        if k not in ("false_change", "dropped_share", "object_views", "camera_nearest_m", "object_through")
     }
-    assert "| pole#60 0.62 | - | - | 90.0% | - | - |" in trade_markdown(
+    assert "| pole#60 0.62 | - | - | 90.0% | - | - | - |" in trade_markdown(
         [TradeRow("old", {}, 10.0, 1.0, 0.3, old)], "site", 10.0, "sampled"
     )
     assert "| fill 0 | fill_px=0 |" in md and md.count("| reused |") == 1

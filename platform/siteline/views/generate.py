@@ -485,6 +485,9 @@ def cover_changes(
         live = [v for v in framing if v.rejected is None and (v.parent, v.strategy) not in taken][
             :CHANGE_TRIES
         ]
+        if live and len(added) >= most:  # the views that may be chosen so are spent: nothing to probe
+            unseen[r] = "view_budget"
+            continue
         batch(live)
         tried = []
         for v in live:
