@@ -39,6 +39,12 @@ def test_the_table_names_the_weakest_object_and_a_failed_variant() -> None:
     ]
     md = trade_markdown(rows, "boxes", 40.0)
     assert "synthetic boxes (flown) at 40 points/m2" in md
+    assert "cameras:" not in md  # no planned altitude in these scores
+    planned = trade_markdown(
+        [TradeRow("default", {}, 10.0, 1.0, 0.3, scores | {"planned_altitude": {"altitude_m": 33.8, "why": "clears the 18.8 m jib by 15 m"}})],
+        "boxes", 40.0,
+    )  # fmt: skip
+    assert "The later scene's cameras: planned at 33.8 m (clears the 18.8 m jib by 15 m)." in planned
     assert (
         "| default | release defaults | 0.900 | 0.800 | 0.850 | 0.700 | 1 | pole#60 0.62 | tree#60 3.1% | 5.2% "
         "| 90.0% | jib#21 3 | pole#60 31.0% | 3.20 | 10 | 1.0 s |" in md
@@ -103,4 +109,8 @@ def test_bench_trade_from_the_installed_command(tmp_path) -> None:
             0 <= n <= 3 for n in r["object_views"].values()
         )
     assert "| default | release defaults |" in (folder / "trade.md").read_text()
+    # LiDAR only: the cameras were planned, above the crane by the clearance, and the trade says so
+    planned = rows[0]["planned_altitude"]
+    assert planned["altitude_m"] > 18.8 and "clears" in planned["why"], planned
+    assert f"planned at {planned['altitude_m']:g} m" in (folder / "trade.md").read_text()
     assert len(list(folder.glob("*.png"))) == 2
