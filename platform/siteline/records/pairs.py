@@ -351,7 +351,7 @@ def unseen_words(reason: str) -> str:
     """A region's ``reason`` (:data:`UNSEEN_REASONS`, or ``only:<rejection>``) in words."""
     if reason.startswith("only:"):
         why = reason.removeprefix("only:")
-        return f"the candidates that frame it were rejected ({REJECTED_WORDS.get(why, why)})"
+        return f"every candidate that frames it was rejected, most as {REJECTED_WORDS.get(why, why)}"
     return UNSEEN_REASONS.get(reason, reason)
 
 
@@ -442,7 +442,7 @@ class ChangesSeen:
             )
         fewest = min(len(r.views) for r in self.regions)
         head = (
-            f"{len(self.regions)} changed regions of {self.min_m2:g} m2 or more, each asked in "
+            f"{len(self.regions)} changed region{'' if len(self.regions) == 1 else 's'} of {self.min_m2:g} m2 or more, each asked in "
             f"{self.asked_views} views at {self.min_px} px or more; "
             + (
                 f"all shown (fewest views {fewest})"
@@ -453,7 +453,7 @@ class ChangesSeen:
         listed = sorted(self.regions, key=lambda r: (len(r.views) >= self.asked_views, r.id))[:most]
         parts = [
             f"#{r.id} {r.area_m2:.1f} m2 at ({r.center_m[0]:.1f}, {r.center_m[1]:.1f}, {r.center_m[2]:.1f}) "
-            f"[{'+'.join(r.sides)}]: {len(r.views)} views"
+            f"[{'+'.join(r.sides)}]: {len(r.views)} view{'' if len(r.views) == 1 else 's'}"
             + (f" ({unseen_words(r.reason)})" if r.reason else "")
             for r in listed
         ]
