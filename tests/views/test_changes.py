@@ -14,7 +14,7 @@ from siteline.records.params.render import RenderParams
 from siteline.records.params.views import ViewParams
 from siteline.render.zbuffer import render_points
 from siteline.views.changes import framed_pixels, shown_pixels
-from siteline.views.generate import NamedCamera, generate_views
+from siteline.views.generate import NamedCamera, ViewSet, generate_views
 from siteline.views.ground import fit_ground_plane
 from siteline.views.sources import ArrayPointSource
 
@@ -145,15 +145,18 @@ def test_every_change_is_seen_in_the_views_asked_or_said_why() -> None:
     inside = next(r for r, reg in enumerate(found.regions) if abs(reg.center_m[0]) < 3)
     patch = next(r for r, reg in enumerate(found.regions) if reg.center_m[0] > 60)
 
+    def views(**knobs: float) -> ViewSet:  # the test's site with PARAMS and ``knobs``, the changes given
+        return generate_views(
+            _cameras(),
+            plane,
+            FENCE,
+            source,
+            ViewParams(**{**PARAMS.to_dict(), **knobs}),
+            changes=found.sample,
+        )
+
     plain = generate_views(_cameras(), plane, FENCE, source, PARAMS)
-    planned = generate_views(
-        _cameras(),
-        plane,
-        FENCE,
-        source,
-        ViewParams(**{**PARAMS.to_dict(), "change_views": 5}),
-        changes=found.sample,
-    )
+    planned = views(change_views=5)
     assert len(plain.views) == len(planned.views) == 12
     # measured by the renderer, not by the planner: the container's pixels in each view
     seen_before = sum(_container_pixels(scene, changes["container"], v.camera) >= 50 for v in plain.views)
@@ -166,27 +169,14 @@ def test_every_change_is_seen_in_the_views_asked_or_said_why() -> None:
         plain.all_rejected().values()
     )
     # the sample stays seeded: the same again
-    again = generate_views(
-        _cameras(),
-        plane,
-        FENCE,
-        source,
-        ViewParams(**{**PARAMS.to_dict(), "change_views": 5}),
-        changes=found.sample,
-    )
+    again = views(change_views=5)
     assert [v.to_dict() for v in again.views] == [v.to_dict() for v in planned.views]
     # a budget smaller than the views asked for the change: every view shows it, and it says why not more
-    few = generate_views(
-        _cameras(), plane, FENCE, source,
-        ViewParams(**{**PARAMS.to_dict(), "views": 3, "change_views": 5, "change_share": 1.0}), changes=found.sample,
-    )  # fmt: skip
+    few = views(views=3, change_views=5, change_share=1.0)
     assert len(few.views) == 3 and all(container in v.shows for v in few.views)
     assert few.unseen[container] == "view_budget"
     # at most change_share of the views are chosen for changes: a quarter of 4 is one
-    capped = generate_views(
-        _cameras(), plane, FENCE, source,
-        ViewParams(**{**PARAMS.to_dict(), "views": 4, "change_views": 5, "change_share": 0.25}), changes=found.sample,
-    )  # fmt: skip
+    capped = views(views=4, change_views=5, change_share=0.25)
     drawn = generate_views(_cameras(), plane, FENCE, source, ViewParams(**{**PARAMS.to_dict(), "views": 4}))
     kept = {(v.parent, v.strategy) for v in drawn.views}
     assert len(capped.views) == 4 and sum((v.parent, v.strategy) not in kept for v in capped.views) == 1

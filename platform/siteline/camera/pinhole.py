@@ -244,6 +244,12 @@ class Camera:
             uv = np.stack([self.fx * cam[:, 0] / z + self.cx, self.fy * cam[:, 1] / z + self.cy], axis=1)
         return uv, z
 
+    def in_frame(self, uv: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """(N,) bool: which of :meth:`project`'s points lie in front of the camera and in its image."""
+        return (
+            (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
+        )
+
     def frustum_planes(self, near_m: float = 1e-3, far_m: float | None = None) -> np.ndarray:
         """Inward planes (K, 4) float64 [n, d] with n . x + d >= 0 inside (site-local metres).
 

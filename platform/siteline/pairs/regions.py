@@ -16,8 +16,8 @@ from siteline.records.pairs import ChangedRegion
 from siteline.site.fence import inside_fence
 from siteline.views.changes import ChangeSample
 
-# changed points are read at this spacing (metres; all of them where the scan is sparser): the read
-# grows with the changed surface, not the scene's density
+# changed points are read at this spacing (metres; all of them where the scan is sparser): each
+# scene is read at it, so the read grows with the site's surface, not its density
 CHANGE_READ_M = 0.2
 # they are linked into regions through touching cells of this size (metres: points of one surface
 # up to ~1 m apart, a pole flown at 80 points/m2 or a wall at 3), or of the pair's change radius

@@ -51,6 +51,15 @@ def ring(radius_px: int) -> np.ndarray:
     return np.array(rows, dtype=np.int64).reshape(-1, 4)
 
 
+def _centres(centres: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The point index (-1 none) and depth (float32 metres, inf none) of each pixel's one-pixel centre,
+    from the z-buffer keys (float32 depth bits << 32 | point index; int64 max where none)."""
+    empty = centres == torch.iinfo(torch.int64).max
+    index = torch.where(empty, -1, centres & 0xFFFFFFFF)
+    depth = torch.where(empty, float("inf"), (centres >> 32).to(torch.int32).view(torch.float32))
+    return index, depth.to(torch.float32)
+
+
 def trim_edges(
     index: torch.Tensor,
     depth: torch.Tensor,
@@ -69,16 +78,14 @@ def trim_edges(
     the widest reach looked at. Returns the new (index, depth) and (H W,) bool ``trimmed``, on the tensors' device (the pass itself runs compiled on the CPU: its cost is per
     pixel)."""
     dev = index.device
-    empty = centres == torch.iinfo(torch.int64).max
-    centre_index = torch.where(empty, -1, centres & 0xFFFFFFFF).cpu().numpy()
-    centre_depth = torch.where(empty, float("inf"), (centres >> 32).to(torch.int32).view(torch.float32))
-    centre = torch.cat([centre_depth.to(torch.float32)[None], centre_uv.to(torch.float32)]).cpu().numpy()
+    centre_index, centre_depth = _centres(centres)
+    centre = torch.cat([centre_depth[None], centre_uv.to(torch.float32)]).cpu().numpy()
     spx = torch.nan_to_num(spacing_px.to(torch.float32), nan=0.0, posinf=float(max_radius_px))
     drawn = torch.stack([depth.to(torch.float32), spx]).cpu().numpy().copy()
     out_index = index.cpu().numpy().copy()
     knobs = np.array([SAME_SURFACE, KEEP_SPACINGS, REACH_SPACINGS], dtype=np.float32)
     done = kernels.trim_edges(
-        out_index, drawn, centre_index, np.ascontiguousarray(centre), ring(max(1, int(max_radius_px)) + 1),
+        out_index, drawn, centre_index.cpu().numpy(), np.ascontiguousarray(centre), ring(max(1, int(max_radius_px)) + 1),
         np.array(enclosed_table(), dtype=bool), knobs, width,
     )  # fmt: skip
     out_depth = drawn[0]
@@ -109,12 +116,11 @@ def see_through(
     centres: (H W,) int64 z-buffer keys of one-pixel points (as :func:`trim_edges`); spacing_m: (N,)
     every point's spacing (metres); focal_px: the render's focal length; max_radius_px: the widest
     reach looked at."""
-    empty = centres == torch.iinfo(torch.int64).max
-    centre_index = torch.where(empty, -1, centres & 0xFFFFFFFF)
-    centre_depth = torch.where(empty, float("inf"), (centres >> 32).to(torch.int32).view(torch.float32))
-    centre_depth = centre_depth.to(torch.float32)
+    centre_index, centre_depth = _centres(centres)
     spx = torch.where(
-        empty, 0.0, spacing_m[centre_index.clamp(min=0)].to(torch.float32) * focal_px / centre_depth
+        centre_index < 0,
+        0.0,
+        spacing_m[centre_index.clamp(min=0)].to(torch.float32) * focal_px / centre_depth,
     )
     knobs = np.array([SAME_SURFACE, REACH_SPACINGS], dtype=np.float32)
     centre = torch.stack([centre_depth, torch.nan_to_num(spx, nan=0.0)]).cpu().numpy()

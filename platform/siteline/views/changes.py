@@ -39,19 +39,12 @@ class ChangeSample:
         """The number of regions."""
         return len(self.inside)
 
-    def of(self, region: int) -> ChangeSample:
-        """The sample of one region (numbered 0 there), for testing candidates against it alone."""
-        at = self.region == region
-        return ChangeSample(
-            self.xyz[at], np.zeros(int(at.sum()), np.int64), self.area_m2[at], self.inside[[region]]
-        )
-
 
 def _pixel_area(sample: ChangeSample, cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each sample point's pixel (u, v as int64), depth (metres) and the pixels its surface covers
     through ``cam`` (0 outside the frame or behind it)."""
     uv, z = cam.project(sample.xyz)
-    on = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+    on = cam.in_frame(uv, z)
     f = max(cam.fx, cam.fy)
     with np.errstate(divide="ignore", invalid="ignore"):
         px = np.where(on, sample.area_m2 * (f / np.where(on, z, 1.0)) ** 2, 0.0)
@@ -81,7 +74,7 @@ def shown_pixels(sample: ChangeSample, probe_xyz: np.ndarray, camera: Camera, sc
     nearest = np.full(gw * gh, np.inf)
     step = max(1, -(-len(probe_xyz) // DEPTH_SAMPLE))
     uv, z = cam.project(np.asarray(probe_xyz[::step], np.float64))
-    on = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+    on = cam.in_frame(uv, z)
     if on.any():
         cell = (uv[on, 1] // DEPTH_CELL_PX).astype(np.int64) * gw + (uv[on, 0] // DEPTH_CELL_PX).astype(
             np.int64

@@ -159,11 +159,11 @@ class Picker:
 class ViewSet:
     """The outcome of view generation: the sample, the candidate count, what the cheap geometric
     tests rejected (``rejected``) and the picker that drew the sample (``reserve``: its next views
-    replace views a later stage rejects, siteline.pairs: too few valid pixels; its ``rejected``
-    counts the probes' verdicts); ``ground_choice``: how the ground was found and modelled, when the
-    caller chose it (siteline.views.ground.model_ground). With a pair's changes: ``unseen`` says
-    why a region (a ChangeSample number) is in fewer views than asked, and ``change_probes`` counts
-    the candidates probed for them (``probed``) and their rejections by reason."""
+    replace views a later stage rejects, siteline.pairs: too few valid pixels); ``ground_choice``: how the ground was found and modelled, when the
+    caller chose it (siteline.views.ground.model_ground); ``verdicts``: every probe's verdict so far,
+    (parent, strategy) -> the judged view (the picker's, the reserve's and those probed for a change:
+    each candidate probed once). With a pair's changes: ``unseen`` says why a region (a ChangeSample
+    number) is in fewer views than asked."""
 
     views: list[SyntheticView]
     params: ViewParams
@@ -173,20 +173,18 @@ class ViewSet:
     reserve: Picker | None = None
     ground_choice: GroundChoice | None = None
     unseen: dict[int, str] = field(default_factory=dict)
-    change_probes: Counter[str] = field(default_factory=Counter)
+    verdicts: dict[tuple[str, str], SyntheticView] = field(default_factory=dict)
 
     def all_rejected(self) -> dict[str, int]:
         """Every rejection so far by reason: the geometric tests' and the probes'."""
         out = Counter(self.rejected)
-        if self.reserve is not None:
-            out.update(self.reserve.rejected)
-        out.update({k: n for k, n in self.change_probes.items() if k != "probed" and n})
+        out.update(v.rejected for v in self.verdicts.values() if v.rejected)
         return dict(sorted(out.items()))
 
     @property
     def probed(self) -> int:
         """Candidates probed so far (the rest passed the geometric tests but were never needed)."""
-        return (self.reserve.probed if self.reserve is not None else 0) + self.change_probes["probed"]
+        return len(self.verdicts)
 
     def next_reserve(self) -> SyntheticView | None:
         """The next view of the stratified order beyond those drawn (None when none is left); views
@@ -316,7 +314,7 @@ def sparse_share(
     xyz, spacing_m = xyz[::step], spacing_m[::step]
     cam = camera.scaled(scale)
     uv, z = cam.project(xyz)
-    on = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < cam.width) & (uv[:, 1] >= 0) & (uv[:, 1] < cam.height)
+    on = cam.in_frame(uv, z)
     if not on.any():
         return 0.0
     px = np.asarray(spacing_m, np.float64)[on] * max(cam.fx, cam.fy) / z[on]
@@ -431,12 +429,13 @@ def _victim(views: list[SyntheticView], added: set[int], counts: np.ndarray, k: 
     return None
 
 
-def _why_unseen(framing: Sequence[SyntheticView], tried: Sequence[SyntheticView]) -> str:
-    """Why a region stays short of views: no candidate frames it (too small), every candidate that
-    does was rejected (the most common reason), or those probed do not show it (hidden)."""
-    if any(v.rejected is None for v in tried) or any(v.rejected is None for v in framing):
+def _why_unseen(rejected: Sequence[SyntheticView], tried: Sequence[SyntheticView]) -> str:
+    """Why a region stays short of views: a candidate probed for it passed but does not show it
+    (hidden), every candidate that frames it was rejected (``rejected`` by the geometric tests, or
+    ``tried`` by their probe: the most common reason), or none frames it (too small)."""
+    if any(v.rejected is None for v in tried):
         return "hidden"
-    reasons = Counter(v.rejected for v in (*tried, *framing) if v.rejected)
+    reasons = Counter(v.rejected for v in (*tried, *rejected) if v.rejected)
     return f"only:{reasons.most_common(1)[0][0]}" if reasons else "too_small"
 
 
@@ -512,11 +511,7 @@ def cover_changes(
             taken.add((j.parent, j.strategy))
             counts[list(j.shows)] += 1
         if counts[r] < k and r not in unseen:
-            unseen[r] = (
-                _why_unseen([v for v in framing if v.rejected is not None], tried)
-                if tried or framing
-                else "too_small"
-            )
+            unseen[r] = _why_unseen([v for v in framing if v.rejected is not None], tried)
     return views, {r: why for r, why in unseen.items() if counts[r] < k}
 
 
@@ -554,32 +549,12 @@ def generate_views(
         progress(1)
     survivors = [v for v in candidates if v.rejected is None]
     verdicts: dict[tuple[str, str], SyntheticView] = {}
-    extra: Counter[str] = Counter()  # the verdicts of candidates probed for a change
 
-    def judge(v: SyntheticView) -> SyntheticView:  # the picker's: counted by the picker
+    def judge(v: SyntheticView) -> SyntheticView:  # each candidate probed once, whoever asks
         key = (v.parent, v.strategy)
-        out = verdicts.get(key)
-        if out is None:
-            verdicts[key] = out = probe(v, source, params, changes)
-        elif key in extra_keys:  # probed for a change first: the picker counts it now
-            extra_keys.discard(key)
-            extra["probed"] -= 1
-            if out.rejected:
-                extra[out.rejected] -= 1
-        return out
-
-    extra_keys: set[tuple[str, str]] = set()
-
-    def judge_again(v: SyntheticView) -> SyntheticView:
-        key = (v.parent, v.strategy)
-        if key in verdicts:
-            return verdicts[key]
-        verdicts[key] = out = probe(v, source, params, changes)
-        extra_keys.add(key)
-        extra["probed"] += 1
-        if out.rejected:
-            extra[out.rejected] += 1
-        return out
+        if key not in verdicts:
+            verdicts[key] = probe(v, source, params, changes)
+        return verdicts[key]
 
     def prefetch(vs: list[SyntheticView]) -> None:
         source.prefetch([v.camera for v in vs], params.probe_scale)
@@ -594,9 +569,9 @@ def generate_views(
         progress(1)
     unseen: dict[int, str] = {}
     if changes is not None:
-        drawn, unseen = cover_changes(drawn, candidates, changes, judge_again, params, prefetch)
+        drawn, unseen = cover_changes(drawn, candidates, changes, judge, params, prefetch)
     sample = [replace(v, index=i) for i, v in enumerate(key_sorted(drawn, params.seed))]
     rejected = dict(sorted(Counter(v.rejected for v in candidates if v.rejected).items()))
     return ViewSet(
-        sample, params, ground, len(candidates), rejected, picker, unseen=unseen, change_probes=extra
+        sample, params, ground, len(candidates), rejected, picker, unseen=unseen, verdicts=verdicts
     )
