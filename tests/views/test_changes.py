@@ -14,7 +14,8 @@ from siteline.records.params.render import RenderParams
 from siteline.records.params.views import ViewParams
 from siteline.render.zbuffer import render_points
 from siteline.views.changes import framed_pixels, shown_pixels
-from siteline.views.generate import NamedCamera, ViewSet, generate_views
+from siteline.records.pairs import ViewStrategy
+from siteline.views.generate import NamedCamera, SyntheticView, ViewSet, cover_changes, generate_views
 from siteline.views.ground import fit_ground_plane
 from siteline.views.sources import ArrayPointSource
 
@@ -201,3 +202,20 @@ def test_changes_seen_say_which_regions_are_short_and_why() -> None:
 def test_change_knobs_are_checked(knob: dict[str, float]) -> None:
     with pytest.raises(ViewsError):
         ViewParams(**knob)  # type: ignore[arg-type]
+
+
+def test_a_region_framed_only_by_views_already_drawn_is_hidden_not_too_small() -> None:
+    """Every candidate that frames the slab is already in the sample and none shows it (a wall stands
+    between): the region is hidden, and no probe is spent on it."""
+    rng = np.random.default_rng(3)
+    slab = np.c_[rng.uniform(8, 10, 400), rng.uniform(-1, 1, 400), np.full(400, 1.5)]
+    found = changes_of([("t2", slab)], None, 1.0)
+    eye = Camera.look_at((-10.0, 0.0, 2.0), (9.0, 0.0, 1.5), 320, 240, fx=260.0)
+    view = SyntheticView("cam0", "v0.5", ViewStrategy(0.5, False, 0.0), eye, coverage=0.9)
+    params = ViewParams(scale=1.0, views=1, change_views=5, change_share=1.0)
+
+    def judge(v: SyntheticView) -> SyntheticView:
+        raise AssertionError(f"{v.strategy} is already drawn; nothing is probed")
+
+    views, unseen = cover_changes([view], [view], found.sample, judge, params)
+    assert views == [view] and unseen == {0: "hidden"}

@@ -429,11 +429,14 @@ def _victim(views: list[SyntheticView], added: set[int], counts: np.ndarray, k: 
     return None
 
 
-def _why_unseen(rejected: Sequence[SyntheticView], tried: Sequence[SyntheticView]) -> str:
-    """Why a region stays short of views: a candidate probed for it passed but does not show it
-    (hidden), every candidate that frames it was rejected (``rejected`` by the geometric tests, or
-    ``tried`` by their probe: the most common reason), or none frames it (too small)."""
-    if any(v.rejected is None for v in tried):
+def _why_unseen(
+    rejected: Sequence[SyntheticView], tried: Sequence[SyntheticView], drawn: Sequence[SyntheticView] = ()
+) -> str:
+    """Why a region stays short of views: a candidate probed for it passed but does not show it, or a
+    view already drawn frames it without showing it (``drawn``): hidden; every candidate that frames
+    it was rejected (``rejected`` by the geometric tests, or ``tried`` by their probe: the most
+    common reason); or none frames it (too small)."""
+    if drawn or any(v.rejected is None for v in tried):
         return "hidden"
     reasons = Counter(v.rejected for v in (*tried, *rejected) if v.rejected)
     return f"only:{reasons.most_common(1)[0][0]}" if reasons else "too_small"
@@ -511,7 +514,11 @@ def cover_changes(
             taken.add((j.parent, j.strategy))
             counts[list(j.shows)] += 1
         if counts[r] < k and r not in unseen:
-            unseen[r] = _why_unseen([v for v in framing if v.rejected is not None], tried)
+            unseen[r] = _why_unseen(
+                [v for v in framing if v.rejected is not None],
+                tried,
+                [v for v in framing if v.rejected is None and (v.parent, v.strategy) in taken],
+            )
     return views, {r: why for r, why in unseen.items() if counts[r] < k}
 
 
