@@ -17,8 +17,10 @@ NOT_OBSERVED = 254
 # not_observed: a winning point's place the other scan did not observe (a wall it grazed or never saw,
 #   ground where it has no point: siteline.labels.change, the adaptive rule);
 # unsure_edge: the edge trim gave the pixel to a farther surface whose change differs from the nearer
-#   one's whose splat reached it: which of them it shows is within a point spacing of an edge
-#   (siteline.pairs.render.unsure_edges; a thin beam's sides, a moved car's rim);
+#   one's whose splat reached it, or the pixel shows a farther surface through a nearer one's holes
+#   or between the samples of a surface sparser than its tile (a pole's column): which of them it
+#   shows is within a point spacing of an edge or a sample (siteline.pairs.render.unsure_edges; a
+#   thin beam's sides, a moved car's rim, the ground between a new pole's samples);
 # ignored_class: a winning point is of an ignored class (noise, snow, ignore) inside the fence.
 IGNORE_CAUSES = (
     "no_surface",

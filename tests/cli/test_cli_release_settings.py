@@ -57,12 +57,13 @@ def test_site_settings_are_stored_shown_updated_and_checked(home, capsys) -> Non
         "--change-views",
         "3",
         "--no-unsure-edges",
+        "--no-sparse-surfaces",
         "--json",
     )
     assert code == 0, err
     assert json.loads(out)["release_settings"]["pair"] == {
         "scale": "auto", "min_valid": 0.3, "trim_edges": False, "splat_factor": 1.5, "surface_probe": 0.0,
-        "view_params": {"change_views": 3}, "unsure_edges": False,
+        "view_params": {"change_views": 3}, "unsure_edges": False, "sparse_surfaces": False,
     }  # fmt: skip
     for bad, message in ((["--views", "0"], "views"), (["--scale", "big"], "--scale 'big'"),
                          (["--unset", "hue"], "not a release setting"), (["--preset", "turbo"], "unknown preset"),

@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 from sitehelpers import SYNTH, epoch_dirs
 
 from siteline.labels.change import CHANGED, IGNORED, UNCHANGED, Matching, change_flags
+from siteline.labels.regions import RegionRule
 from siteline.labels.store import write_labels
 from siteline.pointpass import TilingResources
 from siteline.site.taxonomy import default_taxonomy
@@ -237,7 +238,10 @@ def test_labels_in_slabs_equal_labels_of_whole_tiles(tmp_path, synth_site, monke
     r = 0.5
     for name in ("surface", "adaptive"):
         test = LabelParams(rule=name, surface_probe=0.7).surface_test(r)
-        rule = {"matching": Matching(surface=test, ground=TAX.ground_lut()), "min_region_points": 3}
+        rule = {
+            "matching": Matching(surface=test, ground=TAX.ground_lut()),
+            "regions": RegionRule(3, sparse=True),
+        }
         monkeypatch.setattr(store, "BLOCK_POINTS", 2_000_000)
         whole = write_labels(t1, t2, r, IGN, tmp_path / f"{name}-whole.zarr", **rule)
         monkeypatch.setattr(store, "BLOCK_POINTS", 1_000)
@@ -262,3 +266,75 @@ def test_slabs_take_every_point_once_in_bounded_runs_along_x() -> None:
     assert [len(s) for s in slabs_of(np.full(10, 3.0, np.float32), 4)] == [
         10
     ]  # one value: one slab, none empty
+
+
+def _array_tiles(tmp_path, xyz: np.ndarray, name: str) -> SceneTiles:
+    """A scene tiled from site-local points (all ground class but the first ``poles`` points)."""
+    import pyproj
+
+    from siteline.site.spec import make_site_spec
+
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.offsets = np.array(SYNTH.origin)
+    las = laspy.LasData(header)
+    world = xyz + np.array(SYNTH.origin)
+    las.x, las.y, las.z = world[:, 0], world[:, 1], world[:, 2]
+    las.classification = np.where(xyz[:, 2] > 0.5, 26, 2).astype(np.uint8)  # temporary works, ground
+    path = tmp_path / f"{name}.las"
+    las.write(path)
+    site = make_site_spec("s", SYNTH.crs, SYNTH.origin)
+    r = write_tiles(
+        TileInput(path, site, pyproj.CRS(SYNTH.crs)),
+        tmp_path / f"{name}.zarr",
+        resources=TilingResources(workers=1),
+    )
+    return SceneTiles.open(r.uri)
+
+
+def test_a_sparse_poles_samples_are_each_kept_as_a_change(tmp_path) -> None:
+    """A pole put up between two scans, sampled a metre apart on its sides (a flight's airborne
+    scan: the sloped scene's pole had 24 points over 6 m): each sample is farther from the next than
+    the region cells link, yet none is taken back to unchanged as a region too small; a lone stray
+    point on the ground plane is."""
+    rng = np.random.default_rng(5)
+
+    def ground(n: int) -> np.ndarray:
+        return np.c_[rng.uniform(0, 20, (n, 2)), rng.normal(0, 0.01, n)]
+
+    pole = np.c_[np.full(7, 10.0), np.full(7, 10.0), np.arange(1.0, 8.0) + rng.uniform(-0.1, 0.1, 7)]
+    stray = np.array([[3.0, 3.0, 0.35]])  # one point a little off the ground: an isolated flag
+    t1 = _array_tiles(tmp_path, ground(32000), "before")
+    t2 = _array_tiles(tmp_path, np.concatenate([ground(32000), pole, stray]), "after")
+    res = write_labels(t1, t2, 0.2, IGN, tmp_path / "labels.zarr", regions=RegionRule(3, sparse=True))
+    labelled = t2.with_attribute("change", str(tmp_path / "labels.zarr" / "t2")).points(
+        attributes=("change",)
+    )
+    xyz, change = labelled.xyz_m, labelled.attributes["change"]
+    on_pole = np.hypot(xyz[:, 0] - 10.0, xyz[:, 1] - 10.0) < 0.01
+    assert on_pole.sum() == 7 and (change[on_pole] == CHANGED).all()
+    at_stray = np.linalg.norm(xyz - stray[0], axis=1) < 0.01
+    assert (change[at_stray] == UNCHANGED).all() and res.counts["t2"]["changed"] == 7
+    # without the knob (the labels of before) every sample of the pole is a region too small
+    before = write_labels(t1, t2, 0.2, IGN, tmp_path / "labels-before.zarr", regions=RegionRule(3))
+    assert before.counts["t2"]["changed"] == 0
+
+
+def test_chance_flags_on_a_wall_sparser_than_the_ground_are_not_kept_whole() -> None:
+    """A wall sampled 0.25 m apart over ground 0.1 m apart is sparse against its tile, but its samples
+    lie within the 0.4 m region cells of each other: a few of them flagged a metre apart look sparse
+    among the changed points alone, yet not among the wall's own; none is kept whole (and nothing
+    fails where no sparse point is left to vote)."""
+    from siteline.labels.store import _sparse
+
+    g = np.arange(0.0, 8.0, 0.1)
+    gx, gy = np.meshgrid(g, g)
+    ground = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    w = np.arange(0.0, 8.0, 0.25)
+    wy, wz = np.meshgrid(w, np.arange(0.5, 3.0, 0.25))
+    wall = np.c_[np.full(wy.size, 4.0), wy.ravel(), wz.ravel()]
+    xyz = np.concatenate([ground, wall])
+    changed = np.zeros(len(xyz), bool)
+    changed[len(ground) :: 13] = True  # every 13th wall sample, about a metre apart
+    kept = _sparse(xyz, changed, 0.1, 0.4)
+    assert kept is None or not kept.any()

@@ -209,6 +209,14 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     # unsure edges are ignored by default, and name other outputs; off, the masks of before keep their key
     assert base.unsure_edges and PairParams.BEFORE["unsure_edges"] is False
     assert PairParams(unsure_edges=False).digest() != base.digest()
+    # sparse surfaces are kept by default, name other outputs and other labels; off, those of before
+    assert base.sparse_surfaces and PairParams.BEFORE["sparse_surfaces"] is False
+    assert base.render_settings().sparse_surfaces and base.label_params().sparse_regions
+    assert PairParams(sparse_surfaces=False).digest() != base.digest()
+    assert (
+        not PairParams(unsure_edges=False).render_settings().sparse_surfaces
+    )  # the ignore needs unsure edges
+    assert PairParams(unsure_edges=False).label_params().sparse_regions  # the labels do not
     # the probe is on by default and names other labels; without it (or with the nearest rule, which
     # has none) the key is the one of before the probe existed
     assert base.surface_probe == 0.7 and base.label_params().surface_probe == 0.7
@@ -220,9 +228,10 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
     # (under the sampler of then: keyed-sha256-2 draws other views, so every key moved with it)
     before = {"label_rule": "surface", "min_region_points": 8}
 
-    def key_then(params: PairParams) -> str:  # nor were unsure edges ignored then
+    def key_then(params: PairParams) -> str:  # nor were unsure edges ignored then, nor sparse surfaces kept
         object.__setattr__(params, "sampler", "keyed-sha256-1")
         object.__setattr__(params, "unsure_edges", False)
+        object.__setattr__(params, "sparse_surfaces", False)
         return params.digest()
 
     assert key_then(PairParams(**before, surface_probe=0.0)) == "b089ba124b36"

@@ -67,6 +67,18 @@ def test_datasheets_quote_the_measurement_nearest_the_pair() -> None:
     assert "unsure edges" in accuracy_text("adaptive", 3, True, 0.15, 0.7, True)
     # a rule not measured with them quotes its row without them, and says so
     assert "measured before unsure edges were ignored" in accuracy_text("surface", 8, True, 0.15, 0.7, True)
+    # sparse surfaces kept (the default) have rows of their own, which say so; a setting measured only
+    # without them quotes those rows, saying so
+    sparse = measured_for("adaptive", 3, True, 0.06, 0.7, True, True)
+    assert sparse is not None and sparse.sparse_surfaces and sparse.recall > unsure.recall
+    assert measured_for("adaptive", 3, True, 0.06, 0.7, False, True) == measured_for(
+        "adaptive", 3, True, 0.06, 0.7
+    )
+    assert "sparse surfaces" in accuracy_text("adaptive", 3, True, 0.15, 0.7, True, True)
+    older = accuracy_text(
+        "surface", 8, True, 0.15, 0.7, True, True
+    )  # measured without either: the first named
+    assert "measured before unsure edges were ignored" in older and "sparse" not in older
     assert measured_for("nearest", 1, False, 0.15, 0.7) == measured_for("nearest", 1, False, 0.15)  # no probe
     text = accuracy_text("surface", 8, True, 0.15, 0.7)
     assert "precision 0.98" in text and "recall 0.97" in text and "synthetic site at 10 points/m2" in text

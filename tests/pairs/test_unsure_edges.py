@@ -4,6 +4,8 @@ beam as the unchanged ground."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -49,13 +51,18 @@ def _true_jib(cam: Camera) -> np.ndarray:
     return (np.abs(x) <= 0.5) & (np.abs(y) <= 15.0)
 
 
-def _mask(unsure: bool) -> tuple[np.ndarray, dict[str, float]]:
-    a, code_a, b, code_b = _scenes()
-    cam = _camera()
+def _pair(
+    scenes: tuple[np.ndarray, ...], cam: Camera, settings: RenderParams, spacing_m: float, unsure: bool = True
+) -> tuple[np.ndarray, dict[str, float]]:
+    """Both scenes rendered as a pair renders them (its changed points looked at for sparse surfaces),
+    the mask with unsure edges ignored or not, and why each ignored pixel is."""
+    a, code_a, b, code_b = scenes
     renders, edges = [], []
     for xyz, code in ((a, code_a), (b, code_b)):
-        spacing = np.full(len(xyz), 0.3, np.float32)
-        r = render_points(xyz.astype(np.float32), cam, TRIM, {"change": code}, spacing_m=spacing)
+        spacing = np.full(len(xyz), spacing_m, np.float32)
+        r = render_points(
+            xyz.astype(np.float32), cam, settings, {"change": code}, "cpu", spacing, code == CHANGED
+        )
         renders.append(r)
         edges.append(unsure_edges(r, code))
     ra, rb = renders
@@ -63,6 +70,10 @@ def _mask(unsure: bool) -> tuple[np.ndarray, dict[str, float]]:
     edge = (edges[0] | edges[1]) & (mask != MASK_IGNORE) & unsure
     mask[edge] = MASK_IGNORE
     return mask, ignore_causes(ra, rb, mask, np.zeros(mask.shape, bool), edge)
+
+
+def _mask(unsure: bool) -> tuple[np.ndarray, dict[str, float]]:
+    return _pair(_scenes(), _camera(), TRIM, 0.3, unsure)
 
 
 def test_a_sparse_beam_is_not_seen_through_its_sides_are_said_unsure() -> None:
@@ -94,3 +105,66 @@ def test_a_render_without_the_trim_has_no_unsure_edges() -> None:
         spacing_m=np.full(len(b), 0.3, np.float32),
     )  # fmt: skip
     assert r.unsure_of is None and not unsure_edges(r, code_b).any()
+
+
+POLE_X, POLE_R, POLE_H = 4.0, 0.1, 6.0
+POLE_CAMERA = (0.0, -3.0, 4.0)
+
+
+def _pole_scenes(seed: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The earlier scene: ground at 80 points/m2; the later: other ground samples and a pole 0.2 m
+    wide and 6 m tall at (4, 0) that a flight sampled 0.3-0.9 m apart on its sides, from its foot up
+    (the sloped scene's pole had 24 points over 6 m), the pole changed."""
+    rng = np.random.default_rng(seed)
+
+    def ground(n: int) -> np.ndarray:
+        return np.c_[rng.uniform(-6, 14, n), rng.uniform(-10, 10, n), np.zeros(n)]
+
+    z = np.cumsum(np.r_[rng.uniform(0.05, 0.2), rng.uniform(0.3, 0.9, 12)])
+    z = z[z < POLE_H]
+    a = rng.uniform(0, 2 * np.pi, len(z))
+    pole = np.c_[POLE_X + POLE_R * np.cos(a), POLE_R * np.sin(a), z]
+    n = 32000
+    b = np.concatenate([ground(n), pole])
+    code_b = np.r_[np.full(n, UNCHANGED), np.full(len(pole), CHANGED)].astype(np.uint8)
+    return ground(n), np.full(n, UNCHANGED, np.uint8), b, code_b
+
+
+def _true_pole(cam: Camera) -> np.ndarray:
+    """Pixels whose centre's ray meets the pole (a cylinder of radius 0.1 m from 0 to 6 m) before the
+    ground, exactly."""
+    u, v = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    rays = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones_like(u)], -1) @ cam.R
+    o = np.asarray(cam.center, float)
+    dx, dy = rays[..., 0], rays[..., 1]
+    ox, oy = o[0] - POLE_X, o[1]
+    qa, qb, qc = dx * dx + dy * dy, 2 * (ox * dx + oy * dy), ox * ox + oy * oy - POLE_R**2
+    disc = qb * qb - 4 * qa * qc
+    t = (-qb - np.sqrt(np.maximum(disc, 0))) / (2 * np.maximum(qa, 1e-12))
+    z = o[2] + t * rays[..., 2]
+    return (disc >= 0) & (t > 0) & (z >= 0) & (z <= POLE_H)
+
+
+def _pole_mask(sparse_surfaces: bool) -> np.ndarray:
+    cam = Camera.look_at(POLE_CAMERA, (POLE_X, 0.0, 2.0), 400, 300, fx=300.0)
+    return _pair(_pole_scenes(), cam, replace(TRIM, sparse_surfaces=sparse_surfaces), 0.11)[0]
+
+
+def test_a_sparse_pole_is_not_seen_through_between_its_samples() -> None:
+    cam = Camera.look_at(POLE_CAMERA, (POLE_X, 0.0, 2.0), 400, 300, fx=300.0)
+    truth = _true_pole(cam)
+    assert truth.sum() > 500  # the pole stands large in the view
+
+    def through(mask: np.ndarray) -> float:
+        return float(((mask == MASK_UNCHANGED) & truth).sum() / truth.sum())
+
+    # a column's samples never surround a pixel, and its tile's spacing (the ground's 0.11 m) does not
+    # reach from one to the next: without the knob the ground is labelled where the pole stands
+    before, after = _pole_mask(False), _pole_mask(True)
+    assert through(before) > 0.3
+    assert through(after) <= 0.05
+    assert ((after == MASK_CHANGED) & truth).sum() > 0  # its samples are still drawn and labelled
+    # the pixels said unsure lie around the pole, within its samples' reach, not over the ground elsewhere
+    new = (after == MASK_IGNORE) & (before != MASK_IGNORE)
+    near = ndimage.binary_dilation(truth, iterations=110)  # 2.5 m at the pole's 7 m
+    assert (new & ~near).sum() == 0 and new.sum() <= 3 * truth.sum()

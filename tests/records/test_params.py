@@ -17,8 +17,9 @@ def test_pair_params_are_composed_of_the_stages_specs() -> None:
     p = PairParams(scale=0.5, point_size_px=3, views=6, seed=4, min_coverage=0.3, radius_m=0.2,
                    view_params={"clearance_m": 2.0})  # fmt: skip
     assert p.render_settings() == RenderParams(
-        scale=0.5, point_size_px=3, splat="world", splat_max_px=31, fill_px=2, trim_edges=True
-    )
+        scale=0.5, point_size_px=3, splat="world", splat_max_px=31, fill_px=2, trim_edges=True,
+        sparse_surfaces=True,
+    )  # fmt: skip
     vp = p.view_params_spec()
     assert (vp.scale, vp.views, vp.seed, vp.min_coverage, vp.clearance_m) == (0.5, 6, 4, 0.3, 2.0)
     # the probes draw the renders' splats and judge the pair's valid share

@@ -11,7 +11,7 @@ from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
 from siteline.records.params.render import RenderParams
 from siteline.render.fill import fill_gaps
-from siteline.render.splats import diameters_px, disk_offsets, local_spacing
+from siteline.render.splats import diameters_px, disk_offsets, local_spacing, surface_spacing
 from siteline.render.zbuffer import coverage_of, render_points
 
 from .helpers import box_scene, oblique_camera, plane_points
@@ -237,3 +237,25 @@ def test_the_compiled_fill_fills_what_the_tensor_fill_fills() -> None:
             b = fill_gaps(index.clone(), d.clone(), w, h, r, compiled=False)
             assert torch.equal(a[0], b[0]) and torch.equal(a[2], b[2])
             assert torch.equal(torch.where(a[0] >= 0, a[1], 0), torch.where(b[0] >= 0, b[1], 0))
+
+
+@pytest.mark.parametrize("offset", [(0.0, 0.0), (-300.37, 712.91)])
+def test_surface_spacing_finds_a_sparse_column_and_leaves_dense_ground(offset: tuple[float, float]) -> None:
+    """Ground 0.1 m apart keeps its spacing; a column of points 0.5 m apart standing on it (a pole a
+    flight sampled) gets its own, within a factor of about two, whatever the column's place against
+    the cells (it straddles a cell edge at the origin) and on either side of the site's origin."""
+    g = np.arange(0.0, 10.0, 0.1)
+    gx, gy = np.meshgrid(g, g)
+    ground = np.c_[gx.ravel(), gy.ravel(), np.zeros(gx.size)]
+    z = np.arange(1.0, 7.0, 0.5)
+    column = np.c_[np.full(len(z), 4.0), np.full(len(z), 4.0), z]
+    xyz = np.concatenate([ground, column]) + [offset[0], offset[1], 0.0]
+    given = np.full(len(xyz), 0.1, np.float32)
+    own = surface_spacing(xyz.astype(np.float32), given)
+    assert own.dtype == np.float32 and own.shape == given.shape
+    assert np.array_equal(own[: len(ground)], given[: len(ground)])
+    assert 0.4 <= float(np.median(own[len(ground) :])) <= 1.2
+    # a lone point has no surface to say anything of: it keeps its spacing
+    lone = surface_spacing(np.array([[50.0, 50.0, 9.0]], np.float32), np.array([0.1], np.float32))
+    assert lone.tolist() == pytest.approx([0.1])
+    assert surface_spacing(np.zeros((0, 3), np.float32), np.zeros(0, np.float32)).shape == (0,)

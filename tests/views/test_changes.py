@@ -9,12 +9,11 @@ from siteline.camera.pinhole import Camera
 from siteline.errors import ViewsError
 from siteline.labels.regions import region_ids
 from siteline.pairs.regions import changes_of
-from siteline.records.pairs import ChangedRegion, ChangesSeen
+from siteline.records.pairs import ChangedRegion, ChangesSeen, ViewStrategy
 from siteline.records.params.render import RenderParams
 from siteline.records.params.views import ViewParams
 from siteline.render.zbuffer import render_points
 from siteline.views.changes import framed_pixels, shown_pixels
-from siteline.records.pairs import ViewStrategy
 from siteline.views.generate import NamedCamera, SyntheticView, ViewSet, cover_changes, generate_views
 from siteline.views.ground import fit_ground_plane
 from siteline.views.sources import ArrayPointSource

@@ -42,6 +42,7 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
     "trim_edges": (bool | None, typer.Option(None, "--trim-edges/--no-trim-edges", help="Give the pixels where a world splat reaches past its surface's edge to the surface behind (the default; docs/performance.md).")),
     "change_views": (int | None, typer.Option(None, "--change-views", help="Views each changed region of 1 m2 or more is put in, where candidates show it (default 5; 0: views drawn without regard to the changes).")),
     "unsure_edges": (bool | None, typer.Option(None, "--unsure-edges/--no-unsure-edges", help="Ignore the pixels the edge trim gave to a surface whose change differs from the one that reached them (the default: a thin beam's sides; docs/performance.md).")),
+    "sparse_surfaces": (bool | None, typer.Option(None, "--sparse-surfaces/--no-sparse-surfaces", help="Keep a sparse surface's changed samples whole in the labels and, with unsure edges, ignore what shows between them (the default: a pole's samples a metre apart; docs/performance.md).")),
     "label_rule": (str | None, typer.Option(None, "--label-rule", help="3D change rule: adaptive (the default: a flagged point is checked against the other scene's local surface as that scan sampled it, and a place it did not observe is ignored), surface (the same within twice the radius, for scans that sample every surface alike) or nearest (nearest neighbour alone).")),
     "min_region_points": (int | None, typer.Option(None, "--min-region", help="Changed regions of fewer points are taken back to unchanged (default 8; 1 keeps every point).")),
     "surface_probe": (float | None, typer.Option(None, "--surface-probe", help="Surface and adaptive rules: also probe points whose nearest neighbour in the other scene lies beyond this many change radii, changed when off its surface (default 0.7; 0: only points the nearest test flags; docs/performance.md).")),
@@ -71,7 +72,7 @@ def knobs_of(values: dict[str, Any]) -> ReleaseKnobs:
         pair["radius_m"] = None if radius == AUTO else radius
     for name in (
         "seed", "min_coverage", "min_valid", "one_side_hole", "all_points", "lod_factor", "colour", "shading", "change_rule", "splat",
-        "splat_factor", "trim_edges", "unsure_edges", "label_rule", "min_region_points", "surface_probe",
+        "splat_factor", "trim_edges", "unsure_edges", "sparse_surfaces", "label_rule", "min_region_points", "surface_probe",
     ):  # fmt: skip
         if values.get(name) is not None:
             pair[name] = values[name]

@@ -21,7 +21,8 @@ class Measured:
     give the largest share of an object that stayed labelled changed (``false_change``) and the share
     of the truth's pixels the masks ignore (``ignored``); NaN where not measured. ``unsure_edges``:
     the masks ignored a farther surface drawn where a nearer one of other change may lie (the pair
-    knob of that name, with the trim)."""
+    knob of that name, with the trim); ``sparse_surfaces``: a sparse surface's changes kept whole and
+    what shows between its samples ignored too (the pair knob of that name)."""
 
     scene: str
     density: float
@@ -37,6 +38,7 @@ class Measured:
     false_change: float = math.nan
     ignored: float = math.nan
     unsure_edges: bool = False
+    sparse_surfaces: bool = False
 
 
 # `siteline bench trade`, one run each (docs/performance.md): the nearest rule as releases made it
@@ -76,6 +78,62 @@ MEASURED: tuple[Measured, ...] = (
     Measured(
         "synthetic site", 1000, "adaptive", 3, True, 0.992, 0.965, 0.979, 9, 0.7, "flown", 0.019, 0.049, True
     ),
+    # sparse surfaces kept in the labels and said unsure behind (the default since 2026-11-29, issues
+    # 67-68): the same scenes and views
+    Measured(
+        "synthetic site",
+        10,
+        "adaptive",
+        3,
+        True,
+        0.988,
+        0.956,
+        0.972,
+        4,
+        0.7,
+        "flown",
+        0.017,
+        0.058,
+        True,
+        True,
+    ),
+    Measured(
+        "box scene", 40, "adaptive", 3, True, 0.958, 0.908, 0.932, 0, 0.7, "flown", 0.003, 0.012, True, True
+    ),
+    Measured(
+        "sloped scene",
+        80,
+        "adaptive",
+        3,
+        True,
+        0.959,
+        0.944,
+        0.952,
+        0,
+        0.7,
+        "flown",
+        0.013,
+        0.014,
+        True,
+        True,
+    ),
+    Measured(
+        "synthetic site",
+        1000,
+        "adaptive",
+        3,
+        True,
+        0.993,
+        0.989,
+        0.991,
+        6,
+        0.7,
+        "flown",
+        0.028,
+        0.044,
+        True,
+        True,
+    ),
 )
 
 
@@ -92,17 +150,21 @@ def measured_for(
     spacing_m: float,
     surface_probe: float = 0.0,
     unsure_edges: bool = False,
+    sparse_surfaces: bool = False,
 ) -> Measured | None:
     """The measurement nearest (in log density) to a pair labelled by ``rule`` keeping regions of
     ``min_region_points``, its splats trimmed at edges or not, with the surface rule's
-    ``surface_probe`` and unsure edges ignored or not (only with the trim), at the median spacing
-    ``spacing_m``; None when those settings were not measured."""
+    ``surface_probe``, unsure edges ignored or not (only with the trim) and sparse surfaces kept or
+    not (only with unsure edges), at the median spacing ``spacing_m``; None when those settings were
+    not measured."""
     probe = surface_probe if rule in SURFACE_RULES else 0.0
-    key = (rule, min_region_points, trim_edges, probe, unsure_edges and trim_edges)
+    unsure = unsure_edges and trim_edges
+    key = (rule, min_region_points, trim_edges, probe, unsure, sparse_surfaces and unsure)
     rows = [
         m
         for m in MEASURED
-        if (m.rule, m.min_region_points, m.trim_edges, m.surface_probe, m.unsure_edges) == key
+        if (m.rule, m.min_region_points, m.trim_edges, m.surface_probe, m.unsure_edges, m.sparse_surfaces)
+        == key
     ]
     density = density_of_spacing(spacing_m)
     if not rows or not math.isfinite(density):
@@ -117,16 +179,24 @@ def accuracy_text(
     spacing_m: float,
     surface_probe: float = 0.0,
     unsure_edges: bool = False,
+    sparse_surfaces: bool = False,
 ) -> str | None:
     """One sentence for a datasheet: what the settings measured nearest this pair's density (with
-    unsure edges ignored where those settings were measured so, else without, saying so)."""
-    m = measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe, unsure_edges)
+    unsure edges ignored and sparse surfaces kept where those settings were measured so, else the
+    nearest settings measured without them, saying so)."""
+    m = measured_for(
+        rule, min_region_points, trim_edges, spacing_m, surface_probe, unsure_edges, sparse_surfaces
+    )
+    m = m or measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe, unsure_edges)
     m = m or measured_for(rule, min_region_points, trim_edges, spacing_m, surface_probe)
     if m is None:
         return None
+    unsure = unsure_edges and trim_edges
     before = (
         "; measured before unsure edges were ignored"
-        if unsure_edges and trim_edges and not m.unsure_edges
+        if unsure and not m.unsure_edges
+        else "; measured before sparse surfaces were kept"
+        if unsure and sparse_surfaces and not m.sparse_surfaces
         else ""
     )
     flown = (
@@ -137,7 +207,8 @@ def accuracy_text(
     )
     return (
         f"measured against analytic truth ({m.scene} at {m.density:g} points/m2, {m.scan} epochs, this rule, "
-        f"smallest region, edge trim{', unsure edges' if m.unsure_edges else ''} and probe, "
+        f"smallest region, edge trim{', unsure edges' if m.unsure_edges else ''}"
+        f"{', sparse surfaces' if m.sparse_surfaces else ''} and probe, "
         f"release defaults; this pair is at about {density_of_spacing(spacing_m):.0f} points/m2): changed-class "
         f"precision {m.precision:.2f}, recall {m.recall:.2f}, F1 {m.f1:.2f}, {m.specks_median:g} isolated false "
         "specks (under 30 px) per view (median)" + flown + before

@@ -10,6 +10,8 @@ change kept is therefore ``min_points`` points (``min_points`` / density square 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -21,6 +23,21 @@ from siteline.errors import LabelError
 _FORWARD = [
     (di, dj, dk) for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1) if (di, dj, dk) > (0, 0, 0)
 ]
+
+
+@dataclass(frozen=True)
+class RegionRule:
+    """How the label stage takes chance flags back: changed regions of fewer than ``min_points``
+    points become unchanged (1 keeps every point); with ``sparse``, a sparse surface's changed samples
+    (farther apart than the cells link) are kept whole where most of its samples around changed
+    (siteline.labels.store)."""
+
+    min_points: int = 1
+    sparse: bool = False
+
+
+# what a point that makes its region whole adds to its cell's count: more than any min_points
+_WHOLE = 1 << 32
 
 
 def region_sizes(xyz: np.ndarray, cell_m: float) -> np.ndarray:
@@ -131,12 +148,16 @@ class RegionCells:
         self._counts: list[np.ndarray] = []
         self._inverse: list[np.ndarray] = []
 
-    def add(self, xyz: np.ndarray) -> None:
-        """The next part's changed points, (N, 3) site-local metres."""
+    def add(self, xyz: np.ndarray, whole: np.ndarray | None = None) -> None:
+        """The next part's changed points, (N, 3) site-local metres; ``whole``: (N,) bool, points that
+        make a region whole on their own (a sparse surface's, whose samples lie farther apart than
+        the cells link: a pole's), so their region is never small."""
         if len(xyz) == 0:
             cells, inverse, counts = np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
         else:
             cells, inverse, counts = _cells_of(xyz, self.cell_m)
+            if whole is not None and whole.any():
+                counts = counts + np.bincount(inverse[whole], minlength=len(counts)) * _WHOLE
         self._cells.append(cells)
         self._counts.append(counts)
         self._inverse.append(inverse.astype(np.int32))

@@ -25,9 +25,10 @@ from siteline.labels.change import (
     change_flags,
     median_spacing,
 )
-from siteline.labels.regions import RegionCells
+from siteline.labels.regions import RegionCells, RegionRule
 from siteline.records.pairs import ChangeLabels, RadiusChoice
 from siteline.records.tiling import TileSpec
+from siteline.render.splats import surface_spacing
 from siteline.tiles.layout import parse_tile_key
 from siteline.tiles.reader import SceneTiles
 
@@ -36,6 +37,15 @@ SIDES = ("t1", "t2")
 # points/m2 cells of 2 r keep 99.8 % of the truly changed points of the synthetic site (thin formwork
 # included) where cells of r keep 97 %, and still take back 43 % of the false ones
 REGION_CELL_RADII = 2.0
+# a sparse surface's changed samples (farther apart than those cells link) are kept whole where its
+# samples around changed: of its SPARSE_NEIGHBOURS nearest sparse samples within SPARSE_LINK of its own
+# spacing (a column's two neighbours lie within one), at least three and SPARSE_CHANGED_SHARE (a
+# majority and two kept chance flags on sparse walls and canopy at 1000 points/m2: docs/performance.md)
+SPARSE_NEIGHBOURS = 8
+SPARSE_LINK = 1.5
+SPARSE_CHANGED_SHARE = 0.8
+# the neighbours that vote are looked for in cells of this many metres around the candidates
+SPARSE_AREA_M = 4.0
 
 
 def auto_radius(
@@ -248,7 +258,7 @@ def write_labels(
     out: Path,
     geometric: np.ndarray | None = None,
     matching: Matching = Matching(),
-    min_region_points: int = 1,
+    regions: RegionRule = RegionRule(),
 ) -> ChangeLabels:
     """Compute both directions in one pass over the site grid (each tile of each scene against the
     other scene's points in the tile's grid cell widened by ``radius_m``, or by the surface test's
@@ -256,9 +266,12 @@ def write_labels(
     ``siteline.stores.Store.publish`` for all-or-nothing). Tiles are decoded whole only while they
     are labelled, and as edge strips for their neighbours' halos (:class:`_Decoded`): a tile of the
     next column is decoded twice, and memory stays at a few tiles and the strips whatever the site. ``ignored``, ``geometric`` and ``matching``: the rule
-    (siteline.labels.change.change_flags); then changed regions of fewer than ``min_region_points``
+    (siteline.labels.change.change_flags); then changed regions of fewer than ``regions.min_points``
     points are taken back to unchanged, each scene's changed points linked across its whole grid
-    (siteline.labels.regions, linked through cells of REGION_CELL_RADII x r). The flags of both scenes are held (a byte a point) until written."""
+    (siteline.labels.regions, linked through cells of REGION_CELL_RADII x r); with ``regions.sparse``
+    the changed samples of a surface sparser than those cells are kept whole where most of its
+    samples around changed (:func:`_sparse`: a pole's samples a metre apart).
+    The flags of both scenes are held (a byte a point) until written."""
     t0 = time.perf_counter()
     out = Path(out)
     if out.exists():
@@ -279,9 +292,11 @@ def write_labels(
             matching=matching,
             geometric=geometric,
         )
-        flags_of, changed = _flag_grid(sides, rule, halo_m, radius_m)
+        flags_of, changed = _flag_grid(
+            sides, rule, halo_m, radius_m, regions.sparse and regions.min_points > 1
+        )
         taken_back = {
-            side: _drop_small_regions(flags_of[side], changed[side], min_region_points) for side in sides
+            side: _drop_small_regions(flags_of[side], changed[side], regions.min_points) for side in sides
         }
         counts, checksum, n_total = _write_sides(
             root, {side: tiles.spec for side, (tiles, _) in sides.items()}, flags_of
@@ -306,10 +321,11 @@ def _flag_grid(
     rule: Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray],
     halo_m: float,
     radius_m: float,
+    regions: bool = False,
 ) -> tuple[dict[str, dict[str, _Packed]], dict[str, RegionCells]]:
     """Each tile of each scene flagged against the other scene's halo, the site grid column by column
     (strips of columns behind let go): the packed flags per side and tile, and each side's changed
-    points as region cells."""
+    points as region cells (``regions``: with those of a sparse surface marked whole, :func:`_sparse`)."""
     other = {"t1": "t2", "t2": "t1"}
     flags_of: dict[str, dict[str, _Packed]] = {side: {} for side in sides}
     changed = {side: RegionCells(REGION_CELL_RADII * radius_m) for side in sides}
@@ -323,10 +339,69 @@ def _flag_grid(
                 continue
             flags = _flags_in_blocks(mine[0], mine[1], sides[other[side]][1].halo(ij), rule, halo_m)
             flags_of[side][dec.keys[ij]] = _Packed(flags)
-            changed[side].add(mine[0][flags == CHANGED])
+            now = flags == CHANGED
+            whole = (
+                _sparse(mine[0], now, sides[side][0].native_spacing[dec.keys[ij]], changed[side].cell_m)
+                if regions
+                else None
+            )
+            changed[side].add(mine[0][now], whole)
     for _, dec in sides.values():
         dec.close()
     return flags_of, changed
+
+
+def _sparse(xyz: np.ndarray, changed: np.ndarray, spacing_m: float, cell_m: float) -> np.ndarray | None:
+    """Of a tile's changed points (``changed``: (N,) bool over its points ``xyz``), those of a surface
+    whose own spacing exceeds the region cell (siteline.render.splats.surface_spacing, against the
+    tile's ``spacing_m``) whose sparse neighbours (the SPARSE_NEIGHBOURS nearest within SPARSE_LINK of
+    its own spacing, itself included) changed too, at least three and SPARSE_CHANGED_SHARE of them: a
+    pole put up, its samples a metre apart, each too far from the next to make a region, is kept
+    whole; a few chance flags on a fence both flights grazed (most of its samples unchanged) are not.
+    The tile's changed points are looked at first, and only the points around those on a sparse
+    surface after them (most tiles hold none)."""
+    from scipy.spatial import cKDTree
+
+    if not changed.any():
+        return None
+    xyz32 = np.ascontiguousarray(xyz, dtype=np.float32)
+    spacing = np.full(len(xyz), spacing_m, np.float32)
+    moved_at = np.flatnonzero(changed)
+    candidates = moved_at[surface_spacing(xyz32, spacing, moved_at) > cell_m]
+    if not len(candidates):  # no sparse change: most tiles
+        return None
+    # the points that vote, changed or not: the sparse ones in the cells of SPARSE_AREA_M holding a
+    # candidate or touching one
+    around = _cells_near(xyz32, candidates, SPARSE_AREA_M)
+    own = np.zeros(len(xyz), np.float32)
+    own[around] = surface_spacing(xyz32, spacing, around)
+    sparse = np.flatnonzero(own > cell_m)
+    if not len(sparse):  # their own spacing, among the points around them, is within the cells
+        return None
+    pts = np.asarray(xyz)[sparse].astype(np.float64)
+    k = min(SPARSE_NEIGHBOURS, len(sparse))
+    dist, nearest = cKDTree(pts).query(pts, k=k, distance_upper_bound=float(SPARSE_LINK * own[sparse].max()))
+    dist, nearest = dist.reshape(len(pts), k), nearest.reshape(len(pts), k)
+    within = dist <= SPARSE_LINK * own[sparse][:, None]  # itself included
+    moved = (within & changed[sparse][np.minimum(nearest, len(sparse) - 1)]).sum(axis=1)
+    held = (moved >= 3) & (moved >= SPARSE_CHANGED_SHARE * within.sum(axis=1))
+    keep = np.zeros(len(xyz), bool)
+    keep[sparse] = changed[sparse] & held
+    return keep[changed]
+
+
+def _cells_near(xyz: np.ndarray, of: np.ndarray, cell_m: float) -> np.ndarray:
+    """(K,) int64 positions of the points ``xyz`` in the cells of ``cell_m`` that hold a point ``of``
+    ((M,) positions) or touch one (26 around)."""
+    ijk = np.floor(xyz / cell_m).astype(np.int64)
+    lo = ijk.min(axis=0) - 1
+    dims = ijk.max(axis=0) - lo + 2
+    key = ((ijk[:, 0] - lo[0]) * dims[1] + (ijk[:, 1] - lo[1])) * dims[2] + (ijk[:, 2] - lo[2])
+    steps = np.array(
+        [(di * dims[1] + dj) * dims[2] + dk for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)]
+    )
+    wanted = np.unique((key[of][:, None] + steps[None, :]).ravel())
+    return np.flatnonzero(np.isin(key, wanted))
 
 
 def _write_sides(

@@ -14,6 +14,7 @@ import numpy as np
 
 from siteline.errors import PairError, ViewsError
 from siteline.labels.change import Matching
+from siteline.labels.regions import RegionRule
 from siteline.labels.store import auto_radius, write_labels
 from siteline.labelsets.store import open_labelled
 from siteline.pairs.outputs import output_of
@@ -62,9 +63,7 @@ def pair_labels(
         plan.versions,
         radius,
         plan.change_rule.rule,
-        label_params.rule,
-        label_params.min_region_points,
-        label_params.surface_probe,
+        label_params,
     )
     if store.is_complete(uri):  # made by an earlier run (one killed before its record, say)
         labels = ChangeLabels.from_dict(dict(store.open_group(uri).attrs) | {"uri": uri})
@@ -75,7 +74,7 @@ def pair_labels(
             labels = write_labels(
                 t1, t2, radius, taxonomy.ignored_lut(), work, geometric=plan.change_rule.geometric_lut(taxonomy),
                 matching=Matching(surface=label_params.surface_test(radius), ground=plan.change_rule.ground_lut(taxonomy)),
-                min_region_points=label_params.min_region_points,
+                regions=RegionRule(label_params.min_region_points, label_params.sparse_regions),
             )  # fmt: skip
     log.info("pair %d: change labels at r = %.3f m (%s)", plan.pair_id, radius, uri)
     return replace(labels, uri=uri, radius=info)

@@ -225,7 +225,9 @@ def render_pair_view(
         if colour.source == "height":
             values = ground.height(pts.xyz_m)  # type: ignore[union-attr]
         attrs = pts.attributes | {"rgb": colour.colours(side, pts.xyz_m, values)}
-        r = render_points(xyz, camera, settings, attrs, device=device, spacing_m=pts.spacing_m)
+        # the sparse surfaces that matter stand changed before unchanged ground (a pole put up)
+        sparse_of = pts.attributes["change"] == CHANGED
+        r = render_points(xyz, camera, settings, attrs, device, pts.spacing_m, sparse_of)
         if colour.shading == "edl":  # intensity or elevation alone show no edges: shade by depth
             r.attributes["rgb"] = eye_dome(r.rgb, r.depth)
         out.append(r)

@@ -139,8 +139,9 @@ def _radius_lines(pairs: list[PairLineage], ceiling: float, params: PairParams) 
             else float("nan")
         )
         measured = accuracy_text(
-            rule, regions, params.trim_edges, spacing, params.surface_probe, params.unsure_edges
-        )
+            rule, regions, params.trim_edges, spacing, params.surface_probe, params.unsure_edges,
+            params.sparse_surfaces,
+        )  # fmt: skip
         if fc and rule in SURFACE_RULES:
             out.append(
                 f"  - pair {q['id']}: r = {q['radius_m']:.3f} m = {fc['multiplier']:.2f} x spacing; the nearest-"
@@ -299,7 +300,7 @@ _CAUSE_WORDS = {
     "one_side": "a surface in one scene only (a hole in the other render)",
     "outside_fence": "a point outside the site fence",
     "not_observed": "a place the other scan did not observe (a wall it grazed, ground in a shadow)",
-    "unsure_edge": "an object's edge closer than its points can place it, between a changed and an unchanged surface",
+    "unsure_edge": "an object's edge, or the gaps between a sparse object's points (a pole's), closer than its points can place it, between a changed and an unchanged surface",
     "ignored_class": "a point of an ignored class (noise, snow, ignore)",
     "padding": "padding to the stored size",
     "unaccounted": "not accounted (outputs made before causes were recorded)",
@@ -371,13 +372,19 @@ def _source_lines(lin: Lineage) -> list[str]:
             if p.label_rule in SURFACE_RULES and p.surface_probe
             else ""
         )
-        + f", changed regions under {p.min_region_points} points taken back (siteline.labels.regions)",
+        + f", changed regions under {p.min_region_points} points taken back (siteline.labels.regions)"
+        + (
+            ", but for a sparse surface's changed samples (a pole's), kept whole where most of its samples changed"
+            if p.sparse_surfaces and p.min_region_points > 1
+            else ""
+        ),
         "- mask rules: a pixel is ignore (255) where either render has no point or its nearest point is of an "
         "ignored class (snow, noise, outside the fence); a pixel changed in one render and a hole in the other is "
         f"**{p.one_side_hole}**; change is the union (OR) of the two directions"
         + (
-            "; a pixel where the edge trim, or a hole between a sparse surface's points, shows a surface whose "
-            "change differs from the nearer one that may lie there is ignore (unsure edge)."
+            "; a pixel where the edge trim, or a hole between a surface's points"
+            + (", or the gap between a sparse surface's samples (a pole's)" if p.sparse_surfaces else "")
+            + ", shows a surface whose change differs from the nearer one that may lie there is ignore (unsure edge)."
             if p.unsure_edges and p.trim_edges and p.splat == "world"
             else "."
         ),

@@ -290,8 +290,9 @@ def _made_lines(doc: Manifest) -> list[str]:
         radius = ChangeLabels.from_dict(q["labels"]).radius
         spacing = max(radius.median_spacing_m.values(), default=float("nan")) if radius else float("nan")
         measured = accuracy_text(
-            p.label_rule, p.min_region_points, p.trim_edges, spacing, p.surface_probe, p.unsure_edges
-        )
+            p.label_rule, p.min_region_points, p.trim_edges, spacing, p.surface_probe, p.unsure_edges,
+            p.sparse_surfaces,
+        )  # fmt: skip
         if measured:
             said.setdefault(measured, []).append(str(q["id"]))
     lines += [f"- pair{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {text}." for text, ids in said.items()]

@@ -304,3 +304,103 @@ def see_through(
                     out[p] = centre_index[first]
                     break
     return out
+
+
+@kernel
+def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.ndarray) -> np.ndarray:
+    """The points in the cell of each point ``which`` ((M,) int64 positions) names
+    (siteline.render.splats.surface_spacing), exactly where under ``cap`` ((M,) int64), else some
+    count of at least ``cap``. xyz: (N, 3) float32 site-local metres; level: (N,) int64, each point's
+    cell is two half cells of 2**level metres, in two grids one half cell apart; returns (M,) int64
+    the larger of the point's two cells' counts. Per grid, the named points are counted among
+    themselves first (a cell they fill to ``cap`` is full whatever the rest); only the cells left
+    under it are then counted over every point, behind a 64 kB filter of those cells: a pair's changed
+    points are often a quarter of a view's, the sparse cells among them a few per cent."""
+    n = which.shape[0]
+    best = np.zeros(n, np.int64)
+    for shift in (0, 1):
+        keys = np.empty(n, np.uint64)
+        for j in range(n):
+            keys[j] = _cell_key(xyz, level, which[j], shift)
+        named = _count_keys(keys, keys)
+        left = np.flatnonzero(named < cap)
+        seen = np.zeros(1 << 16, np.bool_)  # a 64 kB filter: most points' cells hold no cell left
+        for m in range(len(left)):
+            seen[(keys[left[m]] * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(48)] = True
+        size = 2
+        while size < 2 * len(left):
+            size *= 2
+        mask = size - 1
+        table = np.zeros(size, np.uint64)  # 0: empty; keys are stored plus one
+        count = np.zeros(size, np.int64)
+        slot = np.empty(len(left), np.int64)
+        for m in range(len(left)):
+            i = _slot(keys[left[m]], mask)
+            while table[i] != 0 and table[i] != keys[left[m]]:
+                i = (i + 1) & mask
+            table[i] = keys[left[m]]
+            slot[m] = i
+        for p in range(xyz.shape[0]):
+            k = _cell_key(xyz, level, p, shift)
+            if not seen[(k * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(48)]:
+                continue
+            i = _slot(k, mask)
+            while table[i] != 0:
+                if table[i] == k:
+                    count[i] += 1
+                    break
+                i = (i + 1) & mask
+        for j in range(n):
+            best[j] = max(best[j], named[j])
+        for m in range(len(left)):
+            best[left[m]] = max(best[left[m]], count[slot[m]])
+    return best
+
+
+@kernel
+def _count_keys(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
+    """(M,) int64: for each key of ``of``, how many of ``keys`` equal it (an open-addressing table)."""
+    size = 2
+    while size < 2 * len(keys):
+        size *= 2
+    mask = size - 1
+    table = np.zeros(size, np.uint64)
+    count = np.zeros(size, np.int64)
+    for k in keys:
+        i = _slot(k, mask)
+        while table[i] != 0 and table[i] != k:
+            i = (i + 1) & mask
+        table[i] = k
+        count[i] += 1
+    out = np.zeros(len(of), np.int64)
+    for j in range(len(of)):
+        i = _slot(of[j], mask)
+        while table[i] != 0:
+            if table[i] == of[j]:
+                out[j] = count[i]
+                break
+            i = (i + 1) & mask
+    return out
+
+
+@kernel
+def _cell_key(xyz: np.ndarray, level: np.ndarray, p: int, shift: int) -> np.uint64:
+    """Point ``p``'s cell of two half cells (2**level[p] metres each), in the grid shifted by
+    ``shift`` half cells, as a nonzero key."""
+    scale = np.float32(np.ldexp(1.0, -level[p]))
+    a = (np.int64(np.floor(xyz[p, 0] * scale)) + shift) >> 1
+    b = (np.int64(np.floor(xyz[p, 1] * scale)) + shift) >> 1
+    c = (np.int64(np.floor(xyz[p, 2] * scale)) + shift) >> 1
+    key = (a & 0x1FFFFF) | ((b & 0x1FFFFF) << 21) | ((c & 0x1FFFFF) << 42) | ((level[p] & 0x3F) << 58)
+    return np.uint64(key) + np.uint64(1)
+
+
+@kernel
+def _slot(key: np.uint64, mask: int) -> np.int64:
+    """A key's first slot in a table of ``mask + 1`` (splitmix64's finaliser, low bits)."""
+    h = key ^ (key >> np.uint64(30))
+    h = h * np.uint64(0xBF58476D1CE4E5B9)
+    h = h ^ (h >> np.uint64(27))
+    h = h * np.uint64(0x94D049BB133111EB)
+    h = h ^ (h >> np.uint64(31))
+    return np.int64(h & np.uint64(mask))

@@ -18,6 +18,7 @@ import torch
 
 from siteline.errors import RenderError
 from siteline.records.params.render import RenderParams
+from siteline.render import kernels
 
 
 @functools.lru_cache(maxsize=128)
@@ -101,6 +102,55 @@ def check_spacing(spacing_m: np.ndarray | torch.Tensor | None, n: int, settings:
         )
     if tuple(spacing_m.shape) != (n,):
         raise RenderError(f"spacing_m has shape {tuple(spacing_m.shape)} for {n} points; give one per point.")
+
+
+# a surface sparser than its level of detail says: a point whose cell of CELL_SPACINGS of its spacing
+# s (rounded up to a power of two: 4-8 s; the larger count of two grids half a cell apart, so that no
+# column straddles both grids' edges) holds fewer than a SPARSE_SHARE of the (edge / s)**2 points a
+# surface at s puts there: its own spacing is more than twice s (a pole's column, a wall a flight
+# grazed, a jib's side)
+CELL_SPACINGS = 4.0
+SPARSE_SHARE = 0.25
+# such a point's own spacing: the distance to the farther of its two nearest sparse neighbours (points
+# of cells up to twice as full count too; a column's sample: the farther of the samples above and
+# below it), where that is at most FAR_SPACINGS of s; a sample with no sparse neighbour that near keeps
+# s (nothing to bridge)
+FAR_SPACINGS = 32.0
+
+
+def surface_spacing(xyz: np.ndarray, spacing_m: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+    """(M,) float32 metres: the spacing ``spacing_m`` (N,) (its level of detail's, or its tile's) of
+    each point ``which`` names ((M,) int64 positions; None: every point), raised where the point's own
+    surface is sparser (see :data:`SPARSE_SHARE`) to the distance to the farther of its two nearest
+    sparse neighbours: a pole's samples a metre apart get about a metre, where their tile's ground
+    says 0.11 m. xyz: (N, 3) site-local metres of one read (a view's points, a tile's); its cells are
+    counted over every point. Costs a compiled pass over the points (siteline.render.kernels) and a
+    k-d tree of the named points of sparse cells alone: naming the few that matter (a pair's changed
+    points) keeps both small."""
+    from scipy.spatial import cKDTree
+
+    which = np.arange(len(spacing_m)) if which is None else np.asarray(which, dtype=np.int64)
+    s = np.asarray(spacing_m, dtype=np.float32)
+    out = s[which]
+    if not len(which):
+        return out
+    level = np.ceil(np.log2(CELL_SPACINGS / 2 * np.maximum(s, 1e-4))).astype(np.int64)
+    expected = (np.exp2(level[which] + 1) / np.maximum(out, 1e-4)) ** 2  # a surface at the spacing
+    cap = np.ceil(2 * SPARSE_SHARE * expected).astype(np.int64)  # counted exactly below (``around``)
+    share = kernels.cell_counts(np.ascontiguousarray(xyz, dtype=np.float32), level, which, cap) / expected
+    sparse = np.flatnonzero(share < SPARSE_SHARE)
+    if not len(sparse):
+        return out
+    # their neighbours are looked for among the named points of cells up to twice as full: a column's
+    # samples that happen to lie closer together are not sparse, but are still its neighbours
+    pts = np.asarray(xyz)[which].astype(np.float64)
+    around = pts[share < 2 * SPARSE_SHARE]
+    if len(around) < 3:
+        return out
+    far = cKDTree(around).query(pts[sparse], k=3)[0][:, 2].astype(np.float32)
+    near = far <= FAR_SPACINGS * out[sparse]
+    out[sparse[near]] = np.maximum(out[sparse[near]], far[near])
+    return out
 
 
 def local_spacing(xyz: np.ndarray, neighbours: int = 8) -> np.ndarray:

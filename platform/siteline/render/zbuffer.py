@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -27,15 +27,19 @@ import torch
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import RenderError
-from siteline.records.params.render import RenderParams
+from siteline.records.params.render import MAX_SPLAT_PX, RenderParams
 from siteline.render import kernels
 from siteline.render.edges import see_through, trim_edges
-from siteline.render.fill import fill_gaps
-from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels
+from siteline.render.fill import SAME_SURFACE, fill_gaps
+from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels, surface_spacing
 
 EMPTY_KEY = torch.iinfo(torch.int64).max
 MAX_POINTS = 2**32 - 1
 INDEX_MASK = 0xFFFFFFFF
+# how wide (in its own spacings) a sparse surface's sample reaches when the pixels behind it are said
+# unsure: its own spacing is the distance to the farther of its two nearest neighbours, so disks of
+# 1.5 of it close the gap to each; the halo beside a pole is 0.75 of its spacing (docs/performance.md)
+SPARSE_REACH = 1.5
 
 
 @dataclass
@@ -418,6 +422,62 @@ def _trimmed(
     return out_index, out_depth, torch.where(trimmed, index, -1)
 
 
+def _behind_sparse(
+    index: torch.Tensor,
+    depth: torch.Tensor,
+    pts: torch.Tensor,
+    spacing: torch.Tensor,
+    cam: Camera,
+    settings: RenderParams,
+    sparse_of: np.ndarray | None,
+) -> torch.Tensor:
+    """(H W,) int64: per pixel whose winner lies behind a sparse surface's reach, the nearest of that
+    surface's points there; -1 elsewhere. A point of ``sparse_of`` ((N,) bool; None: every point)
+    whose own surface is sparser than its spacing says (siteline.render.splats.surface_spacing: a
+    pole's samples a metre apart) is drawn a second time, into a z-buffer of its own, as a disk of
+    :data:`SPARSE_REACH` of its own spacing across (up to MAX_SPLAT_PX): a winner :data:`SAME_SURFACE`
+    farther than such a disk may show through the surface where it lies between its samples (the
+    ground between a pole's)."""
+    dev = index.device
+    npix = cam.width * cam.height
+    out = torch.full((npix,), -1, dtype=torch.int64, device=dev)
+    spacing_np = spacing.cpu().numpy()
+    named = np.arange(len(spacing_np)) if sparse_of is None else np.flatnonzero(sparse_of)
+    own = surface_spacing(pts.cpu().numpy(), spacing_np, named)
+    raised = own > spacing_np[named]
+    sparse, own = named[raised], own[raised]
+    if not len(sparse):
+        return out
+    which = torch.from_numpy(sparse).to(dev)
+    zbuf = torch.full((npix + 1,), EMPTY_KEY, dtype=torch.int64, device=dev)
+    wide = replace(
+        settings, splat="world", splat_max_px=MAX_SPLAT_PX, point_size_px=1, splat_factor=SPARSE_REACH
+    )
+    own_depth = torch.empty(len(sparse), dtype=torch.float32, device=dev)
+    _splat(pts[which], torch.from_numpy(own).to(dev), cam, wide, dev, zbuf, own_depth)
+    near, _ = _winners(zbuf, npix)
+    near_depth = own_depth[near.clamp(min=0)]  # the sample's own depth, not its disk's rim
+    behind = (near >= 0) & (index >= 0) & (depth > near_depth * (1 + SAME_SURFACE))
+    return torch.where(behind, which[near.clamp(min=0)], -1)
+
+
+def _unsure_of(
+    index: torch.Tensor, depth: torch.Tensor, reached: torch.Tensor, centres: torch.Tensor,
+    points: tuple[torch.Tensor, torch.Tensor, np.ndarray | None], cam: Camera, settings: RenderParams,
+) -> np.ndarray:  # fmt: skip
+    """RenderResult.unsure_of: where the trim gave a pixel away (``reached``), the point whose splat
+    reached it; else where the winner shows through a nearer surface's holes or (``sparse_surfaces``)
+    lies behind a sparse surface's reach, that surface's nearest sample; -1 elsewhere. (H, W) int64.
+    points: the render's (N, 3) points, their spacings and which may be of a sparse surface
+    (:func:`_behind_sparse`)."""
+    pts, spacing, sparse_of = points
+    holes = see_through(index, depth, centres, spacing, _focal(cam), cam.width, settings.splat_max_px)
+    if settings.sparse_surfaces:
+        behind = _behind_sparse(index, depth, pts, spacing, cam, settings, sparse_of)
+        holes = torch.where(holes >= 0, holes, behind)
+    return torch.where(reached >= 0, reached, holes).cpu().numpy().reshape(cam.height, cam.width)
+
+
 def render_points(
     xyz: np.ndarray | torch.Tensor,
     camera: Camera,
@@ -425,13 +485,16 @@ def render_points(
     attributes: Mapping[str, np.ndarray | torch.Tensor] | None = None,
     device: str | torch.device = "cpu",
     spacing_m: np.ndarray | torch.Tensor | None = None,
+    sparse_of: np.ndarray | None = None,
 ) -> RenderResult:
     """Render site-local points through ``camera`` at ``settings.scale``.
 
     xyz: (N, 3) float32, site-local metres. attributes: name -> (N,) or (N, C) arrays of any dtype
     (uint8 RGB, uint8 class, bool flags). spacing_m: (N,) each point's spacing in metres, which
     world splats need (a tile read gives it; :func:`siteline.render.splats.local_spacing` estimates
-    it for a raw cloud). Returns a :class:`RenderResult` at the scaled camera.
+    it for a raw cloud). sparse_of: (N,) bool, with ``settings.sparse_surfaces`` the points whose
+    surface is looked at for being sparse (None: every point; a pair names its changed points).
+    Returns a :class:`RenderResult` at the scaled camera.
     """
     settings = settings or RenderParams()
     attributes = dict(attributes or {})
@@ -462,10 +525,9 @@ def render_points(
         index, depth, filled = fill_gaps(index, depth, cam.width, cam.height, settings.fill_px, CPU_KERNELS)
     unsure_of = None
     if trim and centres is not None and spacing is not None:
-        holes = see_through(
-            index, depth, centres[:npix], spacing, _focal(cam), cam.width, settings.splat_max_px
+        unsure_of = _unsure_of(
+            index, depth, reached, centres[:npix], (pts, spacing, sparse_of), cam, settings
         )
-        unsure_of = torch.where(reached >= 0, reached, holes).cpu().numpy().reshape(cam.height, cam.width)
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
     t_splat = time.perf_counter() - t0

@@ -22,7 +22,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from siteline.records.params.labels import LabelParams
 from siteline.stores.base import Store, join
+
+NEAREST = LabelParams(rule="nearest")
 
 
 def blob(store: Store, sha256: str) -> str:
@@ -46,22 +49,21 @@ def pair_labels(
     versions: tuple[int, int],
     radius_m: float,
     rule: str = "semantic",
-    label_rule: str = "nearest",
-    min_region_points: int = 1,
-    surface_probe: float = 0.0,
+    labels: LabelParams = NEAREST,
 ) -> str:
     """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
-    by the change ``rule`` (siteline.labels.rule), the ``label_rule`` and the smallest region kept
+    by the change ``rule`` (siteline.labels.rule), the ``labels``' rule and the smallest region kept
     (siteline.records.params.labels; the nearest rule keeping every point names no suffix, as before both;
     the surface rule is named with its version, the adaptive rule by its name, each with its probe
-    when it has one)."""
+    when it has one, and ``-sparse`` when a sparse surface's changed samples are kept whole)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"
     # the surface rule's second version ignores points the other scene never covered (stores of the
     # first, "-surface", are not reused); the adaptive rule is named as it is
-    by += {"nearest": "", "surface": "-surface2"}.get(label_rule, f"-{label_rule}")
-    by += "" if min_region_points <= 1 else f"-m{min_region_points}"
-    by += "" if label_rule == "nearest" or not surface_probe else f"-p{surface_probe:g}"
+    by += {"nearest": "", "surface": "-surface2"}.get(labels.rule, f"-{labels.rule}")
+    by += "" if labels.min_region_points <= 1 else f"-m{labels.min_region_points}"
+    by += "" if labels.rule == "nearest" or not labels.surface_probe else f"-p{labels.surface_probe:g}"
+    by += "-sparse" if labels.sparse_regions and labels.min_region_points > 1 else ""
     return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um{by}.zarr")
 
 

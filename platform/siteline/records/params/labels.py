@@ -100,13 +100,16 @@ class LabelParams:
     within the change radius but farther than this many radii is probed against that scene's
     surface as well, and changed when it lies off it (a ramp deepened by less than the radius; 0:
     only the points the nearest test flags are looked at); not at a radius under the level of
-    detection's floor, where it finds nothing."""
+    detection's floor, where it finds nothing. sparse_regions: with ``min_region_points``, the changed
+    samples of a surface sparser than the region cells, most of whose samples around changed, are
+    kept whole (a pole's samples a metre apart; siteline.labels.store)."""
 
     radius_m: float | None = None
     radius_multiplier: float = 2.5
     rule: str = "adaptive"
     min_region_points: int = 1
     surface_probe: float = 0.0
+    sparse_regions: bool = False
 
     def surface_test(self, radius_m: float) -> SurfaceTest | None:
         """The surface or adaptive rule's test at the change radius ``radius_m`` (None for the nearest rule)."""
@@ -143,6 +146,8 @@ class LabelParams:
         p = self.surface_probe
         if isinstance(p, bool) or not isinstance(p, int | float) or not 0 <= p < 1:
             raise LabelError(f"surface_probe {p!r} must be a number from 0 (off) to under 1 (change radii).")
+        if not isinstance(self.sparse_regions, bool):
+            raise LabelError(f"sparse_regions {self.sparse_regions!r} must be true or false.")
         if not (isinstance(self.radius_multiplier, int | float) and self.radius_multiplier > 0):
             raise LabelError("radius multiplier must be positive.")
 

@@ -63,6 +63,11 @@ class PairParams:
     trim, a pixel it gave to a farther surface whose change differs from the nearer surface's that
     reached it is ignore (cause ``unsure_edge``: which of the two it shows lies within a point spacing
     of an edge, siteline.pairs.render.unsure_edges), not labelled as the farther surface.
+    sparse_surfaces: a surface sparser than its tile (a pole's samples a metre apart, a wall a flight
+    grazed; siteline.render.splats.surface_spacing) keeps its changed samples whole in the labels,
+    where most of its samples around changed (siteline.labels.store), and with ``unsure_edges`` a
+    farther surface drawn between its samples is ignore (cause ``unsure_edge``), not labelled as
+    what lies behind the pole.
 
     The persisted JSON stays flat (the knobs above), so the catalog, the lineage and ``release diff``
     show each knob once under its one name."""
@@ -92,12 +97,13 @@ class PairParams:
     shading: str = "auto"
     surface_probe: float = SURFACE_PROBE
     unsure_edges: bool = True
+    sparse_surfaces: bool = True
 
     # what each knob added after the first release meant before it existed (a record without it)
     BEFORE: ClassVar[Mapping[str, object]] = {
         "splat": "fixed", "splat_max_px": 31, "fill_px": 0, "min_valid": 0.25, "label_rule": "nearest",
         "min_region_points": 1, "splat_factor": WORLD_SPLAT_FACTOR, "trim_edges": False,
-        "shading": "none", "surface_probe": 0.0, "unsure_edges": False,
+        "shading": "none", "surface_probe": 0.0, "unsure_edges": False, "sparse_surfaces": False,
     }  # fmt: skip
 
     def __post_init__(self) -> None:
@@ -136,6 +142,7 @@ class PairParams:
             fill_px=self.fill_px,
             splat_factor=self.splat_factor,
             trim_edges=self.trim_edges,
+            sparse_surfaces=self.sparse_surfaces and self.unsure_edges,
         )
 
     def view_params_spec(self) -> ViewParams:
@@ -156,8 +163,9 @@ class PairParams:
     def label_params(self) -> LabelParams:
         """The change-label knobs as LabelParams."""
         return LabelParams(
-            self.radius_m, self.radius_multiplier, self.label_rule, self.min_region_points, self.surface_probe
-        )
+            self.radius_m, self.radius_multiplier, self.label_rule, self.min_region_points, self.surface_probe,
+            self.sparse_surfaces,
+        )  # fmt: skip
 
     def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
@@ -189,4 +197,6 @@ class PairParams:
             del doc["surface_probe"]
         if not doc["unsure_edges"]:  # the masks of before
             del doc["unsure_edges"]
+        if not doc["sparse_surfaces"]:  # the labels and masks of before
+            del doc["sparse_surfaces"]
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]

@@ -35,6 +35,8 @@ class RenderParams:
     (docs/performance.md measures both against analytic truth).
     trim_edges: with world splats, give the pixels where a splat reaches past its surface's edge to
     the farther surface behind (siteline.render.edges); no effect on fixed splats.
+    sparse_surfaces: with the trim, say unsure (RenderResult.unsure_of) the pixels whose winner lies
+    behind the reach of a sparse surface's samples (a pole's; siteline.render.zbuffer, SPARSE_REACH).
     """
 
     scale: float = 0.125
@@ -47,6 +49,7 @@ class RenderParams:
     fill_px: int = 0
     splat_factor: float = WORLD_SPLAT_FACTOR
     trim_edges: bool = False
+    sparse_surfaces: bool = False
 
     def __post_init__(self) -> None:
         if not (isinstance(self.scale, int | float) and math.isfinite(self.scale) and 0 < self.scale <= 4):
@@ -82,6 +85,8 @@ class RenderParams:
 
         if not isinstance(self.trim_edges, bool):
             raise RenderError(f"trim_edges {self.trim_edges!r} must be true or false.")
+        if not isinstance(self.sparse_surfaces, bool):
+            raise RenderError(f"sparse_surfaces {self.sparse_surfaces!r} must be true or false.")
 
     def to_dict(self) -> dict[str, JSON]:
         return asdict(self)
