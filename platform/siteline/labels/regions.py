@@ -105,12 +105,28 @@ def region_ids(xyz: np.ndarray, cell_m: float) -> np.ndarray:
     return rank[label]
 
 
+def _padded_keys(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_keys` of (N, 3) cell indices in their box grown by a cell each way (every cell and its
+    neighbours at non-negative indices), with the box's dims: a neighbour (di, dj, dk) of key k is
+    ``k + (di dims[1] + dj) dims[2] + dk``."""
+    lo = cells.min(axis=0) - 1
+    dims = cells.max(axis=0) - lo + 2
+    return _keys(cells, lo, dims), dims
+
+
+def points_near(xyz: np.ndarray, of: np.ndarray, cell_m: float) -> np.ndarray:
+    """(K,) int64 positions of the points ``xyz`` ((N, 3) metres) in the cells of ``cell_m`` that hold a
+    point ``of`` ((M,) positions) or touch one (26 around)."""
+    key, dims = _padded_keys(np.floor(np.asarray(xyz) / cell_m).astype(np.int64))  # in xyz's own precision
+    steps = np.array([(di * dims[1] + dj) * dims[2] + dk for di, dj, dk in [(0, 0, 0), *_FORWARD]])
+    steps = np.r_[steps, -steps[1:]]
+    return np.flatnonzero(np.isin(key, np.unique((key[of][:, None] + steps[None, :]).ravel())))
+
+
 def cell_regions(cells: np.ndarray) -> np.ndarray:
     """(C,) the region (a connected-component number) of each of ``cells`` ((C, 3) distinct int64
     cell indices), cells linked when they touch (26-neighbourhood)."""
-    lo = cells.min(axis=0) - 1  # every cell and its neighbours at non-negative indices
-    dims = cells.max(axis=0) - lo + 2
-    key = _keys(cells, lo, dims)
+    key, dims = _padded_keys(cells)
     order = np.argsort(key)
     key = key[order]
     rows, cols = [], []

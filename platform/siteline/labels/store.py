@@ -25,7 +25,7 @@ from siteline.labels.change import (
     change_flags,
     median_spacing,
 )
-from siteline.labels.regions import RegionCells, RegionRule
+from siteline.labels.regions import RegionCells, RegionRule, points_near
 from siteline.records.pairs import ChangeLabels, RadiusChoice
 from siteline.records.tiling import TileSpec
 from siteline.render.splats import surface_spacing
@@ -372,7 +372,7 @@ def _sparse(xyz: np.ndarray, changed: np.ndarray, spacing_m: float, cell_m: floa
         return None
     # the points that vote, changed or not: the sparse ones in the cells of SPARSE_AREA_M holding a
     # candidate or touching one
-    around = _cells_near(xyz32, candidates, SPARSE_AREA_M)
+    around = points_near(xyz32, candidates, SPARSE_AREA_M)
     own = np.zeros(len(xyz), np.float32)
     own[around] = surface_spacing(xyz32, spacing, around)
     sparse = np.flatnonzero(own > cell_m)
@@ -388,20 +388,6 @@ def _sparse(xyz: np.ndarray, changed: np.ndarray, spacing_m: float, cell_m: floa
     keep = np.zeros(len(xyz), bool)
     keep[sparse] = changed[sparse] & held
     return keep[changed]
-
-
-def _cells_near(xyz: np.ndarray, of: np.ndarray, cell_m: float) -> np.ndarray:
-    """(K,) int64 positions of the points ``xyz`` in the cells of ``cell_m`` that hold a point ``of``
-    ((M,) positions) or touch one (26 around)."""
-    ijk = np.floor(xyz / cell_m).astype(np.int64)
-    lo = ijk.min(axis=0) - 1
-    dims = ijk.max(axis=0) - lo + 2
-    key = ((ijk[:, 0] - lo[0]) * dims[1] + (ijk[:, 1] - lo[1])) * dims[2] + (ijk[:, 2] - lo[2])
-    steps = np.array(
-        [(di * dims[1] + dj) * dims[2] + dk for di in (-1, 0, 1) for dj in (-1, 0, 1) for dk in (-1, 0, 1)]
-    )
-    wanted = np.unique((key[of][:, None] + steps[None, :]).ravel())
-    return np.flatnonzero(np.isin(key, wanted))
 
 
 def _write_sides(

@@ -322,7 +322,7 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
         keys = np.empty(n, np.uint64)
         for j in range(n):
             keys[j] = _cell_key(xyz, level, which[j], shift)
-        named = _count_keys(keys, keys)
+        named = _count_keys(keys)
         left = np.flatnonzero(named < cap)
         seen = np.zeros(1 << 16, np.bool_)  # a 64 kB filter: most points' cells hold no cell left
         for m in range(len(left)):
@@ -358,8 +358,8 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
 
 
 @kernel
-def _count_keys(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
-    """(M,) int64: for each key of ``of``, how many of ``keys`` equal it (an open-addressing table)."""
+def _count_keys(keys: np.ndarray) -> np.ndarray:
+    """(M,) int64: for each of ``keys``, how many of them equal it (an open-addressing table)."""
     size = 2
     while size < 2 * len(keys):
         size *= 2
@@ -372,14 +372,12 @@ def _count_keys(keys: np.ndarray, of: np.ndarray) -> np.ndarray:
             i = (i + 1) & mask
         table[i] = k
         count[i] += 1
-    out = np.zeros(len(of), np.int64)
-    for j in range(len(of)):
-        i = _slot(of[j], mask)
-        while table[i] != 0:
-            if table[i] == of[j]:
-                out[j] = count[i]
-                break
+    out = np.zeros(len(keys), np.int64)
+    for j in range(len(keys)):
+        i = _slot(keys[j], mask)
+        while table[i] != keys[j]:  # every key is in the table
             i = (i + 1) & mask
+        out[j] = count[i]
     return out
 
 
