@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from siteline.labels.change import CHANGED, NOT_OBSERVED, UNCHANGED, Matching, change_flags
+from siteline.labels.change import CHANGED, IGNORED, NOT_OBSERVED, UNCHANGED, Matching, change_flags
 from siteline.records.params.labels import LabelParams
 from siteline.site.taxonomy import default_taxonomy
 
@@ -218,3 +218,52 @@ def test_the_compiled_plane_search_agrees_with_a_plain_one() -> None:
     got = planes_through(q, pts, valid, 0.05, test)
     assert np.array_equal(got, _planes_oracle(q, pts, valid, 0.05, test, ANCHORS))
     assert 20 < got.sum() < m - 20  # both answers occur
+
+
+def _fence_line(seed: int) -> tuple[np.ndarray, ...]:
+    """Two scans at 10 points/m2 of ground across the site's fence line (y = 0) and of a panel standing
+    on it (3 points/m2, grazed), classes as ingest gives them: what falls outside (y < 0) is ignored."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(2):
+        g = _ground(rng, 10.0, y=(-10.0, 10.0))
+        f = _wall(rng, 3.0, x0=4.0, length=12.0, y=0.0, height=2.0)
+        xyz = np.concatenate([g, f])
+        kind = np.r_[_full(len(g), GROUND), _full(len(f), TEMP)]
+        out += [xyz, np.where(xyz[:, 1] >= 0.0, kind, TAX.ignore_id).astype(np.uint8), len(g)]
+    return tuple(out)
+
+
+def test_a_panel_on_the_fence_line_is_ignored_where_only_the_other_scans_outside_returns_hold_it() -> None:
+    r = 0.46  # 2.5 x the ground's spacing at 10 points/m2
+
+    def flags(a, ac, b, bc, rule="adaptive"):
+        test = LabelParams(rule=rule, surface_probe=0.7).surface_test(r)
+        return change_flags(a, ac, b, bc, r, IGN, Matching(surface=test, ground=TAX.ground_lut()))
+
+    kept, gone, before = [], [], []
+    for seed in range(5):
+        a, ac, na, b, bc, nb = _fence_line(seed)
+        inside = slice(na, None)
+        panel = ac[inside] == TEMP  # A's panel returns that fall inside the fence
+        kept.append(flags(a, ac, b, bc)[inside][panel])
+        gone.append(flags(a, ac, b[:nb], bc[:nb])[inside][panel])  # B: the panel taken away
+        before.append(flags(a, ac, b, bc, "surface")[inside][panel])
+    kept, gone, before = (np.concatenate(x) for x in (kept, gone, before))
+    # each scan kept other returns of the panel: those of A's that B kept none beside were changed
+    # against B's kept points alone; B's outside returns hold them, so they are ignored
+    assert (kept == CHANGED).mean() < 0.04
+    assert (kept == IGNORED).mean() > 0.05
+    assert (before == CHANGED).mean() > 0.1  # the surface rule: changed
+    # a panel taken away is still changed, but for its foot within reach of the ground both sides
+    assert (gone == CHANGED).mean() > 0.8
+    # ground dug 9 m deep beside the line (B's outside returns within the rule's reach) stays changed
+    a, ac, na, b, bc, nb = _fence_line(0)
+    rng = np.random.default_rng(5)
+    pit = lambda xyz: (xyz[:, 0] > 8) & (xyz[:, 0] < 12) & (xyz[:, 1] > 1) & (xyz[:, 1] < 5)  # noqa: E731
+    floor = np.c_[rng.uniform(8, 12, 160), rng.uniform(1, 5, 160), np.full(160, -9.0)]
+    b, bc = np.concatenate([b[~pit(b)], floor]), np.r_[bc[~pit(b)], _full(160, GROUND)]
+    inside = bc != TAX.ignore_id
+    dug = flags(a, ac, b, bc)[pit(a) & (ac == GROUND)]
+    alone = flags(a, ac, b[inside], bc[inside])[pit(a) & (ac == GROUND)]  # B's outside returns dropped
+    assert (dug == CHANGED).sum() > 50 and np.array_equal(dug, alone)

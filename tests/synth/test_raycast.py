@@ -205,6 +205,13 @@ def test_mask_score_counts_specks_objects_and_boundaries():
     assert 0 < n_px < SHOWN_MIN_PX
     s.add(tiny.mask.copy(), tiny)
     assert s.object_views() == {"removed#2": 2} and s.to_dict()["object_views"] == {"removed#2": 2}
+    # an edge drawn a pixel past a change the mask ignores is a rim piece of that change, not a speck
+    ignored_edge = truth.mask.copy()
+    ignored_edge[truth.mask == CHANGED] = IGNORE
+    ignored_edge[ys.max() + 1, xs.min() + 3 : xs.min() + 6] = CHANGED
+    edge = MaskScore()
+    edge.add(ignored_edge, truth)
+    assert edge.fp == 3 and edge.specks == [0] and edge.rims == [1] and edge.rim_px == 3
 
 
 def test_a_surface_that_hardly_moved_is_not_changed_where_it_did_not():

@@ -408,10 +408,59 @@ def change_flags(
                 b_kept, b_classes, a_pts[differ], a_classes[differ], reach, surface, tree
             )
     same[found & (idx < 0)] = True
-    out[live] = np.where(
+    flags = np.where(
         uncovered, IGNORED, np.where(unobserved, NOT_OBSERVED, np.where(same, UNCHANGED, CHANGED))
     )
+    if surface is not None and surface.observed and not b_keep.all():
+        again = np.flatnonzero(flags == CHANGED)
+        # only where the other scene has an ignored return within the rule's reach (in plan)
+        again = again[beside(a_pts[again], b_xyz[~b_keep], max(radius_m, surface.halo_m))]
+        as_geometry = ignored if geometric is None else ignored | geometric
+        held = held_by_any(a_pts[again], a_classes[again], b_xyz, b_cls, radius_m, matching, as_geometry)
+        flags[again[held]] = IGNORED
+    out[live] = flags
     return out
+
+
+def beside(a_xyz: np.ndarray, b_xyz: np.ndarray, reach_m: float) -> np.ndarray:
+    """(N,) bool: points of ``a_xyz`` ((N, 3) metres) whose plan cell of ``reach_m`` or one of the 8
+    around it holds a point of ``b_xyz`` (every point within ``reach_m`` in plan, and some up to
+    2.9 times farther)."""
+    if not len(a_xyz) or not len(b_xyz):
+        return np.zeros(len(a_xyz), dtype=bool)
+    lo = np.minimum(a_xyz[:, :2].min(axis=0), b_xyz[:, :2].min(axis=0))
+    cell = lambda xyz: np.floor((xyz[:, :2] - lo) / reach_m).astype(np.int64) + 1  # noqa: E731
+    ca, cb = cell(a_xyz), cell(b_xyz)
+    width = int(max(ca[:, 1].max(), cb[:, 1].max())) + 2
+    taken = np.unique(cb[:, 0] * width + cb[:, 1])
+    around = (np.arange(-1, 2)[:, None] * width + np.arange(-1, 2)).ravel()
+    return np.asarray(np.isin((ca[:, 0] * width + ca[:, 1])[:, None] + around, taken).any(axis=1))
+
+
+def held_by_any(
+    a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray, radius_m: float,
+    matching: Matching, as_geometry: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """(N,) bool: points of ``a_xyz`` (the adaptive rule's changed points, (N, 3) site-local metres,
+    classes ``a_cls``) the rule finds unchanged against the other scene (``b_xyz``, ``b_cls``) when every
+    return of it counts, those of ignored classes too, compared by geometry (``as_geometry``: (256,)
+    bool, the ignored classes and those compared by geometry only): only returns the site does not
+    label (outside its fence, noise) say the place holds what it held, so nothing says whether it
+    changed (the caller ignores them). A site fence standing on the fence line is the case: each scan
+    keeps those of its returns that fall inside, not the same ones, and the rest of each found nothing
+    to match. A panel taken away stays changed (no return of the other scan stands where it stood) but
+    for its foot, within reach of the ground both sides of the line."""
+    if not len(a_xyz):
+        return np.zeros(0, dtype=bool)
+    reach = max(radius_m, matching.surface.halo_m if matching.surface is not None else 0.0)
+    # in plan only: the rule reads the other scene's whole column over a point (what lies above, below)
+    lo, hi = a_xyz[:, :2].min(axis=0) - reach, a_xyz[:, :2].max(axis=0) + reach
+    near = np.all((b_xyz[:, :2] >= lo) & (b_xyz[:, :2] <= hi), axis=1)
+    if not near.any():
+        return np.zeros(len(a_xyz), dtype=bool)
+    nothing = np.zeros(256, dtype=bool)
+    again = change_flags(a_xyz, a_cls, b_xyz[near], b_cls[near], radius_m, nothing, matching, as_geometry)
+    return again != CHANGED
 
 
 def median_spacing(xyz: np.ndarray, max_points: int = 200_000, seed: int = 0) -> float:

@@ -54,13 +54,16 @@ def pair_labels(
     """The 3D change labels of a pair at ``radius_m`` with the label-set ``versions`` of (t1, t2),
     by the change ``rule`` (siteline.labels.rule), the ``labels``' rule and the smallest region kept
     (siteline.records.params.labels; the nearest rule keeping every point names no suffix, as before both;
-    the surface rule is named with its version, the adaptive rule by its name, each with its probe
+    the surface and adaptive rules are named with their versions, each with its probe
     when it has one, and ``-sparse`` when a sparse surface's changed samples are kept whole)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"
     # the surface rule's second version ignores points the other scene never covered (stores of the
-    # first, "-surface", are not reused); the adaptive rule is named as it is
-    by += {"nearest": "", "surface": "-surface2"}.get(labels.rule, f"-{labels.rule}")
+    # first, "-surface", are not reused); the adaptive rule's second ignores changed points beside the
+    # other scene's ignored returns (siteline.labels.change.ignored_near; "-adaptive" not reused)
+    by += {"nearest": "", "surface": "-surface2", "adaptive": "-adaptive2"}.get(
+        labels.rule, f"-{labels.rule}"
+    )
     by += "" if labels.min_region_points <= 1 else f"-m{labels.min_region_points}"
     by += "" if labels.rule == "nearest" or not labels.surface_probe else f"-p{labels.surface_probe:g}"
     by += "-sparse" if labels.sparse_regions and labels.min_region_points > 1 else ""

@@ -138,8 +138,8 @@ class MaskScore:
     BOUNDARY_PX of a true one, predicted boundary pixels, true boundary pixels within BOUNDARY_PX of a
     predicted one, true boundary pixels]. objects: object name -> [changed pixels found, changed
     pixels]. specks: per view, the false-changed components under SPECK_PX pixels that lie on
-    unchanged ground, more than BOUNDARY_PX from any truly changed pixel (a speck a model would learn
-    as change); rims: per view, those under SPECK_PX within BOUNDARY_PX of a truly changed pixel (an
+    unchanged ground, more than BOUNDARY_PX from any truly changed pixel, scored or ignored by the mask
+    (a speck a model would learn as change); rims: per view, those under SPECK_PX within BOUNDARY_PX of a truly changed pixel (an
     edge drawn a pixel too far, in pieces: counted, and already in precision and boundary F).
     kept_objects: object name -> [its truly unchanged pixels labelled changed, its truly unchanged
     pixels the mask labels] (false change per object that stayed). rim_px: the false-changed pixels
@@ -216,7 +216,10 @@ class MaskScore:
             got[1] += int(mine.sum())
         labels, n = ndimage.label(p & ~t, structure=np.ones((3, 3), bool))
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
-        near_change = ndimage.distance_transform_edt(~t) <= BOUNDARY_PX if t.any() else np.zeros_like(t)
+        # near a truly changed pixel, scored or not: a change the mask ignores still has its edge there
+        near_change = (
+            ndimage.distance_transform_edt(~truly) <= BOUNDARY_PX if truly.any() else np.zeros_like(t)
+        )
         self.rim_px += int((p & ~t & near_change).sum())
         touching = np.zeros(n + 1, bool)
         touching[np.unique(labels[near_change & (labels > 0)])] = True

@@ -92,7 +92,8 @@ class LabelParams:
     """radius_m: change radius in metres, or None for ``radius_multiplier`` x the median
     nearest-neighbour spacing of the sparser scene. rule: ``adaptive`` (the default: a point the
     nearest-neighbour test flags is looked at again against the other scene's local surface as that
-    scan sampled it, and a place the other scan did not observe is ignored), ``surface`` (the same
+    scan sampled it, a place the other scan did not observe is ignored, and so is a point only that
+    scan's returns of ignored classes hold: siteline.labels.change.held_by_any), ``surface`` (the same
     within twice the radius, where every surface is sampled alike) or ``nearest`` (the
     nearest-neighbour test alone; siteline.labels.change). min_region_points: changed regions of
     fewer points are taken back to unchanged (siteline.labels.regions; 1 keeps every point).

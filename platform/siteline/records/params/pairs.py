@@ -199,4 +199,6 @@ class PairParams:
             del doc["unsure_edges"]
         if not doc["sparse_surfaces"]:  # the labels and masks of before
             del doc["sparse_surfaces"]
+        if doc["label_rule"] == "adaptive":  # its second version (siteline.labels.change.ignored_near)
+            doc["label_rule"] = "adaptive2"
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
