@@ -8,7 +8,7 @@ from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, cast
 
 import numpy as np
 import zarr
@@ -384,22 +384,26 @@ class SceneTiles:
         k: int,
         plan: tuple[np.ndarray, np.ndarray | None],
         blocks: dict[tuple[str, str, int], np.ndarray],
+        out: np.ndarray | None = None,
     ) -> np.ndarray:
         """Values of ``tiles/<tile>/<name>`` at ``plan`` (:meth:`_chunk_plan` of its first ``k`` or
-        its chosen values), from the decoded inner chunks ``blocks`` (:meth:`_load`)."""
+        its chosen values), from the decoded inner chunks ``blocks`` (:meth:`_load`); written into
+        ``out`` when given (chosen values only: a slice of a read's output)."""
         ids, at = plan
         if (k if at is None else len(at)) == 0:
             arr = self._handle(tile, name)
             return np.zeros((0, *arr.shape[1:]), dtype=arr.dtype)
         parts = [blocks[(tile, name, i)] for i in ids.tolist()]
-        if at is None or len(parts) == 1:
-            buf = parts[0] if len(parts) == 1 else np.concatenate(parts)
-            return buf[:k] if at is None else buf[at]
+        if at is None:
+            return parts[0][:k] if len(parts) == 1 else np.concatenate(parts)[:k]
+        if len(parts) == 1:
+            return parts[0][at] if out is None else np.take(parts[0], at, axis=0, out=out)
         # chunk by chunk: a view takes a part of each, and copying whole chunks end to end first cost
         # more than the gather
         c = len(parts[0])
         edges = np.searchsorted(at, np.arange(len(parts) + 1) * c)
-        out = np.empty((len(at), *parts[0].shape[1:]), dtype=parts[0].dtype)
+        if out is None:
+            out = np.empty((len(at), *parts[0].shape[1:]), dtype=parts[0].dtype)
         for m, part in enumerate(parts):
             lo, hi = edges[m], edges[m + 1]
             np.take(part, at[lo:hi] - m * c, axis=0, out=out[lo:hi])
@@ -533,57 +537,26 @@ class SceneTiles:
                 f"(positions always come back as {METRES!r})."
             )
 
-    def _gather(
-        self,
-        plan: dict[str, tuple[int, np.ndarray | None]],
-        attributes: Sequence[str],
-        view: ViewNodes | None = None,
-    ) -> Points:
+    def _gather(self, plan: dict[str, tuple[int, np.ndarray | None]], attributes: Sequence[str]) -> Points:
         """Per tile of ``plan``: read values ``idx`` of its arrays (the first ``k`` when None; by
         cached chunk, :meth:`_values`), dequantise ``xyz_counts`` to site-local float64 metres;
-        concatenate over tiles. With the ``view`` whose selection made ``plan``: each point gets its
-        node's spacing (``spacing_m``), and the points of nodes that cross a plane of its frustum are
-        tested against it (float64) and dropped outside, before the other attributes are gathered."""
+        concatenate over tiles."""
         self._check_attributes(attributes)
         stats = ReadStats()
         parts: dict[str, list[np.ndarray]] = {a: [] for a in (METRES, *attributes)}
-        spacings: list[np.ndarray] = []
         names = [COUNTS if a == METRES else a for a in (METRES, *attributes)]
         chunks = {t: self._chunk_plan(t, *plan[t]) for t in sorted(plan)}
         blocks = self._load([(t, n, chunks[t][0]) for t in sorted(plan) for n in names], stats)
         for tile in sorted(plan):
             k, idx = plan[tile]
             i, j = parse_tile_key(tile)
-            ids, at = chunks[tile]
-            xyz = dequantise(
-                self._values(tile, COUNTS, k, (ids, at), blocks),
-                tile_origin_local(i, j, self.spec.tile_size_m),
-                self.spec.quantum_m,
-            )
-            if view is not None:
-                sel, take = view.selection[tile]
-                spacing = np.repeat(view.spacing_m[tile], take).astype(np.float32)
-                crossing = np.repeat(
-                    ~boxes_inside_frustum(
-                        view.planes, self.by_tile[tile].lo[sel], self.by_tile[tile].hi[sel]
-                    ),
-                    take,
-                )
-                if crossing.any():
-                    keep = np.ones(len(xyz), bool)
-                    keep[crossing] = np.all(
-                        xyz[crossing] @ view.planes[:, :3].T + view.planes[:, 3] >= 0, axis=1
-                    )
-                    if not keep.all():
-                        xyz, spacing = xyz[keep], spacing[keep]
-                        at = np.flatnonzero(keep) if at is None else at[keep]
-                        k = len(at)
-                spacings.append(spacing)
+            origin = tile_origin_local(i, j, self.spec.tile_size_m)
+            xyz = dequantise(self._values(tile, COUNTS, k, chunks[tile], blocks), origin, self.spec.quantum_m)
             parts[METRES].append(xyz)
             for a in attributes:
-                parts[a].append(self._values(tile, a, k, (ids, at), blocks))
+                parts[a].append(self._values(tile, a, k, chunks[tile], blocks))
             stats.tiles_read += 1
-            stats.points_read += plan[tile][0] if idx is None else len(idx)
+            stats.points_read += k if idx is None else len(idx)
         # one tile's metres are a fresh array: no copy (its attributes may be the cache's own chunks)
         out = {
             a: (chunks[0] if len(chunks) == 1 and a == METRES else np.concatenate(chunks))
@@ -592,10 +565,51 @@ class SceneTiles:
             for a, chunks in parts.items()
         }
         stats.points_returned = len(out[METRES])
-        xyz = out.pop(METRES)
-        if view is None:
-            return Points(xyz, out, stats)
-        return Points(xyz, out, stats, np.concatenate(spacings) if spacings else np.zeros(0, np.float32))
+        return Points(out.pop(METRES), out, stats)
+
+    def _gather_view(self, plan: dict[str, np.ndarray], attributes: Sequence[str], view: ViewNodes) -> Points:
+        """The points ``plan[tile]`` (positions in the tile's arrays, ascending) of the ``view`` whose
+        selection made the plan, each with its node's spacing (``spacing_m``): per decoded chunk, a
+        compiled pass (siteline.tiles.kernels.place_points) makes its chosen points metres, tests
+        those of nodes that cross a plane of the frustum (a node wholly inside keeps all, float64) and
+        writes the kept ones straight into the read's output; then the attributes of the kept points
+        only, into theirs (no concatenation over tiles)."""
+        from siteline.tiles.kernels import place_points
+
+        self._check_attributes(attributes)
+        stats = ReadStats()
+        tiles = sorted(plan)
+        chunks = {t: self._chunk_plan(t, 0, plan[t]) for t in tiles}
+        blocks = self._load([(t, n, chunks[t][0]) for t in tiles for n in (COUNTS, *attributes)], stats)
+        total = sum(len(idx) for idx in plan.values())
+        xyz, rows = np.empty((total, 3), np.float64), np.empty(total, np.int64)
+        spacing = np.empty(total, np.float32)
+        values = {a: np.empty((total, *e.shape[1:]), e.dtype) for a in attributes for e in [self._empty(a)]}
+        n = 0
+        for tile in tiles:
+            ids, at = chunks[tile][0], cast(np.ndarray, chunks[tile][1])  # chosen values: never None
+            i, j = parse_tile_key(tile)
+            origin = np.asarray(tile_origin_local(i, j, self.spec.tile_size_m), dtype=np.float64)
+            sel, take = view.selection[tile]
+            nodes = self.by_tile[tile]
+            crossing = np.repeat(~boxes_inside_frustum(view.planes, nodes.lo[sel], nodes.hi[sel]), take)
+            c = int(self._handle(tile, COUNTS).chunks[0])
+            edges = np.searchsorted(at, np.arange(len(ids) + 1) * c)
+            start = n
+            for m, chunk in enumerate(ids.tolist()):
+                lo, hi = int(edges[m]), int(edges[m + 1])
+                n = place_points(
+                    blocks[(tile, COUNTS, chunk)], at[lo:hi] - m * c, crossing[lo:hi], origin,
+                    float(self.spec.quantum_m), view.planes, xyz, rows, lo, n,
+                )  # fmt: skip
+            kept = rows[start:n]
+            spacing[start:n] = np.repeat(view.spacing_m[tile], take)[kept]
+            for a in attributes:
+                self._values(tile, a, n - start, (ids, at[kept]), blocks, values[a][start:n])
+            stats.tiles_read += 1
+            stats.points_read += len(at)
+        stats.points_returned = n
+        return Points(xyz[:n], {a: v[:n] for a, v in values.items()}, stats, spacing[:n])
 
     def _empty(self, attribute: str) -> np.ndarray:
         if attribute == METRES:
@@ -775,11 +789,14 @@ class SceneTiles:
         ``selection[tile] = (indices, take)`` (indices into ``by_tile[tile]``, ascending): only
         the inner chunks those ranges touch are decoded (:meth:`_values`). ``view``: the view
         whose selection this is, to keep only the points in its frustum (:meth:`_gather`)."""
-        plan: dict[str, tuple[int, np.ndarray | None]] = {}
-        for tile, (sel, take) in selection.items():
-            starts = self.by_tile[tile].start[sel]
-            plan[tile] = (int((starts + take).max()), node_positions(starts, take))
-        out = self._gather(plan, attributes, view)
+        plan = {
+            tile: node_positions(self.by_tile[tile].start[sel], take)
+            for tile, (sel, take) in selection.items()
+        }
+        if view is not None:
+            out = self._gather_view(plan, attributes, view)
+        else:
+            out = self._gather({t: (int(idx.max()) + 1, idx) for t, idx in plan.items()}, attributes)
         out.stats.levels = {t: self._deepest(t, sel, take) for t, (sel, take) in selection.items()}
         return out
 
