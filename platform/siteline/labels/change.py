@@ -361,8 +361,7 @@ def change_flags(
     tree = float32_tree(b_kept) if matching.backend == "pykdtree" else None
     dist, idx = nearest(b_kept, a_pts, radius_m, matching.backend, tree)
     found = np.isfinite(dist)
-    uncovered = np.zeros(len(dist), dtype=bool)
-    unobserved = np.zeros(len(dist), dtype=bool)
+    uncovered, unobserved = np.zeros((2, len(dist)), dtype=bool)
     surface = matching.surface
     # the points looked at again: those the nearest test flags, and those it finds only far (the probe)
     again = None if surface is None else np.flatnonzero(~found | (dist > surface.probe_m))
@@ -386,8 +385,7 @@ def change_flags(
             # point under the other scene's ground was not hidden from it: that ground was dug
             hidden = cells.hidden if cells.buried is None else cells.hidden & ~cells.buried
             seen_not = again[alone[hidden]]
-            found[seen_not] = True
-            idx[seen_not] = -1
+            found[seen_not], idx[seen_not] = True, -1
             if surface.observed:  # structure at or over the point, or nothing at all: not observed
                 unobserved[again[alone[~cells.covered | (cells.above & ~cells.hidden)]]] = True
             else:  # the other scene has nothing in the point's plan cell: it never covered the place
@@ -408,16 +406,12 @@ def change_flags(
                 b_kept, b_classes, a_pts[differ], a_classes[differ], reach, surface, tree
             )
     same[found & (idx < 0)] = True
-    flags = np.where(
-        uncovered, IGNORED, np.where(unobserved, NOT_OBSERVED, np.where(same, UNCHANGED, CHANGED))
-    )
-    if surface is not None and surface.observed and not b_keep.all():
+    flags = np.where(same, UNCHANGED, CHANGED)
+    flags[unobserved], flags[uncovered] = NOT_OBSERVED, IGNORED
+    if surface is not None and surface.observed and not b_keep.all():  # a fence on the fence line
         again = np.flatnonzero(flags == CHANGED)
-        # only where the other scene has an ignored return within the rule's reach (in plan)
-        again = again[beside(a_pts[again], b_xyz[~b_keep], max(radius_m, surface.halo_m))]
-        as_geometry = ignored if geometric is None else ignored | geometric
-        held = held_by_any(a_pts[again], a_classes[again], b_xyz, b_cls, radius_m, matching, as_geometry)
-        flags[again[held]] = IGNORED
+        mine = (a_pts[again], a_classes[again])
+        flags[again[held_by_any(*mine, b_xyz, b_cls, radius_m, matching, ignored, geometric)]] = IGNORED
     out[live] = flags
     return out
 
@@ -439,28 +433,32 @@ def beside(a_xyz: np.ndarray, b_xyz: np.ndarray, reach_m: float) -> np.ndarray:
 
 def held_by_any(
     a_xyz: np.ndarray, a_cls: np.ndarray, b_xyz: np.ndarray, b_cls: np.ndarray, radius_m: float,
-    matching: Matching, as_geometry: np.ndarray,
+    matching: Matching, ignored: np.ndarray, geometric: np.ndarray | None = None,
 ) -> np.ndarray:  # fmt: skip
     """(N,) bool: points of ``a_xyz`` (the adaptive rule's changed points, (N, 3) site-local metres,
-    classes ``a_cls``) the rule finds unchanged against the other scene (``b_xyz``, ``b_cls``) when every
-    return of it counts, those of ignored classes too, compared by geometry (``as_geometry``: (256,)
-    bool, the ignored classes and those compared by geometry only): only returns the site does not
-    label (outside its fence, noise) say the place holds what it held, so nothing says whether it
-    changed (the caller ignores them). A site fence standing on the fence line is the case: each scan
-    keeps those of its returns that fall inside, not the same ones, and the rest of each found nothing
-    to match. A panel taken away stays changed (no return of the other scan stands where it stood) but
-    for its foot, within reach of the ground both sides of the line."""
-    if not len(a_xyz):
-        return np.zeros(0, dtype=bool)
+    classes ``a_cls``) with a return of the other scene (``b_xyz``, ``b_cls``) of an ``ignored`` class
+    within the rule's reach in plan (:func:`beside`) that the rule finds unchanged when every return of
+    that scene counts, those of ignored classes compared by geometry only (as ``geometric`` ones are):
+    only returns the site does not label (outside its fence, noise) say the place holds what it held,
+    so nothing says whether it changed (the caller ignores them). A site fence standing on the fence
+    line is the case: each scan keeps those of its returns that fall inside, not the same ones, and the
+    rest of each found nothing to match. A panel taken away stays changed (no return of the other scan
+    stands where it stood) but for its foot, within reach of the ground both sides of the line."""
+    out = np.zeros(len(a_xyz), dtype=bool)
     reach = max(radius_m, matching.surface.halo_m if matching.surface is not None else 0.0)
+    rows = np.flatnonzero(beside(a_xyz, b_xyz[ignored[b_cls]], reach))
+    if not len(rows):
+        return out
     # in plan only: the rule reads the other scene's whole column over a point (what lies above, below)
-    lo, hi = a_xyz[:, :2].min(axis=0) - reach, a_xyz[:, :2].max(axis=0) + reach
+    lo, hi = a_xyz[rows, :2].min(axis=0) - reach, a_xyz[rows, :2].max(axis=0) + reach
     near = np.all((b_xyz[:, :2] >= lo) & (b_xyz[:, :2] <= hi), axis=1)
-    if not near.any():
-        return np.zeros(len(a_xyz), dtype=bool)
+    as_geometry = ignored if geometric is None else ignored | geometric
     nothing = np.zeros(256, dtype=bool)
-    again = change_flags(a_xyz, a_cls, b_xyz[near], b_cls[near], radius_m, nothing, matching, as_geometry)
-    return again != CHANGED
+    again = change_flags(
+        a_xyz[rows], a_cls[rows], b_xyz[near], b_cls[near], radius_m, nothing, matching, as_geometry
+    )
+    out[rows] = again != CHANGED
+    return out
 
 
 def median_spacing(xyz: np.ndarray, max_points: int = 200_000, seed: int = 0) -> float:

@@ -589,7 +589,9 @@ class SceneTiles:
         for tile in tiles:
             ids, at = chunks[tile][0], cast(np.ndarray, chunks[tile][1])  # chosen values: never None
             i, j = parse_tile_key(tile)
-            origin = np.asarray(tile_origin_local(i, j, self.spec.tile_size_m), dtype=np.float64)
+            frame = np.r_[
+                np.asarray(tile_origin_local(i, j, self.spec.tile_size_m), np.float64), self.spec.quantum_m
+            ]
             sel, take = view.selection[tile]
             nodes = self.by_tile[tile]
             crossing = np.repeat(~boxes_inside_frustum(view.planes, nodes.lo[sel], nodes.hi[sel]), take)
@@ -597,11 +599,11 @@ class SceneTiles:
             edges = np.searchsorted(at, np.arange(len(ids) + 1) * c)
             start = n
             for m, chunk in enumerate(ids.tolist()):
-                lo, hi = int(edges[m]), int(edges[m + 1])
+                lo, hi, first = int(edges[m]), int(edges[m + 1]), n
                 n = place_points(
-                    blocks[(tile, COUNTS, chunk)], at[lo:hi] - m * c, crossing[lo:hi], origin,
-                    float(self.spec.quantum_m), view.planes, xyz, rows, lo, n,
+                    blocks[(tile, COUNTS, chunk)], at[lo:hi] - m * c, crossing[lo:hi], frame, view.planes, xyz, rows, n
                 )  # fmt: skip
+                rows[first:n] += lo
             kept = rows[start:n]
             spacing[start:n] = np.repeat(view.spacing_m[tile], take)[kept]
             for a in attributes:
