@@ -60,7 +60,7 @@ def pair_labels(
     by = "" if rule == "semantic" else f"-{rule}"
     # the surface rule's second version ignores points the other scene never covered (stores of the
     # first, "-surface", are not reused); the adaptive rule's second ignores changed points beside the
-    # other scene's ignored returns (siteline.labels.change.ignored_near; "-adaptive" not reused)
+    # other scene's ignored returns (siteline.labels.change.held_by_any; "-adaptive" not reused)
     by += {"nearest": "", "surface": "-surface2", "adaptive": "-adaptive2"}.get(
         labels.rule, f"-{labels.rule}"
     )

@@ -139,8 +139,9 @@ class MaskScore:
     predicted one, true boundary pixels]. objects: object name -> [changed pixels found, changed
     pixels]. specks: per view, the false-changed components under SPECK_PX pixels that lie on
     unchanged ground, more than BOUNDARY_PX from any truly changed pixel, scored or ignored by the mask
-    (a speck a model would learn as change); rims: per view, those under SPECK_PX within BOUNDARY_PX of a truly changed pixel (an
-    edge drawn a pixel too far, in pieces: counted, and already in precision and boundary F).
+    (a speck a model would learn as change); rims: per view, those under SPECK_PX within BOUNDARY_PX of
+    a truly changed pixel (an edge drawn a pixel too far, in pieces: counted, and already in precision
+    and boundary F).
     kept_objects: object name -> [its truly unchanged pixels labelled changed, its truly unchanged
     pixels the mask labels] (false change per object that stayed). rim_px: the false-changed pixels
     within BOUNDARY_PX of a truly changed one (a change drawn too wide; of ``fp``). scored: pixels

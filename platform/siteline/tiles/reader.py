@@ -790,7 +790,7 @@ class SceneTiles:
         """Read, per tile, the first ``take[k]`` points of each node ``indices[k]`` of
         ``selection[tile] = (indices, take)`` (indices into ``by_tile[tile]``, ascending): only
         the inner chunks those ranges touch are decoded (:meth:`_values`). ``view``: the view
-        whose selection this is, to keep only the points in its frustum (:meth:`_gather`)."""
+        whose selection this is, to keep only the points in its frustum (:meth:`_gather_view`)."""
         plan = {
             tile: node_positions(self.by_tile[tile].start[sel], take)
             for tile, (sel, take) in selection.items()
