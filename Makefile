@@ -5,6 +5,10 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 DEMO_HOME ?= $(CURDIR)/demo-home
 PYTEST_ARGS ?=
+# the suite runs a pytest-xdist worker a core (at most 4; each takes its share of the cores for torch,
+# tests/conftest.py), a test file to a worker (its module fixtures built once); TEST_WORKERS=0: one process
+TEST_WORKERS ?= auto
+XDIST := -n $(TEST_WORKERS) --maxprocesses 4 --dist loadfile
 
 .PHONY: install browser demo test test-all lint typecheck bench bench-scale clean serve
 
@@ -27,10 +31,10 @@ browser:
 	command -v chromium >/dev/null || ! command -v apt-get >/dev/null || { apt-get update -q && apt-get install -y -q chromium; } || true
 
 test: $(STAMP) browser
-	$(VENV)/bin/pytest $(PYTEST_ARGS)
+	$(VENV)/bin/pytest $(XDIST) $(PYTEST_ARGS)
 
 test-all: $(STAMP) browser
-	$(VENV)/bin/pytest -m "" $(PYTEST_ARGS)
+	$(VENV)/bin/pytest -m "" $(XDIST) $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -18,6 +18,16 @@ PG_ADMIN_URL = os.environ.get(
 REPO = Path(__file__).resolve().parents[1]
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Under pytest-xdist (``make test`` runs a worker a core), each worker and the processes it starts
+    get their share of the cores for torch's and OpenMP's threads (unless OMP_NUM_THREADS says): two
+    workers of two threads each on two cores spin against each other (a render test took 4x as long)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0"))
+    if workers > 1 and "OMP_NUM_THREADS" not in os.environ:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        os.environ["OMP_NUM_THREADS"] = str(max(1, cores // workers))
+
+
 @pytest.fixture(scope="session")
 def pg_admin() -> Iterator:
     import sqlalchemy as sa
