@@ -82,6 +82,46 @@ def test_a_wall_the_other_scan_did_not_observe_is_not_change_and_a_removed_one_i
     assert (gone[high] == CHANGED).mean() > 0.95
 
 
+def test_a_fence_both_scans_saw_edge_on_is_not_change_and_one_taken_away_is() -> None:
+    rng = np.random.default_rng(5)
+    ga, gb = (_ground(rng, 80.0, x=(0.0, 62.0)) for _ in range(2))
+    # a free-standing fence 3 m high along both flights' lines: seen edge-on, 0.8 returns a m2 of it
+    # in each scan, not the same ones (the synthetic site's east and west fences at 1000 points/m2
+    # hold 1/50 of the north fence's returns): a few of the other scan's lie within reach of each
+    fence = lambda: _wall(rng, 0.8, x0=1.0, length=60.0, height=3.0)  # noqa: E731
+    fa, fb = fence(), fence()
+    a, b = np.concatenate([ga, fa]), np.concatenate([gb, fb])
+    ac = np.r_[_full(len(ga), GROUND), _full(len(fa), TEMP)]
+    bc = np.r_[_full(len(gb), GROUND), _full(len(fb), TEMP)]
+    reach = LabelParams().surface_test(R).fit_m
+    up = a[len(ga) :, 2] > reach  # beyond the ground's reach (nearer, its plane decides)
+    flags = _flags(a, ac, b, bc)[len(ga) :][up]
+    # those the other scan returned from beside, too thinly to fit a plane, are not observed (the
+    # rule before called half of them changed)
+    assert (flags == NOT_OBSERVED).mean() > 0.5 and (flags == CHANGED).mean() < 0.05
+    # returns of another class beside it (a wall near a panel put up) do not say it was grazed
+    bw = np.r_[_full(len(gb), GROUND), _full(len(fb), BUILDING)]
+    assert (_flags(a, ac, b, bw)[len(ga) :][up] == CHANGED).mean() > 0.3
+    # taken away: the other scan holds only the ground below it
+    gone = _flags(a, ac, gb, _full(len(gb), GROUND))[len(ga) :]
+    assert (gone[a[len(ga) :, 2] > 0.5] == CHANGED).mean() > 0.95
+
+
+def test_formwork_moved_up_over_its_old_place_is_change() -> None:
+    rng = np.random.default_rng(8)
+    # formwork 1.2 m high, sampled thinly as an edge-on wall is, moved up on its plane (a floor
+    # poured under it) leaving a gap of 0.6 of the rule's reach (the synthetic site's at 10 points/m2:
+    # 2.3 m under a 3.7 m reach): the first scan's returns of it lie under the new ones, within reach
+    old = _wall(rng, 2.0, x0=1.0, length=18.0, height=1.2) + [0.0, 0.0, 2.0]
+    reach = LabelParams().surface_test(R).fit_m
+    new = _wall(rng, 2.0, x0=1.0, length=18.0, height=1.2) + [0.0, 0.0, 3.2 + 0.6 * reach]
+    ga, gb = _ground(rng, 80.0), _ground(rng, 80.0)
+    a, b = np.concatenate([ga, old]), np.concatenate([gb, new])
+    ac = np.r_[_full(len(ga), GROUND), _full(len(old), TEMP)]
+    bc = np.r_[_full(len(gb), GROUND), _full(len(new), TEMP)]
+    assert (_flags(b, bc, a, ac)[len(gb) :] == CHANGED).mean() > 0.95
+
+
 def test_a_trench_narrower_than_the_reach_is_found() -> None:
     rng = np.random.default_rng(3)
     a = _ground(rng, 80.0)
@@ -155,12 +195,22 @@ def test_leaves_that_moved_are_not_change_and_a_tree_cut_down_is() -> None:
 def test_a_thin_pole_put_up_on_open_ground_is_found_point_by_point() -> None:
     rng = np.random.default_rng(6)
     ga, gb = _ground(rng, 80.0), _ground(rng, 80.0)
-    z = np.sort(rng.uniform(0.3, 6.0, 24))  # 24 returns on a 6 m pole, as a flight gives it
-    pole = np.c_[10.0 + rng.normal(0, 0.05, 24), 10.0 + rng.normal(0, 0.05, 24), z]
+    # 24 returns on a 6 m pole, as a flight gives it, and 3 at the height where a few of the ground's
+    # points lie at the edge of the rule's reach under them (too few for a plane: not a grazed
+    # surface, the ground it stands on)
+    reach = LabelParams().surface_test(R).fit_m
+    z = np.r_[np.sort(rng.uniform(0.3, 6.0, 24)), reach - np.array([0.0003, 0.0008, 0.0015])]
+    pole = np.c_[10.0 + rng.normal(0, 0.05, 27), 10.0 + rng.normal(0, 0.05, 27), z]
     b = np.concatenate([gb, pole])
-    bc = np.r_[_full(len(gb), GROUND), _full(24, TEMP)]
+    bc = np.r_[_full(len(gb), GROUND), _full(27, TEMP)]
     fb = _flags(b, bc, ga, _full(len(ga), GROUND))
     assert (fb[len(gb) :] == CHANGED).all()
+    # every class compared by geometry only (a class-agnostic rule): the ground under the pole lies
+    # farther below it than beside it
+    test = LabelParams(surface_probe=0.7).surface_test(R)
+    every = np.ones(256, bool)
+    blind = change_flags(b, bc, ga, _full(len(ga), GROUND), R, IGN, Matching(surface=test), every)
+    assert (blind[len(gb) :] == CHANGED).all()
 
 
 def _planes_oracle(q, pts, valid, tol, test, anchors):  # noqa: ANN001, ANN202

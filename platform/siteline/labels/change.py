@@ -314,6 +314,39 @@ def class_within(
     return (valid & (cls == np.asarray(q_cls)[:, None])).any(axis=1)
 
 
+def grazed(
+    b_xyz: np.ndarray, b_cls: np.ndarray, q_xyz: np.ndarray, q_cls: np.ndarray, test: SurfaceTest,
+    tree: KDTree | None = None, geometric: np.ndarray | None = None,
+) -> np.ndarray:  # fmt: skip
+    """(M,) bool: query points (``q_xyz`` (M, 3) site-local metres, classes ``q_cls``) that the other
+    scene (``b_xyz``, ``b_cls``) returned from beside, too thinly to judge: some of its points within
+    ``test.fit_m``, fewer than a plane needs (``test.min_fit``), one of them of the query's class (or
+    either class compared by geometry only, ``geometric``) and beside it, not under it: lower by no
+    more than it lies away in plan. A fence or a wall both flights' lines ran along holds a return
+    every metre or two of it, other ones in each scan; the ground under a pole put up or a thing
+    taken away is another class and lies under it, as does formwork a floor below formwork moved up.
+    ``tree``: :func:`float32_tree` of ``b_xyz`` when already built."""
+    out = np.zeros(len(q_xyz), dtype=bool)
+    if not len(q_xyz) or not len(b_xyz):
+        return out
+    k = max(3, min(test.neighbours, len(b_xyz)))
+    tree = tree if tree is not None else float32_tree(b_xyz)
+    q32 = np.ascontiguousarray(q_xyz, dtype=np.float32)
+    d, i = (
+        np.asarray(v).reshape(len(q_xyz), k) for v in tree.query(q32, k=k, distance_upper_bound=test.fit_m)
+    )
+    valid = d <= test.fit_m
+    few = np.flatnonzero(valid.any(axis=1) & (valid.sum(axis=1) < max(3, test.min_fit)))
+    rows = np.where(valid[few], i[few], 0)
+    bc, qc = np.asarray(b_cls)[rows], np.asarray(q_cls)[few, None]
+    blind = np.zeros(bc.shape, bool) if geometric is None else geometric[bc] | geometric[qc]
+    nb, q = np.asarray(b_xyz)[rows].astype(np.float64), np.asarray(q_xyz, np.float64)[few, None, :]
+    away = np.maximum(np.linalg.norm(nb[..., :2] - q[..., :2], axis=2), test.lod_floor_m)
+    beside = (blind | (bc == qc)) & (q[..., 2] - nb[..., 2] <= away)
+    out[few] = (valid[few] & beside).any(axis=1)
+    return out
+
+
 @dataclass(frozen=True)
 class Matching:
     """How a point looks for its match in the other scene: the nearest-neighbour ``backend``
@@ -377,19 +410,20 @@ def change_flags(
         # no surface of the other scene to judge against (none fitted; with the adaptive rule also
         # one that does not surround the point: it ends before it, or is another surface near it, a
         # roof over a wall): what that scene holds in the point's plan cell decides
-        alone = np.flatnonzero(~np.isfinite(fit.distance) | (surface.observed & ~fit.around & ~on))
+        alone = again[~np.isfinite(fit.distance) | (surface.observed & ~fit.around & ~on)]
         if len(alone):
             b_ground = None if matching.ground is None or not surface.observed else matching.ground[b_classes]
-            cells = hidden_from_other(b_kept, a_pts[again[alone]], surface, b_ground)
+            cells = hidden_from_other(b_kept, a_pts[alone], surface, b_ground)
             # nothing to compare with: unchanged from this side, whatever the classes say; but a
             # point under the other scene's ground was not hidden from it: that ground was dug
             hidden = cells.hidden if cells.buried is None else cells.hidden & ~cells.buried
-            seen_not = again[alone[hidden]]
-            found[seen_not], idx[seen_not] = True, -1
-            if surface.observed:  # structure at or over the point, or nothing at all: not observed
-                unobserved[again[alone[~cells.covered | (cells.above & ~cells.hidden)]]] = True
+            found[alone[hidden]], idx[alone[hidden]] = True, -1
+            if surface.observed:  # structure at or over the point, returns of its own surface beside
+                # it too few to fit (that scan grazed it), or nothing at all: not observed
+                thin = grazed(b_kept, b_classes, a_pts[alone], a_classes[alone], surface, tree, geometric)
+                unobserved[alone[~cells.covered | ((cells.above | thin) & ~cells.hidden)]] = True
             else:  # the other scene has nothing in the point's plan cell: it never covered the place
-                uncovered[again[alone[~cells.covered]]] = True
+                uncovered[alone[~cells.covered]] = True
     same = np.zeros(len(dist), dtype=bool)
     compared = found & (idx >= 0)
     b_near, a_here = b_classes[idx[compared]], a_classes[compared]

@@ -60,8 +60,9 @@ def pair_labels(
     by = "" if rule == "semantic" else f"-{rule}"
     # the surface rule's second version ignores points the other scene never covered (stores of the
     # first, "-surface", are not reused); the adaptive rule's second ignores changed points beside the
-    # other scene's ignored returns (siteline.labels.change.held_by_any; "-adaptive" not reused)
-    by += {"nearest": "", "surface": "-surface2", "adaptive": "-adaptive2"}.get(
+    # other scene's ignored returns (siteline.labels.change.held_by_any; "-adaptive" not reused), its
+    # third a point the other scan grazed (siteline.labels.change.SurfaceFit.grazed; "-adaptive2")
+    by += {"nearest": "", "surface": "-surface2", "adaptive": "-adaptive3"}.get(
         labels.rule, f"-{labels.rule}"
     )
     by += "" if labels.min_region_points <= 1 else f"-m{labels.min_region_points}"

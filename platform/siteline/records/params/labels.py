@@ -60,7 +60,8 @@ class SurfaceTest:
     points at its foot); ``observed``, a point with no
     surface of the other scene to judge it against is changed only when that scene holds nothing at or
     above it in its plan cell (open air it saw through), and is *not observed* otherwise (structure there
-    may have hidden or grazed it) or where the other scene has nothing in the cell at all."""
+    may have hidden or grazed it), where that scene holds returns of the point's class beside it too few
+    to fit (it grazed the point's surface: siteline.labels.change.grazed) or nothing in the cell at all."""
 
     search_m: float
     neighbours: int = 12

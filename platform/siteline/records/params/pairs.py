@@ -199,6 +199,6 @@ class PairParams:
             del doc["unsure_edges"]
         if not doc["sparse_surfaces"]:  # the labels and masks of before
             del doc["sparse_surfaces"]
-        if doc["label_rule"] == "adaptive":  # its second version (siteline.labels.change.held_by_any)
-            doc["label_rule"] = "adaptive2"
+        if doc["label_rule"] == "adaptive":  # its third version (siteline.labels.change: held_by_any, grazed)
+            doc["label_rule"] = "adaptive3"
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
