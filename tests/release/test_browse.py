@@ -461,6 +461,7 @@ def test_clicking_a_camera_opens_its_item_in_the_browser(chromium, server) -> No
     with page.context.expect_page() as opened:
         page.mouse.click(at["x"], at["y"])
     shown = opened.value
+    shown.wait_for_load_state("domcontentloaded")  # a page just opened may not have its body yet
     shown.wait_for_function("document.body.dataset.ready")
     assert shown.url.endswith(f"/browse/rel/1.0.0/#item={item}")
     assert shown.locator("#d-title").inner_text().startswith(item) and shown.locator("#detail").is_visible()
