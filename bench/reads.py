@@ -1,5 +1,7 @@
 """A view's tile read: ``SceneTiles.points_for_view`` throughput cold (a fresh process, nothing
-cached but what the OS holds) and warm (the same views again), on a dense generated scene, for this
+cached but what the OS holds), warm (the same views again, in turn: a second pass that overflows
+the chunk cache decodes again what the first evicted) and again (each view read twice in a row, the
+second timed: its chunks decoded, the read path alone), on a dense generated scene, for this
 checkout and another one's library (``--tree before=PATH``) in the same run, with a checksum of
 every read (the trees must read the same points).
 
@@ -64,6 +66,14 @@ def child(store: str, views: int, half_m: float) -> None:
                 h.update(np.ascontiguousarray(pts.spacing_m).tobytes())
                 sums.append(h.hexdigest()[:16])
         passes.append({"seconds": seconds, "points": points})
+    seconds, points = [], []
+    for cam in cams:
+        tiles.points_for_view(cam, 0.125, attributes=("rgb", "class"))
+        t = time.perf_counter()
+        pts = tiles.points_for_view(cam, 0.125, attributes=("rgb", "class"))
+        seconds.append(time.perf_counter() - t)
+        points.append(len(pts.xyz_m))
+    passes.append({"seconds": seconds, "points": points})
     print(json.dumps({"open_s": opened, "passes": passes, "checksums": sums}))
 
 
@@ -125,20 +135,22 @@ def main() -> None:
         print(f"{args.views} views at 1/8 of a 5280 x 3956 frame over {args.points / 1e6:.0f}M points "
               f"({density:,.0f} points/m2); each tree in a fresh process, its views read twice\n")  # fmt: skip
         print(
-            "| tree | points a view | first view s | cold M pts/s | warm M pts/s | cold s a view | warm s a view |"
+            "| tree | points a view | first view s | cold M pts/s | warm M pts/s | again M pts/s | cold s a view "
+            "| warm s a view | again s a view |"
         )
-        print("|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|")
         results = {}
         # alternate the trees twice so neither always runs on a warmer OS cache
         for name in [*trees, *trees]:
             got = run_tree(trees[name], store, args.views, args.half)
             results.setdefault(name, []).append(got)
-            cold, warm = got["passes"]
+            cold, warm, again = got["passes"]
             n = sum(cold["points"])
+            rate = lambda p: f"{sum(p['points']) / sum(p['seconds']) / 1e6:.2f}"  # noqa: E731
+            each = lambda p: f"{sum(p['seconds']) / len(p['seconds']):.3f}"  # noqa: E731
             print(
-                f"| {name} | {n / len(cold['points']):,.0f} | {cold['seconds'][0]:.3f} | "
-                f"{n / sum(cold['seconds']) / 1e6:.2f} | {sum(warm['points']) / sum(warm['seconds']) / 1e6:.2f} | "
-                f"{sum(cold['seconds']) / len(cold['seconds']):.3f} | {sum(warm['seconds']) / len(warm['seconds']):.3f} |"
+                f"| {name} | {n / len(cold['points']):,.0f} | {cold['seconds'][0]:.3f} | {rate(cold)} | "
+                f"{rate(warm)} | {rate(again)} | {each(cold)} | {each(warm)} | {each(again)} |"
             )
         sums = {n: r[0]["checksums"] for n, r in results.items()}
         same = len({tuple(v) for v in sums.values()}) == 1
@@ -148,7 +160,7 @@ def main() -> None:
             for name in trees:
                 if name == "today":
                     continue
-                for k, label in ((0, "cold"), (1, "warm")):
+                for k, label in ((0, "cold"), (1, "warm"), (2, "again")):
                     mine = np.median([sum(r["passes"][k]["seconds"]) for r in base])
                     theirs = np.median([sum(r["passes"][k]["seconds"]) for r in results[name]])
                     print(f"{label}: today reads in {mine / theirs:.2f}x the time of {name}")
