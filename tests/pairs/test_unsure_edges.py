@@ -15,7 +15,7 @@ from siteline.codes import CHANGED as MASK_CHANGED
 from siteline.codes import IGNORE as MASK_IGNORE
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.labels.change import CHANGED, UNCHANGED
-from siteline.pairs.render import ignore_causes, pair_mask, unsure_edges
+from siteline.pairs.render import ignore_causes, pair_mask, sparse_candidates, unsure_edges
 from siteline.records.params.render import RenderParams
 from siteline.render.zbuffer import render_points
 
@@ -52,17 +52,18 @@ def _true_jib(cam: Camera) -> np.ndarray:
 
 
 def _pair(
-    scenes: tuple[np.ndarray, ...], cam: Camera, settings: RenderParams, spacing_m: float, unsure: bool = True
-) -> tuple[np.ndarray, dict[str, float]]:
-    """Both scenes rendered as a pair renders them (its changed points looked at for sparse surfaces),
-    the mask with unsure edges ignored or not, and why each ignored pixel is."""
+    scenes: tuple[np.ndarray, ...], cam: Camera, settings: RenderParams, spacing_m: float, unsure: bool = True,
+    changed_only: bool = False,
+) -> tuple[np.ndarray, dict[str, float]]:  # fmt: skip
+    """Both scenes rendered as a pair renders them (its labelled points looked at for sparse
+    surfaces, or only its changed ones: ``changed_only``, as before), the mask with unsure edges
+    ignored or not, and why each ignored pixel is."""
     a, code_a, b, code_b = scenes
     renders, edges = [], []
     for xyz, code in ((a, code_a), (b, code_b)):
         spacing = np.full(len(xyz), spacing_m, np.float32)
-        r = render_points(
-            xyz.astype(np.float32), cam, settings, {"change": code}, "cpu", spacing, code == CHANGED
-        )
+        sparse_of = code == CHANGED if changed_only else sparse_candidates(code)
+        r = render_points(xyz.astype(np.float32), cam, settings, {"change": code}, "cpu", spacing, sparse_of)
         renders.append(r)
         edges.append(unsure_edges(r, code))
     ra, rb = renders
@@ -168,3 +169,29 @@ def test_a_sparse_pole_is_not_seen_through_between_its_samples() -> None:
     new = (after == MASK_IGNORE) & (before != MASK_IGNORE)
     near = ndimage.binary_dilation(truth, iterations=110)  # 2.5 m at the pole's 7 m
     assert (new & ~near).sum() == 0 and new.sum() <= 3 * truth.sum()
+
+
+def test_a_sparse_pole_that_stayed_is_not_seen_through_to_a_change_behind_it() -> None:
+    # both scans hold the pole (each its own samples, unchanged); behind it the earlier scan has a
+    # wall taken away before the later one (changed), which shows between the pole's samples
+    rng = np.random.default_rng(2)
+    a, code_a, b, code_b = _pole_scenes()
+    other = _pole_scenes(seed=3)  # other samples of the same pole
+    pole_a = other[2][other[3] == CHANGED]
+    n = 6000
+    wall = np.c_[np.full(n, POLE_X + 2.0), rng.uniform(-3, 3, n), rng.uniform(0, 6, n)]  # 330 points/m2
+    a = np.concatenate([a, pole_a, wall])
+    code_a = np.r_[code_a, np.full(len(pole_a), UNCHANGED), np.full(n, CHANGED)].astype(np.uint8)
+    code_b = np.where(code_b == CHANGED, UNCHANGED, code_b).astype(np.uint8)
+    cam = Camera.look_at(POLE_CAMERA, (POLE_X, 0.0, 2.0), 400, 300, fx=300.0)
+    truth = _true_pole(cam)
+    sparse = replace(TRIM, sparse_surfaces=True)
+    before = _pair((a, code_a, b, code_b), cam, sparse, 0.11, changed_only=True)[0]
+    after = _pair((a, code_a, b, code_b), cam, sparse, 0.11)[0]
+
+    def changed(mask: np.ndarray) -> float:  # the pole labelled as the change behind it
+        return float(((mask == MASK_CHANGED) & truth).sum() / truth.sum())
+
+    assert changed(before) > 0.2  # 29 % when only changed points were looked at (as before)
+    assert changed(after) <= 0.05
+    assert ((after == MASK_UNCHANGED) & truth).sum() > 0  # its samples are still drawn and labelled

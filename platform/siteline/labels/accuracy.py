@@ -81,8 +81,9 @@ MEASURED: tuple[Measured, ...] = (
     # sparse surfaces kept in the labels and said unsure behind (the default since 2026-11-29, issues
     # 67-68): the same scenes and views; the two sites and the box scene re-measured with the adaptive
     # rule's third version (a fence on the fence line, a fence both scans saw edge-on: not observed;
-    # the box scene's views, chosen around its changes, moved with 11 of its jib's points) and specks
-    # counted away from every truly changed pixel
+    # the box scene's views, chosen around its changes, moved with 11 of its jib's points), the masks
+    # unsure behind sparse surfaces that stayed too (the box scene's mast), and specks counted away
+    # from every truly changed pixel
     Measured(
         "synthetic site",
         10,
@@ -90,18 +91,18 @@ MEASURED: tuple[Measured, ...] = (
         3,
         True,
         0.988,
-        0.956,
+        0.955,
         0.972,
         0,
         0.7,
         "flown",
-        0.005,
-        0.058,
+        0.006,
+        0.059,
         True,
         True,
     ),
     Measured(
-        "box scene", 40, "adaptive", 3, True, 0.946, 0.907, 0.926, 0, 0.7, "flown", 0.010, 0.012, True, True
+        "box scene", 40, "adaptive", 3, True, 0.954, 0.906, 0.930, 0, 0.7, "flown", 0.006, 0.012, True, True
     ),
     Measured(
         "sloped scene",

@@ -112,6 +112,15 @@ def small_gaps(hit: np.ndarray) -> np.ndarray:
     return closed & ~hit
 
 
+def sparse_candidates(change: np.ndarray) -> np.ndarray:
+    """(N,) bool: the rendered points whose surface the renderer looks at for being sparse
+    (``render_points``' ``sparse_of``), from their change codes: the labelled ones, changed or not.
+    A sparse surface matters where it stands before a surface of other change: changed before
+    unchanged ground (a pole put up), unchanged before a change (a mast before a container taken
+    away); :func:`unsure_edges` then ignores what shows between its samples."""
+    return np.isin(change, (CHANGED, MASK_UNCHANGED))
+
+
 def unsure_edges(r: RenderResult, change: np.ndarray) -> np.ndarray:
     """(H, W) bool: the pixels of render ``r`` that show a farther surface where a nearer one may lie
     (``RenderResult.unsure_of``: the edge trim gave them away, or they are holes between the nearer
@@ -225,8 +234,7 @@ def render_pair_view(
         if colour.source == "height":
             values = ground.height(pts.xyz_m)  # type: ignore[union-attr]
         attrs = pts.attributes | {"rgb": colour.colours(side, pts.xyz_m, values)}
-        # the sparse surfaces that matter stand changed before unchanged ground (a pole put up)
-        sparse_of = pts.attributes["change"] == CHANGED
+        sparse_of = sparse_candidates(pts.attributes["change"])
         r = render_points(xyz, camera, settings, attrs, device, pts.spacing_m, sparse_of)
         if colour.shading == "edl":  # intensity or elevation alone show no edges: shade by depth
             r.attributes["rgb"] = eye_dome(r.rgb, r.depth)
