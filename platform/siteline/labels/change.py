@@ -58,6 +58,20 @@ def float32_tree(xyz: np.ndarray) -> KDTree:
     return KDTree(np.ascontiguousarray(xyz, dtype=np.float32))
 
 
+def within(
+    b_xyz: np.ndarray, q_xyz: np.ndarray, k: int, radius_m: float, tree: KDTree | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each query's ``k`` nearest points of ``b_xyz`` (fewer when it holds fewer, at least 1) within
+    ``radius_m``: distances (M, k) float64, indices (M, k) int64 (out of range where none) and which
+    are ``valid`` (M, k). Site-local metres, float32 (:func:`float32_tree`; ``tree``: of ``b_xyz``
+    when already built)."""
+    k = max(1, min(k, len(b_xyz)))
+    tree = tree if tree is not None else float32_tree(b_xyz)
+    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=radius_m)
+    d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
+    return d, i, d <= radius_m
+
+
 def nearest(
     b_xyz: np.ndarray,
     a_xyz: np.ndarray,
@@ -151,11 +165,7 @@ def plane_distances(
     radius (the probe): they have a neighbour near, so the gap is not tested for them, and only their
     distance decides (changed when off the plane), so a plane through them is looked for only where
     they lie off it."""
-    k = max(3, min(test.neighbours, len(b_xyz)))
-    tree = tree if tree is not None else float32_tree(b_xyz)
-    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=test.fit_m)
-    d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
-    valid = d <= test.fit_m
+    d, i, valid = within(b_xyz, q_xyz, max(3, test.neighbours), test.fit_m, tree)
     count = valid.sum(axis=1)
     dist = np.full(len(q_xyz), np.inf)
     lod = np.full(len(q_xyz), test.lod_floor_m)
@@ -305,11 +315,7 @@ def class_within(
     """(M,) bool: whether any of each query point's ``test.neighbours`` nearest points of ``b_xyz``
     within ``radius_m`` has the query's class. Site-local metres; ``tree``: :func:`float32_tree` of
     ``b_xyz`` when already built."""
-    k = max(1, min(test.neighbours, len(b_xyz)))
-    tree = tree if tree is not None else float32_tree(b_xyz)
-    d, i = tree.query(np.ascontiguousarray(q_xyz, dtype=np.float32), k=k, distance_upper_bound=radius_m)
-    d, i = np.asarray(d, np.float64).reshape(len(q_xyz), k), np.asarray(i, np.int64).reshape(len(q_xyz), k)
-    valid = d <= radius_m
+    _, i, valid = within(b_xyz, q_xyz, test.neighbours, radius_m, tree)
     cls = np.asarray(b_cls)[np.where(valid, i, 0)]
     return (valid & (cls == np.asarray(q_cls)[:, None])).any(axis=1)
 
@@ -329,13 +335,7 @@ def grazed(
     out = np.zeros(len(q_xyz), dtype=bool)
     if not len(q_xyz) or not len(b_xyz):
         return out
-    k = max(3, min(test.neighbours, len(b_xyz)))
-    tree = tree if tree is not None else float32_tree(b_xyz)
-    q32 = np.ascontiguousarray(q_xyz, dtype=np.float32)
-    d, i = (
-        np.asarray(v).reshape(len(q_xyz), k) for v in tree.query(q32, k=k, distance_upper_bound=test.fit_m)
-    )
-    valid = d <= test.fit_m
+    _, i, valid = within(b_xyz, q_xyz, max(3, test.neighbours), test.fit_m, tree)
     few = np.flatnonzero(valid.any(axis=1) & (valid.sum(axis=1) < max(3, test.min_fit)))
     rows = np.where(valid[few], i[few], 0)
     bc, qc = np.asarray(b_cls)[rows], np.asarray(q_cls)[few, None]
