@@ -318,6 +318,31 @@ def test_swapping_scenes_gives_the_same_mask(built) -> None:
     assert coarse_w.coverage_a > coarse.coverage_a
 
 
+def test_a_scene_paired_with_itself_reads_one_reader_from_both_threads(built) -> None:
+    """A pair renders its two scenes at once, in two threads; paired with itself, a scene's one
+    reader (its chunk cache kept small, so the threads evict each other's chunks) serves both and
+    draws both sides alike, and as the scene draws in a pair with another."""
+    settings, cat, pub = built
+    from siteline.camera.pinhole import Camera
+    from siteline.catalog.scenes import tile_source
+    from siteline.pairs.render import LabelledPair, render_pair_view
+    from siteline.tiles.reader import SceneTiles
+
+    pair = manifest_doc(pub.root)["lineage"]["pairs"][0]
+    label_uri = settings.store.resolve(pair["labels"]["uri"])
+    with cat.transaction() as s:
+        t1, t2 = (SceneTiles.from_source(tile_source(s, pair[side])) for side in ("t1", "t2"))
+    forward = LabelledPair.with_labels(t1, t2, label_uri)
+    alone = LabelledPair(forward.t1, forward.t1)
+    alone.t1.cache_bytes = 1 << 16
+    params = PairParams(scale=1.0, point_size_px=1)
+    for eye in ((-50.0, -50.0, 35.0), (40.0, -20.0, 25.0), (0.0, 30.0, 45.0)):
+        cam = Camera.look_at(eye, (0.0, 0.0, 0.0), 320, 240, fx=260.0)
+        same = render_pair_view(alone, cam, params)
+        assert np.array_equal(same.a, same.b) and same.coverage_a == same.coverage_b > 0.3
+        assert np.array_equal(same.a, render_pair_view(forward, cam, params).a)
+
+
 @pytest.mark.slow  # over 25 s on a 2-core machine: `make test-all` runs it
 def test_preset_is_applied_and_recorded(built) -> None:
     from siteline.records.params.presets import PRESETS

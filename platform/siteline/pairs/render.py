@@ -4,6 +4,7 @@ mask (DESIGN.md §4, §6)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -214,12 +215,9 @@ def render_pair_view(
     if colour.source == "height" and ground is None:
         raise PairError("a height colour plan needs the pair's ground model to render.")
     settings = params.render_settings()
-    out = []
-    outside = []
-    unsure = []
-    read = 0
     source = colour.attribute
-    for side, tiles in ((1, pair.t1), (2, pair.t2)):
+
+    def side(k: int, tiles: SceneTiles) -> tuple[RenderResult, np.ndarray, np.ndarray, int]:
         pts = tiles.points_for_view(
             camera,
             params.scale,
@@ -228,20 +226,25 @@ def render_pair_view(
             point_size_px=params.point_size_px,
             level=None if params.all_points else "auto",
         )
-        read += pts.stats.points_read
         xyz = pts.xyz_m.astype(np.float32)  # site-local: float32 keeps millimetres here
         values = pts.attributes.pop(source) if source else None
         if colour.source == "height":
             values = ground.height(pts.xyz_m)  # type: ignore[union-attr]
-        attrs = pts.attributes | {"rgb": colour.colours(side, pts.xyz_m, values)}
+        attrs = pts.attributes | {"rgb": colour.colours(k, pts.xyz_m, values)}
         sparse_of = sparse_candidates(pts.attributes["change"])
         r = render_points(xyz, camera, settings, attrs, device, pts.spacing_m, sparse_of)
         if colour.shading == "edl":  # intensity or elevation alone show no edges: shade by depth
             r.attributes["rgb"] = eye_dome(r.rgb, r.depth)
-        out.append(r)
-        outside.append(_outside(r, pts.xyz_m, fence))
-        unsure.append(unsure_edges(r, pts.attributes["change"]))
-    ra, rb = out
+        unsure = unsure_edges(r, pts.attributes["change"])
+        return r, _outside(r, pts.xyz_m, fence), unsure, pts.stats.points_read
+
+    # the two scenes' reads and renders run at once: most of a render is compiled loops and zarr's
+    # decoding, which release the GIL (each side has its own reader and chunk cache)
+    with ThreadPoolExecutor(2) as pool:
+        (ra, out_a, unsure_a, read_a), (rb, out_b, unsure_b, read_b) = pool.map(
+            side, (1, 2), (pair.t1, pair.t2)
+        )
+    outside, unsure, read = (out_a, out_b), (unsure_a, unsure_b), read_a + read_b
     mask = pair_mask(ra.hit, ra.attributes["change"], rb.hit, rb.attributes["change"], params.one_side_hole)
     edge = (unsure[0] | unsure[1]) & (mask != MASK_IGNORE) & params.unsure_edges
     mask[edge] = MASK_IGNORE

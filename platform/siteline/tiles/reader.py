@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import threading
 from collections import OrderedDict
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -311,6 +312,7 @@ class SceneTiles:
         self.cache_bytes = cache_bytes
         self._cache: OrderedDict[tuple[str, str, int], np.ndarray] = OrderedDict()
         self._cached = 0
+        self._lock = threading.Lock()  # the cache, for a reader read from two threads at once
 
     def _native_spacings(self) -> dict[str, float]:
         """Each tile's own point spacing in metres (:func:`native_spacing_m`); a tile too sparse to
@@ -416,7 +418,14 @@ class SceneTiles:
         the rest read in one concurrent zarr call (each run of consecutive missing chunks of an array
         one selection, all of them decoded at once by zarr's codec pipeline and its threads), then
         cached. A view's read of dozens of tiles and attributes waits for the slowest chunk, not
-        for the sum of them."""
+        for the sum of them. One load at a time per reader (a pair of a scene with itself renders
+        both sides from one reader, in two threads)."""
+        with self._lock:
+            return self._load_locked(wanted, stats)
+
+    def _load_locked(
+        self, wanted: Sequence[tuple[str, str, np.ndarray]], stats: ReadStats
+    ) -> dict[tuple[str, str, int], np.ndarray]:
         out: dict[tuple[str, str, int], np.ndarray] = {}
         runs: list[tuple[str, str, int, int, int]] = []  # tile, name, chunk length, first, last
         for tile, name, ids in wanted:
