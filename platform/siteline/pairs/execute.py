@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -38,7 +39,7 @@ from siteline.stores import Store, layout, move
 from siteline.tiles.reader import SceneTiles
 from siteline.tolerances import RATIO_TOL, at_least
 from siteline.views.generate import NamedCamera, SyntheticView, ViewSet, generate_views, key_sorted
-from siteline.views.ground import GroundChoice, model_ground
+from siteline.views.ground import GroundChoice, GroundModel, model_ground
 
 log = logging.getLogger(__name__)
 FOLDERS = ("A", "B", "label")
@@ -166,6 +167,30 @@ def pair_views(
     return views
 
 
+def look_tour(views: Sequence[SyntheticView], ground: GroundModel) -> list[SyntheticView]:
+    """``views`` in the order a pair renders them: a greedy tour from the first, each next the view
+    that looks nearest (the site-local point where its optical axis meets ``ground``; its camera's
+    place where it looks level or up). Consecutive renders then read the same tiles, which the
+    readers' chunk caches hold: at 8,000 points/m2 a 236-view pair renders in 0.81x the time of the
+    sampled order (docs/performance.md). What a pair makes does not depend on the order (its views
+    are indexed in key order, and a view replaced for too few valid pixels is replaced whatever its
+    place)."""
+    if len(views) < 3:
+        return list(views)
+    at = np.array([
+        hit if (hit := ground.axis_hit(v.camera.center, v.camera.forward)) is not None else v.camera.center
+        for v in views
+    ])  # fmt: skip
+    left = np.ones(len(views), bool)
+    order = [0]
+    left[0] = False
+    for _ in range(len(views) - 1):
+        d = np.where(left, np.einsum("ij,ij->i", at - at[order[-1]], at - at[order[-1]]), np.inf)
+        order.append(int(np.argmin(d)))
+        left[order[-1]] = False
+    return [views[i] for i in order]
+
+
 def _render_all(
     plan: PairPlan, scenes: LabelledPair, views: ViewSet, work: Path, device: str, progress: Progress
 ) -> tuple[list[tuple[SyntheticView, RenderedView]], dict[str, int]]:
@@ -189,7 +214,7 @@ def _render_queue(
     threads: CpuThreads,
 ) -> tuple[list[tuple[SyntheticView, RenderedView]], dict[str, int]]:
     params = plan.params
-    queue = list(views.views)
+    queue = look_tour(views.views, views.ground)
     low_valid = 0
     kept: list[tuple[SyntheticView, RenderedView]] = []
     for sub in FOLDERS:
