@@ -22,6 +22,7 @@ from siteline.records.tiling import NodeTable, TileSource, TileSpec
 from siteline.schema import json_object
 from siteline.stores import join, open_store
 from siteline.tiles import codecs as _codecs  # noqa: F401  (quiets zarr's warning on the codecs it reads)
+from siteline.tiles.chunks import DirectChunks, direct_chunks, read_chunks
 from siteline.tiles.index import read_index
 from siteline.tiles.layout import (
     ATTRIBUTES,
@@ -308,6 +309,7 @@ class SceneTiles:
         held = np.flatnonzero(nodes.level_counts.sum(axis=0)) if len(nodes) else np.zeros(1, np.int64)
         self._levels = held.astype(np.int64) if len(held) else np.zeros(1, np.int64)
         self._handles: dict[tuple[str, str], zarr.Array] = {}
+        self._direct: dict[tuple[str, str], DirectChunks | None] = {}
         # many views of one pair read the same tiles: keep recent inner chunks (LRU, byte budget)
         self.cache_bytes = cache_bytes
         self._cache: OrderedDict[tuple[str, str, int], np.ndarray] = OrderedDict()
@@ -344,6 +346,14 @@ class SceneTiles:
         """A reader of the same store that reads attribute ``name`` from the group at ``uri`` (laid
         out as ``tiles/<tile>/<name>``, aligned point for point with this store)."""
         return SceneTiles(self.uri, self.nodes, self.spec, self.cache_bytes, self.attributes | {name: uri})
+
+    def _direct_of(self, tile: str, name: str) -> DirectChunks | None:
+        """The direct reader of ``tiles/<tile>/<name>``'s chunks (siteline.tiles.chunks), None where
+        zarr reads them."""
+        key = (tile, name)
+        if key not in self._direct:
+            self._direct[key] = direct_chunks(self._handle(tile, name))
+        return self._direct[key]
 
     def _handle(self, tile: str, name: str) -> zarr.Array:
         """The Zarr array ``tiles/<tile>/<name>``, opened once (each open reads metadata: a request
@@ -443,18 +453,34 @@ class SceneTiles:
                 m = np.array(missing)
                 for run in np.split(m, np.flatnonzero(np.diff(m) != 1) + 1):
                     runs.append((tile, name, c, int(run[0]), int(run[-1])))
-        if runs:
-            arrays = [self._handle(tile, name).async_array for tile, name, _, _, _ in runs]
+        fast: list[tuple[DirectChunks, int]] = []
+        keys: list[tuple[str, str, int]] = []
+        slow: list[tuple[str, str, int, int, int]] = []
+        for spans in runs:
+            tile, name, _, first, last = spans
+            d = self._direct_of(tile, name)
+            if d is None:
+                slow.append(spans)
+                continue
+            fast += [(d, i) for i in range(first, last + 1)]
+            keys += [(tile, name, i) for i in range(first, last + 1)]
+        if fast:  # straight off the disk (siteline.tiles.chunks)
+            for key, block in zip(keys, read_chunks(fast), strict=True):
+                stats.points_decoded += len(block)
+                out[key] = self._cache[key] = block
+                self._cached += block.nbytes
+        if slow:
+            arrays = [self._handle(tile, name).async_array for tile, name, _, _, _ in slow]
 
             async def read_all() -> list[Any]:
                 return await asyncio.gather(
                     *(
                         a.getitem(slice(first * c, (last + 1) * c))
-                        for a, (_, _, c, first, last) in zip(arrays, runs, strict=True)
+                        for a, (_, _, c, first, last) in zip(arrays, slow, strict=True)
                     )
                 )
 
-            for (tile, name, c, first, last), got in zip(runs, sync(read_all()), strict=True):
+            for (tile, name, c, first, last), got in zip(slow, sync(read_all()), strict=True):
                 values = np.asarray(got)
                 stats.points_decoded += len(values)
                 for i in range(first, last + 1):
