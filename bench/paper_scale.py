@@ -12,7 +12,7 @@ With ``--splat world`` (the default) points are drawn as world splats and gaps f
 Scale 2.0 renders 1320 x 990: the paper's 1/4 of a frame, twice its pixels per side.
 
     python bench/paper_scale.py [--density 1000] [--views 300] [--scale 1.0] [--splat world]
-        [--fill 2] [--labels-only] [--knobs JSON] [--json out.json] [--work DIR]
+        [--fill 2] [--labels-only] [--knobs JSON] [--json out.json] [--work DIR] [--lidar-only]
 
 ``--work DIR`` keeps the generated sites and their catalog, and a later run with the same folder skips
 their synthesis and ingest (the 8000 points/m2 site takes about 20 minutes to make).
@@ -46,11 +46,12 @@ def _peak_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def stage_synth(work: Path, density: float) -> dict:
+def stage_synth(work: Path, density: float, lidar_only: bool = False) -> dict:
     from siteline.synth import SynthParams, write_site
 
     t0 = time.perf_counter()
-    write_site(work / "site", SynthParams(epochs=2, density_pts_m2=density, seed=0))
+    cfg = SynthParams(epochs=2, density_pts_m2=density, seed=0, photos=not lidar_only, colmap=not lidar_only)
+    write_site(work / "site", cfg)
     doc = json.loads((work / "site" / "truth" / "site.json").read_text())
     return {"seconds": time.perf_counter() - t0, "points": [e["points"] for e in doc["epochs"]]}
 
@@ -120,7 +121,15 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, kn
     # stages in the order process_pair runs them: labels, views, renders
     t_views = first.get("renders", t0 + total) - first.get("views", t0)
     t_renders = last.get("renders", t0 + total) - first.get("renders", t0 + total)
+    from siteline.views.ground import GroundPlane
+
+    plane = GroundPlane.from_dict(summary["ground_plane"])
+    from siteline.camera.pinhole import Camera
+
+    centres = np.array([Camera.from_dict(r["camera"]).center for r in recs])
+    heights = plane.height(centres)
     return {
+        "camera_height_m": [float(heights.min()), float(np.median(heights)), float(heights.max())],
         "seconds": total,
         "labels_s": first.get("views", t0) - t0,
         "views_s": t_views,
@@ -167,7 +176,7 @@ def stage_labels(work: Path, knobs: dict) -> dict:
 def child(stage: str, work: str, args: list[str]) -> None:
     work_p = Path(work)
     if stage == "synth":
-        res = stage_synth(work_p, float(args[0]))
+        res = stage_synth(work_p, float(args[0]), len(args) > 1 and args[1] == "lidar")
     elif stage == "ingest":
         res = stage_ingest(work_p)
     elif stage == "labels":
@@ -215,7 +224,7 @@ def run_density(root: Path, density: float, args: argparse.Namespace) -> dict:
     work = root / f"d{density:g}"
     work.mkdir(exist_ok=True)
     out = {"density_pts_m2": density}
-    out["synth"] = _run_once("synth", work, str(density))
+    out["synth"] = _run_once("synth", work, str(density), "lidar" if args.lidar_only else "photos")
     out["ingest_tile"] = _run_once("ingest", work)
     if args.labels_only:
         shutil.rmtree(work / "home" / "stores" / "labels", ignore_errors=True)  # a kept folder's last labels
@@ -248,7 +257,11 @@ def main() -> None:
     ap.add_argument("--density", type=float, default=1000.0, help="points/m2 of the dense run")
     ap.add_argument("--ratio", type=float, default=4.0, help="the sparse run has density / ratio")
     ap.add_argument("--views", type=int, default=300)
-    ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument(
+        "--scale", type=float, default=None,
+        help="render scale (default 1.0 of the synthetic photos' 660 x 495; with --lidar-only 0.125 of the "
+        "planned cameras' whole 5280 x 3956 frames: the same images)",
+    )  # fmt: skip
     ap.add_argument(
         "--min-valid", type=float, default=None, help="PairParams.min_valid (default: its default)"
     )
@@ -269,12 +282,18 @@ def main() -> None:
         "--tree", action="append", default=[], type=lambda s: tuple(s.split("=", 1)),
         help="with --labels-only: NAME=PATH, label the same tiles with the siteline checkout at PATH too",
     )  # fmt: skip
+    ap.add_argument(
+        "--lidar-only", action="store_true",
+        help="scans without photos: the pair's views are planned from the scene (its planned survey)",
+    )  # fmt: skip
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument(
         "--work", type=Path, default=None,
         help="keep the generated sites and their catalog here, and reuse what an earlier run left (synth and ingest are skipped)",
     )  # fmt: skip
     args = ap.parse_args()
+    if args.scale is None:
+        args.scale = 0.125 if args.lidar_only else 1.0
     with contextlib.ExitStack() as stack:
         root = args.work or Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="paper-scale-")))
         root.mkdir(parents=True, exist_ok=True)
@@ -311,7 +330,8 @@ def main() -> None:
             f"covered pixel per scene; median coverage {p['coverage_median']:.3f}, median valid "
             f"{p['valid_median']:.3f} (min {p['valid_min']:.2f}); ignore {p['ignore_fraction']:.1%} "
             f"({', '.join(f'{k} {v:.1%}' for k, v in p['ignore_causes'].items())}), filled {p['filled']:.1%}; "
-            f"{p['probed']} candidates probed, rejected {p['rejected']}"
+            f"{p['probed']} candidates probed, rejected {p['rejected']}; camera heights min/median/max "
+            f"{', '.join(f'{h:.1f}' for h in p['camera_height_m'])} m"
         )
     print("dense / sparse: " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios.items()))
     if args.json:
