@@ -185,7 +185,8 @@ def look_tour(views: Sequence[SyntheticView], ground: GroundModel) -> list[Synth
     order = [0]
     left[0] = False
     for _ in range(len(views) - 1):
-        d = np.where(left, np.einsum("ij,ij->i", at - at[order[-1]], at - at[order[-1]]), np.inf)
+        gap = at - at[order[-1]]
+        d = np.where(left, np.einsum("ij,ij->i", gap, gap), np.inf)
         order.append(int(np.argmin(d)))
         left[order[-1]] = False
     return [views[i] for i in order]

@@ -2,9 +2,9 @@
 (siteline.tiles.codecs: a 1-D chunk grid of shards, each an index at its end and inner chunks of
 [transpose], bytes, blosc) decoded by blosc itself, several chunks at once in threads.
 
-zarr's codec pipeline gives the same arrays 3-6x slower on such chunks (a file opened per inner chunk,
-buffers copied between its codecs; measured on the 8,000 points/m2 site: xyz 464 against 1,585 MB/s,
-classes 195 against 1,179 MB/s a core), and a view's read is mostly decoding. An array of any other
+zarr's codec pipeline (asyncio tasks through each codec in turn) gives the same arrays 3-6x slower on
+such chunks (measured on the 8,000 points/m2 site: xyz 464 against 1,585 MB/s, classes 195 against
+1,179 MB/s a core), and a view's read is mostly decoding. An array of any other
 layout, or in a store not on a local disk, is read by zarr (:func:`direct_chunks` gives None).
 """
 
@@ -48,7 +48,6 @@ class DirectChunks:
     def __init__(self, arr: zarr.Array, root: Path, codec: ShardingCodec) -> None:
         meta = arr.metadata
         self.path = root / arr.path
-        self.name = str(self.path)
         self.shape = tuple(int(s) for s in meta.shape)
         self.inner = int(codec.chunk_shape[0])
         self.per_shard = int(meta.chunk_grid.chunk_shape[0]) // self.inner  # type: ignore[attr-defined]
