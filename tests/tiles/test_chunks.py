@@ -1,6 +1,6 @@
 """Tile chunks read straight off the disk (siteline.tiles.chunks) give what zarr gives, chunk for
-chunk and view for view; a damaged shard is an error naming its file; any other layout or store is
-left to zarr."""
+chunk and view for view, and shards written straight are zarr's own bytes; a damaged shard is an
+error naming its file; any other layout or store is left to zarr."""
 
 from __future__ import annotations
 
@@ -15,7 +15,10 @@ from zarr.storage import LocalStore, MemoryStore
 from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
 from siteline.tiles import reader as reader_module
+from siteline.records.tiling import TileSpec
 from siteline.tiles.chunks import direct_chunks
+from siteline.tiles.codecs import array_codecs, time_scale
+from siteline.tiles.layout import ATTRIBUTES
 from siteline.tiles.reader import SceneTiles
 from tests.tiles.test_tiles import _cloud, _tile
 
@@ -44,8 +47,8 @@ def _arrays(root: Path) -> dict[str, zarr.Array]:
 def test_every_chunk_is_what_zarr_reads(store) -> None:
     arrays = _arrays(store)
     direct = {k: direct_chunks(a) for k, a in arrays.items()}
-    # the fixed scale/offset filter of gps_time is left to zarr; every other array is read directly
-    assert {k.split("/")[1] for k, d in direct.items() if d is None} == {"gps_time"}
+    # every array of the store (gps_time's fixed scale/offset included) is read directly
+    assert all(d is not None for d in direct.values()) and {k.split("/")[1] for k in direct} == set(ATTRIBUTES)
     cut = 0
     for key, d in direct.items():
         if d is None:
@@ -123,3 +126,46 @@ def test_chunks_never_written_are_the_fill_value_and_other_layouts_go_to_zarr(tm
         "c", shape=(300, 3), dtype="int32", chunks=(64, 3), shards=(128, 3), compressors=blosc
     )
     assert direct_chunks(plain) is None and direct_chunks(in_memory) is None
+
+
+def test_shards_written_directly_are_the_bytes_zarr_writes(tmp_path) -> None:
+    """Each array of a tile's layout (transposed xyz, a scaled gps_time, plain bytes), 300 rows in
+    shards of 128 and chunks of 32: the last shard holds a whole chunk, a cut one and two past the
+    end. Written by zarr and by ``write_shard``, the shard files are byte for byte the same, and zarr
+    reads the direct ones back."""
+    rng = np.random.default_rng(3)
+    n = 300
+    values = {
+        "xyz_counts": rng.integers(-5_000, 90_000, (n, 3)).astype("<i4"),
+        "rgb": rng.integers(0, 256, (n, 3)).astype("u1"),
+        "intensity": rng.integers(0, 4_000, n).astype("<u2"),
+        "gps_time": (400_000_000_000 + 2 * np.arange(n)) / 1e6,
+        "class": rng.choice(np.array([1, 2, 6], "u1"), n),
+    }
+    spec = TileSpec()
+    made = {}
+    for how in ("zarr", "direct"):
+        root = zarr.open_group(LocalStore(tmp_path / f"{how}.zarr"), mode="w")
+        for name, v in values.items():
+            scale = time_scale(v) if name == "gps_time" else None
+            arr = root.create_array(
+                name, shape=v.shape, dtype=v.dtype, chunks=(32, *v.shape[1:]), shards=(128, *v.shape[1:]),
+                fill_value=0, config={"write_empty_chunks": True},
+                **array_codecs(name, v.dtype, v.ndim, spec, scale),
+            )  # fmt: skip
+            if how == "zarr":
+                arr[:] = v
+                continue
+            d = direct_chunks(arr)
+            assert d is not None and (d.filter is not None) == (name == "gps_time")
+            for s in range(3):
+                d.write_shard(s, v[s * 128 : (s + 1) * 128])
+            assert np.array_equal(zarr.open_array(LocalStore(tmp_path / "direct.zarr"), path=name)[:], v)
+            assert np.array_equal(np.concatenate([d.read(i) for i in range(10)]), v)
+        made[how] = tmp_path / f"{how}.zarr"
+    files = sorted(p.relative_to(made["zarr"]) for p in made["zarr"].rglob("*") if p.is_file())
+    assert len([f for f in files if "/c/" in str(f)]) == 3 * len(values)
+    for f in files:
+        assert (made["direct"] / f).read_bytes() == (made["zarr"] / f).read_bytes(), f
+    with pytest.raises(TileError, match=r"c/2: shard 2 takes 44 rows, not 40"):
+        d.write_shard(2, values["class"][:40])
