@@ -17,6 +17,7 @@ from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.labels.change import CHANGED, UNCHANGED
 from siteline.pairs.render import ignore_causes, pair_mask, sparse_candidates, unsure_edges
 from siteline.records.params.render import RenderParams
+from siteline.render import zbuffer
 from siteline.render.zbuffer import render_points
 
 TRIM = RenderParams(scale=1.0, splat="world", trim_edges=True)
@@ -195,3 +196,59 @@ def test_a_sparse_pole_that_stayed_is_not_seen_through_to_a_change_behind_it() -
     assert changed(before) > 0.2  # 29 % when only changed points were looked at (as before)
     assert changed(after) <= 0.05
     assert ((after == MASK_UNCHANGED) & truth).sum() > 0  # its samples are still drawn and labelled
+
+
+def _beam_scenes(seed: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The earlier scene: ground at 40 points/m2; the later: other ground samples and a beam 1 m
+    square from 17 to 18 m along y, its top flown at 40 points/m2 and its sides at 2.5 (a line
+    scanner grazes them), the beam changed."""
+    rng = np.random.default_rng(seed)
+
+    def ground(n: int) -> np.ndarray:
+        return np.c_[rng.uniform(-20, 20, (n, 2)), np.zeros(n)]
+
+    top = np.c_[rng.uniform(-0.5, 0.5, 1200), rng.uniform(-15, 15, 1200), np.full(1200, BEAM_Z)]
+    sides = [
+        np.c_[np.full(75, x), rng.uniform(-15, 15, 75), rng.uniform(BEAM_Z - 1, BEAM_Z, 75)]
+        for x in (-0.5, 0.5)
+    ]
+    n = 64000
+    b = np.concatenate([ground(n), top, *sides])
+    code_b = np.r_[np.full(n, UNCHANGED), np.full(len(b) - n, CHANGED)].astype(np.uint8)
+    return ground(n), np.full(n, UNCHANGED, np.uint8), b, code_b
+
+
+def _true_box(cam: Camera, lo: tuple[float, ...], hi: tuple[float, ...]) -> np.ndarray:
+    """Pixels whose centre's ray meets the box ``lo``-``hi`` (metres), exactly (slabs)."""
+    u, v = np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5)
+    rays = np.stack([(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, np.ones_like(u)], -1) @ cam.R
+    o = np.asarray(cam.center, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (np.asarray(lo) - o) / rays, (np.asarray(hi) - o) / rays
+    near, far = np.nanmax(np.minimum(t1, t2), -1), np.nanmin(np.maximum(t1, t2), -1)
+    return (near <= far) & (far > 0)
+
+
+def test_a_beams_sparse_side_under_its_dense_top_is_not_seen_through(monkeypatch) -> None:
+    # the side shares the larger cells with the top (dense there): only the smaller cells find it
+    # sparse; and the ground behind it lies within a tenth of its depth near its foot, where half a
+    # sample spacing behind the side is already behind it
+    cam = Camera.look_at((-10.0, 0.0, 30.0), (2.0, 0.0, 14.0), 400, 300, fx=300.0)
+    truth = _true_box(cam, (-0.5, -15.0, BEAM_Z - 1), (0.5, 15.0, BEAM_Z))
+    scenes = _beam_scenes()
+    sparse = replace(TRIM, sparse_surfaces=True)
+
+    def through(mask: np.ndarray) -> float:
+        return float(((mask == MASK_UNCHANGED) & truth).sum() / truth.sum())
+
+    now = _pair(scenes, cam, sparse, 0.16)[0]
+    monkeypatch.setattr(zbuffer, "SPARSE_CELLS", (4.0,))
+    larger_cells = _pair(scenes, cam, sparse, 0.16)[0]
+    monkeypatch.setattr(zbuffer, "BEHIND_SPACINGS", 1e3)  # nothing is behind a sparse sample
+    nothing_behind = _pair(scenes, cam, sparse, 0.16)[0]
+    assert truth.sum() > 5000
+    assert through(nothing_behind) > 0.15
+    assert through(now) <= 0.04 and through(larger_cells) > 1.5 * through(now)
+    assert ((now == MASK_CHANGED) & truth).sum() > 0.3 * truth.sum()  # the beam is still drawn and labelled
+    new = (now == MASK_IGNORE) & (nothing_behind != MASK_IGNORE)
+    assert (new & ~ndimage.binary_dilation(truth, iterations=20)).sum() == 0  # unsure only around the beam

@@ -14,8 +14,8 @@ from zarr.storage import LocalStore, MemoryStore
 
 from siteline.camera.pinhole import Camera
 from siteline.errors import TileError
-from siteline.tiles import reader as reader_module
 from siteline.records.tiling import TileSpec
+from siteline.tiles import reader as reader_module
 from siteline.tiles.chunks import direct_chunks
 from siteline.tiles.codecs import array_codecs, time_scale
 from siteline.tiles.layout import ATTRIBUTES

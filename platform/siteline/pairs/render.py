@@ -114,12 +114,14 @@ def small_gaps(hit: np.ndarray) -> np.ndarray:
 
 
 def sparse_candidates(change: np.ndarray) -> np.ndarray:
-    """(N,) bool: the rendered points whose surface the renderer looks at for being sparse
-    (``render_points``' ``sparse_of``), from their change codes: the labelled ones, changed or not.
-    A sparse surface matters where it stands before a surface of other change: changed before
-    unchanged ground (a pole put up), unchanged before a change (a mast before a container taken
-    away); :func:`unsure_edges` then ignores what shows between its samples."""
-    return np.isin(change, (CHANGED, MASK_UNCHANGED))
+    """(N,) uint8: the rendered points whose surface the renderer looks at for being sparse
+    (``render_points``' ``sparse_of``), from their change codes: the labelled ones, changed or not, in
+    cells of the larger size (1), the changed ones in both (2: a changed beam's side under its top;
+    siteline.render.zbuffer.SPARSE_CELLS, counted for the few changed points alone). A sparse surface
+    matters where it stands before a surface of other change: changed before unchanged ground (a pole
+    put up), unchanged before a change (a mast before a container taken away); :func:`unsure_edges`
+    then ignores what shows between its samples."""
+    return np.where(change == CHANGED, 2, np.isin(change, (MASK_UNCHANGED,))).astype(np.uint8)
 
 
 def unsure_edges(r: RenderResult, change: np.ndarray) -> np.ndarray:

@@ -118,15 +118,21 @@ SPARSE_SHARE = 0.25
 FAR_SPACINGS = 32.0
 
 
-def surface_spacing(xyz: np.ndarray, spacing_m: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
+def surface_spacing(
+    xyz: np.ndarray,
+    spacing_m: np.ndarray,
+    which: np.ndarray | None = None,
+    cell_spacings: float = CELL_SPACINGS,
+) -> np.ndarray:
     """(M,) float32 metres: the spacing ``spacing_m`` (N,) (its level of detail's, or its tile's) of
     each point ``which`` names ((M,) int64 positions; None: every point), raised where the point's own
     surface is sparser (see :data:`SPARSE_SHARE`) to the distance to the farther of its two nearest
     sparse neighbours: a pole's samples a metre apart get about a metre, where their tile's ground
     says 0.11 m. xyz: (N, 3) site-local metres of one read (a view's points, a tile's); its cells are
-    counted over every point. Costs a compiled pass over the points (siteline.render.kernels) and a
-    k-d tree of the named points of sparse cells alone: naming the few that matter (a pair's changed
-    points) keeps both small."""
+    counted over every point, cells of ``cell_spacings`` of a point's spacing (rounded up to a power
+    of two; :data:`CELL_SPACINGS` unless given). Costs a compiled pass over the points
+    (siteline.render.kernels) and a k-d tree of the named points of sparse cells alone: naming the
+    few that matter (a pair's changed points) keeps both small."""
     from scipy.spatial import cKDTree
 
     which = np.arange(len(spacing_m)) if which is None else np.asarray(which, dtype=np.int64)
@@ -134,7 +140,7 @@ def surface_spacing(xyz: np.ndarray, spacing_m: np.ndarray, which: np.ndarray | 
     out = s[which]
     if not len(which):
         return out
-    level = np.ceil(np.log2(CELL_SPACINGS / 2 * np.maximum(s, 1e-4))).astype(np.int64)
+    level = np.ceil(np.log2(cell_spacings / 2 * np.maximum(s, 1e-4))).astype(np.int64)
     expected = (np.exp2(level[which] + 1) / np.maximum(out, 1e-4)) ** 2  # a surface at the spacing
     cap = np.ceil(2 * SPARSE_SHARE * expected).astype(np.int64)  # counted exactly below (``around``)
     share = kernels.cell_counts(np.ascontiguousarray(xyz, dtype=np.float32), level, which, cap) / expected

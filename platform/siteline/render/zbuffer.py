@@ -30,7 +30,7 @@ from siteline.errors import RenderError
 from siteline.records.params.render import MAX_SPLAT_PX, RenderParams
 from siteline.render import kernels
 from siteline.render.edges import see_through, trim_edges
-from siteline.render.fill import SAME_SURFACE, fill_gaps
+from siteline.render.fill import fill_gaps
 from siteline.render.splats import check_spacing, diameters_px, disk_offsets, disk_pixels, surface_spacing
 
 EMPTY_KEY = torch.iinfo(torch.int64).max
@@ -40,6 +40,17 @@ INDEX_MASK = 0xFFFFFFFF
 # unsure: its own spacing is the distance to the farther of its two nearest neighbours, so disks of
 # 1.5 of it close the gap to each; the halo beside a pole is 0.75 of its spacing (docs/performance.md)
 SPARSE_REACH = 1.5
+# a surface is looked at for being sparse in cells of these many of its spacings (siteline.render.splats
+# .surface_spacing; the sparser counts): the larger finds a pole's column among ground, the smaller a
+# beam's side under its dense top, which shares the larger cells with it (the box scene's jib, 1 m
+# square: 12.1 -> 7.3 % of its pixels seen through, docs/performance.md). A render's ``sparse_of``
+# says in how many of them (in this order) each point is looked at
+SPARSE_CELLS = (4.0, 2.0)
+# a winner lies behind a sparse surface's sample (and may be seen between its samples) when it is this
+# many of the sample's own spacings farther: half a gap, where its surface may lie; a tenth of the
+# depth (siteline.render.fill.SAME_SURFACE), as before, let through the ground a metre or two behind
+# a pole or a panel seen from 30 m
+BEHIND_SPACINGS = 0.5
 
 
 @dataclass
@@ -432,18 +443,24 @@ def _behind_sparse(
     sparse_of: np.ndarray | None,
 ) -> torch.Tensor:
     """(H W,) int64: per pixel whose winner lies behind a sparse surface's reach, the nearest of that
-    surface's points there; -1 elsewhere. A point of ``sparse_of`` ((N,) bool; None: every point)
-    whose own surface is sparser than its spacing says (siteline.render.splats.surface_spacing: a
-    pole's samples a metre apart) is drawn a second time, into a z-buffer of its own, as a disk of
-    :data:`SPARSE_REACH` of its own spacing across (up to MAX_SPLAT_PX): a winner :data:`SAME_SURFACE`
-    farther than such a disk may show through the surface where it lies between its samples (the
-    ground between a pole's)."""
+    surface's points there; -1 elsewhere. A point ``sparse_of`` looks at ((N,) uint8 or bool: in the
+    first that many cell sizes of :data:`SPARSE_CELLS`; None: every point in all) whose own surface
+    is sparser than its spacing says (siteline.render.splats.surface_spacing: a pole's samples a metre
+    apart, a beam's side) is drawn a second time, into a z-buffer of its own, as a disk of :data:`SPARSE_REACH` of its own spacing
+    across (up to MAX_SPLAT_PX): a winner :data:`BEHIND_SPACINGS` of that spacing farther than the
+    disk's sample may show through the surface where it lies between its samples (the ground between
+    a pole's)."""
     dev = index.device
     npix = cam.width * cam.height
     out = torch.full((npix,), -1, dtype=torch.int64, device=dev)
     spacing_np = spacing.cpu().numpy()
-    named = np.arange(len(spacing_np)) if sparse_of is None else np.flatnonzero(sparse_of)
-    own = surface_spacing(pts.cpu().numpy(), spacing_np, named)
+    looked = np.full(len(spacing_np), len(SPARSE_CELLS), np.uint8) if sparse_of is None else np.asarray(sparse_of)
+    named = np.flatnonzero(looked)
+    xyz_np, own = pts.cpu().numpy(), spacing_np[named]
+    for k, cells in enumerate(SPARSE_CELLS):
+        sub = np.flatnonzero(looked[named] > k)
+        if len(sub):
+            own[sub] = np.maximum(own[sub], surface_spacing(xyz_np, spacing_np, named[sub], cells))
     raised = own > spacing_np[named]
     sparse, own = named[raised], own[raised]
     if not len(sparse):
@@ -454,11 +471,13 @@ def _behind_sparse(
         settings, splat="world", splat_max_px=MAX_SPLAT_PX, point_size_px=1, splat_factor=SPARSE_REACH
     )
     own_depth = torch.empty(len(sparse), dtype=torch.float32, device=dev)
-    _splat(pts[which], torch.from_numpy(own).to(dev), cam, wide, dev, zbuf, own_depth)
+    own_t = torch.from_numpy(own).to(dev)
+    _splat(pts[which], own_t, cam, wide, dev, zbuf, own_depth)
     near, _ = _winners(zbuf, npix)
-    near_depth = own_depth[near.clamp(min=0)]  # the sample's own depth, not its disk's rim
-    behind = (near >= 0) & (index >= 0) & (depth > near_depth * (1 + SAME_SURFACE))
-    return torch.where(behind, which[near.clamp(min=0)], -1)
+    at = near.clamp(min=0)
+    # from the sample's own depth, not its disk's rim
+    behind = (near >= 0) & (index >= 0) & (depth > own_depth[at] + BEHIND_SPACINGS * own_t[at])
+    return torch.where(behind, which[at], -1)
 
 
 def _unsure_of(
@@ -492,8 +511,9 @@ def render_points(
     xyz: (N, 3) float32, site-local metres. attributes: name -> (N,) or (N, C) arrays of any dtype
     (uint8 RGB, uint8 class, bool flags). spacing_m: (N,) each point's spacing in metres, which
     world splats need (a tile read gives it; :func:`siteline.render.splats.local_spacing` estimates
-    it for a raw cloud). sparse_of: (N,) bool, with ``settings.sparse_surfaces`` the points whose
-    surface is looked at for being sparse (None: every point; a pair names its changed points).
+    it for a raw cloud). sparse_of: (N,) uint8 or bool, with ``settings.sparse_surfaces`` the points
+    whose surface is looked at for being sparse, and in how many of :data:`SPARSE_CELLS`' cell sizes
+    (None: every point, in all; a pair names its labelled points, its changed ones in all).
     Returns a :class:`RenderResult` at the scaled camera.
     """
     settings = settings or RenderParams()

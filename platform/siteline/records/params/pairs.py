@@ -199,8 +199,8 @@ class PairParams:
             del doc["unsure_edges"]
         if not doc["sparse_surfaces"]:  # the labels and masks of before
             del doc["sparse_surfaces"]
-        elif self.unsure_edges:  # masks of its second version: behind sparse unchanged surfaces too
-            doc["sparse_surfaces"] = 2
+        elif self.unsure_edges:  # masks of its third version: behind sparse unchanged surfaces too (2),
+            doc["sparse_surfaces"] = 3  # sparse in cells of two sizes, half a spacing behind (3)
         if doc["label_rule"] == "adaptive":  # its third version (siteline.labels.change: held_by_any, grazed)
             doc["label_rule"] = "adaptive3"
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
