@@ -259,3 +259,29 @@ def test_surface_spacing_finds_a_sparse_column_and_leaves_dense_ground(offset: t
     lone = surface_spacing(np.array([[50.0, 50.0, 9.0]], np.float32), np.array([0.1], np.float32))
     assert lone.tolist() == pytest.approx([0.1])
     assert surface_spacing(np.zeros((0, 3), np.float32), np.zeros(0, np.float32)).shape == (0,)
+
+
+def test_cell_counts_are_exact_under_their_cap_for_few_points_named_or_most() -> None:
+    """The compiled cell count (siteline.render.kernels.cell_counts) against a count by np.unique:
+    the same wherever under the cap, at least the cap elsewhere, whether a few points are named (counted
+    among themselves, then over every point behind a filter) or most (one count over every point)."""
+    from siteline.render import kernels
+
+    rng = np.random.default_rng(5)
+    xyz = np.concatenate([rng.uniform(-40, 40, (30_000, 3)) * [1, 1, 0.05], rng.uniform(-40, 40, (300, 3))])
+    xyz = xyz.astype(np.float32)
+    level = rng.choice(np.array([-2, -1, 0, 1]), len(xyz)).astype(np.int64)
+    cap = rng.integers(1, 30, len(xyz)).astype(np.int64)
+
+    def truth(shift: int) -> np.ndarray:
+        half = np.floor(xyz * np.exp2(-level)[:, None].astype(np.float32)).astype(np.int64)
+        cells = np.c_[(half + shift) >> 1, level]
+        _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+        return counts[inverse.ravel()]
+
+    want = np.maximum(truth(0), truth(1))
+    for which in (np.arange(0, len(xyz), 7), np.arange(len(xyz))):  # few named, most named
+        got = kernels.cell_counts(xyz, level, which, cap[which])
+        under = want[which] < cap[which]
+        assert under.sum() > 100 and (~under).sum() > 100
+        assert np.array_equal(got[under], want[which][under]) and (got[~under] >= cap[which][~under]).all()

@@ -48,7 +48,8 @@ def test_every_chunk_is_what_zarr_reads(store) -> None:
     arrays = _arrays(store)
     direct = {k: direct_chunks(a) for k, a in arrays.items()}
     # every array of the store (gps_time's fixed scale/offset included) is read directly
-    assert all(d is not None for d in direct.values()) and {k.split("/")[1] for k in direct} == set(ATTRIBUTES)
+    assert all(d is not None for d in direct.values())
+    assert {k.split("/")[1] for k in direct} == set(ATTRIBUTES)
     cut = 0
     for key, d in direct.items():
         if d is None:

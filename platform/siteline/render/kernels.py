@@ -315,9 +315,23 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
     the larger of the point's two cells' counts. Per grid, the named points are counted among
     themselves first (a cell they fill to ``cap`` is full whatever the rest); only the cells left
     under it are then counted over every point, behind a 64 kB filter of those cells: a pair's changed
-    points are often a quarter of a view's, the sparse cells among them a few per cent."""
+    points are often a quarter of a view's, the sparse cells among them a few per cent. Where most
+    points are named (a pair's labelled ones) every point's cell is counted once instead (its count
+    is then exact above ``cap`` too), in a table of the distinct cells (:func:`_key_ids`)."""
     n = which.shape[0]
     best = np.zeros(n, np.int64)
+    if 2 * n > xyz.shape[0]:  # most points named (a pair's labelled ones): one count over them all
+        for shift in (0, 1):
+            every = np.empty(xyz.shape[0], np.uint64)
+            for p in range(xyz.shape[0]):
+                every[p] = _cell_key(xyz, level, p, shift)
+            ids = _key_ids(every)[0]
+            count = np.zeros(xyz.shape[0], np.int64)
+            for p in range(xyz.shape[0]):
+                count[ids[p]] += 1
+            for j in range(n):
+                best[j] = max(best[j], count[ids[which[j]]])
+        return best
     for shift in (0, 1):
         keys = np.empty(n, np.uint64)
         for j in range(n):
@@ -382,14 +396,65 @@ def _count_keys(keys: np.ndarray) -> np.ndarray:
 
 
 @kernel
+def _key_ids(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each of ``keys`` (nonzero uint64) numbered by its distinct value, in order of first sight:
+    (M,) int64 ids; and the open-addressing table of the distinct values, (S,) uint64 keys (0: empty)
+    and (S,) int64 their ids, S a power of two at least twice their number. The table grows with the
+    distinct values, not with the keys, so it stays small (and in the cache) where they repeat."""
+    size = 1024
+    table = np.zeros(size, np.uint64)
+    table_ids = np.zeros(size, np.int64)
+    out = np.empty(len(keys), np.int64)
+    n = 0
+    for j in range(len(keys)):
+        k = keys[j]
+        mask = size - 1
+        i = _slot(k, mask)
+        while table[i] != 0 and table[i] != k:
+            i = (i + 1) & mask
+        if table[i] == 0:
+            if 2 * (n + 1) > size:  # twice the slots, and this key's slot found again there
+                size *= 2
+                table, table_ids = _rehashed(table, table_ids, size)
+                mask = size - 1
+                i = _slot(k, mask)
+                while table[i] != 0:
+                    i = (i + 1) & mask
+            table[i] = k
+            table_ids[i] = n
+            n += 1
+        out[j] = table_ids[i]
+    return out, table, table_ids
+
+
+@kernel
+def _rehashed(table: np.ndarray, table_ids: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The keys (0: empty) and ids of an open-addressing table put into a new one of ``size`` slots."""
+    keys = np.zeros(size, np.uint64)
+    ids = np.zeros(size, np.int64)
+    mask = size - 1
+    for s in range(len(table)):
+        if table[s] != 0:
+            i = _slot(table[s], mask)
+            while keys[i] != 0:
+                i = (i + 1) & mask
+            keys[i] = table[s]
+            ids[i] = table_ids[s]
+    return keys, ids
+
+
+@kernel
 def _cell_key(xyz: np.ndarray, level: np.ndarray, p: int, shift: int) -> np.uint64:
     """Point ``p``'s cell of two half cells (2**level[p] metres each), in the grid shifted by
-    ``shift`` half cells, as a nonzero key."""
+    ``shift`` half cells, as a nonzero key: 21 bits of each horizontal cell index, 16 of the vertical
+    (their two's complement: a key tells apart cells within 2**20 and 2**15 cells of the origin), 6 of
+    the level. (The vertical index once took 21 bits, the level's among them: below the origin the
+    cells of every level shared keys.)"""
     scale = np.float32(np.ldexp(1.0, -level[p]))
     a = (np.int64(np.floor(xyz[p, 0] * scale)) + shift) >> 1
     b = (np.int64(np.floor(xyz[p, 1] * scale)) + shift) >> 1
     c = (np.int64(np.floor(xyz[p, 2] * scale)) + shift) >> 1
-    key = (a & 0x1FFFFF) | ((b & 0x1FFFFF) << 21) | ((c & 0x1FFFFF) << 42) | ((level[p] & 0x3F) << 58)
+    key = (a & 0x1FFFFF) | ((b & 0x1FFFFF) << 21) | ((c & 0xFFFF) << 42) | ((level[p] & 0x3F) << 58)
     return np.uint64(key) + np.uint64(1)
 
 

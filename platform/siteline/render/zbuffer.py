@@ -454,7 +454,9 @@ def _behind_sparse(
     npix = cam.width * cam.height
     out = torch.full((npix,), -1, dtype=torch.int64, device=dev)
     spacing_np = spacing.cpu().numpy()
-    looked = np.full(len(spacing_np), len(SPARSE_CELLS), np.uint8) if sparse_of is None else np.asarray(sparse_of)
+    looked = (
+        np.full(len(spacing_np), len(SPARSE_CELLS), np.uint8) if sparse_of is None else np.asarray(sparse_of)
+    )
     named = np.flatnonzero(looked)
     xyz_np, own = pts.cpu().numpy(), spacing_np[named]
     for k, cells in enumerate(SPARSE_CELLS):

@@ -55,7 +55,7 @@ def pair_labels(
     by the change ``rule`` (siteline.labels.rule), the ``labels``' rule and the smallest region kept
     (siteline.records.params.labels; the nearest rule keeping every point names no suffix, as before both;
     the surface and adaptive rules are named with their versions, each with its probe
-    when it has one, and ``-sparse`` when a sparse surface's changed samples are kept whole)."""
+    when it has one, and ``-sparse2`` when a sparse surface's changed samples are kept whole)."""
     classes = "" if tuple(versions) == (1, 1) else f"-ls{versions[0]}.{versions[1]}"
     by = "" if rule == "semantic" else f"-{rule}"
     # the surface rule's second version ignores points the other scene never covered (stores of the
@@ -67,7 +67,9 @@ def pair_labels(
     )
     by += "" if labels.min_region_points <= 1 else f"-m{labels.min_region_points}"
     by += "" if labels.rule == "nearest" or not labels.surface_probe else f"-p{labels.surface_probe:g}"
-    by += "-sparse" if labels.sparse_regions and labels.min_region_points > 1 else ""
+    # "-sparse2": the sparse test's cells below the site's origin no longer share keys across levels
+    # (siteline.render.kernels._cell_key); stores of "-sparse" are not reused
+    by += "-sparse2" if labels.sparse_regions and labels.min_region_points > 1 else ""
     return store.uri("labels", f"pair-{pair_id}{classes}-r{int(round(radius_m * 1e6))}um{by}.zarr")
 
 
