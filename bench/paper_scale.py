@@ -121,11 +121,10 @@ def stage_pair(work: Path, views: int, scale: float, min_valid: float | None, kn
     # stages in the order process_pair runs them: labels, views, renders
     t_views = first.get("renders", t0 + total) - first.get("views", t0)
     t_renders = last.get("renders", t0 + total) - first.get("renders", t0 + total)
+    from siteline.camera.pinhole import Camera
     from siteline.views.ground import GroundPlane
 
     plane = GroundPlane.from_dict(summary["ground_plane"])
-    from siteline.camera.pinhole import Camera
-
     centres = np.array([Camera.from_dict(r["camera"]).center for r in recs])
     heights = plane.height(centres)
     return {

@@ -317,7 +317,7 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
     under it are then counted over every point, behind a 64 kB filter of those cells: a pair's changed
     points are often a quarter of a view's, the sparse cells among them a few per cent. Where most
     points are named (a pair's labelled ones) every point's cell is counted once instead (its count
-    is then exact above ``cap`` too), in a table of the distinct cells (:func:`_key_ids`)."""
+    is then exact above ``cap`` too), (:func:`_count_keys`). Every table holds each cell once (:func:`_key_ids`)."""
     n = which.shape[0]
     best = np.zeros(n, np.int64)
     if 2 * n > xyz.shape[0]:  # most points named (a pair's labelled ones): one count over them all
@@ -325,12 +325,9 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
             every = np.empty(xyz.shape[0], np.uint64)
             for p in range(xyz.shape[0]):
                 every[p] = _cell_key(xyz, level, p, shift)
-            ids = _key_ids(every)[0]
-            count = np.zeros(xyz.shape[0], np.int64)
-            for p in range(xyz.shape[0]):
-                count[ids[p]] += 1
+            count = _count_keys(every)
             for j in range(n):
-                best[j] = max(best[j], count[ids[which[j]]])
+                best[j] = max(best[j], count[which[j]])
         return best
     for shift in (0, 1):
         keys = np.empty(n, np.uint64)
@@ -341,19 +338,9 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
         seen = np.zeros(1 << 16, np.bool_)  # a 64 kB filter: most points' cells hold no cell left
         for m in range(len(left)):
             seen[(keys[left[m]] * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(48)] = True
-        size = 2
-        while size < 2 * len(left):
-            size *= 2
-        mask = size - 1
-        table = np.zeros(size, np.uint64)  # 0: empty; keys are stored plus one
-        count = np.zeros(size, np.int64)
-        slot = np.empty(len(left), np.int64)
-        for m in range(len(left)):
-            i = _slot(keys[left[m]], mask)
-            while table[i] != 0 and table[i] != keys[left[m]]:
-                i = (i + 1) & mask
-            table[i] = keys[left[m]]
-            slot[m] = i
+        ids, table, table_ids = _key_ids(keys[left])
+        mask = len(table) - 1
+        count = np.zeros(len(left), np.int64)  # per cell id (fewer than the keys)
         for p in range(xyz.shape[0]):
             k = _cell_key(xyz, level, p, shift)
             if not seen[(k * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(48)]:
@@ -361,37 +348,26 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
             i = _slot(k, mask)
             while table[i] != 0:
                 if table[i] == k:
-                    count[i] += 1
+                    count[table_ids[i]] += 1
                     break
                 i = (i + 1) & mask
         for j in range(n):
             best[j] = max(best[j], named[j])
         for m in range(len(left)):
-            best[left[m]] = max(best[left[m]], count[slot[m]])
+            best[left[m]] = max(best[left[m]], count[ids[m]])
     return best
 
 
 @kernel
 def _count_keys(keys: np.ndarray) -> np.ndarray:
-    """(M,) int64: for each of ``keys``, how many of them equal it (an open-addressing table)."""
-    size = 2
-    while size < 2 * len(keys):
-        size *= 2
-    mask = size - 1
-    table = np.zeros(size, np.uint64)
-    count = np.zeros(size, np.int64)
-    for k in keys:
-        i = _slot(k, mask)
-        while table[i] != 0 and table[i] != k:
-            i = (i + 1) & mask
-        table[i] = k
-        count[i] += 1
-    out = np.zeros(len(keys), np.int64)
+    """(M,) int64: for each of ``keys``, how many of them equal it."""
+    ids = _key_ids(keys)[0]
+    count = np.zeros(len(keys), np.int64)
     for j in range(len(keys)):
-        i = _slot(keys[j], mask)
-        while table[i] != keys[j]:  # every key is in the table
-            i = (i + 1) & mask
-        out[j] = count[i]
+        count[ids[j]] += 1
+    out = np.empty(len(keys), np.int64)
+    for j in range(len(keys)):
+        out[j] = count[ids[j]]
     return out
 
 

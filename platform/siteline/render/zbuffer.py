@@ -446,10 +446,10 @@ def _behind_sparse(
     surface's points there; -1 elsewhere. A point ``sparse_of`` looks at ((N,) uint8 or bool: in the
     first that many cell sizes of :data:`SPARSE_CELLS`; None: every point in all) whose own surface
     is sparser than its spacing says (siteline.render.splats.surface_spacing: a pole's samples a metre
-    apart, a beam's side) is drawn a second time, into a z-buffer of its own, as a disk of :data:`SPARSE_REACH` of its own spacing
-    across (up to MAX_SPLAT_PX): a winner :data:`BEHIND_SPACINGS` of that spacing farther than the
-    disk's sample may show through the surface where it lies between its samples (the ground between
-    a pole's)."""
+    apart, a beam's side) is drawn a second time, into a z-buffer of its own, as a disk of
+    :data:`SPARSE_REACH` of its own spacing across (up to MAX_SPLAT_PX): a winner
+    :data:`BEHIND_SPACINGS` of that spacing farther than the disk's sample may show through the
+    surface where it lies between its samples (the ground between a pole's)."""
     dev = index.device
     npix = cam.width * cam.height
     out = torch.full((npix,), -1, dtype=torch.int64, device=dev)

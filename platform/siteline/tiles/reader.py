@@ -427,8 +427,9 @@ class SceneTiles:
         """The decoded inner chunks ``(tile, name, ids)`` of ``wanted``: from the reader's LRU cache,
         the rest read straight off a local store's shards and decoded by blosc in threads
         (siteline.tiles.chunks), or, for arrays of another layout or store, in one concurrent zarr
-        call (each run of consecutive missing chunks of an array one selection), then cached. A view's read of dozens of tiles and attributes waits for the slowest chunk, not
-        for the sum of them. One load at a time per reader (a pair of a scene with itself renders
+        call (each run of consecutive missing chunks of an array one selection), then cached. A
+        view's read of dozens of tiles and attributes waits for the slowest chunk, not for the sum of
+        them. One load at a time per reader (a pair of a scene with itself renders
         both sides from one reader, in two threads)."""
         with self._lock:
             return self._load_locked(wanted, stats)
