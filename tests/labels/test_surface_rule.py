@@ -234,10 +234,14 @@ def test_pair_knobs_of_the_rule_and_splats_are_checked_and_keyed():
         object.__setattr__(params, "sparse_surfaces", False)
         return params.digest()
 
-    assert key_then(PairParams(**before, surface_probe=0.0)) == "b089ba124b36"
-    assert key_then(PairParams(label_rule="nearest", min_region_points=8)) == "1f8b3442bcd8"
-    assert key_then(PairParams(**before)) == "c37dfb211d03"  # the default at 5b710e2-dae2f5c
-    assert PairParams(**before).digest() != "c37dfb211d03"  # new views, a new key
+    # the edge trim's second version (2026-11-30: a surface's own points within 5 spacings, lines kept)
+    # draws other masks, so these keys moved with it: b089ba124b36, 1f8b3442bcd8 and c37dfb211d03 before
+    assert key_then(PairParams(**before, surface_probe=0.0)) == "b9e33a569db7"
+    assert key_then(PairParams(label_rule="nearest", min_region_points=8)) == "74fa2794a2dc"
+    assert key_then(PairParams(**before)) == "79299a8c1991"  # the default at 5b710e2-dae2f5c
+    assert PairParams(**before).digest() != "79299a8c1991"  # new views, a new key
+    trim_then = PairParams(**before, trim_edges=False)
+    assert key_then(trim_then) != "c37dfb211d03" and trim_then.digest() != PairParams(**before).digest()
     assert base.digest() not in {PairParams(**before).digest(), no_probe.digest()}
     with pytest.raises(PairError, match="surface_probe"):
         PairParams(surface_probe=1.5)

@@ -90,7 +90,9 @@ def test_a_sparse_beam_is_not_seen_through_its_sides_are_said_unsure() -> None:
     def through(mask: np.ndarray, where: np.ndarray) -> float:
         return float(((mask == MASK_UNCHANGED) & where).sum() / where.sum())
 
-    assert through(before, truth) > 0.3 and through(before, inner) > 0.2  # trimmed away, or holes
+    # trimmed away, or holes (a third of the beam until the trim kept what lies between a line's
+    # samples, 2026-11-30)
+    assert through(before, truth) > 0.2 and through(before, inner) > 0.1
     assert through(after, truth) <= 0.06 and through(after, inner) <= 0.03
     # what is labelled changed stays the beam's, and only pixels near its sides became unsure
     assert ((after == MASK_CHANGED) & ~truth).sum() <= ((before == MASK_CHANGED) & ~truth).sum()

@@ -5,13 +5,15 @@ reaches past where the surface ends and hides the farther surface behind (the gr
 container, the sky-facing ground under a jib's edge). A drawn pixel is trimmed, given the farther
 surface, when:
 
-- no point of its winner's surface (a point no farther than :data:`SAME_SURFACE` beyond the winner's
-  depth) falls within :data:`KEEP_SPACINGS` of the winner's spacing of the pixel's centre (measured
-  to where the point falls within its pixel, not to the pixel), how far a surface is taken to extend
-  past its last sample;
+- no point of its winner's surface (a point no farther than :data:`TRIM_SAME_SPACINGS` of the
+  winner's spacing beyond its depth) falls within :data:`KEEP_SPACINGS` of the winner's spacing of the
+  pixel's centre (measured to where the point falls within its pixel, not to the pixel), how far a
+  surface is taken to extend past its last sample;
 - the points of that surface within :data:`REACH_SPACINGS` spacings leave a run of more than
   :data:`siteline.render.fill.MAX_EMPTY_SECTORS` of the eight 45-degree sectors around the pixel
-  empty (a pixel beyond a straight edge has half of them empty; one inside a surface has none);
+  empty (a pixel beyond a straight edge has half of them empty; one inside a surface has none), and
+  the pixel lies farther than :data:`KEEP_SPACINGS` from the segment joining the nearest samples of
+  any two opposite sectors (a pole's or a beam's samples, one above and one below it);
 - a point of a farther surface falls within that reach: the pixel takes the nearest such point (by
   pixel distance), its colour and labels.
 
@@ -39,6 +41,12 @@ from siteline.render.fill import SAME_SURFACE, enclosed_table, ring_offsets
 KEEP_SPACINGS = 0.25
 # how far around a pixel (in its winner's spacings) its surface's samples are looked for
 REACH_SPACINGS = 2.5
+# a point belongs to a drawn pixel's surface when it lies no more than this many of the winner's
+# spacings beyond it: within the reach a surface seen at 27 degrees or more recedes by at most 5.
+# A tenth of the depth (SAME_SURFACE, before 2026-11-30) took the ground a metre behind a fence
+# panel's foot, or beside a car, for the nearer surface and kept its splats over them (the sloped
+# scene's changed-class precision 0.960 -> 0.976, docs/performance.md)
+TRIM_SAME_SPACINGS = 5.0
 
 
 @functools.lru_cache(maxsize=8)
@@ -68,6 +76,7 @@ def trim_edges(
     centre_uv: torch.Tensor,
     width: int,
     max_radius_px: int,
+    focal_px: float,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Trim the splats of one render at their surfaces' edges (see the module docstring).
 
@@ -75,7 +84,7 @@ def trim_edges(
     own camera depth; spacing_px: (H W,) float32 the winner's spacing in pixels; centres: (H W,) int64
     z-buffer keys of one-pixel points (float32 depth bits << 32 | point index; int64 max where none);
     centre_uv: (2, H W) float32 where in its pixel each of those points falls (0 to 1); max_radius_px:
-    the widest reach looked at. Returns the new (index, depth) and (H W,) bool ``trimmed``, on the tensors' device (the pass itself runs compiled on the CPU: its cost is per
+    the widest reach looked at; focal_px: the render's focal length (pixels). Returns the new (index, depth) and (H W,) bool ``trimmed``, on the tensors' device (the pass itself runs compiled on the CPU: its cost is per
     pixel)."""
     dev = index.device
     centre_index, centre_depth = _centres(centres)
@@ -83,7 +92,7 @@ def trim_edges(
     spx = torch.nan_to_num(spacing_px.to(torch.float32), nan=0.0, posinf=float(max_radius_px))
     drawn = torch.stack([depth.to(torch.float32), spx]).cpu().numpy().copy()
     out_index = index.cpu().numpy().copy()
-    knobs = np.array([SAME_SURFACE, KEEP_SPACINGS, REACH_SPACINGS], dtype=np.float32)
+    knobs = np.array([TRIM_SAME_SPACINGS / focal_px, KEEP_SPACINGS, REACH_SPACINGS], dtype=np.float32)
     done = kernels.trim_edges(
         out_index, drawn, centre_index.cpu().numpy(), np.ascontiguousarray(centre), ring(max(1, int(max_radius_px)) + 1),
         np.array(enclosed_table(), dtype=bool), knobs, width,

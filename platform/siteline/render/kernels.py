@@ -178,6 +178,24 @@ def fill_gaps(
 
 
 @kernel
+def _on_a_line(bits: int, nearest: np.ndarray, keep2: float) -> bool:
+    """Whether the pixel lies within sqrt(``keep2``) pixels of the segment joining the nearest samples
+    of two opposite sectors held in ``bits`` (``nearest``: (8, 2) their offsets from the pixel's
+    centre): between two samples of a line, a pole's or a beam's."""
+    for k in range(4):
+        if not (bits >> k & 1 and bits >> (k + 4) & 1):
+            continue
+        ax, ay = nearest[k, 0], nearest[k, 1]
+        bx, by = nearest[k + 4, 0], nearest[k + 4, 1]
+        ex, ey = bx - ax, by - ay
+        t = min(max(-(ax * ex + ay * ey) / max(ex * ex + ey * ey, np.float32(1e-12)), 0.0), 1.0)
+        px, py = ax + t * ex, ay + t * ey
+        if px * px + py * py <= keep2:
+            return True
+    return False
+
+
+@kernel
 def trim_edges(
     index: np.ndarray,
     drawn: np.ndarray,
@@ -194,22 +212,23 @@ def trim_edges(
     centre_index: (H W,) int64 the nearest point whose own pixel this is (-1 none); centre: (3, H W)
     float32 its depth (inf none) and where in the pixel it falls (u, v: 0 to 1 from the pixel's
     corner); ring: (M, 4) int64 rows (du, dv, squared distance, sector) sorted by distance; enclosed:
-    (256,) bool per set of occupied sectors; knobs: (3,) float32 SAME_SURFACE, KEEP_SPACINGS,
-    REACH_SPACINGS."""
+    (256,) bool per set of occupied sectors that encloses a pixel (one that lies on a line between
+    two opposite sectors' nearest samples is kept too: :func:`_on_a_line`); knobs: (3,) float32 TRIM_SAME_SPACINGS over the
+    focal length (pixels), KEEP_SPACINGS, REACH_SPACINGS."""
     n = len(index)
     height = n // width
     depth, spacing_px = drawn[0], drawn[1]
     centre_depth, centre_u, centre_v = centre[0], centre[1], centre[2]
     out_index, out_depth = index.copy(), depth.copy()
     trimmed = np.zeros(n, np.bool_)
-    widen = np.float32(1.0) + knobs[0]
-    keep_spacings, reach_spacings = knobs[1], knobs[2]
+    same, keep_spacings, reach_spacings = knobs[0], knobs[1], knobs[2]
     half = np.float32(0.5)
+    nearest = np.zeros((8, 2), np.float32)  # per sector, the offset of its nearest sample
     for p in range(n):
         if index[p] < 0:
             continue
-        limit = depth[p] * widen
         s = spacing_px[p]
+        limit = depth[p] * (np.float32(1.0) + same * s)  # depth + TRIM_SAME_SPACINGS x spacing in metres
         keep2 = (keep_spacings * s) ** 2
         reach2 = (reach_spacings * s) ** 2
         if centre_depth[p] <= limit:
@@ -232,12 +251,17 @@ def trim_edges(
                     keep = True
                     break
                 if ring[k, 2] <= reach2:
-                    bits |= 1 << ring[k, 3]
+                    sector = ring[k, 3]
+                    if not bits >> sector & 1:
+                        nearest[sector, 0], nearest[sector, 1] = du, dv
+                    bits |= 1 << sector
                     if enclosed[bits]:
                         keep = True
                         break
             elif far < 0 and c < np.inf and ring[k, 2] <= reach2:
                 far = q
+        if not keep and far >= 0:
+            keep = _on_a_line(bits, nearest, keep2)
         if not keep and far >= 0:
             out_index[p], out_depth[p], trimmed[p] = centre_index[far], centre_depth[far], True
     index[:] = out_index

@@ -428,7 +428,7 @@ def _trimmed(
     spacing_px = torch.where(index >= 0, spacing[index.clamp(min=0)] * _focal(cam) / depth, 0.0)
     centre_uv = _within_pixel(pts, centres, cam, settings, index.device)
     out_index, out_depth, trimmed = trim_edges(
-        index, depth, spacing_px, centres, centre_uv, cam.width, settings.splat_max_px
+        index, depth, spacing_px, centres, centre_uv, cam.width, settings.splat_max_px, _focal(cam)
     )
     return out_index, out_depth, torch.where(trimmed, index, -1)
 

@@ -201,6 +201,8 @@ class PairParams:
             del doc["sparse_surfaces"]
         elif self.unsure_edges:  # masks of its third version: behind sparse unchanged surfaces too (2),
             doc["sparse_surfaces"] = 3  # sparse in cells of two sizes, half a spacing behind (3)
+        if doc["trim_edges"]:  # its second version: a surface's own points within 5 spacings in depth
+            doc["trim_edges"] = 2  # (not a tenth of the depth), lines kept (siteline.render.edges)
         if doc["label_rule"] == "adaptive":  # its third version (siteline.labels.change: held_by_any, grazed)
             doc["label_rule"] = "adaptive3"
         return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
