@@ -17,7 +17,7 @@ from siteline.codes import IGNORE as MASK_IGNORE
 from siteline.codes import IGNORE_CAUSES
 from siteline.codes import UNCHANGED as MASK_UNCHANGED
 from siteline.errors import LabelError, PairError
-from siteline.labels.change import CHANGED, IGNORED, NOT_OBSERVED
+from siteline.labels.change import CHANGED, IGNORED, NOT_OBSERVED, UNCHANGED
 from siteline.records.enums import HOLE_RULES
 from siteline.records.pairs import ColourPlan
 from siteline.render.shading import eye_dome
@@ -130,7 +130,8 @@ def unsure_edges(r: RenderResult, change: np.ndarray) -> np.ndarray:
     surface's samples) and whose change differs from that nearer surface's (``change``: (N,) the
     rendered points' codes). Which of the two such a pixel shows is closer than the points can say:
     a jib three points wide lost a third of its width to the ground behind it, labelled unchanged
-    (issue 67), so the mask ignores them."""
+    (issue 67), so the mask ignores them; and the pixels of an unchanged surface on the rim of a
+    farther changed one (:func:`occluding_rims`)."""
     out = np.zeros(r.hit.shape, bool)
     if r.unsure_of is None:
         return out
@@ -138,7 +139,25 @@ def unsure_edges(r: RenderResult, change: np.ndarray) -> np.ndarray:
     near = change[r.unsure_of[at]] == CHANGED
     shown = r.attributes["change"][at] == CHANGED
     out[at] = near != shown
-    return out
+    return out | occluding_rims(r)
+
+
+def occluding_rims(r: RenderResult) -> np.ndarray:
+    """(H, W) bool: the pixels of render ``r`` that show an unchanged surface next to (one of their 8
+    neighbours) a changed one that lies farther. There a nearer surface's disks meet the changed one
+    behind it (the ground in front of a fence panel's foot, a car's or a trench's rim), and which of
+    the two the pixel shows is a matter of how far the disks reach, not of the points: the ground's
+    splats took the bottom rows of a panel taken away (the sloped scene, docs/performance.md)."""
+    shown = r.attributes["change"]
+    farther = np.where(r.hit & (shown == CHANGED), r.depth, -np.inf).astype(np.float32)
+    padded = np.pad(farther, 1, constant_values=-np.inf)
+    h, w = farther.shape
+    most = np.full_like(farther, -np.inf)
+    for dv in range(3):
+        for du in range(3):
+            if dv != 1 or du != 1:
+                np.maximum(most, padded[dv : dv + h, du : du + w], out=most)
+    return r.hit & (shown == UNCHANGED) & (most > r.depth)
 
 
 def ignore_causes(

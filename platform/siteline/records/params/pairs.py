@@ -197,6 +197,8 @@ class PairParams:
             del doc["surface_probe"]
         if not doc["unsure_edges"]:  # the masks of before
             del doc["unsure_edges"]
+        else:  # its second version: the rims of a farther change too (siteline.pairs.render.occluding_rims)
+            doc["unsure_edges"] = 2
         if not doc["sparse_surfaces"]:  # the labels and masks of before
             del doc["sparse_surfaces"]
         elif self.unsure_edges:  # masks of its third version: behind sparse unchanged surfaces too (2),
