@@ -149,15 +149,11 @@ def occluding_rims(r: RenderResult) -> np.ndarray:
     the two the pixel shows is a matter of how far the disks reach, not of the points: the ground's
     splats took the bottom rows of a panel taken away (the sloped scene, docs/performance.md)."""
     shown = r.attributes["change"]
-    farther = np.where(r.hit & (shown == CHANGED), r.depth, -np.inf).astype(np.float32)
-    padded = np.pad(farther, 1, constant_values=-np.inf)
-    h, w = farther.shape
-    most = np.full_like(farther, -np.inf)
-    for dv in range(3):
-        for du in range(3):
-            if dv != 1 or du != 1:
-                np.maximum(most, padded[dv : dv + h, du : du + w], out=most)
-    return r.hit & (shown == UNCHANGED) & (most > r.depth)
+    changed_depth = np.where(r.hit & (shown == CHANGED), r.depth, -np.inf).astype(np.float32)
+    around = np.ones((3, 3), bool)
+    around[1, 1] = False
+    farthest = ndimage.maximum_filter(changed_depth, footprint=around, mode="constant", cval=-np.inf)
+    return r.hit & (shown == UNCHANGED) & (farthest > r.depth)
 
 
 def ignore_causes(

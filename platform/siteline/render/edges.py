@@ -45,7 +45,7 @@ REACH_SPACINGS = 2.5
 # spacings beyond it: within the reach a surface seen at 27 degrees or more recedes by at most 5.
 # A tenth of the depth (SAME_SURFACE, before 2026-11-30) took the ground a metre behind a fence
 # panel's foot, or beside a car, for the nearer surface and kept its splats over them (the sloped
-# scene's changed-class precision 0.960 -> 0.976, docs/performance.md)
+# scene's changed-class precision 0.960 -> 0.975, docs/performance.md)
 TRIM_SAME_SPACINGS = 5.0
 
 
@@ -84,8 +84,9 @@ def trim_edges(
     own camera depth; spacing_px: (H W,) float32 the winner's spacing in pixels; centres: (H W,) int64
     z-buffer keys of one-pixel points (float32 depth bits << 32 | point index; int64 max where none);
     centre_uv: (2, H W) float32 where in its pixel each of those points falls (0 to 1); max_radius_px:
-    the widest reach looked at; focal_px: the render's focal length (pixels). Returns the new (index, depth) and (H W,) bool ``trimmed``, on the tensors' device (the pass itself runs compiled on the CPU: its cost is per
-    pixel)."""
+    the widest reach looked at; focal_px: the render's focal length (pixels). Returns the new (index,
+    depth) and (H W,) bool ``trimmed``, on the tensors' device (the pass itself runs compiled on the
+    CPU: its cost is per pixel)."""
     dev = index.device
     centre_index, centre_depth = _centres(centres)
     centre = torch.cat([centre_depth[None], centre_uv.to(torch.float32)]).cpu().numpy()

@@ -213,8 +213,8 @@ def trim_edges(
     float32 its depth (inf none) and where in the pixel it falls (u, v: 0 to 1 from the pixel's
     corner); ring: (M, 4) int64 rows (du, dv, squared distance, sector) sorted by distance; enclosed:
     (256,) bool per set of occupied sectors that encloses a pixel (one that lies on a line between
-    two opposite sectors' nearest samples is kept too: :func:`_on_a_line`); knobs: (3,) float32 TRIM_SAME_SPACINGS over the
-    focal length (pixels), KEEP_SPACINGS, REACH_SPACINGS."""
+    two opposite sectors' nearest samples is kept too: :func:`_on_a_line`); knobs: (3,) float32
+    TRIM_SAME_SPACINGS over the focal length (pixels), KEEP_SPACINGS, REACH_SPACINGS."""
     n = len(index)
     height = n // width
     depth, spacing_px = drawn[0], drawn[1]
@@ -260,9 +260,7 @@ def trim_edges(
                         break
             elif far < 0 and c < np.inf and ring[k, 2] <= reach2:
                 far = q
-        if not keep and far >= 0:
-            keep = _on_a_line(bits, nearest, keep2)
-        if not keep and far >= 0:
+        if not keep and far >= 0 and not _on_a_line(bits, nearest, keep2):
             out_index[p], out_depth[p], trimmed[p] = centre_index[far], centre_depth[far], True
     index[:] = out_index
     drawn[0] = out_depth
@@ -341,7 +339,8 @@ def cell_counts(xyz: np.ndarray, level: np.ndarray, which: np.ndarray, cap: np.n
     under it are then counted over every point, behind a 64 kB filter of those cells: a pair's changed
     points are often a quarter of a view's, the sparse cells among them a few per cent. Where most
     points are named (a pair's labelled ones) every point's cell is counted once instead (its count
-    is then exact above ``cap`` too), (:func:`_count_keys`). Every table holds each cell once (:func:`_key_ids`)."""
+    is then exact above ``cap`` too: :func:`_count_keys`). Every table numbers each cell once
+    (:func:`_key_ids`)."""
     n = which.shape[0]
     best = np.zeros(n, np.int64)
     if 2 * n > xyz.shape[0]:  # most points named (a pair's labelled ones): one count over them all
